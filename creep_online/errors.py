@@ -1,0 +1,18 @@
+"""Exception types: every user-facing failure is one of these, with a one-line message."""
+from __future__ import annotations
+
+
+class CreepOnlineError(Exception):
+    """Base class: the CLI prints the message on one line and exits with code 2."""
+
+
+class ModelError(CreepOnlineError, ValueError):
+    """Invalid model parameters (e.g. alpha outside (0, 1))."""
+
+
+class DataError(CreepOnlineError, ValueError):
+    """A data file or array that cannot be used, with the reason."""
+
+
+class IdentificationError(CreepOnlineError, RuntimeError):
+    """Identification could not produce an estimate from the data."""

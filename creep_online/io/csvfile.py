@@ -1,0 +1,99 @@
+"""CSV files with header ``t,u,y`` (other columns ignored), DESIGN.md section 6.
+
+Every problem becomes a DataError whose one-line message names the file, the
+row and what is wrong; nothing is silently dropped or repaired.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataError
+from ..record import MIN_SAMPLES, Record
+
+
+def _read_text(path: Path) -> str:
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise DataError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise DataError(f"{path}: is a directory, not a CSV file") from None
+    except OSError as exc:
+        raise DataError(f"{path}: cannot read ({exc.strerror})") from None
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise DataError(f"{path}: not a text file (undecodable byte at offset {exc.start})") from None
+
+
+def _header(path: Path, line: str, required: tuple[str, ...]) -> list[int]:
+    names = [c.strip().lower() for c in next(csv.reader([line]))]
+    missing = [c for c in required if c not in names]
+    if missing:
+        shown = ",".join(names)[:80]
+        raise DataError(f"{path}: missing column(s) {','.join(missing)} in header '{shown}' (need {','.join(required)})")
+    return [names.index(c) for c in required]
+
+
+def read_columns(path: str | Path, required: tuple[str, ...] = ("t", "u", "y")) -> dict[str, np.ndarray]:
+    """The named columns of a CSV file as float arrays; DataError on any malformed cell."""
+    path = Path(path)
+    text = _read_text(path)
+    lines = text.splitlines()
+    first = next((i for i, ln in enumerate(lines) if ln.strip()), None)
+    if first is None:
+        raise DataError(f"{path}: empty file (expected a header {','.join(required)})")
+    cols = _header(path, lines[first], required)
+    fast = _fast_parse(lines[first + 1:], cols)
+    if fast is not None:
+        return {name: fast[:, k].copy() for k, name in enumerate(required)}
+    width = max(cols) + 1
+    out = np.empty((len(lines) - first - 1, len(cols)))
+    n = 0
+    for lineno, row in enumerate(csv.reader(io.StringIO("\n".join(lines[first + 1:]))), start=first + 2):
+        if not row or all(not c.strip() for c in row):
+            continue
+        if len(row) < width:
+            raise DataError(f"{path}: line {lineno} has {len(row)} field(s), expected at least {width}")
+        for k, c in enumerate(cols):
+            cell = row[c].strip()
+            try:
+                value = float(cell)
+            except ValueError:
+                raise DataError(f"{path}: line {lineno}, column {required[k]}: not a number: {cell[:30]!r}") from None
+            if not math.isfinite(value):
+                raise DataError(f"{path}: line {lineno}, column {required[k]}: {cell!r} (NaN/inf not allowed)")
+            out[n, k] = value
+        n += 1
+    return {name: out[:n, k].copy() for k, name in enumerate(required)}
+
+
+def _fast_parse(body: list[str], cols: list[int]) -> np.ndarray | None:
+    """numpy's parser for the clean common case; None sends the file to the careful path."""
+    try:
+        arr = np.loadtxt(io.StringIO("\n".join(body)), delimiter=",", usecols=cols, ndmin=2, dtype=float)
+    except (ValueError, IndexError):
+        return None
+    if arr.shape[0] == 0 or not np.all(np.isfinite(arr)):
+        return None
+    return arr
+
+
+def load_csv(path: str | Path, min_samples: int = MIN_SAMPLES, need_output: bool = True) -> Record:
+    """Load and validate a ``t,u,y`` record; raise DataError with a one-line reason."""
+    required = ("t", "u", "y") if need_output else ("t", "u")
+    cols = read_columns(path, required)
+    y = cols.get("y", np.zeros_like(cols["t"]))
+    rec = Record(cols["t"], cols["u"], y, source=str(path))
+    return rec.validate(min_samples)
+
+
+def save_csv(path: str | Path, t: np.ndarray, u: np.ndarray, y: np.ndarray) -> None:
+    """Write ``t,u,y`` with full double precision (repr round-trips)."""
+    arr = np.column_stack([t, u, y])
+    np.savetxt(path, arr, delimiter=",", header="t,u,y", comments="", fmt="%.17g")

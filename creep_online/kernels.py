@@ -1,0 +1,184 @@
+"""Numba kernels: the inner loops of every simulator, compiled once and cached on disk.
+
+Three families live here (see DESIGN.md section 2):
+
+* ``gl_paper``: the multi-term revised Grunwald-Letnikov recursion of the paper's
+  eq. 13/14 exactly as FOMCON's ``lsim`` computes it (implicit, full or truncated
+  memory, O(N L)).
+* ``fractional_integral_zoh`` + ``resonance_foh``: the split form. The fractional
+  integral of a zero-order-held input is exact at the samples; the 2nd-order part
+  is then discretized exactly for a piecewise-linear intermediate signal.
+* ``state_march``: the exact sampled step response of the whole model, computed
+  by marching the 2-state resonance exactly (matrix exponential) against the
+  closed-form fractional integral t^alpha / Gamma(1+alpha). Quadrature on the
+  first intervals, a Taylor expansion of t^alpha beyond them. Matrices come from
+  ``creep_online.discretize``; this module holds only loops.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+CACHE = True
+
+
+@njit(cache=CACHE)
+def gl_weights(order: float, n: int) -> np.ndarray:
+    """Grunwald-Letnikov weights w_j = (-1)^j C(order, j), j = 0..n-1.
+
+    Recursion w_0 = 1, w_j = w_{j-1} (1 - (order + 1) / j). A negative order
+    gives the fractional integral's weights.
+    """
+    w = np.empty(n)
+    if n == 0:
+        return w
+    w[0] = 1.0
+    for j in range(1, n):
+        w[j] = w[j - 1] * (1.0 - (order + 1.0) / j)
+    return w
+
+
+@njit(cache=CACHE)
+def paper_weights(alpha: float, a1: float, a2: float, h: float, n: int) -> np.ndarray:
+    """Combined eq. 13 weights W_j = sum_k a_k h^-eta_k w_j(eta_k).
+
+    Terms (a_k, eta_k) = (1, alpha), (a1, alpha + 1), (a2, alpha + 2); W_0 is the
+    denominator D of the recursion.
+    """
+    w0 = gl_weights(alpha, n)
+    w1 = gl_weights(alpha + 1.0, n)
+    w2 = gl_weights(alpha + 2.0, n)
+    c0 = h ** (-alpha)
+    c1 = a1 * h ** (-(alpha + 1.0))
+    c2 = a2 * h ** (-(alpha + 2.0))
+    out = np.empty(n)
+    for j in range(n):
+        out[j] = c0 * w0[j] + c1 * w1[j] + c2 * w2[j]
+    return out
+
+
+@njit(cache=CACHE)
+def gl_paper(u: np.ndarray, h: float, alpha: float, a1: float, a2: float, memory: int) -> np.ndarray:
+    """Eq. 13: y1[n] = (u[n] - sum_{j=1..min(n, L)} W_j y1[n-j]) / D, y1[0] = 0 (gain 1).
+
+    ``memory`` = L <= 0 means full memory (O(N^2)), as FOMCON does. FOMCON never
+    uses u[0]; neither does this.
+    """
+    n_samples = u.shape[0]
+    length = n_samples if memory <= 0 else min(memory + 1, n_samples)
+    w = paper_weights(alpha, a1, a2, h, length)
+    d = w[0]
+    y = np.zeros(n_samples)
+    for n in range(1, n_samples):
+        acc = 0.0
+        jmax = min(n, length - 1)
+        for j in range(1, jmax + 1):
+            acc += w[j] * y[n - j]
+        y[n] = (u[n] - acc) / d
+    return y
+
+
+@njit(cache=CACHE)
+def zoh_integral_weights(alpha: float, h: float, gamma1: float, n: int) -> np.ndarray:
+    """Exact fractional-integral weights for a zero-order-held input.
+
+    c_j = h^alpha (j^alpha - (j-1)^alpha) / Gamma(1+alpha), j >= 1 (c_0 = 0): the
+    integral of (t_n - tau)^(alpha-1)/Gamma(alpha) over the hold interval j
+    samples back. ``gamma1`` is Gamma(1 + alpha) (numba has no gamma).
+    """
+    c = np.zeros(n)
+    scale = h**alpha / gamma1
+    prev = 0.0
+    for j in range(1, n):
+        cur = float(j) ** alpha
+        c[j] = scale * (cur - prev)
+        prev = cur
+    return c
+
+
+@njit(cache=CACHE)
+def fractional_integral_zoh(u: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """z[n] = sum_{j=1..min(n, L)} c_j u[n-j]: direct (truncated if len(c) < N) convolution."""
+    n_samples = u.shape[0]
+    length = c.shape[0]
+    z = np.zeros(n_samples)
+    for n in range(1, n_samples):
+        acc = 0.0
+        jmax = min(n, length - 1)
+        for j in range(1, jmax + 1):
+            acc += c[j] * u[n - j]
+        z[n] = acc
+    return z
+
+
+@njit(cache=CACHE)
+def resonance_foh(z: np.ndarray, phi: np.ndarray, g0: np.ndarray, g1: np.ndarray, h: float) -> np.ndarray:
+    """Exact response of 1/(1 + a1 s + a2 s^2) to the piecewise-linear interpolant of z.
+
+    x_{n+1} = Phi x_n + G0 z_n + G1 (z_{n+1} - z_n) / h, y_n = x_n[0], x_0 = 0.
+    """
+    n_samples = z.shape[0]
+    y = np.zeros(n_samples)
+    x0 = 0.0
+    x1 = 0.0
+    for n in range(n_samples - 1):
+        slope = (z[n + 1] - z[n]) / h
+        nx0 = phi[0, 0] * x0 + phi[0, 1] * x1 + g0[0] * z[n] + g1[0] * slope
+        nx1 = phi[1, 0] * x0 + phi[1, 1] * x1 + g0[1] * z[n] + g1[1] * slope
+        x0 = nx0
+        x1 = nx1
+        y[n + 1] = x0
+    return y
+
+
+@njit(cache=CACHE)
+def state_march(n_samples: int, h: float, alpha: float, gamma1: float, phi: np.ndarray,
+                head: np.ndarray, taylor: np.ndarray) -> np.ndarray:
+    """Exact unit-step response S[n] = S(n h) of the whole model (gain 1).
+
+    x' = A x + B v(t), v(t) = t^alpha / Gamma(1+alpha) (the exact fractional
+    integral of a unit step), y = x[0]. Each interval is advanced exactly:
+    x_{n+1} = Phi x_n + int_0^h e^{A(h-s)} B v(t_n + s) ds. The integral is
+    ``head[n]`` (precomputed by quadrature) for the first len(head) intervals and
+    the Taylor series sum_m taylor[m] v^(m)(t_n) beyond, where
+    taylor[m] = int_0^h e^{A(h-s)} B s^m / m! ds and
+    v^(m)(t) = v(t) prod_{i<m} (alpha - i) / t.
+    """
+    s = np.zeros(n_samples)
+    n_head = head.shape[0]
+    n_terms = taylor.shape[0]
+    x0 = 0.0
+    x1 = 0.0
+    inv_gamma = 1.0 / gamma1
+    for n in range(n_samples - 1):
+        if n < n_head:
+            f0 = head[n, 0]
+            f1 = head[n, 1]
+        else:
+            t = n * h
+            deriv = t**alpha * inv_gamma
+            f0 = taylor[0, 0] * deriv
+            f1 = taylor[0, 1] * deriv
+            inv_t = 1.0 / t
+            for m in range(1, n_terms):
+                deriv *= (alpha - (m - 1)) * inv_t
+                f0 += taylor[m, 0] * deriv
+                f1 += taylor[m, 1] * deriv
+        nx0 = phi[0, 0] * x0 + phi[0, 1] * x1 + f0
+        nx1 = phi[1, 0] * x0 + phi[1, 1] * x1 + f1
+        x0 = nx0
+        x1 = nx1
+        s[n + 1] = x0
+    return s
+
+
+@njit(cache=CACHE)
+def superpose_steps(step_response: np.ndarray, index: np.ndarray, size: np.ndarray, n_samples: int) -> np.ndarray:
+    """y[n] = sum_k size_k S[n - index_k] for n >= index_k: a sparse ZOH convolution."""
+    y = np.zeros(n_samples)
+    for k in range(index.shape[0]):
+        i0 = index[k]
+        a = size[k]
+        for n in range(i0, n_samples):
+            y[n] += a * step_response[n - i0]
+    return y

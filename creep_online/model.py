@@ -1,0 +1,105 @@
+"""The fractional-order creep model G(s) = b / (s^alpha (1 + a1 s + a2 s^2)).
+
+The parameters are kept plain (scikit-learn style): four floats, validated once,
+and everything else (natural frequency, damping, creep law, frequency response)
+is derived from them on demand.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from .errors import ModelError
+
+
+@dataclass(frozen=True)
+class CreepModel:
+    """Creep (``s^-alpha``) in series with the first mechanical resonance.
+
+    ``alpha`` is the creep exponent (0 < alpha < 1), ``a1`` and ``a2`` the
+    coefficients of ``1 + a1 s + a2 s^2`` (both > 0) and ``b`` the gain (any
+    non-zero real).
+    """
+
+    alpha: float
+    a1: float
+    a2: float
+    b: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("alpha", "a1", "a2", "b"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float, np.floating, np.integer)) or not math.isfinite(value):
+                raise ModelError(f"{name} must be a finite number, got {value!r}")
+            object.__setattr__(self, name, float(value))
+        if not 0.0 < self.alpha < 1.0:
+            raise ModelError(f"alpha must satisfy 0 < alpha < 1, got {self.alpha}")
+        if self.a1 <= 0.0:
+            raise ModelError(f"a1 must be > 0, got {self.a1}")
+        if self.a2 <= 0.0:
+            raise ModelError(f"a2 must be > 0, got {self.a2}")
+        if self.b == 0.0:
+            raise ModelError("b must be non-zero")
+
+    # ------------------------------------------------------------------ derived
+    @classmethod
+    def from_resonance(cls, alpha: float, fn: float, zeta: float, b: float = 1.0) -> "CreepModel":
+        """Build the model from the natural frequency ``fn`` (Hz) and damping ``zeta``."""
+        if fn <= 0 or zeta <= 0:
+            raise ModelError(f"fn and zeta must be > 0, got fn={fn}, zeta={zeta}")
+        wn = 2.0 * math.pi * fn
+        return cls(alpha=alpha, a1=2.0 * zeta / wn, a2=1.0 / wn**2, b=b)
+
+    @property
+    def wn(self) -> float:
+        """Natural angular frequency (rad/s)."""
+        return 1.0 / math.sqrt(self.a2)
+
+    @property
+    def fn(self) -> float:
+        """Natural frequency (Hz): 1 / (2 pi sqrt(a2))."""
+        return self.wn / (2.0 * math.pi)
+
+    @property
+    def zeta(self) -> float:
+        """Damping ratio: a1 / (2 sqrt(a2))."""
+        return self.a1 / (2.0 * math.sqrt(self.a2))
+
+    @property
+    def settling_time(self) -> float:
+        """Time (s) for the resonance transient to decay to ~1e-3 of its start.
+
+        For an under-damped pair the envelope decays as exp(-zeta wn t); for an
+        over-damped pair the slower pole sets the pace.
+        """
+        zeta, wn = self.zeta, self.wn
+        rate = zeta * wn if zeta < 1.0 else wn * (zeta - math.sqrt(zeta * zeta - 1.0))
+        return math.log(1e3) / rate
+
+    def poles(self) -> np.ndarray:
+        """Poles of 1 + a1 s + a2 s^2 (complex)."""
+        return np.roots([self.a2, self.a1, 1.0]).astype(complex)
+
+    def creep(self, t: np.ndarray | float, amplitude: float = 1.0) -> np.ndarray:
+        """Creep law y = amplitude b t^alpha / Gamma(1 + alpha): the step response for t >> t_c."""
+        t = np.asarray(t, dtype=float)
+        return amplitude * self.b * np.power(np.maximum(t, 0.0), self.alpha) / math.gamma(1.0 + self.alpha)
+
+    def frequency_response(self, f: np.ndarray | float) -> np.ndarray:
+        """Complex G(j 2 pi f) for frequencies f in Hz (f > 0)."""
+        s = 2j * np.pi * np.asarray(f, dtype=float)
+        return self.b / (s**self.alpha * (1.0 + self.a1 * s + self.a2 * s * s))
+
+    def params(self) -> dict[str, float]:
+        """The four parameters as a plain dict (JSON-ready)."""
+        return asdict(self)
+
+    def describe(self) -> dict[str, float]:
+        """Parameters plus the derived quantities a control engineer reads first."""
+        return {**self.params(), "fn_hz": self.fn, "zeta": self.zeta}
+
+    def __str__(self) -> str:
+        return (f"CreepModel(alpha={self.alpha:.6g}, a1={self.a1:.6g}, a2={self.a2:.6g}, "
+                f"b={self.b:.6g}; fn={self.fn:.4g} Hz, zeta={self.zeta:.3g})")

@@ -1,0 +1,75 @@
+"""A measured (or simulated) record: time, input and output samples, plus where they came from."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import DataError
+
+#: Fewest samples any identification is attempted on.
+MIN_SAMPLES = 20
+
+
+@dataclass
+class Record:
+    """Samples t (s), u (input units), y (output units) of one experiment."""
+
+    t: np.ndarray
+    u: np.ndarray
+    y: np.ndarray
+    source: str = "<array>"
+
+    def __post_init__(self) -> None:
+        self.t = np.ascontiguousarray(self.t, dtype=float)
+        self.u = np.ascontiguousarray(self.u, dtype=float)
+        self.y = np.ascontiguousarray(self.y, dtype=float)
+        if not (self.t.shape == self.u.shape == self.y.shape) or self.t.ndim != 1:
+            raise DataError(f"{self.source}: t, u and y must be 1-D and of equal length "
+                            f"(got {self.t.shape}, {self.u.shape}, {self.y.shape})")
+
+    def __len__(self) -> int:
+        return self.t.size
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0]) if self.t.size else 0.0
+
+    @property
+    def is_uniform(self) -> bool:
+        """True when the step varies by less than 1e-6 relative."""
+        if self.t.size < 3:
+            return True
+        dt = np.diff(self.t)
+        h = (self.t[-1] - self.t[0]) / (self.t.size - 1)
+        return bool(np.max(np.abs(dt - h)) <= 1e-6 * h + 1e-12 * abs(self.t[-1]))
+
+    @property
+    def h(self) -> float:
+        """Mean sampling step (s)."""
+        return self.duration / max(self.t.size - 1, 1)
+
+    def validate(self, min_samples: int = MIN_SAMPLES) -> "Record":
+        """Check what identification needs; raise DataError naming the source and the problem."""
+        name = self.source
+        if self.t.size == 0:
+            raise DataError(f"{name}: no data rows")
+        if self.t.size < min_samples:
+            raise DataError(f"{name}: too few samples ({self.t.size}; need at least {min_samples})")
+        for col in ("t", "u", "y"):
+            bad = ~np.isfinite(getattr(self, col))
+            if bad.any():
+                i = int(np.argmax(bad))
+                raise DataError(f"{name}: column {col} has {int(bad.sum())} NaN/inf value(s), first at data row {i + 1}")
+        dt = np.diff(self.t)
+        if np.any(dt <= 0):
+            i = int(np.argmax(dt <= 0))
+            raise DataError(f"{name}: time is not strictly increasing at data row {i + 2} "
+                            f"(t={self.t[i + 1]!r} after t={self.t[i]!r})")
+        if np.ptp(self.u) == 0.0:
+            raise DataError(f"{name}: no excitation (input u is constant at {self.u[0]!r})")
+        return self
+
+    def slice(self, start: int, stop: int) -> "Record":
+        """Samples start..stop-1 as a new record (views, not copies)."""
+        return Record(self.t[start:stop], self.u[start:stop], self.y[start:stop], self.source)
