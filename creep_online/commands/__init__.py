@@ -1,0 +1,1 @@
+"""One module per ``creep-online`` sub-command, each exposing ``register(subparsers)``."""

@@ -1,0 +1,1 @@
+"""Reports: HTML pages with PNG plots (needs the ``plots`` extra, matplotlib)."""
