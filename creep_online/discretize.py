@@ -1,6 +1,8 @@
 """Exact discretization of the resonance 1/(1 + a1 s + a2 s^2) and the exact step response.
 
-State space: x = [y, y'], x' = A x + B v, A = [[0, 1], [-1/a2, -a1/a2]], B = [0, 1/a2].
+Balanced state space: x = [y, y'/wn], x' = A x + B v with wn = 1/sqrt(a2),
+A = [[0, wn], [-wn, -a1/a2]], B = [0, wn] (entries of similar size, unlike the
+companion form, so the matrix exponential stays cheap and accurate).
 Everything the kernels need (transition matrix, input integrals, quadrature
 terms) is computed here with numpy/scipy, once per parameter set.
 """
@@ -24,9 +26,10 @@ TAYLOR_TERMS = 8
 
 
 def state_matrices(a1: float, a2: float) -> tuple[np.ndarray, np.ndarray]:
-    """(A, B) of the resonance in the state x = [y, y']."""
-    a = np.array([[0.0, 1.0], [-1.0 / a2, -a1 / a2]])
-    b = np.array([0.0, 1.0 / a2])
+    """(A, B) of the resonance in the balanced state x = [y, y'/wn]."""
+    wn = 1.0 / math.sqrt(a2)
+    a = np.array([[0.0, wn], [-wn, -a1 / a2]])
+    b = np.array([0.0, wn])
     return a, b
 
 

@@ -66,8 +66,9 @@ class Record:
             i = int(np.argmax(dt <= 0))
             raise DataError(f"{name}: time is not strictly increasing at data row {i + 2} "
                             f"(t={self.t[i + 1]!r} after t={self.t[i]!r})")
-        if np.ptp(self.u) == 0.0:
-            raise DataError(f"{name}: no excitation (input u is constant at {self.u[0]!r})")
+        if not np.any(self.u):
+            # zero initial state is assumed: a constant non-zero u is a step at t[0]
+            raise DataError(f"{name}: no excitation (input u is zero throughout)")
         return self
 
     def slice(self, start: int, stop: int) -> "Record":

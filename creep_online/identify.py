@@ -1,0 +1,443 @@
+"""Batch identification: the paper's two layers, made fast.
+
+The scheme of Tashakori et al. (Actuators 2024, 13, 534), output-error least
+squares with trust-region-reflective steps (``least_squares(method="trf")``):
+
+* **Layer 1 (creep)**: alpha from the creep regime (samples more than ``t_c``
+  after the last input change), on a coarser step (bin averages). Long after a
+  step the response is the creep law plus the resonance's low-frequency
+  correction ``sum_k c_k t^(alpha-k) / Gamma(1+alpha-k)``, so no simulation is
+  needed; the gain is linear and projected out. Then the eq. 12 retune.
+* **Layer 2 (resonance)**: a1, a2 and b with alpha fixed, on the transient
+  windows (``t_c`` after each change) at the full rate, with the exact
+  simulator; b is linear and projected out (variable projection).
+* Optional joint polish of all four on the whole record, warm-started.
+
+``t_c`` and the starting point come from the data: a coarse creep fit gives a
+first alpha, a grid over (fn, zeta) on the first transient gives the
+resonance, and ``t_c`` is the resonance's settling time.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.special import rgamma
+
+from . import kernels
+from .discretize import foh_matrices, step_response_grid
+from .errors import DataError, IdentificationError
+from .metrics import fit_percent, noise_std_estimate
+from .model import CreepModel
+from .record import Record
+from .simulate import fractional_integral, superpose, uniform_step
+
+#: alpha search interval of layer 1 and the polish.
+ALPHA_BOUNDS = (1e-4, 0.999)
+#: At most this many input changes count as a piecewise-constant (step) input.
+MAX_STEP_FRACTION = 0.05
+#: Default number of coarse points for layer 1 (the paper's Remark 4: coarse is enough).
+LAYER1_POINTS = 1500
+
+
+# --------------------------------------------------------------------------- results
+@dataclass
+class IdentificationResult:
+    """What identification found, how well it fits and what it could not determine."""
+
+    model: CreepModel
+    fit_percent: float
+    elapsed_s: float
+    t_c: float
+    offset: float = 0.0
+    warnings: list[str] = field(default_factory=list)
+    stages: dict[str, dict] = field(default_factory=dict)
+    uncertainty: dict[str, float] = field(default_factory=dict)
+    noise_std: float = float("nan")
+    y_hat: np.ndarray | None = field(default=None, repr=False)
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary (DESIGN.md section 6 keys first)."""
+        m = self.model
+        return {
+            "alpha": m.alpha, "a1": m.a1, "a2": m.a2, "b": m.b,
+            "fit_percent": self.fit_percent, "elapsed_s": self.elapsed_s,
+            "fn_hz": m.fn, "zeta": m.zeta, "t_c": self.t_c, "offset": self.offset,
+            "noise_std": self.noise_std, "uncertainty": self.uncertainty,
+            "warnings": list(self.warnings), "stages": self.stages,
+        }
+
+
+# --------------------------------------------------------------------------- input analysis
+@dataclass
+class InputSchedule:
+    """Where the input changes and how long each level is held."""
+
+    index: np.ndarray        # sample index of each change
+    size: np.ndarray         # size of each change
+    since_change: np.ndarray  # time since the last change at every sample (NaN before the first)
+    hold_start: np.ndarray   # start index of each hold (one per change)
+    hold_stop: np.ndarray    # stop index (exclusive)
+    piecewise: bool          # few changes: the layered scheme applies
+
+
+def input_schedule(t: np.ndarray, u: np.ndarray) -> InputSchedule:
+    """Find the input changes (u[-1] taken as 0) and the holds between them."""
+    du = np.diff(u, prepend=0.0)
+    scale = max(float(np.max(np.abs(u))), 1e-300)
+    idx = np.flatnonzero(np.abs(du) > 1e-12 * scale)
+    n = t.size
+    since = np.full(n, np.nan)  # before the first change: neither transient nor creep
+    stops = np.append(idx[1:], n)
+    for i0, i1 in zip(idx, stops):
+        since[i0:i1] = t[i0:i1] - t[i0]
+    piecewise = idx.size <= max(4, MAX_STEP_FRACTION * n)
+    return InputSchedule(idx, du[idx], since, idx.copy(), stops, piecewise)
+
+
+# --------------------------------------------------------------------------- layer 1
+def creep_asymptote(tau: np.ndarray, alpha: float, a1: float, a2: float) -> np.ndarray:
+    """Unit-step response long after the step: sum_k c_k tau^(alpha-k) / Gamma(1+alpha-k).
+
+    c_0 = 1, c_1 = -a1, c_2 = a1^2 - a2, c_3 = -a1^3 + 2 a1 a2 are the Taylor
+    coefficients of 1/(1 + a1 s + a2 s^2); the neglected terms decay
+    exponentially. a1 = a2 = 0 gives the pure creep law of the paper's
+    double-logarithmic model.
+    """
+    coef = (1.0, -a1, a1 * a1 - a2, -a1**3 + 2.0 * a1 * a2)
+    out = np.zeros_like(tau)
+    for k, c in enumerate(coef):
+        if c != 0.0:
+            out += c * tau ** (alpha - k) * rgamma(1.0 + alpha - k)
+    return out
+
+
+def _coarse_bins(mask: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """Group the masked samples into consecutive runs of ``width``: (start, stop) indices."""
+    starts, stops = [], []
+    runs = np.flatnonzero(np.diff(np.concatenate(([0], mask.view(np.int8), [0]))))
+    for r0, r1 in zip(runs[::2], runs[1::2]):
+        edges = np.arange(r0, r1 - width + 1, width)
+        starts.extend(edges)
+        stops.extend(edges + width)
+    return np.asarray(starts, dtype=np.int64), np.asarray(stops, dtype=np.int64)
+
+
+def layer1_alpha(t: np.ndarray, u: np.ndarray, y: np.ndarray, t_c: float, *, a1: float = 0.0,
+                 a2: float = 0.0, step: float | None = None, alpha0: float = 0.1,
+                 schedule: InputSchedule | None = None) -> tuple[float, float, dict]:
+    """Layer 1: (alpha, gain, info) from the creep regime (more than t_c after the last change).
+
+    Samples are averaged over bins of ``step`` seconds (default: about
+    LAYER1_POINTS bins), the model is evaluated at the bin centres, the gain is
+    projected out and alpha found by bounded TRF.
+    """
+    sched = schedule or input_schedule(t, u)
+    h = float(t[1] - t[0])
+    mask = sched.since_change > t_c
+    if mask.sum() < 4:
+        raise IdentificationError(f"no creep regime: fewer than 4 samples lie more than t_c={t_c:.3g} s after an input change")
+    if step is None:
+        step = max(h, mask.sum() * h / LAYER1_POINTS)
+    width = max(1, int(round(step / h)))
+    b0, b1 = _coarse_bins(mask, width)
+    if b0.size < 3:
+        raise IdentificationError("creep regime too short for layer 1 at this coarse step")
+    csum = np.concatenate(([0.0], np.cumsum(y)))
+    y_bin = (csum[b1] - csum[b0]) / width
+    t_mid = 0.5 * (t[b0] + t[b1 - 1])
+    active = sched.index[np.searchsorted(sched.index, b0, side="right") - 1]
+    # responses of all changes up to each bin's own last change
+    tau = t_mid[:, None] - t[sched.index][None, :]
+    live = sched.index[None, :] <= active[:, None]
+    tau_live = np.where(live, tau, 1.0)
+    sizes = np.where(live, sched.size[None, :], 0.0)
+
+    def basis(alpha: float) -> np.ndarray:
+        return np.sum(sizes * creep_asymptote(tau_live, alpha, a1, a2), axis=1)
+
+    def residual(p: np.ndarray) -> np.ndarray:
+        phi = basis(p[0])
+        g = phi @ y_bin / (phi @ phi)
+        return y_bin - g * phi
+
+    start = time.perf_counter()
+    sol = least_squares(residual, [min(max(alpha0, ALPHA_BOUNDS[0] * 2), 0.9)], bounds=ALPHA_BOUNDS,
+                        method="trf", x_scale=[0.05], diff_step=1e-6)
+    alpha = float(sol.x[0])
+    phi = basis(alpha)
+    gain = float(phi @ y_bin / (phi @ phi))
+    info = {"alpha": alpha, "gain": gain, "points": int(b0.size), "step_s": width * h,
+            "nfev": int(sol.nfev), "elapsed_s": time.perf_counter() - start}
+    return alpha, gain, info
+
+
+def retune_alpha(alpha0: float, y: np.ndarray, y_hat: np.ndarray, i_c: int, i_f: int, half: int) -> float:
+    """Eq. 12: alpha = alpha0 (y*_f - y*_c) / (y_hat_f - y_hat_c), with window averages against noise."""
+    def avg(v: np.ndarray, i: int) -> float:
+        return float(np.mean(v[max(i - half, 0):i + half + 1]))
+    den = avg(y_hat, i_f) - avg(y_hat, i_c)
+    if den == 0.0:
+        return alpha0
+    return alpha0 * (avg(y, i_f) - avg(y, i_c)) / den
+
+
+# --------------------------------------------------------------------------- layer 2
+def _projected(y: np.ndarray, s: np.ndarray) -> tuple[float, np.ndarray]:
+    """Best gain for y ~ b s and the residual (variable projection)."""
+    den = float(s @ s)
+    b = float(s @ y) / den if den > 0 else 0.0
+    return b, y - b * s
+
+
+def model_output(alpha: float, a1: float, a2: float, h: float, u: np.ndarray, n: int | None = None) -> np.ndarray:
+    """Unit-gain exact response to the ZOH input u (first n samples)."""
+    n = u.size if n is None else n
+    s = step_response_grid(alpha, a1, a2, h, n)
+    return superpose(s, u[:n])
+
+
+def resonance_grid(t: np.ndarray, u: np.ndarray, y: np.ndarray, alpha: float, stop: int,
+                   f_lo: float, f_hi: float) -> tuple[float, float]:
+    """Starting (fn, zeta) from a grid on samples [0, stop), using the cheap split form."""
+    h = float(t[1] - t[0])
+    z = fractional_integral(u[:stop], h, alpha)
+    yw = y[:stop]
+    best = (math.inf, f_lo, 0.5)
+    for fn in np.geomspace(f_lo, f_hi, 28):
+        wn = 2 * math.pi * fn
+        for zeta in (0.01, 0.03, 0.1, 0.3, 0.7, 1.5, 4.0):
+            phi, g0, g1 = foh_matrices(2 * zeta / wn, 1 / wn**2, h)
+            s = kernels.resonance_foh(z, phi, g0, g1, h)
+            _, r = _projected(yw, s)
+            cost = float(r @ r)
+            if cost < best[0]:
+                best = (cost, fn, zeta)
+    return best[1], best[2]
+
+
+def layer2_resonance(t: np.ndarray, u: np.ndarray, y: np.ndarray, alpha: float, mask: np.ndarray,
+                     a1: float, a2: float) -> tuple[float, float, float, dict]:
+    """Layer 2: (a1, a2, b, info) with alpha fixed, on the masked samples at the full rate.
+
+    Parameters are log(a1), log(a2); b is projected out. The exact simulator
+    runs up to the last masked sample.
+    """
+    h = float(t[1] - t[0])
+    n = int(np.flatnonzero(mask)[-1]) + 1
+    m = mask[:n]
+    ym = y[:n][m]
+
+    def shape(p: np.ndarray) -> np.ndarray:
+        return model_output(alpha, math.exp(p[0]), math.exp(p[1]), h, u, n)[m]
+
+    def residual(p: np.ndarray) -> np.ndarray:
+        return _projected(ym, shape(p))[1]
+
+    start = time.perf_counter()
+    lo = [math.log(a1) - 12, math.log(a2) - 12]
+    hi = [math.log(a1) + 12, math.log(a2) + 12]
+    sol = least_squares(residual, [math.log(a1), math.log(a2)], bounds=(lo, hi), method="trf",
+                        x_scale=[1.0, 1.0], diff_step=1e-7)
+    a1f, a2f = math.exp(sol.x[0]), math.exp(sol.x[1])
+    b, _ = _projected(ym, shape(sol.x))
+    info = {"a1": a1f, "a2": a2f, "b": b, "samples": int(m.sum()), "nfev": int(sol.nfev),
+            "elapsed_s": time.perf_counter() - start}
+    return a1f, a2f, b, info
+
+
+# --------------------------------------------------------------------------- polish
+def joint_polish(t: np.ndarray, u: np.ndarray, y: np.ndarray, model: CreepModel) -> tuple[CreepModel, dict]:
+    """All four parameters on the whole record (b projected out), warm-started; returns std too."""
+    h = float(t[1] - t[0])
+
+    def shape(p: np.ndarray) -> np.ndarray:
+        return model_output(p[0], math.exp(p[1]), math.exp(p[2]), h, u)
+
+    def residual(p: np.ndarray) -> np.ndarray:
+        return _projected(y, shape(p))[1]
+
+    start = time.perf_counter()
+    p0 = np.array([model.alpha, math.log(model.a1), math.log(model.a2)])
+    lo = [ALPHA_BOUNDS[0], p0[1] - 5, p0[2] - 5]
+    hi = [ALPHA_BOUNDS[1], p0[1] + 5, p0[2] + 5]
+    sol = least_squares(residual, p0, bounds=(lo, hi), method="trf", x_scale=[0.01, 0.1, 0.1],
+                        diff_step=1e-7, xtol=1e-10, ftol=1e-10)
+    s = shape(sol.x)
+    b, r = _projected(y, s)
+    polished = CreepModel(float(sol.x[0]), math.exp(sol.x[1]), math.exp(sol.x[2]), b)
+    info = {"nfev": int(sol.nfev), "elapsed_s": time.perf_counter() - start,
+            "uncertainty": _uncertainty(sol.jac, r, s, polished)}
+    return polished, info
+
+
+def _uncertainty(jac: np.ndarray, r: np.ndarray, s: np.ndarray, m: CreepModel) -> dict[str, float]:
+    """1-sigma parameter std from the Gauss-Newton covariance (b included through its column)."""
+    dof = max(r.size - 4, 1)
+    sigma2 = float(r @ r) / dof
+    full = np.column_stack([jac, -s])  # d residual / d b = -s
+    try:
+        cov = sigma2 * np.linalg.inv(full.T @ full)
+    except np.linalg.LinAlgError:
+        return {k: float("inf") for k in ("alpha", "a1", "a2", "b")}
+    sd = np.sqrt(np.abs(np.diag(cov)))
+    return {"alpha": float(sd[0]), "a1": float(sd[1] * m.a1), "a2": float(sd[2] * m.a2), "b": float(sd[3])}
+
+
+# --------------------------------------------------------------------------- driver
+def _offset(y: np.ndarray, sched: InputSchedule) -> float:
+    """Output level before the first input change (zero initial state is assumed after it)."""
+    first = int(sched.index[0]) if sched.index.size else 0
+    return float(np.median(y[:first])) if first >= 5 else 0.0
+
+
+def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None = None,
+             alpha0: float | None = None, resonance0: tuple[float, float] | None = None,
+             layer1_step: float | None = None, retune: bool = True, polish: bool = True,
+             source: str = "<array>") -> IdentificationResult:
+    """Identify (alpha, a1, a2, b) from a uniformly sampled record with zero initial state.
+
+    ``t_c`` (end of the transient, s), ``alpha0`` and ``resonance0`` =
+    (fn_hz, zeta) override the data-driven choices. ``polish`` runs the joint
+    4-parameter refinement. Warnings say what the data cannot determine.
+    """
+    start = time.perf_counter()
+    rec = Record(t, u, y, source).validate()
+    try:
+        h = uniform_step(rec.t)
+    except DataError as exc:
+        raise DataError(f"{source}: {exc}") from None
+    t = rec.t - rec.t[0]
+    u, y_raw = rec.u, rec.y
+    sched = input_schedule(t, u)
+    offset = _offset(y_raw, sched)
+    y = y_raw - offset
+    warnings: list[str] = []
+    stages: dict[str, dict] = {}
+    noise = noise_std_estimate(y)
+
+    if sched.piecewise:
+        model, t_c = _layered(t, u, y, h, sched, t_c, alpha0, resonance0, layer1_step, retune, stages, warnings)
+    else:
+        model, t_c = _general_start(t, u, y, h, alpha0, resonance0, stages)
+        warnings.append("input is not piecewise constant (changes at most samples): "
+                        "layers skipped, joint fit only")
+        polish = True
+    uncertainty: dict[str, float] = {}
+    if polish:
+        model, info = joint_polish(t, u, y, model)
+        uncertainty = info.pop("uncertainty")
+        stages["polish"] = {**info, **model.params()}
+    y_hat = model.b * model_output(model.alpha, model.a1, model.a2, h, u)
+    warnings += _identifiability(t, u, y, h, model, t_c, sched, noise)
+    return IdentificationResult(
+        model=model, fit_percent=fit_percent(y, y_hat), elapsed_s=time.perf_counter() - start,
+        t_c=t_c, offset=offset, warnings=warnings, stages=stages, uncertainty=uncertainty,
+        noise_std=noise, y_hat=y_hat + offset)
+
+
+def _layered(t, u, y, h, sched, t_c, alpha0, resonance0, layer1_step, retune, stages, warnings):
+    """The paper's two layers with data-driven t_c and starting point."""
+    holds = t[np.minimum(sched.hold_stop, t.size - 1)] - t[sched.hold_start]
+    longest = float(holds.max())
+    first_stop = int(sched.hold_stop[0])
+    # 1. a first alpha from the late part of every hold (pure creep law)
+    tc0 = t_c if t_c is not None else 0.2 * longest
+    if alpha0 is None:
+        alpha0, _, info = layer1_alpha(t, u, y, tc0, step=layer1_step, schedule=sched)
+        stages["alpha_start"] = info
+    # 2. resonance start: grid on the first transient with that alpha
+    if resonance0 is None:
+        window = int(sched.index[0]) + max(int(min(tc0, 0.5 * holds[0]) / h), 8)
+        window = min(window, first_stop)
+        f_hi = 0.45 / h
+        f_lo = min(max(2.0 / (window * h), 1e-3), f_hi / 4)
+        fn0, zeta0 = resonance_grid(t, u, y, alpha0, window, f_lo, f_hi)
+    else:
+        fn0, zeta0 = resonance0
+    start = CreepModel.from_resonance(alpha0, fn0, zeta0)
+    stages["start"] = {"alpha": alpha0, "fn_hz": fn0, "zeta": zeta0}
+    # 3. t_c from the resonance's settling time (clamped to leave a creep regime)
+    auto_tc = t_c is None
+    if auto_tc:
+        t_c = _settled(start, h, longest)
+    # 4. layer 2 with alpha fixed, then layer 1 with the resonance correction, then retune
+    transient = sched.since_change <= t_c
+    a1, a2, b, info = layer2_resonance(t, u, y, alpha0, transient, start.a1, start.a2)
+    stages["layer2"] = info
+    if auto_tc:
+        t_c = _settled(CreepModel(alpha0, a1, a2, b), h, longest)
+        transient = sched.since_change <= t_c
+    alpha, gain, info = layer1_alpha(t, u, y, t_c, a1=a1, a2=a2, step=layer1_step,
+                                     alpha0=alpha0, schedule=sched)
+    stages["layer1"] = info
+    if retune:
+        alpha = _retune(t, u, y, h, sched, t_c, alpha, a1, a2, stages)
+    a1, a2, b, info = layer2_resonance(t, u, y, alpha, transient, a1, a2)
+    stages["layer2_final"] = info
+    return CreepModel(alpha, a1, a2, b), t_c
+
+
+def _settled(model: CreepModel, h: float, longest: float) -> float:
+    """t_c: 1.5 settling times of the resonance, at least 20 samples, at most half the longest hold."""
+    return float(np.clip(1.5 * model.settling_time, 20 * h, 0.5 * longest))
+
+
+def _retune(t, u, y, h, sched, t_c, alpha, a1, a2, stages) -> float:
+    """Eq. 12 on the longest hold; kept only if it lowers the creep-regime error."""
+    k = int(np.argmax(sched.hold_stop - sched.hold_start))
+    i_c = int(sched.hold_start[k] + round(t_c / h))
+    i_f = int(sched.hold_stop[k]) - 1
+    half = max(1, (i_f - i_c) // 50)
+    if i_f - i_c < 4 * half:
+        return alpha
+    creep = sched.since_change > t_c
+
+    def creep_error(a: float) -> tuple[float, np.ndarray]:
+        yh = model_output(a, a1, a2, h, u)
+        g = float(yh[creep] @ y[creep] / (yh[creep] @ yh[creep]))
+        r = y[creep] - g * yh[creep]
+        return float(r @ r), g * yh
+
+    err0, yh0 = creep_error(alpha)
+    new = float(np.clip(retune_alpha(alpha, y, yh0, i_c, i_f, half), *ALPHA_BOUNDS))
+    err1, _ = creep_error(new)
+    keep = err1 < err0
+    stages["retune"] = {"alpha_before": alpha, "alpha_eq12": new, "kept": bool(keep)}
+    return new if keep else alpha
+
+
+def _general_start(t, u, y, h, alpha0, resonance0, stages):
+    """Starting model for inputs that are not piecewise constant: grid over the whole record."""
+    alpha0 = 0.1 if alpha0 is None else alpha0
+    if resonance0 is None:
+        f_hi = 0.45 / h
+        fn0, zeta0 = resonance_grid(t, u, y, alpha0, t.size, min(2.0 / t[-1], f_hi / 4), f_hi)
+    else:
+        fn0, zeta0 = resonance0
+    m = CreepModel.from_resonance(alpha0, fn0, zeta0)
+    s = model_output(m.alpha, m.a1, m.a2, h, u)
+    b, _ = _projected(y, s)
+    stages["start"] = {"alpha": alpha0, "fn_hz": fn0, "zeta": zeta0}
+    return CreepModel(m.alpha, m.a1, m.a2, b if b != 0 else 1.0), float(m.settling_time)
+
+
+def _identifiability(t, u, y, h, model, t_c, sched, noise) -> list[str]:
+    """Plain-language warnings for parameters the data cannot pin down."""
+    out = []
+    fs = 1.0 / h
+    if model.fn > 0.25 * fs:
+        out.append(f"resonance at {model.fn:.4g} Hz is above fs/4 = {0.25 * fs:.4g} Hz: "
+                   "a1 and a2 are poorly identifiable; sample faster")
+    if sched.piecewise:
+        creep_span = float(t[-1]) / max(t_c, h)
+        if creep_span < 5.0:
+            out.append(f"record too short for creep: it spans only {creep_span:.1f} x t_c "
+                       f"(t_c = {t_c:.3g} s); alpha is poorly identifiable")
+    swing = float(np.ptp(model.b * model_output(model.alpha, model.a1, model.a2, h, u)))
+    if np.isfinite(noise) and swing < 3.0 * noise:
+        out.append("no usable excitation: the input moves the output less than 3x the noise")
+    return out
