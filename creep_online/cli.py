@@ -40,6 +40,10 @@ def main(argv: list[str] | None = None) -> int:
     except CreepOnlineError as exc:
         print(f"creep-online {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        # the reader (e.g. `| head`) went away: not an error of ours
+        sys.stderr.close()
+        return 0
     except KeyboardInterrupt:
         print(f"creep-online {args.command}: interrupted", file=sys.stderr)
         return 130
