@@ -288,20 +288,31 @@ def _uncertainty(jac: np.ndarray, r: np.ndarray, s: np.ndarray, m: CreepModel) -
 
 
 # --------------------------------------------------------------------------- driver
+#: Fewest samples before the first input change from which an output offset is estimated.
+MIN_OFFSET_SAMPLES = 100
+
+
 def _offset(y: np.ndarray, sched: InputSchedule) -> float:
-    """Output level before the first input change (zero initial state is assumed after it)."""
+    """Mean output before the first input change, or 0 when fewer than MIN_OFFSET_SAMPLES precede it.
+
+    A short pre-step segment gives a noisy offset that biases alpha (with a
+    small alpha, creep and a constant are nearly collinear), so it is then
+    taken as zero.
+    """
     first = int(sched.index[0]) if sched.index.size else 0
-    return float(np.median(y[:first])) if first >= 5 else 0.0
+    return float(np.mean(y[:first])) if first >= MIN_OFFSET_SAMPLES else 0.0
 
 
 def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None = None,
              alpha0: float | None = None, resonance0: tuple[float, float] | None = None,
              layer1_step: float | None = None, retune: bool = True, polish: bool = True,
-             source: str = "<array>") -> IdentificationResult:
+             offset: float | None = None, source: str = "<array>") -> IdentificationResult:
     """Identify (alpha, a1, a2, b) from a uniformly sampled record with zero initial state.
 
     ``t_c`` (end of the transient, s), ``alpha0`` and ``resonance0`` =
-    (fn_hz, zeta) override the data-driven choices. ``polish`` runs the joint
+    (fn_hz, zeta) override the data-driven choices; ``offset`` is the output
+    level at rest (default: the mean before the first input change when at
+    least MIN_OFFSET_SAMPLES precede it, else 0). ``polish`` runs the joint
     4-parameter refinement. Warnings say what the data cannot determine.
     """
     start = time.perf_counter()
@@ -313,7 +324,7 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
     t = rec.t - rec.t[0]
     u, y_raw = rec.u, rec.y
     sched = input_schedule(t, u)
-    offset = _offset(y_raw, sched)
+    offset = _offset(y_raw, sched) if offset is None else float(offset)
     y = y_raw - offset
     warnings: list[str] = []
     stages: dict[str, dict] = {}
