@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -76,7 +77,9 @@ def read_columns(path: str | Path, required: tuple[str, ...] = ("t", "u", "y")) 
 def _fast_parse(body: list[str], cols: list[int]) -> np.ndarray | None:
     """numpy's parser for the clean common case; None sends the file to the careful path."""
     try:
-        arr = np.loadtxt(io.StringIO("\n".join(body)), delimiter=",", usecols=cols, ndmin=2, dtype=float)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "input contained no data": reported by the careful path
+            arr = np.loadtxt(io.StringIO("\n".join(body)), delimiter=",", usecols=cols, ndmin=2, dtype=float)
     except (ValueError, IndexError):
         return None
     if arr.shape[0] == 0 or not np.all(np.isfinite(arr)):

@@ -1,0 +1,71 @@
+"""The identify and simulate commands: stable JSON keys (DESIGN.md section 6) and behaviour."""
+import json
+
+import numpy as np
+import pytest
+
+from creep_online import CreepModel, simulate
+from creep_online.cli import main
+from creep_online.io import load_csv, save_csv
+from creep_online.plants import LOAD_CELL
+
+
+@pytest.fixture
+def loadcell_csv(tmp_path):
+    t, u, y, _ = LOAD_CELL.run(40.0, seed=4)
+    path = tmp_path / "lc.csv"
+    save_csv(path, t, u, y)
+    return path
+
+
+def test_identify_json_has_the_stable_keys(loadcell_csv, capsys):
+    assert main(["identify", str(loadcell_csv), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    for key in ("alpha", "a1", "a2", "b", "fit_percent", "elapsed_s"):
+        assert isinstance(out[key], float)
+    assert abs(out["alpha"] / LOAD_CELL.model.alpha - 1) < 0.01
+    assert out["samples"] == 12000 and out["warnings"] == []
+
+
+def test_identify_human_output(loadcell_csv, capsys):
+    assert main(["identify", str(loadcell_csv)]) == 0
+    text = capsys.readouterr().out
+    assert "alpha" in text and "fit" in text and "Hz" in text
+
+
+def test_simulate_writes_t_u_y_for_each_method(tmp_path, capsys):
+    t = np.arange(400) * 1e-3
+    u = (t > 0.05).astype(float)
+    save_csv(tmp_path / "in.csv", t, u, np.zeros_like(t))
+    m = CreepModel(0.3, 0.01, 1e-4, 2.0)
+    for method in ("exact", "paper", "split"):
+        out = tmp_path / f"{method}.csv"
+        code = main(["simulate", "--params", "alpha=0.3,a1=0.01,a2=1e-4,b=2", "--input", str(tmp_path / "in.csv"),
+                     "-o", str(out), "--method", method])
+        assert code == 0
+        rec = load_csv(out)
+        np.testing.assert_allclose(rec.y, simulate(m, t, u, method=method), rtol=1e-15, atol=0)
+
+
+def test_simulate_reads_a_file_without_y(tmp_path):
+    (tmp_path / "in.csv").write_text("t,u\n" + "".join(f"{k * 0.01},1\n" for k in range(30)))
+    assert main(["simulate", "--params", "alpha=0.5,a1=0.1,a2=0.01", "--input", str(tmp_path / "in.csv"),
+                 "-o", str(tmp_path / "o.csv")]) == 0
+
+
+@pytest.mark.parametrize("params, needle", [
+    ("alpha=0.3,a1=0.01", "missing a2"), ("alpha=1.5,a1=1,a2=1", "0 < alpha < 1"),
+    ("alpha=x,a1=1,a2=1", "not a number"), ("gamma=1", "expected alpha"),
+])
+def test_simulate_bad_params_exit_2(tmp_path, capsys, params, needle):
+    (tmp_path / "in.csv").write_text("t,u\n0,1\n0.1,1\n")
+    assert main(["simulate", "--params", params, "--input", str(tmp_path / "in.csv"), "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and len(err.strip().splitlines()) == 1
+
+
+def test_simulate_non_uniform_time_is_explained(tmp_path, capsys):
+    (tmp_path / "in.csv").write_text("t,u\n0,1\n0.1,1\n0.3,1\n0.4,1\n")
+    assert main(["simulate", "--params", "alpha=0.5,a1=0.1,a2=0.01", "--input", str(tmp_path / "in.csv"),
+                 "-o", str(tmp_path / "o.csv")]) == 2
+    assert "not uniformly sampled" in capsys.readouterr().err
