@@ -1,0 +1,181 @@
+"""Serial source: any pyserial port or URL, ASCII or binary frames, reconnect with backoff.
+
+A POSIX port (``/dev/tty*``, a pseudo-terminal) is read with ``select`` +
+``os.read`` on its file descriptor (one system call per burst, whatever is
+there); URLs (``socket://``, ``loop://``, ``rfc2217://``) go through pyserial's
+own ``read``. When the port disappears (EIO, EOF, device gone) the source
+says so once, then reopens it with exponential backoff (50 ms doubling to
+2 s) until it returns, for at most ``reconnect_timeout`` seconds, or raises
+:class:`TransportError` at once if ``reconnect=False``.
+"""
+from __future__ import annotations
+
+import os
+import select
+import time
+
+from .frames import SCALE_U, SCALE_Y, RawSample, make_parser
+from .sources import SampleSource, TransportError
+
+
+def _serial():
+    try:
+        import serial  # pyserial
+    except ImportError:  # pragma: no cover - depends on the environment
+        raise TransportError("serial sources need pyserial: pip install 'creep_online[serial]'") from None
+    return serial
+
+
+class SerialSource(SampleSource):
+    """Samples from a serial port or pyserial URL."""
+
+    def __init__(self, port: str, *, baudrate: int = 921600, format: str = "auto",
+                 rate: float | None = None, checksum: str = "auto",
+                 scale_u: float = SCALE_U, scale_y: float = SCALE_Y,
+                 reconnect: bool = True, reconnect_timeout: float | None = None,
+                 start: str | bytes | None = None, window: int = 16, stall: float = 0.5,
+                 chunk: int = 1 << 16, **kw) -> None:
+        fmt = format.lower()
+        super().__init__(window=window, modulus=2**32 if fmt == "binary" else None, rate=rate,
+                         t_from_seq=(fmt == "binary"), stall=stall, **kw)
+        self.name = f"serial:{port}"
+        self.port = port
+        self.baudrate = int(baudrate)
+        self.format = fmt
+        self.reconnect = bool(reconnect)
+        self.reconnect_timeout = reconnect_timeout
+        self.start = start.encode() if isinstance(start, str) else start
+        self.chunk = int(chunk)
+        self._parser_args = dict(fmt=fmt, rate=rate or 1.0, scale_u=scale_u, scale_y=scale_y,
+                                 checksum=checksum)
+        self.parser = make_parser(**self._parser_args, stats=self.stats.parser)
+        self._leftovers: list[RawSample] = []
+        self._ser = None
+        self._fd: int | None = None
+        self._down_since: float | None = None
+        self._next_try = 0.0
+        self._backoff = 0.05
+        self._open(first=True)
+
+    # -------------------------------------------------------------- link
+    def _open(self, first: bool = False) -> None:
+        serial = _serial()
+        try:
+            if "://" in self.port:
+                ser = serial.serial_for_url(self.port, baudrate=self.baudrate, timeout=0.05)
+            else:
+                ser = serial.Serial(self.port, baudrate=self.baudrate, timeout=0.05, exclusive=False)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            if first:
+                raise TransportError(f"serial:{self.port}: cannot open ({_reason(exc)})") from None
+            raise
+        self._ser = ser
+        try:
+            self._fd = ser.fileno() if "://" not in self.port else None
+        except Exception:  # noqa: BLE001 - URL handlers have no descriptor
+            self._fd = None
+        if self.start:
+            ser.write(self.start)
+            ser.flush()
+
+    def _close_port(self) -> None:
+        if self._ser is not None:
+            try:
+                self._ser.close()
+            except Exception:  # noqa: BLE001 - closing a dead port may fail; it is gone either way
+                pass
+        self._ser = None
+        self._fd = None
+
+    def _lost(self, why: str) -> None:
+        self._close_port()
+        self.stats.disconnects += 1
+        self._absorb_parser()
+        if not self.reconnect:
+            self.event(f"port disappeared ({why}); not reconnecting")
+            raise TransportError(f"serial:{self.port}: port disappeared ({why}); reconnect is off")
+        self.event(f"port disappeared ({why}); reconnecting with backoff")
+        self._down_since = time.monotonic()
+        self._next_try = self._down_since + 0.05
+        self._backoff = 0.05
+
+    def _absorb_parser(self) -> None:
+        """A partial frame from before the cut can never complete: count it and start clean."""
+        self._leftovers = self.parser.flush()
+        fmt = getattr(self.parser, "format", None) or self._parser_args["fmt"]
+        self._parser_args["fmt"] = fmt
+        self.parser = make_parser(**self._parser_args, stats=self.stats.parser)
+
+    def _try_reconnect(self, timeout: float) -> bool:
+        now = time.monotonic()
+        if self.reconnect_timeout is not None and now - self._down_since > self.reconnect_timeout:
+            raise TransportError(f"serial:{self.port}: port did not come back within "
+                                 f"{self.reconnect_timeout:g} s")
+        if now < self._next_try:
+            time.sleep(min(timeout, self._next_try - now))
+            return False
+        try:
+            self._open()
+        except Exception:  # noqa: BLE001 - any failure means: not back yet
+            self._backoff = min(self._backoff * 2, 2.0)
+            self._next_try = time.monotonic() + self._backoff
+            return False
+        self.stats.reconnects += 1
+        self.event(f"reconnected after {time.monotonic() - self._down_since:.2f} s")
+        self._down_since = None
+        return True
+
+    # -------------------------------------------------------------- reading
+    def _read_bytes(self, timeout: float) -> bytes:
+        if self._fd is not None:
+            r, _, _ = select.select([self._fd], [], [], timeout)
+            if not r:
+                return b""
+            data = os.read(self._fd, self.chunk)
+            if not data:
+                raise OSError("end of file")
+            return data
+        ser = self._ser
+        ser.timeout = timeout
+        n = ser.in_waiting
+        return ser.read(n if n else 1)
+
+    def _read_raw(self, timeout: float) -> list[RawSample] | None:
+        if self._leftovers:
+            out, self._leftovers = self._leftovers, []
+            return out
+        if self._ser is None:
+            if not self._try_reconnect(timeout):
+                return []
+        serial = _serial()
+        try:
+            data = self._read_bytes(timeout)
+        except (OSError, serial.SerialException, TypeError, AttributeError) as exc:
+            self._lost(_reason(exc))
+            return []
+        if not data:
+            return []
+        out = self.parser.feed(data)
+        if self.format == "auto" and getattr(self.parser, "format", None) == "binary" and not self.t_from_seq:
+            self._switch_to_binary()
+        return out
+
+    def _switch_to_binary(self) -> None:
+        if not self.rate:
+            self._close_port()
+            self.ended = True
+            raise TransportError(f"serial:{self.port}: binary frames carry a counter, not a time: "
+                                 "give the sample rate, e.g. serial:PORT?rate=10000")
+        self.t_from_seq = True
+        self.tracker.modulus = 2**32
+        self.format = "binary"
+        self._parser_args["fmt"] = "binary"
+
+    def close(self) -> None:
+        self._close_port()
+        super().close()
+
+
+def _reason(exc: BaseException) -> str:
+    msg = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+    return str(msg).splitlines()[0][:120]

@@ -1,0 +1,128 @@
+"""``python -m hil_sim``: the simulated amplifier + plant in its own process.
+
+stdout, line 1: the port to open (a ``/dev/pts/N`` path, or the ``--link``
+symlink). Every further stdout line is a JSON event: ``ready`` (model,
+rate, sample count), ``start`` (``t0_monotonic``: sample n was taken at
+``t0 + n / rate`` on the system monotonic clock), ``stall``, ``disconnect``,
+``reconnect``, ``end`` (with the fault ledger). ``--ledger FILE`` also writes
+the ledger as JSON.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import sys
+import tempfile
+import threading
+
+from .faults import FaultSpec, plan
+from .links import PtyLink
+from .plant import SCHEDULES, PlantConfig, generate, parse_effects, parse_params
+from .runner import CAN_FRAMES, TRANSPORTS, Runner, emit_event
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m hil_sim", description=__doc__.splitlines()[0])
+    p.add_argument("--rate", type=float, default=10_000.0, help="samples per second (default 10000)")
+    p.add_argument("--duration", type=float, default=20.0, help="record length in seconds (default 20)")
+    p.add_argument("--transport", choices=TRANSPORTS[:-1], default="serial-binary")
+    p.add_argument("--can-frame", choices=CAN_FRAMES, default="pair",
+                   help="slcan: samples per CAN frame: sample (1), pair (2, classic), block (7, CAN FD)")
+    p.add_argument("--params", default="", help="alpha=..,a1=..,a2=..,b=.. or alpha=..,fn=..,zeta=..,b=..")
+    p.add_argument("--schedule", choices=SCHEDULES, default="step")
+    p.add_argument("--amplitude", type=float, default=1.0)
+    p.add_argument("--period", type=float, default=2.0, help="staircase/square period (s)")
+    p.add_argument("--t-start", type=float, default=0.0, help="time of the first input step (s)")
+    p.add_argument("--noise", type=float, default=2e-4, help="output noise std")
+    p.add_argument("--adc-bits", type=int, default=20)
+    p.add_argument("--adc-range", type=float, default=10.0)
+    p.add_argument("--effects", default="", help="hidden effects from DESIGN.md section 5, e.g. drift,hysteresis")
+    p.add_argument("--faults", default="", help="garbage=N,bitflip=N,drop=N,dup=N,reorder=N,stall=N,disconnect=N"
+                                                ",stall_s=S,disconnect_s=S (N a count, or a probability < 1)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--fast", action="store_true", help="as fast as possible instead of real time")
+    p.add_argument("--wait-start", action="store_true",
+                   help="serial: hold the stream until the reader sends a byte (slcan always waits for 'O')")
+    p.add_argument("--link", default=None, help="stable symlink to the pty (needed to reconnect after a disconnect)")
+    p.add_argument("--linger", type=float, default=2.0, help="keep the port open this long after the end (s)")
+    p.add_argument("--ledger", default=None, help="write the injected-fault ledger (JSON) here")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        model = parse_params(args.params)
+        spec = FaultSpec.parse(args.faults)
+    except ValueError as exc:
+        print(f"hil_sim: {exc}", file=sys.stderr)
+        return 2
+    cfg = PlantConfig(model=model, rate=args.rate, duration=args.duration, schedule=args.schedule,
+                      amplitude=args.amplitude, period=args.period, t_start=args.t_start, noise=args.noise,
+                      adc_bits=args.adc_bits, adc_range=args.adc_range, effects=parse_effects(args.effects),
+                      seed=args.seed)
+    rec = generate(cfg)
+    link_path = args.link
+    if link_path is None and "disconnect" in spec.counts:
+        link_path = os.path.join(tempfile.mkdtemp(prefix="hil_sim_"), "amp")
+    link = PtyLink(link_path)
+    stop = threading.Event()
+
+    def on_signal(signum, frame):  # noqa: ARG001 - signal handler signature
+        stop.set()
+        if armed:
+            armed.clear()
+            raise _Stopped()   # also breaks out of a write blocked on a full pty
+    armed = [True]
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
+
+    spf = 1 if args.transport.startswith("serial") else {"sample": 1, "pair": 2, "block": 7}[args.can_frame]
+    try:
+        runner = Runner(rec, args.rate, args.transport, link, plan(spec, rec.t.size // spf, args.seed), spec,
+                        can_frame=args.can_frame, realtime=not args.fast, seed=args.seed, stop=stop)
+    except ValueError as exc:
+        print(f"hil_sim: {exc}", file=sys.stderr)
+        link.close()
+        return 2
+    print(link.port, flush=True)
+    emit_event("ready", port=link.port, tty=link.tty, transport=args.transport, rate=args.rate,
+               samples=runner.n_samples, samples_per_frame=runner.spf, model=model.params(),
+               schedule=args.schedule, amplitude=args.amplitude, noise=args.noise, lsb=rec.lsb,
+               effects=cfg.effects, faults=spec.counts, pid=os.getpid())
+    try:
+        if args.transport == "slcan":
+            link.wait_for(b"O\r", reply=b"\r")
+        elif args.wait_start:
+            _wait_any(link, stop)
+        runner.run()
+        link.drain(timeout=max(1.0, args.linger))
+    except _Stopped:
+        pass
+    armed.clear()
+    ledger = runner.ledger
+    if args.ledger:
+        ledger.write(args.ledger)
+    try:
+        emit_event("end", ledger=ledger.to_dict(), stopped=stop.is_set())
+        stop.wait(args.linger)
+    except BrokenPipeError:
+        pass
+    link.close()
+    return 0
+
+
+class _Stopped(Exception):
+    """SIGTERM/SIGINT: stop streaming, write the ledger, close the port."""
+
+
+def _wait_any(link: PtyLink, stop: threading.Event) -> None:
+    """Wait for any byte from the reader (its start command)."""
+    while not stop.is_set():
+        if link.read_available(0.05):
+            return
+
+
+if __name__ == "__main__":
+    sys.exit(main())

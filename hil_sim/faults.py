@@ -1,0 +1,93 @@
+"""Fault injection plan and the ledger of what was injected.
+
+``--faults garbage=N,bitflip=N,drop=N,dup=N,reorder=N,stall=N,disconnect=N``
+with N an exact count (integer >= 1) or a per-frame probability (0 < p < 1);
+``stall_s=`` and ``disconnect_s=`` set the durations. Faults land on distinct
+frames at least ``spacing`` frames apart and away from both ends, so each one
+is separately observable and the receiver's counters can be compared exactly
+with the ledger.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+
+import numpy as np
+
+KINDS = ("garbage", "bitflip", "drop", "dup", "reorder", "stall", "disconnect")
+
+
+@dataclass
+class FaultSpec:
+    counts: dict = field(default_factory=dict)      # kind -> count or probability
+    stall_s: float = 1.5
+    disconnect_s: float = 0.5
+
+    @classmethod
+    def parse(cls, text: str | None) -> "FaultSpec":
+        spec = cls()
+        for item in (text or "").split(","):
+            item = item.strip()
+            if not item:
+                continue
+            if "=" not in item:
+                raise ValueError(f"--faults: expected kind=value, got {item!r}")
+            k, v = (s.strip() for s in item.split("=", 1))
+            if k in ("stall_s", "disconnect_s"):
+                setattr(spec, k, float(v))
+            elif k in KINDS:
+                spec.counts[k] = float(v)
+            else:
+                raise ValueError(f"--faults: unknown fault {k!r}; choose from {', '.join(KINDS)}, stall_s, disconnect_s")
+        return spec
+
+
+@dataclass
+class Ledger:
+    """What the plant injected, for tests to compare with the receiver's counters."""
+
+    frames_sent: int = 0
+    samples_per_frame: int = 1
+    dropped: list = field(default_factory=list)        # frame indices
+    duplicated: list = field(default_factory=list)
+    reordered: list = field(default_factory=list)
+    bitflips: list = field(default_factory=list)
+    garbage: list = field(default_factory=list)        # frame indices a burst preceded
+    garbage_bytes: int = 0
+    stalls: list = field(default_factory=list)
+    disconnects: list = field(default_factory=list)
+    disconnect_lost_samples: int = 0
+    late_max_s: float = 0.0                            # worst pacing lag of the sender
+
+    def to_dict(self) -> dict:
+        d = dict(self.__dict__)
+        d["counts"] = {k: len(getattr(self, a)) for k, a in
+                       (("drop", "dropped"), ("dup", "duplicated"), ("reorder", "reordered"),
+                        ("bitflip", "bitflips"), ("garbage", "garbage"), ("stall", "stalls"),
+                        ("disconnect", "disconnects"))}
+        return d
+
+    def write(self, path: str) -> None:
+        with open(path, "w") as f:
+            json.dump(self.to_dict(), f)
+
+
+def plan(spec: FaultSpec, n_frames: int, seed: int, spacing: int = 40, margin: int = 100) -> dict[int, str]:
+    """frame index -> fault kind, deterministic for a seed."""
+    rng = np.random.default_rng(seed + 7919)
+    wanted: list[str] = []
+    for kind in KINDS:
+        v = spec.counts.get(kind, 0.0)
+        if v <= 0:
+            continue
+        n = int(v) if v >= 1 else int(rng.binomial(n_frames, v))
+        wanted += [kind] * n
+    if not wanted:
+        return {}
+    slots = np.arange(margin, max(margin, n_frames - margin - 2), spacing)
+    if len(slots) < len(wanted):
+        raise ValueError(f"--faults: {len(wanted)} faults do not fit in {n_frames} frames "
+                         f"(at most {len(slots)} with {spacing}-frame spacing); lower the counts or run longer")
+    chosen = np.sort(rng.choice(slots, size=len(wanted), replace=False))
+    rng.shuffle(wanted)
+    return {int(f): k for f, k in zip(chosen, wanted)}

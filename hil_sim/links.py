@@ -1,0 +1,133 @@
+"""Where the plant's frames go: a pseudo-terminal (serial or SLCAN) or python-can's virtual bus.
+
+A pty pair is opened with ``os.openpty``; the slave is put in raw mode and kept
+open here too, so the line never hangs up while the reader (pyserial, in
+another process) opens and closes it. ``link`` makes a stable symlink to the
+current ``/dev/pts/N`` (as socat's ``link=`` does) so a reader can reconnect
+after a simulated disconnect, when the pty is replaced by a new one.
+"""
+from __future__ import annotations
+
+import array
+import fcntl
+import os
+import select
+import termios
+import time
+import tty
+
+
+class PtyLink:
+    """Master side of a pseudo-terminal the reader opens as a serial port."""
+
+    def __init__(self, link: str | None = None) -> None:
+        self.link = link
+        self.master: int | None = None
+        self.slave: int | None = None
+        self.open()
+
+    def open(self) -> None:
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)
+        attrs = termios.tcgetattr(self.slave)
+        attrs[3] &= ~termios.ECHO
+        termios.tcsetattr(self.slave, termios.TCSANOW, attrs)
+        self.tty = os.ttyname(self.slave)
+        if self.link:
+            tmp = f"{self.link}.tmp{os.getpid()}"
+            try:
+                os.unlink(tmp)
+            except FileNotFoundError:
+                pass
+            os.symlink(self.tty, tmp)
+            os.replace(tmp, self.link)
+
+    @property
+    def port(self) -> str:
+        return self.link or self.tty
+
+    def write(self, data: bytes) -> None:
+        view = memoryview(data)
+        while view:
+            n = os.write(self.master, view)
+            view = view[n:]
+
+    def read_available(self, timeout: float = 0.0) -> bytes:
+        r, _, _ = select.select([self.master], [], [], timeout)
+        if not r:
+            return b""
+        try:
+            return os.read(self.master, 4096)
+        except OSError:
+            return b""
+
+    def unread(self) -> int:
+        """Bytes written but not yet read by the other side."""
+        buf = array.array("i", [0])
+        fcntl.ioctl(self.slave, termios.FIONREAD, buf, True)
+        return buf[0]
+
+    def drain(self, timeout: float = 5.0) -> bool:
+        """Wait until the reader has consumed everything (True) or timeout (False)."""
+        end = time.monotonic() + timeout
+        while self.unread() > 0:
+            if time.monotonic() > end:
+                return False
+            time.sleep(0.002)
+        return True
+
+    def wait_for(self, token: bytes, timeout: float | None = None, reply: bytes | None = None) -> bool:
+        """Block until the reader sends ``token`` (a start command); answer each CR-ended command."""
+        buf = b""
+        end = None if timeout is None else time.monotonic() + timeout
+        while token not in buf:
+            left = None if end is None else end - time.monotonic()
+            if left is not None and left <= 0:
+                return False
+            chunk = self.read_available(0.05 if left is None else min(0.05, left))
+            if chunk and reply is not None:
+                self.write(reply * chunk.count(b"\r"))
+            buf = (buf + chunk)[-256:]
+        return True
+
+    def close(self) -> None:
+        for fd in (self.master, self.slave):
+            if fd is not None:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        self.master = self.slave = None
+        if self.link:
+            try:
+                os.unlink(self.link)
+            except FileNotFoundError:
+                pass
+
+    def reopen(self) -> None:
+        self.open()
+
+
+def slcan_text(arbitration_id: int, data: bytes, fd: bool) -> bytes:
+    """One frame in the SLCAN (Lawicel) ASCII protocol; FD as the CANable 2.0 'd' extension."""
+    if fd:
+        from can.util import len2dlc
+        return b"d%03X%X%s\r" % (arbitration_id, len2dlc(len(data)), data.hex().upper().encode())
+    return b"t%03X%d%s\r" % (arbitration_id, len(data), data.hex().upper().encode())
+
+
+class VirtualLink:
+    """python-can ``virtual`` bus (in-process only: the reader must live in this process)."""
+
+    def __init__(self, channel: str) -> None:
+        import can
+        self._can = can
+        self.bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+        self.port = f"virtual:{channel}"
+
+    def send(self, arbitration_id: int, data: bytes, fd: bool) -> None:
+        self.bus.send(self._can.Message(arbitration_id=arbitration_id, data=data, is_extended_id=False,
+                                        is_fd=fd, bitrate_switch=fd))
+
+    def close(self) -> None:
+        self.bus.shutdown()

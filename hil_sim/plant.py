@@ -1,0 +1,125 @@
+"""The simulated plant: creep model (+ hidden effects) driven by an input schedule, plus noise and ADC.
+
+The whole record is computed up front with the exact simulator
+(``creep_online.simulate.simulate(..., method="exact")``: closed-form step
+responses superposed, ~1e-14) so that pacing never waits on numerics; the
+transport then releases sample n at t0 + n / rate. Effects from the catalogue
+(DESIGN.md section 5) are applied by ``creep_online.effects`` when that module
+is present; this package keeps no copy of the effect models.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from creep_online import CreepModel, simulate
+
+SCHEDULES = ("step", "staircase", "updown", "square")
+
+#: The demo plant: alpha and gain of a stacked piezo, first mode at 300 Hz.
+DEFAULT_PARAMS = {"alpha": 0.05, "fn": 300.0, "zeta": 0.15, "b": 1.0}
+
+
+def parse_params(text: str | None) -> CreepModel:
+    """``alpha=..,a1=..,a2=..,b=..`` (or ``fn=..,zeta=..`` instead of a1/a2) -> CreepModel."""
+    vals = dict(DEFAULT_PARAMS)
+    if text:
+        for item in text.split(","):
+            if not item.strip():
+                continue
+            if "=" not in item:
+                raise ValueError(f"--params: expected name=value, got {item!r}")
+            k, v = item.split("=", 1)
+            vals[k.strip()] = float(v)
+    if "a1" in vals and "a2" in vals:
+        return CreepModel(vals["alpha"], vals["a1"], vals["a2"], vals.get("b", 1.0))
+    return CreepModel.from_resonance(vals["alpha"], vals["fn"], vals["zeta"], vals.get("b", 1.0))
+
+
+def make_input(schedule: str, t: np.ndarray, *, amplitude: float = 1.0, period: float = 2.0,
+               t_start: float = 0.0) -> np.ndarray:
+    """Input u(t) for a named schedule (zero-order held between samples).
+
+    step       0 until t_start, then ``amplitude``
+    staircase  up in 4 steps of amplitude/4, then down with reversals (up 1, down 2)
+    updown     step up at t_start, back to 0 at the middle of the record
+    square     amplitude/2 +- amplitude/2 with the given period
+    """
+    t = np.asarray(t, dtype=float)
+    u = np.zeros_like(t)
+    on = t >= t_start
+    if schedule == "step":
+        u[on] = amplitude
+    elif schedule == "updown":
+        mid = t_start + (t[-1] - t_start) / 2
+        u[on & (t < mid)] = amplitude
+    elif schedule == "staircase":
+        levels = np.array([1, 2, 3, 4, 3, 3.5, 2, 2.5, 1, 1.5]) * amplitude / 4
+        k = np.floor((t - t_start) / period).astype(int)
+        k = np.clip(k, 0, len(levels) - 1)
+        u[on] = levels[k[on]]
+    elif schedule == "square":
+        phase = np.floor((t - t_start) / (period / 2)).astype(int) % 2
+        u[on] = np.where(phase[on] == 0, amplitude, 0.0)
+    else:
+        raise ValueError(f"unknown schedule {schedule!r}; choose one of {', '.join(SCHEDULES)}")
+    return u
+
+
+def parse_effects(text: str | None) -> list[str]:
+    return [e.strip() for e in (text or "").split(",") if e.strip()]
+
+
+def apply_effects(model: CreepModel, t: np.ndarray, u: np.ndarray, effects: list[str]) -> np.ndarray:
+    """Output with hidden effects, delegated to ``creep_online.effects`` (no copy kept here)."""
+    try:
+        from creep_online import effects as fx
+    except ImportError:
+        raise SystemExit("hil_sim: --effects needs creep_online.effects, which is not available in this build")
+    fn = getattr(fx, "simulate_with_effects", None)
+    if fn is None:
+        raise SystemExit("hil_sim: creep_online.effects has no simulate_with_effects(model, t, u, effects)")
+    return np.asarray(fn(model, t, u, effects), dtype=float)
+
+
+@dataclass
+class PlantConfig:
+    model: CreepModel
+    rate: float = 10_000.0
+    duration: float = 20.0
+    schedule: str = "step"
+    amplitude: float = 1.0
+    period: float = 2.0
+    t_start: float = 0.0
+    noise: float = 2e-4           # output noise std (output units)
+    adc_bits: int = 20
+    adc_range: float = 10.0       # full scale +- adc_range/2
+    effects: list = field(default_factory=list)
+    seed: int = 0
+
+
+@dataclass
+class PlantRecord:
+    t: np.ndarray
+    u: np.ndarray
+    y_clean: np.ndarray   # model (+ effects) output, no noise
+    y: np.ndarray         # what the amplifier reports: noisy, quantized
+    lsb: float
+
+
+def generate(cfg: PlantConfig) -> PlantRecord:
+    """The full sampled record of the plant for this configuration."""
+    n = max(2, int(round(cfg.duration * cfg.rate)))
+    t = np.arange(n) / cfg.rate
+    u = make_input(cfg.schedule, t, amplitude=cfg.amplitude, period=cfg.period, t_start=cfg.t_start)
+    if cfg.effects:
+        y_clean = apply_effects(cfg.model, t, u, cfg.effects)
+    else:
+        y_clean = simulate(cfg.model, t, u, method="exact")
+    rng = np.random.default_rng(cfg.seed)
+    y = y_clean + cfg.noise * rng.standard_normal(n) if cfg.noise > 0 else y_clean.copy()
+    lsb = cfg.adc_range / 2.0 ** cfg.adc_bits
+    half = cfg.adc_range / 2
+    y = np.clip(np.round(y / lsb) * lsb, -half, half - lsb)
+    return PlantRecord(t, u, y_clean, y, lsb)
