@@ -28,6 +28,7 @@ from scipy.optimize import least_squares
 from scipy.special import rgamma
 
 from . import kernels
+from ._threads import single_threaded
 from .discretize import foh_matrices, step_response_grid
 from .errors import DataError, IdentificationError
 from .metrics import fit_percent, noise_std_estimate
@@ -303,6 +304,7 @@ def _offset(y: np.ndarray, sched: InputSchedule) -> float:
     return float(np.mean(y[:first])) if first >= MIN_OFFSET_SAMPLES else 0.0
 
 
+@single_threaded
 def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None = None,
              alpha0: float | None = None, resonance0: tuple[float, float] | None = None,
              layer1_step: float | None = None, retune: bool = True, polish: bool = True,

@@ -1,0 +1,156 @@
+"""Benchmark of batch identification (issue 2). Prints one JSON document.
+
+* recovery: the four reference experiments at 40 dB SNR, several seeds: worst
+  relative error per parameter, fit% against the noise floor.
+* remark4: the paper's Remark 4 -- layer-1 elapsed time and alpha for coarse
+  steps 0.005 ... 0.04 s on a 60 s record, ours and FOMCON-style (eq. 13 full
+  memory simulated at the coarse step, finite-difference TRF), same data.
+* speed: whole two-layer identification warm, p50/p99/max over repeats, for
+  12,000 samples (60 s at 200 Hz) and 100,000 samples (10 s at 10 kHz); the
+  FOMCON-style baseline (full-memory eq. 13 + finite-difference TRF on all four
+  parameters, from the same starting point) run once in the same process.
+
+Usage: python bench/bench_identify.py [--quick]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import sys
+import time
+
+import numpy as np
+from scipy.optimize import least_squares
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+from creep_online import CreepModel  # noqa: E402
+from creep_online.identify import identify, layer1_alpha  # noqa: E402
+from creep_online.kernels import gl_paper  # noqa: E402
+from creep_online.metrics import noise_floor_fit  # noqa: E402
+from creep_online.plants import LOAD_CELL, NANOPOSITIONER, RECOVERY_CASES  # noqa: E402
+
+
+def distribution(samples: list[float]) -> dict[str, float]:
+    a = np.asarray(samples)
+    return {"p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)),
+            "max": float(a.max()), "n": int(a.size)}
+
+
+def recovery(seeds: int) -> list[dict]:
+    rows = []
+    for case in RECOVERY_CASES:
+        worst = dict.fromkeys(("alpha", "a1", "a2", "b"), 0.0)
+        gap = []
+        for seed in range(seeds):
+            t, u, y, std = case.run(40.0, seed)
+            res = identify(t, u, y)
+            for k in worst:
+                worst[k] = max(worst[k], abs(getattr(res.model, k) / getattr(case.model, k) - 1) * 100)
+            gap.append(noise_floor_fit(y, std) - res.fit_percent)
+        rows.append({"case": case.name, "samples": int(t.size), "truth": case.model.describe(),
+                     "worst_error_percent": worst, "seeds": seeds,
+                     "fit_below_noise_floor_points_max": float(max(gap))})
+    return rows
+
+
+# ----------------------------------------------------------------------------- FOMCON-style baselines
+def fomcon_layer1(t, u, y, step, a1, a2, alpha0):
+    """Layer 1 the FOMCON way: data subsampled at ``step``, eq. 13 simulated (full memory) at that
+    step for every residual, alpha and gain as free parameters, finite-difference TRF."""
+    h = t[1] - t[0]
+    k = max(1, int(round(step / h)))
+    ts, us, ys = t[::k], u[::k], y[::k]
+    hs = ts[1] - ts[0]
+
+    def residual(p):
+        return ys - p[1] * gl_paper(us, hs, p[0], a1, a2, -1)
+
+    t0 = time.perf_counter()
+    sol = least_squares(residual, [alpha0, 1.0], bounds=([1e-4, -np.inf], [0.999, np.inf]), method="trf")
+    return float(sol.x[0]), time.perf_counter() - t0, int(sol.nfev)
+
+
+def fomcon_full(t, u, y, start: CreepModel):
+    """Whole identification the FOMCON way: eq. 13 full memory + finite-difference TRF on all four."""
+    h = t[1] - t[0]
+
+    def residual(p):
+        return y - p[3] * gl_paper(u, h, p[0], math.exp(p[1]), math.exp(p[2]), -1)
+
+    p0 = [start.alpha, math.log(start.a1), math.log(start.a2), start.b]
+    t0 = time.perf_counter()
+    sol = least_squares(residual, p0, method="trf",
+                        bounds=([1e-4, -np.inf, -np.inf, -np.inf], [0.999, np.inf, np.inf, np.inf]))
+    return sol, time.perf_counter() - t0
+
+
+def remark4() -> dict:
+    case = LOAD_CELL
+    t, u, y, _ = case.run(40.0, seed=0)
+    ref = identify(t, u, y)
+    m = ref.model
+    rows = []
+    for step in (0.005, 0.01, 0.02, 0.03, 0.04):
+        ours = []
+        for _ in range(20):
+            t0 = time.perf_counter()
+            alpha, _, info = layer1_alpha(t, u, y, ref.t_c, a1=m.a1, a2=m.a2, step=step)
+            ours.append(time.perf_counter() - t0)
+        f_alpha, f_el, f_nfev = fomcon_layer1(t, u, y, step, m.a1, m.a2, 0.1)
+        rows.append({"step_s": step, "ours": {"alpha": alpha, "elapsed_s": distribution(ours),
+                                               "points": info["points"]},
+                     "fomcon_style": {"alpha": f_alpha, "elapsed_s": f_el, "nfev": f_nfev},
+                     "paper_fomcon_s": {0.005: 29, 0.01: 7, 0.02: 2, 0.03: 1, 0.04: "<1"}[step]})
+    return {"record": f"{case.name}, 60 s at 200 Hz, 40 dB", "true_alpha": case.model.alpha, "t_c": ref.t_c,
+            "rows": rows}
+
+
+def speed(repeats: int) -> dict:
+    out = {}
+    for case in (LOAD_CELL, NANOPOSITIONER):
+        t, u, y, _ = case.run(40.0, seed=1)
+        identify(t, u, y)  # warm (numba cache, imports)
+        times = []
+        for _ in range(repeats):
+            res = identify(t, u, y)
+            times.append(res.elapsed_s)
+        entry = {"samples": int(t.size), "elapsed_s": distribution(times)}
+        start = CreepModel(res.stages["start"]["alpha"], 1.0, 1.0).from_resonance(
+            res.stages["start"]["alpha"], res.stages["start"]["fn_hz"], res.stages["start"]["zeta"], 1.0)
+        if t.size <= 20000:
+            sol, el = fomcon_full(t, u, y, start)
+            entry["baseline_fomcon_style"] = {
+                "elapsed_s": el, "nfev": int(sol.nfev), "alpha": float(sol.x[0]),
+                "a1": math.exp(sol.x[1]), "a2": math.exp(sol.x[2]), "b": float(sol.x[3])}
+            entry["speedup_vs_baseline_p50"] = el / entry["elapsed_s"]["p50"]
+        else:
+            # one full-memory eq. 13 simulation is O(N^2): time it once; the baseline needs dozens
+            t0 = time.perf_counter()
+            gl_paper(u, t[1] - t[0], start.alpha, start.a1, start.a2, -1)
+            one = time.perf_counter() - t0
+            entry["baseline_one_eq13_simulation_s"] = one
+            entry["speedup_lower_bound_vs_one_simulation"] = one / entry["elapsed_s"]["p50"]
+        out[case.name] = entry
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="fewer seeds and repeats")
+    args = ap.parse_args()
+    report = {
+        "bench": "identify", "machine": {"cpus": os.cpu_count(), "python": platform.python_version()},
+        "recovery": recovery(2 if args.quick else 5),
+        "speed": speed(5 if args.quick else 30),
+        "remark4": remark4(),
+    }
+    json.dump(report, sys.stdout, indent=2)
+    sys.stdout.write("\n")
+
+
+if __name__ == "__main__":
+    main()
