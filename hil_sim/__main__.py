@@ -37,7 +37,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise", type=float, default=2e-4, help="output noise std")
     p.add_argument("--adc-bits", type=int, default=20)
     p.add_argument("--adc-range", type=float, default=10.0)
-    p.add_argument("--effects", default="", help="hidden effects from DESIGN.md section 5, e.g. drift,hysteresis")
+    p.add_argument("--effects", default="", help="hidden effects (DESIGN.md section 5): 'drift;delay:delay_s=1e-3' "
+                        "(name[:k=v,..] joined by ';', list values as a/b/c) or a JSON object")
     p.add_argument("--faults", default="", help="garbage=N,bitflip=N,drop=N,dup=N,reorder=N,stall=N,disconnect=N"
                                                 ",stall_s=S,disconnect_s=S (N a count, or a probability < 1)")
     p.add_argument("--seed", type=int, default=0)
@@ -55,12 +56,13 @@ def main(argv: list[str] | None = None) -> int:
     try:
         model = parse_params(args.params)
         spec = FaultSpec.parse(args.faults)
+        effects = parse_effects(args.effects)
     except ValueError as exc:
         print(f"hil_sim: {exc}", file=sys.stderr)
         return 2
     cfg = PlantConfig(model=model, rate=args.rate, duration=args.duration, schedule=args.schedule,
                       amplitude=args.amplitude, period=args.period, t_start=args.t_start, noise=args.noise,
-                      adc_bits=args.adc_bits, adc_range=args.adc_range, effects=parse_effects(args.effects),
+                      adc_bits=args.adc_bits, adc_range=args.adc_range, effects=effects,
                       seed=args.seed)
     rec = generate(cfg)
     link_path = args.link

@@ -67,11 +67,44 @@ def make_input(schedule: str, t: np.ndarray, *, amplitude: float = 1.0, period: 
     return u
 
 
-def parse_effects(text: str | None) -> list[str]:
-    return [e.strip() for e in (text or "").split(",") if e.strip()]
+#: Parameters used when ``--effects`` names an effect without giving any (scenario values, not models).
+EFFECT_DEFAULTS = {
+    "hysteresis": {"r": [0.1, 0.3, 0.5], "w": [0.10, 0.06, 0.03]},
+    "nonlinear_gain": {"k2": 0.08, "k3": 0.0},
+    "second_mode": {"gain": 0.05, "fn_hz": 1200.0, "zeta": 0.03},
+    "drift": {"rate": 2e-3, "offset": 0.0},
+    "leakage": {"tau_s": 30.0},
+    "delay": {"delay_s": 5e-4},
+    "periodic_disturbance": {"f_hz": 50.0, "amplitude": 2e-3, "phase": 0.0},
+    "second_creep": {"gain": 0.05, "alpha2": 0.4},
+}
 
 
-def apply_effects(model: CreepModel, t: np.ndarray, u: np.ndarray, effects: list[str]) -> np.ndarray:
+def parse_effects(text: str | None) -> dict[str, dict]:
+    """``name[:k=v,k=v][;name...]`` or a JSON object -> ``{name: params}`` for creep_online.effects."""
+    text = (text or "").strip()
+    if not text:
+        return {}
+    if text.startswith("{"):
+        import json
+        return {k: dict(v) for k, v in json.loads(text).items()}
+    out: dict[str, dict] = {}
+    for item in text.split(";"):
+        item = item.strip()
+        if not item:
+            continue
+        name, _, rest = item.partition(":")
+        name = name.strip()
+        params = dict(EFFECT_DEFAULTS.get(name, {})) if not rest.strip() else {}
+        for kv in filter(None, (x.strip() for x in rest.split(","))):
+            k, _, v = kv.partition("=")
+            vals = [float(x) for x in v.split("/")]
+            params[k.strip()] = vals if len(vals) > 1 else vals[0]
+        out[name] = params
+    return out
+
+
+def apply_effects(model: CreepModel, t: np.ndarray, u: np.ndarray, effects: dict[str, dict]) -> np.ndarray:
     """Output with hidden effects, delegated to ``creep_online.effects`` (no copy kept here)."""
     try:
         from creep_online import effects as fx
@@ -95,7 +128,7 @@ class PlantConfig:
     noise: float = 2e-4           # output noise std (output units)
     adc_bits: int = 20
     adc_range: float = 10.0       # full scale +- adc_range/2
-    effects: list = field(default_factory=list)
+    effects: dict = field(default_factory=dict)
     seed: int = 0
 
 

@@ -3,10 +3,11 @@
 Two formats (DESIGN.md section 7):
 
 ASCII lines
-    ``seq,t,u,y`` then optionally ``*HH`` (NMEA-style: XOR of every byte before
-    the ``*``, two upper-case hex digits), ended by ``\\n`` (a trailing ``\\r``
-    is accepted). Without the checksum a flipped digit cannot be detected, so
-    once a checksummed line has been seen the parser requires it on every line.
+    ``seq,t,u,y`` then optionally ``*HHHH`` (CRC-16/CCITT-FALSE of every byte
+    before the ``*``, four upper-case hex digits), ended by ``\\n`` (a trailing
+    ``\\r`` is accepted). Without the checksum a flipped digit cannot be
+    detected, so once a checksummed line has been seen the parser requires it
+    on every line (``checksum="required"`` requires it from the first).
 
 Binary frames (22 bytes, little-endian)
     ``AA 55 | u16 len=16 | u32 seq | i32 u | i32 y | u32 status | u16 crc``
@@ -73,14 +74,6 @@ def crc16(data: bytes) -> int:
     return binascii.crc_hqx(data, 0xFFFF)
 
 
-def nmea_checksum(data: bytes) -> int:
-    """XOR of all bytes (the NMEA-0183 sentence checksum)."""
-    c = 0
-    for b in data:
-        c ^= b
-    return c
-
-
 # ---------------------------------------------------------------- encoders
 def quantize(value: float, scale: float) -> int:
     """Nearest wire integer for ``value`` at ``scale`` units per LSB, clipped to i32."""
@@ -103,10 +96,10 @@ def encode_binary_raw(seq: int, raw_u: int, raw_y: int, status: int = 0) -> byte
 
 
 def encode_ascii(seq: int, t: float, u: float, y: float, checksum: bool = True) -> bytes:
-    """One ASCII line ``seq,t,u,y[*HH]\\n`` (repr-exact floats)."""
+    """One ASCII line ``seq,t,u,y[*HHHH]\\n`` (repr-exact floats)."""
     body = f"{seq},{t!r},{u!r},{y!r}".encode()
     if checksum:
-        return body + b"*%02X\n" % nmea_checksum(body)
+        return body + b"*%04X\n" % crc16(body)
     return body + b"\n"
 
 
@@ -190,17 +183,12 @@ class BinaryParser:
         return out
 
 
-_HEX = b"0123456789ABCDEF"
-
-
-def _hexval(b: int) -> int:
-    i = _HEX.find(bytes((b,)))
-    return i
+_HEX4 = frozenset(b"0123456789ABCDEF")
 
 
 @dataclass
 class AsciiParser:
-    """Incremental decoder of ``seq,t,u,y[*HH]`` lines.
+    """Incremental decoder of ``seq,t,u,y[*HHHH]`` lines.
 
     ``checksum``: ``"auto"`` (require it once one line carried it), ``"required"``
     or ``"none"`` (accept lines with or without; never require).
@@ -266,17 +254,10 @@ class AsciiParser:
         if not line:
             self.stats.garbage_bytes += 1
             return None
-        star = line.find(b"*")
+        star = line.rfind(b"*")
         if star >= 0:
             body, tail = line[:star], line[star + 1:]
-            if len(tail) != 2:
-                self._reject(line)
-                return None
-            hi, lo = _hexval(tail[0]), _hexval(tail[1])
-            if hi < 0 or lo < 0:
-                self._reject(line, crc=True)
-                return None
-            if nmea_checksum(body) != (hi << 4 | lo):
+            if len(tail) != 4 or not _HEX4.issuperset(tail) or crc16(body) != int(tail, 16):
                 self._reject(line, crc=True)
                 return None
             if self.checksum == "auto":
