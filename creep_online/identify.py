@@ -54,6 +54,7 @@ class IdentificationResult:
     elapsed_s: float
     t_c: float
     offset: float = 0.0
+    input_offset: float = 0.0
     warnings: list[str] = field(default_factory=list)
     stages: dict[str, dict] = field(default_factory=dict)
     uncertainty: dict[str, float] = field(default_factory=dict)
@@ -67,6 +68,7 @@ class IdentificationResult:
             "alpha": m.alpha, "a1": m.a1, "a2": m.a2, "b": m.b,
             "fit_percent": self.fit_percent, "elapsed_s": self.elapsed_s,
             "fn_hz": m.fn, "zeta": m.zeta, "t_c": self.t_c, "offset": self.offset,
+            "input_offset": self.input_offset,
             "noise_std": self.noise_std, "uncertainty": self.uncertainty,
             "warnings": list(self.warnings), "stages": self.stages,
         }
@@ -194,6 +196,13 @@ def _projected(y: np.ndarray, s: np.ndarray) -> tuple[float, np.ndarray]:
     return b, y - b * s
 
 
+def _projected_affine(y: np.ndarray, s: np.ndarray) -> tuple[float, float, np.ndarray]:
+    """Best (b, c) for y ~ b s + c and the residual: the gain and a free output offset."""
+    basis = np.column_stack([s, np.ones_like(s)])
+    (b, c), *_ = np.linalg.lstsq(basis, y, rcond=None)
+    return float(b), float(c), y - b * s - c
+
+
 def model_output(alpha: float, a1: float, a2: float, h: float, u: np.ndarray, n: int | None = None) -> np.ndarray:
     """Unit-gain exact response to the ZOH input u (first n samples)."""
     n = u.size if n is None else n
@@ -251,14 +260,20 @@ def layer2_resonance(t: np.ndarray, u: np.ndarray, y: np.ndarray, alpha: float, 
 
 
 # --------------------------------------------------------------------------- polish
-def joint_polish(t: np.ndarray, u: np.ndarray, y: np.ndarray, model: CreepModel) -> tuple[CreepModel, dict]:
-    """All four parameters on the whole record (b projected out), warm-started; returns std too."""
+def joint_polish(t: np.ndarray, u: np.ndarray, y: np.ndarray, model: CreepModel,
+                 free_offset: bool = False) -> tuple[CreepModel, dict]:
+    """All four parameters on the whole record (b, and the offset if free, projected out), warm-started.
+
+    Returns the polished model and an info dict with the parameter std.
+    """
     h = float(t[1] - t[0])
 
     def shape(p: np.ndarray) -> np.ndarray:
         return model_output(p[0], math.exp(p[1]), math.exp(p[2]), h, u)
 
     def residual(p: np.ndarray) -> np.ndarray:
+        if free_offset:
+            return _projected_affine(y, shape(p))[2]
         return _projected(y, shape(p))[1]
 
     start = time.perf_counter()
@@ -268,9 +283,12 @@ def joint_polish(t: np.ndarray, u: np.ndarray, y: np.ndarray, model: CreepModel)
     sol = least_squares(residual, p0, bounds=(lo, hi), method="trf", x_scale=[0.01, 0.1, 0.1],
                         diff_step=1e-7, xtol=1e-10, ftol=1e-10)
     s = shape(sol.x)
-    b, r = _projected(y, s)
+    if free_offset:
+        b, c, r = _projected_affine(y, s)
+    else:
+        (b, r), c = _projected(y, s), 0.0
     polished = CreepModel(float(sol.x[0]), math.exp(sol.x[1]), math.exp(sol.x[2]), b)
-    info = {"nfev": int(sol.nfev), "elapsed_s": time.perf_counter() - start,
+    info = {"nfev": int(sol.nfev), "elapsed_s": time.perf_counter() - start, "offset": c,
             "uncertainty": _uncertainty(sol.jac, r, s, polished)}
     return polished, info
 
@@ -332,24 +350,30 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
     stages: dict[str, dict] = {}
     noise = noise_std_estimate(y)
 
+    u0 = 0.0
     if sched.piecewise:
         model, t_c = _layered(t, u, y, h, sched, t_c, alpha0, resonance0, layer1_step, retune, stages, warnings)
     else:
+        # a record taken in operation: deviations from its first input level, output offset fitted
+        u0 = float(u[0])
+        u = u - u0
         model, t_c = _general_start(t, u, y, h, alpha0, resonance0, stages)
         warnings.append("input is not piecewise constant (changes at most samples): "
-                        "layers skipped, joint fit only")
+                        "layers skipped, joint fit only, output offset fitted")
         polish = True
     uncertainty: dict[str, float] = {}
     if polish:
-        model, info = joint_polish(t, u, y, model)
+        model, info = joint_polish(t, u, y, model, free_offset=not sched.piecewise)
         uncertainty = info.pop("uncertainty")
+        offset += info["offset"]
+        y = y - info["offset"]
         stages["polish"] = {**info, **model.params()}
     y_hat = model.b * model_output(model.alpha, model.a1, model.a2, h, u)
     warnings += _identifiability(t, u, y, h, model, t_c, sched, noise)
     return IdentificationResult(
         model=model, fit_percent=fit_percent(y, y_hat), elapsed_s=time.perf_counter() - start,
-        t_c=t_c, offset=offset, warnings=warnings, stages=stages, uncertainty=uncertainty,
-        noise_std=noise, y_hat=y_hat + offset)
+        t_c=t_c, offset=offset, input_offset=u0, warnings=warnings, stages=stages,
+        uncertainty=uncertainty, noise_std=noise, y_hat=y_hat + offset)
 
 
 def _layered(t, u, y, h, sched, t_c, alpha0, resonance0, layer1_step, retune, stages, warnings):
@@ -433,7 +457,7 @@ def _general_start(t, u, y, h, alpha0, resonance0, stages):
         fn0, zeta0 = resonance0
     m = CreepModel.from_resonance(alpha0, fn0, zeta0)
     s = model_output(m.alpha, m.a1, m.a2, h, u)
-    b, _ = _projected(y, s)
+    b, _, _ = _projected_affine(y, s)
     stages["start"] = {"alpha": alpha0, "fn_hz": fn0, "zeta": zeta0}
     return CreepModel(m.alpha, m.a1, m.a2, b if b != 0 else 1.0), float(m.settling_time)
 
@@ -450,7 +474,7 @@ def _identifiability(t, u, y, h, model, t_c, sched, noise) -> list[str]:
         if creep_span < 5.0:
             out.append(f"record too short for creep: it spans only {creep_span:.1f} x t_c "
                        f"(t_c = {t_c:.3g} s); alpha is poorly identifiable")
-    swing = float(np.ptp(model.b * model_output(model.alpha, model.a1, model.a2, h, u)))
-    if np.isfinite(noise) and swing < 3.0 * noise:
-        out.append("no usable excitation: the input moves the output less than 3x the noise")
+    if np.isfinite(noise) and float(np.std(y)) < 1.5 * noise:
+        out.append("no usable excitation: the output varies no more than its noise "
+                   f"(std {float(np.std(y)):.3g} vs noise {noise:.3g})")
     return out

@@ -37,12 +37,13 @@ class Record:
 
     @property
     def is_uniform(self) -> bool:
-        """True when the step varies by less than 1e-6 relative."""
-        if self.t.size < 3:
-            return True
-        dt = np.diff(self.t)
-        h = (self.t[-1] - self.t[0]) / (self.t.size - 1)
-        return bool(np.max(np.abs(dt - h)) <= 1e-6 * h + 1e-12 * abs(self.t[-1]))
+        """True when the step varies by less than UNIFORM_RTOL of the mean step."""
+        from .simulate import uniform_step  # local: simulate imports record's neighbours
+        try:
+            uniform_step(self.t)
+        except DataError:
+            return False
+        return True
 
     @property
     def h(self) -> float:
@@ -65,7 +66,7 @@ class Record:
         if np.any(dt <= 0):
             i = int(np.argmax(dt <= 0))
             raise DataError(f"{name}: time is not strictly increasing at data row {i + 2} "
-                            f"(t={self.t[i + 1]!r} after t={self.t[i]!r})")
+                            f"(t={float(self.t[i + 1])!r} after t={float(self.t[i])!r})")
         if not np.any(self.u):
             # zero initial state is assumed: a constant non-zero u is a step at t[0]
             raise DataError(f"{name}: no excitation (input u is zero throughout)")
