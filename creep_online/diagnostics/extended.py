@@ -34,7 +34,16 @@ ZETA_BOUNDS = (1e-3, 20.0)
 #: Largest delay searched, in samples (uniform) of the record.
 MAX_DELAY_SAMPLES = 40
 #: Evaluations allowed per least-squares fit.
-MAX_NFEV = 60
+MAX_NFEV = 40
+#: Extended fits: this many grid starts get a short polish of SHORT_NFEV evaluations first.
+SHORT_STARTS = 4
+SHORT_NFEV = 8
+#: ... and this many priority starts (spectral peaks, swapped modes) too.
+PRIORITY_STARTS = 5
+#: Records longer than 1.5x this explore starting points on their first EXPLORE_SAMPLES samples.
+EXPLORE_SAMPLES = 8000
+#: Relative tolerance (ftol, xtol) of the final polish: RSS to ~1e-7 is ample for the evidence.
+FULL_TOL = 1e-7
 
 
 # --------------------------------------------------------------------------- prepared data
@@ -50,6 +59,8 @@ class Prepared:
     t_pre: float | None = None
     source: str = "<array>"
     notes: list[str] = field(default_factory=list)
+    u_range: float | None = None   # input range (sets the hysteresis thresholds); default from u
+    u_scale: float | None = None   # max |u| (scales the polynomial columns); default from u
     _cache: dict = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
@@ -59,8 +70,17 @@ class Prepared:
         self.n = self.t.size
         self.uniform = fx.is_uniform(self.t) and (self.t_pre is None or self.t_pre == self.t[0])
         self.h = (self.t[-1] - self.t[0]) / max(self.n - 1, 1) if self.uniform else float(np.min(np.diff(self.t)))
-        self.u_range = float(np.ptp(self.u))
+        if self.u_range is None:
+            self.u_range = float(np.ptp(self.u))
+        if self.u_scale is None:
+            self.u_scale = max(float(np.max(np.abs(self.u))), 1e-300)
         self.wy = self.y if self.weights is None else self.y * self.weights
+
+    def prefix(self, n: int) -> "Prepared":
+        """The first n samples, with the same input scaling (a shorter record of the same experiment)."""
+        w = None if self.weights is None else self.weights[:n]
+        return Prepared(self.t[:n], self.u[:n], self.y[:n], w, self.u_pre, self.t_pre, self.source,
+                        list(self.notes), self.u_range, self.u_scale)
 
     @property
     def fs(self) -> float:
@@ -82,7 +102,7 @@ class Prepared:
         if key == "u":
             return u[None, :]
         if key == "poly":
-            scale = max(float(np.max(np.abs(self.u))), 1e-300)
+            scale = self.u_scale
             x = u / scale
             return np.array([u, scale * x * x, scale * x * x * x])
         if key == "hyst":
@@ -268,6 +288,7 @@ class ExtendedFit:
     nfev: int = 0
     u_pre: float | None = None
     t_pre: float | None = None
+    alternatives: list = field(default_factory=list, repr=False)  # other polished base starts
 
     def simulate(self, t: np.ndarray, u: np.ndarray) -> np.ndarray:
         """This model's output for another input (same conventions as the fitted record)."""
@@ -297,7 +318,7 @@ def _result(design: Design, theta: np.ndarray) -> ExtendedFit:
             eff[e] = {"r": data.thresholds.tolist(), "w": w.tolist(), "loop_width": width,
                       "loop_width_rel": width / data.u_range if data.u_range else float("nan")}
         elif e == "nonlinear_gain":
-            scale = max(float(np.max(np.abs(data.u))), 1e-300)
+            scale = data.u_scale
             k2, k3 = c["c2"] / b / scale, c["c3"] / b / scale**2
             lo, hi = float(data.u.min()), float(data.u.max())
             g = lambda x: 1 + 2 * k2 * x + 3 * k3 * x * x  # noqa: E731  incremental gain
@@ -334,13 +355,13 @@ def base_theta(model: CreepModel) -> np.ndarray:
     return np.array([model.alpha, math.log10(model.fn), math.log10(model.zeta)])
 
 
-def _optimise(design: Design, theta0: np.ndarray, max_nfev: int = MAX_NFEV) -> np.ndarray:
+def _optimise(design: Design, theta0: np.ndarray, max_nfev: int = MAX_NFEV, tol: float = 1e-8) -> np.ndarray:
     x0 = np.clip(theta0, design.lo, design.hi)
     span = design.hi - design.lo
     x0 = np.minimum(np.maximum(x0, design.lo + 1e-9 * span), design.hi - 1e-9 * span)
     try:
         sol = least_squares(design.residual, x0, bounds=(design.lo, design.hi), method="trf",
-                            x_scale="jac", max_nfev=max_nfev, diff_step=1e-7)
+                            x_scale="jac", max_nfev=max_nfev, diff_step=1e-7, ftol=tol, xtol=tol)
     except (ValueError, np.linalg.LinAlgError, ModelError):
         return x0
     return sol.x if design.cost(sol.x) <= design.cost(x0) else x0
@@ -392,46 +413,79 @@ def fit_base(data: Prepared, start: CreepModel | None = None, max_nfev: int = MA
         except (ValueError, ModelError, np.linalg.LinAlgError):
             costs.append(np.inf)
     order = np.argsort(costs)
-    best, best_cost = None, np.inf
+    polished = []
     for i in order[:2]:
         th = _optimise(design, starts[i], max_nfev)
-        c = design.cost(th)
-        if c < best_cost:
-            best, best_cost = th, c
-    return _result(design, best)
+        polished.append((design.cost(th), th))
+    polished.sort(key=lambda ct: ct[0])
+    fit = _result(design, polished[0][1])
+    fit.alternatives = [th for _, th in polished[1:]]
+    return fit
 
 
 # --------------------------------------------------------------------------- extended fit
-def _grid_starts(design: Design, theta: np.ndarray, base: ExtendedFit) -> list[np.ndarray]:
-    """Starting points for the effects' nonlinear parameters (grids and residual-spectrum peaks)."""
-    from .locate import spectrum_peaks
+def _grid_starts(design: Design, base: ExtendedFit, peaks: list[float]) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """(grid starts, priority starts) for the effects' nonlinear parameters.
+
+    Grids cover each parameter's range; priority starts put a frequency
+    parameter on a residual-spectrum peak (always polished, since a narrow
+    resonance or line is found there and almost nowhere else). Every start is
+    combined with the base fit and its runner-up.
+    """
     data = design.data
     grids: list[list[float]] = []
+    prio: list[list[float]] = []
     names = design.names[3:]
-    peaks = [p["f_hz"] for p in spectrum_peaks(data.t, base.residual, max_peaks=4)] if data.uniform else []
     for name in names:
+        lo, hi = design.lo[design.index(name)], design.hi[design.index(name)]
         if name == "second_mode.log10_fn":
-            lo, hi = design.lo[design.index(name)], design.hi[design.index(name)]
             cand = [math.log10(f) for f in peaks if 10 ** lo < f < 10 ** hi]
-            cand += list(np.linspace(lo + 0.1 * (hi - lo), hi - 0.02 * (hi - lo), 6))
-            grids.append(cand)
+            grids.append(list(np.linspace(lo + 0.05 * (hi - lo), hi - 0.01 * (hi - lo), 24)))
+            prio.append(cand)
         elif name == "second_mode.log10_zeta":
-            grids.append([math.log10(0.05), math.log10(0.3)])
+            grids.append([math.log10(0.05)])
+            prio.append([math.log10(0.02), math.log10(0.08)])
         elif name == "leakage.log10_tau":
-            lo, hi = design.lo[design.index(name)], design.hi[design.index(name)]
             grids.append(list(np.linspace(lo + 0.5, hi - 0.5, 9)))
+            prio.append([])
         elif name == "delay.d":
-            hi = design.hi[design.index(name)]
             grids.append(list(np.unique(np.concatenate([np.array([0.3, 1, 2, 3, 5, 8, 13, 20, 30]) * data.h, [hi * 0.99]]))))
+            prio.append([])
         elif name == "periodic_disturbance.f":
-            cand = list(peaks) or [0.05 * data.fs]
-            grids.append(cand)
+            grids.append([f for f in peaks if lo <= f <= hi] or [0.05 * data.fs])
+            prio.append([f for f in peaks if lo <= f <= hi])
         elif name == "second_creep.alpha2":
             grids.append([0.05, 0.15, 0.3, 0.5, 0.7, 0.85, 0.97])
+            prio.append([])
+    bases = [base.theta[:3]] + [np.asarray(a)[:3] for a in base.alternatives
+                                if np.max(np.abs(np.asarray(a)[:3] - base.theta[:3])) > 1e-3]
+    if "second_creep" in design.effects:  # the two exponents trade places: move alpha too
+        for b_ in list(bases):
+            for shift in (-0.2, 0.2):
+                v = b_.copy()
+                v[0] = float(np.clip(v[0] + shift, ALPHA_BOUNDS[0] + 0.01, ALPHA_BOUNDS[1] - 0.01))
+                bases.append(v)
     if not grids:
-        return [theta]
-    mesh = np.array(np.meshgrid(*grids, indexing="ij")).reshape(len(grids), -1).T
-    return [np.concatenate([theta[:3], row]) for row in mesh]
+        return [b_ for b_ in bases], []
+
+    def mesh(lists: list[list[float]]) -> list[np.ndarray]:
+        if any(len(x) == 0 for x in lists):
+            return []
+        m = np.array(np.meshgrid(*lists, indexing="ij")).reshape(len(lists), -1).T
+        return [np.concatenate([b_, row]) for b_ in bases for row in m]
+
+    # a priority start keeps the grid for the parameters that have no priority values
+    prio_lists = [p_ if p_ else g for p_, g in zip(prio, grids)] if any(prio) else []
+    prio_starts = mesh(prio_lists) if prio_lists else []
+    if "second_mode" in design.effects and len(names) == 2:
+        # the base may have locked onto the higher mode: hand it to the second mode, move the base down
+        i_fn = design.index("second_mode.log10_fn")
+        for factor in (0.25, 0.4, 0.6):
+            th = np.concatenate([base.theta[:3], np.zeros(2)])
+            th[i_fn], th[i_fn + 1] = base.theta[1], base.theta[2]
+            th[1], th[2] = base.theta[1] + math.log10(factor), math.log10(0.2)
+            prio_starts.append(th)
+    return mesh(grids), prio_starts
 
 
 def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, base: ExtendedFit | None = None,
@@ -439,8 +493,9 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     """Fit the base model extended by ``effects``, warm-started from ``base`` (fitted if not given).
 
     The effects' nonlinear parameters start from a grid (residual-spectrum
-    peaks for frequencies); the ``n_starts`` best grid points are polished
-    jointly with the base parameters by bounded least squares.
+    peaks for frequencies); the ``SHORT_STARTS`` most promising grid values
+    (each with its best base variant) get a short joint polish, and the
+    ``n_starts`` best of those a full one (bounded least squares).
     """
     if isinstance(effects, str):
         effects = tuple(e.strip() for e in effects.split(",") if e.strip())
@@ -449,17 +504,41 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
         base = fit_base(data)
     if not effects:
         return base
+    from .locate import spectrum_peaks
     design = Design(data, effects, harmonics)
-    starts = _grid_starts(design, base.theta[:3], base)
-    costs = []
-    for th in starts:
-        try:
-            costs.append(design.cost(np.clip(th, design.lo, design.hi)))
-        except (ValueError, ModelError, np.linalg.LinAlgError):
-            costs.append(np.inf)
+    peaks = [p["f_hz"] for p in spectrum_peaks(data.t, base.residual, max_peaks=4, ratio=3.0)] if data.uniform else []
+    # explore (grids, short polishes) on a prefix of long records: the same experiment, cheaper evaluations
+    explore = Design(data.prefix(EXPLORE_SAMPLES), effects, harmonics) if data.n > 1.5 * EXPLORE_SAMPLES else design
+    grid, prio = _grid_starts(explore, base, peaks)
+
+    def ranked(d: Design, starts: list[np.ndarray]) -> list[tuple[float, np.ndarray]]:
+        out = []
+        for th in starts:
+            th = np.clip(th, d.lo, d.hi)
+            try:
+                out.append((d.cost(th), th))
+            except (ValueError, ModelError, np.linalg.LinAlgError):
+                out.append((np.inf, th))
+        out.sort(key=lambda ct: ct[0])
+        return out
+
+    # best base variant per effect-parameter value, the most promising few, plus the priority starts
+    groups: dict[tuple, np.ndarray] = {}
+    for _, th in ranked(explore, grid):
+        groups.setdefault(tuple(np.round(th[3:], 9)), th)
+    chosen = list(groups.values())[:SHORT_STARTS] + [th for _, th in ranked(explore, prio)[:PRIORITY_STARTS]]
+    short = [_optimise(explore, th, SHORT_NFEV, 1e-6) for th in chosen]
+    finalists = [th for _, th in ranked(explore, short)[:n_starts]]
+    if explore is not design and "periodic_disturbance" in effects:
+        i_f = design.index("periodic_disturbance.f")  # a line's frequency is sharper on the whole record
+        for th in list(finalists):
+            for f in peaks:
+                v = th.copy()
+                v[i_f] = f
+                finalists.append(v)
     best, best_cost = None, np.inf
-    for i in np.argsort(costs)[:n_starts]:
-        th = _optimise(design, starts[i], max_nfev)
+    for _, th in ranked(design, finalists)[:n_starts if explore is design else 1]:
+        th = _optimise(design, th, max_nfev, FULL_TOL)
         c = design.cost(th)
         if c < best_cost:
             best, best_cost = th, c
