@@ -82,8 +82,10 @@ def main(argv: list[str] | None = None) -> int:
 
     spf = 1 if args.transport.startswith("serial") else {"sample": 1, "pair": 2, "block": 7}[args.can_frame]
     try:
-        runner = Runner(rec, args.rate, args.transport, link, plan(spec, rec.t.size // spf, args.seed), spec,
-                        can_frame=args.can_frame, realtime=not args.fast, seed=args.seed, stop=stop)
+        runner = Runner(rec, args.rate, args.transport, link,
+                        plan(spec, rec.t.size // spf, args.seed, frame_rate=args.rate / spf), spec,
+                        can_frame=args.can_frame, realtime=not args.fast, seed=args.seed, stop=stop,
+                        resume=(lambda: _wait_any(link, stop)) if args.wait_start else None)
     except ValueError as exc:
         print(f"hil_sim: {exc}", file=sys.stderr)
         link.close()

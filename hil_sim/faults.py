@@ -72,8 +72,14 @@ class Ledger:
             json.dump(self.to_dict(), f)
 
 
-def plan(spec: FaultSpec, n_frames: int, seed: int, spacing: int = 40, margin: int = 100) -> dict[int, str]:
-    """frame index -> fault kind, deterministic for a seed."""
+def plan(spec: FaultSpec, n_frames: int, seed: int, spacing: int = 40, margin: int = 100,
+         frame_rate: float | None = None) -> dict[int, str]:
+    """frame index -> fault kind, deterministic for a seed.
+
+    A disconnect loses the frames of its outage; it is placed so that the
+    outage (doubled, plus half a second for the reader to come back) ends before the record
+    does, or the loss would be invisible to a receiver (no later frame).
+    """
     rng = np.random.default_rng(seed + 7919)
     wanted: list[str] = []
     for kind in KINDS:
@@ -88,6 +94,28 @@ def plan(spec: FaultSpec, n_frames: int, seed: int, spacing: int = 40, margin: i
     if len(slots) < len(wanted):
         raise ValueError(f"--faults: {len(wanted)} faults do not fit in {n_frames} frames "
                          f"(at most {len(slots)} with {spacing}-frame spacing); lower the counts or run longer")
-    chosen = np.sort(rng.choice(slots, size=len(wanted), replace=False))
     rng.shuffle(wanted)
+    n_disc = wanted.count("disconnect")
+    if n_disc:
+        reserve = int(((2 * spec.disconnect_s + 0.5) * frame_rate) if frame_rate else 0)
+        early = slots[slots < n_frames - margin - reserve]
+        if len(early) < n_disc:
+            raise ValueError(f"--faults: {n_disc} disconnect(s) of {spec.disconnect_s:g} s do not fit in the record; "
+                             "run longer")
+        disc = []
+        for _ in range(n_disc):     # outages must not overlap each other or other faults
+            if len(early) == 0:
+                raise ValueError(f"--faults: {n_disc} disconnects of {spec.disconnect_s:g} s do not fit in the "
+                                 "record; run longer")
+            d = int(rng.choice(early))
+            disc.append(d)
+            early = early[(early < d - reserve - spacing) | (early > d + reserve + spacing)]
+        for d in disc:
+            slots = slots[(slots < d - spacing) | (slots > d + reserve + spacing)]
+        if len(slots) < len(wanted) - n_disc:
+            raise ValueError("--faults: too many faults for the record; lower the counts or run longer")
+        rest = rng.choice(slots, size=len(wanted) - n_disc, replace=False)
+        others = [k for k in wanted if k != "disconnect"]
+        return {**{int(f): "disconnect" for f in disc}, **{int(f): k for f, k in zip(rest, others)}}
+    chosen = rng.choice(slots, size=len(wanted), replace=False)
     return {int(f): k for f, k in zip(chosen, wanted)}

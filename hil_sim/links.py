@@ -67,14 +67,25 @@ class PtyLink:
         fcntl.ioctl(self.slave, termios.FIONREAD, buf, True)
         return buf[0]
 
-    def drain(self, timeout: float = 5.0) -> bool:
-        """Wait until the reader has consumed everything (True) or timeout (False)."""
+    def drain(self, timeout: float = 5.0, quiet: float = 0.05) -> bool:
+        """Wait until the reader has consumed everything (True) or timeout (False).
+
+        The kernel moves written bytes to the reader's queue asynchronously, so
+        an empty queue must stay empty for ``quiet`` seconds to count.
+        """
         end = time.monotonic() + timeout
-        while self.unread() > 0:
-            if time.monotonic() > end:
+        empty_since = None
+        while True:
+            now = time.monotonic()
+            if self.unread() > 0:
+                empty_since = None
+            elif empty_since is None:
+                empty_since = now
+            elif now - empty_since >= quiet:
+                return True
+            if now > end:
                 return False
             time.sleep(0.002)
-        return True
 
     def wait_for(self, token: bytes, timeout: float | None = None, reply: bytes | None = None) -> bool:
         """Block until the reader sends ``token`` (a start command); answer each CR-ended command."""
@@ -91,6 +102,11 @@ class PtyLink:
         return True
 
     def close(self) -> None:
+        if self.link:       # first the name, so nobody opens a pty that is about to go
+            try:
+                os.unlink(self.link)
+            except FileNotFoundError:
+                pass
         for fd in (self.master, self.slave):
             if fd is not None:
                 try:
@@ -98,11 +114,6 @@ class PtyLink:
                 except OSError:
                     pass
         self.master = self.slave = None
-        if self.link:
-            try:
-                os.unlink(self.link)
-            except FileNotFoundError:
-                pass
 
     def reopen(self) -> None:
         self.open()

@@ -37,10 +37,11 @@ def emit_event(event: str, **fields) -> None:
 class Runner:
     def __init__(self, rec, rate: float, transport: str, link, plan: dict[int, str], spec: FaultSpec,
                  *, can_frame: str = "pair", realtime: bool = True, seed: int = 0,
-                 events=emit_event, stop: threading.Event | None = None) -> None:
+                 events=emit_event, stop: threading.Event | None = None, resume=None) -> None:
         self.rec, self.rate, self.transport, self.link = rec, float(rate), transport, link
         self.plan, self.spec = plan, spec
         self.realtime = realtime
+        self.resume = resume          # called after a reconnect: wait for the reader's start command
         self.events = events
         self.stop = stop or threading.Event()
         self.rng = np.random.default_rng(seed + 104729)
@@ -132,9 +133,14 @@ class Runner:
         return min(self.n_frames, max(0, k))
 
     def _disconnect(self, f: int) -> int:
-        """Hang up, stay away disconnect_s, come back on a new pty; return the next frame to send."""
+        """Hang up, stay away disconnect_s, come back on a new pty; return the next frame to send.
+
+        The frames the plant produced while the line was down (from the hang-up
+        until the reader is back) are lost, in real time and in fast mode alike.
+        """
         link: PtyLink = self.link
         link.drain(timeout=5.0)
+        t_down = time.monotonic()
         link.close()
         self.events("disconnect", frame=f, seq=f * self.spf)
         time.sleep(self.spec.disconnect_s)
@@ -144,11 +150,10 @@ class Runner:
             link.wait_for(b"O\r", timeout=30.0, reply=b"\r")
         else:
             self.events("reconnect", port=link.port, tty=link.tty)
-        if self.realtime:
-            nxt = max(f + 1, self._due_frames(time.monotonic()))
-        else:
-            nxt = f + max(1, int(round(self.spec.disconnect_s * self.rate / self.spf)))
-        nxt = min(nxt, self.n_frames)
+            if self.resume is not None:
+                self.resume()
+        lost = max(1, int(round((time.monotonic() - t_down) * self.rate / self.spf)))
+        nxt = min(f + lost, self.n_frames)
         self.ledger.disconnects.append(f)
         self.ledger.disconnect_lost_samples += (nxt - f) * self.spf
         return nxt
@@ -231,7 +236,7 @@ def run_virtual_plant(rec, rate: float, channel: str, *, can_frame: str = "block
     spec = FaultSpec.parse(faults)
     link = VirtualLink(channel)
     spf = {"sample": 1, "pair": 2, "block": cf.BLOCK_SAMPLES}[can_frame]
-    runner = Runner(rec, rate, "virtual", link, make_plan(spec, rec.t.size // spf, seed), spec,
+    runner = Runner(rec, rate, "virtual", link, make_plan(spec, rec.t.size // spf, seed, frame_rate=rate / spf), spec,
                     can_frame=can_frame, realtime=realtime, seed=seed, events=lambda *a, **k: None)
 
     def target() -> None:

@@ -242,11 +242,12 @@ class AsciiParser:
         return out
 
     def _reject(self, line: bytes, crc: bool = False) -> None:
+        """A line with a bad checksum is a damaged frame; anything else is garbage."""
         if crc:
             self.stats.crc_errors += 1
         else:
             self.stats.malformed += 1
-        self.stats.garbage_bytes += len(line) + 1
+            self.stats.garbage_bytes += len(line) + 1
 
     def _line(self, line: bytes) -> RawSample | None:
         if line.endswith(b"\r"):

@@ -55,6 +55,11 @@ class SequenceTracker(Generic[T]):
     _pending: dict = field(default_factory=dict)
     _max_seen: int = -1
     _lost: set = field(default_factory=set)
+    _maybe_restart: bool = False
+
+    def expect_restart(self) -> None:
+        """The link was re-established: a counter that went backwards means the sender restarted."""
+        self._maybe_restart = True
 
     def _unwrap(self, seq: int) -> int:
         if self.modulus is None or self._next is None:
@@ -76,7 +81,9 @@ class SequenceTracker(Generic[T]):
             self._next = seq
             self._max_seen = seq - 1
         s = self._unwrap(seq)
-        if s - self._next > self.reset_jump or self._next - s > self.reset_jump:
+        restarted = self._maybe_restart and s < self._next and s not in self._pending
+        self._maybe_restart = False
+        if restarted or s - self._next > self.reset_jump or self._next - s > self.reset_jump:
             out = self.flush()
             st.resets += 1
             self._next = s

@@ -121,9 +121,14 @@ class SerialSource(SampleSource):
             self._next_try = time.monotonic() + self._backoff
             return False
         self.stats.reconnects += 1
+        self.tracker.expect_restart()
         self.event(f"reconnected after {time.monotonic() - self._down_since:.2f} s")
         self._down_since = None
         return True
+
+    @property
+    def link_up(self) -> bool:
+        return self._ser is not None
 
     # -------------------------------------------------------------- reading
     def _read_bytes(self, timeout: float) -> bytes:

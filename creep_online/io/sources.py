@@ -117,7 +117,7 @@ class SampleSource:
         self.stall_s = float(stall)
         self.on_event = on_event
         self.ended = False
-        self._last_data = time.monotonic()
+        self._last_data: float | None = None   # no stall before the first data
         self._in_stall = False
         self._dt_est: float | None = None
         self._first_t: tuple[int, float] | None = None
@@ -149,12 +149,18 @@ class SampleSource:
             for r in raw:
                 out += push(r.seq, r)
             return self._deliver(out, now)
-        if not self._in_stall and now - self._last_data > self.stall_s:
+        if (not self._in_stall and self._last_data is not None and self.link_up
+                and now - self._last_data > self.stall_s):
             self._in_stall = True
             self.stats.stalls += 1
             self.event(f"no data for {now - self._last_data:.2f} s (stall)")
             return self._deliver(self.tracker.flush(), now)
         return []
+
+    @property
+    def link_up(self) -> bool:
+        """False while a lost port is being reopened (no stall is counted then)."""
+        return True
 
     def _deliver(self, pairs: list[tuple[int, RawSample]], now: float) -> list[Sample]:
         if not pairs:
