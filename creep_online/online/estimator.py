@@ -139,6 +139,8 @@ class OnlineEstimator:
         """Forget everything: back to buffering, counters to zero."""
         self.samples = 0
         self.skipped_nonfinite = 0
+        self.gaps = 0
+        self._last_u = 0.0
         self.alpha_updates = 0
         self.divergences = 0
         self.retunes_kept = 0
@@ -199,6 +201,7 @@ class OnlineEstimator:
         self._theta = np.zeros(2)
         self._P = np.eye(2)
         self._counter = np.zeros(1, dtype=np.int64)
+        self._pmax = 1e6
         self._tracked = 0          # samples fed to the tracker since the record start
         self._i_c = 0              # record index where layer-1 statistics start (t_c)
         self._next_update = 0
@@ -251,6 +254,7 @@ class OnlineEstimator:
             return
         n = self.samples
         self.samples = n + 1
+        self._last_u = u
         if self._start is None:
             if u == 0.0:
                 self._pre_sum += y
@@ -288,18 +292,37 @@ class OnlineEstimator:
         finally:
             self._blocking = False
 
-    def _update_block(self, u: np.ndarray, y: np.ndarray) -> None:
-        ok = np.isfinite(u) & np.isfinite(y)
+    def gap(self, count: int = 1) -> None:
+        """``count`` samples were lost (sequence gap): time advances with the input held, no output used."""
+        count = int(count)
+        if count <= 0:
+            return
+        self.gaps += count
+        if self._start is None:
+            self.samples += count
+            return
+        u = np.full(count, self._last_u)
+        y = np.full(count, np.nan)
+        self._blocking = True
+        try:
+            self._update_block(u, y, allow_nan_output=True)
+        finally:
+            self._blocking = False
+
+    def _update_block(self, u: np.ndarray, y: np.ndarray, allow_nan_output: bool = False) -> None:
+        ok = np.isfinite(u) & (allow_nan_output | np.isfinite(y))
         bad = int(u.size - np.count_nonzero(ok))
         if bad:
             self.skipped_nonfinite += bad
             u, y = u[ok], y[ok]
+        if u.size:
+            self._last_u = float(u[-1])
         i = 0
         while i < u.size and self._start is None:
             nz = np.flatnonzero(u[i:] != 0.0)
             stop = u.size if nz.size == 0 else i + int(nz[0])
-            self._pre_sum += float(np.sum(y[i:stop]))
-            self._pre_n += stop - i
+            self._pre_sum += float(np.nansum(y[i:stop]))
+            self._pre_n += int(np.count_nonzero(np.isfinite(y[i:stop])))
             self.samples += stop - i
             i = stop
             if i < u.size:
@@ -394,6 +417,7 @@ class OnlineEstimator:
         self._theta[:] = (self._alpha, self._b)
         noise2 = max(self._l2.cost / max(self._l2_samples, 1), 1e-30) if self._l2 else 1.0
         self._P[:] = np.diag([0.02**2, (0.1 * self._b) ** 2 + 1e-30]) / noise2
+        self._pmax = 100.0 * float(np.trace(self._P))
         self._i_c = int(round(self._tc_used / self.dt))
         self._next_update = self._i_c + self.update_every
         self._replay = 0
@@ -427,7 +451,7 @@ class OnlineEstimator:
                 th_before = self._theta.copy()
                 K.rpem_block(u[i:stop], y[i:stop], self._st, self._co, self.basis.lam, self.basis.dx,
                              self._a1, self._a2, self._theta, self._P, float(self._sc[K.SC_FORGET]),
-                             self.alpha_bounds[0], self.alpha_bounds[1], 16, self._counter)
+                             self.alpha_bounds[0], self.alpha_bounds[1], 16, self._counter, self._pmax)
                 if self.frozen:
                     self._theta[:] = th_before
             else:
@@ -590,7 +614,7 @@ def _warm_kernels() -> None:
     K.window_cost(0.1, S, sy, 1.0, basis.lam, basis.dx, 1e-3, 1e-6)
     K.gauss_newton_alpha(0.1, 1.0, S, sy, 1.0, basis.lam, basis.dx, 1e-3, 1e-6, 1e-3, 0.99, 1, np.zeros(8))
     K.rpem_block(u, y, st, co, basis.lam, basis.dx, 1e-3, 1e-6, np.array([0.1, 1.0]), np.eye(2), 1.0,
-                 1e-3, 0.99, 16, np.zeros(1, dtype=np.int64))
+                 1e-3, 0.99, 16, np.zeros(1, dtype=np.int64), 1e6)
     Layer2Job(basis, u, y, 0.1, start=(1e-3, 1e-6), max_iter=1).run()
     del est
 

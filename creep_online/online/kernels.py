@@ -98,7 +98,8 @@ def _step(u: float, y: float, st: np.ndarray, co: np.ndarray, v: np.ndarray, S: 
     pred = 0.0
     for i in range(p):
         pred += st[i] * v[i]
-    if accumulate:
+    missing = y != y   # NaN output: a dropped sample, the state still advances with the held input
+    if accumulate and not missing:
         f = sc[SC_FORGET]
         g = sc[SC_G]
         if f < 1.0:
@@ -123,14 +124,18 @@ def _step(u: float, y: float, st: np.ndarray, co: np.ndarray, v: np.ndarray, S: 
         for i in range(p):
             avg[i] += k * (st[i] - avg[i])
         sc[SC_YAVG] += k * (y - sc[SC_YAVG])
-    # prediction-error monitor (divergence detection)
-    m = sc[SC_MON]
-    e = y - pred
-    sc[SC_E2] += m * (e * e - sc[SC_E2])
-    sc[SC_YM] += m * (y - sc[SC_YM])
-    dy = y - sc[SC_YM]
-    sc[SC_Y2] += m * (dy * dy - sc[SC_Y2])
     sc[SC_LAST] = pred
+    if missing:
+        m = 0.0
+    else:
+        m = sc[SC_MON]
+    # prediction-error monitor (divergence detection)
+    e = 0.0 if missing else y - pred
+    sc[SC_E2] += m * (e * e - sc[SC_E2])
+    sc[SC_YM] += m * ((sc[SC_YM] if missing else y) - sc[SC_YM])
+    dy = 0.0 if missing else y - sc[SC_YM]
+    if not missing:
+        sc[SC_Y2] += m * (dy * dy - sc[SC_Y2])
     # advance: nodes and resonance, exact for a zero-order-held u
     for i in range(q):
         st[i] = co[i] * st[i] + co[q + i] * u
@@ -321,13 +326,13 @@ def gauss_newton_alpha(alpha: float, b: float, S: np.ndarray, sy: np.ndarray, sy
 @njit(cache=CACHE)
 def rpem_block(u: np.ndarray, y: np.ndarray, st: np.ndarray, co: np.ndarray, lam: np.ndarray, dx: float,
                a1: float, a2: float, theta: np.ndarray, P: np.ndarray, forget: float, lo: float,
-               hi: float, every: int, counter: np.ndarray) -> None:
+               hi: float, every: int, counter: np.ndarray, pmax: float) -> None:
     """Recursive prediction-error (Gauss-Newton) update of theta = (alpha, b): the "carry on" option.
 
     Each sample's prediction and sensitivity use the alpha current at that
     sample; the past is never re-evaluated (the information matrix keeps the
     regressors computed with older alphas). v(alpha) is refreshed every
-    ``every`` samples. Covariance P is kept symmetric and bounded (anti-windup).
+    ``every`` samples. Covariance P is kept symmetric and bounded by ``pmax`` in trace (anti-windup).
     """
     p = st.shape[0]
     q = p - 2
@@ -345,30 +350,30 @@ def rpem_block(u: np.ndarray, y: np.ndarray, st: np.ndarray, co: np.ndarray, lam
             gd += st[i] * dv[i]
         alpha = theta[0]
         b = theta[1]
-        e = y[k] - b * g
-        f0 = b * gd   # d y_hat / d alpha
-        f1 = g        # d y_hat / d b
-        pf0 = P[0, 0] * f0 + P[0, 1] * f1
-        pf1 = P[1, 0] * f0 + P[1, 1] * f1
-        den = forget + f0 * pf0 + f1 * pf1
-        k0 = pf0 / den
-        k1 = pf1 / den
-        alpha = min(max(alpha + k0 * e, lo), hi)
-        theta[0] = alpha
-        theta[1] = b + k1 * e
-        p00 = (P[0, 0] - k0 * pf0) / forget
-        p01 = (P[0, 1] - k0 * pf1) / forget
-        p11 = (P[1, 1] - k1 * pf1) / forget
-        # anti-windup: cap the trace
-        tr = p00 + p11
-        if tr > 1e6:
-            p00 *= 1e6 / tr
-            p01 *= 1e6 / tr
-            p11 *= 1e6 / tr
-        P[0, 0] = p00
-        P[0, 1] = p01
-        P[1, 0] = p01
-        P[1, 1] = p11
+        if y[k] == y[k]:   # a NaN output (dropped sample) only advances the state
+            e = y[k] - b * g
+            f0 = b * gd   # d y_hat / d alpha
+            f1 = g        # d y_hat / d b
+            pf0 = P[0, 0] * f0 + P[0, 1] * f1
+            pf1 = P[1, 0] * f0 + P[1, 1] * f1
+            den = forget + f0 * pf0 + f1 * pf1
+            k0 = pf0 / den
+            k1 = pf1 / den
+            theta[0] = min(max(alpha + k0 * e, lo), hi)
+            theta[1] = b + k1 * e
+            p00 = (P[0, 0] - k0 * pf0) / forget
+            p01 = (P[0, 1] - k0 * pf1) / forget
+            p11 = (P[1, 1] - k1 * pf1) / forget
+            # anti-windup: cap the trace
+            tr = p00 + p11
+            if tr > pmax:
+                p00 *= pmax / tr
+                p01 *= pmax / tr
+                p11 *= pmax / tr
+            P[0, 0] = p00
+            P[0, 1] = p01
+            P[1, 0] = p01
+            P[1, 1] = p11
         uk = u[k]
         for i in range(q):
             st[i] = co[i] * st[i] + co[q + i] * uk

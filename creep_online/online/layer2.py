@@ -50,7 +50,10 @@ class Layer2Job:
                  start: tuple[float, float] | None = None, max_iter: int = 40) -> None:
         self.basis = basis
         self.u = np.ascontiguousarray(u, dtype=float)
-        self.y = np.ascontiguousarray(y, dtype=float)
+        y = np.array(y, dtype=float)
+        self._mask = np.isfinite(y).astype(float)   # NaN = dropped sample: no weight
+        y[self._mask == 0.0] = 0.0
+        self.y = y
         self.alpha = float(alpha)
         self.start = start
         self.max_iter = max_iter
@@ -90,6 +93,7 @@ class Layer2Job:
         q = self.basis.size
         s = np.empty(self.u.size)
         kernels.layer2_shape(self._hist, self._v[:q].copy(), self.u, phi, gam, self._v[q], self._v[q + 1], s)
+        s *= self._mask
         self.evaluations += 1
         den = float(s @ s)
         if not math.isfinite(den) or den <= 0.0:
@@ -168,7 +172,7 @@ class Layer2Job:
 
     def _std(self, jac: np.ndarray, cost: float, b: float, s: np.ndarray, a1: float, a2: float) -> dict:
         """1-sigma std of a1, a2, b from the Gauss-Newton covariance (b's column included)."""
-        n = self.u.size
+        n = int(self._mask.sum())
         full = np.column_stack([jac, -s])
         try:
             cov = cost / max(n - 3, 1) * np.linalg.inv(full.T @ full)

@@ -1,0 +1,176 @@
+"""``creep-online stream --source SPEC``: run the online estimator on a recorded or live stream.
+
+``csv:FILE`` is replayed sample by sample through ``OnlineEstimator.update``
+as fast as it goes (``--block`` uses ``update_block``), timing every call.
+Any other spec (``serial:PORT``, ``can:IFACE:CHANNEL``, ``canlog:FILE``) is
+opened by ``creep_online.io.sources.open_source``; sequence gaps are passed
+to the estimator as lost samples (time advances, output unused).
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import math
+import time
+
+import numpy as np
+
+from ..errors import CreepOnlineError, DataError
+from ..io import load_csv
+from ..online import OnlineEstimator
+from ._common import print_json
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("stream", help="run the online estimator on a stream (csv:FILE, serial:PORT, can:..., canlog:FILE)",
+                       description="Online two-layer identification: buffer until t_c, fit the resonance (layer 2) "
+                                   "off the sample path, then track alpha and b over a sliding window (layer 1). "
+                                   "Prints the final estimate and the per-sample update() latency.")
+    p.add_argument("--source", required=True, help="csv:FILE | serial:PORT | can:IFACE:CHANNEL | canlog:FILE")
+    p.add_argument("--json", action="store_true",
+                   help="print JSON (alpha a1 a2 b samples latency_us{p50,p99,max} phase quality ...)")
+    p.add_argument("--t-c", type=float, default=None, help="end of the transient after the first input change, s "
+                                                            "(default: from the layer-2 fit)")
+    p.add_argument("--alpha0", type=float, default=None, help="alpha guessed for layer 2")
+    p.add_argument("--window", type=float, default=None,
+                   help="forgetting time constant of layer 1 in s (default: keep everything since t_c)")
+    p.add_argument("--dt", type=float, default=None, help="sampling step in s (live sources; default: from the stream)")
+    p.add_argument("--block", action="store_true", help="csv: feed the whole file with update_block (throughput)")
+    p.add_argument("--max-samples", type=int, default=None, help="stop after this many samples (live sources)")
+    p.add_argument("--duration", type=float, default=None, help="stop after this many seconds (live sources)")
+    p.set_defaults(func=run)
+
+
+def _options(args: argparse.Namespace) -> dict:
+    opts: dict = {"t_c": args.t_c, "window_s": args.window}
+    if args.alpha0 is not None:
+        opts["alpha0"] = args.alpha0
+    return opts
+
+
+def _latency(ns: np.ndarray) -> dict:
+    """p50/p99/max (+ mean, count over 1 ms) of per-sample update() time, in microseconds."""
+    if ns.size == 0:
+        return {"p50": 0.0, "p99": 0.0, "max": 0.0, "mean": 0.0, "over_1ms": 0}
+    us = ns / 1e3
+    return {"p50": float(np.percentile(us, 50)), "p99": float(np.percentile(us, 99)), "max": float(us.max()),
+            "mean": float(us.mean()), "over_1ms": int(np.count_nonzero(us > 1000.0))}
+
+
+def _report(est: OnlineEstimator, latency: dict, extra: dict) -> dict:
+    e = est.estimate
+    out = {"alpha": e.alpha, "a1": e.a1, "a2": e.a2, "b": e.b, "samples": e.samples, "latency_us": latency,
+           "phase": e.phase, "quality": e.quality, "t_c": e.t_c, "fn_hz": e.fn_hz, "zeta": e.zeta,
+           "offset": e.offset, "uncertainty": e.uncertainty, "skipped": est.skipped_nonfinite,
+           "gaps": est.gaps, "alpha_updates": est.alpha_updates, "divergences": est.divergences,
+           "t": e.t, "dt": est.dt}
+    out.update(extra)
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    spec = args.source
+    if spec.lower().startswith("csv:"):
+        est, latency, extra = _run_csv(spec[4:], args)
+    else:
+        est, latency, extra = _run_live(spec, args)
+    out = _report(est, latency, extra)
+    if args.json:
+        print_json(out)
+        return 0
+    e = est.estimate
+    sd = e.uncertainty
+    print(f"{spec}: {e.samples} samples ({e.t:.4g} s at dt = {est.dt:.4g} s), phase {e.phase}, quality {e.quality}")
+    for name in ("alpha", "a1", "a2", "b"):
+        err = f"  +/- {sd[name]:.3g}" if name in sd and math.isfinite(sd[name]) else ""
+        print(f"  {name:<6} = {getattr(e, name):.6g}{err}")
+    print(f"  fn     = {e.fn_hz:.5g} Hz, zeta = {e.zeta:.4g}, t_c = {e.t_c:.4g} s, offset = {e.offset:.4g}")
+    print(f"  skipped {est.skipped_nonfinite} non-finite, {est.gaps} lost, {est.alpha_updates} alpha updates, "
+          f"{est.divergences} rejected")
+    if "throughput_sps" in extra:
+        print(f"  block mode: {extra['throughput_sps']:.4g} samples/s")
+    else:
+        print(f"  update() latency: p50 {latency['p50']:.3g} us, p99 {latency['p99']:.3g} us, "
+              f"max {latency['max']:.4g} us, {latency['over_1ms']} over 1 ms")
+    return 0
+
+
+def _run_csv(path: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dict, dict]:
+    if not path:
+        raise DataError("csv: missing file name after 'csv:'")
+    rec = load_csv(path)
+    if not rec.is_uniform:
+        raise DataError(f"{rec.source}: time is not uniformly sampled; the online estimator needs a fixed step")
+    est = OnlineEstimator(rec.h if args.dt is None else args.dt, **_options(args))
+    u, y = rec.u, rec.y
+    if args.block:
+        start = time.perf_counter()
+        est.update_block(u, y)
+        elapsed = time.perf_counter() - start
+        return est, _latency(np.empty(0)), {"throughput_sps": u.size / max(elapsed, 1e-12), "file": rec.source}
+    ns = np.empty(u.size, dtype=np.int64)
+    clock = time.perf_counter_ns
+    update = est.update
+    ul, yl = u.tolist(), y.tolist()
+    for k in range(u.size):
+        t0 = clock()
+        update(ul[k], yl[k])
+        ns[k] = clock() - t0
+    return est, _latency(ns), {"file": rec.source}
+
+
+def _run_live(spec: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dict, dict]:
+    try:
+        sources = importlib.import_module("creep_online.io.sources")
+    except ModuleNotFoundError as exc:
+        raise CreepOnlineError(f"{spec}: live sources are not available in this build ({exc.name} missing)") from None
+    source = sources.open_source(spec)
+    est: OnlineEstimator | None = None
+    pending: list = []
+    ns: list[int] = []
+    clock = time.perf_counter_ns
+    last_seq = None
+    deadline = math.inf if args.duration is None else time.monotonic() + args.duration
+    read = getattr(source, "read", None)
+
+    def batches():
+        if read is None:            # a plain iterable of samples
+            for smp in source:
+                yield [smp]
+            return
+        while not getattr(source, "ended", False):
+            yield read(0.1)
+
+    try:
+        for batch in batches():
+            for s in batch:
+                if est is None:
+                    pending.append(s)
+                    dt = args.dt or getattr(source, "dt", None)
+                    if not dt and len(pending) >= 2 and pending[-1].seq > pending[0].seq:
+                        dt = (pending[-1].t - pending[0].t) / (pending[-1].seq - pending[0].seq)
+                    if not dt or dt <= 0:
+                        continue
+                    est = OnlineEstimator(dt, **_options(args))
+                    todo, pending = pending, []
+                else:
+                    todo = (s,)
+                for smp in todo:
+                    if last_seq is not None and smp.seq > last_seq + 1:
+                        est.gap(smp.seq - last_seq - 1)
+                    last_seq = smp.seq
+                    t0 = clock()
+                    est.update(smp.u, smp.y)
+                    ns.append(clock() - t0)
+            done = est is not None and args.max_samples is not None and est.samples >= args.max_samples
+            if done or time.monotonic() > deadline:
+                break
+    except KeyboardInterrupt:
+        pass
+    finally:
+        source.close()
+    if est is None:
+        raise DataError(f"{spec}: fewer than 2 samples arrived; cannot tell the sampling step (use --dt)")
+    stats = getattr(source, "stats", None)
+    extra = {"source_stats": stats.as_dict() if stats is not None and hasattr(stats, "as_dict") else {}}
+    return est, _latency(np.asarray(ns, dtype=np.int64)), extra
