@@ -1,0 +1,149 @@
+"""Report of a ``creep-online demo`` run: ``summary.json`` always, ``report.html`` + PNG plots with matplotlib.
+
+Plots: measured output against the identified model's simulation (whole run
+and the first resonance transient), the convergence of each parameter towards
+the plant's true value, and the latency distribution.
+"""
+from __future__ import annotations
+
+import html
+import json
+from pathlib import Path
+
+import numpy as np
+
+
+def write_report(out_dir: str | Path, r: dict) -> str:
+    """Write the report files; return a one-line description of what was written where."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    public = {k: v for k, v in r.items() if not k.startswith("_")}
+    (out / "summary.json").write_text(json.dumps(public, indent=2, default=_json_default))
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return (f"{out / 'summary.json'} (matplotlib is not installed: no plots; "
+                "pip install 'creep_online[plots]')")
+    pngs = [_plot_fit(plt, out, r), _plot_convergence(plt, out, r), _plot_latency(plt, out, r)]
+    pngs = [p for p in pngs if p]
+    page = out / "report.html"
+    page.write_text(_html(r, pngs))
+    return f"{page} (+ summary.json, {len(pngs)} PNG plots)"
+
+
+def _json_default(x):
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    return str(x)
+
+
+def _plot_fit(plt, out: Path, r: dict) -> str | None:
+    from ..model import CreepModel
+    from ..simulate import simulate
+    seq, u, y = r["_seq"], r["_u"], r["_y"]
+    if r.get("model") is None or seq.size < 10:
+        return None
+    m = r["model"]
+    model = CreepModel(m["alpha"], m["a1"], m["a2"], m["b"])
+    dt = 1.0 / r["rate_hz"]
+    n = int(seq[-1]) + 1
+    # the input on the full grid (zero-order hold across any lost samples)
+    idx = np.searchsorted(seq, np.arange(n), side="right") - 1
+    u_full = np.where(idx >= 0, u[np.clip(idx, 0, None)], 0.0)
+    t = np.arange(n) * dt
+    offset = float(r["estimate"].get("offset", 0.0))
+    y_hat = simulate(model, t, u_full) + offset
+    t_meas = seq * dt
+    fig, axes = plt.subplots(2, 1, figsize=(9, 6.5))
+    step = max(1, seq.size // 20000)
+    axes[0].plot(t_meas[::step], y[::step], lw=0.6, label="measured (received)")
+    axes[0].plot(t[::step], y_hat[::step], lw=1.0, label="identified model")
+    axes[0].set(xlabel="t (s)", ylabel="y", title="Output: measured vs identified model")
+    axes[0].legend()
+    first = int(np.argmax(u_full != 0)) if np.any(u_full != 0) else 0
+    span = max(int(6 * model.settling_time / dt), 200)
+    win = slice(first, min(n, first + span))
+    sel = (seq >= win.start) & (seq < win.stop)
+    axes[1].plot(t_meas[sel] * 1e3, y[sel], ".", ms=2, label="measured")
+    axes[1].plot(t[win] * 1e3, y_hat[win], lw=1.0, label="identified model")
+    axes[1].set(xlabel="t (ms)", ylabel="y", title="First step: the resonance transient")
+    axes[1].legend()
+    fig.tight_layout()
+    path = out / "fit.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path.name
+
+
+def _plot_convergence(plt, out: Path, r: dict) -> str | None:
+    tr = [p for p in r["trace"] if p["phase"] == "tracking" or p["quality"] != "none"]
+    if len(tr) < 2:
+        return None
+    truth = r["truth"]
+    t = np.array([p["t"] for p in tr])
+    alpha = np.array([p["alpha"] for p in tr])
+    a1 = np.array([p["a1"] for p in tr])
+    a2 = np.array([p["a2"] for p in tr])
+    b = np.array([p["b"] for p in tr])
+    fn = 1.0 / (2 * np.pi * np.sqrt(a2))
+    zeta = a1 / (2 * np.sqrt(a2))
+    fig, ax = plt.subplots(figsize=(9, 4))
+    for name, val, ref in (("alpha", alpha, truth["alpha"]), ("fn", fn, truth["fn_hz"]),
+                           ("zeta", zeta, truth["zeta"]), ("b", b, truth["b"])):
+        ax.semilogy(t, np.abs(val / ref - 1) + 1e-9, label=name)
+    ax.set(xlabel="plant time (s)", ylabel="|relative error|", title="Convergence of the online estimate")
+    ax.legend()
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    path = out / "convergence.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path.name
+
+
+def _plot_latency(plt, out: Path, r: dict) -> str | None:
+    lat = np.asarray(r["_lat_us"])
+    if lat.size == 0:
+        return None
+    fig, ax = plt.subplots(figsize=(9, 3.5))
+    hi = max(float(np.percentile(lat, 99.9)), 1.0)
+    ax.hist(np.clip(lat, 0, hi), bins=100)
+    ax.set_yscale("log")
+    p = r["latency_us"]
+    ax.set(xlabel="latency (us): plant sample time -> estimator updated",
+           ylabel="samples", title=f"Latency: p50 {p['p50']:.0f} us, p99 {p['p99']:.0f} us, max {p['max']:.0f} us")
+    fig.tight_layout()
+    path = out / "latency.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path.name
+
+
+def _html(r: dict, pngs: list[str]) -> str:
+    rows = []
+    m, t, e = r.get("model"), r["truth"], r.get("errors", {})
+    if m:
+        for key, tk, ek, scale, unit in (("alpha", "alpha", "alpha_abs", 1, ""), ("fn_hz", "fn_hz", "fn_rel", 100, "%"),
+                                         ("zeta", "zeta", "zeta_rel", 100, "%"), ("b", "b", "b_rel", 100, "%")):
+            rows.append(f"<tr><td>{key}</td><td>{m[key]:.6g}</td><td>{t[tk]:.6g}</td>"
+                        f"<td>{e[ek] * scale:+.3g} {unit}</td></tr>")
+    s = r["source_stats"]
+    counters = "".join(f"<tr><td>{html.escape(k)}</td><td>{v}</td></tr>" for k, v in s.items() if k != "events")
+    lat = r["latency_us"]
+    imgs = "".join(f'<p><img src="{p}" style="max-width:100%"></p>' for p in pngs)
+    return f"""<!doctype html><html><head><meta charset="utf-8"><title>creep-online demo</title>
+<style>body{{font-family:sans-serif;max-width:960px;margin:auto}}td,th{{padding:2px 10px;text-align:right}}</style>
+</head><body><h1>creep-online demo</h1>
+<p>Simulated plant (hil_sim) over {html.escape(r['tty'])}, {html.escape(r['transport'])}, {r['rate_hz']:g} Hz;
+{r['samples_received']} of {r['samples_sent_by_plant']} samples received in {r['wall_s']:.1f} s
+({r['achieved_rate_sps'] / 1e3:.1f} kS/s). Latency (plant sample time to estimator updated):
+p50 {lat['p50']:.0f} us, p99 {lat['p99']:.0f} us, max {lat['max']:.0f} us.</p>
+<h2>Estimate vs truth</h2><p>phase {html.escape(r['estimate']['phase'])}, quality {html.escape(r['estimate']['quality'])}</p>
+<table><tr><th>parameter</th><th>estimate</th><th>true</th><th>error</th></tr>{''.join(rows)}</table>
+{imgs}
+<h2>Transport counters</h2><table>{counters}</table>
+</body></html>"""
