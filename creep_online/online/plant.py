@@ -1,0 +1,60 @@
+"""A plant whose creep exponent and gain drift: test bench for tracking (DESIGN.md section 4).
+
+``simulate_varying`` streams the input through the SOE state vector (exact for
+a zero-order-held input, see ``kernels``) and, at every sample, reads the
+output with that sample's parameters: ``y[n] = b[n] psi[n] . v(alpha[n])``.
+This is the "frozen-time" time-varying model: at each instant the plant is the
+creep model with the current parameters applied to the whole input history.
+With constant parameters it equals ``creep_online.simulate.simulate``
+(tested to < 1e-5 of the output range in tests/test_online_plant.py).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..simulate import uniform_step
+from . import kernels as K
+from .soe import SoeBasis, pack_coefficients
+
+
+@njit(cache=True)
+def _varying(u: np.ndarray, alpha: np.ndarray, b: np.ndarray, st: np.ndarray, co: np.ndarray,
+             lam: np.ndarray, dx: float, a1: float, a2: float) -> np.ndarray:
+    n = u.shape[0]
+    p = st.shape[0]
+    q = p - 2
+    v = np.empty(p)
+    dv = np.empty(p)
+    y = np.empty(n)
+    last = -1.0
+    for k in range(n):
+        if alpha[k] != last:
+            K.model_coefficients(alpha[k], lam, dx, a1, a2, v, dv)
+            last = alpha[k]
+        acc = 0.0
+        for i in range(p):
+            acc += st[i] * v[i]
+        y[k] = b[k] * acc
+        for i in range(q):
+            st[i] = co[i] * st[i] + co[q + i] * u[k]
+        b0 = 2 * q
+        x0 = st[q]
+        x1 = st[q + 1]
+        st[q] = co[b0] * x0 + co[b0 + 1] * x1 + co[b0 + 4] * u[k]
+        st[q + 1] = co[b0 + 2] * x0 + co[b0 + 3] * x1 + co[b0 + 5] * u[k]
+    return y
+
+
+def simulate_varying(t: np.ndarray, u: np.ndarray, alpha: np.ndarray | float, a1: float, a2: float,
+                     b: np.ndarray | float, horizon_s: float | None = None) -> np.ndarray:
+    """Output of the creep model with per-sample alpha[n] and b[n] (zero initial state, ZOH input)."""
+    h = uniform_step(t)
+    u = np.ascontiguousarray(u, dtype=float)
+    alpha = np.broadcast_to(np.asarray(alpha, dtype=float), u.shape).copy()
+    b = np.broadcast_to(np.asarray(b, dtype=float), u.shape).copy()
+    span = max(float(t[-1] - t[0]), 10 * h)
+    basis = SoeBasis.build(h, horizon_s=horizon_s or 10 * span, top=3000.0)
+    co = pack_coefficients(basis, a1, a2)
+    st = np.zeros(basis.size + 2)
+    return _varying(u, alpha, b, st, co, basis.lam, basis.dx, a1, a2)

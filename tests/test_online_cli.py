@@ -1,0 +1,53 @@
+"""``creep-online stream``: JSON keys, human output, one-line errors with exit code 2."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from creep_online.cli import main
+from creep_online.io.csvfile import save_csv
+from creep_online.model import CreepModel
+from creep_online.simulate import simulate
+
+
+@pytest.fixture(scope="module")
+def record(tmp_path_factory):
+    model = CreepModel.from_resonance(0.06, 6.0, 0.1, 0.02)
+    h, n = 5e-3, 2400
+    t = np.arange(n) * h
+    u = np.where(t >= 0.1, 50.0, 0.0)
+    y = simulate(model, t, u) + np.random.default_rng(0).normal(0, 0.01, n)
+    path = tmp_path_factory.mktemp("stream") / "load.csv"
+    save_csv(path, t, u, y)
+    return path
+
+
+def test_stream_json_keys(record, capsys):
+    assert main(["stream", "--source", f"csv:{record}", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert {"alpha", "a1", "a2", "b", "samples", "latency_us", "phase", "quality", "t_c", "skipped"} <= set(out)
+    assert set(out["latency_us"]) >= {"p50", "p99", "max"}
+    assert out["samples"] == 2400 and out["phase"] == "tracking"
+    assert out["alpha"] == pytest.approx(0.06, rel=0.03)
+
+
+def test_stream_block_and_human_output(record, capsys):
+    assert main(["stream", "--source", f"csv:{record}", "--block", "--window", "5"]) == 0
+    text = capsys.readouterr().out
+    assert "alpha" in text and "samples/s" in text
+
+
+@pytest.mark.parametrize("spec", ["csv:/nonexistent/x.csv", "csv:", "bogus:thing"])
+def test_stream_bad_source_is_one_line_exit_2(spec, capsys):
+    assert main(["stream", "--source", spec]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "error" in err
+
+
+def test_stream_bad_csv_content(tmp_path, capsys):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,u,y\n0,1,2\n0.1,1,nan\n" + "".join(f"{0.1 * k},1,2\n" for k in range(2, 40)))
+    assert main(["stream", "--source", f"csv:{bad}", "--json"]) == 2
+    assert "bad.csv" in capsys.readouterr().err
