@@ -166,10 +166,23 @@ def play_operators(u: np.ndarray, r: np.ndarray, initial: np.ndarray | None = No
     return out
 
 
-def hysteresis_input(u: np.ndarray, r, w) -> np.ndarray:
-    """v = u + sum_i w_i play_{r_i}[u] (Prandtl-Ishlinskii)."""
+#: Play-operator states before the record, as multiples of the threshold added to u[0].
+INITIAL_STATES = {"centred": 0.0, "ascending": -1.0, "descending": 1.0}
+
+
+def hysteresis_input(u: np.ndarray, r, w, initial: str = "centred") -> np.ndarray:
+    """v = u + sum_i w_i play_{r_i}[u] (Prandtl-Ishlinskii).
+
+    ``initial``: the operators' state before the record -- "centred" on u[0],
+    "ascending" (the input last rose to u[0]: p = u[0] - r) or "descending"
+    (it last fell to u[0]: p = u[0] + r).
+    """
     w = np.atleast_1d(np.asarray(w, dtype=float))
-    return np.asarray(u, dtype=float) + w @ play_operators(u, r)
+    r = np.atleast_1d(np.asarray(r, dtype=float))
+    u = np.asarray(u, dtype=float)
+    if initial not in INITIAL_STATES:
+        raise ModelError(f"hysteresis initial must be one of {', '.join(INITIAL_STATES)}, got {initial!r}")
+    return u + w @ play_operators(u, r, initial=u[0] + INITIAL_STATES[initial] * r)
 
 
 def polynomial_input(u: np.ndarray, k2: float = 0.0, k3: float = 0.0) -> np.ndarray:
@@ -329,7 +342,7 @@ def simulate_with_effects(model: CreepModel, t: np.ndarray, u: np.ndarray, effec
     pre = u_pre
     if "hysteresis" in effects:
         p = effects["hysteresis"]
-        v = hysteresis_input(v, p.get("r", []), p.get("w", []))
+        v = hysteresis_input(v, p.get("r", []), p.get("w", []), p.get("initial", "centred"))
     if "nonlinear_gain" in effects:
         p = effects["nonlinear_gain"]
         k2, k3 = float(p.get("k2", 0.0)), float(p.get("k3", 0.0))

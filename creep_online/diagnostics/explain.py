@@ -227,6 +227,14 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] = fx.EFFECTS, use_i
     warnings = list(data.notes)
     start_model = _start_from_identify(data, warnings) if use_identify else None
     base = ext.fit_base(data, start=start_model, max_nfev=max_nfev)
+    if u_pre is None and t_pre is None and u[0] != 0.0:
+        # equilibrium at u[0] (default) or at rest with a jump 0 -> u[0] at t[0]: let the fit decide
+        rest = ext.prepare(t, u, y, source=source, u_pre=0.0)
+        base_rest = ext.fit_base(rest, start=base.model, max_nfev=max_nfev)
+        if base_rest.rss < 0.9 * base.rss:
+            data, base = rest, base_rest
+            warnings.append(f"the record starts from rest: input read as a jump 0 -> {u[0]:g} at t = {t[0]:g} s "
+                            "(fits better than equilibrium at u[0])")
     noise = noise_std_estimate(base.residual)
     settle = min(base.model.settling_time, 0.25 * (data.t[-1] - data.t[0]))
     where = locate(data.t, data.u, base.residual, noise, settle)
@@ -256,11 +264,10 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] = fx.EFFECTS, use_i
     sig = [c for c in ranked if c.significant]
     if combine and len(sig) >= 2:
         pair = (sig[0].effect, sig[1].effect)
-        if set(pair) != {"hysteresis", "nonlinear_gain"}:
-            fit = ext.fit_extended(data, pair, base, max_nfev=max_nfev)
-            ev, lr, pv, dk = evidence(base, fit, data.n)
-            ev1 = evidence(sig[0].fit, fit, data.n)[0]
-            combo = Candidate("+".join(pair), ev, lr, pv, dk, bool(ev1 > EVIDENCE_THRESHOLD), fit,
-                              f"evidence over {sig[0].effect} alone: {ev1:.3g}")
+        fit = ext.fit_extended(data, pair, base, max_nfev=max_nfev)
+        ev, lr, pv, dk = evidence(base, fit, data.n)
+        ev1 = evidence(sig[0].fit, fit, data.n)[0]
+        combo = Candidate("+".join(pair), ev, lr, pv, dk, bool(ev1 > EVIDENCE_THRESHOLD), fit,
+                          f"evidence over {sig[0].effect} alone: {ev1:.3g}")
     return Diagnosis(source, base, noise, ranked, skipped, where, analysis, combo, warnings,
                      time.perf_counter() - start, data)

@@ -28,6 +28,10 @@ from ..model import CreepModel
 
 #: Play-operator thresholds used for hysteresis, as fractions of the input range.
 HYSTERESIS_THRESHOLDS = tuple(np.arange(1, 10) / 20.0)
+#: Time stamps whose step varies by less than this (relative) are snapped to a uniform grid.
+SNAP_RTOL = 1e-2
+#: Play-operator states before the record: centred on u[0], or as left by a rise to / fall to u[0].
+INITIAL_STATES = {0: "centred", -1: "ascending", 1: "descending"}
 #: Bounds of the base model's nonlinear parameters.
 ALPHA_BOUNDS = (1e-3, 0.999)
 ZETA_BOUNDS = (1e-3, 20.0)
@@ -105,10 +109,14 @@ class Prepared:
             scale = self.u_scale
             x = u / scale
             return np.array([u, scale * x * x, scale * x * x * x])
-        if key == "hyst":
-            if u is not self.u:  # the state before the record: operators centred there
+        if key.startswith("hystpoly"):  # generalised PI: play operators plus a polynomial (asymmetric loops)
+            return np.vstack([self.features("hyst" + key[8:], u), self.features("poly", u)[1:]])
+        if key.startswith("hyst"):
+            init = int(key[4:])
+            if u is not self.u:  # the state before the record
                 return np.repeat(u[None, :], 1 + len(HYSTERESIS_THRESHOLDS), axis=0)
-            return np.vstack([u[None, :], fx.play_operators(u, self.thresholds)])
+            r = self.thresholds
+            return np.vstack([u[None, :], fx.play_operators(u, r, initial=u[0] + init * r)])
         raise KeyError(key)
 
     @property
@@ -130,6 +138,11 @@ def prepare(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, source: str = "<arra
     y = np.asarray(y, dtype=float)
     w = None
     notes: list[str] = []
+    if not fx.is_uniform(t) and fx.is_uniform(t, rtol=SNAP_RTOL):
+        h = (t[-1] - t[0]) / (t.size - 1)
+        jitter = float(np.max(np.abs(np.diff(t) - h)) / h)
+        t = t[0] + np.arange(t.size) * h
+        notes.append(f"time stamps jitter by up to {100 * jitter:.2g} % of the step: treated as uniform (h = {h:.6g} s)")
     if isinstance(weights, str):
         if weights != "auto":
             raise ValueError(f"weights must be 'auto', None or an array, got {weights!r}")
@@ -175,12 +188,11 @@ def _effect_specs(data: Prepared, name: str) -> list[ParamSpec]:
 class Design:
     """Columns of the extended model for given nonlinear parameters, and their projection."""
 
-    def __init__(self, data: Prepared, effects: tuple[str, ...] = (), harmonics: int = 1) -> None:
+    def __init__(self, data: Prepared, effects: tuple[str, ...] = (), harmonics: int = 1,
+                 hysteresis_initial: int = 0) -> None:
         for e in effects:
             if e not in fx.EFFECTS:
                 raise ModelError(f"unknown effect {e!r}; the catalogue is {', '.join(fx.EFFECTS)}")
-        if "hysteresis" in effects and "nonlinear_gain" in effects:
-            raise ModelError("hysteresis and nonlinear_gain both act on the input; fit them one at a time")
         self.data = data
         self.effects = tuple(effects)
         self.harmonics = harmonics
@@ -194,7 +206,10 @@ class Design:
         self.names = [s.name for s in self.specs]
         self.lo = np.array([s.lo for s in self.specs])
         self.hi = np.array([s.hi for s in self.specs])
-        key = "hyst" if "hysteresis" in effects else "poly" if "nonlinear_gain" in effects else "u"
+        hyst, poly = "hysteresis" in effects, "nonlinear_gain" in effects
+        self.hysteresis_initial = int(hysteresis_initial)
+        init = f"{self.hysteresis_initial:+d}"
+        key = "hystpoly" + init if hyst and poly else "hyst" + init if hyst else "poly" if poly else "u"
         self.key = key
         self.col_names: list[str] = []
         self.nfev = 0
@@ -219,8 +234,9 @@ class Design:
         else:
             dyn = [sup.apply(lambda tt: fx.base_step_at(alpha, a1, a2, tt - d))]
             tau = None
-        names += ["b"] + {"u": [], "hyst": [f"w{i}" for i in range(1, len(HYSTERESIS_THRESHOLDS) + 1)],
-                          "poly": ["c2", "c3"]}[self.key]
+        w_names = [f"w{i}" for i in range(1, len(HYSTERESIS_THRESHOLDS) + 1)]
+        names += ["b"] + {"u": [], "hyst": w_names, "poly": ["c2", "c3"],
+                          "hystpoly": w_names + ["c2", "c3"]}[self.key.rstrip("+-01")]
         usup = data.superposer("u")
         if "second_mode" in self.effects:
             f2, z2 = 10 ** p["second_mode.log10_fn"], 10 ** p["second_mode.log10_zeta"]
@@ -316,7 +332,8 @@ def _result(design: Design, theta: np.ndarray) -> ExtendedFit:
             w = np.array([c[f"w{i}"] for i in range(1, len(HYSTERESIS_THRESHOLDS) + 1)]) / b
             width = fx.loop_width(data.thresholds, w, data.u_range)
             eff[e] = {"r": data.thresholds.tolist(), "w": w.tolist(), "loop_width": width,
-                      "loop_width_rel": width / data.u_range if data.u_range else float("nan")}
+                      "loop_width_rel": width / data.u_range if data.u_range else float("nan"),
+                      "initial": INITIAL_STATES[design.hysteresis_initial]}
         elif e == "nonlinear_gain":
             scale = data.u_scale
             k2, k3 = c["c2"] / b / scale, c["c3"] / b / scale**2
@@ -488,6 +505,11 @@ def _grid_starts(design: Design, base: ExtendedFit, peaks: list[float]) -> tuple
     return mesh(grids), prio_starts
 
 
+def _default_tail(design: Design) -> np.ndarray:
+    """Mid-range values of the effects' nonlinear parameters (for quick comparisons)."""
+    return 0.5 * (design.lo[3:] + design.hi[3:])
+
+
 def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, base: ExtendedFit | None = None,
                  harmonics: int = 1, max_nfev: int = MAX_NFEV, n_starts: int = 2) -> ExtendedFit:
     """Fit the base model extended by ``effects``, warm-started from ``base`` (fitted if not given).
@@ -505,10 +527,17 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     if not effects:
         return base
     from .locate import spectrum_peaks
-    design = Design(data, effects, harmonics)
+    init = 0
+    if "hysteresis" in effects:  # the operators' state before the record is unknown: take the best of three
+        costs = {k: Design(data, effects, harmonics, k).cost(
+            np.concatenate([base.theta[:3], _default_tail(Design(data, effects, harmonics, k))]))
+            for k in INITIAL_STATES}
+        init = min(costs, key=costs.get)
+    design = Design(data, effects, harmonics, init)
     peaks = [p["f_hz"] for p in spectrum_peaks(data.t, base.residual, max_peaks=4, ratio=3.0)] if data.uniform else []
     # explore (grids, short polishes) on a prefix of long records: the same experiment, cheaper evaluations
-    explore = Design(data.prefix(EXPLORE_SAMPLES), effects, harmonics) if data.n > 1.5 * EXPLORE_SAMPLES else design
+    explore = (Design(data.prefix(EXPLORE_SAMPLES), effects, harmonics, init)
+               if data.n > 1.5 * EXPLORE_SAMPLES else design)
     grid, prio = _grid_starts(explore, base, peaks)
 
     def ranked(d: Design, starts: list[np.ndarray]) -> list[tuple[float, np.ndarray]]:
