@@ -78,8 +78,9 @@ def test_block_and_single_agree(load_cell):
     for k in range(u.size):
         b.update(u[k], y[k])
     ea, eb = a.estimate, b.estimate
+    # identical up to when the amortized layer-2 refreshes land (a few samples later in single mode)
     for name in ("alpha", "a1", "a2", "b"):
-        assert getattr(ea, name) == pytest.approx(getattr(eb, name), rel=2e-3)
+        assert getattr(ea, name) == pytest.approx(getattr(eb, name), rel=1e-2)
     assert ea.samples == eb.samples == u.size
 
 

@@ -48,6 +48,10 @@ QUALITIES = ("none", "provisional", "good", "degraded")
 DEFAULT_ALPHA0 = 0.05
 #: Largest layer-2 buffer (samples): bounds memory and the duration of the fit.
 MAX_LAYER2_SAMPLES = 1 << 15
+#: Longest history (samples since the first input change) kept for exact rebuilds after a layer-2 refresh.
+MAX_HISTORY = 1 << 18
+#: At most this many layer-2 refreshes (alternating with layer 1 until alpha stops moving).
+MAX_REFRESH = 3
 #: Node above which the SOE lumps the fast modes into a direct term (units 1/h).
 SOE_TOP = 3000.0
 
@@ -99,13 +103,18 @@ class OnlineEstimator:
     retune:         try the eq. 12 retune after each layer-1 fit.
     alpha_bounds:   search interval of alpha.
     t_c_max:        upper limit of the automatic t_c (s).
+    layer1_from:    "record": layer-1 statistics from the first input change (the model is
+                    exact in the transient too, so it carries alpha information; 4x smaller
+                    alpha scatter at t_c + 5 s on the load cell), "t_c": the paper's creep
+                    regime only.
     """
 
     def __init__(self, dt: float, *, t_c: float | None = None, alpha0: float = DEFAULT_ALPHA0,
                  window_s: float | None = 10.0, update_every_s: float = 0.05, memory: str = "soe",
                  remark3: str = "recompute", horizon_s: float = DEFAULT_HORIZON_S,
                  soe_dx: float = DEFAULT_DX, budget_us: float = 60.0, retune: bool = True,
-                 alpha_bounds: tuple[float, float] = (1e-3, 0.99), t_c_max: float = 10.0) -> None:
+                 alpha_bounds: tuple[float, float] = (1e-3, 0.99), t_c_max: float = 10.0,
+                 layer1_from: str = "record") -> None:
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
             raise DataError(f"dt must be a positive finite number of seconds, got {dt!r}")
         if t_c is not None and not (math.isfinite(t_c) and t_c > 0):
@@ -117,6 +126,8 @@ class OnlineEstimator:
         if memory != "soe":
             raise DataError(f"memory must be 'soe' (got {memory!r}); truncated memory is measured in "
                             "bench/bench_online.py and loses creep (docs/online.md)")
+        if layer1_from not in ("record", "t_c"):
+            raise DataError(f"layer1_from must be 'record' or 't_c', got {layer1_from!r}")
         if remark3 not in ("recompute", "carry_on"):
             raise DataError(f"remark3 must be 'recompute' or 'carry_on', got {remark3!r}")
         self.dt = float(dt)
@@ -131,6 +142,7 @@ class OnlineEstimator:
         self.retune = retune
         self.alpha_bounds = (float(alpha_bounds[0]), float(alpha_bounds[1]))
         self.t_c_max = float(t_c_max)
+        self.layer1_from = layer1_from
         self.basis = SoeBasis.build(self.dt, horizon_s=self.horizon_s, dx=soe_dx, top=SOE_TOP)
         _warm_kernels()
         self.reset()
@@ -172,6 +184,10 @@ class OnlineEstimator:
         self.refreshes = 0
         self._bad_streak = 0
         self._blocking = False
+        self._keep_hist = self.remark3 == "recompute"
+        self._rebuilding = False
+        self._hist_u: list[float] = []
+        self._hist_y: list[float] = []
         self._last_pred: float | None = None
         self._init_tracker_arrays()
 
@@ -211,7 +227,7 @@ class OnlineEstimator:
     # ------------------------------------------------------------------ public API
     @property
     def phase(self) -> str:
-        return self._phase
+        return "tracking" if self._rebuilding else self._phase
 
     @property
     def model(self) -> CreepModel | None:
@@ -228,7 +244,7 @@ class OnlineEstimator:
         m = self._model
         return OnlineEstimate(
             alpha=_finite(self._alpha), a1=_finite(self._a1), a2=_finite(self._a2), b=_finite(self._b),
-            phase=self._phase, quality=self._quality,
+            phase=self.phase, quality=self._quality,
             uncertainty={k: _finite(v, math.inf) for k, v in self._std.items()},
             t=self.samples * self.dt, samples=self.samples, t_c=_finite(self._tc_used),
             fn_hz=m.fn if m else 0.0, zeta=m.zeta if m else 0.0, offset=_finite(self._offset),
@@ -263,6 +279,8 @@ class OnlineEstimator:
                 return
             self._begin(n)
         if self._phase == "tracking" and self._replay_done():
+            if self._keep_hist:
+                self._remember(u, y)
             y0 = y - self._offset
             if self.remark3 == "carry_on":
                 self._advance(np.array([u]), np.array([y0]))
@@ -276,6 +294,8 @@ class OnlineEstimator:
                 self._alpha_update()
             elif self._refresh is not None:
                 self._run_refresh(self.budget_s)
+                if self._phase != "tracking":
+                    self._work(self.budget_s)
             return
         self._bu.append(u)
         self._by.append(y)
@@ -334,6 +354,8 @@ class OnlineEstimator:
         while i < u.size:
             if self._phase == "tracking" and self._replay_done():
                 self.samples += u.size - i
+                if self._keep_hist:
+                    self._remember_block(u[i:], y[i:])
                 self._advance(np.ascontiguousarray(u[i:]), np.ascontiguousarray(y[i:] - self._offset))
                 return
             stop = min(u.size, i + chunk)
@@ -368,15 +390,45 @@ class OnlineEstimator:
                 else:   # replaying the buffer into the tracker
                     self._replay_chunk(deadline)
                     if self._replay_done():
-                        self._bu = []
-                        self._by = []
-                        self._replay = 0
-                        self._phase = "tracking"
-                        return
+                        self._finish_replay()
+                        if self._refresh is not None and budget == math.inf:
+                            self._run_refresh(math.inf)
+                        if self._phase == "tracking":
+                            return
             else:
                 return
             if time.perf_counter() >= deadline:
                 return
+
+    def _finish_replay(self) -> None:
+        """The tracker has caught up: the buffer becomes the history (kept for a rebuild) or is dropped."""
+        if self._keep_hist and len(self._bu) <= MAX_HISTORY and self.refreshes < MAX_REFRESH:
+            self._hist_u, self._hist_y = self._bu, self._by
+        else:
+            self._drop_history()
+        self._bu = []
+        self._by = []
+        self._replay = 0
+        self._phase = "tracking"
+        self._rebuilding = False
+
+    def _drop_history(self) -> None:
+        self._keep_hist = False
+        self._hist_u = []
+        self._hist_y = []
+
+    def _remember(self, u: float, y: float) -> None:
+        self._hist_u.append(u)
+        self._hist_y.append(y)
+        if len(self._hist_u) > MAX_HISTORY:
+            self._drop_history()
+
+    def _remember_block(self, u: np.ndarray, y: np.ndarray) -> None:
+        if len(self._hist_u) + u.size > MAX_HISTORY:
+            self._drop_history()
+            return
+        self._hist_u.extend(u.tolist())
+        self._hist_y.extend(y.tolist())
 
     def _start_layer2(self, n: int) -> None:
         u = np.asarray(self._bu[:n])
@@ -419,7 +471,7 @@ class OnlineEstimator:
         noise2 = max(self._l2.cost / max(self._l2_samples, 1), 1e-30) if self._l2 else 1.0
         self._P[:] = np.diag([0.02**2, (0.1 * self._b) ** 2 + 1e-30]) / noise2
         self._pmax = 100.0 * float(np.trace(self._P))
-        self._i_c = int(round(self._tc_used / self.dt))
+        self._i_c = 0 if self.layer1_from == "record" else int(round(self._tc_used / self.dt))
         self._next_update = self._i_c + self.update_every
         self._replay = 0
 
@@ -462,8 +514,11 @@ class OnlineEstimator:
             i = stop
             if acc and self._tracked == self._next_update:
                 self._alpha_update()
-            if self._refresh is not None and (self._blocking or self._replay_done()):
+            if self._refresh is not None and self._phase == "tracking" and self._replay_done():
                 self._run_refresh(math.inf if self._blocking else self.budget_s)
+                if self._phase != "tracking":     # rebuilding: the history (this block included) is replayed
+                    self._work(math.inf if self._blocking else self.budget_s)
+                    return
         if self.remark3 != "carry_on":
             self._last_pred = float(self._sc[K.SC_LAST]) + self._offset
 
@@ -506,8 +561,9 @@ class OnlineEstimator:
         std_a, std_b = math.sqrt(max(var_a, 0.0)), math.sqrt(max(var_b, 0.0))
         self._std = {**self._std, "alpha": std_a, "b": std_b}
         self._judge(std_a)
-        if (self._quality == "good" and self.refreshes == 0 and self._refresh is None
-                and self._l2_data is not None and abs(self._alpha / self._l2_alpha - 1.0) > 0.02):
+        if (self._quality == "good" and self.refreshes < MAX_REFRESH and self._refresh is None
+                and self._l2_data is not None and abs(self._alpha / self._l2_alpha - 1.0) > 0.01
+                and (self.refreshes == 0 or self._keep_hist)):
             u, y = self._l2_data
             self._refresh = Layer2Job(self.basis, u, y, self._alpha, start=(self._a1, self._a2))
 
@@ -525,6 +581,15 @@ class OnlineEstimator:
             return
         self._a1, self._a2 = res.a1, res.a2
         self._std = {**self._std, "a1": res.std["a1"], "a2": res.std["a2"]}
+        if self._keep_hist and self.remark3 == "recompute":
+            # rebuild the tracker exactly for the new resonance: replay the whole history
+            self._bu, self._by = self._hist_u, self._hist_y
+            self._hist_u, self._hist_y = [], []
+            self._start_tracker()
+            self._phase = "resonance_fit"
+            self._rebuilding = True
+            self._set_model(self._alpha, self._b)
+            return
         self._co[:] = pack_coefficients(self.basis, self._a1, self._a2)
         K.model_coefficients(self._alpha, self.basis.lam, self.basis.dx, self._a1, self._a2, self._v, self._dv)
         self._v *= self._b

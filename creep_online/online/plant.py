@@ -58,3 +58,19 @@ def simulate_varying(t: np.ndarray, u: np.ndarray, alpha: np.ndarray | float, a1
     co = pack_coefficients(basis, a1, a2)
     st = np.zeros(basis.size + 2)
     return _varying(u, alpha, b, st, co, basis.lam, basis.dx, a1, a2)
+
+
+class PlantStream:
+    """The same plant, fed chunk by chunk with persistent state (for endless streams in the bench)."""
+
+    def __init__(self, h: float, alpha: float, a1: float, a2: float, b: float, horizon_s: float = 3600.0) -> None:
+        self.basis = SoeBasis.build(h, horizon_s=horizon_s, top=3000.0)
+        self.co = pack_coefficients(self.basis, a1, a2)
+        self.st = np.zeros(self.basis.size + 2)
+        self.alpha, self.a1, self.a2, self.b = alpha, a1, a2, b
+
+    def step_block(self, u: np.ndarray) -> np.ndarray:
+        """Noise-free output for the next len(u) input samples."""
+        u = np.ascontiguousarray(u, dtype=float)
+        return _varying(u, np.full(u.size, self.alpha), np.full(u.size, self.b), self.st, self.co,
+                        self.basis.lam, self.basis.dx, self.a1, self.a2)
