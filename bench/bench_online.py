@@ -125,8 +125,9 @@ def accuracy_run(name: str, p: dict, seed: int = 0) -> dict:
     u = np.where(t >= p["t0"], p["amp"], 0.0)
     y = noisy(simulate(model, t, u), t >= p["t0"], seed)
     out: dict = {"truth": model.describe()}
-    for mode in ("recompute", "carry_on"):
-        est = OnlineEstimator(h, remark3=mode)
+    modes = {"recompute": {}, "carry_on": {"remark3": "carry_on"}, "layer1_from_t_c": {"layer1_from": "t_c"}}
+    for mode, kw in modes.items():
+        est = OnlineEstimator(h, **kw)
         at = None
         k = 0
         step = max(1, int(0.01 / h))

@@ -560,7 +560,7 @@ class OnlineEstimator:
             self._v *= b
         std_a, std_b = math.sqrt(max(var_a, 0.0)), math.sqrt(max(var_b, 0.0))
         self._std = {**self._std, "alpha": std_a, "b": std_b}
-        self._judge(std_a)
+        self._judge(std_a, cost / max(float(self._sc[K.SC_NEFF]), 1.0) if self.remark3 == "recompute" else cost)
         if (self._quality == "good" and self.refreshes < MAX_REFRESH and self._refresh is None
                 and self._l2_data is not None and abs(self._alpha / self._l2_alpha - 1.0) > 0.01
                 and (self.refreshes == 0 or self._keep_hist)):
@@ -615,11 +615,14 @@ class OnlineEstimator:
             return cand, float(b2), float(j)
         return alpha, b, cost
 
-    def _judge(self, std_alpha: float) -> None:
-        """Quality flag from the alpha uncertainty and the live prediction error; fall back on divergence."""
-        e2 = float(self._sc[K.SC_E2])
-        y2 = float(self._sc[K.SC_Y2]) + float(self._sc[K.SC_YM]) ** 2
-        if self._last_good is not None and e2 > 25.0 * self._good_e2 and e2 > 1e-6 * y2:
+    def _judge(self, std_alpha: float, resid2: float) -> None:
+        """Quality flag from the alpha uncertainty; fall back when the window's mean squared residual jumps.
+
+        ``resid2`` is the window cost per effective sample (exact, from the
+        statistics): it stays put through input steps, unlike the live error,
+        and jumps on outliers or a model that no longer fits.
+        """
+        if self._last_good is not None and resid2 > 25.0 * self._good_e2:
             self._bad_streak += 1
             if self._bad_streak < 20:   # after 20 in a row the plant has changed: accept
                 self._diverged()
@@ -628,7 +631,7 @@ class OnlineEstimator:
         rel = std_alpha / max(abs(self._alpha), 1e-12)
         self._quality = "good" if rel < 0.05 else "provisional"
         self._last_good = (self._alpha, self._b)
-        self._good_e2 = min(self._good_e2 * 1.5, e2) if math.isfinite(self._good_e2) else e2
+        self._good_e2 = min(self._good_e2 * 1.5, resid2) if math.isfinite(self._good_e2) else resid2
         self._good_e2 = max(self._good_e2, 1e-300)
 
     def _diverged(self) -> None:
