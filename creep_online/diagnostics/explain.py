@@ -230,7 +230,7 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] = fx.EFFECTS, use_i
     if u_pre is None and t_pre is None and u[0] != 0.0:
         # equilibrium at u[0] (default) or at rest with a jump 0 -> u[0] at t[0]: let the fit decide
         rest = ext.prepare(t, u, y, source=source, u_pre=0.0)
-        base_rest = ext.fit_base(rest, start=base.model, max_nfev=max_nfev)
+        base_rest = ext.fit_base(rest, start=base.model, max_nfev=max_nfev, grid=False)
         if base_rest.rss < 0.9 * base.rss:
             data, base = rest, base_rest
             warnings.append(f"the record starts from rest: input read as a jump 0 -> {u[0]:g} at t = {t[0]:g} s "

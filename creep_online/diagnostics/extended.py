@@ -19,6 +19,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.linalg import lstsq as scipy_lstsq
 from scipy.optimize import least_squares
 
 from .. import effects as fx
@@ -45,9 +46,11 @@ SHORT_NFEV = 8
 #: ... and this many priority starts (spectral peaks, swapped modes) too.
 PRIORITY_STARTS = 5
 #: Records longer than 1.5x this explore starting points on their first EXPLORE_SAMPLES samples.
-EXPLORE_SAMPLES = 8000
+EXPLORE_SAMPLES = 6000
 #: Relative tolerance (ftol, xtol) of the final polish: RSS to ~1e-7 is ample for the evidence.
 FULL_TOL = 1e-7
+#: Evaluations of the final polish on the whole record after exploring on a prefix.
+FULL_NFEV = 8
 
 
 # --------------------------------------------------------------------------- prepared data
@@ -271,7 +274,7 @@ class Design:
         wphi = phi if data.weights is None else phi * data.weights[:, None]
         scale = np.linalg.norm(wphi, axis=0)
         scale[scale == 0] = 1.0
-        coef, *_ = np.linalg.lstsq(wphi / scale, data.wy, rcond=1e-10)
+        coef = scipy_lstsq(wphi / scale, data.wy, cond=1e-10, lapack_driver="gelsy", check_finite=False)[0]
         coef = coef / scale
         y_hat = phi @ coef
         return coef, y_hat, data.wy - wphi @ coef
@@ -405,34 +408,40 @@ def _frf_peaks(data: Prepared, count: int = 3) -> list[float]:
     return [float(f[peaks[i]]) for i in order[:count]]
 
 
-def fit_base(data: Prepared, start: CreepModel | None = None, max_nfev: int = MAX_NFEV) -> ExtendedFit:
+def fit_base(data: Prepared, start: CreepModel | None = None, max_nfev: int = MAX_NFEV,
+             grid: bool = True) -> ExtendedFit:
     """The base creep model (plus offset) by variable projection from several starts.
 
-    Starts: ``start`` (e.g. the result of ``identify``), and a small grid
-    over alpha, the resonance frequency (peaks of the empirical frequency
-    response, and a default) and the damping. The two best starts are polished.
+    Starts: ``start`` (e.g. the result of ``identify``), and (``grid``) a
+    small grid over alpha, the resonance frequency (peaks of the empirical
+    frequency response, and a default) and the damping. The two best starts
+    are polished.
     """
     design = Design(data)
+    # long records: choose and pre-polish the starts on a prefix (same experiment, cheaper), finish on all
+    explore = Design(data.prefix(EXPLORE_SAMPLES)) if data.n > 1.5 * EXPLORE_SAMPLES else design
     starts: list[np.ndarray] = []
     if start is not None:
         starts.append(base_theta(start))
     fmax = 10 ** design.hi[1] / 2.0
-    fns = _frf_peaks(data) + [fmax / 10.0, fmax / 100.0]
+    fns = (_frf_peaks(data) + [fmax / 10.0, fmax / 100.0]) if grid or start is None else []
     for alpha in (0.15, 0.4, 0.7, 0.95):
         for fn in fns:
             for zeta in (0.05, 0.3, 1.0):
                 starts.append(np.array([alpha, math.log10(fn), math.log10(zeta)]))
     costs = []
     for th in starts:
-        th = np.clip(th, design.lo, design.hi)
+        th = np.clip(th, explore.lo, explore.hi)
         try:
-            costs.append(design.cost(th))
+            costs.append(explore.cost(th))
         except (ValueError, ModelError, np.linalg.LinAlgError):
             costs.append(np.inf)
     order = np.argsort(costs)
     polished = []
     for i in order[:2]:
-        th = _optimise(design, starts[i], max_nfev)
+        th = _optimise(explore, starts[i], max_nfev)
+        if explore is not design:
+            th = _optimise(design, th, FULL_NFEV, FULL_TOL)
         polished.append((design.cost(th), th))
     polished.sort(key=lambda ct: ct[0])
     fit = _result(design, polished[0][1])
@@ -567,7 +576,7 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
                 finalists.append(v)
     best, best_cost = None, np.inf
     for _, th in ranked(design, finalists)[:n_starts if explore is design else 1]:
-        th = _optimise(design, th, max_nfev, FULL_TOL)
+        th = _optimise(design, th, max_nfev if explore is design else FULL_NFEV, FULL_TOL)
         c = design.cost(th)
         if c < best_cost:
             best, best_cost = th, c
