@@ -225,3 +225,18 @@ def test_bad_parameters_raise_one_line_errors(kwargs):
     dt = kwargs.pop("dt")
     with pytest.raises(DataError):
         OnlineEstimator(dt, **kwargs)
+
+
+def test_long_forgetting_run_has_no_overflow_or_false_divergence():
+    """The forgetting weight g = f^-n is renormalised: a short window over many samples stays finite."""
+    from creep_online.online.plant import PlantStream
+    h = 1e-3
+    model = CreepModel.from_resonance(0.05, 20.0, 0.2, 1.0)
+    plant = PlantStream(h, model.alpha, model.a1, model.a2, model.b)
+    t = np.arange(100_000) * h
+    u = np.where(((t // 2) % 2) == 0, 1.0, 0.5)
+    y = plant.step_block(u) + np.random.default_rng(1).normal(0, 0.005, t.size)
+    est = OnlineEstimator(h, window_s=0.1)     # g would pass 1e300 after ~70k samples
+    est.update_block(u, y)
+    assert est.divergences == 0
+    assert est.estimate.alpha == pytest.approx(0.05, rel=0.05)

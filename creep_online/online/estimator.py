@@ -560,7 +560,11 @@ class OnlineEstimator:
             self._v *= b
         std_a, std_b = math.sqrt(max(var_a, 0.0)), math.sqrt(max(var_b, 0.0))
         self._std = {**self._std, "alpha": std_a, "b": std_b}
-        self._judge(std_a, cost / max(float(self._sc[K.SC_NEFF]), 1.0) if self.remark3 == "recompute" else cost)
+        if self.remark3 == "recompute":   # window cost per effective sample, in true scale
+            resid2 = cost / (float(self._sc[K.SC_G]) * max(float(self._sc[K.SC_NEFF]), 1.0))
+        else:
+            resid2 = cost
+        self._judge(std_a, resid2)
         if (self._quality == "good" and self.refreshes < MAX_REFRESH and self._refresh is None
                 and self._l2_data is not None and abs(self._alpha / self._l2_alpha - 1.0) > 0.01
                 and (self.refreshes == 0 or self._keep_hist)):

@@ -104,7 +104,7 @@ def _step(u: float, y: float, st: np.ndarray, co: np.ndarray, v: np.ndarray, S: 
         g = sc[SC_G]
         if f < 1.0:
             g = g / f
-            if g > 1e150:  # renormalise: S_true = S_acc / g stays the same
+            if g > 1e20:  # renormalise (keeps det() in Gauss-Newton far from overflow)
                 inv = 1.0 / g
                 for i in range(p):
                     sy[i] *= inv
