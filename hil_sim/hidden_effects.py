@@ -92,8 +92,11 @@ def effect_params(effect: str, model: CreepModel, t: np.ndarray, u: np.ndarray, 
         k2 = rng.uniform(0.1, 0.3) / um * rng.choice([-1, 1]) * 0.5
         return {"k2": k2, "k3": rng.uniform(-0.05, 0.05) / um**2}
     if effect == "second_mode":
-        return {"gain": model.b * rng.uniform(0.05, 0.2) * rng.choice([-1, 1]),
-                "fn_hz": model.fn * rng.uniform(2.5, 5.0), "zeta": rng.uniform(0.02, 0.08)}
+        # a higher mode is weaker than the first: its resonance peak is 10-40 % of the first mode's
+        zeta2 = rng.uniform(0.02, 0.08)
+        peak1 = abs(model.b) * model.wn ** -model.alpha / (2.0 * model.zeta)
+        gain = 2.0 * zeta2 * rng.uniform(0.1, 0.4) * peak1
+        return {"gain": gain * rng.choice([-1, 1]), "fn_hz": model.fn * rng.uniform(2.5, 5.0), "zeta": zeta2}
     if effect == "drift":
         return {"rate": span * rng.uniform(0.06, 0.15) / (t[-1] - t[0]) * rng.choice([-1, 1])}
     if effect == "leakage":

@@ -260,6 +260,15 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] = fx.EFFECTS, use_i
         sig = ev > EVIDENCE_THRESHOLD and fit.residual_rms < (1.0 - MIN_RMS_DROP) * base.residual_rms
         ranked.append(Candidate(name, ev, lr, pv, dk, bool(sig), fit, signature(name, fit, base, where, data)))
     ranked.sort(key=lambda c: -c.evidence)
+    if ranked and ranked[0].significant:
+        # high-frequency misfit (ringing, a hum) inflates the difference-based noise estimate: re-estimate
+        # on the residual of the model that explains it, and keep the smaller
+        noise = min(noise, noise_std_estimate(ranked[0].fit.residual))
+        analysis["metrics"] = error_metrics(data.y, base.y_hat, noise)
+    sig_top = [c for c in ranked if c.significant][:2]
+    if len(sig_top) == 2 and sig_top[0].evidence - sig_top[1].evidence < EVIDENCE_THRESHOLD:
+        warnings.append(f"{sig_top[0].effect} and {sig_top[1].effect} explain the data about equally well "
+                        f"(evidence {sig_top[0].evidence:.4g} vs {sig_top[1].evidence:.4g}): the verdict is not firm")
     combo = None
     sig = [c for c in ranked if c.significant]
     if combine and len(sig) >= 2:

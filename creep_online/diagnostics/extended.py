@@ -27,8 +27,9 @@ from ..errors import DataError, ModelError
 from ..metrics import fit_percent, rms
 from ..model import CreepModel
 
-#: Play-operator thresholds used for hysteresis, as fractions of the input range.
-HYSTERESIS_THRESHOLDS = tuple(np.arange(1, 10) / 20.0)
+#: Play-operator thresholds used for hysteresis, as fractions of the input range (denser where
+#: real loops put most of their weight, at small thresholds).
+HYSTERESIS_THRESHOLDS = (0.02, 0.04, 0.07, 0.1, 0.14, 0.19, 0.25, 0.32, 0.4, 0.48)
 #: Time stamps whose step varies by less than this (relative) are snapped to a uniform grid.
 SNAP_RTOL = 1e-2
 #: Play-operator states before the record: centred on u[0], or as left by a rise to / fall to u[0].
@@ -537,10 +538,13 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
         return base
     from .locate import spectrum_peaks
     init = 0
-    if "hysteresis" in effects:  # the operators' state before the record is unknown: take the best of three
-        costs = {k: Design(data, effects, harmonics, k).cost(
-            np.concatenate([base.theta[:3], _default_tail(Design(data, effects, harmonics, k))]))
-            for k in INITIAL_STATES}
+    if "hysteresis" in effects:  # the operators' state before the record is unknown: best of three after a short polish
+        small = data.prefix(EXPLORE_SAMPLES) if data.n > 1.5 * EXPLORE_SAMPLES else data
+        costs = {}
+        for k in INITIAL_STATES:
+            d = Design(small, effects, harmonics, k)
+            th = _optimise(d, np.concatenate([base.theta[:3], _default_tail(d)]), SHORT_NFEV, 1e-6)
+            costs[k] = d.cost(th)
         init = min(costs, key=costs.get)
     design = Design(data, effects, harmonics, init)
     peaks = [p["f_hz"] for p in spectrum_peaks(data.t, base.residual, max_peaks=4, ratio=3.0)] if data.uniform else []
