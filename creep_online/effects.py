@@ -49,7 +49,7 @@ EFFECTS = ("hysteresis", "nonlinear_gain", "second_mode", "drift", "leakage", "d
            "periodic_disturbance", "second_creep")
 
 #: Points per grid of the multi-resolution step response used at arbitrary times.
-MULTIGRID_POINTS = 4096
+MULTIGRID_POINTS = 2048
 #: Ratio between successive grids of the multi-resolution step response.
 MULTIGRID_RATIO = 8.0
 #: Non-uniform records: at most this many (samples x input changes) pairs are summed explicitly.
