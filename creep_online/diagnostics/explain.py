@@ -273,7 +273,7 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] = fx.EFFECTS, use_i
     sig = [c for c in ranked if c.significant]
     if combine and len(sig) >= 2:
         pair = (sig[0].effect, sig[1].effect)
-        fit = ext.fit_extended(data, pair, base, max_nfev=max_nfev)
+        fit = ext.fit_extended(data, pair, base, max_nfev=max_nfev, warm=sig[0].fit)
         ev, lr, pv, dk = evidence(base, fit, data.n)
         ev1 = evidence(sig[0].fit, fit, data.n)[0]
         combo = Candidate("+".join(pair), ev, lr, pv, dk, bool(ev1 > EVIDENCE_THRESHOLD), fit,

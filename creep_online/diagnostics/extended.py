@@ -46,8 +46,10 @@ SHORT_STARTS = 4
 SHORT_NFEV = 8
 #: ... and this many priority starts (spectral peaks, swapped modes) too.
 PRIORITY_STARTS = 5
-#: Records longer than 1.5x this explore starting points on their first EXPLORE_SAMPLES samples.
+#: Long records explore starting points on a prefix of at least EXPLORE_SAMPLES samples that also
+#: holds EXPLORE_EXCITATION of the input's total variation (used when it is < 2/3 of the record).
 EXPLORE_SAMPLES = 6000
+EXPLORE_EXCITATION = 0.3
 #: Relative tolerance (ftol, xtol) of the final polish: RSS to ~1e-7 is ample for the evidence.
 FULL_TOL = 1e-7
 #: Evaluations of the final polish on the whole record after exploring on a prefix.
@@ -83,6 +85,32 @@ class Prepared:
         if self.u_scale is None:
             self.u_scale = max(float(np.max(np.abs(self.u))), 1e-300)
         self.wy = self.y if self.weights is None else self.y * self.weights
+
+    def explore_data(self) -> "Prepared":
+        """A window for cheap exploration: long enough and excited enough; the record itself if not shorter.
+
+        It starts at the record's start, or (record in equilibrium before its
+        first input change) shortly before that change: the samples before it
+        only carry the offset.
+        """
+        if "explore" not in self._cache:
+            a = 0
+            if self.u_pre is None and self.t_pre is None:
+                moved = np.flatnonzero(self.u != self.u[0])
+                if moved.size:
+                    a = max(0, int(moved[0]) - EXPLORE_SAMPLES // 10)
+            du = np.abs(np.diff(self.u[a:], prepend=self.u[a] if self.u_pre is None else self.u_pre))
+            tv = np.cumsum(du)
+            need = int(np.searchsorted(tv, EXPLORE_EXCITATION * tv[-1])) + 1 if tv[-1] > 0 else self.n
+            n = max(EXPLORE_SAMPLES, need)
+            self._cache["explore"] = self.window(a, a + n) if n < 2 * self.n // 3 else self
+        return self._cache["explore"]
+
+    def window(self, a: int, b: int) -> "Prepared":
+        """Samples a..b-1 (a > 0 only for records in equilibrium until after a), same input scaling."""
+        w = None if self.weights is None else self.weights[a:b]
+        return Prepared(self.t[a:b], self.u[a:b], self.y[a:b], w, self.u_pre, self.t_pre, self.source,
+                        list(self.notes), self.u_range, self.u_scale)
 
     def prefix(self, n: int) -> "Prepared":
         """The first n samples, with the same input scaling (a shorter record of the same experiment)."""
@@ -309,6 +337,7 @@ class ExtendedFit:
     u_pre: float | None = None
     t_pre: float | None = None
     alternatives: list = field(default_factory=list, repr=False)  # other polished base starts
+    names: list = field(default_factory=list, repr=False)         # names of theta's entries
 
     def simulate(self, t: np.ndarray, u: np.ndarray) -> np.ndarray:
         """This model's output for another input (same conventions as the fitted record)."""
@@ -368,7 +397,7 @@ def _result(design: Design, theta: np.ndarray) -> ExtendedFit:
     res = data.y - y_hat
     return ExtendedFit(design.effects, model, c["offset"], eff, np.array(theta), coef, y_hat, res,
                        float(wres @ wres), len(theta) + len(coef), fit_percent(data.y, y_hat), rms(res),
-                       design.nfev, data.u_pre, data.t_pre)
+                       design.nfev, data.u_pre, data.t_pre, names=list(design.names))
 
 
 def base_theta(model: CreepModel) -> np.ndarray:
@@ -420,7 +449,8 @@ def fit_base(data: Prepared, start: CreepModel | None = None, max_nfev: int = MA
     """
     design = Design(data)
     # long records: choose and pre-polish the starts on a prefix (same experiment, cheaper), finish on all
-    explore = Design(data.prefix(EXPLORE_SAMPLES)) if data.n > 1.5 * EXPLORE_SAMPLES else design
+    small = data.explore_data()
+    explore = Design(small) if small is not data else design
     starts: list[np.ndarray] = []
     if start is not None:
         starts.append(base_theta(start))
@@ -515,19 +545,42 @@ def _grid_starts(design: Design, base: ExtendedFit, peaks: list[float]) -> tuple
     return mesh(grids), prio_starts
 
 
+def _null_start(design: Design, base: ExtendedFit) -> np.ndarray:
+    """The base fit inside the extended model (effects switched off): the nested model, never worse than base."""
+    tail = _default_tail(design)
+    for i, name in enumerate(design.names[3:], start=3):
+        if name == "leakage.log10_tau":
+            tail[i - 3] = design.hi[i]
+        elif name == "delay.d":
+            tail[i - 3] = 0.0
+    return np.concatenate([base.theta[:3], tail])
+
+
 def _default_tail(design: Design) -> np.ndarray:
     """Mid-range values of the effects' nonlinear parameters (for quick comparisons)."""
     return 0.5 * (design.lo[3:] + design.hi[3:])
 
 
+def _merge(design: Design, theta: np.ndarray, warm: ExtendedFit) -> np.ndarray:
+    """theta with every parameter that ``warm`` also has replaced by warm's value."""
+    out = np.array(theta, dtype=float)
+    for name, value in zip(warm.names, warm.theta):
+        if name in design.names:
+            out[design.index(name)] = value
+    return out
+
+
 def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, base: ExtendedFit | None = None,
-                 harmonics: int = 1, max_nfev: int = MAX_NFEV, n_starts: int = 2) -> ExtendedFit:
+                 harmonics: int = 1, max_nfev: int = MAX_NFEV, n_starts: int = 2,
+                 warm: ExtendedFit | None = None) -> ExtendedFit:
     """Fit the base model extended by ``effects``, warm-started from ``base`` (fitted if not given).
 
     The effects' nonlinear parameters start from a grid (residual-spectrum
     peaks for frequencies); the ``SHORT_STARTS`` most promising grid values
     (each with its best base variant) get a short joint polish, and the
-    ``n_starts`` best of those a full one (bounded least squares).
+    ``n_starts`` best of those a full one (bounded least squares). ``warm``
+    (e.g. the fit of one of the effects alone) seeds further starts with its
+    values, so a combination is never worse than that fit.
     """
     if isinstance(effects, str):
         effects = tuple(e.strip() for e in effects.split(",") if e.strip())
@@ -538,8 +591,11 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
         return base
     from .locate import spectrum_peaks
     init = 0
-    if "hysteresis" in effects:  # the operators' state before the record is unknown: best of three after a short polish
-        small = data.prefix(EXPLORE_SAMPLES) if data.n > 1.5 * EXPLORE_SAMPLES else data
+    warm_h = (warm.effect_params.get("hysteresis") or {}).get("initial") if warm is not None else None
+    if warm_h is not None:
+        init = {v: k for k, v in INITIAL_STATES.items()}[warm_h]
+    elif "hysteresis" in effects:  # the operators' state before the record is unknown: best of three after a short polish
+        small = data.explore_data()
         costs = {}
         for k in INITIAL_STATES:
             d = Design(small, effects, harmonics, k)
@@ -549,8 +605,8 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     design = Design(data, effects, harmonics, init)
     peaks = [p["f_hz"] for p in spectrum_peaks(data.t, base.residual, max_peaks=4, ratio=3.0)] if data.uniform else []
     # explore (grids, short polishes) on a prefix of long records: the same experiment, cheaper evaluations
-    explore = (Design(data.prefix(EXPLORE_SAMPLES), effects, harmonics, init)
-               if data.n > 1.5 * EXPLORE_SAMPLES else design)
+    small = data.explore_data()
+    explore = Design(small, effects, harmonics, init) if small is not data else design
     grid, prio = _grid_starts(explore, base, peaks)
 
     def ranked(d: Design, starts: list[np.ndarray]) -> list[tuple[float, np.ndarray]]:
@@ -569,8 +625,12 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     for _, th in ranked(explore, grid):
         groups.setdefault(tuple(np.round(th[3:], 9)), th)
     chosen = list(groups.values())[:SHORT_STARTS] + [th for _, th in ranked(explore, prio)[:PRIORITY_STARTS]]
+    if warm is not None:
+        chosen += [_merge(explore, th, warm) for th in list(groups.values())[:2]]
     short = [_optimise(explore, th, SHORT_NFEV, 1e-6) for th in chosen]
-    finalists = [th for _, th in ranked(explore, short)[:n_starts]]
+    finalists = [th for _, th in ranked(explore, short)[:n_starts]] + [_null_start(design, base)]
+    if warm is not None:
+        finalists.append(_merge(design, _null_start(design, base), warm))
     if explore is not design and "periodic_disturbance" in effects:
         i_f = design.index("periodic_disturbance.f")  # a line's frequency is sharper on the whole record
         for th in list(finalists):
