@@ -1,0 +1,120 @@
+"""Benchmark of ``diagnose``: time on 30,000 samples with all eight candidates, and the detection table.
+
+Prints one JSON document:
+
+* ``timing``: wall time of ``diagnose`` on 30,000-sample records (1 kHz, a
+  staircase with reversals; clean and with hidden effects), p50/p99/max over
+  all runs, against a straightforward baseline measured in the same run (the
+  same fits with every evaluation on the whole record, no exploration window)
+  and the ratio.
+* ``detection``: for each catalogue effect (and clean data) and >= 3 seeds,
+  the rank of the correct effect, the verdict, fit% and residual/noise before
+  and after adding the top effect.
+
+Usage: ``PYTHONPATH=. python bench/bench_diagnose.py [--seeds 3] [--timing-records 4] [--quick]``
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+
+from creep_online.diagnostics import diagnose  # noqa: E402
+from creep_online.diagnostics import extended as ext  # noqa: E402
+from creep_online.effects import EFFECTS  # noqa: E402
+from hil_sim.hidden_effects import hidden_dataset  # noqa: E402
+
+
+def dist(x: list[float]) -> dict:
+    a = np.asarray(x, dtype=float)
+    return {"p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)), "max": float(a.max()),
+            "min": float(a.min()), "runs": int(a.size)}
+
+
+def timing(records: int, repeats: int) -> dict:
+    kinds = [None, "delay", "hysteresis", "second_mode", "periodic_disturbance", "leakage"][:records]
+    data = [hidden_dataset(k, 1, n=30_000) for k in kinds]
+    runs, verdicts = [], []
+    for _ in range(repeats):
+        for k, ds in zip(kinds, data):
+            t0 = time.perf_counter()
+            d = diagnose((ds.t, ds.u, ds.y))
+            runs.append(time.perf_counter() - t0)
+            verdicts.append({"hidden": k or "none", "verdict": d.verdict, "seconds": runs[-1]})
+    # baseline: identical fits, every evaluation on the whole record (no exploration window)
+    saved = ext.EXPLORE_SAMPLES
+    ext.EXPLORE_SAMPLES = 10**9
+    try:
+        base_runs = []
+        for k, ds in zip(kinds[:2], data[:2]):
+            t0 = time.perf_counter()
+            diagnose((ds.t, ds.u, ds.y))
+            base_runs.append(time.perf_counter() - t0)
+    finally:
+        ext.EXPLORE_SAMPLES = saved
+    ours = dist(runs)
+    base = dist(base_runs)
+    same = [r for r, v in zip(runs, verdicts) if v["hidden"] in [k or "none" for k in kinds[:2]]]
+    return {"samples": 30_000, "candidates": len(EFFECTS), "seconds": ours, "per_record": verdicts,
+            "baseline_full_record_seconds": base,
+            "speedup_vs_baseline_p50": base["p50"] / float(np.percentile(same, 50)),
+            "goal_s": 20.0, "meets_goal_p99": ours["p99"] < 20.0, "load_average": os.getloadavg()}
+
+
+def detection(seeds: list[int], n: int) -> dict:
+    rows = []
+    for effect in (None, *EFFECTS):
+        for seed in seeds:
+            ds = hidden_dataset(effect, seed, n=n)
+            t0 = time.perf_counter()
+            d = diagnose((ds.t, ds.u, ds.y))
+            el = time.perf_counter() - t0
+            names = [c.effect for c in d.candidates]
+            name = effect or "none"
+            rank = names.index(effect) + 1 if effect in names else None
+            top = d.candidates[0] if d.candidates else None
+            after = top.fit if (top is not None and effect is not None) else d.base
+            rows.append({
+                "effect": name, "seed": seed, "verdict": d.verdict, "rank_of_correct": rank if effect else
+                (1 if d.verdict == "none" else None),
+                "fit_percent_before": d.base.fit_percent, "fit_percent_after": after.fit_percent,
+                "residual_over_noise_before": d.base.residual_rms / ds.noise_std,
+                "residual_over_noise_after": after.residual_rms / ds.noise_std,
+                "evidence_top": top.evidence if top else None, "seconds": el})
+    table = {}
+    for r in rows:
+        e = table.setdefault(r["effect"], {"ranks": [], "correct_verdicts": 0, "runs": 0,
+                                           "max_residual_over_noise_after": 0.0})
+        e["ranks"].append(r["rank_of_correct"])
+        e["runs"] += 1
+        e["correct_verdicts"] += int(r["verdict"] == r["effect"])
+        e["max_residual_over_noise_after"] = max(e["max_residual_over_noise_after"], r["residual_over_noise_after"])
+    ok = all(all(k == 1 for k in v["ranks"]) and v["max_residual_over_noise_after"] <= 1.3 for v in table.values())
+    return {"samples": n, "seeds": seeds, "table": table, "rows": rows, "all_pass": ok,
+            "seconds": dist([r["seconds"] for r in rows])}
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--seeds", type=int, default=3, help="seeds per effect in the detection table (>= 3)")
+    p.add_argument("--samples", type=int, default=4000, help="samples per detection record")
+    p.add_argument("--timing-records", type=int, default=4, help="30k-sample records timed")
+    p.add_argument("--repeats", type=int, default=1, help="timing repeats over the records")
+    p.add_argument("--quick", action="store_true", help="2 timing records, 1 seed (smoke run)")
+    a = p.parse_args()
+    if a.quick:
+        a.timing_records, a.seeds = 2, 1
+    out = {"timing": timing(a.timing_records, a.repeats),
+           "detection": detection(list(range(101, 101 + a.seeds)), a.samples)}
+    json.dump(out, sys.stdout, indent=1, default=float)
+    sys.stdout.write("\n")
+
+
+if __name__ == "__main__":
+    main()
