@@ -18,6 +18,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("data", help="CSV file with header t,u,y")
     p.add_argument("--effects", required=True, help="comma-separated catalogue names, e.g. delay,drift")
     p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("--online", action="store_true",
+                   help="also stream the record through the online estimator, plain and with the fitted effects "
+                        "compensated sample by sample, and show the live prediction error of both (uniform time)")
+    p.add_argument("--window", type=float, default=1.0, help="window of the live error display in s (default 1)")
     p.set_defaults(func=run)
 
 
@@ -31,6 +35,14 @@ def run(args: argparse.Namespace) -> int:
     noise = noise_std_estimate(fit.residual)
     out = {**fit.to_dict(), "fit_percent_before": base.fit_percent, "residual_rms_before": base.residual_rms,
            "noise_rms": noise, "samples": data.n, "file": rec.source, "notes": inp.notes + data.notes}
+    live = None
+    if args.online:
+        from ..diagnostics.online import live_error
+        from ..errors import DataError
+        if not data.uniform:
+            raise DataError(f"{rec.source}: --online needs uniformly sampled time")
+        live = live_error(data.t - data.t[0], data.u, data.y, fit.effect_params, window_s=args.window)
+        out["online_live_error"] = live
     if args.json:
         print_json(out)
         return 0
@@ -45,6 +57,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"  RMS    {base.residual_rms:.4g} -> {fit.residual_rms:.4g} (noise floor ~{noise:.4g})")
     for n in out["notes"]:
         print(f"  note: {n}")
+    if live is not None:
+        from ..diagnostics.online import format_live_error
+        print("  live prediction error of the online estimator (RMS per window):")
+        print(format_live_error(live, noise if noise > 0 else None))
     return 0
 
 
