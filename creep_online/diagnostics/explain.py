@@ -165,8 +165,9 @@ def signature(effect: str, fit: ext.ExtendedFit, base: ext.ExtendedFit, where: d
         c = float(np.corrcoef(tt, r)[0, 1]) if np.std(r) > 0 else 0.0
         return f"residual trends with time (correlation {c:.2f}); rate {p.get('rate', float('nan')):.3g} per s"
     if effect == "leakage":
-        return (f"output decays during holds (mean hold slope of the residual {spans.get('hold_slope_mean', float('nan')):.3g}/s); "
-                f"tau {p.get('tau_s', float('nan')):.3g} s")
+        slope = spans.get("hold_slope_mean", float("nan"))
+        held = f" (mean hold slope of the residual {slope:.3g}/s)" if np.isfinite(slope) else ""
+        return f"output decays towards zero, high-pass{held}; tau {p.get('tau_s', float('nan')):.3g} s"
     if effect == "delay":
         dy = np.gradient(base.y_hat, data.t)
         c = float(np.corrcoef(dy, r)[0, 1]) if np.std(r) > 0 and np.std(dy) > 0 else 0.0
