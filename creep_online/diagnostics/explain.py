@@ -184,15 +184,21 @@ def signature(effect: str, fit: ext.ExtendedFit, base: ext.ExtendedFit, where: d
 
 
 # --------------------------------------------------------------------------- the workflow
-def _as_arrays(record_or_t_u_y) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
+def _as_arrays(record_or_t_u_y, step_before: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
+    """t, u, y, source from a Record or a tuple, validated (a constant input is allowed after a prior step)."""
     if isinstance(record_or_t_u_y, Record):
-        r = record_or_t_u_y
-        return r.t, r.u, r.y, r.source
-    try:
-        t, u, y = record_or_t_u_y
-    except (TypeError, ValueError):
-        raise DataError("diagnose needs a Record or a (t, u, y) tuple") from None
-    rec = Record(t, u, y)
+        rec = record_or_t_u_y
+    else:
+        try:
+            t, u, y = record_or_t_u_y
+        except (TypeError, ValueError):
+            raise DataError("diagnose needs a Record or a (t, u, y) tuple") from None
+        rec = Record(t, u, y)
+    if step_before and rec.t.size and np.ptp(rec.u) == 0.0:
+        Record(np.concatenate(([rec.t[0] - 1.0], rec.t)), np.concatenate(([0.0], rec.u)),
+               np.concatenate(([0.0], rec.y)), rec.source).validate()
+    else:
+        rec.validate()
     return rec.t, rec.u, rec.y, rec.source
 
 
@@ -221,11 +227,15 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] = fx.EFFECTS, use_i
     u[0]. ``combine`` also fits the two best significant effects together.
     """
     start = time.perf_counter()
-    t, u, y, source = _as_arrays(record_or_t_u_y)
+    t, u, y, source = _as_arrays(record_or_t_u_y, step_before=u_pre is not None)
+    pre_notes = []
+    if u_pre is None and t_pre is None and np.ptp(u) == 0.0:
+        u_pre = 0.0  # a constant non-zero input is a step from rest at t[0] (as Record.validate reads it)
+        pre_notes.append(f"constant input {u[0]:g}: read as a step from 0 at t = {t[0]:g} s")
     for name in candidates:
         ext.check_effects([name])
     data = ext.prepare(t, u, y, source=source, u_pre=u_pre, t_pre=t_pre)
-    warnings = list(data.notes)
+    warnings = pre_notes + list(data.notes)
     start_model = _start_from_identify(data, warnings) if use_identify else None
     base = ext.fit_base(data, start=start_model, max_nfev=max_nfev)
     if u_pre is None and t_pre is None and u[0] != 0.0:
