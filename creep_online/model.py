@@ -92,6 +92,12 @@ class CreepModel:
         s = 2j * np.pi * np.asarray(f, dtype=float)
         return self.b / (s**self.alpha * (1.0 + self.a1 * s + self.a2 * s * s))
 
+    def with_effects(self, **effects: dict):
+        """This model extended by catalogue effects (DESIGN.md section 5), e.g.
+        ``model.with_effects(delay={"delay_s": 2e-3})``; see ``creep_online.diagnostics``."""
+        from .diagnostics.extended import with_effects  # the diagnostics layer sits above the model
+        return with_effects(self, **effects)
+
     def params(self) -> dict[str, float]:
         """The four parameters as a plain dict (JSON-ready)."""
         return asdict(self)
