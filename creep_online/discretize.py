@@ -40,37 +40,6 @@ def resonance_poles(a1: float, a2: float) -> tuple[complex, complex]:
     return 1.0 / q, q / a2
 
 
-def _expm1_over(d: complex, tau: np.ndarray) -> np.ndarray:
-    """(exp(d tau) - 1) / d, accurate as d tau -> 0 (the limit is tau)."""
-    x = d * tau
-    small = np.abs(x) < 1e-4
-    out = np.empty_like(x, dtype=complex)
-    xs = x[small]
-    out[small] = tau[small] * (1.0 + xs / 2.0 + xs * xs / 6.0 + xs**3 / 24.0)
-    big = ~small
-    out[big] = np.expm1(x[big]) / d
-    return out
-
-
-def transition_times_b(a1: float, a2: float, tau: np.ndarray) -> np.ndarray:
-    """e^{A tau} B for an array of times tau, shape (len(tau), 2), in closed form.
-
-    Putzer: e^{A tau} = e^{l1 tau} I + r(tau) (A - l1 I) with
-    r = (e^{l1 tau} - e^{l2 tau}) / (l1 - l2) = e^{l1 tau} (e^{d tau} - 1) / d,
-    d = l2 - l1, l1 the slow pole: stable for repeated, complex and stiff poles.
-    """
-    tau = np.asarray(tau, dtype=float)
-    a, b = state_matrices(a1, a2)
-    l1, l2 = resonance_poles(a1, a2)
-    e1 = np.exp(l1 * tau)
-    r = e1 * _expm1_over(l2 - l1, tau)
-    ab = a @ b
-    out = np.empty((tau.size, 2))
-    out[:, 0] = (e1 * b[0] + r * (ab[0] - l1 * b[0])).real
-    out[:, 1] = (e1 * b[1] + r * (ab[1] - l1 * b[1])).real
-    return out
-
-
 def taylor_moments(a1: float, a2: float, h: float, terms: int = TAYLOR_TERMS) -> tuple[np.ndarray, np.ndarray]:
     """(Phi, M) with Phi = e^{A h} and M[m] = int_0^h e^{A(h-s)} B s^m / m! ds.
 
@@ -103,25 +72,11 @@ def head_terms(alpha: float, a1: float, a2: float, h: float, n_head: int) -> np.
     (|pole| * panel <= 4); Gauss-Jacobi absorbs the t^alpha singularity on the
     very first panel.
     """
-    gamma1 = math.gamma(1.0 + alpha)
-    fastest = max(abs(p) for p in resonance_poles(a1, a2))
-    panels = int(min(64, max(1, math.ceil(fastest * h / 4.0))))
-    width = h / panels
+    slow, fast = resonance_poles(a1, a2)
+    panels = int(min(64, max(1, math.ceil(abs(fast) * h / 4.0))))
     xl, wl, xj, wj = _gauss(HEAD_NODES, float(alpha))
-    # Legendre nodes in every panel: s in [0, h), weight width/2 * wl
-    starts = np.arange(panels) * width
-    s_leg = (starts[:, None] + (xl[None, :] + 1.0) * width / 2.0).ravel()
-    w_leg = np.tile(wl * width / 2.0, panels)
-    e_leg = transition_times_b(a1, a2, h - s_leg) * w_leg[:, None]
-    k = np.arange(n_head, dtype=float)[:, None]
-    out = (((k * h + s_leg[None, :]) ** alpha) @ e_leg) / gamma1
-    # Interval 0, first panel: replace Legendre by Jacobi (weight s^alpha)
-    s_jac = (xj + 1.0) * width / 2.0
-    e_jac = transition_times_b(a1, a2, h - s_jac)
-    first = (wj @ e_jac) * (width / 2.0) ** (1.0 + alpha) / gamma1
-    first_leg = ((s_leg[:HEAD_NODES] ** alpha) @ e_leg[:HEAD_NODES]) / gamma1
-    out[0] += first - first_leg
-    return out
+    return kernels.head_quadrature(alpha, slow, fast, 1.0 / math.sqrt(a2), a1 / a2, h, n_head,
+                                   xl, wl, xj, wj, panels, math.gamma(1.0 + alpha))
 
 
 def step_response_grid(alpha: float, a1: float, a2: float, h: float, n: int) -> np.ndarray:
@@ -139,3 +94,40 @@ def foh_matrices(a1: float, a2: float, h: float) -> tuple[np.ndarray, np.ndarray
     """(Phi, G0, G1) of the resonance for a piecewise-linear input (first-order hold)."""
     phi, moments = taylor_moments(a1, a2, h, terms=2)
     return phi, moments[0].copy(), moments[1].copy()
+
+
+def foh_matrices_batch(a1: np.ndarray, a2: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(Phi, G0, G1) of ``foh_matrices`` for arrays of (a1, a2) at once, in closed form.
+
+    Phi = e^{A h} by Putzer with the slow pole first; G0 = A^-1 (Phi - I) B and
+    G1 = A^-1 (G0 - h B) (integration by parts). Loses ~log10(1/(|pole| h))
+    digits to cancellation: meant for starting grids, not for the fit itself.
+    """
+    a1 = np.asarray(a1, dtype=float)
+    a2 = np.asarray(a2, dtype=float)
+    wn = 1.0 / np.sqrt(a2)
+    root = np.sqrt((a1 * a1 - 4.0 * a2).astype(complex))
+    q = -0.5 * (a1 + root)
+    l1, l2 = 1.0 / q, q / a2                      # slow, fast
+    d = l2 - l1
+    x = d * h
+    small = np.abs(x) < 1e-4
+    ratio = np.where(small, h * (1 + x / 2 + x * x / 6), np.expm1(x) / np.where(small, 1.0, d))
+    e1 = np.exp(l1 * h)
+    r = e1 * ratio
+    n = a1.size
+    a = np.zeros((n, 2, 2))
+    a[:, 0, 1] = wn
+    a[:, 1, 0] = -wn
+    a[:, 1, 1] = -a1 / a2
+    eye = np.eye(2)[None]
+    phi = (e1[:, None, None] * eye + r[:, None, None] * (a - l1[:, None, None] * eye)).real
+    b = np.zeros((n, 2))
+    b[:, 1] = wn
+    inv = np.zeros((n, 2, 2))                     # A^-1 = [[-a1/a2, -wn], [wn, 0]] / wn^2
+    inv[:, 0, 0] = -a1 / a2 / wn**2
+    inv[:, 0, 1] = -1.0 / wn
+    inv[:, 1, 0] = 1.0 / wn
+    g0 = np.einsum("nij,nj->ni", inv, np.einsum("nij,nj->ni", phi, b) - b)
+    g1 = np.einsum("nij,nj->ni", inv, g0 - h * b)
+    return np.ascontiguousarray(phi), np.ascontiguousarray(g0), np.ascontiguousarray(g1)

@@ -29,7 +29,7 @@ from scipy.special import rgamma
 
 from . import kernels
 from ._threads import single_threaded
-from .discretize import foh_matrices, step_response_grid
+from .discretize import foh_matrices_batch, step_response_grid
 from .errors import DataError, IdentificationError
 from .metrics import fit_percent, noise_std_estimate
 from .model import CreepModel
@@ -200,9 +200,12 @@ def _projected(y: np.ndarray, s: np.ndarray) -> tuple[float, np.ndarray]:
 
 def _projected_affine(y: np.ndarray, s: np.ndarray) -> tuple[float, float, np.ndarray]:
     """Best (b, c) for y ~ b s + c and the residual: the gain and a free output offset."""
-    basis = np.column_stack([s, np.ones_like(s)])
-    (b, c), *_ = np.linalg.lstsq(basis, y, rcond=None)
-    return float(b), float(c), y - b * s - c
+    ms, my = float(s.mean()), float(y.mean())
+    sc = s - ms
+    den = float(sc @ sc)
+    b = float(sc @ (y - my)) / den if den > 0 else 0.0
+    c = my - b * ms
+    return b, c, y - b * s - c
 
 
 def model_output(alpha: float, a1: float, a2: float, h: float, u: np.ndarray, n: int | None = None) -> np.ndarray:
@@ -212,23 +215,26 @@ def model_output(alpha: float, a1: float, a2: float, h: float, u: np.ndarray, n:
     return superpose(s, u[:n])
 
 
+#: The (fn, zeta) starting grid: 28 log-spaced frequencies x these damping ratios.
+GRID_ZETAS = (0.01, 0.03, 0.1, 0.3, 0.7, 1.5, 4.0)
+
+
 def resonance_grid(t: np.ndarray, u: np.ndarray, y: np.ndarray, alpha: float, stop: int,
                    f_lo: float, f_hi: float) -> tuple[float, float]:
-    """Starting (fn, zeta) from a grid on samples [0, stop), using the cheap split form."""
+    """Starting (fn, zeta) from a grid on samples [0, stop), using the cheap split form.
+
+    All grid points' FOH matrices come from one vectorised closed form and one
+    numba pass scores them (gain projected out).
+    """
     h = float(t[1] - t[0])
     z = fractional_integral(u[:stop], h, alpha)
-    yw = y[:stop]
-    best = (math.inf, f_lo, 0.5)
-    for fn in np.geomspace(f_lo, f_hi, 28):
-        wn = 2 * math.pi * fn
-        for zeta in (0.01, 0.03, 0.1, 0.3, 0.7, 1.5, 4.0):
-            phi, g0, g1 = foh_matrices(2 * zeta / wn, 1 / wn**2, h)
-            s = kernels.resonance_foh(z, phi, g0, g1, h)
-            _, r = _projected(yw, s)
-            cost = float(r @ r)
-            if cost < best[0]:
-                best = (cost, fn, zeta)
-    return best[1], best[2]
+    fn, zeta = np.meshgrid(np.geomspace(f_lo, f_hi, 28), GRID_ZETAS, indexing="ij")
+    fn, zeta = fn.ravel(), zeta.ravel()
+    wn = 2 * np.pi * fn
+    phi, g0, g1 = foh_matrices_batch(2 * zeta / wn, 1 / wn**2, h)
+    costs = kernels.foh_grid_costs(z, np.ascontiguousarray(y[:stop]), phi, g0, g1, h)
+    k = int(np.argmin(costs))
+    return float(fn[k]), float(zeta[k])
 
 
 def layer2_resonance(t: np.ndarray, u: np.ndarray, y: np.ndarray, alpha: float, mask: np.ndarray,

@@ -16,6 +16,8 @@ Three families live here (see DESIGN.md section 2):
 """
 from __future__ import annotations
 
+import cmath
+
 import numpy as np
 from numba import njit
 
@@ -182,3 +184,83 @@ def superpose_steps(step_response: np.ndarray, index: np.ndarray, size: np.ndarr
         for n in range(i0, n_samples):
             y[n] += a * step_response[n - i0]
     return y
+
+
+@njit(cache=CACHE)
+def foh_grid_costs(z: np.ndarray, y: np.ndarray, phi: np.ndarray, g0: np.ndarray, g1: np.ndarray,
+                   h: float) -> np.ndarray:
+    """For each resonance k: min over b of ||y - b s_k||^2, s_k = resonance_foh(z) with (phi, g0, g1)[k]."""
+    n_grid = phi.shape[0]
+    n = z.shape[0]
+    yy = 0.0
+    for i in range(n):
+        yy += y[i] * y[i]
+    costs = np.empty(n_grid)
+    for k in range(n_grid):
+        x0 = 0.0
+        x1 = 0.0
+        ss = 0.0
+        sy = 0.0
+        for i in range(n - 1):
+            slope = (z[i + 1] - z[i]) / h
+            nx0 = phi[k, 0, 0] * x0 + phi[k, 0, 1] * x1 + g0[k, 0] * z[i] + g1[k, 0] * slope
+            nx1 = phi[k, 1, 0] * x0 + phi[k, 1, 1] * x1 + g0[k, 1] * z[i] + g1[k, 1] * slope
+            x0 = nx0
+            x1 = nx1
+            ss += x0 * x0
+            sy += x0 * y[i + 1]
+        costs[k] = yy - sy * sy / ss if ss > 0.0 else yy
+    return costs
+
+
+@njit(cache=CACHE)
+def transition_b(slow: complex, fast: complex, wn: float, damp: float, tau: float) -> tuple[float, float]:
+    """e^{A tau} B for the balanced resonance A = [[0, wn], [-wn, -damp]], B = [0, wn].
+
+    Putzer with the slow pole first: e^{A tau} = e^{l1 tau} I + r (A - l1 I),
+    r = e^{l1 tau} (e^{d tau} - 1) / d, d = l2 - l1, with a series for small d tau.
+    """
+    d = fast - slow
+    x = d * tau
+    if abs(x) < 1e-4:
+        ratio = tau * (1.0 + x / 2.0 + x * x / 6.0 + x * x * x / 24.0)
+    else:
+        ratio = (cmath.exp(x) - 1.0) / d
+    e1 = cmath.exp(slow * tau)
+    r = e1 * ratio
+    # B = [0, wn], A B = [wn^2, -damp wn]
+    return (r * (wn * wn)).real, (e1 * wn + r * (-damp * wn - slow * wn)).real
+
+
+@njit(cache=CACHE)
+def head_quadrature(alpha: float, slow: complex, fast: complex, wn: float, damp: float, h: float,
+                    n_head: int, xl: np.ndarray, wl: np.ndarray, xj: np.ndarray, wj: np.ndarray,
+                    panels: int, gamma1: float) -> np.ndarray:
+    """int_0^h e^{A(h-s)} B (k h + s)^alpha / Gamma(1+alpha) ds for k < n_head.
+
+    Gauss-Legendre on ``panels`` panels per interval; on interval 0's first
+    panel Gauss-Jacobi with weight s^alpha takes the singularity.
+    """
+    out = np.zeros((n_head, 2))
+    width = h / panels
+    for p in range(panels):
+        for i in range(xl.shape[0]):
+            s = p * width + (xl[i] + 1.0) * width / 2.0
+            w = wl[i] * width / 2.0
+            e0, e1 = transition_b(slow, fast, wn, damp, h - s)
+            for k in range(n_head):
+                if k == 0 and p == 0:
+                    continue
+                v = w * (k * h + s) ** alpha
+                out[k, 0] += v * e0
+                out[k, 1] += v * e1
+    scale = (width / 2.0) ** (1.0 + alpha)
+    for i in range(xj.shape[0]):
+        s = (xj[i] + 1.0) * width / 2.0
+        e0, e1 = transition_b(slow, fast, wn, damp, h - s)
+        out[0, 0] += wj[i] * scale * e0
+        out[0, 1] += wj[i] * scale * e1
+    for k in range(n_head):
+        out[k, 0] /= gamma1
+        out[k, 1] /= gamma1
+    return out

@@ -151,3 +151,16 @@ def test_memory_argument_rules():
         simulate(m, t, u, method="euler")
     # full memory through the truncation path equals the untruncated result
     np.testing.assert_allclose(simulate(m, t, u, "paper", memory=1000), simulate(m, t, u, "paper"), rtol=1e-14)
+
+
+def test_batched_foh_matrices_match_the_matrix_exponential():
+    from creep_online.discretize import foh_matrices, foh_matrices_batch
+    h = 1e-3
+    cases = [(0.02, 4e-4), (2 * 1.0 / 300, 1 / 300**2), (2 * 4.0 / 50, 1 / 50**2), (1e-5, 1e-8)]
+    a1 = np.array([c[0] for c in cases])
+    a2 = np.array([c[1] for c in cases])
+    phi, g0, g1 = foh_matrices_batch(a1, a2, h)
+    for k, (x1, x2) in enumerate(cases):
+        ref = foh_matrices(x1, x2, h)
+        for got, want in zip((phi[k], g0[k], g1[k]), ref):
+            np.testing.assert_allclose(got, want, rtol=1e-8, atol=1e-12 * np.abs(want).max())
