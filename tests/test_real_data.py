@@ -9,7 +9,6 @@ What the tool says about each is recorded in docs/diagnostics.md.
 """
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,8 +17,11 @@ from creep_online.diagnostics import diagnose
 from creep_online.diagnostics.loading import load_for_diagnosis
 from creep_online.diagnostics.mimo import virtual_siso
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
-pytestmark = pytest.mark.skipif(not REAL.is_dir(), reason=f"real data folder {REAL} not present (CI places shared/ beside the repo)")
+from conftest import SHARED_DATA
+
+# the real measurements are the test: a missing folder fails (conftest's shared_data fixture)
+REAL = SHARED_DATA / "real"
+pytestmark = pytest.mark.usefixtures("shared_data")
 
 
 def _diagnose(rel):

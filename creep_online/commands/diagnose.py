@@ -74,7 +74,7 @@ def format_table(result) -> str:
                      f"{b.residual_rms:>11.4g} {c.fit.residual_rms:>11.4g}  {c.signature}")
     lines.append("")
     lines.append(f"verdict: {result.verdict}" + ("" if result.verdict == "none" else
-                 f"  (* = significant: BIC drop > 10 and RMS drop > 2 %)"))
+                 "  (* = significant: BIC drop > 10 and RMS drop > 2 %)"))
     for w in result.warnings:
         lines.append(f"note: {w}")
     return "\n".join(lines)

@@ -28,7 +28,7 @@ from ..metrics import noise_std_estimate
 from ..record import Record
 from . import extended as ext
 from .compare import error_metrics
-from .locate import last_direction, locate, piecewise_constant
+from .locate import last_direction, locate
 from .residuals import autocorrelation, cross_correlation, parameter_uncertainty
 
 #: BIC drop an effect needs to be called significant.
