@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from creep_online import CreepModel
+from creep_online import CreepModel, simulate
 from creep_online.diagnostics import (autocorrelation, cross_correlation, diagnose, fit_base, fit_extended, prepare,
                                       with_effects)
 from creep_online.diagnostics.loading import load_for_diagnosis
@@ -227,3 +227,13 @@ def test_cli_bad_input_is_one_line_exit_2(tmp_path):
     save(ds, ok)
     r = _cli("fit", str(ok), "--effects", "backlash")
     assert r.returncode == 2 and "unknown effect" in r.stderr
+
+
+def test_noise_free_simulated_data_has_nothing_missing():
+    """Rounding-level residuals must not be 'explained' by an effect (BIC on 1e-15 noise)."""
+    m = CreepModel.from_resonance(0.3, 5.0, 0.3, 2.5)
+    t = np.arange(2000) * 5e-3
+    u = np.where(t < 5.0, 1.0, 0.0)
+    res = diagnose((t, u, simulate(m, t, u)))
+    assert res.verdict == "none"
+    assert any("nothing is missing" in w for w in res.warnings)

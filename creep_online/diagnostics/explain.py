@@ -35,6 +35,10 @@ from .residuals import autocorrelation, cross_correlation, parameter_uncertainty
 EVIDENCE_THRESHOLD = 10.0
 #: ... and the relative drop of the residual RMS it must achieve.
 MIN_RMS_DROP = 0.02
+#: Base residual RMS, relative to the output's spread, below which the model already
+#: reproduces the data to their numerical precision (noise-free or simulated data):
+#: no effect can be missing then, whatever the BIC says about rounding noise.
+PRECISION_FLOOR = 1e-7
 
 
 @dataclass
@@ -261,6 +265,10 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] = fx.EFFECTS, use_i
         warnings.append(f"parameter uncertainty unavailable ({exc})")
     ranked: list[Candidate] = []
     skipped: dict[str, str] = {}
+    exact = base.residual_rms < PRECISION_FLOOR * float(np.std(data.y))
+    if exact:
+        warnings.append(f"the base model reproduces the data to {base.residual_rms / float(np.std(data.y)):.1e} "
+                        "of their spread (noise-free data?): nothing is missing")
     for name in candidates:
         why = applicable(data, name)
         if why is not None:
@@ -268,7 +276,8 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] = fx.EFFECTS, use_i
             continue
         fit = ext.fit_extended(data, (name,), base, max_nfev=max_nfev)
         ev, lr, pv, dk = evidence(base, fit, data.n)
-        sig = ev > EVIDENCE_THRESHOLD and fit.residual_rms < (1.0 - MIN_RMS_DROP) * base.residual_rms
+        sig = (not exact and ev > EVIDENCE_THRESHOLD
+               and fit.residual_rms < (1.0 - MIN_RMS_DROP) * base.residual_rms)
         ranked.append(Candidate(name, ev, lr, pv, dk, bool(sig), fit, signature(name, fit, base, where, data)))
     ranked.sort(key=lambda c: -c.evidence)
     if ranked and ranked[0].significant:
