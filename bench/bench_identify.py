@@ -29,7 +29,7 @@ from scipy.optimize import least_squares
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from creep_online import CreepModel  # noqa: E402
-from creep_online.identify import identify, layer1_alpha  # noqa: E402
+from creep_online.identification import identify, layer1_alpha  # noqa: E402
 from creep_online.kernels import gl_paper  # noqa: E402
 from creep_online.metrics import noise_floor_fit  # noqa: E402
 from creep_online.plants import LOAD_CELL, NANOPOSITIONER, RECOVERY_CASES  # noqa: E402

@@ -18,7 +18,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from creep_online.identify import identify  # noqa: E402
+from creep_online.identification import identify  # noqa: E402
 from creep_online.kernels import zoh_integral_weights  # noqa: E402
 from creep_online.model import CreepModel  # noqa: E402
 from creep_online.online import OnlineEstimator  # noqa: E402

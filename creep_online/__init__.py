@@ -16,10 +16,22 @@ from .errors import CreepOnlineError, DataError, IdentificationError, ModelError
 from .model import CreepModel
 from .record import Record
 from .simulate import simulate, step_response
+from .identification import identify
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "CreepModel", "Record", "simulate", "step_response",
+    "CreepModel", "Record", "simulate", "step_response", "identify", "OnlineEstimator", "diagnose",
     "CreepOnlineError", "DataError", "IdentificationError", "ModelError",
 ]
+
+# The API mirrors the CLI; the heavier layers load on first use, not on import.
+_LAZY = {"OnlineEstimator": ("online", "OnlineEstimator"), "diagnose": ("diagnostics", "diagnose")}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+        module, attr = _LAZY[name]
+        return getattr(importlib.import_module(f".{module}", __name__), attr)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

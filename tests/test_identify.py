@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from creep_online import CreepModel, DataError, simulate
-from creep_online.identify import creep_asymptote, identify, input_schedule, layer1_alpha
+from creep_online.identification import creep_asymptote, identify, input_schedule, layer1_alpha
 from creep_online.metrics import noise_floor_fit
 from creep_online.plants import RECOVERY_CASES, Experiment
 from creep_online.discretize import step_response_grid

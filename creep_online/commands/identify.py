@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..identify import identify
+from ..identification import identify
 from ..io import load_csv
 from ._common import print_json
 

@@ -211,7 +211,7 @@ def _start_from_identify(data: ext.Prepared, warnings: list[str]):
     if not data.uniform:
         return None
     try:
-        from ..identify import identify
+        from ..identification import identify
         return identify(data.t, data.u, data.y, polish=False).model
     except CreepOnlineError as exc:
         warnings.append(f"identify() gave no start ({exc}); grid start used")

@@ -9,7 +9,7 @@ comes from the same exact SOE/ZOH state representation as the tracker
 2-state filter and one matrix-vector product. The gain b is projected out
 (variable projection); (ln a1, ln a2) are fitted by Levenberg-Marquardt with
 forward-difference Jacobians, started from a (fn, zeta) grid, as the batch
-``creep_online.identify`` does with scipy (whose TRF cannot be paused).
+``creep_online.identification`` does with scipy (whose TRF cannot be paused).
 """
 from __future__ import annotations
 
