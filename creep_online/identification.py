@@ -382,7 +382,7 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
 
     u0 = 0.0
     if sched.piecewise:
-        model, t_c = _layered(t, u, y, h, sched, t_c, alpha0, resonance0, layer1_step, retune, stages, warnings)
+        model, t_c = _layered(t, u, y, h, sched, t_c, alpha0, resonance0, layer1_step, retune, stages)
     else:
         # a record taken in operation: deviations from its first input level, output offset fitted
         u0 = float(u[0])
@@ -408,7 +408,7 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
         uncertainty=uncertainty, noise_std=noise, y_hat=y_hat + offset)
 
 
-def _layered(t, u, y, h, sched, t_c, alpha0, resonance0, layer1_step, retune, stages, warnings):
+def _layered(t, u, y, h, sched, t_c, alpha0, resonance0, layer1_step, retune, stages):
     """The paper's two layers with data-driven t_c and starting point."""
     holds = t[np.minimum(sched.hold_stop, t.size - 1)] - t[sched.hold_start]
     longest = float(holds.max())
@@ -440,8 +440,8 @@ def _layered(t, u, y, h, sched, t_c, alpha0, resonance0, layer1_step, retune, st
     if auto_tc:
         t_c = _settled(CreepModel(alpha0, a1, a2, b), h, longest)
         transient = sched.since_change <= t_c
-    alpha, gain, info = layer1_alpha(t, u, y, t_c, a1=a1, a2=a2, step=layer1_step,
-                                     alpha0=alpha0, schedule=sched)
+    alpha, _, info = layer1_alpha(t, u, y, t_c, a1=a1, a2=a2, step=layer1_step,
+                                  alpha0=alpha0, schedule=sched)
     stages["layer1"] = info
     if retune:
         alpha = _retune(t, u, y, h, sched, t_c, alpha, a1, a2, stages)
