@@ -369,7 +369,8 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
     try:
         h = uniform_step(rec.t)
     except DataError as exc:
-        raise DataError(f"{source}: {exc}") from None
+        raise DataError(f"{source}: {exc} (identify simulates on a uniform grid; "
+                        "'creep-online diagnose' fits non-uniform records)") from None
     t = rec.t - rec.t[0]
     u, y_raw = rec.u, rec.y
     sched = input_schedule(t, u)
