@@ -50,3 +50,52 @@ def test_live_error_falls_with_the_extended_model():
     assert np.all(np.isfinite(base)) and np.all(np.isfinite(ext))
     assert ext.mean() < 0.5 * base.mean()
     assert "extended" in format_live_error(table, noise)
+
+
+def test_fractional_delay_is_compensated_to_second_order():
+    """A delay of 2.4 samples: the split of each held sample between two neighbours (not rounding to 2)."""
+    model = CreepModel.from_resonance(0.3, 40.0, 0.1, 1.0)
+    t = np.arange(3000) * 1e-3
+    u = np.zeros(t.size)
+    u[200:], u[1200:], u[2000:] = 2.0, 5.0, 1.0
+    eff = {"delay": {"delay_s": 2.4e-3}}
+    y = simulate_with_effects(model, t, u, eff)
+    comp = EffectCompensator(1e-3, eff)
+    out = np.array([comp.step(a, b) for a, b in zip(u, y)])
+    err = np.max(np.abs(out[:, 1] - simulate(model, t, out[:, 0])))
+    rounded = EffectCompensator(1e-3, {"delay": {"delay_s": 2e-3}})
+    out2 = np.array([rounded.step(a, b) for a, b in zip(u, y)])
+    err2 = np.max(np.abs(out2[:, 1] - simulate(model, t, out2[:, 0])))
+    assert err < 0.1 * err2
+    assert err < 2e-3 * np.ptp(y)
+
+
+def test_warm_start_follows_the_batch_fit():
+    from creep_online.diagnostics.online import warm_start
+    m = CreepModel.from_resonance(0.4, 40.0, 0.1, 1.0)
+    kw = warm_start(m, 1e-3)
+    assert kw["alpha0"] == pytest.approx(0.4)
+    assert kw["t_c"] == pytest.approx(1.5 * m.settling_time)
+    assert warm_start(None, 1e-3) == {}
+
+
+# Hidden-effect records (hil_sim, realistic strengths: base residual 2-12x the noise), 6 s at 1 kHz,
+# a seed the measurement table in docs/diagnostics.md does not use. Both online estimators start
+# from their own batch fit (alpha0, t_c). The compensated live error over the last quarter must be
+# within 2.5x the noise floor (measured 0.98-2.2x on seeds 5 and 6; drift is the worst, the online
+# layer-2 resonance fit on the short t_c buffer, not the compensation) and well below the plain one.
+ONLINE_SEED, ONLINE_N = 5, 6000
+
+
+@pytest.mark.parametrize("name", list(EFFECTS))
+def test_online_live_error_falls_to_the_noise_floor(name):
+    from creep_online.diagnostics.online import measure
+    row = measure(name, ONLINE_SEED, ONLINE_N)
+    assert row["online_extended"] < 2.5, row
+    assert row["online_extended"] < 0.6 * row["online_plain"], row
+
+
+def test_online_clean_data_is_at_the_noise_floor():
+    from creep_online.diagnostics.online import measure
+    row = measure(None, ONLINE_SEED, ONLINE_N)
+    assert row["online_plain"] < 1.3 and row["online_extended"] == row["online_plain"], row

@@ -20,7 +20,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print JSON")
     p.add_argument("--online", action="store_true",
                    help="also stream the record through the online estimator, plain and with the fitted effects "
-                        "compensated sample by sample, and show the live prediction error of both (uniform time)")
+                        "compensated sample by sample, each warm-started from its batch fit (alpha0, t_c), and show "
+                        "the live prediction error of both (uniform time)")
     p.add_argument("--window", type=float, default=1.0, help="window of the live error display in s (default 1)")
     p.set_defaults(func=run)
 
@@ -41,7 +42,8 @@ def run(args: argparse.Namespace) -> int:
         from ..errors import DataError
         if not data.uniform:
             raise DataError(f"{rec.source}: --online needs uniformly sampled time")
-        live = live_error(data.t - data.t[0], data.u, data.y, fit.effect_params, window_s=args.window)
+        live = live_error(data.t - data.t[0], data.u, data.y, fit.effect_params, window_s=args.window,
+                          base_model=base.model, extended_model=fit.model)
         out["online_live_error"] = live
     if args.json:
         print_json(out)
