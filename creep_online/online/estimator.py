@@ -42,6 +42,8 @@ from .layer2 import Layer2Job, Layer2Result
 from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SoeBasis, pack_coefficients
 
 PHASES = ("buffering", "resonance_fit", "tracking")
+#: Relative alpha change since the last layer-2 fit above which a refresh restarts from the grid.
+FRESH_REFRESH = 0.3
 QUALITIES = ("none", "provisional", "good", "degraded")
 
 #: Default creep exponent guessed for layer 2 (the paper's stage: ~0.01-0.07).
@@ -569,7 +571,10 @@ class OnlineEstimator:
                 and self._l2_data is not None and abs(self._alpha / self._l2_alpha - 1.0) > 0.01
                 and (self.refreshes == 0 or self._keep_hist)):
             u, y = self._l2_data
-            self._refresh = Layer2Job(self.basis, u, y, self._alpha, start=(self._a1, self._a2))
+            # far from the alpha layer 2 used, its resonance may be a wrong local fit: search afresh
+            fresh = abs(self._alpha / self._l2_alpha - 1.0) > FRESH_REFRESH
+            self._refresh = Layer2Job(self.basis, u, y, self._alpha,
+                                      start=None if fresh else (self._a1, self._a2))
 
     def _run_refresh(self, budget: float) -> None:
         """Layer 2 again with the tracked alpha (the guess alpha0 biases a1, a2); swapped in whole."""
