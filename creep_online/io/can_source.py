@@ -12,11 +12,10 @@ source says so once and re-creates the bus with exponential backoff, or raises
 """
 from __future__ import annotations
 
-import time
 
 from .can_frames import COUNTER_MODULUS, CanDecoder
 from .frames import RawSample
-from .sources import SampleSource, TransportError
+from .sources import ReconnectingSource, TransportError
 
 #: Frames taken from the bus per read() call at most (bounds the work per call).
 BATCH = 512
@@ -30,8 +29,10 @@ def _can():
     return can
 
 
-class CanSource(SampleSource):
+class CanSource(ReconnectingSource):
     """Samples from a live CAN bus."""
+
+    link = "adapter"
 
     def __init__(self, interface: str, channel: str, *, rate: float | None = None, dbc: str | None = None,
                  bitrate: int | None = None, fd: bool = False, reconnect: bool = True,
@@ -39,7 +40,8 @@ class CanSource(SampleSource):
                  bus_kwargs: dict | None = None, **kw) -> None:
         kw.pop("format", None)
         kw.pop("start", None)
-        super().__init__(window=window, modulus=COUNTER_MODULUS, rate=rate, t_from_seq=True, stall=stall, **kw)
+        super().__init__(window=window, modulus=COUNTER_MODULUS, rate=rate, t_from_seq=True, stall=stall,
+                         reconnect=reconnect, reconnect_timeout=reconnect_timeout, **kw)
         self.name = f"can:{interface}:{channel}"
         if not rate:
             raise TransportError(f"{self.name}: CAN frames carry a counter, not a time: give the sample rate, "
@@ -47,12 +49,8 @@ class CanSource(SampleSource):
         self.interface, self.channel = interface, channel
         self.bitrate, self.fd = bitrate, fd
         self.bus_kwargs = dict(bus_kwargs or {})
-        self.reconnect, self.reconnect_timeout = bool(reconnect), reconnect_timeout
         self.decoder = CanDecoder(dbc, stats=self.stats.parser)
         self.bus = None
-        self._down_since: float | None = None
-        self._next_try = 0.0
-        self._backoff = 0.05
         try:
             self._open()
         except TransportError:
@@ -75,43 +73,13 @@ class CanSource(SampleSource):
                 kw.setdefault("fd", True)
         self.bus = can.Bus(interface=self.interface, channel=self.channel, **kw)
 
-    def _lost(self, why: str) -> None:
-        self._shutdown()
-        self.stats.disconnects += 1
-        if not self.reconnect:
-            self.event(f"adapter disappeared ({why}); not reconnecting")
-            raise TransportError(f"{self.name}: adapter disappeared ({why}); reconnect is off")
-        self.event(f"adapter disappeared ({why}); reconnecting with backoff")
-        self._down_since = time.monotonic()
-        self._next_try = self._down_since + 0.05
-        self._backoff = 0.05
-
-    def _shutdown(self) -> None:
+    def _close_link(self) -> None:
         if self.bus is not None:
             try:
                 self.bus.shutdown()
             except Exception:  # noqa: BLE001 - a dead adapter may fail to close; it is gone either way
                 pass
         self.bus = None
-
-    def _try_reconnect(self, timeout: float) -> bool:
-        now = time.monotonic()
-        if self.reconnect_timeout is not None and now - self._down_since > self.reconnect_timeout:
-            raise TransportError(f"{self.name}: adapter did not come back within {self.reconnect_timeout:g} s")
-        if now < self._next_try:
-            time.sleep(min(timeout, self._next_try - now))
-            return False
-        try:
-            self._open()
-        except Exception:  # noqa: BLE001 - not back yet
-            self._backoff = min(self._backoff * 2, 2.0)
-            self._next_try = time.monotonic() + self._backoff
-            return False
-        self.stats.reconnects += 1
-        self.tracker.expect_restart()
-        self.event(f"reconnected after {time.monotonic() - self._down_since:.2f} s")
-        self._down_since = None
-        return True
 
     @property
     def link_up(self) -> bool:
@@ -137,7 +105,7 @@ class CanSource(SampleSource):
         return out
 
     def close(self) -> None:
-        self._shutdown()
+        self._close_link()
         super().close()
 
 

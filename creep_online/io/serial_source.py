@@ -12,10 +12,9 @@ from __future__ import annotations
 
 import os
 import select
-import time
 
 from .frames import SCALE_U, SCALE_Y, RawSample, make_parser
-from .sources import SampleSource, TransportError
+from .sources import ReconnectingSource, TransportError
 
 
 def _serial():
@@ -26,8 +25,10 @@ def _serial():
     return serial
 
 
-class SerialSource(SampleSource):
+class SerialSource(ReconnectingSource):
     """Samples from a serial port or pyserial URL."""
+
+    link = "port"
 
     def __init__(self, port: str, *, baudrate: int = 921600, format: str = "auto",
                  rate: float | None = None, checksum: str = "auto",
@@ -37,13 +38,12 @@ class SerialSource(SampleSource):
                  chunk: int = 1 << 16, **kw) -> None:
         fmt = format.lower()
         super().__init__(window=window, modulus=2**32 if fmt == "binary" else None, rate=rate,
-                         t_from_seq=(fmt == "binary"), stall=stall, **kw)
+                         t_from_seq=(fmt == "binary"), stall=stall, reconnect=reconnect,
+                         reconnect_timeout=reconnect_timeout, **kw)
         self.name = f"serial:{port}"
         self.port = port
         self.baudrate = int(baudrate)
         self.format = fmt
-        self.reconnect = bool(reconnect)
-        self.reconnect_timeout = reconnect_timeout
         self.start = start.encode() if isinstance(start, str) else start
         self.chunk = int(chunk)
         self._parser_args = dict(fmt=fmt, rate=rate or 1.0, scale_u=scale_u, scale_y=scale_y,
@@ -52,9 +52,6 @@ class SerialSource(SampleSource):
         self._leftovers: list[RawSample] = []
         self._ser = None
         self._fd: int | None = None
-        self._down_since: float | None = None
-        self._next_try = 0.0
-        self._backoff = 0.05
         self._open(first=True)
 
     # -------------------------------------------------------------- link
@@ -87,17 +84,9 @@ class SerialSource(SampleSource):
         self._ser = None
         self._fd = None
 
-    def _lost(self, why: str) -> None:
+    def _close_link(self) -> None:
         self._close_port()
-        self.stats.disconnects += 1
         self._absorb_parser()
-        if not self.reconnect:
-            self.event(f"port disappeared ({why}); not reconnecting")
-            raise TransportError(f"serial:{self.port}: port disappeared ({why}); reconnect is off")
-        self.event(f"port disappeared ({why}); reconnecting with backoff")
-        self._down_since = time.monotonic()
-        self._next_try = self._down_since + 0.05
-        self._backoff = 0.05
 
     def _absorb_parser(self) -> None:
         """A partial frame from before the cut can never complete: count it and start clean."""
@@ -105,26 +94,6 @@ class SerialSource(SampleSource):
         fmt = getattr(self.parser, "format", None) or self._parser_args["fmt"]
         self._parser_args["fmt"] = fmt
         self.parser = make_parser(**self._parser_args, stats=self.stats.parser)
-
-    def _try_reconnect(self, timeout: float) -> bool:
-        now = time.monotonic()
-        if self.reconnect_timeout is not None and now - self._down_since > self.reconnect_timeout:
-            raise TransportError(f"serial:{self.port}: port did not come back within "
-                                 f"{self.reconnect_timeout:g} s")
-        if now < self._next_try:
-            time.sleep(min(timeout, self._next_try - now))
-            return False
-        try:
-            self._open()
-        except Exception:  # noqa: BLE001 - any failure means: not back yet
-            self._backoff = min(self._backoff * 2, 2.0)
-            self._next_try = time.monotonic() + self._backoff
-            return False
-        self.stats.reconnects += 1
-        self.tracker.expect_restart()
-        self.event(f"reconnected after {time.monotonic() - self._down_since:.2f} s")
-        self._down_since = None
-        return True
 
     @property
     def link_up(self) -> bool:

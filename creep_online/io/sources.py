@@ -202,6 +202,62 @@ class SampleSource:
 
 
 # ------------------------------------------------------------------ CSV replay
+class ReconnectingSource(SampleSource):
+    """A source over a link that can disappear (a serial port, a CAN adapter).
+
+    On loss it says so once and reopens with backoff (50 ms doubling to 2 s)
+    for at most ``reconnect_timeout`` seconds, or raises at once when
+    ``reconnect`` is off. Subclasses implement ``_open()`` and ``_close_link()``.
+    """
+
+    link = "link"  # what the messages call it
+
+    def __init__(self, *, reconnect: bool = True, reconnect_timeout: float | None = None, **kw) -> None:
+        super().__init__(**kw)
+        self.reconnect = bool(reconnect)
+        self.reconnect_timeout = reconnect_timeout
+        self._down_since: float | None = None
+        self._next_try = 0.0
+        self._backoff = 0.05
+
+    def _open(self) -> None:
+        raise NotImplementedError
+
+    def _close_link(self) -> None:
+        raise NotImplementedError
+
+    def _lost(self, why: str) -> None:
+        self._close_link()
+        self.stats.disconnects += 1
+        if not self.reconnect:
+            self.event(f"{self.link} disappeared ({why}); not reconnecting")
+            raise TransportError(f"{self.name}: {self.link} disappeared ({why}); reconnect is off")
+        self.event(f"{self.link} disappeared ({why}); reconnecting with backoff")
+        self._down_since = time.monotonic()
+        self._next_try = self._down_since + 0.05
+        self._backoff = 0.05
+
+    def _try_reconnect(self, timeout: float) -> bool:
+        """One reopening attempt if it is due; True when the link is back."""
+        now = time.monotonic()
+        if self.reconnect_timeout is not None and now - self._down_since > self.reconnect_timeout:
+            raise TransportError(f"{self.name}: {self.link} did not come back within {self.reconnect_timeout:g} s")
+        if now < self._next_try:
+            time.sleep(min(timeout, self._next_try - now))
+            return False
+        try:
+            self._open()
+        except Exception:  # noqa: BLE001 - any failure to open means: not back yet
+            self._backoff = min(self._backoff * 2, 2.0)
+            self._next_try = time.monotonic() + self._backoff
+            return False
+        self.stats.reconnects += 1
+        self.tracker.expect_restart()
+        self.event(f"reconnected after {time.monotonic() - self._down_since:.2f} s")
+        self._down_since = None
+        return True
+
+
 class CsvSource(SampleSource):
     """A ``t,u,y`` CSV file as a stream (sequence = row index), optionally paced in real time."""
 
