@@ -217,6 +217,25 @@ def window_cost(alpha: float, S: np.ndarray, sy: np.ndarray, syy: float, lam: np
 
 
 @njit(cache=CACHE)
+def _quadratic_forms(S, sy, v, dv, sv, sdv):
+    """(v'Sv, v'sy, dv'Sv, dv'S dv, dv'sy): the window cost and its alpha-derivatives' pieces."""
+    _sym_mul(S, v, sv)
+    _sym_mul(S, dv, sdv)
+    m = 0.0
+    n = 0.0
+    mv = 0.0
+    mdd = 0.0
+    nd = 0.0
+    for i in range(v.shape[0]):
+        m += v[i] * sv[i]
+        n += v[i] * sy[i]
+        mv += dv[i] * sv[i]
+        mdd += dv[i] * sdv[i]
+        nd += dv[i] * sy[i]
+    return m, n, mv, mdd, nd
+
+
+@njit(cache=CACHE)
 def gauss_newton_alpha(alpha: float, b: float, S: np.ndarray, sy: np.ndarray, syy: float,
                        lam: np.ndarray, dx: float, a1: float, a2: float, lo: float, hi: float,
                        iters: int, out: np.ndarray) -> None:
@@ -238,19 +257,7 @@ def gauss_newton_alpha(alpha: float, b: float, S: np.ndarray, sy: np.ndarray, sy
     ok = 1.0
     for it in range(iters + 1):
         model_coefficients(alpha, lam, dx, a1, a2, v, dv)
-        _sym_mul(S, v, sv)
-        _sym_mul(S, dv, sdv)
-        m = 0.0
-        n = 0.0
-        mv = 0.0
-        mdd = 0.0
-        nd = 0.0
-        for i in range(p):
-            m += v[i] * sv[i]
-            n += v[i] * sy[i]
-            mv += dv[i] * sv[i]
-            mdd += dv[i] * sdv[i]
-            nd += dv[i] * sy[i]
+        m, n, mv, mdd, nd = _quadratic_forms(S, sy, v, dv, sv, sdv)
         cost = syy - 2.0 * b * n + b * b * m
         h00 = m
         h01 = b * mv
@@ -290,17 +297,7 @@ def gauss_newton_alpha(alpha: float, b: float, S: np.ndarray, sy: np.ndarray, sy
         b = bn
         if moved < 1e-10:
             model_coefficients(alpha, lam, dx, a1, a2, v, dv)
-            _sym_mul(S, v, sv)
-            _sym_mul(S, dv, sdv)
-            m = 0.0
-            n = 0.0
-            mv = 0.0
-            mdd = 0.0
-            for i in range(p):
-                m += v[i] * sv[i]
-                n += v[i] * sy[i]
-                mv += dv[i] * sv[i]
-                mdd += dv[i] * sdv[i]
+            m, n, mv, mdd, nd = _quadratic_forms(S, sy, v, dv, sv, sdv)
             cost = syy - 2.0 * b * n + b * b * m
             h00 = m
             h01 = b * mv
