@@ -90,11 +90,27 @@ def model_coefficients(alpha: float, lam: np.ndarray, dx: float, a1: float, a2: 
 
 
 @njit(cache=CACHE)
+def advance_state(st: np.ndarray, co: np.ndarray, u: float) -> None:
+    """One sample of the state: SOE nodes and the resonance pair, exact for a zero-order-held u.
+
+    ``co`` packs the node decays, node gains, then the resonance's 2x2
+    transition and 2-vector input (``soe.pack_coefficients``).
+    """
+    q = st.shape[0] - 2
+    for i in range(q):
+        st[i] = co[i] * st[i] + co[q + i] * u
+    b0 = 2 * q
+    x0 = st[q]
+    x1 = st[q + 1]
+    st[q] = co[b0] * x0 + co[b0 + 1] * x1 + co[b0 + 4] * u
+    st[q + 1] = co[b0 + 2] * x0 + co[b0 + 3] * x1 + co[b0 + 5] * u
+
+
+@njit(cache=CACHE)
 def _step(u: float, y: float, st: np.ndarray, co: np.ndarray, v: np.ndarray, S: np.ndarray,
           sy: np.ndarray, sc: np.ndarray, avg: np.ndarray, accumulate: bool) -> float:
     """One sample: prediction, statistics update (if ``accumulate``), state advance."""
     p = st.shape[0]
-    q = p - 2
     pred = 0.0
     for i in range(p):
         pred += st[i] * v[i]
@@ -137,13 +153,7 @@ def _step(u: float, y: float, st: np.ndarray, co: np.ndarray, v: np.ndarray, S: 
     if not missing:
         sc[SC_Y2] += m * (dy * dy - sc[SC_Y2])
     # advance: nodes and resonance, exact for a zero-order-held u
-    for i in range(q):
-        st[i] = co[i] * st[i] + co[q + i] * u
-    b0 = 2 * q
-    x0 = st[q]
-    x1 = st[q + 1]
-    st[q] = co[b0] * x0 + co[b0 + 1] * x1 + co[b0 + 4] * u
-    st[q + 1] = co[b0 + 2] * x0 + co[b0 + 3] * x1 + co[b0 + 5] * u
+    advance_state(st, co, u)
     return pred
 
 
@@ -332,7 +342,6 @@ def rpem_block(u: np.ndarray, y: np.ndarray, st: np.ndarray, co: np.ndarray, lam
     ``every`` samples. Covariance P is kept symmetric and bounded by ``pmax`` in trace (anti-windup).
     """
     p = st.shape[0]
-    q = p - 2
     v = np.empty(p)
     dv = np.empty(p)
     model_coefficients(theta[0], lam, dx, a1, a2, v, dv)
@@ -371,14 +380,7 @@ def rpem_block(u: np.ndarray, y: np.ndarray, st: np.ndarray, co: np.ndarray, lam
             P[0, 1] = p01
             P[1, 0] = p01
             P[1, 1] = p11
-        uk = u[k]
-        for i in range(q):
-            st[i] = co[i] * st[i] + co[q + i] * uk
-        b0 = 2 * q
-        x0 = st[q]
-        x1 = st[q + 1]
-        st[q] = co[b0] * x0 + co[b0 + 1] * x1 + co[b0 + 4] * uk
-        st[q + 1] = co[b0 + 2] * x0 + co[b0 + 3] * x1 + co[b0 + 5] * uk
+        advance_state(st, co, u[k])
 
 
 # --------------------------------------------------------------------------- layer 2 (phase 1)

@@ -23,7 +23,6 @@ def _varying(u: np.ndarray, alpha: np.ndarray, b: np.ndarray, st: np.ndarray, co
              lam: np.ndarray, dx: float, a1: float, a2: float) -> np.ndarray:
     n = u.shape[0]
     p = st.shape[0]
-    q = p - 2
     v = np.empty(p)
     dv = np.empty(p)
     y = np.empty(n)
@@ -36,13 +35,7 @@ def _varying(u: np.ndarray, alpha: np.ndarray, b: np.ndarray, st: np.ndarray, co
         for i in range(p):
             acc += st[i] * v[i]
         y[k] = b[k] * acc
-        for i in range(q):
-            st[i] = co[i] * st[i] + co[q + i] * u[k]
-        b0 = 2 * q
-        x0 = st[q]
-        x1 = st[q + 1]
-        st[q] = co[b0] * x0 + co[b0 + 1] * x1 + co[b0 + 4] * u[k]
-        st[q + 1] = co[b0 + 2] * x0 + co[b0 + 3] * x1 + co[b0 + 5] * u[k]
+        K.advance_state(st, co, u[k])
     return y
 
 
