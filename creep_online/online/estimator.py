@@ -1,61 +1,64 @@
-"""The online estimator: the paper's two-layer scheme (Remark 2, Figure 2) on a live stream.
+"""The online estimator: all four parameters of b / (s^alpha (1 + a1 s + a2 s^2)), live, with bounded work.
 
 Phases (``OnlineEstimate.phase``):
 
 ``buffering``
-    Samples are kept until ``t_c`` seconds after the first input change (the
-    output level before it is taken as the sensor offset).
-``resonance_fit``
-    Layer 2 (a1, a2, b with ``alpha0`` fixed) runs as a resumable job
-    (``layer2.Layer2Job``), a slice of at most ``budget_us`` per ``update()``.
-    With ``t_c=None`` the job also chooses t_c (1.5 settling times of the fitted
-    resonance) and buffers longer if needed. When it ends, the tracker replays
-    the buffer exactly (again in slices) and takes over: nothing is lost.
+    Samples are kept until the input has moved and the buffer spans the
+    search window (``t_c``; chosen from the data when None).
+``searching``
+    A global search over (alpha, fn, zeta) on the buffer (``search.py``), in
+    small slices: no starting guess is needed. If the resonance found needs a
+    longer window, the buffer grows and the search runs again.
 ``tracking``
-    Layer 1 on a sliding window: the statistics of the SOE state vector
-    (``kernels``; exponential forgetting with time constant ``window_s``)
-    give the *exact* windowed output-error cost for any alpha, so every
-    ``update_every_s`` a few Gauss-Newton steps re-fit (alpha, b) over the whole
-    window (the paper's Remark 3, "recompute over the window", at O(P^2) per
-    sample instead of O(window x memory)); then the eq. 12 retune is tried and
-    kept only if it lowers the windowed cost. ``remark3="carry_on"`` instead
-    runs a recursive prediction-error update that never re-evaluates the past.
+    The window tracker (``tracker.py``) replays the buffer and follows the
+    plant: a Levenberg-Marquardt re-fit of all four parameters on the exact
+    exponentially forgotten window cost every ``update_every_s``, a
+    likelihood-ratio change test every half second (a change restarts the
+    window; ``estimate.events`` lists them), and a re-linearization by replay
+    when the resonance moves.
 
-Guard rails: non-finite samples are skipped and counted; every reported number
-is finite; a fit that leaves the bounds, fails, or worsens the live prediction
-error is rejected and the last good estimate is kept (``quality="degraded"``,
-``divergences`` counts them); the forgetting stops where the window holds too
-little information (anti-windup).
+Work per ``update()``: one sample of O(P^2) statistics (~1-2 us) plus at most
+``work_units`` units of background work (~3 us each). The default unit count is
+``max(1, round(dt / 400 us))``: one unit at 10 kHz, more at low rates, so the
+background work stays below ~1 % of the sample period's CPU time.
+
+Robustness: an output whose innovation exceeds ``outlier_gate`` robust scales
+is not used (a run longer than ``burst_s`` is accepted: a shift is a change, not
+an outlier); an input sample far outside the range seen so far is held at the
+last plausible value (a glitch) unless it persists; an output frozen while
+the model says it should move is reported (``quality="degraded"``).
 """
 from __future__ import annotations
 
+import inspect
 import math
-import time
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
 from ..errors import DataError
 from ..model import CreepModel
-from . import kernels as K
-from .layer2 import Layer2Job, Layer2Result
-from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SoeBasis, pack_coefficients
+from . import window as W
+from .search import ResonanceSearch
+from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SoeBasis
+from .tracker import WindowTracker
 
-PHASES = ("buffering", "resonance_fit", "tracking")
-#: Relative alpha change since the last layer-2 fit above which a refresh restarts from the grid.
-FRESH_REFRESH = 0.3
-QUALITIES = ("none", "provisional", "good", "degraded")
-
-#: Default creep exponent guessed for layer 2 (the paper's stage: ~0.01-0.07).
-DEFAULT_ALPHA0 = 0.05
-#: Largest layer-2 buffer (samples): bounds memory and the duration of the fit.
-MAX_LAYER2_SAMPLES = 1 << 15
-#: Longest history (samples since the first input change) kept for exact rebuilds after a layer-2 refresh.
-MAX_HISTORY = 1 << 18
-#: At most this many layer-2 refreshes (alternating with layer 1 until alpha stops moving).
-MAX_REFRESH = 3
+PHASES = ("buffering", "searching", "tracking")
+QUALITIES = ("none", "provisional", "good", "changing", "degraded")
+#: Largest search buffer (samples): bounds memory and the duration of the search.
+MAX_SEARCH_SAMPLES = 1 << 15
+#: Start-up buffer (samples): the search window plus what arrives while the search runs.
+BUFFER_SAMPLES = 1 << 17
+#: Largest history kept for replays (samples).
+MAX_HISTORY = 1 << 16
 #: Node above which the SOE lumps the fast modes into a direct term (units 1/h).
 SOE_TOP = 3000.0
+#: Relative 1-sigma limits for "determined" parameters (half the accuracy goals).
+DETERMINED = {"alpha": 0.01, "b": 0.015, "a1": 0.025, "a2": 0.025}
+#: Live error (window rms) above this multiple of the noise floor is "degraded".
+FLOOR_RATIO = 2.0
+#: An input sample further than this many input ranges from the last accepted one is a glitch.
+INPUT_GATE = 20.0
 
 
 @dataclass
@@ -78,625 +81,526 @@ class OnlineEstimate:
     skipped: int = 0
     alpha_updates: int = 0
     divergences: int = 0
+    reason: str = ""
+    noise_rms: float = 0.0
+    residual_rms: float = 0.0
+    outliers: int = 0
+    input_outliers: int = 0
+    shifts: int = 0
+    relinearizations: int = 0
+    events: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
-        """JSON-ready dict (DESIGN.md section 6 keys first)."""
+        """JSON-ready dict."""
         return asdict(self)
 
 
 class OnlineEstimator:
-    """Fractional creep model b / (s^alpha (1 + a1 s + a2 s^2)) identified sample by sample.
+    """Fractional creep model identified sample by sample (scikit-learn / river style).
 
-    Parameters (scikit-learn style; defaults from the measurements in docs/online.md):
+    Every constructor argument is stored verbatim (``get_params``); derived
+    values are built in ``reset()``.
 
-    dt:             sampling step (s) of the stream.
-    t_c:            end of the resonance transient after the first input change (s);
-                    None chooses it from the layer-2 fit (1.5 settling times).
-    alpha0:         alpha guessed for layer 2.
-    window_s:       time constant (s) of the exponential forgetting of layer 1 (default 10 s:
-                    follows a 20 %/60 s alpha drift to ~3.5 % and costs ~5 % of accuracy on a
-                    stationary plant); None keeps everything since t_c (growing window).
-    update_every_s: how often layer 1 re-fits alpha and b (s); default 0.05 s (at least 20 samples).
-    memory:         "soe" (full memory, sum of exponentials; the only memory the
-                    exact window re-fit needs).
-    remark3:        "recompute" (exact re-fit over the window, default) or "carry_on".
-    horizon_s:      memory horizon for which the SOE accuracy is guaranteed.
-    budget_us:      work per update() spent on the layer-2 job and the replay.
-    retune:         try the eq. 12 retune after each layer-1 fit.
+    dt:             sampling step (s).
+    window_s:       time constant (s) of the exponential forgetting (None: keep everything).
+    update_every_s: period (s) of the window re-fit of all four parameters.
+    t_c:            search window after the first input change (s); None: from the data.
+    alpha0:         optional hint: an extra starting candidate for the search (None: none needed).
+    horizon_s:      memory horizon of the SOE fractional integral (s).
+    soe_dx:         SOE node spacing in ln(lambda).
     alpha_bounds:   search interval of alpha.
-    t_c_max:        upper limit of the automatic t_c (s).
-    layer1_from:    "record": layer-1 statistics from the first input change (the model is
-                    exact in the transient too, so it carries alpha information; 4x smaller
-                    alpha scatter at t_c + 5 s on the load cell), "t_c": the paper's creep
-                    regime only.
+    t_c_max:        upper limit of the automatic search window (s).
+    outlier_gate:   innovation gate in robust scales (0 disables the gate).
+    burst_s:        longest run of gated outputs treated as outliers (s); longer is a shift.
+    detect_changes: run the change test (likelihood ratio every 0.5 s).
+    work_units:     background units per update() (None: max(1, round(dt / 400 us))).
     """
 
-    def __init__(self, dt: float, *, t_c: float | None = None, alpha0: float = DEFAULT_ALPHA0,
-                 window_s: float | None = 10.0, update_every_s: float = 0.05, memory: str = "soe",
-                 remark3: str = "recompute", horizon_s: float = DEFAULT_HORIZON_S,
-                 soe_dx: float = DEFAULT_DX, budget_us: float = 60.0, retune: bool = True,
-                 alpha_bounds: tuple[float, float] = (1e-3, 0.99), t_c_max: float = 10.0,
-                 layer1_from: str = "record") -> None:
-        if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
-            raise DataError(f"dt must be a positive finite number of seconds, got {dt!r}")
-        if t_c is not None and not (math.isfinite(t_c) and t_c > 0):
-            raise DataError(f"t_c must be > 0 s or None, got {t_c!r}")
-        if not 0.0 < alpha0 < 1.0:
-            raise DataError(f"alpha0 must satisfy 0 < alpha0 < 1, got {alpha0!r}")
-        if window_s is not None and not window_s > 0:
-            raise DataError(f"window_s must be > 0 s or None, got {window_s!r}")
-        if memory != "soe":
-            raise DataError(f"memory must be 'soe' (got {memory!r}); truncated memory is measured in "
-                            "bench/bench_online.py and loses creep (docs/online.md)")
-        if layer1_from not in ("record", "t_c"):
-            raise DataError(f"layer1_from must be 'record' or 't_c', got {layer1_from!r}")
-        if remark3 not in ("recompute", "carry_on"):
-            raise DataError(f"remark3 must be 'recompute' or 'carry_on', got {remark3!r}")
-        self.dt = float(dt)
-        self.t_c = t_c
-        self.alpha0 = float(alpha0)
+    def __init__(self, dt: float, *, window_s: float | None = 10.0, update_every_s: float = 0.1,
+                 t_c: float | None = None, alpha0: float | None = None,
+                 horizon_s: float = DEFAULT_HORIZON_S, soe_dx: float = DEFAULT_DX,
+                 alpha_bounds: tuple[float, float] = (0.002, 0.95), t_c_max: float = 10.0,
+                 outlier_gate: float = 8.0, burst_s: float = 0.002, detect_changes: bool = True,
+                 work_units: int | None = None) -> None:
+        self.dt = dt
         self.window_s = window_s
-        self.update_every = max(20, int(round(update_every_s / self.dt)))
-        self.memory = memory
-        self.remark3 = remark3
-        self.horizon_s = float(horizon_s)
-        self.budget_s = budget_us * 1e-6
-        self.retune = retune
-        self.alpha_bounds = (float(alpha_bounds[0]), float(alpha_bounds[1]))
-        self.t_c_max = float(t_c_max)
-        self.layer1_from = layer1_from
-        self.basis = SoeBasis.build(self.dt, horizon_s=self.horizon_s, dx=soe_dx, top=SOE_TOP)
-        _warm_kernels()
+        self.update_every_s = update_every_s
+        self.t_c = t_c
+        self.alpha0 = alpha0
+        self.horizon_s = horizon_s
+        self.soe_dx = soe_dx
+        self.alpha_bounds = alpha_bounds
+        self.t_c_max = t_c_max
+        self.outlier_gate = outlier_gate
+        self.burst_s = burst_s
+        self.detect_changes = detect_changes
+        self.work_units = work_units
+        self._validate()
         self.reset()
 
+    # ------------------------------------------------------------------ parameters
+    @classmethod
+    def _param_names(cls) -> list[str]:
+        return [p for p in inspect.signature(cls.__init__).parameters if p != "self"]
+
+    def get_params(self) -> dict:
+        """Constructor arguments as given (``OnlineEstimator(**est.get_params())`` is an equal estimator)."""
+        return {name: getattr(self, name) for name in self._param_names()}
+
+    def _validate(self) -> None:
+        def positive(name: str, value, allow_none: bool = False) -> None:
+            if value is None and allow_none:
+                return
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                    or value <= 0:
+                raise DataError(f"{name} must be a positive finite number{' or None' if allow_none else ''}, "
+                                f"got {value!r}")
+        positive("dt", self.dt)
+        positive("window_s", self.window_s, allow_none=True)
+        positive("update_every_s", self.update_every_s)
+        positive("t_c", self.t_c, allow_none=True)
+        positive("horizon_s", self.horizon_s)
+        positive("soe_dx", self.soe_dx)
+        positive("t_c_max", self.t_c_max)
+        positive("burst_s", self.burst_s)
+        if self.alpha0 is not None and not (isinstance(self.alpha0, (int, float)) and 0 < self.alpha0 < 1):
+            raise DataError(f"alpha0 must satisfy 0 < alpha0 < 1 or be None, got {self.alpha0!r}")
+        try:
+            lo, hi = (float(v) for v in self.alpha_bounds)
+        except (TypeError, ValueError):
+            raise DataError(f"alpha_bounds must be two numbers (lo, hi), got {self.alpha_bounds!r}") from None
+        if not 0 < lo < hi < 1:
+            raise DataError(f"alpha_bounds must satisfy 0 < lo < hi < 1, got {self.alpha_bounds!r}")
+        if not isinstance(self.outlier_gate, (int, float)) or not self.outlier_gate >= 0:
+            raise DataError(f"outlier_gate must be >= 0 (0 disables it), got {self.outlier_gate!r}")
+        if self.work_units is not None and not (isinstance(self.work_units, int) and self.work_units >= 1):
+            raise DataError(f"work_units must be a positive integer or None, got {self.work_units!r}")
+        if self.horizon_s <= self.dt:
+            raise DataError(f"horizon_s ({self.horizon_s}) must exceed dt ({self.dt})")
+
     # ------------------------------------------------------------------ lifecycle
-    def reset(self) -> None:
-        """Forget everything: back to buffering, counters to zero."""
+    def reset(self) -> "OnlineEstimator":
+        """Forget everything: derived settings rebuilt, back to buffering, counters to zero."""
+        h = float(self.dt)
+        self._h = h
+        self.basis = SoeBasis.build(h, horizon_s=float(self.horizon_s), dx=float(self.soe_dx), top=SOE_TOP)
+        self._units = self.work_units or max(1, int(round(h / 400e-6)))
+        self._refit_every = max(5, int(round(self.update_every_s / h)))
+        self._test_every = max(10, int(round(0.5 / h)))
+        self._history = int(min(MAX_HISTORY, max(1024, 3 * (self.window_s or 30.0) / h)))
         self.samples = 0
         self.skipped_nonfinite = 0
         self.gaps = 0
-        self._last_u = 0.0
-        self.alpha_updates = 0
-        self.divergences = 0
-        self.retunes_kept = 0
+        self.input_outliers = 0
         self.frozen = False
         self._phase = "buffering"
-        self._quality = "none"
-        self._alpha = self.alpha0
-        self._a1 = self._a2 = self._b = 0.0
-        self._std: dict[str, float] = {}
-        self._model: CreepModel | None = None
-        self._last_good: tuple[float, float] | None = None
-        self._offset = 0.0
-        self._pre_sum = 0.0
-        self._pre_n = 0
-        self._start: int | None = None      # sample index of the first input change
-        self._bu: list[float] = []
-        self._by: list[float] = []
-        self._tc_used = self.t_c if self.t_c is not None else 0.0
-        self._tc_target = self.t_c if self.t_c is not None else max(0.05, 200 * self.dt)
-        self._tc_rounds = 0
-        self._job: Layer2Job | None = None
-        self._replay = 0                     # buffered samples already replayed into the tracker
-        self._l2: Layer2Result | None = None
-        self._l2_samples = 0
-        self._l2_data: tuple[np.ndarray, np.ndarray] | None = None
-        self._l2_alpha = self.alpha0
-        self._refresh: Layer2Job | None = None
-        self.refreshes = 0
-        self._bad_streak = 0
-        self._blocking = False
-        self._keep_hist = self.remark3 == "recompute"
-        self._rebuilding = False
-        self._hist_u: list[float] = []
-        self._hist_y: list[float] = []
-        self._last_pred: float | None = None
-        self._init_tracker_arrays()
+        self._u_ref: float | None = None
+        self._u_lo = self._u_hi = 0.0
+        self._u_last = 0.0
+        self._u_run = 0
+        self._first_change: int | None = None
+        self._bu = np.empty(BUFFER_SAMPLES)
+        self._by = np.empty(BUFFER_SAMPLES)
+        self._nbuf = 0
+        # pre-faulted work memory: page faults would otherwise land inside update()
+        self._bu.fill(0.0)
+        self._by.fill(0.0)
+        self._hist_work = np.zeros((MAX_SEARCH_SAMPLES, self.basis.size))
+        self._hist_work.fill(0.0)
+        self._ring = np.zeros((2, self._history))
+        self._ring.fill(0.0)
+        self._burst = max(2, int(round(self.burst_s / h)))
+        self._t_need = max(0.05, 200 * h)
+        self._search: ResonanceSearch | None = None
+        self._search_rounds = 0
+        self._tc_used = 0.0
+        self._tracker: WindowTracker | None = None
+        self._catchup = 0
+        return self
 
     def freeze(self) -> None:
-        """Stop adapting: samples still update the states and predictions, the estimate stays."""
+        """Stop adapting: samples still advance the states and the predictions; the estimate stays."""
         self.frozen = True
+        if self._tracker is not None:
+            self._tracker.sc[W.SC_ACC] = 0.0
 
     def unfreeze(self) -> None:
         """Resume adapting."""
         self.frozen = False
-
-    def _init_tracker_arrays(self) -> None:
-        p = self.basis.size + 2
-        self._st = np.zeros(p)
-        self._S = np.zeros((p, p))
-        self._sy = np.zeros(p)
-        self._sc = np.zeros(K.SC_SIZE)
-        self._avg = np.zeros(p)
-        self._avg_c: np.ndarray | None = None
-        self._y_c = 0.0
-        self._v = np.zeros(p)
-        self._dv = np.zeros(p)
-        self._co = np.zeros(2 * self.basis.size + 6)
-        self._sc[K.SC_G] = 1.0
-        self._sc[K.SC_FORGET] = 1.0 if self.window_s is None else math.exp(-self.dt / self.window_s)
-        self._sc[K.SC_MON] = min(1.0, self.dt / 0.2)      # 0.2 s monitor of the live error
-        self._sc[K.SC_AVGK] = min(1.0, self.dt / 0.05)    # 50 ms averages for eq. 12
-        self._theta = np.zeros(2)
-        self._P = np.eye(2)
-        self._counter = np.zeros(1, dtype=np.int64)
-        self._pmax = 1e6
-        self._tracked = 0          # samples fed to the tracker since the record start
-        self._i_c = 0              # record index where layer-1 statistics start (t_c)
-        self._next_update = 0
-        self._good_e2 = math.inf
+        if self._tracker is not None:
+            self._tracker.sc[W.SC_ACC] = 1.0
 
     # ------------------------------------------------------------------ public API
     @property
     def phase(self) -> str:
-        return "tracking" if self._rebuilding else self._phase
+        return self._phase
 
     @property
     def model(self) -> CreepModel | None:
-        """The current model (None until layer 2 has produced one)."""
-        return self._model
+        """The current model (None before the first search has ended)."""
+        tr = self._tracker
+        if tr is None:
+            return None
+        try:
+            return CreepModel(tr.alpha, tr.a1, tr.a2, tr.b)
+        except Exception:  # noqa: BLE001 - a transient out-of-range fit: no model object
+            return None
 
     @property
     def last_prediction(self) -> float | None:
-        """Model output (offset included) for the latest sample; None before a model exists."""
-        return self._last_pred
+        """Model output for the latest sample (offset included); None before a model exists."""
+        tr = self._live
+        return None if tr is None or tr.fit.sample == 0 and tr.n == 0 else tr.prediction
+
+    @property
+    def alpha_updates(self) -> int:
+        """Window re-fits done."""
+        return 0 if self._tracker is None else self._tracker.refits
+
+    @property
+    def divergences(self) -> int:
+        """Re-fits rejected (non-finite or zero gain)."""
+        return 0
+
+    @property
+    def events(self) -> list[dict]:
+        """Detected abrupt changes: time, parameters that moved, relative moves."""
+        if self._tracker is None:
+            return []
+        return [{k: v for k, v in ev.items() if not k.startswith("_")} for ev in self._tracker.events]
 
     @property
     def estimate(self) -> OnlineEstimate:
-        m = self._model
+        tr = self._tracker
+        quality, reason = self._quality()
+        if tr is None:
+            return OnlineEstimate(alpha=0.0, a1=0.0, a2=0.0, b=0.0, phase=self._phase, quality=quality,
+                                  reason=reason, t=self.samples * self._h, samples=self.samples,
+                                  skipped=self.skipped_nonfinite, input_outliers=self.input_outliers)
+        a1, a2 = tr.a1, tr.a2
+        wn = 1.0 / math.sqrt(a2)
+        std = {k: _finite(v, math.inf) for k, v in tr.fit.std.items() if k != "offset"}
         return OnlineEstimate(
-            alpha=_finite(self._alpha), a1=_finite(self._a1), a2=_finite(self._a2), b=_finite(self._b),
-            phase=self.phase, quality=self._quality,
-            uncertainty={k: _finite(v, math.inf) for k, v in self._std.items()},
-            t=self.samples * self.dt, samples=self.samples, t_c=_finite(self._tc_used),
-            fn_hz=m.fn if m else 0.0, zeta=m.zeta if m else 0.0, offset=_finite(self._offset),
-            skipped=self.skipped_nonfinite, alpha_updates=self.alpha_updates,
-            divergences=self.divergences)
+            alpha=_finite(tr.alpha), a1=_finite(a1), a2=_finite(a2), b=_finite(tr.b), phase=self._phase,
+            quality=quality, reason=reason, uncertainty=std, t=self.samples * self._h, samples=self.samples,
+            t_c=_finite(self._tc_used), fn_hz=_finite(wn / (2 * math.pi)), zeta=_finite(a1 * wn / 2),
+            offset=_finite(tr.offset), skipped=self.skipped_nonfinite,
+            alpha_updates=self.alpha_updates, divergences=0, noise_rms=_finite(self._noise()),
+            residual_rms=_finite(self._residual()), outliers=int(tr.sc[W.SC_OUTLIERS]),
+            shifts=int(tr.sc[W.SC_SHIFTS]), relinearizations=tr.relinearizations,
+            input_outliers=self.input_outliers, events=self.events)
 
     def predict_one(self, u: float) -> float | None:
         """Model output at the next sample if u is applied now (no state change); None without a model."""
-        if self._phase != "tracking" or self._model is None:
+        tr = self._tracker
+        if tr is None or self._phase != "tracking":
             return None
-        return float(K.predict_next(float(u), self._st, self._co, self._v)) + self._offset
+        phi = tr.phi.copy()
+        W.advance(phi, tr.co, tr.q, float(u) - (self._u_ref or 0.0))
+        return float(phi @ tr.m)
 
     def learn_one(self, u: float, y: float) -> "OnlineEstimator":
         """river-style alias of update()."""
         self.update(u, y)
         return self
 
+    # ------------------------------------------------------------------ feeding
     def update(self, u: float, y: float) -> None:
-        """Feed one sample. Bounded work: never waits for the layer-2 fit."""
-        u = float(u)
-        y = float(y)
-        if not (math.isfinite(u) and math.isfinite(y)):
+        """Feed one sample. Bounded work: never waits for a search or a re-fit."""
+        try:
+            u = float(u)
+            y = float(y)
+        except (TypeError, ValueError):
+            raise DataError(f"update(): u and y must be numbers, got {u!r}, {y!r}") from None
+        if u - u != 0.0 or y - y != 0.0:          # NaN or inf
             self.skipped_nonfinite += 1
             return
-        n = self.samples
-        self.samples = n + 1
-        self._last_u = u
-        if self._start is None:
-            if u == 0.0:
-                self._pre_sum += y
-                self._pre_n += 1
-                return
-            self._begin(n)
-        if self._phase == "tracking" and self._replay_done():
-            if self._keep_hist:
-                self._remember(u, y)
-            y0 = y - self._offset
-            if self.remark3 == "carry_on":
-                self._advance(np.array([u]), np.array([y0]))
-                return
-            acc = self._tracked >= self._i_c
-            pred = K.track_one(u, y0, self._st, self._co, self._v, self._S, self._sy, self._sc,
-                               self._avg, acc)
-            self._last_pred = pred + self._offset
-            self._tracked += 1
-            if self._tracked == self._next_update:
-                self._alpha_update()
-            elif self._refresh is not None:
-                self._run_refresh(self.budget_s)
-                if self._phase != "tracking":
-                    self._work(self.budget_s)
+        self.samples += 1
+        tr = self._live
+        if tr is None:
+            self._buffer(self._input(u), y)
+            self._advance_start(self._units)
             return
-        self._bu.append(u)
-        self._by.append(y)
-        self._work(self.budget_s)
+        if self._u_lo <= u <= self._u_hi:
+            self._u_last = u
+            self._u_run = 0
+            du = u - self._u_ref
+        else:
+            du = self._input(u)
+        status = W.sample(du, y, tr.st, tr.S, tr.ring)
+        if status >= 8:
+            tr._schedule()
+        if tr._jobs:
+            tr.work(self._units)
 
     def update_block(self, u: np.ndarray, y: np.ndarray) -> None:
-        """Feed many samples (same semantics as repeated update(), much faster)."""
-        u = np.asarray(u, dtype=float).ravel()
-        y = np.asarray(y, dtype=float).ravel()
+        """Feed many samples (same semantics as repeated update(); background work runs to completion)."""
+        u = _array(u, "u")
+        y = _array(y, "y")
         if u.shape != y.shape:
-            raise DataError(f"u and y differ in length ({u.size} vs {y.size})")
-        self._blocking = True
-        try:
-            self._update_block(u, y)
-        finally:
-            self._blocking = False
-
-    def gap(self, count: int = 1) -> None:
-        """``count`` samples were lost (sequence gap): time advances with the input held, no output used."""
-        count = int(count)
-        if count <= 0:
-            return
-        self.gaps += count
-        if self._start is None:
-            self.samples += count
-            return
-        u = np.full(count, self._last_u)
-        y = np.full(count, np.nan)
-        self._blocking = True
-        try:
-            self._update_block(u, y, allow_nan_output=True)
-        finally:
-            self._blocking = False
-
-    def _update_block(self, u: np.ndarray, y: np.ndarray, allow_nan_output: bool = False) -> None:
-        ok = np.isfinite(u) & (allow_nan_output | np.isfinite(y))
-        bad = int(u.size - np.count_nonzero(ok))
-        if bad:
-            self.skipped_nonfinite += bad
+            raise DataError(f"update_block(): u and y differ in length ({u.size} vs {y.size})")
+        ok = np.isfinite(u) & np.isfinite(y)
+        if not ok.all():
+            self.skipped_nonfinite += int(u.size - np.count_nonzero(ok))
             u, y = u[ok], y[ok]
-        if u.size:
-            self._last_u = float(u[-1])
-        i = 0
-        while i < u.size and self._start is None:
-            nz = np.flatnonzero(u[i:] != 0.0)
-            stop = u.size if nz.size == 0 else i + int(nz[0])
-            self._pre_sum += float(np.nansum(y[i:stop]))
-            self._pre_n += int(np.count_nonzero(np.isfinite(y[i:stop])))
-            self.samples += stop - i
-            i = stop
-            if i < u.size:
-                self._begin(self.samples)
-        if i >= u.size:
-            return
-        chunk = 1 << 16
-        while i < u.size:
-            if self._phase == "tracking" and self._replay_done():
-                self.samples += u.size - i
-                if self._keep_hist:
-                    self._remember_block(u[i:], y[i:])
-                self._advance(np.ascontiguousarray(u[i:]), np.ascontiguousarray(y[i:] - self._offset))
-                return
-            stop = min(u.size, i + chunk)
-            self.samples += stop - i
-            self._bu.extend(u[i:stop].tolist())
-            self._by.extend(y[i:stop].tolist())
-            self._work(math.inf)
-            i = stop
-
-    # ------------------------------------------------------------------ phase machinery
-    def _begin(self, n: int) -> None:
-        """First input change at sample n: fix the offset and start the record."""
-        self._start = n
-        self._offset = self._pre_sum / self._pre_n if self._pre_n >= 5 else 0.0
-
-    def _replay_done(self) -> bool:
-        return self._replay >= len(self._bu)
-
-    def _work(self, budget: float) -> None:
-        """Advance the phase machine by at most ``budget`` seconds of work (inf: to completion)."""
-        deadline = time.perf_counter() + budget
-        while True:
-            if self._phase == "buffering":
-                need = int(math.ceil(self._tc_target / self.dt))
-                if len(self._bu) < need:
-                    return
-                self._start_layer2(min(need, MAX_LAYER2_SAMPLES))
-            elif self._phase == "resonance_fit":
-                if self._job is not None:
-                    if self._job.step():
-                        self._layer2_done()
-                else:   # replaying the buffer into the tracker
-                    self._replay_chunk(deadline)
-                    if self._replay_done():
-                        self._finish_replay()
-                        if self._refresh is not None and budget == math.inf:
-                            self._run_refresh(math.inf)
-                        if self._phase == "tracking":
-                            return
-            else:
-                return
-            if time.perf_counter() >= deadline:
-                return
-
-    def _finish_replay(self) -> None:
-        """The tracker has caught up: the buffer becomes the history (kept for a rebuild) or is dropped."""
-        if self._keep_hist and len(self._bu) <= MAX_HISTORY and self.refreshes < MAX_REFRESH:
-            self._hist_u, self._hist_y = self._bu, self._by
-        else:
-            self._drop_history()
-        self._bu = []
-        self._by = []
-        self._replay = 0
-        self._phase = "tracking"
-        self._rebuilding = False
-
-    def _drop_history(self) -> None:
-        self._keep_hist = False
-        self._hist_u = []
-        self._hist_y = []
-
-    def _remember(self, u: float, y: float) -> None:
-        self._hist_u.append(u)
-        self._hist_y.append(y)
-        if len(self._hist_u) > MAX_HISTORY:
-            self._drop_history()
-
-    def _remember_block(self, u: np.ndarray, y: np.ndarray) -> None:
-        if len(self._hist_u) + u.size > MAX_HISTORY:
-            self._drop_history()
-            return
-        self._hist_u.extend(u.tolist())
-        self._hist_y.extend(y.tolist())
-
-    def _start_layer2(self, n: int) -> None:
-        u = np.asarray(self._bu[:n])
-        y = np.asarray(self._by[:n]) - self._offset
-        start = None if self._l2 is None else (self._l2.a1, self._l2.a2)
-        self._job = Layer2Job(self.basis, u, y, self.alpha0, start=start)
-        self._l2_samples = n
-        self._l2_data = (u, y)
-        self._tc_used = n * self.dt
-        self._phase = "resonance_fit"
-
-    def _layer2_done(self) -> None:
-        res = self._job.result
-        self._job = None
-        self._l2 = res
-        if self.t_c is None and self._tc_rounds < 4:
-            try:
-                settle = CreepModel(self.alpha0, res.a1, res.a2, res.b or 1.0).settling_time
-            except Exception:
-                settle = self._tc_used
-            want = float(np.clip(1.5 * settle, 20 * self.dt, self.t_c_max))
-            if want > 1.05 * self._tc_used and self._tc_used < MAX_LAYER2_SAMPLES * self.dt * 0.99:
-                self._tc_rounds += 1
-                self._tc_target = want
-                self._phase = "buffering"
-                return
-        self._a1, self._a2, self._b, self._alpha = res.a1, res.a2, res.b, self.alpha0
-        self._set_model(self.alpha0, res.b)
-        self._std = {"alpha": math.inf, **res.std}
-        self._quality = "provisional"
-        self._start_tracker()
-
-    def _start_tracker(self) -> None:
-        """Fresh tracker for the current (a1, a2); the buffer is replayed into it from sample 0."""
-        self._init_tracker_arrays()
-        self._co = pack_coefficients(self.basis, self._a1, self._a2)
-        K.model_coefficients(self._alpha, self.basis.lam, self.basis.dx, self._a1, self._a2, self._v, self._dv)
-        self._v *= self._b
-        self._theta[:] = (self._alpha, self._b)
-        noise2 = max(self._l2.cost / max(self._l2_samples, 1), 1e-30) if self._l2 else 1.0
-        self._P[:] = np.diag([0.02**2, (0.1 * self._b) ** 2 + 1e-30]) / noise2
-        self._pmax = 100.0 * float(np.trace(self._P))
-        self._i_c = 0 if self.layer1_from == "record" else int(round(self._tc_used / self.dt))
-        self._next_update = self._i_c + self.update_every
-        self._replay = 0
-
-    def _replay_chunk(self, deadline: float) -> None:
-        chunk = 64
-        while self._replay < len(self._bu):
-            i0 = self._replay
-            i1 = min(i0 + chunk, len(self._bu))
-            u = np.asarray(self._bu[i0:i1])
-            y = np.asarray(self._by[i0:i1]) - self._offset
-            self._advance(u, y)
-            self._replay = i1
-            if time.perf_counter() >= deadline:
-                return
-
-    def _advance(self, u: np.ndarray, y: np.ndarray) -> None:
-        """Tracker over a block of (offset-free) samples, splitting at t_c and at the alpha updates."""
         i = 0
         n = u.size
-        none = np.empty(0)
-        while i < n:
-            pos = self._tracked
-            if pos < self._i_c:
-                stop = min(n, i + self._i_c - pos)
-                acc = False
+        status = np.empty(n, dtype=np.int64)
+        while i < n and self._live is None:
+            self.samples += 1
+            self._buffer(self._input(float(u[i])), float(y[i]))
+            i += 1
+            self._advance_start(1 << 30)
+        if i == n:
+            return
+        du = self._inputs(u[i:])
+        y = y[i:]
+        tr = self._live
+        i = 0
+        while i < du.size:
+            used = tr.feed_block(du[i:], y[i:], status[i:])
+            self.samples += used
+            i += used
+            tr.finish()
+
+    def gap(self, n: int) -> None:
+        """n samples were lost (sequence counter): time advances with the input held, no output used."""
+        n = int(n)
+        if n <= 0:
+            return
+        self.gaps += n
+        du = self._u_last - (self._u_ref or 0.0)
+        for _ in range(n):
+            self.samples += 1
+            if self._live is not None:
+                self._live.feed(du, math.nan)
             else:
-                stop = min(n, i + self._next_update - pos)
-                acc = True
-            if self.remark3 == "carry_on" and acc:
-                th_before = self._theta.copy()
-                K.rpem_block(u[i:stop], y[i:stop], self._st, self._co, self.basis.lam, self.basis.dx,
-                             self._a1, self._a2, self._theta, self._P, float(self._sc[K.SC_FORGET]),
-                             self.alpha_bounds[0], self.alpha_bounds[1], 16, self._counter, self._pmax)
-                if self.frozen:
-                    self._theta[:] = th_before
-            else:
-                K.track_block(u[i:stop], y[i:stop], self._st, self._co, self._v, self._S, self._sy,
-                              self._sc, self._avg, acc, none)
-            self._tracked += stop - i
-            i = stop
-            if acc and self._tracked == self._next_update:
-                self._alpha_update()
-            if self._refresh is not None and self._phase == "tracking" and self._replay_done():
-                self._run_refresh(math.inf if self._blocking else self.budget_s)
-                if self._phase != "tracking":     # rebuilding: the history (this block included) is replayed
-                    self._work(math.inf if self._blocking else self.budget_s)
+                self._buffer(du, math.nan)
+
+    @property
+    def _live(self) -> WindowTracker | None:
+        """The tracker once it is fed directly (after the start-up buffer has been replayed)."""
+        return self._tracker if self._catchup == 0 else None
+
+    # ------------------------------------------------------------------ input handling
+    def _input(self, u: float) -> float:
+        """Input deviation from the first level; an implausible glitch is held at the last accepted value."""
+        if self._u_ref is None:
+            self._u_ref = u
+            self._u_lo = self._u_hi = u
+            self._u_last = u
+        rng = self._u_hi - self._u_lo
+        if rng > 0 and abs(u - self._u_last) > INPUT_GATE * rng:
+            self._u_run += 1
+            if self._u_run <= self._burst:
+                self.input_outliers += 1
+                return self._u_last - self._u_ref
+        self._u_run = 0
+        if u != self._u_last and self._first_change is None:
+            self._first_change = self._nbuf
+        self._u_last = u
+        self._u_lo = min(self._u_lo, u)
+        self._u_hi = max(self._u_hi, u)
+        return u - self._u_ref
+
+    def _inputs(self, u: np.ndarray) -> np.ndarray:
+        """Vector form of ``_input`` (fast when every sample lies within the range seen so far)."""
+        if self._u_lo <= u.min() and u.max() <= self._u_hi:
+            self._u_last = float(u[-1])
+            self._u_run = 0
+            return u - self._u_ref
+        out = np.empty(u.size)
+        for k in range(u.size):
+            out[k] = self._input(float(u[k]))
+        return out
+
+    # ------------------------------------------------------------------ start-up
+    def _buffer(self, du: float, y: float) -> None:
+        """Append to the start-up buffer (before any input change only the last samples are kept)."""
+        k = self._nbuf
+        if k == self._bu.size:
+            if self._first_change is None:
+                keep = 1024
+                self._bu[:keep] = self._bu[k - keep:k]
+                self._by[:keep] = self._by[k - keep:k]
+                k = keep
+            else:                            # the search cannot keep up: finish it now
+                self._advance_start(1 << 30)
+                if self._live is not None:
+                    self._live.feed(du, y)
                     return
-        if self.remark3 != "carry_on":
-            self._last_pred = float(self._sc[K.SC_LAST]) + self._offset
+                raise DataError("start-up buffer overflow: the stream is too fast for the search")
+        self._bu[k] = du
+        self._by[k] = y
+        self._nbuf = k + 1
 
-    # ------------------------------------------------------------------ layer 1 + guards
-    def _alpha_update(self) -> None:
-        """Layer 1 over the window (Gauss-Newton on exact statistics), eq. 12 retune, guards."""
-        self._next_update = self._tracked + self.update_every
-        if self._avg_c is None:
-            self._avg_c = self._avg.copy()
-            self._y_c = float(self._sc[K.SC_YAVG])
+    def _ready_to_search(self) -> bool:
+        if self._first_change is None:
+            return False
+        return self._nbuf - self._first_change >= self._t_search() / self._h
+
+    def _t_search(self) -> float:
+        if self.t_c is not None:
+            return float(self.t_c)
+        return self._t_need
+
+    def _advance_start(self, units: int) -> None:
+        """Buffering and searching: start the search when ready, give it ``units``, build the tracker."""
+        if self._phase == "buffering":
+            if not self._ready_to_search():
+                return
+            self._start_search()
+            units -= 1
+        if self._phase == "searching":
+            s = self._search
+            while units > 0 and not s.step():
+                units -= 1
+            if s.result is None or self._longer_window_needed(s.result):
+                return
+            self._start_tracker(s.result)
+        if self._catchup:
+            self._catch_up(max(units, 1))
+
+    def _start_search(self) -> None:
+        start = 0 if self._u_ref else max(0, self._first_change - 1)
+        end = min(self._nbuf, start + MAX_SEARCH_SAMPLES)
+        prev = self._search.result if self._search is not None else None
+        extra = ((prev.alpha, prev.a1, prev.a2),) if prev is not None else ()
+        alphas = () if self.alpha0 is None else (float(self.alpha0),)
+        self._search = ResonanceSearch(self.basis, self._bu[start:end], self._by[start:end], extra=extra,
+                                       alphas=alphas, work=self._hist_work)
+        self._tc_used = (end - start) * self._h
+        self._phase = "searching"
+
+    def _longer_window_needed(self, res) -> bool:
+        """After a search: grow the buffer to 1.5 settling times of the resonance found and search again."""
+        if self.t_c is not None or self._search_rounds >= 3:
+            return False
+        settle = 8.0 * res.a2 / res.a1
+        want = min(max(1.5 * settle, 0.05, 200 * self._h), float(self.t_c_max), MAX_SEARCH_SAMPLES * self._h * 0.95)
+        if want <= 1.05 * self._t_need:
+            return False
+        self._search_rounds += 1
+        self._t_need = want
+        self._phase = "buffering"
+        return True
+
+    def _start_tracker(self, res) -> None:
+        theta = np.array([res.alpha, math.log(res.a1), math.log(res.a2), res.b, res.c])
+        lo, hi = (float(v) for v in self.alpha_bounds)
+        theta[0] = min(max(theta[0], lo), hi)
+        self._tracker = WindowTracker(
+            self.basis, theta, window_s=self.window_s, free=bool(self._u_ref), ring=self._ring,
+            gate=0.0, burst=self._burst, stuck=max(10, int(round(0.05 / self._h))), alpha_bounds=(lo, hi),
+            refit_every=self._refit_every, test_every=self._test_every, detect=bool(self.detect_changes))
         if self.frozen:
-            return
-        lo, hi = self.alpha_bounds
-        if self.remark3 == "carry_on":
-            alpha, b = float(self._theta[0]), float(self._theta[1])
-            var_a = float(self._P[0, 0]) * float(self._sc[K.SC_E2])
-            var_b = float(self._P[1, 1]) * float(self._sc[K.SC_E2])
-            ok = True
-            cost = float(self._sc[K.SC_E2])
-        else:
-            out = np.empty(8)
-            K.gauss_newton_alpha(self._alpha, self._b, self._S, self._sy, float(self._sc[K.SC_SYY]),
-                                 self.basis.lam, self.basis.dx, self._a1, self._a2, lo, hi, 6, out)
-            alpha, b, cost = float(out[0]), float(out[1]), float(out[2])
-            neff = float(self._sc[K.SC_NEFF])
-            sigma2 = max(cost, 0.0) / max(neff - 2.0, 1.0)
-            var_a, var_b = sigma2 * out[3], sigma2 * out[4]
-            ok = bool(out[7]) and math.isfinite(alpha) and math.isfinite(b) and b != 0.0
-            if ok and self.retune:
-                alpha, b, cost = self._eq12(alpha, b, cost)
-        self.alpha_updates += 1
-        if not ok or not (lo < alpha < hi) or not math.isfinite(var_a) or b == 0.0:
-            self._diverged()
-            return
-        self._alpha, self._b = alpha, b
-        self._set_model(alpha, b)
-        if self.remark3 != "carry_on":
-            K.model_coefficients(alpha, self.basis.lam, self.basis.dx, self._a1, self._a2, self._v, self._dv)
-            self._v *= b
-        std_a, std_b = math.sqrt(max(var_a, 0.0)), math.sqrt(max(var_b, 0.0))
-        self._std = {**self._std, "alpha": std_a, "b": std_b}
-        if self.remark3 == "recompute":   # window cost per effective sample, in true scale
-            resid2 = cost / (float(self._sc[K.SC_G]) * max(float(self._sc[K.SC_NEFF]), 1.0))
-        else:
-            resid2 = cost
-        self._judge(std_a, resid2)
-        if (self._quality == "good" and self.refreshes < MAX_REFRESH and self._refresh is None
-                and self._l2_data is not None and abs(self._alpha / self._l2_alpha - 1.0) > 0.01
-                and (self.refreshes == 0 or self._keep_hist)):
-            u, y = self._l2_data
-            # far from the alpha layer 2 used, its resonance may be a wrong local fit: search afresh
-            fresh = abs(self._alpha / self._l2_alpha - 1.0) > FRESH_REFRESH
-            self._refresh = Layer2Job(self.basis, u, y, self._alpha,
-                                      start=None if fresh else (self._a1, self._a2))
+            self._tracker.sc[W.SC_ACC] = 0.0
+        self._catchup = 1
+        self._replayed = 0
+        self._phase = "tracking"
 
-    def _run_refresh(self, budget: float) -> None:
-        """Layer 2 again with the tracked alpha (the guess alpha0 biases a1, a2); swapped in whole."""
-        deadline = time.perf_counter() + budget
-        while not self._refresh.step():
-            if time.perf_counter() >= deadline:
-                return
-        res = self._refresh.result
-        self._refresh = None
-        self.refreshes += 1
-        self._l2_alpha = self._alpha
-        if not (math.isfinite(res.a1) and math.isfinite(res.a2) and res.a1 > 0 and res.a2 > 0):
-            return
-        self._a1, self._a2 = res.a1, res.a2
-        self._std = {**self._std, "a1": res.std["a1"], "a2": res.std["a2"]}
-        if self._keep_hist and self.remark3 == "recompute":
-            # rebuild the tracker exactly for the new resonance: replay the whole history
-            self._bu, self._by = self._hist_u, self._hist_y
-            self._hist_u, self._hist_y = [], []
-            self._start_tracker()
-            self._phase = "resonance_fit"
-            self._rebuilding = True
-            self._set_model(self._alpha, self._b)
-            return
-        self._co[:] = pack_coefficients(self.basis, self._a1, self._a2)
-        K.model_coefficients(self._alpha, self.basis.lam, self.basis.dx, self._a1, self._a2, self._v, self._dv)
-        self._v *= self._b
-        self._set_model(self._alpha, self._b)
+    def _catch_up(self, units: int) -> None:
+        """Feed the buffer into the new tracker, a few samples per unit, then go live (gate open)."""
+        tr = self._tracker
+        per_unit = max(2, 6000 // (tr.p * tr.p // 2 + tr.q))
+        status = np.empty(per_unit, dtype=np.int64)
+        while units > 0 and self._replayed < self._nbuf:
+            units -= 1
+            k = self._replayed
+            n = min(per_unit, self._nbuf - k)
+            used = tr.feed_block(self._bu[k:k + n], self._by[k:k + n], status[:n])
+            self._replayed += used
+            if tr._jobs and units > 0:     # the tracker's own jobs share the budget
+                units -= 1
+                tr.work(1 if units < (1 << 29) else 1 << 30)
+        if self._replayed >= self._nbuf:
+            self._catchup = 0
+            self._nbuf = 0
+            tr.sc[W.SC_GATE] = float(self.outlier_gate)
 
-    def _eq12(self, alpha: float, b: float, cost: float) -> tuple[float, float, float]:
-        """Eq. 12: alpha *= (y*_f - y*_c) / (y_hat_f - y_hat_c); kept only if the window cost drops."""
-        v = np.empty_like(self._v)
-        dv = np.empty_like(self._v)
-        K.model_coefficients(alpha, self.basis.lam, self.basis.dx, self._a1, self._a2, v, dv)
-        den = b * float((self._avg - self._avg_c) @ v)
-        num = float(self._sc[K.SC_YAVG]) - self._y_c
-        if den == 0.0 or not math.isfinite(num / den):
-            return alpha, b, cost
-        cand = alpha * num / den
-        lo, hi = self.alpha_bounds
-        if not lo < cand < hi:
-            return alpha, b, cost
-        j, b2 = K.window_cost(cand, self._S, self._sy, float(self._sc[K.SC_SYY]), self.basis.lam,
-                              self.basis.dx, self._a1, self._a2)
-        if j < cost and b2 != 0.0:
-            self.retunes_kept += 1
-            return cand, float(b2), float(j)
-        return alpha, b, cost
+    # ------------------------------------------------------------------ monitoring
+    def _noise(self) -> float:
+        tr = self._tracker
+        return 0.0 if tr is None else float(tr.sc[W.SC_NOISE])
 
-    def _judge(self, std_alpha: float, resid2: float) -> None:
-        """Quality flag from the alpha uncertainty; fall back when the window's mean squared residual jumps.
+    def _residual(self) -> float:
+        tr = self._tracker
+        if tr is None or not math.isfinite(tr.fit.cost) or tr.fit.neff <= 0:
+            return 0.0
+        return math.sqrt(max(tr.fit.cost, 0.0) / tr.fit.neff)
 
-        ``resid2`` is the window cost per effective sample (exact, from the
-        statistics): it stays put through input steps, unlike the live error,
-        and jumps on outliers or a model that no longer fits.
-        """
-        if self._last_good is not None and resid2 > 25.0 * self._good_e2:
-            self._bad_streak += 1
-            if self._bad_streak < 20:   # after 20 in a row the plant has changed: accept
-                self._diverged()
-                return
-        self._bad_streak = 0
-        rel = std_alpha / max(abs(self._alpha), 1e-12)
-        self._quality = "good" if rel < 0.05 else "provisional"
-        self._last_good = (self._alpha, self._b)
-        self._good_e2 = min(self._good_e2 * 1.5, resid2) if math.isfinite(self._good_e2) else resid2
-        self._good_e2 = max(self._good_e2, 1e-300)
-
-    def _diverged(self) -> None:
-        """Reject the new estimate: back to the last good one (or the layer-2 start)."""
-        self.divergences += 1
-        self._quality = "degraded"
-        alpha, b = self._last_good if self._last_good is not None else (self.alpha0, self._l2.b)
-        self._alpha, self._b = alpha, b
-        self._theta[:] = (alpha, b)
-        self._set_model(alpha, b)
-        K.model_coefficients(alpha, self.basis.lam, self.basis.dx, self._a1, self._a2, self._v, self._dv)
-        self._v *= b
-
-    def _set_model(self, alpha: float, b: float) -> None:
-        try:
-            self._model = CreepModel(alpha, self._a1, self._a2, b)
-        except Exception:
-            pass
-
-    # ------------------------------------------------------------------ helpers for tests / bench
-    def window_cost(self, alpha: float) -> tuple[float, float]:
-        """(J, b) of the current window for this alpha (exact, gain projected out)."""
-        return K.window_cost(alpha, self._S, self._sy, float(self._sc[K.SC_SYY]), self.basis.lam,
-                             self.basis.dx, self._a1, self._a2)
+    def _quality(self) -> tuple[str, str]:
+        """(quality, reason): good only at the noise floor with every parameter determined."""
+        tr = self._tracker
+        if tr is None:
+            return "none", ("waiting for the input to move" if self._first_change is None
+                            else "searching the resonance and creep")
+        if self._catchup:
+            return "provisional", "replaying the start-up buffer"
+        if tr.sc[W.SC_STUCK]:
+            return "degraded", "output frozen or clipped while the model says it moves"
+        now = self.samples * self._h
+        if tr.events and now - tr.events[-1]["detected_t"] < 1.5:
+            ev = tr.events[-1]
+            return "changing", f"change detected at t={ev['t']:.3g} s ({', '.join(ev['moved'])} moved)"
+        if tr.fit.sample == 0:
+            return "provisional", "first window fit pending"
+        floor = max(self._noise(), 1e-9 * abs(tr.b) * max(self._u_hi - self._u_lo, 1e-300))
+        ratio = self._residual() / floor if floor > 0 else math.inf
+        if ratio > FLOOR_RATIO:
+            return "degraded", f"window error {ratio:.1f}x the noise floor: the model misses part of the data"
+        values = {"alpha": tr.alpha, "b": tr.b, "a1": tr.a1, "a2": tr.a2}
+        for name, limit in DETERMINED.items():
+            rel = tr.fit.std.get(name, math.inf) / max(abs(values[name]), 1e-300)
+            if not rel < limit:
+                return "provisional", f"{name} not yet determined by the data ({100 * rel:.2g} % 1-sigma)"
+        return "good", ""
 
 
-_WARM = False
+def _number(x, name: str) -> float:
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        raise DataError(f"update(): {name} must be a number, got {x!r}") from None
 
 
-def _warm_kernels() -> None:
-    """Call every kernel once on tiny data so that no update() pays numba's load/compile time."""
-    global _WARM
-    if _WARM:
-        return
-    basis = SoeBasis.build(1e-3, horizon_s=1.0, dx=1.0, top=10.0)
-    u = np.ones(64)
-    y = np.ones(64)
-    est = OnlineEstimator.__new__(OnlineEstimator)
-    _WARM = True
-    p = basis.size + 2
-    v, dv = np.zeros(p), np.zeros(p)
-    K.model_coefficients(0.1, basis.lam, basis.dx, 1e-3, 1e-6, v, dv)
-    co = pack_coefficients(basis, 1e-3, 1e-6)
-    st, S, sy, sc, avg = np.zeros(p), np.zeros((p, p)), np.zeros(p), np.zeros(K.SC_SIZE), np.zeros(p)
-    sc[K.SC_G] = sc[K.SC_FORGET] = 1.0
-    K.track_block(u, y, st, co, v, S, sy, sc, avg, True, np.empty(0))
-    K.track_one(1.0, 1.0, st, co, v, S, sy, sc, avg, True)
-    K.predict_next(1.0, st, co, v)
-    K.window_cost(0.1, S, sy, 1.0, basis.lam, basis.dx, 1e-3, 1e-6)
-    K.gauss_newton_alpha(0.1, 1.0, S, sy, 1.0, basis.lam, basis.dx, 1e-3, 1e-6, 1e-3, 0.99, 1, np.zeros(8))
-    K.rpem_block(u, y, st, co, basis.lam, basis.dx, 1e-3, 1e-6, np.array([0.1, 1.0]), np.eye(2), 1.0,
-                 1e-3, 0.99, 16, np.zeros(1, dtype=np.int64), 1e6)
-    Layer2Job(basis, u, y, 0.1, start=(1e-3, 1e-6), max_iter=1).run()
-    del est
+def _array(x, name: str) -> np.ndarray:
+    try:
+        a = np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        raise DataError(f"update_block(): {name} must be numeric") from None
+    if a.ndim != 1:
+        raise DataError(f"update_block(): {name} must be one-dimensional, got shape {a.shape}")
+    return a
 
 
 def _finite(x: float, default: float = 0.0) -> float:
     x = float(x)
     return x if math.isfinite(x) else default
+
+
+def warm_kernels() -> None:
+    """Compile (or load from numba's cache) every kernel that Python calls, so no update() pays for it."""
+    from . import tracker as T
+    est = OnlineEstimator(1e-3, horizon_s=10.0, t_c=0.05)
+    t = np.arange(3000) * 1e-3
+    u = np.floor(t * 4) % 2
+    est.update_block(u, u * 0.5 + 0.01 * np.sin(t * 50))
+    for k in range(20):
+        est.update(1.0, 0.5)
+    est.predict_one(1.0)
+    tr = est._tracker
+    n = tr.theta.size
+    F = np.eye(tr.p)
+    fy = np.ones(tr.p)
+    C = np.empty((tr.p, n))
+    lin = (tr.a1l, tr.a2l)
+    W.jacobian_coefficients(tr.theta, *lin, tr.basis.lam, tr.basis.dx, C)
+    H, g, cost = W.normal_equations(tr.theta, C, F, fy, 1.0)
+    W.lm_trial(tr.theta.copy(), np.ones(n), 1e-3, H, g, cost, *lin, tr.basis.lam, tr.basis.dx, F, fy, 1.0,
+               0.01, 0.9, np.empty(3))
+    W.covariance(H, np.ones(n), np.empty((n, n)))
+    W.cost_of(tr.theta, *lin, tr.basis.lam, tr.basis.dx, F, fy, 1.0)
+    W.symmetrize(tr.S, F, 1.0)
+    W.replay(tr.ring, 0, 4, 1, tr.st.copy(), tr.S.copy())
+    T.WindowTracker  # noqa: B018 - imported for its kernels

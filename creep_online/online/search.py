@@ -1,0 +1,249 @@
+"""Global start of the tracker: a grid over (alpha, fn, zeta), then a pattern search, in small slices.
+
+The tracker's Gauss-Newton is local: started on the wrong resonance it stays
+there (the old single-alpha layer 2 locked onto a resonance 57 % off in zeta on
+a plant with alpha 0.3). So the start compares candidates over all three
+nonlinear parameters on a buffer of samples, with the gain and the output
+offset projected out (linear), using the same exact model as the tracker
+(SOE nodes + partial fractions, ``kernels.model_coefficients``):
+``y = b (zeta . v_z + x . v_x) + c``.
+
+Every ``step()`` does a bounded unit of work (a few thousand multiply-adds:
+part of one model evaluation over the buffer), so the search can run inside
+``update()`` at 10 kHz. The coarse grid evaluates every ``stride``-th sample
+(the states still advance at every sample, so the model is exact; only the
+cost sums skip rows), the refinement every sample up to ``FINE_ROWS``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Generator
+
+import numpy as np
+from numba import njit
+
+from . import kernels
+from .soe import SoeBasis
+from .window import resonance_step
+
+#: Creep exponents of the grid (log-spaced over the supported range 0.005-0.8).
+GRID_ALPHA = (0.008, 0.025, 0.07, 0.17, 0.35, 0.6)
+#: Damping ratios of the grid.
+GRID_ZETA = (0.015, 0.05, 0.15, 0.4, 1.0)
+#: Natural frequencies of the grid (log-spaced from the buffer length to 0.3 fs).
+GRID_FREQS = 18
+#: Rows in the cost of a grid point (the rest are skipped by a stride).
+COARSE_ROWS = 1500
+#: Rows in the cost during refinement.
+FINE_ROWS = 6000
+#: Multiply-adds per unit of work (~3 us).
+UNIT_WORK = 2000
+#: Candidates refined from the grid.
+REFINE = 3
+
+
+@dataclass
+class SearchResult:
+    """Best (alpha, a1, a2) on the buffer, with the projected gain, offset and cost (per row)."""
+
+    alpha: float
+    a1: float
+    a2: float
+    b: float
+    c: float
+    cost: float
+
+
+@njit(cache=True)
+def _rows(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx0: float, vx1: float,
+          rc: np.ndarray, x: np.ndarray, r0: int, r1: int, stride: int, lead: int, acc: np.ndarray) -> None:
+    """Model rows r0..r1 (states x carried); sums for the projected cost into acc.
+
+    acc = [n, sum s, sum s^2, sum y, sum s y, sum y^2] over rows k >= lead with
+    k % stride == 0 and a finite y.
+    """
+    q = vz.shape[0]
+    x0 = x[0]
+    x1 = x[1]
+    for k in range(r0, r1):
+        if k >= lead and k % stride == 0 and y[k] == y[k]:
+            s = vx0 * x0 + vx1 * x1
+            for i in range(q):
+                s += hist[k, i] * vz[i]
+            yk = y[k]
+            acc[0] += 1.0
+            acc[1] += s
+            acc[2] += s * s
+            acc[3] += yk
+            acc[4] += s * yk
+            acc[5] += yk * yk
+        n0 = rc[0] * x0 + rc[1] * x1 + rc[4] * u[k]
+        x1 = rc[2] * x0 + rc[3] * x1 + rc[5] * u[k]
+        x0 = n0
+    x[0] = x0
+    x[1] = x1
+
+
+def _projected(acc: np.ndarray) -> tuple[float, float, float]:
+    """(cost per row, b, c) of min ||y - b s - c||^2 from the sums."""
+    n, s1, s2, y1, sy, y2 = acc
+    if n < 3:
+        return math.inf, 0.0, 0.0
+    det = s2 * n - s1 * s1
+    if not det > 1e-12 * abs(s2 * n) or not math.isfinite(det):
+        return math.inf, 0.0, 0.0
+    b = (sy * n - s1 * y1) / det
+    c = (s2 * y1 - s1 * sy) / det
+    cost = y2 - b * sy - c * y1
+    return (max(cost, 0.0) / n if math.isfinite(cost) else math.inf), b, c
+
+
+class ResonanceSearch:
+    """Resumable global search on a buffer (input deviations u, outputs y; NaN = unusable).
+
+    ``zeta0`` is the node state before the buffer (zero for a start from
+    rest); ``lead`` rows at the start are left out of the cost (the resonance
+    state before the buffer is unknown; it is forgotten within a settling
+    time). ``work`` is an optional (>= len(u), Q) buffer for the node history.
+    ``extra`` are (alpha, a1, a2) candidates to refine besides the grid's;
+    ``alphas`` are added to the grid's creep exponents (a user's hint).
+    """
+
+    def __init__(self, basis: SoeBasis, u: np.ndarray, y: np.ndarray, zeta0: np.ndarray | None = None,
+                 lead: int = 0, extra: tuple = (), alphas: tuple = (), work: np.ndarray | None = None) -> None:
+        self.basis = basis
+        self.u = np.ascontiguousarray(u, dtype=float)
+        self.y = np.ascontiguousarray(y, dtype=float)
+        self.zeta0 = np.zeros(basis.size) if zeta0 is None else np.array(zeta0, dtype=float)
+        self.lead = int(lead)
+        self.extra = tuple(extra)
+        self.alphas = tuple(sorted(set(GRID_ALPHA) | set(alphas)))
+        self.result: SearchResult | None = None
+        self.units = 0
+        if work is not None and work.shape[0] >= self.u.size and work.shape[1] == basis.size:
+            self._hist = work[:self.u.size]     # a pre-faulted buffer: no page faults in update()
+        else:
+            self._hist = np.empty((self.u.size, basis.size))
+        self._v = np.empty(basis.size + 2)
+        self._dv = np.empty(basis.size + 2)
+        self._rc = np.empty(6)
+        self._gen = self._run()
+
+    def step(self) -> bool:
+        """One unit of work; True when the result is ready."""
+        if self.result is None:
+            self.units += 1
+            next(self._gen, None)
+        return self.result is not None
+
+    def run(self) -> SearchResult:
+        """To completion (block mode)."""
+        while not self.step():
+            pass
+        return self.result
+
+    # ------------------------------------------------------------------ pieces
+    def _evaluate(self, alpha: float, a1: float, a2: float, stride: int) -> Generator:
+        """Projected cost of one candidate, in units; the generator's return value is (cost, b, c)."""
+        q = self.basis.size
+        kernels.model_coefficients(alpha, self.basis.lam, self.basis.dx, a1, a2, self._v, self._dv)
+        resonance_step(a1, a2, self.basis.h, self._rc)
+        vz = self._v[:q].copy()
+        x = np.zeros(2)
+        acc = np.zeros(6)
+        yield
+        n = self.u.size
+        per_row = 6 + q / stride
+        chunk = max(16, int(UNIT_WORK / per_row))
+        for r0 in range(0, n, chunk):
+            _rows(self._hist, self.u, self.y, vz, self._v[q], self._v[q + 1], self._rc, x, r0,
+                  min(n, r0 + chunk), stride, self.lead, acc)
+            yield
+        return _projected(acc)
+
+    def _history(self) -> Generator:
+        zeta = self.zeta0.copy()
+        chunk = max(16, UNIT_WORK // self.basis.size)
+        for i0 in range(0, self.u.size, chunk):
+            i1 = min(i0 + chunk, self.u.size)
+            kernels.node_history(self.u[i0:i1], self.basis.decay, self.basis.gain, zeta, self._hist[i0:i1])
+            yield
+
+    def _grid(self, stride: int) -> Generator:
+        h = self.basis.h
+        span = max(self.u.size - self.lead, 2) * h
+        f_hi = 0.3 / h
+        f_lo = min(max(1.0 / span, 1e-3), f_hi / 16)
+        found = []
+        for alpha in self.alphas:
+            for fn in np.geomspace(f_lo, f_hi, GRID_FREQS):
+                wn = 2 * math.pi * fn
+                for z in GRID_ZETA:
+                    a1, a2 = 2 * z / wn, 1 / wn**2
+                    cost, _, _ = yield from self._evaluate(alpha, a1, a2, stride)
+                    found.append((cost, alpha, fn, z))
+        return found
+
+    def _refine(self, alpha: float, fn: float, z: float, stride: int) -> Generator:
+        """Pattern search in (ln alpha, ln fn, ln zeta) from a start; returns (cost, alpha, fn, zeta)."""
+        p = np.log([alpha, fn, z])
+        lo = np.log([0.002, 1e-3, 0.003])
+        hi = np.log([0.95, 0.45 / self.basis.h, 3.0])
+        best = yield from self._cost_at(p, stride)
+        steps = np.array([0.5, 0.25, 0.6])
+        for _ in range(6):
+            improved = True
+            while improved:
+                improved = False
+                for j in range(3):
+                    for sign in (1.0, -1.0):
+                        trial = p.copy()
+                        trial[j] = min(max(trial[j] + sign * steps[j], lo[j]), hi[j])
+                        c = yield from self._cost_at(trial, stride)
+                        if c < best:
+                            best, p, improved = c, trial, True
+                            break
+            steps *= 0.4
+        return (best, *np.exp(p))
+
+    def _cost_at(self, p: np.ndarray, stride: int) -> Generator:
+        alpha, fn, z = np.exp(p)
+        wn = 2 * math.pi * fn
+        cost, _, _ = yield from self._evaluate(alpha, 2 * z / wn, 1 / wn**2, stride)
+        return cost
+
+    def _run(self) -> Generator:
+        yield from self._history()
+        n = self.u.size - self.lead
+        coarse = max(1, n // COARSE_ROWS)
+        fine = max(1, n // FINE_ROWS)
+        found = yield from self._grid(coarse)
+        found.sort(key=lambda r: r[0])
+        starts = _distinct(found, REFINE)
+        for alpha, a1, a2 in self.extra:
+            starts.append((alpha, 1 / (2 * math.pi * math.sqrt(a2)), a1 / (2 * math.sqrt(a2))))
+        best = None
+        for alpha, fn, z in starts:
+            cand = yield from self._refine(alpha, fn, z, fine)
+            if best is None or cand[0] < best[0]:
+                best = cand
+        _, alpha, fn, z = best
+        wn = 2 * math.pi * fn
+        a1, a2 = 2 * z / wn, 1 / wn**2
+        cost, b, c = yield from self._evaluate(alpha, a1, a2, 1)
+        self.result = SearchResult(alpha=float(alpha), a1=float(a1), a2=float(a2), b=float(b), c=float(c),
+                                   cost=float(cost))
+
+
+def _distinct(found: list, count: int) -> list:
+    """The best grid points that are not neighbours of a better one (different basins)."""
+    out: list = []
+    for cost, alpha, fn, z in found:
+        if not math.isfinite(cost):
+            break
+        if all(abs(math.log(fn / f2)) > 0.3 or abs(math.log(z / z2)) > 0.5 for _, f2, z2 in out):
+            out.append((alpha, fn, z))
+        if len(out) == count:
+            break
+    return [(a, f, z) for a, f, z in out]

@@ -1,0 +1,381 @@
+"""The window tracker: all four parameters from one set of exponentially forgotten statistics.
+
+Per sample (``feed``): one numba call predicts, gates the output on its
+innovation, accumulates the statistics of the regressor (``window.py``),
+remembers the sample and advances the states. Heavy work is a queue of
+resumable jobs, one small unit per ``work()`` call:
+
+* **refit** every ``refit_every`` samples: Levenberg-Marquardt steps on the
+  exact window cost over (alpha, ln a1, ln a2, b, offset, free responses);
+* **relinearize** when a1 or a2 moved more than ``RELINEARIZE`` from the point
+  the resonance states were computed at: the remembered samples are replayed
+  into fresh statistics (the nodes fast-forwarded, the resonance states
+  started a settling time early), then swapped in whole;
+* **change test** every ``test_every`` samples: the statistics of the last
+  second are the difference of two snapshots (exact for exponential
+  forgetting); a fit on them against the window's estimate is a
+  likelihood-ratio test. A significant, physically large move restarts the
+  window at the change (the event names the parameters and their moves).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Generator
+
+import numpy as np
+
+from . import window as W
+from .soe import SoeBasis
+
+#: Relative move of a1 or a2 from the linearization point that triggers a replay.
+RELINEARIZE = 0.02
+#: Free-response decay rates (1/s) for streams that start in operation.
+FREE_RATES = (0.03, 0.2, 1.0, 5.0)
+#: Likelihood-ratio threshold of the change test (chi-square with 4 degrees of freedom: p ~ 1e-20).
+CHANGE_LR = 100.0
+#: Smallest relative moves that count as a change (a1, a2, b): below them the window just follows.
+CHANGE_MOVE = {"a1": 0.08, "a2": 0.05, "b": 0.03}
+#: Levenberg-Marquardt steps per window re-fit and per change test.
+REFIT_STEPS = 2
+TEST_STEPS = 4
+#: Parameter names in theta order (then the offset and the free responses).
+NAMES = ("alpha", "a1", "a2", "b", "offset")
+
+
+@dataclass
+class Fit:
+    """The window's last fit: parameters, cost, 1-sigma std, and when."""
+
+    theta: np.ndarray
+    cost: float = math.inf
+    neff: float = 0.0
+    std: dict = field(default_factory=dict)
+    sample: int = 0
+
+
+class WindowTracker:
+    """Exponentially forgotten output-error statistics and the jobs that fit them."""
+
+    def __init__(self, basis: SoeBasis, theta: np.ndarray, *, window_s: float | None, free: bool,
+                 ring: np.ndarray, gate: float, burst: int, stuck: int, alpha_bounds: tuple[float, float],
+                 refit_every: int, test_every: int, detect: bool) -> None:
+        self.basis = basis
+        self.h = basis.h
+        self.q = basis.size
+        self.n_free = len(FREE_RATES) if free else 0
+        self.lay = W.layout(self.q, self.n_free)
+        self.p = self.lay["p"]
+        self.alpha_bounds = alpha_bounds
+        self.refit_every = refit_every
+        self.test_every = test_every
+        self.detect = detect
+        self.theta = np.zeros(5 + self.n_free)
+        self.theta[:len(theta)] = theta
+        self.forget = 1.0 if window_s is None else math.exp(-self.h / window_s)
+        self.ring = ring                 # (2, H) history, owned by the caller (pre-faulted)
+        self.events: list[dict] = []
+        self.relinearizations = 0
+        self.refits = 0
+        self.window_start = 0            # first sample in the statistics (moved by a detected change)
+        self.fit = Fit(theta=self.theta.copy())
+        self._mu = 1e-3
+        self._jobs: list[Generator] = []
+        self._snaps: list[tuple] = []
+        st, S = self._fresh(self.a1, self.a2)
+        sc = st[:W.SC_SIZE]
+        sc[W.SC_GATE] = gate
+        sc[W.SC_BURST] = burst
+        sc[W.SC_GDECAY] = math.exp(-1.0 / max(5.0, 0.02 / self.h))
+        sc[W.SC_STUCKN] = stuck
+        sc[W.SC_SCALEK] = min(1.0, self.h / 0.5)
+        sc[W.SC_MONK] = min(1.0, self.h / 0.2)
+        sc[W.SC_ACC] = 1.0
+        self._install(st, S)
+        self._schedule()
+
+    # ------------------------------------------------------------------ parameters
+    @property
+    def alpha(self) -> float:
+        return float(self.theta[0])
+
+    @property
+    def a1(self) -> float:
+        return math.exp(self.theta[1])
+
+    @property
+    def a2(self) -> float:
+        return math.exp(self.theta[2])
+
+    @property
+    def b(self) -> float:
+        return float(self.theta[3])
+
+    @property
+    def offset(self) -> float:
+        return float(self.theta[4])
+
+    @property
+    def n(self) -> int:
+        """Samples fed."""
+        return int(self.sc[W.SC_N])
+
+    # ------------------------------------------------------------------ state arrays
+    def _fresh(self, a1l: float, a2l: float) -> tuple[np.ndarray, np.ndarray]:
+        """Empty statistics and zero states for a linearization point (weight 1)."""
+        lay, q = self.lay, self.q
+        st = np.zeros(lay["size"])
+        st[W.SC_NQ] = q
+        st[W.SC_NM] = self.n_free
+        st[W.SC_G] = 1.0
+        st[W.SC_FORGET] = self.forget
+        st[W.SC_A1L] = a1l
+        st[W.SC_A2L] = a2l
+        co = st[lay["co"]:lay["ztail"]]
+        co[:q] = self.basis.decay
+        co[q:2 * q] = self.basis.gain
+        W.resonance_coefficients(a1l, a2l, self.h, co[2 * q:2 * q + 18])
+        co[2 * q + 18:] = np.exp(-np.asarray(FREE_RATES[:self.n_free]) * self.h)
+        phi = st[lay["phi"]:lay["m"]]
+        phi[q + W.ONE] = 1.0
+        phi[q + W.FREE:] = 1.0
+        return st, np.zeros((self.p, self.p))
+
+    def _install(self, st: np.ndarray, S: np.ndarray) -> None:
+        lay = self.lay
+        self.st, self.S = st, S
+        self.sc = st[:W.SC_SIZE]
+        self.phi = st[lay["phi"]:lay["m"]]
+        self.m = st[lay["m"]:lay["sy"]]
+        self.sy = st[lay["sy"]:lay["co"]]
+        self.co = st[lay["co"]:lay["ztail"]]
+        self.ztail = st[lay["ztail"]:lay["size"]]
+        self.a1l, self.a2l = float(st[W.SC_A1L]), float(st[W.SC_A2L])
+        self._coefficients()
+        self._snaps = []
+
+    def _coefficients(self) -> None:
+        W.full_coefficients(self.theta, self.a1l, self.a2l, self.basis.lam, self.basis.dx, self.m)
+
+    # ------------------------------------------------------------------ per sample
+    def feed(self, u: float, y: float) -> int:
+        """One sample (u as applied, y measured; NaN y = missing). Returns the kernel's status."""
+        status = W.sample(u, y, self.st, self.S, self.ring)
+        if status >= 8:
+            self._schedule()
+        return status
+
+    def feed_block(self, u: np.ndarray, y: np.ndarray, status: np.ndarray) -> int:
+        """Samples up to the next scheduled job or shift; returns how many were consumed."""
+        used = W.block(u, y, self.st, self.S, self.ring, status)
+        if status[used - 1] >= 8:
+            self._schedule()
+        return used
+
+    @property
+    def prediction(self) -> float:
+        return float(self.sc[W.SC_PRED])
+
+    def _schedule(self) -> None:
+        """Queue the jobs that are due at this sample and set the next due count."""
+        n = self.n
+        if n and n % self.refit_every == 0:
+            self._jobs.append(self._refit_job())
+        if self.detect and n and n % self.test_every == 0:
+            self._snapshot()
+            if len(self._snaps) > 2:
+                self._jobs.append(self._change_job())
+        due = (n // self.refit_every + 1) * self.refit_every
+        if self.detect:
+            due = min(due, (n // self.test_every + 1) * self.test_every)
+        self.sc[W.SC_DUE] = due
+
+    # ------------------------------------------------------------------ background work
+    @property
+    def busy(self) -> bool:
+        return bool(self._jobs)
+
+    def work(self, units: int = 1) -> None:
+        """Run up to ``units`` units of the queued jobs (each unit a few microseconds)."""
+        while units > 0 and self._jobs:
+            units -= 1
+            job = self._jobs[0]
+            if next(job, StopIteration) is StopIteration and job in self._jobs:
+                self._jobs.remove(job)
+
+    def finish(self) -> None:
+        """Run every queued job to completion (block mode)."""
+        while self._jobs:
+            self.work(1 << 30)
+
+    def _true_stats(self) -> Generator:
+        """Full symmetric true-scale copy of the window statistics (one unit)."""
+        g = self.sc[W.SC_G]
+        F = np.empty((self.p, self.p))
+        W.symmetrize(self.S, F, 1.0 / g)
+        yield
+        return F, self.sy / g, self.sc[W.SC_SYY] / g
+
+    def _lm(self, theta: np.ndarray, free: np.ndarray, mu: float, stats: tuple, lin: tuple,
+            out: np.ndarray) -> Generator:
+        """One Levenberg-Marquardt step in three units (Jacobian, normal equations, trial); returns mu.
+
+        ``stats`` = (F, fy, fyy) true-scale, ``lin`` = the linearization point they were built at.
+        """
+        lo, hi = self.alpha_bounds
+        lam, dx = self.basis.lam, self.basis.dx
+        C = np.empty((self.p, theta.size))
+        W.jacobian_coefficients(theta, *lin, lam, dx, C)
+        yield
+        H, g, cost = W.normal_equations(theta, C, *stats)
+        self._last_h = H
+        yield
+        mu = W.lm_trial(theta, free, mu, H, g, cost, *lin, lam, dx, *stats, lo, hi, out)
+        yield
+        return mu
+
+    def _refit_job(self) -> Generator:
+        lin = (self.a1l, self.a2l)
+        stats = yield from self._true_stats()
+        free = np.ones(self.theta.size)
+        cov = np.empty((self.theta.size, self.theta.size))
+        out = np.empty(3)
+        theta = self.theta.copy()
+        for _ in range(REFIT_STEPS):
+            self._mu = yield from self._lm(theta, free, self._mu, stats, lin, out)
+            if out[2] == 0.0 and self._mu > 1e3:
+                break
+        W.covariance(self._last_h, free, cov)
+        yield
+        if not np.all(np.isfinite(theta)) or theta[3] == 0.0 or lin != (self.a1l, self.a2l):
+            return                         # failed, or re-linearized meanwhile: the next refit decides
+        previous = self.theta.copy()
+        self.theta[:] = theta
+        self._coefficients()
+        self.refits += 1
+        neff = float(self.sc[W.SC_NEFF])
+        cost = float(out[1])
+        sigma2 = max(cost, 0.0) / max(neff - theta.size, 1.0)
+        sd = [math.sqrt(abs(cov[i, i]) * sigma2) if math.isfinite(cov[i, i]) else math.inf for i in range(5)]
+        std = {"alpha": sd[0], "a1": sd[1] * self.a1, "a2": sd[2] * self.a2, "b": sd[3], "offset": sd[4]}
+        self.fit = Fit(theta=theta.copy(), cost=cost, neff=neff, std=std, sample=self.n)
+        if abs(self.a1 / self.a1l - 1) > RELINEARIZE or abs(self.a2 / self.a2l - 1) > RELINEARIZE:
+            if not any(j.__name__ == "_relinearize_job" for j in self._jobs):
+                self._jobs.append(self._relinearize_job(None))
+        elif self.events:
+            self._settle_events(previous)
+
+    # ------------------------------------------------------------------ relinearization (replay)
+    def _ring_position(self, index: int) -> int:
+        """Ring slot of the sample with this index (must be remembered)."""
+        size = self.ring.shape[1]
+        count = int(self.sc[W.SC_RCOUNT])
+        oldest = (int(self.sc[W.SC_RPOS]) - count) % size
+        return (oldest + index - int(self.sc[W.SC_RSTART])) % size
+
+    def _relinearize_job(self, start: int | None) -> Generator:
+        """Replay the remembered samples (from ``start``, default the oldest) for the current resonance."""
+        a1, a2 = self.a1, self.a2
+        st, S = self._fresh(a1, a2)
+        lay = self.lay
+        phi = st[lay["phi"]:lay["m"]]
+        oldest = int(self.sc[W.SC_RSTART])
+        begin = max(self.window_start if start is None else start, oldest)
+        # the states are replayed from the oldest remembered sample, exact for the nodes; the
+        # resonance states start at zero, which is exact only at the record's start: otherwise
+        # they are not trusted before two settling times
+        skip = begin - oldest
+        if oldest > 0:
+            skip = max(skip, int(16.0 * a2 / a1 / self.h))
+        phi[:self.q] = self.ztail
+        phi[self.q + W.FREE:] = np.exp(-np.asarray(FREE_RATES[:self.n_free]) * self.h * oldest)
+        chunk = max(4, 6000 // (self.p * self.p // 2 + self.q))
+        i = oldest
+        while i < self.n:                  # the live stream keeps appending: catch up
+            n = min(chunk if i - oldest >= skip else 8 * chunk, self.n - i)
+            W.replay(self.ring, self._ring_position(i), n, max(skip - (i - oldest), 0), st, S)
+            i += n
+            yield
+        # swap: the live scalars and tail, the replayed states and statistics
+        new = self.st.copy()
+        for part in ("phi", "sy", "co"):
+            new[lay[part]:lay[part] + (lay[{"phi": "m", "sy": "co", "co": "ztail"}[part]] - lay[part])] = \
+                st[lay[part]:lay[{"phi": "m", "sy": "co", "co": "ztail"}[part]]]
+        for k in (W.SC_G, W.SC_SYY, W.SC_NEFF, W.SC_A1L, W.SC_A2L):
+            new[k] = st[k]
+        self._install(new, S)
+        self.relinearizations += 1
+
+    # ------------------------------------------------------------------ change detection
+    def _snapshot(self) -> None:
+        self._snaps.append((self.n, self.S.copy(), self.sy.copy(), float(self.sc[W.SC_SYY]),
+                            float(self.sc[W.SC_G])))
+        if len(self._snaps) > 3:
+            self._snaps.pop(0)
+
+    def _change_job(self) -> Generator:
+        """Likelihood-ratio test of the last ~second against the window's estimate."""
+        n0, S0, sy0, syy0, g0 = self._snaps[0]
+        g = float(self.sc[W.SC_G])
+        if g < g0 or self.fit.sample == 0 or self.fit.sample < n0:
+            return
+        R = np.empty_like(self.S)
+        W.symmetrize(self.S - S0, R, 1.0 / g)
+        ry = (self.sy - sy0) / g
+        ryy = (self.sc[W.SC_SYY] - syy0) / g
+        nr = self.n - n0
+        lin = (self.a1l, self.a2l)
+        yield
+        before = W.cost_of(self.theta, *lin, self.basis.lam, self.basis.dx, R, ry, ryy)
+        theta = self.theta.copy()
+        free = np.zeros(theta.size)
+        free[1:5] = 1.0
+        out = np.empty(3)
+        mu = 1e-3
+        for _ in range(TEST_STEPS):
+            mu = yield from self._lm(theta, free, mu, (R, ry, ryy), lin, out)
+        after = out[1]
+        if not (math.isfinite(after) and after > 0.0 and math.isfinite(before)):
+            return
+        lr = (before - after) / (after / max(nr - 4, 1))
+        moves = {"a1": math.exp(theta[1] - self.theta[1]) - 1, "a2": math.exp(theta[2] - self.theta[2]) - 1,
+                 "b": theta[3] / self.theta[3] - 1 if self.theta[3] else 0.0}
+        moved = {k: v for k, v in moves.items() if abs(v) > CHANGE_MOVE[k]}
+        if lr < CHANGE_LR or not moved or lin != (self.a1l, self.a2l):
+            return
+        self._restart_window(n0, S0, sy0, syy0)
+        self.events.append({"t": n0 * self.h, "detected_t": self.n * self.h, "moved": sorted(moved),
+                            "relative_change": {k: float(v) for k, v in moves.items()}, "lr": float(lr),
+                            "settled": False, "_before": self.theta[:4].copy()})
+
+    def _restart_window(self, n0: int, S0: np.ndarray, sy0: np.ndarray, syy0: float) -> None:
+        """Keep only the statistics since sample n0 (just before a detected change).
+
+        The parameters stay: the test's own fit is linearized around the old
+        resonance and unreliable for a large move; the refits and
+        re-linearizations on the post-change window converge from here.
+        """
+        self.S -= S0
+        self.sy -= sy0
+        self.sc[W.SC_SYY] -= syy0
+        self.sc[W.SC_NEFF] = float(self.n - n0)
+        self.window_start = n0
+        self._snaps = []
+        self._jobs = [j for j in self._jobs if j.__name__ == "_refit_job"]
+        self._jobs.append(self._relinearize_job(n0))
+
+    def _settle_events(self, previous: np.ndarray) -> None:
+        """Once the fit after a change has stopped moving, record what moved and by how much."""
+        ev = self.events[-1] if self.events else None
+        if ev is None or ev["settled"]:
+            return
+        step = np.abs(self.theta[:4] - previous[:4]) / np.maximum(np.abs(previous[:4]), 1e-300)
+        if np.all(step < 0.002):
+            before = ev.pop("_before")
+            now = self.theta[:4]
+            change = {"alpha": now[0] / before[0] - 1, "a1": math.exp(now[1] - before[1]) - 1,
+                      "a2": math.exp(now[2] - before[2]) - 1, "b": now[3] / before[3] - 1}
+            ev["relative_change"] = {k: float(v) for k, v in change.items()}
+            ev["moved"] = sorted(k for k, v in change.items() if abs(v) > CHANGE_MOVE.get(k, 0.02))
+            ev["settled"] = True
+            ev["settled_t"] = self.n * self.h

@@ -1,0 +1,577 @@
+"""Numba kernels of the four-parameter tracker: one regressor, one set of window statistics.
+
+The model output is linear in one regressor ``phi`` whose entries depend on
+none of alpha, b or the offset, and on the resonance only through a fixed
+*linearization point* ``(a1l, a2l)``:
+
+========================  =====================================================
+``phi[0:Q]``              SOE nodes ``zeta_i`` of the input (``soe.py``)
+``phi[Q], phi[Q+1]``      ``x = [H2 u, d/dt H2 u]`` at ``(a1l, a2l)`` (ZOH-exact)
+``phi[Q+2], phi[Q+3]``    ``dx/da1`` (sensitivity states)
+``phi[Q+4], phi[Q+5]``    ``dx/da2``
+``phi[Q+6]``              1 (the output offset)
+``phi[Q+7:]``             free responses ``exp(-mu_j t)`` (streams that start in
+                          operation: the unknown past input's fading memory)
+========================  =====================================================
+
+By partial fractions (``kernels.model_coefficients``) the exact output is
+``b (zeta . v_z(alpha, a) + x(a) . v_x(alpha, a))``; with ``x(a) = x(al) +
+dx/da (a - al)`` to first order the output for *any* (alpha, a1, a2, b, c, d)
+near the linearization point is ``phi . m`` with a coefficient vector ``m``
+(``coefficients``). The exponentially forgotten statistics ``S = sum g phi
+phi^T``, ``sy``, ``syy`` therefore give the window's output-error cost, its
+gradient and its Gauss-Newton matrix for all parameters at once, in O(P^2)
+(``lm_step``). The tracker re-linearizes (replays its history) when the
+resonance moves away from the linearization point.
+
+Statistics are accumulated with a growing weight ``g = forget^-n`` (no O(P^2)
+decay per sample) and renormalised; the true statistics are ``S / g``.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .kernels import model_coefficients
+
+CACHE = True
+
+#: Offsets of the regressor entries after the Q SOE nodes.
+X0, S1, S2, ONE, FREE = 0, 2, 4, 6, 7
+
+# indices into the scalar work array ``sc``
+SC_G = 0          # weight of the next sample (forget^-n, renormalised)
+SC_FORGET = 1     # forgetting factor per sample
+SC_SYY = 2        # sum g y^2
+SC_NEFF = 3       # effective number of samples (true scale)
+SC_PRED = 4       # prediction of the latest sample
+SC_SCALE = 5      # robust scale of the innovations (Huber mean of |e|, times 1.25)
+SC_NOISE = 6      # robust scale of the output noise (from second differences)
+SC_Y1 = 7         # previous output
+SC_Y2 = 8         # output before that
+SC_GATE = 9       # gate width in robust scales (0: gate off)
+SC_OUTLIERS = 10  # outputs rejected by the gate (count)
+SC_RUN = 11       # recent rejections (decaying count, ~20 ms)
+SC_BURST = 12     # longest run treated as outliers; longer runs are accepted (a shift)
+SC_SHIFTS = 13    # gate-exceeding outputs accepted because rejections were dense
+SC_STILL = 14     # consecutive samples with an unchanged output
+SC_PMOVE = 15     # |prediction change| accumulated while the output stayed still
+SC_SCALEK = 16    # smoothing factor of the robust scales
+SC_E2 = 17        # short mean of e^2 (live error monitor)
+SC_MONK = 18      # smoothing factor of the live monitor
+SC_ACC = 19       # 1: accumulate statistics, 0: states only (frozen / lead-in)
+SC_NY = 20        # outputs seen (for the noise estimator's start)
+SC_PSTART = 21    # prediction when the output last changed
+SC_RPOS = 22      # next write position in the history ring
+SC_RCOUNT = 23    # samples in the ring
+SC_RSTART = 24    # sample index (since the tracker's start) of the oldest sample in the ring
+SC_NQ = 25        # number of SOE nodes Q
+SC_N = 26         # samples fed
+SC_DUE = 27       # sample count at which the caller has scheduled work (status flag 8)
+SC_STUCK = 28     # 1 while the output is frozen although the prediction moves
+SC_STUCKN = 29    # samples an output must stay frozen to count as stuck
+SC_NM = 30        # number of free-response columns M
+SC_A1L = 31       # linearization point a1 of the resonance states
+SC_A2L = 32       # linearization point a2
+SC_GDECAY = 33    # per-sample decay of the rejection count
+SC_SIZE = 36
+
+
+@njit(cache=CACHE)
+def resonance_step(a1: float, a2: float, h: float, out: np.ndarray) -> None:
+    """ZOH discretization of 1/(1 + a1 s + a2 s^2) in the state [y, y']: out = Phi (4, row major), Gamma (2).
+
+    Closed form of the 2x2 matrix exponential, A = [[0, 1], [-1/a2, -a1/a2]]:
+    e^{Ah} = e^{sh} (c I + k (A - s I)) with s = -a1/(2 a2) and c, k from the
+    discriminant (cos/sin, cosh/sinh, or the repeated-root limit).
+    Gamma = A^-1 (Phi - I) B with B = [0, 1/a2].
+    """
+    s = -a1 / (2.0 * a2)
+    d = s * s - 1.0 / a2
+    if d > 1e-14 * s * s:
+        q = math.sqrt(d)
+        c = math.cosh(q * h)
+        k = math.sinh(q * h) / q
+    elif d < -1e-14 * s * s:
+        q = math.sqrt(-d)
+        c = math.cos(q * h)
+        k = math.sin(q * h) / q
+    else:
+        c = 1.0
+        k = h
+    e = math.exp(s * h)
+    p00 = e * (c - k * s)
+    p01 = e * k
+    p10 = e * k * (-1.0 / a2)
+    p11 = e * (c + k * (-a1 / a2 - s))
+    out[0] = p00
+    out[1] = p01
+    out[2] = p10
+    out[3] = p11
+    # A^-1 = [[-a1, -a2], [1, 0]]; (Phi - I) B = [p01 / a2, (p11 - 1) / a2]
+    b0 = p01 / a2
+    b1 = (p11 - 1.0) / a2
+    out[4] = -a1 * b0 - a2 * b1
+    out[5] = b0
+
+
+@njit(cache=CACHE)
+def resonance_coefficients(a1: float, a2: float, h: float, out: np.ndarray) -> None:
+    """``out[0:6]`` Phi, Gamma at (a1, a2); ``out[6:12]`` and ``out[12:18]`` their a1- and a2-derivatives.
+
+    The derivatives are central differences of the closed form (relative step
+    1e-5: error ~1e-10, far below what a sensitivity needs).
+    """
+    resonance_step(a1, a2, h, out[0:6])
+    tmp_p = np.empty(6)
+    tmp_m = np.empty(6)
+    for j in range(2):
+        da = (a1 if j == 0 else a2) * 1e-5
+        if j == 0:
+            resonance_step(a1 + da, a2, h, tmp_p)
+            resonance_step(a1 - da, a2, h, tmp_m)
+        else:
+            resonance_step(a1, a2 + da, h, tmp_p)
+            resonance_step(a1, a2 - da, h, tmp_m)
+        for i in range(6):
+            out[6 + 6 * j + i] = (tmp_p[i] - tmp_m[i]) / (2.0 * da)
+
+
+@njit(cache=CACHE)
+def advance(phi: np.ndarray, co: np.ndarray, q: int, u: float) -> None:
+    """Advance the regressor by one sample of the zero-order-held input u (exact for the nodes and x).
+
+    ``co`` = [node decays (Q), node gains (Q), resonance Phi, Gamma and their
+    a1-, a2-derivatives (18, ``resonance_coefficients``), free-response decays (M)].
+    """
+    for i in range(q):
+        phi[i] = co[i] * phi[i] + co[q + i] * u
+    r = 2 * q
+    x0 = phi[q]
+    x1 = phi[q + 1]
+    for j in range(2):
+        o = r + 6 + 6 * j
+        s0 = phi[q + 2 + 2 * j]
+        s1 = phi[q + 3 + 2 * j]
+        phi[q + 2 + 2 * j] = co[r] * s0 + co[r + 1] * s1 + co[o] * x0 + co[o + 1] * x1 + co[o + 4] * u
+        phi[q + 3 + 2 * j] = co[r + 2] * s0 + co[r + 3] * s1 + co[o + 2] * x0 + co[o + 3] * x1 + co[o + 5] * u
+    phi[q] = co[r] * x0 + co[r + 1] * x1 + co[r + 4] * u
+    phi[q + 1] = co[r + 2] * x0 + co[r + 3] * x1 + co[r + 5] * u
+    f = r + 18
+    for j in range(co.shape[0] - f):
+        phi[q + FREE + j] *= co[f + j]
+
+
+@njit(cache=CACHE)
+def coefficients(alpha: float, a1: float, a2: float, a1l: float, a2l: float, lam: np.ndarray,
+                 dx: float, k: np.ndarray, dk: np.ndarray) -> None:
+    """Unit-gain coefficient vector k (output = b phi . k) and dk/dalpha, for (alpha, a1, a2).
+
+    Only the model part (first Q + 6 entries) is written; the offset and free
+    responses are separate linear parameters.
+    """
+    q = lam.shape[0]
+    v = np.empty(q + 2)
+    dv = np.empty(q + 2)
+    model_coefficients(alpha, lam, dx, a1, a2, v, dv)
+    for i in range(q + 2):
+        k[i] = v[i]
+        dk[i] = dv[i]
+    d1 = a1 - a1l
+    d2 = a2 - a2l
+    for j in range(2):
+        k[q + 2 + j] = d1 * v[q + j]
+        dk[q + 2 + j] = d1 * dv[q + j]
+        k[q + 4 + j] = d2 * v[q + j]
+        dk[q + 4 + j] = d2 * dv[q + j]
+
+
+@njit(cache=CACHE)
+def full_coefficients(theta: np.ndarray, a1l: float, a2l: float, lam: np.ndarray, dx: float,
+                      m: np.ndarray) -> None:
+    """m such that the model output is phi . m; theta = [alpha, ln a1, ln a2, b, c, d_1..d_M]."""
+    q = lam.shape[0]
+    p = m.shape[0]
+    k = np.zeros(p)
+    dk = np.zeros(p)
+    coefficients(theta[0], math.exp(theta[1]), math.exp(theta[2]), a1l, a2l, lam, dx, k, dk)
+    b = theta[3]
+    for i in range(q + ONE):
+        m[i] = b * k[i]
+    for i in range(q + ONE, p):
+        m[i] = theta[4 + i - q - ONE]
+
+
+def layout(q: int, n_free: int) -> dict:
+    """Offsets of the parts of the flat state array ``st`` (one array: fewer arguments per numba call).
+
+    ``st`` = [scalars (SC_SIZE) | regressor phi (P) | coefficients m (P) | sy (P) |
+    co (2Q + 18 + M: node decays and gains, resonance, free-response decays) |
+    ztail (Q: node states before the oldest remembered sample)].
+    """
+    p = q + FREE + n_free
+    o = {"sc": 0, "phi": SC_SIZE}
+    o["m"] = o["phi"] + p
+    o["sy"] = o["m"] + p
+    o["co"] = o["sy"] + p
+    o["ztail"] = o["co"] + 2 * q + 18 + n_free
+    o["size"] = o["ztail"] + q
+    o["p"] = p
+    return o
+
+
+FAST = {"contract", "reassoc", "arcp"}   # no "nnan": the kernels test for NaN
+
+
+@njit(cache=CACHE, fastmath=FAST)
+def _accumulate(y: float, phi: np.ndarray, S: np.ndarray, sy: np.ndarray, sc: np.ndarray) -> None:
+    """S += g phi phi^T (upper triangle), sy += g phi y, with the growing weight g = forget^-n."""
+    p = phi.shape[0]
+    f = sc[SC_FORGET]
+    g = sc[SC_G]
+    if f < 1.0:
+        g = g / f
+        if g > 1e100:
+            _rescale(S, sy, sc, 1.0 / g)
+            g = 1.0
+        sc[SC_G] = g
+    for i in range(p):
+        gi = g * phi[i]
+        if gi != 0.0:
+            sy[i] += gi * y
+            row = S[i]
+            for j in range(i, p):
+                row[j] += gi * phi[j]
+    sc[SC_SYY] += g * y * y
+    sc[SC_NEFF] = sc[SC_NEFF] * f + 1.0
+
+
+@njit(cache=CACHE, fastmath=FAST)
+def _monitor(y: float, pred: float, sc: np.ndarray) -> None:
+    """Noise floor (second differences), frozen-output detector."""
+    if sc[SC_NY] >= 2.0:
+        d2 = abs(y - 2.0 * sc[SC_Y1] + sc[SC_Y2]) * 0.5117    # sqrt(pi/2)/sqrt(6): white noise
+        nz = sc[SC_NOISE]
+        if nz > 0.0:
+            sc[SC_NOISE] = nz + sc[SC_SCALEK] * (min(d2, 3.0 * nz) - nz)
+        else:
+            sc[SC_NOISE] = d2
+    if sc[SC_NY] >= 1.0 and y == sc[SC_Y1]:
+        sc[SC_STILL] += 1.0
+        sc[SC_PMOVE] = max(sc[SC_PMOVE], abs(pred - sc[SC_PSTART]))
+        sc[SC_STUCK] = 1.0 if (sc[SC_STILL] >= sc[SC_STUCKN]
+                               and sc[SC_PMOVE] > 5.0 * sc[SC_NOISE] + 1e-300) else 0.0
+    else:
+        sc[SC_STILL] = 0.0
+        sc[SC_PMOVE] = 0.0
+        sc[SC_PSTART] = pred
+        sc[SC_STUCK] = 0.0
+    sc[SC_Y2] = sc[SC_Y1]
+    sc[SC_Y1] = y
+    sc[SC_NY] += 1.0
+
+
+@njit(cache=CACHE, fastmath=FAST)
+def sample(u: float, y: float, st: np.ndarray, S: np.ndarray, ring: np.ndarray) -> int:
+    """One sample: predict, gate, accumulate, monitor, remember, advance. Returns a status code.
+
+    Low bits: 0 accepted, 1 output missing (NaN), 2 rejected as an outlier, 3
+    beyond the gate but accepted (rejections were dense: a shift or a change,
+    not an outlier), 4 not accumulated (statistics paused). Flag 8: the caller's
+    scheduled work is due (``sc[SC_DUE]`` reached). The input and the output as
+    used (NaN when not accumulated) go into the history ``ring`` (2 x H).
+    """
+    sc = st[:SC_SIZE]
+    q = int(sc[SC_NQ])
+    p = q + FREE + int(sc[SC_NM])
+    o = SC_SIZE
+    phi = st[o:o + p]
+    m = st[o + p:o + 2 * p]
+    sy = st[o + 2 * p:o + 3 * p]
+    c0 = o + 3 * p
+    co = st[c0:c0 + 2 * q + 18 + int(sc[SC_NM])]
+    ztail = st[c0 + co.shape[0]:c0 + co.shape[0] + q]
+    pred = 0.0
+    for i in range(p):
+        pred += phi[i] * m[i]
+    sc[SC_PRED] = pred
+    status = 0
+    if y != y:
+        status = 1
+    else:
+        e = y - pred
+        scale = sc[SC_SCALE]
+        _monitor(y, pred, sc)
+        gate = sc[SC_GATE]
+        sc[SC_RUN] *= sc[SC_GDECAY]
+        if gate > 0.0 and scale > 0.0 and abs(e) > gate * scale:
+            # isolated outliers are rejected; dense rejections (a burst longer than SC_BURST within
+            # ~20 ms, or a model that no longer fits) are accepted: a shift or a change is followed
+            if sc[SC_RUN] < sc[SC_BURST]:
+                sc[SC_OUTLIERS] += 1.0
+                status = 2
+            else:
+                sc[SC_SHIFTS] += 1.0
+                status = 3
+            sc[SC_RUN] += 1.0
+        if status != 2:
+            a = abs(e)
+            if scale > 0.0:
+                sc[SC_SCALE] = scale + sc[SC_SCALEK] * (1.25 * min(a, 4.0 * scale) - scale)
+            else:
+                sc[SC_SCALE] = 1.25 * a
+            sc[SC_E2] += sc[SC_MONK] * (e * e - sc[SC_E2])
+            if sc[SC_ACC] > 0.0 and sc[SC_STUCK] == 0.0:
+                _accumulate(y, phi, S, sy, sc)
+            elif status == 0:
+                status = 4
+    _remember(u, y if status == 0 or status == 3 else math.nan, co, q, sc, ring, ztail)
+    advance(phi, co, q, u)
+    sc[SC_N] += 1.0
+    if sc[SC_N] >= sc[SC_DUE]:
+        status += 8
+    return status
+
+
+@njit(cache=CACHE)
+def _remember(u: float, y: float, co: np.ndarray, q: int, sc: np.ndarray, ring: np.ndarray,
+              ztail: np.ndarray) -> None:
+    size = ring.shape[1]
+    pos = int(sc[SC_RPOS])
+    if sc[SC_RCOUNT] >= size:   # the oldest sample leaves: the tail state absorbs it
+        old = ring[0, pos]
+        for i in range(q):
+            ztail[i] = co[i] * ztail[i] + co[q + i] * old
+        sc[SC_RSTART] += 1.0
+    else:
+        sc[SC_RCOUNT] += 1.0
+    ring[0, pos] = u
+    ring[1, pos] = y
+    pos += 1
+    sc[SC_RPOS] = 0.0 if pos == size else float(pos)
+
+
+@njit(cache=CACHE)
+def _rescale(S: np.ndarray, sy: np.ndarray, sc: np.ndarray, factor: float) -> None:
+    p = sy.shape[0]
+    for i in range(p):
+        sy[i] *= factor
+        for j in range(i, p):
+            S[i, j] *= factor
+    sc[SC_SYY] *= factor
+
+
+@njit(cache=CACHE)
+def block(u: np.ndarray, y: np.ndarray, st: np.ndarray, S: np.ndarray, ring: np.ndarray,
+          status: np.ndarray) -> int:
+    """Samples until the end or due work (flag 8); returns how many were consumed."""
+    for k in range(u.shape[0]):
+        s = sample(u[k], y[k], st, S, ring)
+        status[k] = s
+        if s >= 8:
+            return k + 1
+    return u.shape[0]
+
+
+@njit(cache=CACHE)
+def symmetrize(S: np.ndarray, out: np.ndarray, scale: float) -> None:
+    """out = scale * (full symmetric matrix whose upper triangle is S)."""
+    p = S.shape[0]
+    for i in range(p):
+        for j in range(i, p):
+            v = S[i, j] * scale
+            out[i, j] = v
+            out[j, i] = v
+
+
+@njit(cache=CACHE)
+def cost_of(theta: np.ndarray, a1l: float, a2l: float, lam: np.ndarray, dx: float, F: np.ndarray,
+            fy: np.ndarray, fyy: float) -> float:
+    """Window cost sum w (y - phi . m(theta))^2 from full (symmetric) statistics F, fy, fyy."""
+    p = fy.shape[0]
+    m = np.empty(p)
+    full_coefficients(theta, a1l, a2l, lam, dx, m)
+    fm = np.dot(F, m)
+    return fyy - 2.0 * np.dot(m, fy) + np.dot(m, fm)
+
+
+@njit(cache=CACHE)
+def _resonance_derivatives(alpha: float, lam: np.ndarray, dx: float, a1: float, a2: float,
+                           va1: np.ndarray, va2: np.ndarray) -> None:
+    """d v / d a1 and d v / d a2 of ``kernels.model_coefficients`` (analytic).
+
+    v_i = w_i A_i with A_i = 1 / (a2 lam_i^2 - a1 lam_i + 1), so dA/da1 = lam A^2 and
+    dA/da2 = -lam^2 A^2; the last two entries follow from their sums.
+    """
+    q = lam.shape[0]
+    s = math.sin(math.pi * alpha) / math.pi
+    lo = lam[1] * math.exp(-dx)
+    w0 = s * dx * lo ** (1.0 - alpha) / (1.0 - math.exp(-(1.0 - alpha) * dx))
+    t1 = 0.0
+    t2 = 0.0
+    sa = 0.0
+    sl = 0.0
+    sl2 = 0.0
+    for i in range(q):
+        li = lam[i]
+        w = w0 if i == 0 else s * dx * li ** (1.0 - alpha)
+        a = 1.0 / (a2 * li * li - a1 * li + 1.0)
+        aa = a * a
+        va1[i] = w * li * aa
+        va2[i] = -w * li * li * aa
+        c = a2 * li - a1
+        t1 += w * (li * aa * c - a)
+        t2 += w * (-li * li * aa * c + a * li)
+        sa += w * a
+        sl += w * li * aa
+        sl2 += w * li * li * aa
+    va1[q] = t1
+    va2[q] = t2
+    va1[q + 1] = -a2 * sl
+    va2[q + 1] = -sa + a2 * sl2
+
+
+@njit(cache=CACHE)
+def jacobian_coefficients(theta: np.ndarray, a1l: float, a2l: float, lam: np.ndarray, dx: float,
+                          C: np.ndarray) -> None:
+    """Columns of C: d(phi . m)/d theta_j as coefficient vectors over phi (analytic)."""
+    q = lam.shape[0]
+    p = C.shape[0]
+    n = C.shape[1]
+    a1 = math.exp(theta[1])
+    a2 = math.exp(theta[2])
+    b = theta[3]
+    v = np.empty(q + 2)
+    dv = np.empty(q + 2)
+    va1 = np.empty(q + 2)
+    va2 = np.empty(q + 2)
+    model_coefficients(theta[0], lam, dx, a1, a2, v, dv)
+    _resonance_derivatives(theta[0], lam, dx, a1, a2, va1, va2)
+    C[:, :] = 0.0
+    d1 = a1 - a1l
+    d2 = a2 - a2l
+    for i in range(q + 2):
+        C[i, 0] = b * dv[i]
+        C[i, 1] = b * a1 * va1[i]
+        C[i, 2] = b * a2 * va2[i]
+        C[i, 3] = v[i]
+    for j in range(2):      # the first-order resonance slots: d1 v_x, d2 v_x
+        C[q + 2 + j, 0] = b * d1 * dv[q + j]
+        C[q + 4 + j, 0] = b * d2 * dv[q + j]
+        C[q + 2 + j, 1] = b * a1 * (v[q + j] + d1 * va1[q + j])
+        C[q + 4 + j, 1] = b * a1 * d2 * va1[q + j]
+        C[q + 2 + j, 2] = b * a2 * d1 * va2[q + j]
+        C[q + 4 + j, 2] = b * a2 * (v[q + j] + d2 * va2[q + j])
+        C[q + 2 + j, 3] = d1 * v[q + j]
+        C[q + 4 + j, 3] = d2 * v[q + j]
+    for j in range(4, n):
+        C[q + ONE + j - 4, j] = 1.0
+
+
+@njit(cache=CACHE)
+def normal_equations(theta: np.ndarray, C: np.ndarray, F: np.ndarray, fy: np.ndarray, fyy: float) -> tuple:
+    """(J^T J, J^T r, cost) of the window at theta from its Jacobian coefficients C.
+
+    The model coefficients are a combination of C's columns (the gain column
+    is the unit-gain vector k, the offset and free responses are unit
+    vectors): m = C[:, 3:] theta[3:], so one product F C serves everything.
+    """
+    FC = np.dot(F, np.ascontiguousarray(C))
+    lin = np.ascontiguousarray(theta[3:])
+    m = np.dot(np.ascontiguousarray(C[:, 3:]), lin)
+    fm = np.dot(np.ascontiguousarray(FC[:, 3:]), lin)
+    cost = fyy - 2.0 * np.dot(m, fy) + np.dot(m, fm)
+    return np.dot(np.ascontiguousarray(C.T), FC), np.dot(np.ascontiguousarray(C.T), fy - fm), cost
+
+
+@njit(cache=CACHE)
+def lm_trial(theta: np.ndarray, free: np.ndarray, mu: float, H: np.ndarray, g: np.ndarray, cost: float,
+             a1l: float, a2l: float, lam: np.ndarray, dx: float, F: np.ndarray, fy: np.ndarray, fyy: float,
+             lo: float, hi: float, out: np.ndarray) -> float:
+    """The damped Gauss-Newton step; theta updated in place if the window cost drops.
+
+    ``free[j]`` = 1 lets parameter j move. ``out`` = [cost before, cost
+    after, accepted]. Returns the next damping ``mu``.
+    """
+    n = theta.shape[0]
+    A = H.copy()
+    r = g.copy()
+    for i in range(n):
+        if free[i] == 0.0:
+            A[i, :] = 0.0
+            A[:, i] = 0.0
+            A[i, i] = 1.0
+            r[i] = 0.0
+        else:
+            A[i, i] += mu * H[i, i] + 1e-300
+    out[0] = cost
+    out[1] = cost
+    out[2] = 0.0
+    d = np.sqrt(np.abs(np.diag(A))) + 1e-300
+    An = A / np.outer(d, d)
+    if not (np.all(np.isfinite(An)) and np.all(np.isfinite(r))):
+        return min(mu * 10.0, 1e8)
+    step = np.linalg.solve(An, r / d) / d
+    if not np.all(np.isfinite(step)):
+        return min(mu * 10.0, 1e8)
+    trial = theta.copy()
+    for i in range(n):
+        s = step[i]
+        if i == 1 or i == 2:
+            s = min(max(s, -0.3), 0.3)
+        trial[i] = theta[i] + s
+    trial[0] = min(max(trial[0], lo), hi)
+    c_new = cost_of(trial, a1l, a2l, lam, dx, F, fy, fyy)
+    if c_new == c_new and c_new < cost:
+        theta[:] = trial
+        out[1] = c_new
+        out[2] = 1.0
+        return max(mu / 3.0, 1e-7)
+    return min(mu * 4.0, 1e8)
+
+
+@njit(cache=CACHE)
+def covariance(H: np.ndarray, free: np.ndarray, cov: np.ndarray) -> None:
+    """inv(J^T J) over the free parameters (unscaled: times sigma^2); inf where it is singular."""
+    n = H.shape[0]
+    A = H.copy()
+    for i in range(n):
+        if free[i] == 0.0:
+            A[i, :] = 0.0
+            A[:, i] = 0.0
+            A[i, i] = 1.0
+    d = np.sqrt(np.abs(np.diag(A))) + 1e-300
+    An = A / np.outer(d, d)
+    cov[:, :] = np.inf
+    if not np.all(np.isfinite(An)):
+        return
+    w = np.linalg.eigvalsh(An)
+    if w[0] > 1e-13 * w[n - 1]:
+        cov[:, :] = np.linalg.inv(An) / np.outer(d, d)
+
+
+@njit(cache=CACHE, fastmath=FAST)
+def replay(ring: np.ndarray, p0: int, n: int, skip: int, st: np.ndarray, S: np.ndarray) -> None:
+    """Re-accumulate n remembered samples from ring position p0 (wrapping); the first ``skip`` only advance.
+
+    No gate, no prediction: the ring holds the outputs as they were used (NaN
+    where they were not), so a replay reproduces the accepted samples exactly
+    for a new linearization point.
+    """
+    sc = st[:SC_SIZE]
+    q = int(sc[SC_NQ])
+    p = q + FREE + int(sc[SC_NM])
+    o = SC_SIZE
+    phi = st[o:o + p]
+    sy = st[o + 2 * p:o + 3 * p]
+    c0 = o + 3 * p
+    co = st[c0:c0 + 2 * q + 18 + int(sc[SC_NM])]
+    size = ring.shape[1]
+    for k in range(n):
+        pos = (p0 + k) % size
+        y = ring[1, pos]
+        if k >= skip and y == y:
+            _accumulate(y, phi, S, sy, sc)
+        advance(phi, co, q, ring[0, pos])
