@@ -1,0 +1,321 @@
+"""Online estimator over randomized scenario families: the current code against a baseline commit.
+
+Usage (from the repository root, with the package installed or ``PYTHONPATH=.``)::
+
+    python bench/bench_online_scenarios.py [--plants 20] [--families payload,drift]
+        [--baseline 773e268|none] [--mode block|single] [--kwargs '{"window_s": 5}']
+        [--out bench/results/online_scenarios.json]
+
+What it does:
+
+1. draws ``--plants`` scenarios per family from ``hil_sim.scenarios`` (seeds
+   0..plants-1, so every run sees the same plants) and saves them as npz in a
+   temporary directory;
+2. runs ``OnlineEstimator(dt, **kwargs)`` of this working tree over them in
+   this process and, at the same time, the ``--baseline`` revision's
+   estimator in a subprocess whose PYTHONPATH is
+   ``git archive <rev> creep_online`` unpacked in a temporary directory (that
+   worker imports neither hil_sim nor this tree's creep_online; it reports
+   which file it imported). Feeding: ``update_block`` in chunks of 0.1 s
+   (at most 1000 samples; ``--mode single``: ``update()`` per sample), the
+   estimate recorded after every chunk. An exception ends that run and is
+   recorded as a failure with its message;
+3. prints one JSON document (also written to ``--out``): per estimator and
+   family, the fraction of runs ending within the tolerances (alpha 2 %,
+   b 3 %, a1 5 %, a2 5 %; each and all four; close_modes against
+   ``truth_best``; failed runs count as outside), median/p90 of the final
+   relative errors, the time to enter and stay within all four tolerances
+   after ``change_time`` (re-convergence; inf if never) and from the start
+   (convergence), the scatter over the last 3 s (median over runs of the std
+   of each relative error), and the fraction of runs reporting quality
+   "good" while outside ("dishonest good").
+
+Lengths and rates (hil_sim.scenarios): 12-16 s at 10 kHz (strong_creep also at
+1-2 kHz), payload and stiffness 16 s at 10 kHz, drift 60 s at 2 kHz,
+controller, close_modes and mid_operation 12 s at 10 kHz. With 20 plants per
+family generation takes about a minute and both estimators together a few
+more on the shared 2-core machine (one core each).
+"""
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")   # one core per estimator: current and baseline run side by side
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import math  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+PARAMS = ("alpha", "a1", "a2", "b")
+#: Final relative error tolerances for "within".
+TOL = {"alpha": 0.02, "b": 0.03, "a1": 0.05, "a2": 0.05}
+#: Trajectory sampling (s): also the feeding chunk, at most MAX_CHUNK samples.
+TRAJ_DT = 0.1
+MAX_CHUNK = 1000
+#: Scatter window at the end of the record (s).
+SCATTER_S = 3.0
+
+
+# --------------------------------------------------------------------------- worker (both processes)
+def chunk_size(h: float) -> int:
+    """Samples per feeding chunk: TRAJ_DT of data, at most MAX_CHUNK."""
+    return max(1, min(MAX_CHUNK, int(round(TRAJ_DT / h))))
+
+
+def run_estimator(u: np.ndarray, y: np.ndarray, h: float, mode: str, kwargs: dict) -> dict:
+    """Feed one record to ``OnlineEstimator``; trajectory after each chunk, final estimate, or the error."""
+    from creep_online.online import OnlineEstimator
+    traj: dict[str, list] = {k: [] for k in ("samples", *PARAMS)}
+    out: dict = {"error": None, "quality": None, "phase": None, "final": None, "traj": traj}
+    start = time.perf_counter()
+    try:
+        est = OnlineEstimator(h, **kwargs)
+        step = chunk_size(h)
+        for k in range(0, u.size, step):
+            _feed(est, u[k:k + step], y[k:k + step], mode)
+            e = est.estimate
+            traj["samples"].append(min(k + step, u.size))
+            for p in PARAMS:
+                traj[p].append(float(getattr(e, p)))
+        e = est.estimate
+        out.update(quality=e.quality, phase=e.phase, final={p: float(getattr(e, p)) for p in PARAMS})
+    except Exception as exc:  # the estimator under test may fail in any way: that is a result
+        out["error"] = f"{type(exc).__name__}: {exc}"
+    out["elapsed_s"] = time.perf_counter() - start
+    return out
+
+
+def _feed(est, u: np.ndarray, y: np.ndarray, mode: str) -> None:
+    """One chunk through update_block, or update() per sample."""
+    if mode == "block":
+        est.update_block(u, y)
+        return
+    for a, b in zip(u.tolist(), y.tolist()):
+        est.update(a, b)
+
+
+def run_files(files: list[Path], mode: str, kwargs: dict) -> list[dict]:
+    """run_estimator over saved scenarios (numpy only: usable without hil_sim)."""
+    results = []
+    for f in files:
+        with np.load(f) as z:
+            h = json.loads(str(z["meta"]))["h"]
+            results.append({"file": f.name, **run_estimator(z["u"], z["y"], h, mode, kwargs)})
+    return results
+
+
+def worker_main(argv: list[str]) -> None:
+    """Subprocess entry: ``--worker <spec.json>``; writes results next to it and names the package it ran."""
+    spec = json.loads(Path(argv[0]).read_text())
+    results = run_files([Path(f) for f in spec["files"]], spec["mode"], spec["kwargs"])
+    import creep_online
+    report = {"results": results, "package": creep_online.__file__, "hil_sim_imported": "hil_sim" in sys.modules}
+    Path(spec["out"]).write_text(json.dumps(report))
+
+
+# --------------------------------------------------------------------------- scenarios and truth
+def generate(families: list[str], plants: int, folder: Path) -> dict[str, dict]:
+    """Make and save the scenarios; keep for each only the truth at the chunk ends (the metrics' needs)."""
+    from hil_sim.scenarios import make
+    truth = {}
+    for fam in families:
+        for seed in range(plants):
+            scen = make(fam, seed)
+            name = f"{fam}_{seed:03d}.npz"
+            scen.save(folder / name)
+            step = chunk_size(scen.h)
+            ends = np.minimum(np.arange(step, scen.u.size + step, step), scen.u.size)
+            truth[name] = {"family": fam, "seed": seed, "t": ends * scen.h, "change_time": scen.change_time,
+                           "at": scen.truth_at(ends - 1), "final": scen.final_truth, "h": scen.h}
+    return truth
+
+
+def baseline_tree(rev: str, folder: Path) -> Path:
+    """``git archive rev creep_online`` unpacked into folder (the baseline's PYTHONPATH)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "creep_online"],
+                             check=True, capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(folder)], input=archive, check=True)
+    return folder
+
+
+def start_baseline(rev: str, files: list[Path], mode: str, kwargs: dict, work: Path) -> tuple[subprocess.Popen, Path]:
+    """Launch the baseline worker; returns the process and the path its report will be written to."""
+    tree = baseline_tree(rev, work / "baseline_src")
+    spec = work / "baseline_spec.json"
+    out = work / "baseline_out.json"
+    spec.write_text(json.dumps({"files": [str(f) for f in files], "mode": mode, "kwargs": kwargs, "out": str(out)}))
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    with open(work / "baseline_stderr.txt", "w") as err:  # a file, not a pipe: nobody reads it until the end
+        proc = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--worker", str(spec)],
+                                env=env, cwd=str(work), stderr=err)
+    return proc, out
+
+
+# --------------------------------------------------------------------------- metrics
+def rel_errors(est: dict[str, np.ndarray | float], truth: dict) -> dict[str, np.ndarray]:
+    """|estimate - truth| / |truth| per parameter (a wrong sign of b gives ~2)."""
+    return {p: np.abs(np.asarray(est[p]) - truth[p]) / np.abs(truth[p]) for p in PARAMS}
+
+
+def settle_time(t: np.ndarray, inside: np.ndarray, t0: float) -> float:
+    """Time after t0 at which the trajectory enters the tolerances for good (inf if it is outside at the end)."""
+    after = t > t0
+    ok = inside[after]
+    if ok.size == 0 or not ok[-1]:
+        return math.inf
+    bad = np.flatnonzero(~ok)
+    first = 0 if bad.size == 0 else bad[-1] + 1
+    return float(t[after][first] - t0)
+
+
+def run_metrics(res: dict, tr: dict) -> dict:
+    """Per-run numbers: final errors and within-flags, (re)convergence times, end scatter, honesty."""
+    row = {"seed": tr["seed"], "error": res["error"], "quality": res["quality"]}
+    if res["error"] is not None:
+        return row
+    final = rel_errors(res["final"], tr["final"])
+    within = {p: bool(final[p] <= TOL[p]) for p in PARAMS}
+    traj = {p: np.asarray(res["traj"][p]) for p in PARAMS}
+    errs = rel_errors(traj, tr["at"])
+    inside = np.logical_and.reduce([errs[p] <= TOL[p] for p in PARAMS])
+    t = tr["t"][:inside.size]
+    last = t >= t[-1] - SCATTER_S
+    row.update(final_rel_error={p: float(final[p]) for p in PARAMS}, within=within,
+               within_all=all(within.values()), convergence_s=settle_time(t, inside, 0.0),
+               scatter={p: float(np.std(errs[p][last])) for p in PARAMS},
+               dishonest_good=res["quality"] == "good" and not all(within.values()))
+    if tr["change_time"] is not None:
+        row["reconvergence_s"] = settle_time(t, inside, tr["change_time"])
+    return row
+
+
+def _dist(x: list[float]) -> dict:
+    """Median and p90 (p90 is an observed value, so inf-safe), or None for no data."""
+    if not x:
+        return None
+    return {"median": float(np.median(x)), "p90": float(np.percentile(x, 90, method="higher"))}
+
+
+def family_metrics(rows: list[dict]) -> dict:
+    """Aggregate the per-run rows of one family (failed runs count as outside the tolerances)."""
+    ok = [r for r in rows if r["error"] is None]
+    n = len(rows)
+    out = {"runs": n, "failures": n - len(ok),
+           "within": {p: sum(r["within"][p] for r in ok) / n for p in PARAMS},
+           "within_all": sum(r["within_all"] for r in ok) / n,
+           "final_rel_error": {p: _dist([r["final_rel_error"][p] for r in ok]) for p in PARAMS},
+           "scatter_last_3s_median": {p: float(np.median([r["scatter"][p] for r in ok])) if ok else None
+                                      for p in PARAMS},
+           "convergence_s": _dist([r["convergence_s"] for r in ok]),
+           "dishonest_good": sum(r["dishonest_good"] for r in ok) / n,
+           "quality": {q: sum(r["quality"] == q for r in ok) for q in sorted({r["quality"] for r in ok})},
+           "failure_messages": sorted({r["error"] for r in rows if r["error"] is not None})}
+    if any("reconvergence_s" in r for r in ok):
+        times = [r["reconvergence_s"] for r in ok]
+        out["reconvergence_s"] = {**_dist(times), "never": sum(math.isinf(x) for x in times) / n}
+    out["runs_detail"] = rows
+    return out
+
+
+def summarize(results: list[dict], truth: dict[str, dict]) -> dict:
+    """Per-family metrics from one estimator's results."""
+    rows: dict[str, list] = {}
+    for res in results:
+        tr = truth[res["file"]]
+        rows.setdefault(tr["family"], []).append(run_metrics(res, tr))
+    return {fam: family_metrics(r) for fam, r in rows.items()}
+
+
+def _jsonable(x):
+    """inf/nan as strings so the document is strict JSON."""
+    if isinstance(x, float) and not math.isfinite(x):
+        return str(x)
+    if isinstance(x, dict):
+        return {k: _jsonable(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_jsonable(v) for v in x]
+    return x
+
+
+# --------------------------------------------------------------------------- main
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--plants", type=int, default=20, help="scenarios per family (seeds 0..plants-1)")
+    ap.add_argument("--families", default=None, help="comma-separated subset of hil_sim.scenarios.FAMILIES")
+    ap.add_argument("--baseline", default="773e268", help="git revision of the baseline estimator, or 'none'")
+    ap.add_argument("--mode", choices=("block", "single"), default="block")
+    ap.add_argument("--kwargs", default="{}", help="JSON dict passed to OnlineEstimator(dt, **kwargs)")
+    ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "online_scenarios.json"))
+    return ap.parse_args(argv)
+
+
+def git_head() -> str:
+    """Commit of this tree (with '-dirty' when creep_online has uncommitted changes)."""
+    rev = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
+    dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "creep_online"],
+                           capture_output=True, text=True).stdout.strip()
+    return rev.stdout.strip() + ("-dirty" if dirty else "")
+
+
+def main(argv: list[str] | None = None) -> dict:
+    """Generate, run current and baseline side by side, summarize, print and write the JSON."""
+    sys.path.insert(0, str(ROOT))
+    from hil_sim.scenarios import FAMILIES
+    args = parse_args(argv)
+    families = args.families.split(",") if args.families else list(FAMILIES)
+    unknown = set(families) - set(FAMILIES)
+    if unknown:
+        raise SystemExit(f"unknown families {sorted(unknown)}; choose from {', '.join(FAMILIES)}")
+    kwargs = json.loads(args.kwargs)
+    start = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="online_scenarios_") as tmp:
+        work = Path(tmp)
+        (work / "scenarios").mkdir()
+        truth = generate(families, args.plants, work / "scenarios")
+        files = sorted((work / "scenarios").glob("*.npz"))
+        gen_s = time.perf_counter() - start
+        base = None if args.baseline == "none" else start_baseline(args.baseline, files, args.mode, kwargs, work)
+        current = run_files(files, args.mode, kwargs)
+        run_s = time.perf_counter() - start - gen_s
+        doc = {"config": {"plants": args.plants, "families": families, "mode": args.mode, "kwargs": kwargs,
+                          "tolerances": TOL, "traj_dt_s": TRAJ_DT, "scatter_s": SCATTER_S},
+               "current": {"revision": git_head(), "families": summarize(current, truth),
+                           "run_s": run_s}}
+        if base is not None:
+            doc["baseline"] = collect_baseline(*base, args.baseline, truth)
+    doc["generate_s"] = gen_s
+    doc["elapsed_s"] = time.perf_counter() - start
+    text = json.dumps(_jsonable(doc), indent=1)
+    print(text)
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(text + "\n")
+    return doc
+
+
+def collect_baseline(proc: subprocess.Popen, out: Path, rev: str, truth: dict) -> dict:
+    """Wait for the baseline worker and summarize its results (or report why it produced none)."""
+    proc.wait()
+    if proc.returncode != 0 or not out.exists():
+        err = (out.parent / "baseline_stderr.txt").read_text()
+        return {"revision": rev, "error": f"worker exited with {proc.returncode}: {err[-2000:]}"}
+    report = json.loads(out.read_text())
+    return {"revision": rev, "package": report["package"], "hil_sim_imported": report["hil_sim_imported"],
+            "run_s": sum(r["elapsed_s"] for r in report["results"]),
+            "families": summarize(report["results"], truth)}
+
+
+if __name__ == "__main__":
+    if sys.argv[1:2] == ["--worker"]:
+        worker_main(sys.argv[2:])
+    else:
+        main()
