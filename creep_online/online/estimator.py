@@ -17,10 +17,10 @@ Phases (``OnlineEstimate.phase``):
     window; ``estimate.events`` lists them), and a re-linearization by replay
     when the resonance moves.
 
-Work per ``update()``: one sample of O(P^2) statistics (~1-2 us) plus at most
-``work_units`` units of background work (~3 us each). The default unit count is
-``max(1, round(dt / 400 us))``: one unit at 10 kHz, more at low rates, so the
-background work stays below ~1 % of the sample period's CPU time.
+Work per ``update()``: one sample of O(P^2) statistics (~1 us) plus at most
+``work_units`` units of background work (a few us each). The default unit count
+is ``max(1, floor(dt / 100 us))``: one unit at 10 kHz, 10 at 1 kHz, 50 at
+200 Hz, i.e. at most ~5 % of the sample period at low rates.
 
 Robustness: an output whose innovation exceeds ``outlier_gate`` robust scales
 is not used (a run longer than ``burst_s`` is accepted: a shift is a change, not
@@ -113,7 +113,7 @@ class OnlineEstimator:
     outlier_gate:   innovation gate in robust scales (0 disables the gate).
     burst_s:        longest run of gated outputs treated as outliers (s); longer is a shift.
     detect_changes: run the change test (likelihood ratio every 0.5 s).
-    work_units:     background units per update() (None: max(1, round(dt / 400 us))).
+    work_units:     background units per update() (None: max(1, floor(dt / 100 us))).
     """
 
     def __init__(self, dt: float, *, window_s: float | None = 10.0, update_every_s: float = 0.1,
@@ -184,7 +184,7 @@ class OnlineEstimator:
         h = float(self.dt)
         self._h = h
         self.basis = SoeBasis.build(h, horizon_s=float(self.horizon_s), dx=float(self.soe_dx), top=SOE_TOP)
-        self._units = self.work_units or max(1, int(round(h / 400e-6)))
+        self._units = self.work_units or max(1, int(h / 100e-6))
         self._refit_every = max(5, int(round(self.update_every_s / h)))
         self._test_every = max(10, int(round(0.5 / h)))
         self._history = int(min(MAX_HISTORY, max(1024, 3 * (self.window_s or 30.0) / h)))
@@ -418,6 +418,11 @@ class OnlineEstimator:
     def _buffer(self, du: float, y: float) -> None:
         """Append to the start-up buffer (before any input change only the last samples are kept)."""
         k = self._nbuf
+        if self._first_change is None and k >= 4096:     # no excitation yet: keep the latest only
+            keep = 1024
+            self._bu[:keep] = self._bu[k - keep:k]
+            self._by[:keep] = self._by[k - keep:k]
+            k = keep
         if k == self._bu.size:
             if self._first_change is None:
                 keep = 1024
@@ -495,6 +500,7 @@ class OnlineEstimator:
             refit_every=self._refit_every, test_every=self._test_every, detect=bool(self.detect_changes))
         if self.frozen:
             self._tracker.sc[W.SC_ACC] = 0.0
+        self._tracker.fitting = False
         self._catchup = 1
         self._replayed = 0
         self._phase = "tracking"
@@ -517,6 +523,8 @@ class OnlineEstimator:
             self._catchup = 0
             self._nbuf = 0
             tr.sc[W.SC_GATE] = float(self.outlier_gate)
+            tr.fitting = True
+            tr._jobs.append(tr._refit_job())
 
     # ------------------------------------------------------------------ monitoring
     def _noise(self) -> float:

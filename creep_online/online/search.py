@@ -86,16 +86,23 @@ def _rows(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx0: f
 
 
 def _projected(acc: np.ndarray) -> tuple[float, float, float]:
-    """(cost per row, b, c) of min ||y - b s - c||^2 from the sums."""
+    """(cost per row, b, c) of min ||y - b s - c||^2 from the sums, centred (no cancellation).
+
+    A shape that is nearly constant over the rows cannot be told from the
+    offset: its cost is inf (otherwise rounding can make a degenerate
+    candidate look perfect).
+    """
     n, s1, s2, y1, sy, y2 = acc
     if n < 3:
         return math.inf, 0.0, 0.0
-    det = s2 * n - s1 * s1
-    if not det > 1e-12 * abs(s2 * n) or not math.isfinite(det):
+    ss = s2 - s1 * s1 / n
+    if not (ss > 1e-9 * s2 and math.isfinite(ss)):
         return math.inf, 0.0, 0.0
-    b = (sy * n - s1 * y1) / det
-    c = (s2 * y1 - s1 * sy) / det
-    cost = y2 - b * sy - c * y1
+    sc = sy - s1 * y1 / n
+    yy = y2 - y1 * y1 / n
+    b = sc / ss
+    c = (y1 - b * s1) / n
+    cost = yy - sc * b
     return (max(cost, 0.0) / n if math.isfinite(cost) else math.inf), b, c
 
 

@@ -34,6 +34,8 @@ RELINEARIZE = 0.02
 FREE_RATES = (0.03, 0.2, 1.0, 5.0)
 #: Likelihood-ratio threshold of the change test (chi-square with 4 degrees of freedom: p ~ 1e-20).
 CHANGE_LR = 100.0
+#: A move must also exceed this many 1-sigma of the recent fit (undetermined parameters never "move").
+CHANGE_SIGMAS = 5.0
 #: Smallest relative moves that count as a change (a1, a2, b): below them the window just follows.
 CHANGE_MOVE = {"a1": 0.08, "a2": 0.05, "b": 0.03}
 #: Levenberg-Marquardt steps per window re-fit and per change test.
@@ -78,6 +80,7 @@ class WindowTracker:
         self.relinearizations = 0
         self.refits = 0
         self.window_start = 0            # first sample in the statistics (moved by a detected change)
+        self.fitting = True              # False while the start-up buffer is replayed: no refits yet
         self.fit = Fit(theta=self.theta.copy())
         self._mu = 1e-3
         self._jobs: list[Generator] = []
@@ -179,12 +182,12 @@ class WindowTracker:
     def _schedule(self) -> None:
         """Queue the jobs that are due at this sample and set the next due count."""
         n = self.n
-        if n and n % self.refit_every == 0:
+        if n and n % self.refit_every == 0 and self.fitting:
             self._jobs.append(self._refit_job())
         if self.detect and n and n % self.test_every == 0:
             self._snapshot()
             if len(self._snaps) > 2:
-                self._jobs.append(self._change_job())
+                self._jobs.append(self._change_job(self._snaps[0]))
         due = (n // self.refit_every + 1) * self.refit_every
         if self.detect:
             due = min(due, (n // self.test_every + 1) * self.test_every)
@@ -309,15 +312,15 @@ class WindowTracker:
     # ------------------------------------------------------------------ change detection
     def _snapshot(self) -> None:
         self._snaps.append((self.n, self.S.copy(), self.sy.copy(), float(self.sc[W.SC_SYY]),
-                            float(self.sc[W.SC_G])))
+                            float(self.sc[W.SC_G]), (self.a1l, self.a2l)))
         if len(self._snaps) > 3:
             self._snaps.pop(0)
 
-    def _change_job(self) -> Generator:
-        """Likelihood-ratio test of the last ~second against the window's estimate."""
-        n0, S0, sy0, syy0, g0 = self._snaps[0]
+    def _change_job(self, snap: tuple) -> Generator:
+        """Likelihood-ratio test of the samples since the snapshot against the window's estimate."""
+        n0, S0, sy0, syy0, g0, lin0 = snap
         g = float(self.sc[W.SC_G])
-        if g < g0 or self.fit.sample == 0 or self.fit.sample < n0:
+        if g < g0 or self.fit.sample < n0 or lin0 != (self.a1l, self.a2l) or n0 < self.window_start:
             return
         R = np.empty_like(self.S)
         W.symmetrize(self.S - S0, R, 1.0 / g)
@@ -337,10 +340,18 @@ class WindowTracker:
         after = out[1]
         if not (math.isfinite(after) and after > 0.0 and math.isfinite(before)):
             return
-        lr = (before - after) / (after / max(nr - 4, 1))
+        cov = np.empty((theta.size, theta.size))
+        W.covariance(self._last_h, free, cov)
+        yield
+        sigma2 = after / max(nr - 4, 1)
+        lr = (before - after) / sigma2
         moves = {"a1": math.exp(theta[1] - self.theta[1]) - 1, "a2": math.exp(theta[2] - self.theta[2]) - 1,
                  "b": theta[3] / self.theta[3] - 1 if self.theta[3] else 0.0}
-        moved = {k: v for k, v in moves.items() if abs(v) > CHANGE_MOVE[k]}
+        # relative 1-sigma of the recent fit (ln a1, ln a2 are relative already)
+        rel_sd = {"a1": math.sqrt(abs(cov[1, 1]) * sigma2), "a2": math.sqrt(abs(cov[2, 2]) * sigma2),
+                  "b": math.sqrt(abs(cov[3, 3]) * sigma2) / max(abs(theta[3]), 1e-300)}
+        moved = {k: v for k, v in moves.items()
+                 if abs(v) > CHANGE_MOVE[k] and abs(v) > CHANGE_SIGMAS * rel_sd[k]}
         if lr < CHANGE_LR or not moved or lin != (self.a1l, self.a2l):
             return
         self._restart_window(n0, S0, sy0, syy0)

@@ -498,8 +498,12 @@ def lm_trial(theta: np.ndarray, free: np.ndarray, mu: float, H: np.ndarray, g: n
     n = theta.shape[0]
     A = H.copy()
     r = g.copy()
+    top = 0.0
     for i in range(n):
-        if free[i] == 0.0:
+        top = max(top, abs(H[i, i]) * max(abs(theta[i]), 1.0) ** 2)
+    for i in range(n):
+        # a parameter the window carries (almost) no information about does not move
+        if free[i] == 0.0 or not abs(H[i, i]) * max(abs(theta[i]), 1.0) ** 2 > 1e-14 * top:
             A[i, :] = 0.0
             A[:, i] = 0.0
             A[i, i] = 1.0
@@ -511,9 +515,10 @@ def lm_trial(theta: np.ndarray, free: np.ndarray, mu: float, H: np.ndarray, g: n
     out[2] = 0.0
     d = np.sqrt(np.abs(np.diag(A))) + 1e-300
     An = A / np.outer(d, d)
-    if not (np.all(np.isfinite(An)) and np.all(np.isfinite(r))):
+    rhs = r / d
+    if not (np.all(np.isfinite(An)) and np.all(np.isfinite(rhs))):
         return min(mu * 10.0, 1e8)
-    step = np.linalg.solve(An, r / d) / d
+    step = np.linalg.solve(An, rhs) / d
     if not np.all(np.isfinite(step)):
         return min(mu * 10.0, 1e8)
     trial = theta.copy()
