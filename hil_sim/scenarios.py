@@ -364,9 +364,13 @@ def strong_creep(seed: int) -> Scenario:
     return _build("strong_creep", seed, rng, h, u, truth, params)[0]
 
 
-def _abrupt(family: str, seed: int, change: Callable[[dict, np.random.Generator], tuple[dict, dict]]) -> Scenario:
-    """16 s at 10 kHz, fn 100-1000 Hz, steps every 1 s; ``change`` gives the parameters after t_change."""
-    rng = np.random.default_rng([seed, 2 if family == "payload" else 3])
+def _abrupt(family: str, seed: int, stream: int,
+            change: Callable[[dict, np.random.Generator], tuple[dict, dict]]) -> Scenario:
+    """16 s at 10 kHz, fn 100-1000 Hz, steps every 1 s; ``change`` gives the parameters after t_change.
+
+    ``stream`` keeps the families' random draws apart for equal seeds.
+    """
+    rng = np.random.default_rng([seed, stream])
     h = 1e-4
     t = np.arange(int(16.0 / h)) * h
     plant = _stationary_plant(rng, 100.0, 1000.0)
@@ -396,12 +400,12 @@ def _stiffness_or_damping(plant: dict, rng: np.random.Generator) -> tuple[dict, 
 
 def payload(seed: int) -> Scenario:
     """A payload added mid-record."""
-    return _abrupt("payload", seed, _add_mass)
+    return _abrupt("payload", seed, 2, _add_mass)
 
 
 def stiffness(seed: int) -> Scenario:
     """A stiffness or damping change mid-record."""
-    return _abrupt("stiffness", seed, _stiffness_or_damping)
+    return _abrupt("stiffness", seed, 3, _stiffness_or_damping)
 
 
 def drift(seed: int) -> Scenario:
