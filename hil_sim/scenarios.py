@@ -31,8 +31,9 @@ close_modes    two weaker modes (residues 0.1-0.4) 1.3-2.5x above the first; 12 
                ``truth_best`` = best second-order fit (``identify`` on the noise-free record)
 mid_operation  12 s taken 5 s into operation after a history of steps (u[0] != 0), t re-zeroed
 
-Stationary families draw alpha log-uniformly in 0.005-0.7 (strong_creep) or
-0.01-0.5 (the others).
+Draws are log-uniform: strong_creep as listed; the other families alpha
+0.01-0.5, zeta 0.02-0.5, b = +-10^U(-1,1). Every input rests at 0 for
+0.05-0.3 s before its first change (mid_operation excepted).
 """
 from __future__ import annotations
 
@@ -324,14 +325,12 @@ def _build(family: str, seed: int, rng: np.random.Generator, h: float, u: np.nda
     return scen, clean
 
 
-def _stationary_plant(rng: np.random.Generator, fn_lo: float, fn_hi: float,
-                      alpha_lo: float = 0.01, alpha_hi: float = 0.5, zeta_lo: float = 0.02,
-                      zeta_hi: float = 0.5, decades: float = 1.0) -> dict:
-    """Random (alpha, fn, zeta, b) with a1, a2."""
+def _stationary_plant(rng: np.random.Generator, fn_lo: float, fn_hi: float) -> dict:
+    """Plant of the families other than strong_creep: alpha 0.01-0.5, zeta 0.02-0.5, b +-10^U(-1,1)."""
     fn = _loguniform(rng, fn_lo, fn_hi)
-    zeta = _loguniform(rng, zeta_lo, zeta_hi)
+    zeta = _loguniform(rng, 0.02, 0.5)
     a1, a2 = _resonance(fn, zeta)
-    return {"alpha": _loguniform(rng, alpha_lo, alpha_hi), "a1": a1, "a2": a2, "b": _gain(rng, decades),
+    return {"alpha": _loguniform(rng, 0.01, 0.5), "a1": a1, "a2": a2, "b": _gain(rng, 1.0),
             "fn": fn, "zeta": zeta}
 
 
