@@ -163,8 +163,8 @@ def start_baseline(rev: str, files: list[Path], mode: str, kwargs: dict, work: P
 
 # --------------------------------------------------------------------------- metrics
 def rel_errors(est: dict[str, np.ndarray | float], truth: dict) -> dict[str, np.ndarray]:
-    """|estimate - truth| / |truth| per parameter (a wrong sign of b gives ~2)."""
-    return {p: np.abs(np.asarray(est[p]) - truth[p]) / np.abs(truth[p]) for p in PARAMS}
+    """Signed (estimate - truth) / |truth| per parameter (a wrong sign of b gives about -2 or 2)."""
+    return {p: (np.asarray(est[p]) - truth[p]) / np.abs(truth[p]) for p in PARAMS}
 
 
 def settle_time(t: np.ndarray, inside: np.ndarray, t0: float) -> float:
@@ -183,14 +183,14 @@ def run_metrics(res: dict, tr: dict) -> dict:
     row = {"seed": tr["seed"], "error": res["error"], "quality": res["quality"]}
     if res["error"] is not None:
         return row
-    final = rel_errors(res["final"], tr["final"])
-    within = {p: bool(final[p] <= TOL[p]) for p in PARAMS}
+    final = {p: abs(float(e)) for p, e in rel_errors(res["final"], tr["final"]).items()}
+    within = {p: final[p] <= TOL[p] for p in PARAMS}
     traj = {p: np.asarray(res["traj"][p]) for p in PARAMS}
     errs = rel_errors(traj, tr["at"])
-    inside = np.logical_and.reduce([errs[p] <= TOL[p] for p in PARAMS])
+    inside = np.logical_and.reduce([np.abs(errs[p]) <= TOL[p] for p in PARAMS])
     t = tr["t"][:inside.size]
     last = t >= t[-1] - SCATTER_S
-    row.update(final_rel_error={p: float(final[p]) for p in PARAMS}, within=within,
+    row.update(final_rel_error=final, within=within,
                within_all=all(within.values()), convergence_s=settle_time(t, inside, 0.0),
                scatter={p: float(np.std(errs[p][last])) for p in PARAMS},
                dishonest_good=res["quality"] == "good" and not all(within.values()))
