@@ -12,6 +12,11 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
+# Before numba is imported: a read-only install caches kernels in a per-user directory.
+from ._numba_cache import configure as _configure_numba_cache
+
+_configure_numba_cache()
+
 from .errors import CreepOnlineError, DataError, IdentificationError, ModelError
 from .model import CreepModel
 from .record import Record
