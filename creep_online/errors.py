@@ -16,3 +16,7 @@ class DataError(CreepOnlineError, ValueError):
 
 class IdentificationError(CreepOnlineError, RuntimeError):
     """Identification could not produce an estimate from the data."""
+
+
+class OutputError(CreepOnlineError, OSError):
+    """An output file or folder that cannot (or must not) be written, with the reason."""

@@ -97,6 +97,8 @@ def load_csv(path: str | Path, min_samples: int = MIN_SAMPLES, need_output: bool
 
 
 def save_csv(path: str | Path, t: np.ndarray, u: np.ndarray, y: np.ndarray) -> None:
-    """Write ``t,u,y`` with full double precision (repr round-trips)."""
+    """Write ``t,u,y`` with full double precision (repr round-trips), atomically (temp file + rename)."""
+    from .safe_files import atomic_write
     arr = np.column_stack([t, u, y])
-    np.savetxt(path, arr, delimiter=",", header="t,u,y", comments="", fmt="%.17g")
+    with atomic_write(path) as fh:
+        np.savetxt(fh, arr, delimiter=",", header="t,u,y", comments="", fmt="%.17g")
