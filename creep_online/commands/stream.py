@@ -92,8 +92,8 @@ def run(args: argparse.Namespace) -> int:
         est, latency, extra = _run_csv(spec[4:], args)
     else:
         est, latency, extra = _run_live(spec, args)
+    end = extra.setdefault("end", _end("end_of_stream"))
     out = _report(est, latency, extra)
-    end = extra.setdefault("end", {"reason": "end_of_stream", "exit_code": 0, "message": ""})
     if end["message"]:
         print(f"creep-online stream: {end['reason'].replace('_', ' ')}: {end['message']}", file=sys.stderr)
     if args.json:

@@ -93,6 +93,9 @@ def read_columns(path: str | Path, required: tuple[str, ...] = ("t", "u", "y")) 
     path = Path(path)
     text = _read_text(path)
     lines = text.splitlines()
+    if lines and max(map(len, lines)) > MAX_LINE_BYTES:
+        lineno = next(i for i, ln in enumerate(lines, 1) if len(ln) > MAX_LINE_BYTES)
+        raise DataError(f"{path}: line {lineno} is longer than {MAX_LINE_BYTES} characters: not a t,u,y CSV file")
     first = next((i for i, ln in enumerate(lines) if ln.strip()), None)
     if first is None:
         raise DataError(f"{path}: empty file (expected a header {','.join(required)})")
