@@ -12,7 +12,12 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-from .errors import CreepOnlineError, DataError, IdentificationError, ModelError
+# Before numba is imported: a read-only install caches kernels in a per-user directory.
+from ._numba_cache import configure as _configure_numba_cache
+
+_configure_numba_cache()
+
+from .errors import CreepOnlineError, DataError, IdentificationError, ModelError, OutputError
 from .model import CreepModel
 from .record import Record
 from .simulate import simulate, step_response
@@ -22,7 +27,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "CreepModel", "Record", "simulate", "step_response", "identify", "OnlineEstimator", "diagnose",
-    "CreepOnlineError", "DataError", "IdentificationError", "ModelError",
+    "CreepOnlineError", "DataError", "IdentificationError", "ModelError", "OutputError",
 ]
 
 # The API mirrors the CLI; the heavier layers load on first use, not on import.

@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
+import warnings
 
-from .errors import CreepOnlineError
+from .errors import CreepOnlineError, CreepOnlineWarning
 
 COMMANDS = ("identify", "simulate", "stream", "diagnose", "fit", "demo")
 
@@ -31,14 +33,31 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _warning_printer(command: str):
+    """showwarning replacement: our warnings as one line, anything else as Python prints it."""
+    default = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, CreepOnlineWarning):
+            print(f"creep-online {command}: warning: {message}", file=sys.stderr)
+        else:
+            default(message, category, filename, lineno, file, line)
+    return show
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Entry point; returns the exit code (0 ok, 1 failed check, 2 bad input)."""
+    """Entry point; returns the exit code (0 ok, 1 failed check, 2 bad input, 3 internal error).
+
+    ``creep-online stream`` has its own codes for how a stream ended (see its --help).
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():
+            warnings.showwarning = _warning_printer(args.command)
+            return int(args.func(args) or 0)
     except CreepOnlineError as exc:
-        print(f"creep-online {args.command}: error: {exc}", file=sys.stderr)
+        print(f"creep-online {args.command}: error: {_one_line(exc)}", file=sys.stderr)
         return 2
     except BrokenPipeError:
         # the reader (e.g. `| head`) went away: not an error of ours
@@ -47,6 +66,18 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"creep-online {args.command}: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:  # noqa: BLE001 - a bug of ours: one line, not a traceback
+        if os.environ.get("CREEP_ONLINE_DEBUG"):
+            raise
+        print(f"creep-online {args.command}: internal error: {type(exc).__name__}: {_one_line(exc)} "
+              f"(please report it; CREEP_ONLINE_DEBUG=1 shows the traceback)", file=sys.stderr)
+        return 3
+
+
+def _one_line(exc: BaseException) -> str:
+    """The exception's message on one line (first line, at most 300 characters)."""
+    text = str(exc).strip().splitlines()
+    return (text[0] if text else type(exc).__name__)[:300]
 
 
 if __name__ == "__main__":

@@ -16,3 +16,15 @@ class DataError(CreepOnlineError, ValueError):
 
 class IdentificationError(CreepOnlineError, RuntimeError):
     """Identification could not produce an estimate from the data."""
+
+
+class OutputError(CreepOnlineError, OSError):
+    """An output file or folder that cannot (or must not) be written, with the reason."""
+
+
+class CreepOnlineWarning(UserWarning):
+    """Something the user should know that does not stop the run; the CLI prints it on one line."""
+
+
+class DataWarning(CreepOnlineWarning):
+    """A doubtful but usable data file (e.g. a last line without end-of-line)."""

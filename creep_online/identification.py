@@ -33,7 +33,7 @@ from .discretize import foh_matrices_batch, step_response_grid
 from .errors import DataError, IdentificationError
 from .metrics import fit_percent, noise_std_estimate
 from .model import CreepModel
-from .record import Record
+from .record import SAFE_AMPLITUDE, Record, check_time_and_output
 from .simulate import fractional_integral, superpose, uniform_step
 
 #: alpha search interval of layer 1 and the polish.
@@ -365,12 +365,20 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
     4-parameter refinement. Warnings say what the data cannot determine.
     """
     start = time.perf_counter()
+    check_options(t_c=t_c, alpha0=alpha0, resonance0=resonance0, layer1_step=layer1_step, offset=offset)
     rec = Record(t, u, y, source).validate()
     try:
         h = uniform_step(rec.t)
     except DataError as exc:
         raise DataError(f"{source}: {exc} (identify simulates on a uniform grid; "
                         "'creep-online diagnose' fits non-uniform records)") from None
+    check_ranges(rec, h)
+    su, sy = amplitude_scales(rec.u, rec.y)
+    if su != 1.0 or sy != 1.0:
+        scaled = _identify_scaled(rec, su, sy, t_c=t_c, alpha0=alpha0, resonance0=resonance0,
+                                  layer1_step=layer1_step, retune=retune, polish=polish, offset=offset)
+        scaled.elapsed_s = time.perf_counter() - start
+        return scaled
     t = rec.t - rec.t[0]
     u, y_raw = rec.u, rec.y
     sched = input_schedule(t, u)
@@ -407,6 +415,66 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
         model=model, fit_percent=fit_percent(y, y_hat), elapsed_s=time.perf_counter() - start,
         t_c=t_c, offset=offset, input_offset=u0, warnings=warnings, stages=stages,
         uncertainty=uncertainty, noise_std=noise, y_hat=y_hat + offset)
+
+
+def _positive(name: str, value: float | None) -> None:
+    if value is not None and not (isinstance(value, (int, float, np.integer, np.floating))
+                                  and math.isfinite(value) and value > 0):
+        raise DataError(f"{name} must be a positive finite number, got {value!r}")
+
+
+def check_options(*, t_c=None, alpha0=None, resonance0=None, layer1_step=None, offset=None) -> None:
+    """DataError naming the first invalid identification setting."""
+    _positive("t_c (end of the transient, s)", t_c)
+    _positive("layer1_step (s)", layer1_step)
+    if alpha0 is not None and not (isinstance(alpha0, (int, float, np.integer, np.floating)) and 0 < alpha0 < 1):
+        raise DataError(f"alpha0 must lie in (0, 1), got {alpha0!r}")
+    if resonance0 is not None:
+        try:
+            fn, zeta = resonance0
+        except (TypeError, ValueError):
+            raise DataError(f"resonance0 must be (fn_hz, zeta), got {resonance0!r}") from None
+        _positive("resonance0 fn_hz", fn)
+        _positive("resonance0 zeta", zeta)
+    if offset is not None and not (isinstance(offset, (int, float, np.integer, np.floating)) and math.isfinite(offset)):
+        raise DataError(f"offset must be a finite number, got {offset!r}")
+
+
+def check_ranges(rec: Record, h: float) -> None:
+    """DataError when the time axis or the output cannot be identified at all (with the reason)."""
+    check_time_and_output(rec.t, rec.y, rec.source)
+
+
+def amplitude_scales(u: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Powers of 2 to divide u and y by so that both lie well inside the floating range (1.0 when they do)."""
+    def scale(v: np.ndarray) -> float:
+        peak = float(np.max(np.abs(v)))
+        if peak == 0.0 or SAFE_AMPLITUDE[0] <= peak <= SAFE_AMPLITUDE[1]:
+            return 1.0
+        return math.ldexp(1.0, math.frexp(peak)[1])
+    return scale(u), scale(y)
+
+
+def _identify_scaled(rec: Record, su: float, sy: float, **kw) -> "IdentificationResult":
+    """identify() on u/su, y/sy, with b, offset, y_hat and uncertainties scaled back (or refused)."""
+    off = kw.pop("offset")
+    res = identify(rec.t, rec.u / su, rec.y / sy, offset=None if off is None else off / sy,
+                   source=rec.source, **kw)
+    m = res.model
+    b = m.b * (sy / su)
+    if not (math.isfinite(b) and b != 0.0):
+        raise IdentificationError(f"{rec.source}: gain b = {m.b:g} x {sy:g} / {su:g} is outside the floating-point "
+                                  f"range: rescale u or y")
+    res.model = CreepModel(m.alpha, m.a1, m.a2, b)
+    if "b" in res.uncertainty:
+        res.uncertainty["b"] *= sy / su
+    res.offset *= sy
+    res.input_offset *= su
+    res.noise_std *= sy
+    res.y_hat = res.y_hat * sy
+    res.warnings.append(f"u and y were rescaled by 1/{su:g} and 1/{sy:g} for the computation "
+                        f"(amplitudes outside {SAFE_AMPLITUDE[0]:g}..{SAFE_AMPLITUDE[1]:g})")
+    return res
 
 
 def _layered(t, u, y, h, sched, t_c, alpha0, resonance0, layer1_step, retune, stages):

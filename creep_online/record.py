@@ -1,6 +1,7 @@
 """A measured (or simulated) record: time, input and output samples, plus where they came from."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -75,3 +76,30 @@ class Record:
     def slice(self, start: int, stop: int) -> "Record":
         """Samples start..stop-1 as a new record (views, not copies)."""
         return Record(self.t[start:stop], self.u[start:stop], self.y[start:stop], self.source)
+
+
+#: Time steps and spans the model can be computed on (a2 ~ t^2 must stay far from overflow).
+MIN_STEP_S, MAX_SPAN_S = 1e-12, 1e12
+#: Amplitudes of u and y the fits compute with directly (squares and sums stay finite).
+SAFE_AMPLITUDE = (1e-100, 1e100)
+
+
+def check_time_and_output(t: np.ndarray, y: np.ndarray, source: str) -> None:
+    """DataError when the time axis is out of the computable range or the output is constant."""
+    span = float(t[-1] - t[0]) if t.size else 0.0
+    step = float(np.min(np.diff(t))) if t.size > 1 else 0.0
+    if t.size > 1 and not (step >= MIN_STEP_S and math.isfinite(span) and span <= MAX_SPAN_S):
+        raise DataError(f"{source}: time axis out of range (step {step:.3g} s, span {span:.3g} s; supported "
+                        f"step >= {MIN_STEP_S:g} s and span <= {MAX_SPAN_S:g} s): are the times in seconds?")
+    if y.size and np.ptp(y) == 0.0:
+        raise DataError(f"{source}: output y is constant ({float(y[0]) + 0.0:g}): no response to identify")
+
+
+def check_amplitudes(u: np.ndarray, y: np.ndarray, source: str) -> None:
+    """DataError when u or y is so large or small that squares and sums over the record would overflow."""
+    lo, hi = SAFE_AMPLITUDE
+    for name, v in (("u", u), ("y", y)):
+        peak = float(np.max(np.abs(v))) if v.size else 0.0
+        if peak and not lo <= peak <= hi:
+            raise DataError(f"{source}: {name} reaches {peak:.3g}, outside {lo:g}..{hi:g} where the fit "
+                            f"computes without overflow: rescale {name} (e.g. other units)")

@@ -41,6 +41,8 @@ def parse_params(text: str) -> CreepModel:
         key = key.strip()
         if not sep or key not in ("alpha", "a1", "a2", "b"):
             raise CreepOnlineError(f"--params: expected alpha=..,a1=..,a2=..,b=.., got {item!r}")
+        if key in values:
+            raise CreepOnlineError(f"--params: {key} given twice")
         try:
             values[key] = float(val)
         except ValueError:

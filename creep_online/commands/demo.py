@@ -86,6 +86,8 @@ def run(args: argparse.Namespace) -> int:
     if not args.duration > 0 or not args.rate > 0:
         raise CreepOnlineError("--duration and --rate must be > 0")
     out_dir = Path(args.report)
+    from ..io.safe_files import check_report_dir
+    check_report_dir(out_dir)   # before the run, not after it
     plant_args = ["--rate", repr(args.rate), "--duration", repr(args.duration), "--transport", args.transport,
                   "--schedule", args.schedule, "--t-start", "0.2", "--seed", str(args.seed), "--wait-start",
                   "--linger", "30"]

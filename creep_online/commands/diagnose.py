@@ -19,7 +19,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true",
                    help="print JSON (fit_percent residual_rms noise_rms verdict missing_effects ...)")
     p.add_argument("--report", metavar="DIR", default=None,
-                   help="write an HTML report with PNG plots into DIR (needs matplotlib)")
+                   help="write an HTML report with PNG plots into DIR (needs matplotlib; built beside DIR "
+                        "and swapped in whole; an existing DIR may hold only an earlier report)")
     p.add_argument("--effects", default=None,
                    help="comma-separated candidates to try (default: the whole catalogue)")
     p.set_defaults(func=run)
@@ -28,6 +29,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..diagnostics.extended import check_effects
     candidates = check_effects(args.effects) if args.effects else EFFECTS
+    if args.report:
+        from ..io.safe_files import check_report_dir
+        check_report_dir(args.report)   # before the work, not after it
     inp = load_for_diagnosis(args.data)
     result = diagnose(inp.record, candidates=candidates, u_pre=inp.u_pre, t_pre=inp.t_pre)
     result.warnings[:0] = inp.notes

@@ -3,7 +3,11 @@ from __future__ import annotations
 
 import argparse
 
+import numpy as np
+
+from ..errors import CreepOnlineError, DataError
 from ..io import save_csv
+from ..io.safe_files import check_output
 from ..io.csvfile import read_columns
 from ..record import Record
 from ..simulate import METHODS, simulate
@@ -19,7 +23,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "'split' (exact ZOH fractional integral + exact FOH resonance).")
     p.add_argument("--params", required=True, help="alpha=..,a1=..,a2=..,b=.. (b defaults to 1)")
     p.add_argument("--input", required=True, help="CSV with header t,u (uniform sampling)")
-    p.add_argument("-o", "--output", required=True, help="CSV to write (t,u,y)")
+    p.add_argument("-o", "--output", required=True,
+                   help="CSV to write (t,u,y; written atomically, never over the input)")
     p.add_argument("--method", choices=METHODS, default="exact", help="simulator (default: exact)")
     p.add_argument("--memory", type=int, default=None, help="truncate the fractional memory to L samples "
                                                              "(paper and split only)")
@@ -29,16 +34,19 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     model = parse_params(args.params)
+    check_output(args.output, inputs=[args.input])
     cols = read_columns(args.input, ("t", "u"))
     rec = Record(cols["t"], cols["u"], cols["t"] * 0.0, source=args.input)
     if len(rec) < 2:
-        from ..errors import DataError
         raise DataError(f"{args.input}: need at least 2 samples")
     try:
         y = simulate(model, rec.t, rec.u, method=args.method, memory=args.memory)
     except ValueError as exc:
-        from ..errors import CreepOnlineError
         raise CreepOnlineError(f"{args.input}: {exc}") from None
+    if not np.all(np.isfinite(y)):
+        raise DataError(f"{args.input}: the simulated output is not finite (NaN/inf from sample "
+                        f"{int(np.argmin(np.isfinite(y))) + 1}); {model} is numerically out of range "
+                        f"for this sampling step; nothing written")
     save_csv(args.output, rec.t, rec.u, y)
     summary = {**model.describe(), "method": args.method, "samples": len(rec), "output": args.output}
     if args.json:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import math
+import sys
 import time
 
 import numpy as np
@@ -21,11 +22,24 @@ from ..online import OnlineEstimator
 from ._common import print_json
 
 
+#: How a stream ended -> exit code. Every end after the first sample prints the estimate and the counters.
+END_CODES = {"end_of_stream": 0, "limit": 0, "link_lost": 4, "error": 5, "interrupted": 130}
+EXIT_CODES_HELP = """exit codes (the estimate reached so far and the link counters are printed in every case
+once samples have arrived):
+  0    the stream ended: end of file / log, or --max-samples / --duration reached
+  2    bad input or settings, the source could not be opened, or it ended before
+       2 samples arrived (no estimate)
+  4    the link was lost for good (reconnect=0, or past reconnect_timeout)
+  5    an unrecoverable error while streaming (the message says which)
+  130  interrupted (Ctrl-C)"""
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("stream", help="run the online estimator on a stream (csv:FILE, serial:PORT, can:..., canlog:FILE)",
                        description="Online two-layer identification: buffer until t_c, fit the resonance (layer 2) "
                                    "off the sample path, then track alpha and b over a sliding window (layer 1). "
-                                   "Prints the final estimate and the per-sample update() latency.")
+                                   "Prints the final estimate and the per-sample update() latency.",
+                       epilog=EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--source", required=True, help="csv:FILE | serial:PORT | can:IFACE:CHANNEL | canlog:FILE")
     p.add_argument("--json", action="store_true",
                    help="print JSON (alpha a1 a2 b samples latency_us{p50,p99,max} phase quality ...)")
@@ -70,14 +84,21 @@ def _report(est: OnlineEstimator, latency: dict, extra: dict) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     spec = args.source
+    if args.max_samples is not None and args.max_samples < 1:
+        raise DataError(f"--max-samples must be at least 1, got {args.max_samples}")
+    if args.duration is not None and not args.duration > 0:
+        raise DataError(f"--duration must be > 0 s, got {args.duration:g}")
     if spec.lower().startswith("csv:"):
         est, latency, extra = _run_csv(spec[4:], args)
     else:
         est, latency, extra = _run_live(spec, args)
+    end = extra.setdefault("end", _end("end_of_stream"))
     out = _report(est, latency, extra)
+    if end["message"]:
+        print(f"creep-online stream: {end['reason'].replace('_', ' ')}: {end['message']}", file=sys.stderr)
     if args.json:
         print_json(out)
-        return 0
+        return end["exit_code"]
     e = est.estimate
     sd = e.uncertainty
     print(f"{spec}: {e.samples} samples ({e.t:.4g} s at dt = {est.dt:.4g} s), phase {e.phase}, quality {e.quality}")
@@ -92,7 +113,10 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(f"  update() latency: p50 {latency['p50']:.3g} us, p99 {latency['p99']:.3g} us, "
               f"max {latency['max']:.4g} us, {latency['over_1ms']} over 1 ms")
-    return 0
+    if "link" in extra:
+        print(f"  link: {extra['link']}")
+    print(f"  ended: {end['reason'].replace('_', ' ')} (exit {end['exit_code']})")
+    return end["exit_code"]
 
 
 def _run_csv(path: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dict, dict]:
@@ -101,7 +125,8 @@ def _run_csv(path: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dict
     rec = load_csv(path)
     if not rec.is_uniform:
         raise DataError(f"{rec.source}: time is not uniformly sampled; the online estimator needs a fixed step")
-    est = OnlineEstimator(rec.h if args.dt is None else args.dt, **_options(args))
+    _check_dt(args, rec.h, rec.source)
+    est = OnlineEstimator(rec.h, **_options(args))
     u, y = rec.u, rec.y
     if args.block:
         start = time.perf_counter()
@@ -112,11 +137,28 @@ def _run_csv(path: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dict
     clock = time.perf_counter_ns
     update = est.update
     ul, yl = u.tolist(), y.tolist()
-    for k in range(u.size):
-        t0 = clock()
-        update(ul[k], yl[k])
-        ns[k] = clock() - t0
-    return est, _latency(ns), {"file": rec.source}
+    k, end = 0, None
+    try:
+        for k in range(u.size):
+            t0 = clock()
+            update(ul[k], yl[k])
+            ns[k] = clock() - t0
+        k = u.size
+    except KeyboardInterrupt:
+        end = _end("interrupted", "interrupted (Ctrl-C)")
+    return est, _latency(ns[:k]), {"file": rec.source, **({"end": end} if end else {})}
+
+
+def _check_dt(args: argparse.Namespace, h: float, source: str) -> None:
+    """--dt must agree with the file's own time column (a different step is refused, not ignored)."""
+    if args.dt is not None and not math.isclose(args.dt, h, rel_tol=1e-6):
+        raise DataError(f"--dt {args.dt:g} contradicts the time column of {source} (step {h:.6g} s); "
+                        f"drop --dt or fix the file")
+
+
+def _end(reason: str, message: str = "") -> dict:
+    """How the stream ended, for the report and the exit code."""
+    return {"reason": reason, "exit_code": END_CODES[reason], "message": message}
 
 
 def _run_live(spec: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dict, dict]:
@@ -131,6 +173,7 @@ def _run_live(spec: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dic
     clock = time.perf_counter_ns
     last_seq = None
     deadline = math.inf if args.duration is None else time.monotonic() + args.duration
+    end = None
     read = getattr(source, "read", None)
 
     def batches():
@@ -164,13 +207,25 @@ def _run_live(spec: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dic
                     ns.append(clock() - t0)
             done = est is not None and args.max_samples is not None and est.samples >= args.max_samples
             if done or time.monotonic() > deadline:
+                end = _end("limit")
                 break
     except KeyboardInterrupt:
-        pass
+        end = _end("interrupted", "interrupted (Ctrl-C)")
+    except sources.TransportError as exc:
+        end = _end("link_lost", str(exc))
+    except Exception as exc:  # noqa: BLE001 - keep the work done so far; say what stopped it
+        if est is None:
+            raise
+        end = _end("error", f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"[:300])
     finally:
         source.close()
-    if est is None:
-        raise DataError(f"{spec}: fewer than 2 samples arrived; cannot tell the sampling step (use --dt)")
     stats = getattr(source, "stats", None)
-    extra = {"source_stats": stats.as_dict() if stats is not None and hasattr(stats, "as_dict") else {}}
+    if est is None:
+        why = end["message"] if end and end["message"] else "fewer than 2 samples arrived; cannot tell the sampling step (use --dt)"
+        raise (sources.TransportError if end and end["reason"] == "link_lost" else DataError)(
+            f"{spec}: no estimate: {why}")
+    extra = {"source_stats": stats.as_dict() if stats is not None and hasattr(stats, "as_dict") else {},
+             "end": end or _end("end_of_stream")}
+    if stats is not None and hasattr(stats, "summary"):
+        extra["link"] = stats.summary()
     return est, _latency(np.asarray(ns, dtype=np.int64)), extra

@@ -26,6 +26,7 @@ from .. import effects as fx
 from ..errors import DataError, ModelError
 from ..metrics import fit_percent, rms
 from ..model import CreepModel
+from ..record import check_amplitudes, check_time_and_output
 
 #: Play-operator thresholds used for hysteresis, as fractions of the input range (denser where
 #: real loops put most of their weight, at small thresholds).
@@ -168,6 +169,8 @@ def prepare(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, source: str = "<arra
     """
     t = np.asarray(t, dtype=float)
     y = np.asarray(y, dtype=float)
+    check_time_and_output(t, y, source)
+    check_amplitudes(np.asarray(u, dtype=float), y, source)
     w = None
     notes: list[str] = []
     if not fx.is_uniform(t) and fx.is_uniform(t, rtol=SNAP_RTOL):
@@ -177,7 +180,7 @@ def prepare(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, source: str = "<arra
         notes.append(f"time stamps jitter by up to {100 * jitter:.2g} % of the step: treated as uniform (h = {h:.6g} s)")
     if isinstance(weights, str):
         if weights != "auto":
-            raise ValueError(f"weights must be 'auto', None or an array, got {weights!r}")
+            raise DataError(f"weights must be 'auto', None or an array, got {weights!r}")
         if not fx.is_uniform(t):
             floor = 1e-3 * float(np.max(np.abs(y)))
             w = 1.0 / np.maximum(np.abs(y), max(floor, 1e-300))

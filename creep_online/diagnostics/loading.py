@@ -10,12 +10,13 @@ Every other problem is the ``DataError`` of ``creep_online.io.load_csv``.
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataError
+from ..errors import DataError, DataWarning
 from ..io import load_csv
 from ..io.csvfile import read_columns
 from ..record import MIN_SAMPLES, Record
@@ -50,7 +51,9 @@ def load_for_diagnosis(path: str | Path) -> DiagnosisInput:
     try:
         return DiagnosisInput(load_csv(path))
     except DataError as first:
-        cols = read_columns(path)  # raises the file-level errors itself
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DataWarning)   # already said by load_csv
+            cols = read_columns(path)  # raises the file-level errors itself
         t, u, y = cols["t"], cols["u"], cols["y"]
         notes = []
         if t.size >= 2 and np.all(np.diff(t) >= 0) and np.any(np.diff(t) == 0):

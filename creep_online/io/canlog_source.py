@@ -36,23 +36,47 @@ class CanLogSource(SampleSource):
         except Exception as exc:  # noqa: BLE001 - unknown suffix, unreadable file, ...
             raise DataError(f"{path}: cannot read as a CAN log ({str(exc).splitlines()[0][:100]})") from None
         self._reader = reader
-        self._iter = iter(can.MessageSync(reader, timestamps=True) if realtime else reader)
+        self._realtime = realtime
+        self._iter = self._messages()
         self.decoder = CanDecoder(dbc, stats=self.stats.parser)
         self.stall_s = float("inf")   # a file cannot stall
+
+    def _messages(self):
+        can = _can()
+        return iter(can.MessageSync(self._reader, timestamps=True) if self._realtime else self._reader)
 
     def _read_raw(self, timeout: float) -> list[RawSample] | None:
         out: list[RawSample] = []
         decode = self.decoder.decode
-        try:
-            for _ in range(BATCH):
+        for _ in range(BATCH):
+            try:
                 msg = next(self._iter, None)
-                if msg is None:
+            except Exception as exc:  # noqa: BLE001 - a corrupt log line or block
+                if not self._skip_bad_record(exc):
                     return out if out else None
-                if not msg.is_error_frame and not msg.is_remote_frame:
-                    out += decode(msg.arbitration_id, msg.data)
-        except Exception as exc:  # noqa: BLE001 - a corrupt log line or block
-            raise DataError(f"{self.name}: unreadable log record ({str(exc).splitlines()[0][:100]})") from None
+                continue
+            if msg is None:
+                return out if out else None
+            if not msg.is_error_frame and not msg.is_remote_frame:
+                out += decode(msg.arbitration_id, msg.data)
         return out
+
+    def _skip_bad_record(self, exc: Exception) -> bool:
+        """Count a record the log reader could not parse; True when reading can go on after it.
+
+        Text logs (.asc) resume at the next line (the header is not read again).
+        A corrupt block of a binary log ends the replay there, with a message.
+        """
+        self.stats.parser.malformed += 1
+        why = (str(exc).splitlines() or [type(exc).__name__])[0][:100]
+        if hasattr(self._reader, "_extract_header") and hasattr(self._reader, "file"):
+            if self.stats.parser.malformed <= 3:
+                self.event(f"unreadable log record skipped ({why})")
+            self._reader._extract_header = lambda: None   # resume after the bad line, header already read
+            self._iter = self._messages()
+            return True
+        self.event(f"unreadable log record ({why}); the rest of the log cannot be read, replay ends here")
+        return False
 
     def close(self) -> None:
         try:

@@ -8,20 +8,62 @@ from __future__ import annotations
 import csv
 import io
 import math
+import os
+import stat
 import warnings
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataError
+from ..errors import DataError, DataWarning
 from ..record import MIN_SAMPLES, Record
 
 
-def _read_text(path: Path) -> str:
+#: Longest line accepted (bytes): a t,u,y row is ~60; a file of one endless line is not a CSV.
+MAX_LINE_BYTES = 65536
+_CHUNK = 1 << 20
+
+
+def _check_kind(path: Path) -> None:
+    """DataError unless ``path`` is a regular file or a pipe (devices, sockets, folders cannot be a CSV)."""
     try:
-        data = path.read_bytes()
+        mode = path.stat().st_mode
     except FileNotFoundError:
         raise DataError(f"{path}: no such file") from None
+    except OSError as exc:
+        raise DataError(f"{path}: cannot read ({exc.strerror})") from None
+    if stat.S_ISDIR(mode):
+        raise DataError(f"{path}: is a directory, not a CSV file")
+    if not (stat.S_ISREG(mode) or stat.S_ISFIFO(mode)):
+        kind = "a character device" if stat.S_ISCHR(mode) else "a block device" if stat.S_ISBLK(mode) \
+            else "a socket" if stat.S_ISSOCK(mode) else "not a regular file"
+        raise DataError(f"{path}: is {kind}, not a CSV file")
+
+
+def _read_bytes(path: Path) -> bytes:
+    """The whole file, read in chunks; DataError as soon as one line exceeds MAX_LINE_BYTES."""
+    chunks: list[bytes] = []
+    since_newline = 0
+    with path.open("rb") as fh:
+        size0 = os.fstat(fh.fileno()).st_size
+        while chunk := fh.read(_CHUNK):
+            chunks.append(chunk)
+            nl = chunk.rfind(b"\n")
+            since_newline = since_newline + len(chunk) if nl < 0 else len(chunk) - nl - 1
+            if since_newline > MAX_LINE_BYTES:
+                raise DataError(f"{path}: a line longer than {MAX_LINE_BYTES} bytes: not a t,u,y CSV file")
+        grown = os.fstat(fh.fileno()).st_size
+    data = b"".join(chunks)
+    if stat.S_ISREG(path.stat().st_mode) and (grown != size0 or grown != len(data)):
+        warnings.warn(f"{path}: the file changed size while it was read (still being written?); "
+                      f"used the {len(data)} bytes read", DataWarning, stacklevel=4)
+    return data
+
+
+def _read_text(path: Path) -> str:
+    _check_kind(path)
+    try:
+        data = _read_bytes(path)
     except IsADirectoryError:
         raise DataError(f"{path}: is a directory, not a CSV file") from None
     except OSError as exc:
@@ -38,6 +80,11 @@ def _header(path: Path, line: str, required: tuple[str, ...]) -> list[int]:
     if missing:
         shown = ",".join(names)[:80]
         raise DataError(f"{path}: missing column(s) {','.join(missing)} in header '{shown}' (need {','.join(required)})")
+    for c in required:
+        if names.count(c) > 1:
+            where = [i + 1 for i, n in enumerate(names) if n == c]
+            raise DataError(f"{path}: column {c} appears {len(where)} times in the header "
+                            f"(columns {', '.join(map(str, where))}); which one is meant is ambiguous")
     return [names.index(c) for c in required]
 
 
@@ -46,10 +93,14 @@ def read_columns(path: str | Path, required: tuple[str, ...] = ("t", "u", "y")) 
     path = Path(path)
     text = _read_text(path)
     lines = text.splitlines()
+    if lines and max(map(len, lines)) > MAX_LINE_BYTES:
+        lineno = next(i for i, ln in enumerate(lines, 1) if len(ln) > MAX_LINE_BYTES)
+        raise DataError(f"{path}: line {lineno} is longer than {MAX_LINE_BYTES} characters: not a t,u,y CSV file")
     first = next((i for i, ln in enumerate(lines) if ln.strip()), None)
     if first is None:
         raise DataError(f"{path}: empty file (expected a header {','.join(required)})")
     cols = _header(path, lines[first], required)
+    _check_last_line(path, text, lines[first + 1:], cols, first + 1)
     fast = _fast_parse(lines[first + 1:], cols)
     if fast is not None:
         return {name: fast[:, k].copy() for k, name in enumerate(required)}
@@ -72,6 +123,27 @@ def read_columns(path: str | Path, required: tuple[str, ...] = ("t", "u", "y")) 
             out[n, k] = value
         n += 1
     return {name: out[:n, k].copy() for k, name in enumerate(required)}
+
+
+def _check_last_line(path: Path, text: str, body: list[str], cols: list[int], offset: int) -> None:
+    """A last line without end-of-line was perhaps cut (file copied or still being written): say so.
+
+    Cut mid-row (too few fields, or a cell that is not a number): DataError.
+    Complete-looking: a DataWarning, since its last number may still be cut short.
+    """
+    if not body or text.endswith(("\n", "\r")) or not body[-1].strip():
+        return
+    lineno = offset + len(body)
+    cells = next(csv.reader([body[-1]]), [])
+    try:
+        ok = len(cells) > max(cols) and all(math.isfinite(float(cells[c])) for c in cols)
+    except ValueError:
+        ok = False
+    if not ok:
+        raise DataError(f"{path}: last line {lineno} is incomplete (no end-of-line and cut mid-row: "
+                        f"file truncated or still being written?)")
+    warnings.warn(f"{path}: last line {lineno} has no end-of-line; if the file was cut or is still being "
+                  f"written, its last number may be incomplete", DataWarning, stacklevel=3)
 
 
 def _fast_parse(body: list[str], cols: list[int]) -> np.ndarray | None:
@@ -97,6 +169,8 @@ def load_csv(path: str | Path, min_samples: int = MIN_SAMPLES, need_output: bool
 
 
 def save_csv(path: str | Path, t: np.ndarray, u: np.ndarray, y: np.ndarray) -> None:
-    """Write ``t,u,y`` with full double precision (repr round-trips)."""
+    """Write ``t,u,y`` with full double precision (repr round-trips), atomically (temp file + rename)."""
+    from .safe_files import atomic_write
     arr = np.column_stack([t, u, y])
-    np.savetxt(path, arr, delimiter=",", header="t,u,y", comments="", fmt="%.17g")
+    with atomic_write(path) as fh:
+        np.savetxt(fh, arr, delimiter=",", header="t,u,y", comments="", fmt="%.17g")

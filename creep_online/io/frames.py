@@ -25,9 +25,12 @@ from __future__ import annotations
 
 import binascii
 import math
+import operator
 import struct
 from dataclasses import dataclass, field
 from typing import NamedTuple
+
+from ..errors import DataError
 
 SYNC = b"\xaa\x55"
 PAYLOAD_LEN = 16
@@ -76,8 +79,13 @@ def crc16(data: bytes) -> int:
 
 # ---------------------------------------------------------------- encoders
 def quantize(value: float, scale: float) -> int:
-    """Nearest wire integer for ``value`` at ``scale`` units per LSB, clipped to i32."""
-    q = round(value / scale)
+    """Nearest wire integer for ``value`` at ``scale`` units per LSB, clipped to i32 (DataError for NaN)."""
+    q = float(value) / float(scale)
+    if math.isnan(q):
+        raise DataError(f"cannot quantize {value!r} at scale {scale!r}: not a number")
+    if math.isinf(q):
+        return I32_MAX if q > 0 else I32_MIN
+    q = round(q)
     return min(max(q, I32_MIN), I32_MAX)
 
 
@@ -96,8 +104,8 @@ def encode_binary_raw(seq: int, raw_u: int, raw_y: int, status: int = 0) -> byte
 
 
 def encode_ascii(seq: int, t: float, u: float, y: float, checksum: bool = True) -> bytes:
-    """One ASCII line ``seq,t,u,y[*HHHH]\\n`` (repr-exact floats)."""
-    body = f"{seq},{t!r},{u!r},{y!r}".encode()
+    """One ASCII line ``seq,t,u,y[*HHHH]\\n`` (repr-exact floats; numpy scalars written as plain numbers)."""
+    body = f"{operator.index(seq)},{float(t)!r},{float(u)!r},{float(y)!r}".encode()
     if checksum:
         return body + b"*%04X\n" % crc16(body)
     return body + b"\n"

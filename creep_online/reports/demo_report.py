@@ -14,9 +14,15 @@ import numpy as np
 
 
 def write_report(out_dir: str | Path, r: dict) -> str:
-    """Write the report files; return a one-line description of what was written where."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    """Write the report folder in full or not at all; return a one-line description of what was written where."""
+    from ..io.safe_files import report_dir
+    with report_dir(out_dir) as tmp:
+        text = _write(tmp, r)
+    return text.replace(str(tmp), str(Path(out_dir)))
+
+
+def _write(out: Path, r: dict) -> str:
+    """summary.json, plots and report.html into folder ``out``."""
     public = {k: v for k, v in r.items() if not k.startswith("_")}
     (out / "summary.json").write_text(json.dumps(public, indent=2, default=_json_default))
     try:

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CreepOnlineError
+from ..io.safe_files import report_dir
 
 
 def _pyplot():
@@ -30,13 +31,19 @@ def _decimate(n: int, limit: int = 20000) -> slice:
 
 
 def write_report(result, directory: str | Path) -> Path:
-    """Write the report of a ``Diagnosis`` into ``directory``; returns the path of index.html."""
+    """Write the report of a ``Diagnosis`` into ``directory``, in full or not at all; the path of index.html.
+
+    The folder is built beside ``directory`` and swapped in at the end (an
+    interrupted run leaves the previous report as it was).
+    """
     plt = _pyplot()
-    out = Path(directory)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise CreepOnlineError(f"cannot create report directory {out}: {exc.strerror}") from None
+    with report_dir(directory) as tmp:
+        _write(plt, result, tmp)
+    return Path(directory) / "index.html"
+
+
+def _write(plt, result, out: Path) -> None:
+    """The plots and index.html of a diagnosis, into folder ``out``."""
     data, base, best = result.data, result.base, result.best
     t, y = data.t, data.y
     sl = _decimate(t.size)
@@ -111,7 +118,6 @@ def write_report(result, directory: str | Path) -> Path:
     plt.close(fig)
 
     (out / "index.html").write_text(_html(result, figs), encoding="utf-8")
-    return out / "index.html"
 
 
 def _num(x) -> str:

@@ -1,0 +1,350 @@
+"""Adversarial inputs (issue 14): no traceback, one-line errors with exit 2, inputs never destroyed.
+
+Categories (docs/reliability.md has the table): files the CSV reader is given,
+numbers out of range, invalid settings, outputs that would destroy data,
+report folders, frame encoders, and streams that end (link lost, Ctrl-C,
+corrupt CAN log). Real files, real subprocesses and real pseudo-terminals;
+the frame parsers themselves are fuzzed in test_fuzz_frames.py, the
+read-only install in test_readonly_install.py.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+import tty
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from creep_online import CreepModel, CreepOnlineError, identify, simulate
+from creep_online.cli import main
+from creep_online.errors import DataError, DataWarning
+from creep_online.io import load_csv, save_csv
+from creep_online.io.frames import AsciiParser, encode_ascii
+
+REPO = Path(__file__).resolve().parents[1]
+FEW = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                     HealthCheck.function_scoped_fixture])
+PARAMS = "alpha=0.3,a1=0.01,a2=1e-4,b=2"
+
+
+def _record(n: int = 1500, h: float = 1e-3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A small step experiment with a little noise."""
+    t = np.arange(n) * h
+    u = np.where(t > 0.05, 1.0, 0.0)
+    y = simulate(CreepModel(0.3, 0.01, 1e-4, 2.0), t, u) + 1e-3 * np.random.default_rng(1).standard_normal(n)
+    return t, u, y
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("adv")
+    t, u, y = _record()
+    out = {}
+    for name, (tt, uu, yy) in {"good": (t, u, y), "y_huge": (t, u, y * 1e300), "t_huge": (t * 1e300, u, y),
+                               "u_huge": (t, u * 1e300, y), "y_const": (t, u, 0 * y + 1.0),
+                               "y_tiny": (t, u, y * 1e-300)}.items():
+        save_csv(d / f"{name}.csv", tt, uu, yy)
+        out[name] = d / f"{name}.csv"
+    (d / "dup.csv").write_text("t,u,y,y\n" + "".join(f"{k * 1e-3},{float(k > 5)},{k},{k}\n" for k in range(50)))
+    out["dup"] = d / "dup.csv"
+    text = out["good"].read_text()
+    (d / "cut.csv").write_text(text[:text.rindex(",")])          # last row cut mid-row, no end-of-line
+    out["cut"] = d / "cut.csv"
+    (d / "longline.csv").write_text("t,u,y\n" + "1" * 200_000 + "\n")
+    out["longline"] = d / "longline.csv"
+    out["dir"] = d
+    return out
+
+
+def _cli(argv: list[str], capsys) -> tuple[int, str, str]:
+    code = main([str(a) for a in argv])
+    cap = capsys.readouterr()
+    return code, cap.out, cap.err
+
+
+def _assert_one_line_error(code: int, err: str, *words: str) -> None:
+    assert code == 2, err
+    assert "Traceback" not in err
+    lines = [ln for ln in err.splitlines() if ln.strip() and ": warning: " not in ln]
+    assert len(lines) == 1 and ": error: " in lines[0], err
+    for w in words:
+        assert w in lines[0], (w, lines[0])
+
+
+# ------------------------------------------------------------------ files
+@pytest.mark.parametrize("name, words", [
+    ("/dev/zero", ["character device"]), ("/dev/null", ["character device"]), ("dir", ["directory"]),
+    ("missing", ["no such file"]), ("dup", ["appears 2 times"]), ("cut", ["incomplete"]),
+    ("longline", ["longer than"]),
+])
+@pytest.mark.parametrize("command", ["identify", "diagnose"])
+def test_unusable_files_are_one_line_errors(files, capsys, command, name, words):
+    path = files.get(name, name if name.startswith("/") else files["dir"] / "missing.csv")
+    code, _, err = _cli([command, path], capsys)
+    _assert_one_line_error(code, err, *words)
+
+
+def test_last_line_without_end_of_line_is_reported(tmp_path):
+    t, u, y = _record(200)
+    save_csv(tmp_path / "a.csv", t, u, y)
+    (tmp_path / "b.csv").write_text((tmp_path / "a.csv").read_text().rstrip("\n"))
+    with pytest.warns(DataWarning, match="no end-of-line"):
+        rec = load_csv(tmp_path / "b.csv")
+    assert len(rec) == 200
+
+
+@FEW
+@given(st.binary(max_size=400))
+def test_csv_reader_fuzz_raises_only_data_errors(tmp_path_factory, blob):
+    path = tmp_path_factory.mktemp("fz") / "f.csv"
+    path.write_bytes(b"t,u,y\n" + blob)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        try:
+            rec = load_csv(path, min_samples=1)
+        except DataError as exc:
+            assert "\n" not in str(exc)
+            return
+    assert np.all(np.isfinite(rec.t)) and np.all(np.diff(rec.t) > 0)
+
+
+@FEW
+@given(st.lists(st.tuples(st.floats(-1e6, 1e6), st.floats(-1e6, 1e6)), min_size=1, max_size=30))
+def test_csv_rows_round_trip(tmp_path_factory, rows):
+    path = tmp_path_factory.mktemp("rt") / "r.csv"
+    t = np.arange(len(rows)) * 0.5
+    u = np.array([r[0] for r in rows])
+    y = np.array([r[1] for r in rows])
+    save_csv(path, t, u, y)
+    from creep_online.io.csvfile import read_columns
+    cols = read_columns(path)
+    assert np.array_equal(cols["u"], u) and np.array_equal(cols["y"], y)
+
+
+# ------------------------------------------------------------------ numbers
+@pytest.mark.parametrize("name, words", [("t_huge", ["time axis out of range"]), ("y_const", ["constant"])])
+@pytest.mark.parametrize("command", ["identify", "diagnose"])
+def test_out_of_range_records_are_refused_with_the_reason(files, capsys, command, name, words):
+    code, _, err = _cli([command, files[name]], capsys)
+    _assert_one_line_error(code, err, *words)
+
+
+@pytest.mark.parametrize("name", ["y_huge", "u_huge", "y_tiny"])
+def test_identify_rescales_extreme_amplitudes(files, name):
+    ref = identify(*(load_csv(files["good"]).__dict__[k] for k in "tuy"))
+    rec = load_csv(files[name])
+    res = identify(rec.t, rec.u, rec.y)
+    factor = {"y_huge": 1e300, "u_huge": 1e-300, "y_tiny": 1e-300}[name]
+    assert res.model.alpha == pytest.approx(ref.model.alpha, rel=1e-6)
+    assert res.model.b == pytest.approx(ref.model.b * factor, rel=1e-6)
+    assert any("rescaled" in w for w in res.warnings)
+
+
+@pytest.mark.parametrize("name", ["y_huge", "u_huge"])
+def test_diagnose_refuses_extreme_amplitudes(files, capsys, name):
+    code, _, err = _cli(["diagnose", files[name]], capsys)
+    _assert_one_line_error(code, err, "rescale")
+
+
+@pytest.mark.parametrize("flags, words", [
+    (["--t-c", "-1"], ["t_c"]), (["--t-c", "0"], ["t_c"]), (["--t-c", "nan"], ["t_c"]),
+    (["--layer1-step", "0"], ["layer1_step"]), (["--alpha0", "1.5"], ["alpha0"]),
+])
+def test_identify_settings_are_checked(files, capsys, flags, words):
+    code, _, err = _cli(["identify", files["good"], *flags], capsys)
+    _assert_one_line_error(code, err, *words)
+
+
+def test_api_errors_are_creep_online_errors(files):
+    rec = load_csv(files["good"])
+    for kw in ({"t_c": -1.0}, {"t_c": 0.0}, {"layer1_step": 0.0}, {"alpha0": 0.0}, {"resonance0": (1.0,)}):
+        with pytest.raises(CreepOnlineError):
+            identify(rec.t, rec.u, rec.y, **kw)
+    for t, u, y in ((rec.t * 1e300, rec.u, rec.y), (rec.t, rec.u, rec.y * 0)):
+        with pytest.raises(CreepOnlineError):
+            identify(t, u, y)
+
+
+# ------------------------------------------------------------------ outputs
+def test_simulate_refuses_to_overwrite_its_input(files, capsys, tmp_path):
+    m = tmp_path / "m.csv"
+    m.write_bytes(files["good"].read_bytes())
+    before = m.read_bytes()
+    for out in (m, tmp_path / "." / "m.csv"):
+        code, _, err = _cli(["simulate", "--params", PARAMS, "--input", m, "-o", out], capsys)
+        _assert_one_line_error(code, err, "refusing to overwrite the input")
+    os.link(m, tmp_path / "hard.csv")
+    code, _, err = _cli(["simulate", "--params", PARAMS, "--input", m, "-o", tmp_path / "hard.csv"], capsys)
+    _assert_one_line_error(code, err, "input")
+    assert m.read_bytes() == before
+
+
+@pytest.mark.parametrize("target, words", [("nodir/x.csv", ["does not exist"]), (".", ["directory"]),
+                                           ("/proc/x.csv", ["x.csv"])])
+def test_simulate_bad_output_paths(files, capsys, tmp_path, target, words):
+    out = target if target.startswith("/") else tmp_path / target
+    code, _, err = _cli(["simulate", "--params", PARAMS, "--input", files["good"], "-o", out], capsys)
+    _assert_one_line_error(code, err, *words)
+
+
+def test_simulate_failure_leaves_the_old_output_intact(files, capsys, tmp_path):
+    out = tmp_path / "out.csv"
+    out.write_text("precious\n")
+    code, _, err = _cli(["simulate", "--params", "alpha=0.3,a1=0.01,a2=1e-300", "--input", files["good"],
+                         "-o", out], capsys)
+    _assert_one_line_error(code, err, "not finite")
+    assert out.read_text() == "precious\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["out.csv"]      # no temporary file left behind
+
+
+def test_simulate_output_is_replaced_whole(files, capsys, tmp_path):
+    out = tmp_path / "out.csv"
+    out.write_text("old\n")
+    assert _cli(["simulate", "--params", PARAMS, "--input", files["good"], "-o", out], capsys)[0] == 0
+    assert len(load_csv(out)) == 1500 and sorted(p.name for p in tmp_path.iterdir()) == ["out.csv"]
+
+
+@pytest.mark.parametrize("params, words", [("alpha=0.3,a1=0.01,a2=1e-4,alpha=0.5", ["twice"]),
+                                           ("alpha=2,a1=0.01,a2=1e-4", ["alpha"]),
+                                           ("alpha=0.3,a1=x,a2=1e-4", ["not a number"])])
+def test_simulate_params_are_checked(files, capsys, tmp_path, params, words):
+    code, _, err = _cli(["simulate", "--params", params, "--input", files["good"], "-o", tmp_path / "o.csv"],
+                        capsys)
+    _assert_one_line_error(code, err, *words)
+
+
+def test_report_folder_with_other_files_is_refused(files, capsys, tmp_path):
+    folder = tmp_path / "rep"
+    folder.mkdir()
+    (folder / "notes.txt").write_text("mine")
+    code, _, err = _cli(["diagnose", files["good"], "--report", folder], capsys)
+    _assert_one_line_error(code, err, "other files")
+    assert (folder / "notes.txt").read_text() == "mine"
+
+
+def test_report_folder_is_all_or_nothing(tmp_path):
+    from creep_online.io.safe_files import report_dir
+    folder = tmp_path / "rep"
+    folder.mkdir()
+    (folder / "index.html").write_text("old report")
+    with pytest.raises(KeyboardInterrupt):
+        with report_dir(folder) as tmp:
+            (tmp / "index.html").write_text("half")
+            raise KeyboardInterrupt
+    assert [p.name for p in tmp_path.iterdir()] == ["rep"]
+    assert (folder / "index.html").read_text() == "old report"
+    with report_dir(folder) as tmp:
+        (tmp / "index.html").write_text("new report")
+        (tmp / "plot.png").write_bytes(b"png")
+    assert sorted(p.name for p in folder.iterdir()) == ["index.html", "plot.png"]
+    assert (folder / "index.html").read_text() == "new report"
+    assert [p.name for p in tmp_path.iterdir()] == ["rep"]
+
+
+# ------------------------------------------------------------------ encoders
+@FEW
+@given(st.integers(0, 2**31), st.floats(allow_nan=False, allow_infinity=False),
+       st.floats(allow_nan=False, allow_infinity=False), st.floats(allow_nan=False, allow_infinity=False))
+def test_encode_ascii_accepts_numpy_scalars(seq, t, u, y):
+    line = encode_ascii(np.int64(seq), np.float64(t), np.float64(u), np.float64(y))
+    assert b"np." not in line
+    (got,) = AsciiParser().feed(line)
+    assert (got.seq, got.t, got.u, got.y) == (seq, t, u, y)
+
+
+# ------------------------------------------------------------------ streams
+def test_stream_dt_contradicting_the_file_is_an_error(files, capsys):
+    code, _, err = _cli(["stream", "--source", f"csv:{files['good']}", "--dt", "1"], capsys)
+    _assert_one_line_error(code, err, "contradicts")
+
+
+@pytest.mark.parametrize("flags", [["--max-samples", "0"], ["--duration", "-1"]])
+def test_stream_limits_are_checked(files, capsys, flags):
+    code, _, err = _cli(["stream", "--source", f"csv:{files['good']}", *flags], capsys)
+    _assert_one_line_error(code, err)
+
+
+def test_stream_end_of_file_reports_and_exits_0(files, capsys):
+    code, out, _ = _cli(["stream", "--source", f"csv:{files['good']}", "--json"], capsys)
+    assert code == 0 and json.loads(out)["end"]["reason"] == "end_of_stream"
+
+
+def _stream_over_pty(extra_spec: str = "") -> tuple[subprocess.Popen, int]:
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    proc = subprocess.Popen([sys.executable, "-m", "creep_online", "stream", "--json", "--source",
+                             f"serial:{os.ttyname(slave)}?format=ascii{extra_spec}"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    os.close(slave)
+    t, u, y = _record(3000)
+    os.write(master, b"".join(encode_ascii(k, t[k], u[k], y[k]) for k in range(300)))
+    return proc, master
+
+
+def _send_rest(master: int) -> None:
+    t, u, y = _record(3000)
+    for k in range(300, 3000, 100):
+        os.write(master, b"".join(encode_ascii(j, t[j], u[j], y[j]) for j in range(k, k + 100)))
+        time.sleep(0.002)
+
+
+def _wait_for_samples(proc: subprocess.Popen, master: int) -> None:
+    """Keep the port open until the stream has consumed the data (stall message on stderr)."""
+    _send_rest(master)
+    time.sleep(1.5)
+
+
+def test_stream_link_lost_for_good_prints_the_estimate_and_exits_4():
+    proc, master = _stream_over_pty("&reconnect=0")
+    _wait_for_samples(proc, master)
+    os.close(master)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 4, err
+    assert "Traceback" not in err and "link lost" in err
+    report = json.loads(out)
+    assert report["samples"] > 1000 and report["end"]["reason"] == "link_lost"
+    assert report["source_stats"]["disconnects"] == 1 and report["alpha"] is not None
+
+
+def test_stream_ctrl_c_prints_the_estimate_and_exits_130():
+    proc, master = _stream_over_pty()
+    _wait_for_samples(proc, master)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    os.close(master)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err
+    report = json.loads(out)
+    assert report["samples"] > 1000 and report["end"]["reason"] == "interrupted"
+
+
+def test_canlog_bad_records_are_counted_and_skipped(tmp_path):
+    can = pytest.importorskip("can")
+    from creep_online.io import can_frames as cf
+    from creep_online.io.sources import open_source
+    good = tmp_path / "s.asc"
+    with can.Logger(str(good)) as log:
+        ts = 1000.0
+        for k in range(0, 400, 2):
+            for fid, data, _fd in (cf.encode_input(0, 1.0), cf.encode_pair(k, 0, 0, 0.1 * k, 0.1 * k + 0.05)):
+                log(can.Message(timestamp=ts, arbitration_id=fid, data=data, is_extended_id=False))
+                ts += 1e-4
+    lines = good.read_text().splitlines(True)
+    k = next(i for i, ln in enumerate(lines) if " Rx " in ln and i > len(lines) // 2)
+    lines[k] = lines[k].split(" Rx ")[0] + " Rx d 8 GG HH II JJ KK LL MM NN\n"
+    bad = tmp_path / "bad.asc"
+    bad.write_text("".join(lines))
+    src = open_source(f"canlog:{bad}?rate=1000", on_event=None)
+    samples = list(src)
+    assert src.ended and src.stats.parser.malformed == 1
+    assert len(samples) >= 398
