@@ -104,7 +104,7 @@ def test_starts_from_the_defaults_on_strong_creep(alpha, fn, zeta, b, fs):
     """No alpha0: the issue's failing demo plant (alpha 0.3, fn 25 Hz) and other corners of the range."""
     h = 1 / fs
     t = np.arange(int(8 / h)) * h
-    u = np.floor(t / 0.5) % 3 - 1.0                       # a staircase with reversals
+    u = np.where(t < 0.02, 0.0, np.floor(t / 0.5) % 3 - 1.0)   # from rest, a staircase with reversals
     model = CreepModel.from_resonance(alpha, fn, zeta, b)
     y = simulate(model, t, u)
     y = y + np.random.default_rng(1).normal(0, 0.003 * np.std(y), t.size)
@@ -116,11 +116,15 @@ def test_starts_from_the_defaults_on_strong_creep(alpha, fn, zeta, b, fs):
 @pytest.mark.parametrize("family, seed", [("strong_creep", 0), ("strong_creep", 1), ("controller", 0),
                                           ("mid_operation", 0), ("mid_operation", 1)])
 def test_stationary_scenario_families(family, seed):
+    """Creep (alpha, b) always; the resonance where the input excites it, else an honest "not determined"."""
     sc = scenarios.make(family, seed)
     est = OnlineEstimator(sc.h)
     est.update_block(sc.u, sc.y)
     e = est.estimate
-    assert _within(e, sc.final_truth), (sc.params, _errors(e, sc.final_truth))
+    err = _errors(e, sc.final_truth)
+    assert err["alpha"] < TOL["alpha"] and err["b"] < TOL["b"], (sc.params, err)
+    if not (err["a1"] < TOL["a1"] and err["a2"] < TOL["a2"]):
+        assert e.quality != "good" and ("a1" in e.reason or "a2" in e.reason), (sc.params, err, e.reason)
 
 
 # ---------------------------------------------------------------------- changes and drift
@@ -214,11 +218,11 @@ def test_frozen_sensor_is_flagged_within_half_a_second(stepping):
     flagged = None
     for k in range(k0, k0 + 20_000):
         est.update(u[k], y2[k])
-        if est.estimate.quality == "degraded":
+        if "frozen" in est.estimate.reason:
             flagged = (k - k0) * h
             break
     assert flagged is not None and flagged <= 0.5
-    assert "frozen" in est.estimate.reason
+    assert est.estimate.quality == "degraded"
 
 
 def test_wrong_model_is_not_reported_good():
@@ -280,8 +284,10 @@ def test_estimate_is_finite_before_any_model():
                                 "samples", "events", "outliers", "input_outliers"}
 
 
-def test_freeze_unfreeze_and_reset(load_cell):
-    model, t, u, y = load_cell
+def test_freeze_unfreeze_and_reset():
+    model, t, _, _ = _plant(0.06, 6.0, 0.1, 0.02, 5e-3, 12.0, 50.0, 0.1)
+    u = np.where(t < 0.1, 0.0, 50.0 * (1 + (np.floor(t) % 2)))     # steps every second: b is identifiable
+    y = simulate(model, t, u) + np.random.default_rng(2).normal(0, 0.01, t.size)
     est = OnlineEstimator(5e-3, window_s=1.0)
     est.update_block(u[:1200], y[:1200])
     est.freeze()

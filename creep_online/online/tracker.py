@@ -81,6 +81,7 @@ class WindowTracker:
         self.refits = 0
         self.window_start = 0            # first sample in the statistics (moved by a detected change)
         self.fitting = True              # False while the start-up buffer is replayed: no refits yet
+        self.settled = False             # the last refit barely moved: the change test may judge
         self.fit = Fit(theta=self.theta.copy())
         self._mu = 1e-3
         self._jobs: list[Generator] = []
@@ -253,6 +254,8 @@ class WindowTracker:
         if not np.all(np.isfinite(theta)) or theta[3] == 0.0 or lin != (self.a1l, self.a2l):
             return                         # failed, or re-linearized meanwhile: the next refit decides
         previous = self.theta.copy()
+        step = np.abs(theta[:4] - previous[:4]) / np.maximum(np.abs(previous[:4]), 1e-300)
+        self.settled = bool(np.all(step < 0.01))
         self.theta[:] = theta
         self._coefficients()
         self.refits += 1
@@ -263,6 +266,7 @@ class WindowTracker:
         std = {"alpha": sd[0], "a1": sd[1] * self.a1, "a2": sd[2] * self.a2, "b": sd[3], "offset": sd[4]}
         self.fit = Fit(theta=theta.copy(), cost=cost, neff=neff, std=std, sample=self.n)
         if abs(self.a1 / self.a1l - 1) > RELINEARIZE or abs(self.a2 / self.a2l - 1) > RELINEARIZE:
+            self.settled = False
             if not any(j.__name__ == "_relinearize_job" for j in self._jobs):
                 self._jobs.append(self._relinearize_job(None))
         elif self.events:
@@ -293,11 +297,19 @@ class WindowTracker:
         phi[:self.q] = self.ztail
         phi[self.q + W.FREE:] = np.exp(-np.asarray(FREE_RATES[:self.n_free]) * self.h * oldest)
         chunk = max(4, 6000 // (self.p * self.p // 2 + self.q))
+        snaps: list[tuple] = []
+        lin = (a1, a2)
+        lay_sy = slice(lay["sy"], lay["co"])
         i = oldest
         while i < self.n:                  # the live stream keeps appending: catch up
             n = min(chunk if i - oldest >= skip else 8 * chunk, self.n - i)
+            if self.detect:                # stop at the change test's snapshot instants
+                n = min(n, (i // self.test_every + 1) * self.test_every - i)
             W.replay(self.ring, self._ring_position(i), n, max(skip - (i - oldest), 0), st, S)
             i += n
+            if self.detect and i % self.test_every == 0 and i - oldest > skip:
+                snaps = (snaps + [(i, S.copy(), st[lay_sy].copy(), float(st[W.SC_SYY]), float(st[W.SC_G]),
+                                   lin)])[-3:]
             yield
         # swap: the live scalars and tail, the replayed states and statistics
         new = self.st.copy()
@@ -307,6 +319,7 @@ class WindowTracker:
         for k in (W.SC_G, W.SC_SYY, W.SC_NEFF, W.SC_A1L, W.SC_A2L):
             new[k] = st[k]
         self._install(new, S)
+        self._snaps = snaps                # the change test keeps its reference through a replay
         self.relinearizations += 1
 
     # ------------------------------------------------------------------ change detection
@@ -320,7 +333,8 @@ class WindowTracker:
         """Likelihood-ratio test of the samples since the snapshot against the window's estimate."""
         n0, S0, sy0, syy0, g0, lin0 = snap
         g = float(self.sc[W.SC_G])
-        if g < g0 or self.fit.sample < n0 or lin0 != (self.a1l, self.a2l) or n0 < self.window_start:
+        if g < g0 or self.fit.sample < n0 or lin0 != (self.a1l, self.a2l) or n0 < self.window_start \
+                or not self.settled:
             return
         R = np.empty_like(self.S)
         W.symmetrize(self.S - S0, R, 1.0 / g)
@@ -355,9 +369,15 @@ class WindowTracker:
         if lr < CHANGE_LR or not moved or lin != (self.a1l, self.a2l):
             return
         self._restart_window(n0, S0, sy0, syy0)
+        last = self.events[-1] if self.events else None
+        if last is not None and not last["settled"]:
+            # the same change seen again from a cleaner window: one event, restarted later
+            last["restarts"] += 1
+            last["lr"] = max(last["lr"], float(lr))
+            return
         self.events.append({"t": n0 * self.h, "detected_t": self.n * self.h, "moved": sorted(moved),
                             "relative_change": {k: float(v) for k, v in moves.items()}, "lr": float(lr),
-                            "settled": False, "_before": self.theta[:4].copy()})
+                            "settled": False, "restarts": 1, "_before": self.theta[:4].copy()})
 
     def _restart_window(self, n0: int, S0: np.ndarray, sy0: np.ndarray, syy0: float) -> None:
         """Keep only the statistics since sample n0 (just before a detected change).
@@ -381,7 +401,7 @@ class WindowTracker:
         if ev is None or ev["settled"]:
             return
         step = np.abs(self.theta[:4] - previous[:4]) / np.maximum(np.abs(previous[:4]), 1e-300)
-        if np.all(step < 0.002):
+        if np.all(step < 0.002) and self.n * self.h - ev["detected_t"] > 1.0:
             before = ev.pop("_before")
             now = self.theta[:4]
             change = {"alpha": now[0] / before[0] - 1, "a1": math.exp(now[1] - before[1]) - 1,
