@@ -75,13 +75,13 @@ def test_warm_start_follows_the_batch_fit():
     m = CreepModel.from_resonance(0.4, 40.0, 0.1, 1.0)
     kw = warm_start(m, 1e-3)
     assert kw["alpha0"] == pytest.approx(0.4)
-    assert kw["t_c"] == pytest.approx(1.5 * m.settling_time)
+    assert "t_c" not in kw          # the estimator chooses its own search window
     assert warm_start(None, 1e-3) == {}
 
 
 # Hidden-effect records (hil_sim, realistic strengths: base residual 2-12x the noise), 6 s at 1 kHz,
 # a seed the measurement table in docs/diagnostics.md does not use. Both online estimators start
-# from their own batch fit (alpha0, t_c). The compensated live error over the last quarter must be
+# with their own batch fit's alpha as a hint (alpha0). The compensated live error over the last quarter must be
 # within 2.5x the noise floor (measured 0.98-2.2x on seeds 5 and 6; drift is the worst, the online
 # layer-2 resonance fit on the short t_c buffer, not the compensation) and well below the plain one.
 ONLINE_SEED, ONLINE_N = 5, 6000

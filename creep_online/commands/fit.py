@@ -20,7 +20,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print JSON")
     p.add_argument("--online", action="store_true",
                    help="also stream the record through the online estimator, plain and with the fitted effects "
-                        "compensated sample by sample, each warm-started from its batch fit (alpha0, t_c), and show "
+                        "compensated sample by sample, each given its batch fit's alpha as a hint, and show "
                         "the live prediction error of both (uniform time)")
     p.add_argument("--window", type=float, default=1.0, help="window of the live error display in s (default 1)")
     p.set_defaults(func=run)

@@ -155,32 +155,25 @@ class ExtendedOnlineEstimator:
         return self._last - p
 
 
-def warm_start(model, dt: float, t_c_max: float = 10.0) -> dict:
-    """``OnlineEstimator`` keyword arguments that start it from a batch fit: alpha0 and t_c.
+def warm_start(model, dt: float) -> dict:
+    """``OnlineEstimator`` keyword arguments that start it from a batch fit: the fit's alpha as a hint.
 
-    Why: the estimator's layer 2 fits the resonance with alpha *fixed* at
-    ``alpha0`` (default 0.05, the paper's nanopositioners). On a plant with
-    strong creep (alpha 0.15-0.6, the hidden-effect records) that guess is so
-    far off that layer 2 lands on an over-damped pseudo-resonance the later
-    alpha refreshes do not leave, and the live error stays 50-130x the noise
-    floor whatever the effect (measured, docs/diagnostics.md). The batch fit
-    that named the effect already knows alpha and the settling time, so both
-    estimators (plain and extended) start from their own batch fit: t_c = 1.5
-    settling times, as the estimator itself chooses it.
+    The estimator's start-up search needs no guess (it compares candidates
+    over alpha, fn and zeta); the batch alpha is added to its grid so that a
+    record too short to settle the search still starts at the batch answer.
+    The search window (t_c) is left to the estimator.
     """
     if model is None:
         return {}
-    alpha0 = float(np.clip(model.alpha, 0.01, 0.95))
-    t_c = float(np.clip(1.5 * model.settling_time, max(0.05, 200 * dt), t_c_max))
-    return {"alpha0": alpha0, "t_c": t_c}
+    return {"alpha0": float(np.clip(model.alpha, 0.01, 0.95))}
 
 
 def live_error(t: np.ndarray, u: np.ndarray, y: np.ndarray, effects: dict[str, dict], window_s: float = 1.0,
                base_model=None, extended_model=None, **estimator_kwargs) -> dict:
     """Stream a record through the plain and the extended online estimator; windowed RMS prediction errors.
 
-    ``base_model`` / ``extended_model``: batch fits (``CreepModel``) to warm-start the plain and
-    the extended estimator from (``warm_start``: alpha0 and t_c); None runs the estimator's defaults.
+    ``base_model`` / ``extended_model``: batch fits (``CreepModel``) whose alpha the plain and the
+    extended estimator get as a hint (``warm_start``); None runs the estimator's defaults.
     Returns ``{"t": window ends, "base": RMS per window, "extended": RMS per window}`` (NaN while
     an estimator is not tracking yet): the live error display's data.
     """

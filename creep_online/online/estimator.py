@@ -109,7 +109,7 @@ class OnlineEstimator:
     horizon_s:      memory horizon of the SOE fractional integral (s).
     soe_dx:         SOE node spacing in ln(lambda).
     alpha_bounds:   search interval of alpha.
-    t_c_max:        upper limit of the automatic search window (s).
+    t_c_max:        upper limit of the automatic search window (s); the tracker refines slower resonances.
     outlier_gate:   innovation gate in robust scales (0 disables the gate).
     burst_s:        longest run of gated outputs treated as outliers (s); longer is a shift.
     detect_changes: run the change test (likelihood ratio every 0.5 s).
@@ -119,7 +119,7 @@ class OnlineEstimator:
     def __init__(self, dt: float, *, window_s: float | None = 10.0, update_every_s: float = 0.1,
                  t_c: float | None = None, alpha0: float | None = None,
                  horizon_s: float = DEFAULT_HORIZON_S, soe_dx: float = DEFAULT_DX,
-                 alpha_bounds: tuple[float, float] = (0.002, 0.95), t_c_max: float = 10.0,
+                 alpha_bounds: tuple[float, float] = (0.002, 0.95), t_c_max: float = 2.0,
                  outlier_gate: float = 8.0, burst_s: float = 0.002, detect_changes: bool = True,
                  work_units: int | None = None) -> None:
         self.dt = dt
@@ -469,11 +469,11 @@ class OnlineEstimator:
     def _start_search(self) -> None:
         start = 0 if self._u_ref else max(0, self._first_change - 1)
         end = min(self._nbuf, start + MAX_SEARCH_SAMPLES)
-        prev = self._search.result if self._search is not None else None
-        extra = ((prev.alpha, prev.a1, prev.a2),) if prev is not None else ()
+        prev = self._search
+        starts = [c[1:] for c in prev.candidates] if prev is not None and prev.candidates else None
         alphas = () if self.alpha0 is None else (float(self.alpha0),)
-        self._search = ResonanceSearch(self.basis, self._bu[start:end], self._by[start:end], extra=extra,
-                                       alphas=alphas, work=self._hist_work)
+        self._search = ResonanceSearch(self.basis, self._bu[start:end], self._by[start:end], alphas=alphas,
+                                       work=self._hist_work, starts=starts)
         self._tc_used = (end - start) * self._h
         self._phase = "searching"
 

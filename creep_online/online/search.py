@@ -34,11 +34,11 @@ GRID_ZETA = (0.015, 0.05, 0.15, 0.4, 1.0)
 #: Natural frequencies of the grid (log-spaced from the buffer length to 0.3 fs).
 GRID_FREQS = 18
 #: Rows in the cost of a grid point (the rest are skipped by a stride).
-COARSE_ROWS = 1500
+COARSE_ROWS = 400
 #: Rows in the cost during refinement.
 FINE_ROWS = 6000
 #: Multiply-adds per unit of work (~3 us).
-UNIT_WORK = 2000
+UNIT_WORK = 4000
 #: Candidates refined from the grid.
 REFINE = 3
 
@@ -114,17 +114,21 @@ class ResonanceSearch:
     state before the buffer is unknown; it is forgotten within a settling
     time). ``work`` is an optional (>= len(u), Q) buffer for the node history.
     ``extra`` are (alpha, a1, a2) candidates to refine besides the grid's;
-    ``alphas`` are added to the grid's creep exponents (a user's hint).
+    ``alphas`` are added to the grid's creep exponents (a user's hint);
+    ``starts`` (alpha, fn, zeta) replace the grid (a longer window after a first search).
     """
 
     def __init__(self, basis: SoeBasis, u: np.ndarray, y: np.ndarray, zeta0: np.ndarray | None = None,
-                 lead: int = 0, extra: tuple = (), alphas: tuple = (), work: np.ndarray | None = None) -> None:
+                 lead: int = 0, extra: tuple = (), alphas: tuple = (), work: np.ndarray | None = None,
+                 starts: list | None = None) -> None:
         self.basis = basis
         self.u = np.ascontiguousarray(u, dtype=float)
         self.y = np.ascontiguousarray(y, dtype=float)
         self.zeta0 = np.zeros(basis.size) if zeta0 is None else np.array(zeta0, dtype=float)
         self.lead = int(lead)
         self.extra = tuple(extra)
+        self.starts = starts             # (alpha, fn, zeta) to refine instead of running the grid
+        self.candidates: list = []       # refined (cost, alpha, fn, zeta), best first
         self.alphas = tuple(sorted(set(GRID_ALPHA) | set(alphas)))
         self.result: SearchResult | None = None
         self.units = 0
@@ -225,17 +229,19 @@ class ResonanceSearch:
         n = self.u.size - self.lead
         coarse = max(1, n // COARSE_ROWS)
         fine = max(1, n // FINE_ROWS)
-        found = yield from self._grid(coarse)
-        found.sort(key=lambda r: r[0])
-        starts = _distinct(found, REFINE)
+        if self.starts is None:
+            found = yield from self._grid(coarse)
+            found.sort(key=lambda r: r[0])
+            starts = _distinct(found, REFINE)
+        else:
+            starts = list(self.starts)
         for alpha, a1, a2 in self.extra:
             starts.append((alpha, 1 / (2 * math.pi * math.sqrt(a2)), a1 / (2 * math.sqrt(a2))))
-        best = None
         for alpha, fn, z in starts:
             cand = yield from self._refine(alpha, fn, z, fine)
-            if best is None or cand[0] < best[0]:
-                best = cand
-        _, alpha, fn, z = best
+            self.candidates.append(cand)
+        self.candidates.sort(key=lambda r: r[0])
+        _, alpha, fn, z = self.candidates[0]
         wn = 2 * math.pi * fn
         a1, a2 = 2 * z / wn, 1 / wn**2
         cost, b, c = yield from self._evaluate(alpha, a1, a2, 1)
