@@ -42,6 +42,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--faults", default="", help="garbage=N,bitflip=N,drop=N,dup=N,reorder=N,stall=N,disconnect=N"
                                                 ",stall_s=S,disconnect_s=S (N a count, or a probability < 1)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--payload", default="", help="T:M: at time T (s) a payload adds the fraction M to the moving "
+                                                 "mass (a2 *= 1 + M; the state continues), e.g. 10:0.5")
     p.add_argument("--fast", action="store_true", help="as fast as possible instead of real time")
     p.add_argument("--wait-start", action="store_true",
                    help="serial: hold the stream until the reader sends a byte (slcan always waits for 'O')")
@@ -49,6 +51,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--linger", type=float, default=2.0, help="keep the port open this long after the end (s)")
     p.add_argument("--ledger", default=None, help="write the injected-fault ledger (JSON) here")
     return p
+
+
+def _payload(text: str) -> tuple[float, float] | None:
+    """``T:M`` -> (T, M); empty -> None."""
+    if not text:
+        return None
+    try:
+        at, mass = (float(v) for v in text.split(":"))
+    except ValueError:
+        raise SystemExit(f"hil_sim: --payload expects T:M (seconds:mass fraction), got {text!r}") from None
+    return at, mass
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -63,6 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     cfg = PlantConfig(model=model, rate=args.rate, duration=args.duration, schedule=args.schedule,
                       amplitude=args.amplitude, period=args.period, t_start=args.t_start, noise=args.noise,
                       adc_bits=args.adc_bits, adc_range=args.adc_range, effects=effects,
+                      payload=_payload(args.payload),
                       seed=args.seed)
     rec = generate(cfg)
     link_path = args.link

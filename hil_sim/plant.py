@@ -130,6 +130,7 @@ class PlantConfig:
     adc_range: float = 10.0       # full scale +- adc_range/2
     effects: dict = field(default_factory=dict)
     seed: int = 0
+    payload: tuple[float, float] | None = None   # (time s, added mass fraction): a2 *= 1 + m from then on
 
 
 @dataclass
@@ -148,6 +149,11 @@ def generate(cfg: PlantConfig) -> PlantRecord:
     u = make_input(cfg.schedule, t, amplitude=cfg.amplitude, period=cfg.period, t_start=cfg.t_start)
     if cfg.effects:
         y_clean = apply_effects(cfg.model, t, u, cfg.effects)
+    elif cfg.payload is not None:
+        from .scenarios import simulate_tv
+        at, mass = cfg.payload
+        m = cfg.model
+        y_clean = simulate_tv(1.0 / cfg.rate, u, m.alpha, m.a1, np.where(t < at, m.a2, m.a2 * (1.0 + mass)), m.b)
     else:
         y_clean = simulate(cfg.model, t, u, method="exact")
     rng = np.random.default_rng(cfg.seed)

@@ -20,6 +20,10 @@ import numpy as np
 
 from ..errors import CreepOnlineError
 
+SCENARIOS = ("stationary", "payload")
+#: The payload scenario's added mass fraction (a2 *= 1 + PAYLOAD_MASS at half the duration).
+PAYLOAD_MASS = 0.5
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("demo", help="stream the simulated plant over a pty and identify it live",
@@ -28,7 +32,12 @@ def register(subparsers) -> None:
     p.add_argument("--rate", type=float, default=10_000.0, help="sample rate in Hz (default 10000)")
     p.add_argument("--transport", choices=("serial-binary", "serial-ascii"), default="serial-binary")
     p.add_argument("--params", default="", help="true plant alpha=..,fn=..,zeta=..,b=.. (default 0.05, 300 Hz, 0.15, 1)")
-    p.add_argument("--schedule", default="step", help="input schedule: step, staircase, updown, square")
+    p.add_argument("--schedule", default=None, help="input schedule: step, staircase, updown, square "
+                                                     "(default: step; square for --scenario payload)")
+    p.add_argument("--scenario", choices=SCENARIOS, default="stationary",
+                   help="stationary: a constant plant; payload: half-way through, a payload adds 50 %% to the "
+                        "moving mass (fn drops by 18 %%) while the input keeps stepping: watch the estimator "
+                        "detect the change and follow it")
     p.add_argument("--effects", default="", help="hidden effects for the plant (see python -m hil_sim --help)")
     p.add_argument("--faults", default="", help="fault injection, e.g. drop=5,bitflip=5,garbage=5,reorder=3")
     p.add_argument("--seed", type=int, default=0)
@@ -77,6 +86,7 @@ def _errors(model, truth) -> dict:
 def run(args: argparse.Namespace) -> int:
     from ..model import CreepModel
     from ..online import OnlineEstimator
+    from ..online.estimator import warm_kernels
     try:
         from hil_sim.harness import PlantProcess
         from ..io.sources import open_source
@@ -88,9 +98,13 @@ def run(args: argparse.Namespace) -> int:
     out_dir = Path(args.report)
     from ..io.safe_files import check_report_dir
     check_report_dir(out_dir)   # before the run, not after it
+    payload = args.scenario == "payload"
+    schedule = args.schedule or ("square" if payload else "step")
     plant_args = ["--rate", repr(args.rate), "--duration", repr(args.duration), "--transport", args.transport,
-                  "--schedule", args.schedule, "--t-start", "0.2", "--seed", str(args.seed), "--wait-start",
+                  "--schedule", schedule, "--t-start", "0.2", "--seed", str(args.seed), "--wait-start",
                   "--linger", "30"]
+    if payload:
+        plant_args += ["--payload", f"{args.duration / 2!r}:{PAYLOAD_MASS!r}"]
     for flag, value in (("--params", args.params), ("--effects", args.effects), ("--faults", args.faults)):
         if value:
             plant_args += [flag, value]
@@ -103,7 +117,10 @@ def run(args: argparse.Namespace) -> int:
     with plant:
         ready = plant.ready
         truth = CreepModel(**ready["model"])
+        if payload:        # the estimate is judged against the plant as it ends
+            truth = CreepModel(truth.alpha, truth.a1, truth.a2 * (1.0 + PAYLOAD_MASS), truth.b)
         n_total = int(ready["samples"])
+        warm_kernels()
         est = OnlineEstimator(1.0 / args.rate)
         events: list[str] = []
         src = open_source(f"serial:{plant.port}?rate={args.rate!r}&start=S", on_event=events.append)
@@ -158,7 +175,7 @@ def _stream(src, est, truth, n_total: int, args, t0: float, progress: Progress) 
         if t_plant >= next_trace and last_seq is not None:
             e = est.estimate
             trace.append({"t": t_plant, "alpha": e.alpha, "a1": e.a1, "a2": e.a2, "b": e.b,
-                          "phase": e.phase, "quality": e.quality, "wall": now() - wall0})
+                          "phase": e.phase, "quality": e.quality, "events": len(e.events), "wall": now() - wall0})
             next_trace = t_plant + 0.1
         if batch:
             progress.show(_status(est, truth, src, last_seq, wall0, lat_ns))
@@ -193,6 +210,11 @@ def _status(est, truth, src, last_seq, wall0, lat_ns) -> str:
     n = src.stats.samples
     text = f"t={(last_seq or 0) * est.dt:6.2f}s {n / max(el, 1e-9) / 1e3:5.1f} kS/s "
     text += f"[{e.phase}/{e.quality}] "
+    if e.events:
+        ev = e.events[-1]
+        text += f"change@{ev['t']:.1f}s({','.join(ev['moved']) or '?'}) "
+    if e.outliers or e.input_outliers:
+        text += f"outliers y{e.outliers} u{e.input_outliers} "
     m = est.model
     if m is not None:
         err = _errors(m, truth)
@@ -232,7 +254,13 @@ def _print_summary(r: dict, as_json: bool) -> None:
         print(f"  estimate: none yet (phase {r['estimate']['phase']})")
     else:
         e = r["errors"]
-        print(f"  estimate: phase {r['estimate']['phase']}, quality {r['estimate']['quality']}")
+        est = r["estimate"]
+        why = f" ({est['reason']})" if est.get("reason") else ""
+        print(f"  estimate: phase {est['phase']}, quality {est['quality']}{why}")
+        for ev in est.get("events", []):
+            moves = ", ".join(f"{k} {100 * v:+.1f} %" for k, v in ev["relative_change"].items())
+            print(f"    change near t = {ev['t']:.2f} s, detected at {ev['detected_t']:.2f} s: "
+                  f"{', '.join(ev['moved']) or 'nothing significant'} moved ({moves})")
         print(f"    alpha {m['alpha']:.5f}  (true {t['alpha']:.5f}, error {e['alpha_abs']:+.2e})")
         print(f"    fn    {m['fn_hz']:.2f} Hz (true {t['fn_hz']:.2f}, error {100 * e['fn_rel']:+.3f} %)")
         print(f"    zeta  {m['zeta']:.4f}  (true {t['zeta']:.4f}, error {100 * e['zeta_rel']:+.3f} %)")

@@ -19,6 +19,7 @@ import numpy as np
 from ..errors import CreepOnlineError, DataError
 from ..io import load_csv
 from ..online import OnlineEstimator
+from ..online.estimator import warm_kernels
 from ._common import print_json
 
 
@@ -36,18 +37,23 @@ once samples have arrived):
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("stream", help="run the online estimator on a stream (csv:FILE, serial:PORT, can:..., canlog:FILE)",
-                       description="Online two-layer identification: buffer until t_c, fit the resonance (layer 2) "
-                                   "off the sample path, then track alpha and b over a sliding window (layer 1). "
-                                   "Prints the final estimate and the per-sample update() latency.",
+                       description="Online identification of all four parameters: a global search over "
+                                   "(alpha, fn, zeta) on the first samples, then a window fit that follows the "
+                                   "plant, detects abrupt changes and gates outliers (docs/online.md). Prints the "
+                                   "final estimate, its quality and the per-sample update() latency.",
                        epilog=EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--source", required=True, help="csv:FILE | serial:PORT | can:IFACE:CHANNEL | canlog:FILE")
     p.add_argument("--json", action="store_true",
                    help="print JSON (alpha a1 a2 b samples latency_us{p50,p99,max} phase quality ...)")
-    p.add_argument("--t-c", type=float, default=None, help="end of the transient after the first input change, s "
-                                                            "(default: from the layer-2 fit)")
-    p.add_argument("--alpha0", type=float, default=None, help="alpha guessed for layer 2")
-    p.add_argument("--window", type=float, default=None,
-                   help="forgetting time constant of layer 1 in s (default: keep everything since t_c)")
+    p.add_argument("--t-c", type=float, default=None, help="start-up search window after the first input change, s "
+                                                            "(default: chosen from the data, at most 2 s)")
+    p.add_argument("--alpha0", type=float, default=None, help="optional alpha hint added to the search grid "
+                                                               "(default: none needed)")
+    p.add_argument("--window", default=None,
+                   help="forgetting time constant in s (default: the estimator's, 10 s); 'none' keeps everything")
+    p.add_argument("--trace", default=None, metavar="FILE",
+                   help="write the estimate's trajectory as CSV (t, alpha, a1, a2, b, fn_hz, zeta, quality, "
+                        "reason, events), every 10 ms of stream time")
     p.add_argument("--dt", type=float, default=None, help="sampling step in s (live sources; default: from the stream)")
     p.add_argument("--block", action="store_true", help="csv: feed the whole file with update_block (throughput)")
     p.add_argument("--max-samples", type=int, default=None, help="stop after this many samples (live sources)")
@@ -56,10 +62,56 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _options(args: argparse.Namespace) -> dict:
-    opts: dict = {"t_c": args.t_c, "window_s": args.window}
+    """Only the settings given on the command line: the defaults are the estimator's own (one set)."""
+    opts: dict = {}
+    if args.t_c is not None:
+        opts["t_c"] = args.t_c
     if args.alpha0 is not None:
         opts["alpha0"] = args.alpha0
+    if args.window is not None:
+        text = str(args.window).strip().lower()
+        if text in ("none", "inf"):
+            opts["window_s"] = None
+        else:
+            try:
+                opts["window_s"] = float(text)
+            except ValueError:
+                raise DataError(f"--window must be a number of seconds or 'none', got {args.window!r}") from None
     return opts
+
+
+class Trace:
+    """The estimate's trajectory, one row per ``period`` seconds of stream time (``--trace FILE``)."""
+
+    COLUMNS = ("t", "alpha", "a1", "a2", "b", "fn_hz", "zeta", "quality", "reason", "events")
+
+    def __init__(self, path: str | None, dt: float, period: float = 0.01) -> None:
+        self.path = path
+        self.every = max(1, int(round(period / dt)))
+        self.rows: list[tuple] = []
+
+    def due(self, samples: int) -> bool:
+        return self.path is not None and samples % self.every == 0
+
+    def add(self, est: OnlineEstimator) -> None:
+        e = est.estimate
+        events = ";".join(f"{ev['t']:.4g}:{'+'.join(ev['moved'])}" for ev in e.events)
+        self.rows.append((e.t, e.alpha, e.a1, e.a2, e.b, e.fn_hz, e.zeta, e.quality, e.reason, events))
+
+    def write(self) -> None:
+        if self.path is None:
+            return
+        from ..io.safe_files import atomic_write
+        with atomic_write(self.path) as f:
+            f.write(",".join(self.COLUMNS) + "\n")
+            for row in self.rows:
+                f.write(",".join(_cell(v) for v in row) + "\n")
+
+
+def _cell(v) -> str:
+    if isinstance(v, str):
+        return '"' + v.replace('"', "'") + '"' if ("," in v or '"' in v) else v
+    return repr(float(v))
 
 
 def _latency(ns: np.ndarray) -> dict:
@@ -74,10 +126,11 @@ def _latency(ns: np.ndarray) -> dict:
 def _report(est: OnlineEstimator, latency: dict, extra: dict) -> dict:
     e = est.estimate
     out = {"alpha": e.alpha, "a1": e.a1, "a2": e.a2, "b": e.b, "samples": e.samples, "latency_us": latency,
-           "phase": e.phase, "quality": e.quality, "t_c": e.t_c, "fn_hz": e.fn_hz, "zeta": e.zeta,
-           "offset": e.offset, "uncertainty": e.uncertainty, "skipped": est.skipped_nonfinite,
+           "phase": e.phase, "quality": e.quality, "reason": e.reason, "t_c": e.t_c, "fn_hz": e.fn_hz,
+           "zeta": e.zeta, "offset": e.offset, "uncertainty": e.uncertainty, "skipped": est.skipped_nonfinite,
            "gaps": est.gaps, "alpha_updates": est.alpha_updates, "divergences": est.divergences,
-           "t": e.t, "dt": est.dt}
+           "outliers": e.outliers, "input_outliers": e.input_outliers, "noise_rms": e.noise_rms,
+           "residual_rms": e.residual_rms, "events": e.events, "t": e.t, "dt": est.dt}
     out.update(extra)
     return out
 
@@ -101,13 +154,18 @@ def run(args: argparse.Namespace) -> int:
         return end["exit_code"]
     e = est.estimate
     sd = e.uncertainty
-    print(f"{spec}: {e.samples} samples ({e.t:.4g} s at dt = {est.dt:.4g} s), phase {e.phase}, quality {e.quality}")
+    why = f" ({e.reason})" if e.reason else ""
+    print(f"{spec}: {e.samples} samples ({e.t:.4g} s at dt = {est.dt:.4g} s), phase {e.phase}, quality {e.quality}{why}")
     for name in ("alpha", "a1", "a2", "b"):
         err = f"  +/- {sd[name]:.3g}" if name in sd and math.isfinite(sd[name]) else ""
         print(f"  {name:<6} = {getattr(e, name):.6g}{err}")
     print(f"  fn     = {e.fn_hz:.5g} Hz, zeta = {e.zeta:.4g}, t_c = {e.t_c:.4g} s, offset = {e.offset:.4g}")
-    print(f"  skipped {est.skipped_nonfinite} non-finite, {est.gaps} lost, {est.alpha_updates} alpha updates, "
-          f"{est.divergences} rejected")
+    print(f"  skipped {est.skipped_nonfinite} non-finite, {est.gaps} lost, {est.alpha_updates} window fits, "
+          f"outliers gated: {e.outliers} output, {e.input_outliers} input")
+    for ev in e.events:
+        moves = ", ".join(f"{k} {100 * v:+.1f} %" for k, v in ev["relative_change"].items())
+        print(f"  change near t = {ev['t']:.4g} s (detected {ev['detected_t']:.4g} s): "
+              f"{', '.join(ev['moved']) or 'nothing significant'} moved ({moves})")
     if "throughput_sps" in extra:
         print(f"  block mode: {extra['throughput_sps']:.4g} samples/s")
     else:
@@ -126,12 +184,22 @@ def _run_csv(path: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dict
     if not rec.is_uniform:
         raise DataError(f"{rec.source}: time is not uniformly sampled; the online estimator needs a fixed step")
     _check_dt(args, rec.h, rec.source)
+    if args.trace is not None:
+        from ..io.safe_files import check_output
+        check_output(args.trace, inputs=[path])
     est = OnlineEstimator(rec.h, **_options(args))
+    warm_kernels()                          # compile before the clock starts
+    trace = Trace(args.trace, rec.h)
     u, y = rec.u, rec.y
     if args.block:
         start = time.perf_counter()
-        est.update_block(u, y)
+        step = trace.every if args.trace else u.size
+        for i in range(0, u.size, step):
+            est.update_block(u[i:i + step], y[i:i + step])
+            if args.trace:
+                trace.add(est)
         elapsed = time.perf_counter() - start
+        trace.write()
         return est, _latency(np.empty(0)), {"throughput_sps": u.size / max(elapsed, 1e-12), "file": rec.source}
     ns = np.empty(u.size, dtype=np.int64)
     clock = time.perf_counter_ns
@@ -143,9 +211,12 @@ def _run_csv(path: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dict
             t0 = clock()
             update(ul[k], yl[k])
             ns[k] = clock() - t0
+            if trace.due(k + 1):
+                trace.add(est)
         k = u.size
     except KeyboardInterrupt:
         end = _end("interrupted", "interrupted (Ctrl-C)")
+    trace.write()
     return est, _latency(ns[:k]), {"file": rec.source, **({"end": end} if end else {})}
 
 
@@ -166,8 +237,13 @@ def _run_live(spec: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dic
         sources = importlib.import_module("creep_online.io.sources")
     except ModuleNotFoundError as exc:
         raise CreepOnlineError(f"{spec}: live sources are not available in this build ({exc.name} missing)") from None
+    if args.trace is not None:
+        from ..io.safe_files import check_output
+        check_output(args.trace)
+    warm_kernels()                          # compile before the first sample arrives
     source = sources.open_source(spec)
     est: OnlineEstimator | None = None
+    trace = Trace(None, 1.0)
     pending: list = []
     ns: list[int] = []
     clock = time.perf_counter_ns
@@ -195,6 +271,7 @@ def _run_live(spec: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dic
                     if not dt or dt <= 0:
                         continue
                     est = OnlineEstimator(dt, **_options(args))
+                    trace = Trace(args.trace, dt)
                     todo, pending = pending, []
                 else:
                     todo = (s,)
@@ -205,6 +282,8 @@ def _run_live(spec: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dic
                     t0 = clock()
                     est.update(smp.u, smp.y)
                     ns.append(clock() - t0)
+                    if trace.due(est.samples):
+                        trace.add(est)
             done = est is not None and args.max_samples is not None and est.samples >= args.max_samples
             if done or time.monotonic() > deadline:
                 end = _end("limit")
@@ -220,6 +299,7 @@ def _run_live(spec: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dic
     finally:
         source.close()
     stats = getattr(source, "stats", None)
+    trace.write()
     if est is None:
         why = end["message"] if end and end["message"] else "fewer than 2 samples arrived; cannot tell the sampling step (use --dt)"
         raise (sources.TransportError if end and end["reason"] == "link_lost" else DataError)(

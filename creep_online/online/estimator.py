@@ -548,7 +548,7 @@ class OnlineEstimator:
         if tr.sc[W.SC_STUCK]:
             return "degraded", "output frozen or clipped while the model says it moves"
         now = self.samples * self._h
-        if tr.events and now - tr.events[-1]["detected_t"] < 1.5:
+        if tr.events and (not tr.events[-1]["settled"] or now - tr.events[-1]["detected_t"] < 1.5):
             ev = tr.events[-1]
             return "changing", f"change detected at t={ev['t']:.3g} s ({', '.join(ev['moved'])} moved)"
         if tr.fit.sample == 0:

@@ -36,7 +36,7 @@ GRID_FREQS = 18
 #: Rows in the cost of a grid point (the rest are skipped by a stride).
 COARSE_ROWS = 400
 #: Rows in the cost during refinement.
-FINE_ROWS = 6000
+FINE_ROWS = 2000
 #: Multiply-adds per unit of work (~3 us).
 UNIT_WORK = 4000
 #: Candidates refined from the grid.
@@ -115,12 +115,13 @@ class ResonanceSearch:
     time). ``work`` is an optional (>= len(u), Q) buffer for the node history.
     ``extra`` are (alpha, a1, a2) candidates to refine besides the grid's;
     ``alphas`` are added to the grid's creep exponents (a user's hint);
-    ``starts`` (alpha, fn, zeta) replace the grid (a longer window after a first search).
+    ``starts`` (alpha, fn, zeta) replace the grid (a longer window after a first search);
+    ``fixed_alpha`` searches the resonance only (after a detected change).
     """
 
     def __init__(self, basis: SoeBasis, u: np.ndarray, y: np.ndarray, zeta0: np.ndarray | None = None,
                  lead: int = 0, extra: tuple = (), alphas: tuple = (), work: np.ndarray | None = None,
-                 starts: list | None = None) -> None:
+                 starts: list | None = None, fixed_alpha: float | None = None) -> None:
         self.basis = basis
         self.u = np.ascontiguousarray(u, dtype=float)
         self.y = np.ascontiguousarray(y, dtype=float)
@@ -129,7 +130,8 @@ class ResonanceSearch:
         self.extra = tuple(extra)
         self.starts = starts             # (alpha, fn, zeta) to refine instead of running the grid
         self.candidates: list = []       # refined (cost, alpha, fn, zeta), best first
-        self.alphas = tuple(sorted(set(GRID_ALPHA) | set(alphas)))
+        self.fixed_alpha = fixed_alpha   # search only the resonance, at this alpha (after a change)
+        self.alphas = (fixed_alpha,) if fixed_alpha is not None else tuple(sorted(set(GRID_ALPHA) | set(alphas)))
         self.result: SearchResult | None = None
         self.units = 0
         if work is not None and work.shape[0] >= self.u.size and work.shape[1] == basis.size:
@@ -207,7 +209,7 @@ class ResonanceSearch:
             improved = True
             while improved:
                 improved = False
-                for j in range(3):
+                for j in self._axes():
                     for sign in (1.0, -1.0):
                         trial = p.copy()
                         trial[j] = min(max(trial[j] + sign * steps[j], lo[j]), hi[j])
@@ -217,6 +219,10 @@ class ResonanceSearch:
                             break
             steps *= 0.4
         return (best, *np.exp(p))
+
+    def _axes(self) -> range:
+        """Pattern-search axes: (ln alpha, ln fn, ln zeta), alpha left out when it is fixed."""
+        return range(1, 3) if self.fixed_alpha is not None else range(3)
 
     def _cost_at(self, p: np.ndarray, stride: int) -> Generator:
         alpha, fn, z = np.exp(p)

@@ -26,6 +26,7 @@ from typing import Generator
 import numpy as np
 
 from . import window as W
+from .search import ResonanceSearch
 from .soe import SoeBasis
 
 #: Relative move of a1 or a2 from the linearization point that triggers a replay.
@@ -38,6 +39,13 @@ CHANGE_LR = 100.0
 CHANGE_SIGMAS = 5.0
 #: Smallest relative moves that count as a change (a1, a2, b): below them the window just follows.
 CHANGE_MOVE = {"a1": 0.08, "a2": 0.05, "b": 0.03}
+#: After a detected change alpha is held this long (s): the new window is too short to determine it,
+#: and creep (alpha) does not jump with a payload or a stiffness change.
+ALPHA_HOLD_S = 2.0
+#: What a job yields while it waits for samples to arrive (the unit is not spent on it).
+WAIT = "wait"
+#: Post-change samples the resonance search waits for after a detection (s).
+RESEARCH_S = 1.0
 #: Levenberg-Marquardt steps per window re-fit and per change test.
 REFIT_STEPS = 2
 TEST_STEPS = 4
@@ -81,11 +89,12 @@ class WindowTracker:
         self.refits = 0
         self.window_start = 0            # first sample in the statistics (moved by a detected change)
         self.fitting = True              # False while the start-up buffer is replayed: no refits yet
-        self.settled = False             # the last refit barely moved: the change test may judge
+        self.converged = False           # a refit has barely moved since the start: the change test may judge
         self.fit = Fit(theta=self.theta.copy())
         self._mu = 1e-3
         self._jobs: list[Generator] = []
         self._snaps: list[tuple] = []
+        self._theta_at: dict[int, np.ndarray] = {}
         st, S = self._fresh(self.a1, self.a2)
         sc = st[:W.SC_SIZE]
         sc[W.SC_GATE] = gate
@@ -199,18 +208,26 @@ class WindowTracker:
     def busy(self) -> bool:
         return bool(self._jobs)
 
-    def work(self, units: int = 1) -> None:
-        """Run up to ``units`` units of the queued jobs (each unit a few microseconds)."""
+    def work(self, units: int = 1) -> bool:
+        """Run up to ``units`` units of the queued jobs (each unit a few microseconds).
+
+        Returns False when the job at the head waits for more samples (nothing to do now).
+        """
         while units > 0 and self._jobs:
             units -= 1
             job = self._jobs[0]
-            if next(job, StopIteration) is StopIteration and job in self._jobs:
-                self._jobs.remove(job)
+            step = next(job, StopIteration)
+            if step is StopIteration:
+                if job in self._jobs:
+                    self._jobs.remove(job)
+            elif step is WAIT:
+                return False
+        return True
 
     def finish(self) -> None:
-        """Run every queued job to completion (block mode)."""
-        while self._jobs:
-            self.work(1 << 30)
+        """Run the queued jobs to completion, or until one waits for samples (block mode)."""
+        while self._jobs and self.work(1 << 30):
+            pass
 
     def _true_stats(self) -> Generator:
         """Full symmetric true-scale copy of the window statistics (one unit)."""
@@ -242,6 +259,8 @@ class WindowTracker:
         lin = (self.a1l, self.a2l)
         stats = yield from self._true_stats()
         free = np.ones(self.theta.size)
+        if self.window_start and (self.n - self.window_start) * self.h < ALPHA_HOLD_S:
+            free[0] = 0.0                  # a short window after a change does not determine alpha
         cov = np.empty((self.theta.size, self.theta.size))
         out = np.empty(3)
         theta = self.theta.copy()
@@ -255,7 +274,7 @@ class WindowTracker:
             return                         # failed, or re-linearized meanwhile: the next refit decides
         previous = self.theta.copy()
         step = np.abs(theta[:4] - previous[:4]) / np.maximum(np.abs(previous[:4]), 1e-300)
-        self.settled = bool(np.all(step < 0.01))
+        self.converged = self.converged or bool(np.all(step < 0.01))
         self.theta[:] = theta
         self._coefficients()
         self.refits += 1
@@ -266,7 +285,6 @@ class WindowTracker:
         std = {"alpha": sd[0], "a1": sd[1] * self.a1, "a2": sd[2] * self.a2, "b": sd[3], "offset": sd[4]}
         self.fit = Fit(theta=theta.copy(), cost=cost, neff=neff, std=std, sample=self.n)
         if abs(self.a1 / self.a1l - 1) > RELINEARIZE or abs(self.a2 / self.a2l - 1) > RELINEARIZE:
-            self.settled = False
             if not any(j.__name__ == "_relinearize_job" for j in self._jobs):
                 self._jobs.append(self._relinearize_job(None))
         elif self.events:
@@ -296,7 +314,7 @@ class WindowTracker:
             skip = max(skip, int(16.0 * a2 / a1 / self.h))
         phi[:self.q] = self.ztail
         phi[self.q + W.FREE:] = np.exp(-np.asarray(FREE_RATES[:self.n_free]) * self.h * oldest)
-        chunk = max(4, 6000 // (self.p * self.p // 2 + self.q))
+        chunk = max(4, 10000 // (self.p * self.p // 2 + self.q))
         snaps: list[tuple] = []
         lin = (a1, a2)
         lay_sy = slice(lay["sy"], lay["co"])
@@ -309,7 +327,9 @@ class WindowTracker:
             i += n
             if self.detect and i % self.test_every == 0 and i - oldest > skip:
                 snaps = (snaps + [(i, S.copy(), st[lay_sy].copy(), float(st[W.SC_SYY]), float(st[W.SC_G]),
-                                   lin)])[-3:]
+                                   lin, self._theta_at.get(i, self.theta).copy())])[-3:]
+            if i >= self.n:                # caught up: swap now (a yield would let a new sample in)
+                break
             yield
         # swap: the live scalars and tail, the replayed states and statistics
         new = self.st.copy()
@@ -325,16 +345,19 @@ class WindowTracker:
     # ------------------------------------------------------------------ change detection
     def _snapshot(self) -> None:
         self._snaps.append((self.n, self.S.copy(), self.sy.copy(), float(self.sc[W.SC_SYY]),
-                            float(self.sc[W.SC_G]), (self.a1l, self.a2l)))
+                            float(self.sc[W.SC_G]), (self.a1l, self.a2l), self.theta.copy()))
+        self._theta_at[self.n] = self.theta.copy()     # the estimate at each snapshot instant
+        for old in [k for k in self._theta_at if k < self.n - 4 * self.test_every]:
+            del self._theta_at[old]
         if len(self._snaps) > 3:
             self._snaps.pop(0)
 
     def _change_job(self, snap: tuple) -> Generator:
         """Likelihood-ratio test of the samples since the snapshot against the window's estimate."""
-        n0, S0, sy0, syy0, g0, lin0 = snap
+        n0, S0, sy0, syy0, g0, lin0, theta0 = snap
         g = float(self.sc[W.SC_G])
         if g < g0 or self.fit.sample < n0 or lin0 != (self.a1l, self.a2l) or n0 < self.window_start \
-                or not self.settled:
+                or not self.converged:
             return
         R = np.empty_like(self.S)
         W.symmetrize(self.S - S0, R, 1.0 / g)
@@ -368,6 +391,7 @@ class WindowTracker:
                  if abs(v) > CHANGE_MOVE[k] and abs(v) > CHANGE_SIGMAS * rel_sd[k]}
         if lr < CHANGE_LR or not moved or lin != (self.a1l, self.a2l):
             return
+        self.theta[0] = theta0[0]          # alpha as it was before the change (the refits chased it since)
         self._restart_window(n0, S0, sy0, syy0)
         last = self.events[-1] if self.events else None
         if last is not None and not last["settled"]:
@@ -377,23 +401,76 @@ class WindowTracker:
             return
         self.events.append({"t": n0 * self.h, "detected_t": self.n * self.h, "moved": sorted(moved),
                             "relative_change": {k: float(v) for k, v in moves.items()}, "lr": float(lr),
-                            "settled": False, "restarts": 1, "_before": self.theta[:4].copy()})
+                            "settled": False, "restarts": 1, "_before": theta0[:4].copy()})
 
     def _restart_window(self, n0: int, S0: np.ndarray, sy0: np.ndarray, syy0: float) -> None:
-        """Keep only the statistics since sample n0 (just before a detected change).
+        """A change happened between sample n0 and now: the window restarts after it.
 
-        The parameters stay: the test's own fit is linearized around the old
-        resonance and unreliable for a large move; the refits and
-        re-linearizations on the post-change window converge from here.
+        The old window's refits are void. The parameters stay until the
+        resonance has been searched afresh on post-change samples only
+        (``_research_job``); the test's own fit is linearized around the old
+        resonance and unreliable for a large move.
         """
-        self.S -= S0
-        self.sy -= sy0
-        self.sc[W.SC_SYY] -= syy0
-        self.sc[W.SC_NEFF] = float(self.n - n0)
-        self.window_start = n0
+        self.window_start = self.n
+        self.converged = False
         self._snaps = []
-        self._jobs = [j for j in self._jobs if j.__name__ == "_refit_job"]
-        self._jobs.append(self._relinearize_job(n0))
+        self._jobs = [self._research_job(self.n)]
+
+    def _research_job(self, n_detect: int) -> Generator:
+        """Wait for post-change samples, search the resonance on them (alpha held), rebuild the window there.
+
+        Samples after the detection are all post-change (the change was seen
+        before it): the search gets ``RESEARCH_S`` seconds of them (longer if
+        the input has not moved), starting from the exact node state.
+        """
+        self.fitting = False
+        wait = int(RESEARCH_S / self.h)
+        while self.n < n_detect + wait or (not self._input_moved(n_detect) and self.n < n_detect + 3 * wait):
+            yield WAIT
+        oldest = int(self.sc[W.SC_RSTART])
+        n0 = max(n_detect, oldest)
+        st, S = self._fresh(self.a1l, self.a2l)       # node states fast-forwarded to n0 (no statistics)
+        st[self.lay["phi"]:self.lay["phi"] + self.q] = self.ztail
+        chunk = max(16, 4000 // (self.q + 10))
+        i = oldest
+        while i < n0:
+            n = min(chunk, n0 - i)
+            W.replay(self.ring, self._ring_position(i), n, n, st, S)
+            i += n
+            yield
+        zeta0 = st[self.lay["phi"]:self.lay["phi"] + self.q].copy()
+        u, y = yield from self._ring_segment(n0, self.n)
+        lead = min(int(16.0 * self.a2 / self.a1 / self.h), u.size // 4)   # two (old) settling times
+        search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, fixed_alpha=self.alpha)
+        while not search.step():
+            yield
+        r = search.result
+        if r is not None and math.isfinite(r.cost) and r.a1 > 0 and r.a2 > 0 and r.b != 0:
+            self.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
+            self._coefficients()
+        self.fitting = True
+        yield from self._relinearize_job(n0)
+
+    def _ring_segment(self, n0: int, n1: int) -> Generator:
+        """Copies of the remembered u, y for samples n0..n1 (a few thousand per unit); returns (u, y)."""
+        u = np.empty(n1 - n0)
+        y = np.empty(n1 - n0)
+        size = self.ring.shape[1]
+        for k0 in range(0, n1 - n0, 4096):
+            k1 = min(n1 - n0, k0 + 4096)
+            pos = (self._ring_position(n0 + k0) + np.arange(k1 - k0)) % size
+            u[k0:k1] = self.ring[0, pos]
+            y[k0:k1] = self.ring[1, pos]
+            yield
+        return u, y
+
+    def _input_moved(self, since: int) -> bool:
+        """Did the input change between sample ``since`` and now (is there something to fit)?"""
+        n = self.n - since
+        if n < 2:
+            return False
+        pos = (self._ring_position(since) + np.arange(0, n, max(1, n // 512))) % self.ring.shape[1]
+        return bool(np.ptp(self.ring[0, pos]) > 0)
 
     def _settle_events(self, previous: np.ndarray) -> None:
         """Once the fit after a change has stopped moving, record what moved and by how much."""
