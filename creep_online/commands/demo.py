@@ -31,7 +31,7 @@ def register(subparsers) -> None:
     p.add_argument("--duration", type=float, default=20.0, help="seconds of plant record to stream (default 20)")
     p.add_argument("--rate", type=float, default=10_000.0, help="sample rate in Hz (default 10000)")
     p.add_argument("--transport", choices=("serial-binary", "serial-ascii"), default="serial-binary")
-    p.add_argument("--params", default="", help="true plant alpha=..,fn=..,zeta=..,b=.. (default 0.05, 300 Hz, 0.15, 1)")
+    p.add_argument("--params", default="", help="true plant alpha=..,fn=..,zeta=..,b=.. (default 0.12, 420 Hz, 0.08, 2.5)")
     p.add_argument("--schedule", default=None, help="input schedule: step, staircase, updown, square "
                                                      "(default: step; square for --scenario payload)")
     p.add_argument("--scenario", choices=SCENARIOS, default="stationary",

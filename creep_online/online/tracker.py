@@ -168,7 +168,11 @@ class WindowTracker:
         self._snaps = []
 
     def _coefficients(self) -> None:
+        """The model coefficients for theta, and what the gate needs to know of the estimate."""
         W.full_coefficients(self.theta, self.a1l, self.a2l, self.basis.lam, self.basis.dx, self.m)
+        self.sc[W.SC_BABS] = abs(self.b)
+        settle = 8.0 * self.a2 / self.a1
+        self.sc[W.SC_HOLD] = min(max(20.0, 2.0 * settle / self.h), 2.0 / self.h)
 
     # ------------------------------------------------------------------ per sample
     def feed(self, u: float, y: float) -> int:

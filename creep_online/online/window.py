@@ -76,7 +76,12 @@ SC_NM = 30        # number of free-response columns M
 SC_A1L = 31       # linearization point a1 of the resonance states
 SC_A2L = 32       # linearization point a2
 SC_GDECAY = 33    # per-sample decay of the rejection count
-SC_SIZE = 36
+SC_SINCE = 34     # samples since the input last changed
+SC_HOLD = 35      # after an input change the gate widens for this many samples (two settling times)
+SC_BABS = 36      # |b| (set by the caller when the estimate changes)
+SC_TSCALE = 37    # |b du| of the last input change: how far a mismatched model can miss a transient
+SC_ULAST = 38     # the previous input
+SC_SIZE = 40
 
 
 @njit(cache=CACHE)
@@ -304,9 +309,13 @@ def sample(u: float, y: float, st: np.ndarray, S: np.ndarray, ring: np.ndarray) 
         e = y - pred
         scale = sc[SC_SCALE]
         _monitor(y, pred, sc)
-        gate = sc[SC_GATE]
+        gate = sc[SC_GATE] * scale
+        if sc[SC_SINCE] < sc[SC_HOLD]:
+            # just after an input step a model that is slightly off misses the transient by up to
+            # about its size: those samples are the informative ones, not outliers
+            gate += 2.0 * sc[SC_TSCALE]
         sc[SC_RUN] *= sc[SC_GDECAY]
-        if gate > 0.0 and scale > 0.0 and abs(e) > gate * scale:
+        if sc[SC_GATE] > 0.0 and scale > 0.0 and abs(e) > gate:
             # isolated outliers are rejected; dense rejections (a burst longer than SC_BURST within
             # ~20 ms, or a model that no longer fits) are accepted: a shift or a change is followed
             if sc[SC_RUN] < sc[SC_BURST]:
@@ -328,6 +337,12 @@ def sample(u: float, y: float, st: np.ndarray, S: np.ndarray, ring: np.ndarray) 
             elif status == 0:
                 status = 4
     _remember(u, y if status == 0 or status == 3 else math.nan, co, q, sc, ring, ztail)
+    if u != sc[SC_ULAST]:
+        sc[SC_TSCALE] = sc[SC_BABS] * abs(u - sc[SC_ULAST])
+        sc[SC_ULAST] = u
+        sc[SC_SINCE] = 0.0
+    else:
+        sc[SC_SINCE] += 1.0
     advance(phi, co, q, u)
     sc[SC_N] += 1.0
     if sc[SC_N] >= sc[SC_DUE]:
