@@ -605,6 +605,8 @@ def warm_kernels() -> None:
     lin = (tr.a1l, tr.a2l)
     W.jacobian_coefficients(tr.theta, *lin, tr.basis.lam, tr.basis.dx, C)
     H, g, cost = W.normal_equations(tr.theta, C, F, fy, 1.0)
+    W.lm_step(tr.theta.copy(), np.ones(n), 1e-3, *lin, tr.basis.lam, tr.basis.dx, F, fy, 1.0, 0.01, 0.9,
+              np.empty(3), np.empty((n, n)))
     W.lm_trial(tr.theta.copy(), np.ones(n), 1e-3, H, g, cost, *lin, tr.basis.lam, tr.basis.dx, F, fy, 1.0,
                0.01, 0.9, np.empty(3))
     W.covariance(H, np.ones(n), np.empty((n, n)))

@@ -95,6 +95,7 @@ class WindowTracker:
         self._jobs: list[Generator] = []
         self._snaps: list[tuple] = []
         self._theta_at: dict[int, np.ndarray] = {}
+        self._last_h = np.zeros((self.theta.size, self.theta.size))   # J^T J of the last LM step
         st, S = self._fresh(self.a1, self.a2)
         sc = st[:W.SC_SIZE]
         sc[W.SC_GATE] = gate
@@ -213,7 +214,7 @@ class WindowTracker:
         return bool(self._jobs)
 
     def work(self, units: int = 1) -> bool:
-        """Run up to ``units`` units of the queued jobs (each unit a few microseconds).
+        """Run up to ``units`` units of the queued jobs in order (each unit a few microseconds).
 
         Returns False when the job at the head waits for more samples (nothing to do now).
         """
@@ -229,7 +230,7 @@ class WindowTracker:
         return True
 
     def finish(self) -> None:
-        """Run the queued jobs to completion, or until one waits for samples (block mode)."""
+        """Run the queued jobs to completion, or until the one at the head waits for samples (block mode)."""
         while self._jobs and self.work(1 << 30):
             pass
 
@@ -243,19 +244,12 @@ class WindowTracker:
 
     def _lm(self, theta: np.ndarray, free: np.ndarray, mu: float, stats: tuple, lin: tuple,
             out: np.ndarray) -> Generator:
-        """One Levenberg-Marquardt step in three units (Jacobian, normal equations, trial); returns mu.
+        """One Levenberg-Marquardt step (one unit); returns the next damping mu.
 
         ``stats`` = (F, fy, fyy) true-scale, ``lin`` = the linearization point they were built at.
         """
         lo, hi = self.alpha_bounds
-        lam, dx = self.basis.lam, self.basis.dx
-        C = np.empty((self.p, theta.size))
-        W.jacobian_coefficients(theta, *lin, lam, dx, C)
-        yield
-        H, g, cost = W.normal_equations(theta, C, *stats)
-        self._last_h = H
-        yield
-        mu = W.lm_trial(theta, free, mu, H, g, cost, *lin, lam, dx, *stats, lo, hi, out)
+        mu = W.lm_step(theta, free, mu, *lin, self.basis.lam, self.basis.dx, *stats, lo, hi, out, self._last_h)
         yield
         return mu
 

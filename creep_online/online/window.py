@@ -553,6 +553,22 @@ def lm_trial(theta: np.ndarray, free: np.ndarray, mu: float, H: np.ndarray, g: n
 
 
 @njit(cache=CACHE)
+def lm_step(theta: np.ndarray, free: np.ndarray, mu: float, a1l: float, a2l: float, lam: np.ndarray, dx: float,
+            F: np.ndarray, fy: np.ndarray, fyy: float, lo: float, hi: float, out: np.ndarray,
+            H_out: np.ndarray) -> float:
+    """One Levenberg-Marquardt step in one call (Jacobian, normal equations, trial): ~10 us at P ~ 50.
+
+    ``H_out`` receives J^T J at the starting point (for the covariance);
+    otherwise as ``lm_trial``.
+    """
+    C = np.empty((fy.shape[0], theta.shape[0]))
+    jacobian_coefficients(theta, a1l, a2l, lam, dx, C)
+    H, g, cost = normal_equations(theta, C, F, fy, fyy)
+    H_out[:, :] = H
+    return lm_trial(theta, free, mu, H, g, cost, a1l, a2l, lam, dx, F, fy, fyy, lo, hi, out)
+
+
+@njit(cache=CACHE)
 def covariance(H: np.ndarray, free: np.ndarray, cov: np.ndarray) -> None:
     """inv(J^T J) over the free parameters (unscaled: times sigma^2); inf where it is singular."""
     n = H.shape[0]
