@@ -495,7 +495,7 @@ class OnlineEstimator:
         lo, hi = (float(v) for v in self.alpha_bounds)
         theta[0] = min(max(theta[0], lo), hi)
         self._tracker = WindowTracker(
-            self.basis, theta, window_s=self.window_s, free=bool(self._u_ref), ring=self._ring,
+            self.basis, theta, window_s=self.window_s, free=bool(self._u_ref), ring=self._ring, work=self._hist_work,
             gate=0.0, burst=self._burst, stuck=max(10, int(round(0.05 / self._h))), alpha_bounds=(lo, hi),
             refit_every=self._refit_every, test_every=self._test_every, detect=bool(self.detect_changes))
         if self.frozen:

@@ -30,7 +30,7 @@ from .search import ResonanceSearch
 from .soe import SoeBasis
 
 #: Relative move of a1 or a2 from the linearization point that triggers a replay.
-RELINEARIZE = 0.02
+RELINEARIZE = 0.04
 #: Free-response decay rates (1/s) for streams that start in operation.
 FREE_RATES = (0.03, 0.2, 1.0, 5.0)
 #: Likelihood-ratio threshold of the change test (chi-square with 4 degrees of freedom: p ~ 1e-20).
@@ -69,7 +69,7 @@ class WindowTracker:
 
     def __init__(self, basis: SoeBasis, theta: np.ndarray, *, window_s: float | None, free: bool,
                  ring: np.ndarray, gate: float, burst: int, stuck: int, alpha_bounds: tuple[float, float],
-                 refit_every: int, test_every: int, detect: bool) -> None:
+                 refit_every: int, test_every: int, detect: bool, work: np.ndarray | None = None) -> None:
         self.basis = basis
         self.h = basis.h
         self.q = basis.size
@@ -84,6 +84,7 @@ class WindowTracker:
         self.theta[:len(theta)] = theta
         self.forget = 1.0 if window_s is None else math.exp(-self.h / window_s)
         self.ring = ring                 # (2, H) history, owned by the caller (pre-faulted)
+        self.work_memory = work          # (N, Q) scratch for the post-change search (pre-faulted)
         self.events: list[dict] = []
         self.relinearizations = 0
         self.refits = 0
@@ -312,7 +313,7 @@ class WindowTracker:
             skip = max(skip, int(16.0 * a2 / a1 / self.h))
         phi[:self.q] = self.ztail
         phi[self.q + W.FREE:] = np.exp(-np.asarray(FREE_RATES[:self.n_free]) * self.h * oldest)
-        chunk = max(4, 10000 // (self.p * self.p // 2 + self.q))
+        chunk = max(4, 20000 // (self.p * self.p // 2 + self.q))
         snaps: list[tuple] = []
         lin = (a1, a2)
         lay_sy = slice(lay["sy"], lay["co"])
@@ -439,7 +440,8 @@ class WindowTracker:
         zeta0 = st[self.lay["phi"]:self.lay["phi"] + self.q].copy()
         u, y = yield from self._ring_segment(n0, self.n)
         lead = min(int(16.0 * self.a2 / self.a1 / self.h), u.size // 4)   # two (old) settling times
-        search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, fixed_alpha=self.alpha)
+        search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, fixed_alpha=self.alpha,
+                                 work=self.work_memory)
         while not search.step():
             yield
         r = search.result
@@ -454,8 +456,8 @@ class WindowTracker:
         u = np.empty(n1 - n0)
         y = np.empty(n1 - n0)
         size = self.ring.shape[1]
-        for k0 in range(0, n1 - n0, 4096):
-            k1 = min(n1 - n0, k0 + 4096)
+        for k0 in range(0, n1 - n0, 1024):
+            k1 = min(n1 - n0, k0 + 1024)
             pos = (self._ring_position(n0 + k0) + np.arange(k1 - k0)) % size
             u[k0:k1] = self.ring[0, pos]
             y[k0:k1] = self.ring[1, pos]
