@@ -225,6 +225,16 @@ def test_frozen_sensor_is_flagged_within_half_a_second(stepping):
     assert est.estimate.quality == "degraded"
 
 
+def test_an_input_that_stops_moving_is_not_reported_good(load_cell):
+    """Issue 14: an input that does not excite the plant is said so in quality, never "good"."""
+    model, t, u, y = _plant(0.06, 6.0, 0.1, 0.02, 5e-3, 30.0, 50.0, 0.1)
+    est = OnlineEstimator(5e-3, window_s=5.0)
+    est.update_block(u, y)          # one step at 0.1 s, then 30 s of the same input
+    e = est.estimate
+    assert e.quality == "provisional" and "input constant" in e.reason
+    assert _within(e, _truth(model))             # the estimate itself stays where the data put it
+
+
 def test_wrong_model_is_not_reported_good():
     """Honest quality: a plant outside the model (a strong second mode) never reads 'good'."""
     h = 1e-4

@@ -553,6 +553,10 @@ class OnlineEstimator:
             return "changing", f"change detected at t={ev['t']:.3g} s ({', '.join(ev['moved'])} moved)"
         if tr.fit.sample == 0:
             return "provisional", "first window fit pending"
+        held = tr.sc[W.SC_SINCE] * self._h
+        if self.window_s is not None and held > 3.0 * self.window_s:    # < 5 % of the last step's weight left
+            return "provisional", (f"input constant for {held:.3g} s: the window no longer holds an input change "
+                                   "(the estimate is the last one the data determined)")
         floor = max(self._noise(), 1e-9 * abs(tr.b) * max(self._u_hi - self._u_lo, 1e-300))
         ratio = self._residual() / floor if floor > 0 else math.inf
         if ratio > FLOOR_RATIO:
