@@ -1,9 +1,9 @@
-"""Online identification of the fractional creep model (DESIGN.md section 4).
+"""Online identification of the fractional creep model (docs/online.md).
 
 ``OnlineEstimator.update(u, y)`` takes one sample at a time (bounded work),
 ``update_block`` many; ``estimate`` is the current ``OnlineEstimate``. See
 docs/online.md for the scheme, the defaults and the measurements behind them.
 """
-from .estimator import OnlineEstimate, OnlineEstimator
+from .estimator import OnlineEstimate, OnlineEstimator, warm_kernels
 
-__all__ = ["OnlineEstimator", "OnlineEstimate"]
+__all__ = ["OnlineEstimator", "OnlineEstimate", "warm_kernels"]

@@ -1,4 +1,4 @@
-"""A plant whose creep exponent and gain drift: test bench for tracking (DESIGN.md section 4).
+"""A plant whose creep exponent and gain drift: test bench for tracking (docs/online.md).
 
 ``simulate_varying`` streams the input through the SOE state vector (exact for
 a zero-order-held input, see ``kernels``) and, at every sample, reads the

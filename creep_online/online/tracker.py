@@ -49,8 +49,7 @@ RESEARCH_S = 1.0
 #: Levenberg-Marquardt steps per window re-fit and per change test.
 REFIT_STEPS = 2
 TEST_STEPS = 4
-#: Parameter names in theta order (then the offset and the free responses).
-NAMES = ("alpha", "a1", "a2", "b", "offset")
+#: theta = [alpha, ln a1, ln a2, b, offset, free-response weights...]
 
 
 @dataclass

@@ -453,7 +453,6 @@ def jacobian_coefficients(theta: np.ndarray, a1l: float, a2l: float, lam: np.nda
                           C: np.ndarray) -> None:
     """Columns of C: d(phi . m)/d theta_j as coefficient vectors over phi (analytic)."""
     q = lam.shape[0]
-    p = C.shape[0]
     n = C.shape[1]
     a1 = math.exp(theta[1])
     a2 = math.exp(theta[2])
