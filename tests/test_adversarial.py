@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -298,17 +299,29 @@ def _send_rest(master: int) -> None:
         time.sleep(0.002)
 
 
-def _wait_for_samples(proc: subprocess.Popen, master: int) -> None:
-    """Keep the port open until the stream has consumed the data (stall message on stderr)."""
+def _wait_for_samples(proc: subprocess.Popen, master: int, timeout: float = 90.0) -> str:
+    """Keep the port open until the stream has consumed the data: its stall message on stderr.
+
+    A fixed sleep raced the stream's start-up (kernel warm-up) on a loaded machine. Returns
+    the stderr read so far (``communicate`` returns only the rest).
+    """
     _send_rest(master)
-    time.sleep(1.5)
+    seen = b""
+    end = time.monotonic() + timeout
+    fd = proc.stderr.fileno()
+    while b"stall" not in seen and time.monotonic() < end and proc.poll() is None:
+        ready, _, _ = select.select([fd], [], [], 0.2)
+        if ready:
+            seen += os.read(fd, 4096)
+    return seen.decode(errors="replace")
 
 
 def test_stream_link_lost_for_good_prints_the_estimate_and_exits_4():
     proc, master = _stream_over_pty("&reconnect=0")
-    _wait_for_samples(proc, master)
+    early = _wait_for_samples(proc, master)
     os.close(master)
     out, err = proc.communicate(timeout=120)
+    err = early + err
     assert proc.returncode == 4, err
     assert "Traceback" not in err and "link lost" in err
     report = json.loads(out)
@@ -318,9 +331,10 @@ def test_stream_link_lost_for_good_prints_the_estimate_and_exits_4():
 
 def test_stream_ctrl_c_prints_the_estimate_and_exits_130():
     proc, master = _stream_over_pty()
-    _wait_for_samples(proc, master)
+    early = _wait_for_samples(proc, master)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=120)
+    err = early + err
     os.close(master)
     assert proc.returncode == 130, err
     assert "Traceback" not in err
