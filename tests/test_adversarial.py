@@ -283,9 +283,12 @@ def _stream_over_pty(extra_spec: str = "") -> tuple[subprocess.Popen, int]:
     master, slave = os.openpty()
     tty.setraw(slave)
     env = dict(os.environ, PYTHONPATH=str(REPO))
+    # SIGINT back to its default in the child: a shell that runs the suite in the background
+    # starts it with SIGINT ignored, and Python would then never raise KeyboardInterrupt
     proc = subprocess.Popen([sys.executable, "-m", "creep_online", "stream", "--json", "--source",
                              f"serial:{os.ttyname(slave)}?format=ascii{extra_spec}"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     os.close(slave)
     t, u, y = _record(3000)
     os.write(master, b"".join(encode_ascii(k, t[k], u[k], y[k]) for k in range(300)))

@@ -104,6 +104,7 @@ class WindowTracker:
         sc[W.SC_STUCKN] = stuck
         sc[W.SC_SCALEK] = min(1.0, self.h / 0.5)
         sc[W.SC_MONK] = min(1.0, self.h / 0.2)
+        sc[W.SC_REPK] = min(1.0, self.h / 10.0)
         sc[W.SC_ACC] = 1.0
         self._install(st, S)
         self._schedule()

@@ -81,7 +81,9 @@ SC_HOLD = 35      # after an input change the gate widens for this many samples 
 SC_BABS = 36      # |b| (set by the caller when the estimate changes)
 SC_TSCALE = 37    # |b du| of the last input change: how far a mismatched model can miss a transient
 SC_ULAST = 38     # the previous input
-SC_SIZE = 40
+SC_REPRATE = 39   # long-run rate of outputs exactly equal to the previous one (~0 for a noisy sensor)
+SC_REPK = 40      # smoothing factor of that rate (~10 s)
+SC_SIZE = 44
 
 
 @njit(cache=CACHE)
@@ -263,11 +265,18 @@ def _monitor(y: float, pred: float, sc: np.ndarray) -> None:
             sc[SC_NOISE] = nz + sc[SC_SCALEK] * (min(d2, 3.0 * nz) - nz)
         else:
             sc[SC_NOISE] = d2
-    if sc[SC_NY] >= 1.0 and y == sc[SC_Y1]:
+    repeat = sc[SC_NY] >= 1.0 and y == sc[SC_Y1]
+    sc[SC_REPRATE] += sc[SC_REPK] * ((1.0 if repeat else 0.0) - sc[SC_REPRATE])
+    if repeat:
         sc[SC_STILL] += 1.0
         sc[SC_PMOVE] = max(sc[SC_PMOVE], abs(pred - sc[SC_PSTART]))
-        sc[SC_STUCK] = 1.0 if (sc[SC_STILL] >= sc[SC_STUCKN]
-                               and sc[SC_PMOVE] > 5.0 * sc[SC_NOISE] + 1e-300) else 0.0
+        moved = sc[SC_PMOVE] > 5.0 * sc[SC_NOISE] + 1e-300
+        # a sensor whose outputs almost never repeat exactly does not repeat for STUCKN samples
+        # while the input or the prediction moves: frozen, even if only creep moves the model
+        rate = sc[SC_REPRATE] - sc[SC_STILL] * sc[SC_REPK]      # without the current run
+        implausible = rate < 0.02 and (sc[SC_SINCE] < sc[SC_STILL]
+                                       or sc[SC_PMOVE] > sc[SC_NOISE] + 1e-300)
+        sc[SC_STUCK] = 1.0 if sc[SC_STILL] >= sc[SC_STUCKN] and (moved or implausible) else 0.0
     else:
         sc[SC_STILL] = 0.0
         sc[SC_PMOVE] = 0.0
