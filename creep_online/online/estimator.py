@@ -259,8 +259,8 @@ class OnlineEstimator:
 
     @property
     def divergences(self) -> int:
-        """Re-fits rejected (non-finite or zero gain)."""
-        return 0
+        """Window re-fits rejected (non-finite or zero gain): the previous estimate was kept."""
+        return 0 if self._tracker is None else self._tracker.rejected
 
     @property
     def events(self) -> list[dict]:
@@ -285,7 +285,8 @@ class OnlineEstimator:
             quality=quality, reason=reason, uncertainty=std, t=self.samples * self._h, samples=self.samples,
             t_c=_finite(self._tc_used), fn_hz=_finite(wn / (2 * math.pi)), zeta=_finite(a1 * wn / 2),
             offset=_finite(tr.offset), skipped=self.skipped_nonfinite,
-            alpha_updates=self.alpha_updates, divergences=0, noise_rms=_finite(self._noise()),
+            alpha_updates=self.alpha_updates, divergences=self.divergences,
+            noise_rms=_finite(self._noise()),
             residual_rms=_finite(self._residual()), outliers=int(tr.sc[W.SC_OUTLIERS]),
             shifts=int(tr.sc[W.SC_SHIFTS]), relinearizations=tr.relinearizations,
             input_outliers=self.input_outliers, events=self.events)

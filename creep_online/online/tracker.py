@@ -87,6 +87,7 @@ class WindowTracker:
         self.events: list[dict] = []
         self.relinearizations = 0
         self.refits = 0
+        self.rejected = 0                # refits discarded (non-finite or zero gain)
         self.window_start = 0            # first sample in the statistics (moved by a detected change)
         self.fitting = True              # False while the start-up buffer is replayed: no refits yet
         self.converged = False           # a refit has barely moved since the start: the change test may judge
@@ -269,8 +270,11 @@ class WindowTracker:
                 break
         W.covariance(self._last_h, free, cov)
         yield
-        if not np.all(np.isfinite(theta)) or theta[3] == 0.0 or lin != (self.a1l, self.a2l):
-            return                         # failed, or re-linearized meanwhile: the next refit decides
+        if lin != (self.a1l, self.a2l):
+            return                         # re-linearized meanwhile: the next refit decides
+        if not np.all(np.isfinite(theta)) or theta[3] == 0.0:
+            self.rejected += 1             # a failed fit is never swapped in
+            return
         previous = self.theta.copy()
         step = np.abs(theta[:4] - previous[:4]) / np.maximum(np.abs(previous[:4]), 1e-300)
         self.converged = self.converged or bool(np.all(step < 0.01))

@@ -275,7 +275,7 @@ def _monitor(y: float, pred: float, sc: np.ndarray) -> None:
         # while the input or the prediction moves: frozen, even if only creep moves the model
         rate = sc[SC_REPRATE] - sc[SC_STILL] * sc[SC_REPK]      # without the current run
         implausible = rate < 0.02 and (sc[SC_SINCE] < sc[SC_STILL]
-                                       or sc[SC_PMOVE] > sc[SC_NOISE] + 1e-300)
+                                       or sc[SC_PMOVE] > 0.5 * sc[SC_NOISE] + 1e-300)
         sc[SC_STUCK] = 1.0 if sc[SC_STILL] >= sc[SC_STUCKN] and (moved or implausible) else 0.0
     else:
         sc[SC_STILL] = 0.0
