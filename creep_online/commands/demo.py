@@ -85,8 +85,7 @@ def _errors(model, truth) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     from ..model import CreepModel
-    from ..online import OnlineEstimator
-    from ..online.estimator import warm_kernels
+    from ..online import OnlineEstimator, warm_kernels
     try:
         from hil_sim.harness import PlantProcess
         from ..io.sources import open_source

@@ -18,8 +18,7 @@ import numpy as np
 
 from ..errors import CreepOnlineError, DataError
 from ..io import load_csv
-from ..online import OnlineEstimator
-from ..online.estimator import warm_kernels
+from ..online import OnlineEstimator, warm_kernels
 from ._common import print_json
 
 
