@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from creep_online.effects import EFFECTS, simulate_with_effects
+from creep_online.effects import EFFECTS, effect_names, get_effect, simulate_with_effects
 from creep_online.model import CreepModel
 
 #: Base-model residual RMS / noise RMS, drawn log-uniformly per data set.
@@ -78,42 +78,8 @@ def random_model(rng: np.random.Generator) -> CreepModel:
 
 def effect_params(effect: str, model: CreepModel, t: np.ndarray, u: np.ndarray, y_base: np.ndarray,
                   rng: np.random.Generator) -> dict:
-    """Physically plausible parameters of one hidden effect for this plant and input."""
-    span = float(np.ptp(y_base))
-    u_range = float(np.ptp(u))
-    h = float(t[1] - t[0])
-    if effect == "hysteresis":
-        r = np.linspace(0.0, 0.5, 31)[1:] * u_range
-        w = np.exp(-r / (rng.uniform(0.08, 0.25) * u_range))
-        w *= rng.uniform(0.2, 0.5) / w.sum()  # loop ~ 5-20 % of the range
-        return {"r": r.tolist(), "w": w.tolist()}
-    if effect == "nonlinear_gain":
-        um = float(np.max(np.abs(u)))
-        k2 = rng.uniform(0.1, 0.3) / um * rng.choice([-1, 1]) * 0.5
-        return {"k2": k2, "k3": rng.uniform(-0.05, 0.05) / um**2}
-    if effect == "second_mode":
-        # a higher mode is weaker than the first: its resonance peak is 10-40 % of the first mode's
-        zeta2 = rng.uniform(0.02, 0.08)
-        peak1 = abs(model.b) * model.wn ** -model.alpha / (2.0 * model.zeta)
-        gain = 2.0 * zeta2 * rng.uniform(0.1, 0.4) * peak1
-        return {"gain": gain * rng.choice([-1, 1]), "fn_hz": model.fn * rng.uniform(2.5, 5.0), "zeta": zeta2}
-    if effect == "drift":
-        return {"rate": span * rng.uniform(0.06, 0.15) / (t[-1] - t[0]) * rng.choice([-1, 1])}
-    if effect == "leakage":
-        return {"tau_s": rng.uniform(2.0, 20.0)}
-    if effect == "delay":
-        return {"delay_s": rng.uniform(1.5, 6.0) * h}
-    if effect == "periodic_disturbance":
-        f = rng.choice([50.0, 60.0, rng.uniform(15.0, 150.0)])
-        while abs(f - model.fn) < 0.2 * model.fn:
-            f = rng.uniform(15.0, 150.0)
-        return {"f_hz": float(f), "amplitude": span * rng.uniform(0.005, 0.02), "phase": rng.uniform(0, 2 * math.pi)}
-    if effect == "second_creep":
-        a2 = model.alpha + rng.choice([-1, 1]) * rng.uniform(0.3, 0.4)
-        if not 0.1 <= a2 <= 0.95:  # keep a creep (not an elastic or viscous) term, 0.3-0.4 away from alpha
-            a2 = model.alpha + 0.35
-        return {"gain": model.b * rng.uniform(0.2, 0.5) * rng.choice([-1, 1]), "alpha2": a2}
-    raise ValueError(f"unknown effect {effect!r}; the catalogue is {', '.join(EFFECTS)}")
+    """Physically plausible parameters of one hidden effect for this plant and input (the effect's own ranges)."""
+    return get_effect(effect).example_params(model, t, u, y_base, rng)
 
 
 def hidden_dataset(effect: str | None, seed: int = 0, n: int = 4000, h: float = 1e-3,
@@ -124,7 +90,9 @@ def hidden_dataset(effect: str | None, seed: int = 0, n: int = 4000, h: float = 
     noise RMS (default: drawn log-uniformly from ``RATIO_RANGE``). Clean
     data get noise at 0.2-1 % of the output range.
     """
-    rng = np.random.default_rng([seed, 0 if effect is None else 1 + EFFECTS.index(effect)])
+    if effect is not None:
+        get_effect(effect)  # ModelError naming the catalogue if unknown
+    rng = np.random.default_rng([seed, 0 if effect is None else 1 + effect_names().index(effect)])
     t, u = staircase(n, h, rng)
     model = random_model(rng)
     if effect == "second_mode" and model.zeta > 0.15:
@@ -147,7 +115,7 @@ def hidden_dataset(effect: str | None, seed: int = 0, n: int = 4000, h: float = 
 
 
 def all_hidden(seed: int = 0, **kw) -> dict[str, HiddenDataset]:
-    """Clean data (key 'none') and one data set per catalogue effect."""
+    """Clean data (key 'none') and one data set per built-in catalogue effect."""
     out = {"none": hidden_dataset(None, seed, **kw)}
     for e in EFFECTS:
         out[e] = hidden_dataset(e, seed, **kw)

@@ -4,7 +4,7 @@ The whole record is computed up front with the exact simulator
 (``creep_online.simulate.simulate(..., method="exact")``: closed-form step
 responses superposed, ~1e-14) so that pacing never waits on numerics; the
 transport then releases sample n at t0 + n / rate. Effects from the catalogue
-(DESIGN.md section 5) are applied by ``creep_online.effects`` when that module
+(docs/diagnostics.md) are applied by ``creep_online.effects`` when that module
 is present; this package keeps no copy of the effect models.
 """
 from __future__ import annotations

@@ -89,13 +89,13 @@ ONLINE_SEED, ONLINE_N = 5, 6000
 
 @pytest.mark.parametrize("name", list(EFFECTS))
 def test_online_live_error_falls_to_the_noise_floor(name):
-    from creep_online.diagnostics.online import measure
+    from hil_sim.online_table import measure
     row = measure(name, ONLINE_SEED, ONLINE_N)
     assert row["online_extended"] < 2.5, row
     assert row["online_extended"] < 0.6 * row["online_plain"], row
 
 
 def test_online_clean_data_is_at_the_noise_floor():
-    from creep_online.diagnostics.online import measure
+    from hil_sim.online_table import measure
     row = measure(None, ONLINE_SEED, ONLINE_N)
     assert row["online_plain"] < 1.3 and row["online_extended"] == row["online_plain"], row

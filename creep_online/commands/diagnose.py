@@ -5,7 +5,7 @@ import argparse
 
 from ..diagnostics import diagnose
 from ..diagnostics.loading import load_for_diagnosis
-from ..effects import EFFECTS
+from ..effects import effect_names
 from ._common import print_json
 
 
@@ -13,7 +13,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("diagnose", help="find which catalogue effect the creep model is missing",
                        description="Fits the base creep model, locates where it fails (time spans, frequency "
                                    "bands, input regimes), fits each catalogue effect as an extension "
-                                   f"({', '.join(EFFECTS)}), ranks them by evidence (BIC drop) and names the "
+                                   f"({', '.join(effect_names())}), ranks them by evidence (BIC drop) and names the "
                                    "missing one, or 'none'. Non-uniform (e.g. log-spaced) time is supported.")
     p.add_argument("data", help="CSV file with header t,u,y")
     p.add_argument("--json", action="store_true",
@@ -28,7 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..diagnostics.extended import check_effects
-    candidates = check_effects(args.effects) if args.effects else EFFECTS
+    candidates = check_effects(args.effects) if args.effects else effect_names()
     if args.report:
         from ..io.safe_files import check_report_dir
         check_report_dir(args.report)   # before the work, not after it

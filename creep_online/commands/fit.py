@@ -5,7 +5,7 @@ import argparse
 
 from ..diagnostics.extended import check_effects, fit_base, fit_extended, prepare
 from ..diagnostics.loading import load_for_diagnosis
-from ..effects import EFFECTS
+from ..effects import effect_names
 from ..metrics import noise_std_estimate
 from ._common import print_json
 
@@ -13,7 +13,7 @@ from ._common import print_json
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fit", help="fit the creep model extended by catalogue effects",
                        description="Fits b / (s^alpha (1 + a1 s + a2 s^2)) plus the named effects "
-                                   f"({', '.join(EFFECTS)}; one or several) and prints the parameters and "
+                                   f"({', '.join(effect_names())}; one or several) and prints the parameters and "
                                    "the fit before and after.")
     p.add_argument("data", help="CSV file with header t,u,y")
     p.add_argument("--effects", required=True, help="comma-separated catalogue names, e.g. delay,drift")

@@ -1,4 +1,4 @@
-"""Model discrepancy (DESIGN.md section 5): compare, locate where the model fails, explain which effect is missing, extend.
+"""Model discrepancy (docs/diagnostics.md): compare, locate where the model fails, explain which effect is missing, extend.
 
 ``diagnose(record_or_t_u_y)`` runs the whole workflow and returns a
 ``Diagnosis`` (``.verdict``, ``.candidates``, ``.to_dict()`` = the
@@ -7,7 +7,7 @@ fit and build models with one or more catalogue effects.
 """
 from .compare import compare, error_metrics, overlay
 from .explain import Candidate, Diagnosis, diagnose, evidence
-from .extended import (ExtendedFit, ExtendedModel, Prepared, check_effects, fit_base, fit_extended, prepare,
+from .extended import (ExtendedFit, ExtendedModel, Prepared, check_effects, fit_base, fit_extended, prepare, refit,
                        with_effects)
 from .locate import locate, spectrum_peaks
 from .residuals import autocorrelation, cross_correlation, parameter_uncertainty
@@ -15,6 +15,6 @@ from .residuals import autocorrelation, cross_correlation, parameter_uncertainty
 __all__ = [
     "diagnose", "Diagnosis", "Candidate", "evidence",
     "compare", "error_metrics", "overlay",
-    "prepare", "Prepared", "fit_base", "fit_extended", "ExtendedFit", "ExtendedModel", "with_effects",
+    "prepare", "Prepared", "fit_base", "fit_extended", "ExtendedFit", "ExtendedModel", "with_effects", "refit",
     "check_effects", "locate", "spectrum_peaks", "autocorrelation", "cross_correlation", "parameter_uncertainty",
 ]

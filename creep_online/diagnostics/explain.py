@@ -22,13 +22,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import chi2
 
-from .. import effects as fx
+from ..effects import effect_names, get_effect
 from ..errors import CreepOnlineError, DataError
 from ..metrics import noise_std_estimate
 from ..record import Record
 from . import extended as ext
 from .compare import error_metrics
-from .locate import last_direction, locate
+from .locate import locate
 from .residuals import autocorrelation, cross_correlation, parameter_uncertainty
 
 #: BIC drop an effect needs to be called significant.
@@ -121,21 +121,8 @@ def _jsonable(x):
 
 # --------------------------------------------------------------------------- applicability
 def applicable(data: ext.Prepared, effect: str) -> str | None:
-    """None if the data can reveal ``effect``; else the reason it cannot."""
-    u = data.u
-    if effect == "hysteresis":
-        d = last_direction(u)
-        flips = int(np.sum(np.abs(np.diff(d[d != 0])) > 0))
-        if flips < 2:
-            return f"needs input reversals (found {flips})"
-    if effect == "nonlinear_gain":
-        if np.unique(u).size < 3:
-            return "needs at least 3 input levels"
-    if effect == "periodic_disturbance" and not data.uniform:
-        return "needs uniform sampling for its frequency search"
-    if effect == "delay" and not data.uniform:
-        return "needs uniform sampling (delays below one sample step of a log-spaced record are not identifiable)"
-    return None
+    """None if the data can reveal ``effect``; else the reason it cannot (the effect's own rule)."""
+    return get_effect(effect).applicable(data)
 
 
 # --------------------------------------------------------------------------- evidence
@@ -149,42 +136,7 @@ def evidence(base: ext.ExtendedFit, fit: ext.ExtendedFit, n: int) -> tuple[float
 
 def signature(effect: str, fit: ext.ExtendedFit, base: ext.ExtendedFit, where: dict, data: ext.Prepared) -> str:
     """The effect's fingerprint in the base residual, in words with the number that carries it."""
-    p = fit.effect_params.get(effect, {})
-    r = base.residual
-    reg = where.get("input_regimes", {})
-    spans = where.get("time_spans", {})
-    if effect == "hysteresis":
-        return (f"residual depends on the direction of the last input change (split {reg.get('direction_split', 0):.2f} "
-                f"x RMS); loop width {p.get('loop_width', float('nan')):.3g} input units "
-                f"({100 * p.get('loop_width_rel', float('nan')):.2g} % of the range)")
-    if effect == "nonlinear_gain":
-        return (f"level error grows with the input level (trend {reg.get('level_trend', 0):.2f} x RMS); "
-                f"incremental gain changes {100 * p.get('gain_change', float('nan')):.3g} % over the range")
-    if effect == "second_mode":
-        near = [pk for pk in where.get("spectrum_peaks", []) if abs(pk["f_hz"] - p.get("fn_hz", 0)) < 0.1 * p.get("fn_hz", 1)]
-        extra = f"; residual spectrum peak at {near[0]['f_hz']:.4g} Hz" if near else ""
-        return f"second resonance at {p.get('fn_hz', float('nan')):.4g} Hz (zeta {p.get('zeta', float('nan')):.2g}){extra}"
-    if effect == "drift":
-        tt = data.t - data.t[0]
-        c = float(np.corrcoef(tt, r)[0, 1]) if np.std(r) > 0 else 0.0
-        return f"residual trends with time (correlation {c:.2f}); rate {p.get('rate', float('nan')):.3g} per s"
-    if effect == "leakage":
-        slope = spans.get("hold_slope_mean", float("nan"))
-        held = f" (mean hold slope of the residual {slope:.3g}/s)" if np.isfinite(slope) else ""
-        return f"output decays towards zero, high-pass{held}; tau {p.get('tau_s', float('nan')):.3g} s"
-    if effect == "delay":
-        dy = np.gradient(base.y_hat, data.t)
-        c = float(np.corrcoef(dy, r)[0, 1]) if np.std(r) > 0 and np.std(dy) > 0 else 0.0
-        return (f"residual shaped like -d(output)/dt after steps (correlation {c:.2f}); "
-                f"delay {1e3 * p.get('delay_s', float('nan')):.3g} ms = {p.get('delay_samples', float('nan')):.3g} samples")
-    if effect == "periodic_disturbance":
-        amp = p.get("amplitude", float("nan"))
-        amp = amp[0] if isinstance(amp, list) else amp
-        return f"narrow spectral line at {p.get('f_hz', float('nan')):.5g} Hz, amplitude {amp:.3g}, unrelated to the input"
-    if effect == "second_creep":
-        return (f"log-log slope changes with time: second power law alpha2 = {p.get('alpha2', float('nan')):.3g} "
-                f"beside alpha = {fit.model.alpha:.3g}")
-    return ""
+    return get_effect(effect).signature(fit.effect_params.get(effect, {}), fit, base, where, data)
 
 
 # --------------------------------------------------------------------------- the workflow
@@ -220,7 +172,7 @@ def _start_from_identify(data: ext.Prepared, warnings: list[str]):
     return None
 
 
-def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] = fx.EFFECTS, use_identify: bool = True,
+def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_identify: bool = True,
              u_pre: float | None = None, t_pre: float | None = None, combine: bool = True,
              max_nfev: int = ext.MAX_NFEV) -> Diagnosis:
     """Compare, locate, explain: fit the base model, every candidate effect, rank them, give the verdict.
@@ -229,6 +181,8 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] = fx.EFFECTS, use_i
     ``t_pre`` describe an input step before the first sample (e.g. a creep
     test logged from t > 0); by default the record starts in equilibrium at
     u[0]. ``combine`` also fits the two best significant effects together.
+    ``candidates``: the effects to try (default: every registered one,
+    ``creep_online.effects.effect_names()``).
     """
     start = time.perf_counter()
     t, u, y, source = _as_arrays(record_or_t_u_y, step_before=u_pre is not None)
@@ -236,6 +190,7 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] = fx.EFFECTS, use_i
     if u_pre is None and t_pre is None and np.ptp(u) == 0.0:
         u_pre = 0.0  # a constant non-zero input is a step from rest at t[0] (as Record.validate reads it)
         pre_notes.append(f"constant input {u[0]:g}: read as a step from 0 at t = {t[0]:g} s")
+    candidates = effect_names() if candidates is None else tuple(candidates)
     for name in candidates:
         ext.check_effects([name])
     data = ext.prepare(t, u, y, source=source, u_pre=u_pre, t_pre=t_pre)

@@ -9,9 +9,14 @@ amplitudes and the offset solved in closed form at every evaluation
 (variable projection). Starting points: the base fit (warm start) and short
 grid searches for each effect's nonlinear parameters.
 
+Every effect-specific step (its parameters and bounds, its design columns,
+its starting grid, its reported parameters) is a hook of the effect's module
+in ``creep_online.effects`` (the ``Effect`` contract in
+``creep_online/effects/base.py``); this module only wires the stages.
+
 Python API: :func:`prepare` a record once, :func:`fit_base`, then
 :func:`fit_extended` for any effects (one or several, e.g. two at once);
-:class:`ExtendedModel` (also via :func:`with_effects`) simulates the result.
+``ExtendedFit.simulate`` (or ``creep_online.model.ExtendedModel``) simulates the result.
 """
 from __future__ import annotations
 
@@ -23,23 +28,17 @@ from scipy.linalg import lstsq as scipy_lstsq
 from scipy.optimize import least_squares
 
 from .. import effects as fx
+from ..effects import FitView, InputEffect, ParamSpec, Stage, check_effect_names, effect_names, get_effect
 from ..errors import DataError, ModelError
 from ..metrics import fit_percent, rms
-from ..model import CreepModel
+from ..model import EXTENDED_FIT_ALPHA_BOUNDS as ALPHA_BOUNDS
+from ..model import CreepModel, ExtendedModel, with_effects
 from ..record import check_amplitudes, check_time_and_output
 
-#: Play-operator thresholds used for hysteresis, as fractions of the input range (denser where
-#: real loops put most of their weight, at small thresholds).
-HYSTERESIS_THRESHOLDS = (0.02, 0.04, 0.07, 0.1, 0.14, 0.19, 0.25, 0.32, 0.4, 0.48)
 #: Time stamps whose step varies by less than this (relative) are snapped to a uniform grid.
 SNAP_RTOL = 1e-2
-#: Play-operator states before the record: centred on u[0], or as left by a rise to / fall to u[0].
-INITIAL_STATES = {0: "centred", -1: "ascending", 1: "descending"}
-#: Bounds of the base model's nonlinear parameters.
-ALPHA_BOUNDS = (1e-3, 0.999)
+#: Bounds of the base model's damping (alpha's are ``model.EXTENDED_FIT_ALPHA_BOUNDS``).
 ZETA_BOUNDS = (1e-3, 20.0)
-#: Largest delay searched, in samples (uniform) of the record.
-MAX_DELAY_SAMPLES = 40
 #: Evaluations allowed per least-squares fit.
 MAX_NFEV = 40
 #: Extended fits: this many grid starts get a short polish of SHORT_NFEV evaluations first.
@@ -123,38 +122,25 @@ class Prepared:
     def fs(self) -> float:
         return 1.0 / self.h
 
-    def superposer(self, key: str) -> fx.Superposer:
-        """Cached superposer of the input features named by ``key`` (built on first use)."""
+    def superposer(self, inputs: tuple[tuple[InputEffect, str | None], ...] = ()) -> fx.Superposer:
+        """Cached superposer of the input rows: u, then each input effect's rows (built on first use).
+
+        ``inputs``: (input-stage effect, its variant) pairs in registry order;
+        () is the plain input.
+        """
+        key = "+".join(f"{e.name}[{variant}]" for e, variant in inputs) or "u"
         if key not in self._cache:
-            x = self.features(key)
+            x = self.input_rows(inputs, self.u)
             pre = None
             if self.u_pre is not None:
-                pre = self.features(key, np.array([self.u_pre]))[:, 0]
+                pre = self.input_rows(inputs, np.array([self.u_pre]), before=True)[:, 0]
             self._cache[key] = fx.Superposer(self.t, x, x_pre=pre, t_pre=self.t_pre)
         return self._cache[key]
 
-    def features(self, key: str, u: np.ndarray | None = None) -> np.ndarray:
-        """Input rows for a path: 'u' (the input), 'hyst' (u and play operators), 'poly' (u, u^2, u^3)."""
-        u = self.u if u is None else u
-        if key == "u":
-            return u[None, :]
-        if key == "poly":
-            scale = self.u_scale
-            x = u / scale
-            return np.array([u, scale * x * x, scale * x * x * x])
-        if key.startswith("hystpoly"):  # generalised PI: play operators plus a polynomial (asymmetric loops)
-            return np.vstack([self.features("hyst" + key[8:], u), self.features("poly", u)[1:]])
-        if key.startswith("hyst"):
-            init = int(key[4:])
-            if u is not self.u:  # the state before the record
-                return np.repeat(u[None, :], 1 + len(HYSTERESIS_THRESHOLDS), axis=0)
-            r = self.thresholds
-            return np.vstack([u[None, :], fx.play_operators(u, r, initial=u[0] + init * r)])
-        raise KeyError(key)
-
-    @property
-    def thresholds(self) -> np.ndarray:
-        return np.asarray(HYSTERESIS_THRESHOLDS) * self.u_range
+    def input_rows(self, inputs: tuple[tuple[InputEffect, str | None], ...], u: np.ndarray,
+                   before: bool = False) -> np.ndarray:
+        """u and the rows the input effects add (``before``: u is the input before the record)."""
+        return np.vstack([u[None, :]] + [e.design_rows(self, u, variant, before) for e, variant in inputs])
 
 
 def prepare(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, source: str = "<array>",
@@ -191,43 +177,20 @@ def prepare(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, source: str = "<arra
 
 
 # --------------------------------------------------------------------------- the design
-@dataclass
-class ParamSpec:
-    name: str      # internal name
-    lo: float
-    hi: float
-
-
-def _effect_specs(data: Prepared, name: str) -> list[ParamSpec]:
-    """Nonlinear parameters (internal scale) of one effect, with bounds."""
-    if name == "second_mode":
-        hi = math.log10(0.5 * data.fs) if data.uniform else math.log10(1.0 / data.h)
-        lo = math.log10(1.0 / (data.t[-1] - data.t[0]))
-        return [ParamSpec("second_mode.log10_fn", lo, hi), ParamSpec("second_mode.log10_zeta", -3.0, 0.5)]
-    if name == "leakage":
-        dur = data.t[-1] - data.t[0]
-        return [ParamSpec("leakage.log10_tau", math.log10(dur / 1e3), math.log10(dur * 1e3))]
-    if name == "delay":
-        hi = MAX_DELAY_SAMPLES * data.h if data.uniform else 0.05 * (data.t[-1] - data.t[0])
-        return [ParamSpec("delay.d", 0.0, hi)]
-    if name == "periodic_disturbance":
-        # fewer than ~3 cycles over the record is a trend, not a periodic disturbance
-        return [ParamSpec("periodic_disturbance.f", 3.0 / (data.t[-1] - data.t[0]), 0.5 * data.fs)]
-    if name == "second_creep":
-        return [ParamSpec("second_creep.alpha2", 1e-3, 1.0)]
-    if name in ("hysteresis", "nonlinear_gain", "drift"):
-        return []
-    raise ModelError(f"unknown effect {name!r}; the catalogue is {', '.join(fx.EFFECTS)}")
-
-
 class Design:
-    """Columns of the extended model for given nonlinear parameters, and their projection."""
+    """Columns of the extended model for given nonlinear parameters, and their projection.
+
+    theta = (alpha, log10 fn, log10 zeta) then each effect's nonlinear
+    parameters in the order of ``effects``. Columns: the dynamic paths (the
+    base path on the input rows, then one per parallel effect), delayed and
+    filtered, then the offset and the additive effects' columns.
+    ``variants`` picks an effect's discrete variant (e.g. hysteresis'
+    initial state; default: its first).
+    """
 
     def __init__(self, data: Prepared, effects: tuple[str, ...] = (), harmonics: int = 1,
-                 hysteresis_initial: int = 0) -> None:
-        for e in effects:
-            if e not in fx.EFFECTS:
-                raise ModelError(f"unknown effect {e!r}; the catalogue is {', '.join(fx.EFFECTS)}")
+                 variants: dict[str, str] | None = None) -> None:
+        check_effect_names(effects)
         self.data = data
         self.effects = tuple(effects)
         self.harmonics = harmonics
@@ -237,15 +200,15 @@ class Design:
                       ParamSpec("log10_fn", math.log10(fmin), math.log10(2.0 * fmax)),
                       ParamSpec("log10_zeta", math.log10(ZETA_BOUNDS[0]), math.log10(ZETA_BOUNDS[1]))]
         for e in self.effects:
-            self.specs += _effect_specs(data, e)
+            self.specs += get_effect(e).nonlinear_params(data)
         self.names = [s.name for s in self.specs]
         self.lo = np.array([s.lo for s in self.specs])
         self.hi = np.array([s.hi for s in self.specs])
-        hyst, poly = "hysteresis" in effects, "nonlinear_gain" in effects
-        self.hysteresis_initial = int(hysteresis_initial)
-        init = f"{self.hysteresis_initial:+d}"
-        key = "hystpoly" + init if hyst and poly else "hyst" + init if hyst else "poly" if poly else "u"
-        self.key = key
+        ordered = [get_effect(n) for n in effect_names() if n in self.effects]
+        self.stages = {stage: [e for e in ordered if e.stage == stage] for stage in Stage}
+        self.variants = {e.name: (variants or {}).get(e.name, e.variants[0] if e.variants else None)
+                         for e in ordered}
+        self.inputs = tuple((e, self.variants[e.name]) for e in self.stages[Stage.INPUT])
         self.col_names: list[str] = []
         self.nfev = 0
 
@@ -253,15 +216,19 @@ class Design:
         return self.names.index(name)
 
     def columns(self, theta: np.ndarray) -> np.ndarray:
-        """Design matrix (n, p): dynamic paths (delayed, leaked) then offset, drift and sinusoids."""
+        """Design matrix (n, p): dynamic paths (delayed, filtered) then offset and additive columns."""
         data = self.data
         p = dict(zip(self.names, theta))
         alpha, fn, zeta = p["alpha"], 10 ** p["log10_fn"], 10 ** p["log10_zeta"]
         wn = 2 * math.pi * fn
         a1, a2 = 2 * zeta / wn, 1 / wn**2
-        d = p.get("delay.d", 0.0)
-        sup = data.superposer(self.key)
-        names: list[str] = []
+        d = 0.0
+        for e in self.stages[Stage.DELAY]:
+            d = d + e.fitted_delay(p)
+        sup = data.superposer(self.inputs)
+        names: list[str] = ["b"]
+        for e, _ in self.inputs:
+            names += e.column_names()
         if data.uniform:
             s = fx.delayed_grid(fx.base_step_grid(alpha, a1, a2, data.h, data.n), data.h, d)
             dyn = [sup.apply(s)]
@@ -269,32 +236,21 @@ class Design:
         else:
             dyn = [sup.apply(lambda tt: fx.base_step_at(alpha, a1, a2, tt - d))]
             tau = None
-        w_names = [f"w{i}" for i in range(1, len(HYSTERESIS_THRESHOLDS) + 1)]
-        names += ["b"] + {"u": [], "hyst": w_names, "poly": ["c2", "c3"],
-                          "hystpoly": w_names + ["c2", "c3"]}[self.key.rstrip("+-01")]
-        usup = data.superposer("u")
-        if "second_mode" in self.effects:
-            f2, z2 = 10 ** p["second_mode.log10_fn"], 10 ** p["second_mode.log10_zeta"]
-            fn_ = (lambda tt: fx.resonance_step(f2, z2, tt - d))
-            dyn.append(usup.apply(fn_(tau + d) if tau is not None else fn_))
-            names.append("second_mode.gain")
-        if "second_creep" in self.effects:
-            a_2 = p["second_creep.alpha2"]
-            fn_ = (lambda tt: fx.creep_step(a_2, tt - d))
-            dyn.append(usup.apply(fn_(tau + d) if tau is not None else fn_))
-            names.append("second_creep.gain")
+        usup = data.superposer()
+        for e in self.stages[Stage.PARALLEL]:
+            step = e.unit_step(p)
+            shifted = (lambda tt, step=step: step(tt - d))
+            dyn.append(usup.apply(shifted(tau + d) if tau is not None else shifted))
+            names.append(e.gain_column)
         cols = np.vstack(dyn)
-        if "leakage" in self.effects:
-            cols = fx.leakage_filter(data.t, cols, 10 ** p["leakage.log10_tau"])
+        for e in self.stages[Stage.OUTPUT_FILTER]:
+            cols = e.filter_columns(data.t, cols, p)
         static = [np.ones(data.n)]
         names.append("offset")
-        if "drift" in self.effects:
-            static.append(data.t - data.t[0])
-            names.append("drift.rate")
-        if "periodic_disturbance" in self.effects:
-            static += list(fx.periodic_columns(data.t, p["periodic_disturbance.f"], self.harmonics))
-            for k in range(1, self.harmonics + 1):
-                names += [f"periodic.sin{k}", f"periodic.cos{k}"]
+        for e in self.stages[Stage.ADDITIVE]:
+            more, more_names = e.output_columns(data.t, p, self.harmonics)
+            static += more
+            names += more_names
         self.col_names = names
         return np.vstack([cols, np.array(static)]).T
 
@@ -362,41 +318,8 @@ def _result(design: Design, theta: np.ndarray) -> ExtendedFit:
     if b == 0.0 or not math.isfinite(b):
         b = 1e-300
     model = CreepModel.from_resonance(p["alpha"], 10 ** p["log10_fn"], 10 ** p["log10_zeta"], b)
-    eff: dict[str, dict] = {}
-    for e in design.effects:
-        if e == "hysteresis":
-            w = np.array([c[f"w{i}"] for i in range(1, len(HYSTERESIS_THRESHOLDS) + 1)]) / b
-            width = fx.loop_width(data.thresholds, w, data.u_range)
-            eff[e] = {"r": data.thresholds.tolist(), "w": w.tolist(), "loop_width": width,
-                      "loop_width_rel": width / data.u_range if data.u_range else float("nan"),
-                      "initial": INITIAL_STATES[design.hysteresis_initial]}
-        elif e == "nonlinear_gain":
-            scale = data.u_scale
-            k2, k3 = c["c2"] / b / scale, c["c3"] / b / scale**2
-            lo, hi = float(data.u.min()), float(data.u.max())
-            g = lambda x: 1 + 2 * k2 * x + 3 * k3 * x * x  # noqa: E731  incremental gain
-            gains = [g(x) for x in np.linspace(lo, hi, 21)]
-            eff[e] = {"k2": k2, "k3": k3, "gain_change": float(max(gains) / min(gains) - 1)
-                      if min(gains) > 0 else float("inf")}
-        elif e == "second_mode":
-            eff[e] = {"gain": c["second_mode.gain"], "fn_hz": 10 ** p["second_mode.log10_fn"],
-                      "zeta": 10 ** p["second_mode.log10_zeta"]}
-        elif e == "drift":
-            eff[e] = {"rate": c["drift.rate"]}
-        elif e == "leakage":
-            eff[e] = {"tau_s": 10 ** p["leakage.log10_tau"]}
-        elif e == "delay":
-            eff[e] = {"delay_s": p["delay.d"], "delay_samples": p["delay.d"] / data.h}
-        elif e == "periodic_disturbance":
-            amps, phases = [], []
-            for k in range(1, design.harmonics + 1):
-                s_, c_ = c[f"periodic.sin{k}"], c[f"periodic.cos{k}"]
-                amps.append(math.hypot(s_, c_))
-                phases.append(math.atan2(c_, s_))
-            eff[e] = {"f_hz": p["periodic_disturbance.f"], "amplitude": amps if len(amps) > 1 else amps[0],
-                      "phase": phases if len(phases) > 1 else phases[0]}
-        elif e == "second_creep":
-            eff[e] = {"gain": c["second_creep.gain"], "alpha2": p["second_creep.alpha2"]}
+    eff = {e: get_effect(e).fitted_params(FitView(p, c, b, data, design.variants[e], design.harmonics))
+           for e in design.effects}
     res = data.y - y_hat
     return ExtendedFit(design.effects, model, c["offset"], eff, np.array(theta), coef, y_hat, res,
                        float(wres @ wres), len(theta) + len(coef), fit_percent(data.y, y_hat), rms(res),
@@ -487,44 +410,25 @@ def fit_base(data: Prepared, start: CreepModel | None = None, max_nfev: int = MA
 def _grid_starts(design: Design, base: ExtendedFit, peaks: list[float]) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """(grid starts, priority starts) for the effects' nonlinear parameters.
 
-    Grids cover each parameter's range; priority starts put a frequency
-    parameter on a residual-spectrum peak (always polished, since a narrow
-    resonance or line is found there and almost nowhere else). Every start is
-    combined with the base fit and its runner-up.
+    Each effect gives, per parameter, grid values covering its range and
+    priority values (e.g. a frequency on a residual-spectrum peak; always
+    polished, since a narrow resonance or line is found there and almost
+    nowhere else). Every start is combined with the base fit, its runner-up
+    and the base variants the effects ask for.
     """
     data = design.data
+    effects = [get_effect(e) for e in design.effects]
     grids: list[list[float]] = []
     prio: list[list[float]] = []
-    names = design.names[3:]
-    for name in names:
-        lo, hi = design.lo[design.index(name)], design.hi[design.index(name)]
-        if name == "second_mode.log10_fn":
-            cand = [math.log10(f) for f in peaks if 10 ** lo < f < 10 ** hi]
-            grids.append(list(np.linspace(lo + 0.05 * (hi - lo), hi - 0.01 * (hi - lo), 24)))
-            prio.append(cand)
-        elif name == "second_mode.log10_zeta":
-            grids.append([math.log10(0.05)])
-            prio.append([math.log10(0.02), math.log10(0.08)])
-        elif name == "leakage.log10_tau":
-            grids.append(list(np.linspace(lo + 0.5, hi - 0.5, 9)))
-            prio.append([])
-        elif name == "delay.d":
-            grids.append(list(np.unique(np.concatenate([np.array([0.3, 1, 2, 3, 5, 8, 13, 20, 30]) * data.h, [hi * 0.99]]))))
-            prio.append([])
-        elif name == "periodic_disturbance.f":
-            grids.append([f for f in peaks if lo <= f <= hi] or [0.05 * data.fs])
-            prio.append([f for f in peaks if lo <= f <= hi])
-        elif name == "second_creep.alpha2":
-            grids.append([0.05, 0.15, 0.3, 0.5, 0.7, 0.85, 0.97])
-            prio.append([])
+    for e in effects:
+        for grid, priority in e.start_values(data, peaks):
+            grids.append(grid)
+            prio.append(priority)
     bases = [base.theta[:3]] + [np.asarray(a)[:3] for a in base.alternatives
                                 if np.max(np.abs(np.asarray(a)[:3] - base.theta[:3])) > 1e-3]
-    if "second_creep" in design.effects:  # the two exponents trade places: move alpha too
+    for e in effects:
         for b_ in list(bases):
-            for shift in (-0.2, 0.2):
-                v = b_.copy()
-                v[0] = float(np.clip(v[0] + shift, ALPHA_BOUNDS[0] + 0.01, ALPHA_BOUNDS[1] - 0.01))
-                bases.append(v)
+            bases += e.base_variants(b_, (design.lo[0], design.hi[0]))
     if not grids:
         return [b_ for b_ in bases], []
 
@@ -537,25 +441,19 @@ def _grid_starts(design: Design, base: ExtendedFit, peaks: list[float]) -> tuple
     # a priority start keeps the grid for the parameters that have no priority values
     prio_lists = [p_ if p_ else g for p_, g in zip(prio, grids)] if any(prio) else []
     prio_starts = mesh(prio_lists) if prio_lists else []
-    if "second_mode" in design.effects and len(names) == 2:
-        # the base may have locked onto the higher mode: hand it to the second mode, move the base down
-        i_fn = design.index("second_mode.log10_fn")
-        for factor in (0.25, 0.4, 0.6):
-            th = np.concatenate([base.theta[:3], np.zeros(2)])
-            th[i_fn], th[i_fn + 1] = base.theta[1], base.theta[2]
-            th[1], th[2] = base.theta[1] + math.log10(factor), math.log10(0.2)
-            prio_starts.append(th)
+    n_effect_params = len(design.names) - 3
+    for e in effects:
+        if len(e.nonlinear_params(data)) == n_effect_params:  # the only effect with nonlinear parameters
+            prio_starts += e.takeover_starts(base.theta)
     return mesh(grids), prio_starts
 
 
 def _null_start(design: Design, base: ExtendedFit) -> np.ndarray:
     """The base fit inside the extended model (effects switched off): the nested model, never worse than base."""
     tail = _default_tail(design)
-    for i, name in enumerate(design.names[3:], start=3):
-        if name == "leakage.log10_tau":
-            tail[i - 3] = design.hi[i]
-        elif name == "delay.d":
-            tail[i - 3] = 0.0
+    for i, spec in enumerate(design.specs[3:]):
+        if spec.off is not None:
+            tail[i] = spec.off
     return np.concatenate([base.theta[:3], tail])
 
 
@@ -571,6 +469,31 @@ def _merge(design: Design, theta: np.ndarray, warm: ExtendedFit) -> np.ndarray:
         if name in design.names:
             out[design.index(name)] = value
     return out
+
+
+def _choose_variants(data: Prepared, effects: tuple[str, ...], base: ExtendedFit, harmonics: int,
+                     warm: ExtendedFit | None) -> dict[str, str]:
+    """Each effect's discrete variant: the warm fit's, else the best of all after a short polish on the explore window.
+
+    (Hysteresis: the operators' state before the record is unknown.)
+    """
+    chosen: dict[str, str] = {}
+    for name in effects:
+        effect = get_effect(name)
+        if not effect.variants:
+            continue
+        known = (warm.effect_params.get(name) or {}).get(effect.variant_key) if warm is not None else None
+        if known is not None:
+            chosen[name] = known
+            continue
+        small = data.explore_data()
+        costs = {}
+        for variant in effect.variants:
+            d = Design(small, effects, harmonics, {**chosen, name: variant})
+            th = _optimise(d, np.concatenate([base.theta[:3], _default_tail(d)]), SHORT_NFEV, 1e-6)
+            costs[variant] = d.cost(th)
+        chosen[name] = min(costs, key=costs.get)
+    return chosen
 
 
 def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, base: ExtendedFit | None = None,
@@ -593,23 +516,12 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     if not effects:
         return base
     from .locate import spectrum_peaks
-    init = 0
-    warm_h = (warm.effect_params.get("hysteresis") or {}).get("initial") if warm is not None else None
-    if warm_h is not None:
-        init = {v: k for k, v in INITIAL_STATES.items()}[warm_h]
-    elif "hysteresis" in effects:  # the operators' state before the record is unknown: best of three after a short polish
-        small = data.explore_data()
-        costs = {}
-        for k in INITIAL_STATES:
-            d = Design(small, effects, harmonics, k)
-            th = _optimise(d, np.concatenate([base.theta[:3], _default_tail(d)]), SHORT_NFEV, 1e-6)
-            costs[k] = d.cost(th)
-        init = min(costs, key=costs.get)
-    design = Design(data, effects, harmonics, init)
+    variants = _choose_variants(data, effects, base, harmonics, warm)
+    design = Design(data, effects, harmonics, variants)
     peaks = [p["f_hz"] for p in spectrum_peaks(data.t, base.residual, max_peaks=4, ratio=3.0)] if data.uniform else []
     # explore (grids, short polishes) on a prefix of long records: the same experiment, cheaper evaluations
     small = data.explore_data()
-    explore = Design(small, effects, harmonics, init) if small is not data else design
+    explore = Design(small, effects, harmonics, variants) if small is not data else design
     grid, prio = _grid_starts(explore, base, peaks)
 
     def ranked(d: Design, starts: list[np.ndarray]) -> list[tuple[float, np.ndarray]]:
@@ -634,13 +546,15 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     finalists = [th for _, th in ranked(explore, short)[:n_starts]] + [_null_start(design, base)]
     if warm is not None:
         finalists.append(_merge(design, _null_start(design, base), warm))
-    if explore is not design and "periodic_disturbance" in effects:
-        i_f = design.index("periodic_disturbance.f")  # a line's frequency is sharper on the whole record
-        for th in list(finalists):
-            for f in peaks:
-                v = th.copy()
-                v[i_f] = f
-                finalists.append(v)
+    if explore is not design:  # some parameters are sharper on the whole record (a line's frequency)
+        for e in effects:
+            for name, values in get_effect(e).full_record_values(peaks).items():
+                i = design.index(name)
+                for th in list(finalists):
+                    for value in values:
+                        v = th.copy()
+                        v[i] = value
+                        finalists.append(v)
     best, best_cost = None, np.inf
     for _, th in ranked(design, finalists)[:n_starts if explore is design else 1]:
         th = _optimise(design, th, max_nfev if explore is design else FULL_NFEV, FULL_TOL)
@@ -650,50 +564,23 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     return _result(design, best)
 
 
-# --------------------------------------------------------------------------- model object
-@dataclass(frozen=True)
-class ExtendedModel:
-    """A base CreepModel plus catalogue effects: ``ExtendedModel(model, {"delay": {"delay_s": 1e-3}})``."""
-
-    base: CreepModel
-    effects: dict = field(default_factory=dict)
-    offset: float = 0.0
-
-    def simulate(self, t: np.ndarray, u: np.ndarray, u_pre: float | None = 0.0,
-                 t_pre: float | None = None) -> np.ndarray:
-        """Output for a zero-order-held input (from rest by default, like ``simulate``)."""
-        return fx.simulate_with_effects(self.base, t, u, self.effects, offset=self.offset, u_pre=u_pre, t_pre=t_pre)
-
-    def with_effects(self, **effects: dict) -> "ExtendedModel":
-        """A copy with more (or replaced) effects."""
-        return ExtendedModel(self.base, {**self.effects, **effects}, self.offset)
-
-    def fit(self, t: np.ndarray, u: np.ndarray, y: np.ndarray) -> ExtendedFit:
-        """Refit this model's structure (base + the named effects) to a record, warm-started here."""
-        data = prepare(t, u, y)
-        base = fit_base(data, start=self.base)
-        return fit_extended(data, tuple(self.effects), base)
-
-
-def with_effects(model: CreepModel, **effects: dict) -> ExtendedModel:
-    """``with_effects(model, delay={"delay_s": 2e-3})``: the model extended by catalogue effects."""
-    for name in effects:
-        if name not in fx.EFFECTS:
-            raise ModelError(f"unknown effect {name!r}; the catalogue is {', '.join(fx.EFFECTS)}")
-    return ExtendedModel(model, dict(effects))
+# --------------------------------------------------------------------------- refit a model
+def refit(model: ExtendedModel, t: np.ndarray, u: np.ndarray, y: np.ndarray) -> ExtendedFit:
+    """Refit ``model``'s structure (base + its effects) to a record, warm-started from its base."""
+    data = prepare(t, u, y)
+    base = fit_base(data, start=model.base)
+    return fit_extended(data, tuple(model.effects), base)
 
 
 def check_effects(names: str | list[str]) -> tuple[str, ...]:
-    """Parse 'a,b' into catalogue names; DataError-free ModelError naming the unknown ones."""
+    """Parse 'a,b' into effect names; ModelError naming the unknown ones (or none named) and the catalogue."""
     if isinstance(names, str):
         names = [n.strip() for n in names.split(",") if n.strip()]
-    bad = [n for n in names if n not in fx.EFFECTS]
-    if bad:
-        raise ModelError(f"unknown effect(s) {', '.join(bad)}; the catalogue is {', '.join(fx.EFFECTS)}")
+    check_effect_names(names)
     if not names:
-        raise ModelError("no effect named; the catalogue is " + ", ".join(fx.EFFECTS))
+        raise ModelError("no effect named; the catalogue is " + ", ".join(effect_names()))
     return tuple(dict.fromkeys(names))
 
 
 __all__ = ["Prepared", "prepare", "Design", "ExtendedFit", "ExtendedModel", "fit_base", "fit_extended",
-           "with_effects", "check_effects", "DataError"]
+           "refit", "with_effects", "check_effects", "DataError"]

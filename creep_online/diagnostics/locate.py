@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from ..effects import is_uniform
+from ..effects import is_uniform, last_direction
 from ..metrics import rms
 
 #: A spectral peak must stand this many times above the local median.
@@ -155,20 +155,6 @@ def time_spans(t: np.ndarray, u: np.ndarray, r: np.ndarray, settle: float) -> di
 
 
 # --------------------------------------------------------------------------- input regimes
-def last_direction(u: np.ndarray) -> np.ndarray:
-    """+1 where the last input change went up, -1 where down, 0 before the first change."""
-    du = np.diff(np.asarray(u, dtype=float), prepend=u[0])
-    sign = np.sign(du)
-    idx = np.flatnonzero(sign)
-    out = np.zeros(len(u))
-    if idx.size:
-        fill = np.zeros(len(u), dtype=int)
-        fill[idx] = idx
-        np.maximum.accumulate(fill, out=fill)
-        out = np.where(np.arange(len(u)) >= idx[0], sign[fill], 0.0)
-    return out
-
-
 def input_regimes(u: np.ndarray, r: np.ndarray, bins: int = 5) -> dict:
     """Residual mean and RMS by input-level bin and by the direction of the last change.
 

@@ -1,16 +1,17 @@
 """Online estimation with an extended model: stream-compensate the fitted effects, watch the live error fall.
 
-``EffectCompensator`` undoes catalogue effects sample by sample, turning a
+``EffectCompensator`` undoes fitted effects sample by sample, turning a
 measured pair (u, y) into the pair (v, y_base) the *base* creep model would
-see: input effects are applied to the input (hysteresis, nonlinear gain,
-delay), additive and parallel ones are removed from the output (drift,
-periodic disturbance, second mode, second creep) and leakage is inverted
-(``(1 + tau s)/(tau s) = 1 + 1/(tau s)``: add the running integral of the
-output over tau). ``ExtendedOnlineEstimator`` feeds the compensated stream to
-the project's ``OnlineEstimator`` (unchanged), so the estimator runs with the
-extended model, and its live prediction error can be compared with the plain
-estimator's (``live_error``; both warm-started from their batch fits, ``warm_start``;
-``measure`` and ``python -m creep_online.diagnostics.online`` give the table in
+see, with each effect's own compensator (``Effect.compensator`` in
+``creep_online/effects/``): input effects are applied to the input
+(hysteresis, nonlinear gain, delay), additive and parallel ones are removed
+from the output (drift, periodic disturbance, second mode, second creep) and
+leakage is inverted (``(1 + tau s)/(tau s) = 1 + 1/(tau s)``: add the running
+integral of the output over tau). ``ExtendedOnlineEstimator`` feeds the
+compensated stream to the project's ``OnlineEstimator`` (unchanged), so the
+estimator runs with the extended model, and its live prediction error can be
+compared with the plain estimator's (``live_error``; both warm-started from
+their batch fits, ``warm_start``; ``hil_sim.online_table`` gives the table in
 docs/diagnostics.md). Per-sample work is O(1) for every effect except
 ``second_creep`` (O(number of input changes so far), exact for a staircase).
 """
@@ -19,103 +20,53 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.signal import cont2discrete
 
-from ..effects import INITIAL_STATES
-from ..errors import ModelError
+from ..effects import Stage, check_effect_names, in_forward_order
+
+#: Order in which the output-side compensators undo their effects.
+OUTPUT_ORDER = (Stage.OUTPUT_FILTER, Stage.ADDITIVE, Stage.PARALLEL)
 
 
 class EffectCompensator:
-    """Per-sample inverse of fitted catalogue effects (parameters as in ``ExtendedFit.effect_params``)."""
+    """Per-sample inverse of fitted effects (parameters as in ``ExtendedFit.effect_params``).
+
+    Per sample: the input-stage compensators transform the input; on the
+    first sample every other compensator learns the equilibrium the record
+    starts in (that input and output); the delay line delays the input; then
+    the output-side compensators remove their effects from the output in
+    ``OUTPUT_ORDER``.
+    """
 
     def __init__(self, dt: float, effects: dict[str, dict]) -> None:
+        check_effect_names(effects)
         self.dt = float(dt)
         self.effects = {k: dict(v) for k, v in effects.items()}
         self.n = 0
-        self._ref = None
-        self._y0 = 0.0
-        self._vprev = 0.0
-        e = self.effects
-        if "hysteresis" in e:
-            self._r = np.asarray(e["hysteresis"]["r"], dtype=float)
-            self._w = np.asarray(e["hysteresis"]["w"], dtype=float)
-            self._init = INITIAL_STATES[e["hysteresis"].get("initial", "centred")]
-            self._p = None
-        # delay = k whole samples + a fraction f: the sample-held input delayed by (k + f) h, averaged over
-        # each sample interval, is (1 - f) v[n-k] + f v[n-k-1] (rounding to whole samples left 1.2-1.5x
-        # the noise floor online on the hidden-effect records; this leaves ~1.0x)
-        d = float(e.get("delay", {}).get("delay_s", 0.0)) / self.dt
-        self._k = int(math.floor(d + 1e-9))
-        self._frac = d - self._k if d - self._k > 1e-9 else 0.0
-        self._k1 = self._k + (1 if self._frac else 0)   # samples of history kept
-        self._hist: list[float] = []
-        if "second_mode" in e:
-            p = e["second_mode"]
-            wn = 2 * math.pi * float(p["fn_hz"])
-            a = np.array([[0.0, 1.0], [-wn * wn, -2 * float(p["zeta"]) * wn]])
-            b = np.array([[0.0], [wn * wn]])
-            ad, bd, *_ = cont2discrete((a, b, np.eye(2), np.zeros((2, 1))), self.dt, method="zoh")
-            self._ad, self._bd = ad, bd[:, 0]
-            self._x2 = np.zeros(2)
-            self._g2 = float(p["gain"])
-        if "second_creep" in e:
-            self._c = float(e["second_creep"]["gain"])
-            self._a2 = float(e["second_creep"]["alpha2"])
-            self._changes: list[tuple[int, float]] = []
-        if "leakage" in e:
-            self._tau = float(e["leakage"]["tau_s"])
-            self._integral = 0.0
-            self._yprev = 0.0
+        self._started = False
+
+        def built(stage: Stage) -> list:
+            return [e.compensator(self.dt, self.effects[e.name]) for e in in_forward_order(self.effects, stage)]
+
+        self._inputs = built(Stage.INPUT)
+        self._delays = built(Stage.DELAY)
+        self._outputs = [c for stage in OUTPUT_ORDER for c in built(stage)]
 
     def step(self, u: float, y: float) -> tuple[float, float]:
         """(v, y_base) for one sample."""
-        e = self.effects
         n = self.n
-        t = n * self.dt
         v = float(u)
-        if "hysteresis" in e:
-            if self._p is None:
-                self._p = v + self._init * self._r
-            self._p = np.maximum(v - self._r, np.minimum(v + self._r, self._p))
-            v = v + float(self._w @ self._p)
-        if "nonlinear_gain" in e:
-            p = e["nonlinear_gain"]
-            v = v + float(p.get("k2", 0.0)) * v * v + float(p.get("k3", 0.0)) * v ** 3
-        if self._ref is None:  # the record starts in equilibrium at its first (transformed) input
-            self._ref, self._y0 = v, float(y)
-            self._hist = [v] * self._k1
-            self._vprev = v
-        if self._k1:
-            self._hist.append(v)          # _hist[-1 - j] = v[n - j]
-            v = self._hist[-1 - self._k]
-            if self._frac:
-                v = (1.0 - self._frac) * v + self._frac * self._hist[0]
-            self._hist.pop(0)
+        for c in self._inputs:
+            v = c.input(v)
+        if not self._started:  # the record starts in equilibrium at its first (transformed) input
+            self._started = True
+            for c in self._delays + self._outputs:
+                c.start(v, float(y))
+        for c in self._delays:
+            v = c.input(v)
         yb = float(y)
-        if "leakage" in e:  # y_lin - y0 = (y - y0) + (1/tau) int (y - y0) dt   (trapezoid)
-            d = yb - self._y0
-            if n:
-                self._integral += 0.5 * (d + self._yprev) * self.dt
-            self._yprev = d
-            yb = yb + self._integral / self._tau
-        if "drift" in e:
-            yb -= float(e["drift"].get("rate", 0.0)) * t
-        if "periodic_disturbance" in e:
-            p = e["periodic_disturbance"]
-            amp = np.atleast_1d(p.get("amplitude", 0.0))
-            ph = np.broadcast_to(np.atleast_1d(p.get("phase", 0.0)), amp.shape)
-            for k, (a, phi) in enumerate(zip(amp, ph), start=1):
-                yb -= float(a) * math.sin(2 * math.pi * k * float(p["f_hz"]) * t + float(phi))
-        if "second_mode" in e:  # output at this sample, then advance the ZOH state with this input
-            yb -= self._g2 * self._x2[0]
-            self._x2 = self._ad @ self._x2 + self._bd * (v - self._ref)
-        if "second_creep" in e:
-            dv = v - self._vprev
-            if dv != 0.0:
-                self._changes.append((n, dv))
-            yb -= self._c * sum(dvk * ((n - k) * self.dt) ** self._a2 for k, dvk in self._changes) \
-                / math.gamma(1.0 + self._a2)
-        self._vprev = v
+        t = n * self.dt
+        for c in self._outputs:
+            yb = c.output(yb, v, n, t)
         self.n += 1
         return v, yb
 
@@ -125,10 +76,6 @@ class ExtendedOnlineEstimator:
 
     def __init__(self, dt: float, effects: dict[str, dict], **estimator_kwargs) -> None:
         from ..online.estimator import OnlineEstimator
-        unknown = [k for k in effects if k not in ("hysteresis", "nonlinear_gain", "delay", "drift", "leakage",
-                                                    "periodic_disturbance", "second_mode", "second_creep")]
-        if unknown:
-            raise ModelError(f"unknown effect(s) {', '.join(unknown)}")
         self.compensator = EffectCompensator(dt, effects)
         self.estimator = OnlineEstimator(dt, **estimator_kwargs)
         self._last = math.nan
@@ -201,38 +148,6 @@ def live_error(t: np.ndarray, u: np.ndarray, y: np.ndarray, effects: dict[str, d
     return {"t": ends, "base": r0, "extended": r1}
 
 
-def tail_rms(table: dict, fraction: float = 0.25) -> tuple[float, float]:
-    """(plain, extended) RMS live error over the last ``fraction`` of the windows (NaN windows ignored)."""
-    k = max(1, int(round(fraction * len(table["t"]))))
-    out = []
-    for key in ("base", "extended"):
-        r = np.asarray(table[key][-k:], dtype=float)
-        r = r[np.isfinite(r)]
-        out.append(float(np.sqrt(np.mean(r * r))) if r.size else math.nan)
-    return out[0], out[1]
-
-
-def measure(effect: str | None, seed: int = 0, n: int = 20000, warm: bool = True) -> dict:
-    """One row of the online table: a hidden-effect record (``hil_sim``), batch fits, both online runs.
-
-    Live errors over the last quarter of the record, as multiples of the true noise RMS.
-    """
-    from hil_sim.hidden_effects import hidden_dataset
-
-    from .extended import fit_base, fit_extended, prepare
-    ds = hidden_dataset(effect, seed, n=n)
-    data = prepare(ds.t, ds.u, ds.y)
-    base = fit_base(data)
-    fit = fit_extended(data, [effect], base) if effect else base
-    params = fit.effect_params if effect else {}
-    table = live_error(ds.t, ds.u, ds.y, params, window_s=1.0,
-                       base_model=base.model if warm else None, extended_model=fit.model if warm else None)
-    raw, comp = tail_rms(table)
-    return {"effect": effect or "none", "seed": seed, "seconds": n * float(ds.t[1] - ds.t[0]),
-            "batch_before": base.residual_rms / ds.noise_std, "batch_after": fit.residual_rms / ds.noise_std,
-            "online_plain": raw / ds.noise_std, "online_extended": comp / ds.noise_std}
-
-
 def format_live_error(table: dict, noise: float | None = None) -> str:
     """The live error display as text: one line per window, base vs extended model."""
     lines = [f"  {'t (s)':>8} {'online error, base':>18} {'extended':>10}" + ("   (x noise floor)" if noise else "")]
@@ -241,25 +156,3 @@ def format_live_error(table: dict, noise: float | None = None) -> str:
         sb = "-" if not math.isfinite(b) else (f"{b / noise:.3g}x" if noise else f"{b:.4g}")
         lines.append(f"  {t:>8.3g} {sa:>18} {sb:>10}")
     return "\n".join(lines)
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m creep_online.diagnostics.online [N] [SEEDS] [--cold]``: the online table (JSON lines)."""
-    import json
-    import sys
-
-    from ..effects import EFFECTS
-    args = list(sys.argv[1:] if argv is None else argv)
-    warm = "--cold" not in args
-    args = [a for a in args if a != "--cold"]
-    n = int(args[0]) if args else 20000
-    seeds = [int(x) for x in args[1].split(",")] if len(args) > 1 else [0, 1, 2]
-    for seed in seeds:
-        for effect in (None, *EFFECTS):
-            print(json.dumps({k: (round(v, 3) if isinstance(v, float) else v)
-                              for k, v in measure(effect, seed, n, warm).items()}), flush=True)
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,0 +1,153 @@
+"""``hysteresis``: rate-independent memory of input reversals, a Prandtl-Ishlinskii model on the input.
+
+``v = u + sum_i w_i play_{r_i}[u]``. The fit uses ``HYSTERESIS_THRESHOLDS``
+(fractions of the input range) with one linear weight each, and chooses the
+operators' state before the record (``INITIAL_STATES``) by a short polish of
+each. Signature: the residual depends on the direction of the last input change.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import ModelError
+from .base import FitView, InputCompensator, InputEffect
+
+#: Play-operator thresholds the fit uses, as fractions of the input range (denser where
+#: real loops put most of their weight, at small thresholds).
+HYSTERESIS_THRESHOLDS = (0.02, 0.04, 0.07, 0.1, 0.14, 0.19, 0.25, 0.32, 0.4, 0.48)
+#: Play-operator states before the record, as multiples of the threshold added to u[0]: centred on u[0],
+#: or as left by a rise to u[0] (p = u[0] - r) or a fall to u[0] (p = u[0] + r).
+INITIAL_STATES = {"centred": 0.0, "ascending": -1.0, "descending": 1.0}
+
+
+def play_operators(u: np.ndarray, r: np.ndarray, initial: np.ndarray | None = None) -> np.ndarray:
+    """Play (backlash) operator outputs, one row per threshold r_i >= 0.
+
+    ``p[n] = max(u[n] - r, min(u[n] + r, p[n-1]))`` with ``p[-1] = u[0]``
+    (the operators start centred on the first input value unless ``initial``
+    is given). Work is done only where the input changes.
+    """
+    u = np.asarray(u, dtype=float)
+    r = np.atleast_1d(np.asarray(r, dtype=float))
+    out = np.empty((r.size, u.size))
+    p = np.full(r.size, u[0]) if initial is None else np.asarray(initial, dtype=float).copy()
+    change = np.flatnonzero(np.diff(u, prepend=u[0] - 1.0) != 0.0)
+    stops = np.append(change[1:], u.size)
+    for i0, i1 in zip(change, stops):
+        p = np.maximum(u[i0] - r, np.minimum(u[i0] + r, p))
+        out[:, i0:i1] = p[:, None]
+    return out
+
+
+def hysteresis_input(u: np.ndarray, r, w, initial: str = "centred") -> np.ndarray:
+    """v = u + sum_i w_i play_{r_i}[u] (Prandtl-Ishlinskii).
+
+    ``initial``: the operators' state before the record -- "centred" on u[0],
+    "ascending" (the input last rose to u[0]: p = u[0] - r) or "descending"
+    (it last fell to u[0]: p = u[0] + r).
+    """
+    w = np.atleast_1d(np.asarray(w, dtype=float))
+    r = np.atleast_1d(np.asarray(r, dtype=float))
+    u = np.asarray(u, dtype=float)
+    if initial not in INITIAL_STATES:
+        raise ModelError(f"hysteresis initial must be one of {', '.join(INITIAL_STATES)}, got {initial!r}")
+    return u + w @ play_operators(u, r, initial=u[0] + INITIAL_STATES[initial] * r)
+
+
+def loop_width(r, w, u_range: float) -> float:
+    """Widest vertical opening (input units, relative to the large-signal slope) of the PI loop.
+
+    A play operator of threshold r cycled over a range >= 2 r opens a loop of
+    height 2 r; over a range A < 2 r it never moves. The PI loop over the
+    measured input range is therefore ``sum_i w_i 2 min(r_i, A/2) / (1 + sum_i w_i)``.
+    """
+    r = np.atleast_1d(np.asarray(r, dtype=float))
+    w = np.atleast_1d(np.asarray(w, dtype=float))
+    slope = 1.0 + float(w.sum())
+    if slope == 0.0:
+        return float("nan")
+    return float(np.sum(w * 2.0 * np.minimum(r, u_range / 2.0)) / slope)
+
+
+def last_direction(u: np.ndarray) -> np.ndarray:
+    """+1 where the last input change went up, -1 where down, 0 before the first change."""
+    du = np.diff(np.asarray(u, dtype=float), prepend=u[0])
+    sign = np.sign(du)
+    idx = np.flatnonzero(sign)
+    out = np.zeros(len(u))
+    if idx.size:
+        fill = np.zeros(len(u), dtype=int)
+        fill[idx] = idx
+        np.maximum.accumulate(fill, out=fill)
+        out = np.where(np.arange(len(u)) >= idx[0], sign[fill], 0.0)
+    return out
+
+
+class _PlayCompensator(InputCompensator):
+    """The PI operator run sample by sample (its state starts at the first input, as in the fit)."""
+
+    def __init__(self, params: dict) -> None:
+        self.r = np.asarray(params["r"], dtype=float)
+        self.w = np.asarray(params["w"], dtype=float)
+        self.initial = INITIAL_STATES[params.get("initial", "centred")]
+        self.p: np.ndarray | None = None
+
+    def input(self, v: float) -> float:
+        if self.p is None:
+            self.p = v + self.initial * self.r
+        self.p = np.maximum(v - self.r, np.minimum(v + self.r, self.p))
+        return v + float(self.w @ self.p)
+
+
+class Hysteresis(InputEffect):
+    name = "hysteresis"
+    term = "Prandtl-Ishlinskii play operators on the input: v = u + sum_i w_i play_{r_i}[u]"
+    variants = tuple(INITIAL_STATES)
+    variant_key = "initial"
+
+    def transform_input(self, v: np.ndarray, params: dict) -> np.ndarray:
+        return hysteresis_input(v, params.get("r", []), params.get("w", []), params.get("initial", "centred"))
+
+    @staticmethod
+    def thresholds(data) -> np.ndarray:
+        """The fit's play-operator thresholds for this record (input units)."""
+        return np.asarray(HYSTERESIS_THRESHOLDS) * data.u_range
+
+    def design_rows(self, data, u: np.ndarray, variant: str | None, before: bool = False) -> np.ndarray:
+        if before:  # the operators rest on the input before the record
+            return np.repeat(u[None, :], len(HYSTERESIS_THRESHOLDS), axis=0)
+        r = self.thresholds(data)
+        return play_operators(u, r, initial=u[0] + INITIAL_STATES[variant or "centred"] * r)
+
+    def column_names(self) -> list[str]:
+        return [f"w{i}" for i in range(1, len(HYSTERESIS_THRESHOLDS) + 1)]
+
+    def fitted_params(self, fit: FitView) -> dict:
+        data = fit.data
+        w = np.array([fit.coef[name] for name in self.column_names()]) / fit.gain
+        r = self.thresholds(data)
+        width = loop_width(r, w, data.u_range)
+        return {"r": r.tolist(), "w": w.tolist(), "loop_width": width,
+                "loop_width_rel": width / data.u_range if data.u_range else float("nan"),
+                "initial": fit.variant or "centred"}
+
+    def compensator(self, dt: float, params: dict) -> InputCompensator:
+        return _PlayCompensator(params)
+
+    def applicable(self, data) -> str | None:
+        d = last_direction(data.u)
+        flips = int(np.sum(np.abs(np.diff(d[d != 0])) > 0))
+        return f"needs input reversals (found {flips})" if flips < 2 else None
+
+    def signature(self, params: dict, fit, base, where: dict, data) -> str:
+        reg = where.get("input_regimes", {})
+        return (f"residual depends on the direction of the last input change (split {reg.get('direction_split', 0):.2f} "
+                f"x RMS); loop width {params.get('loop_width', float('nan')):.3g} input units "
+                f"({100 * params.get('loop_width_rel', float('nan')):.2g} % of the range)")
+
+    def example_params(self, model, t, u, y_base, rng) -> dict:
+        u_range = float(np.ptp(u))
+        r = np.linspace(0.0, 0.5, 31)[1:] * u_range
+        w = np.exp(-r / (rng.uniform(0.08, 0.25) * u_range))
+        w *= rng.uniform(0.2, 0.5) / w.sum()  # loop ~ 5-20 % of the range
+        return {"r": r.tolist(), "w": w.tolist()}

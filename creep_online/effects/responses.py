@@ -1,0 +1,182 @@
+"""Shared numerics of the forward model: unit-step responses and their zero-order-hold superposition.
+
+Every linear path of the extended model is evaluated the same way: the input
+is zero-order held, so the output is a superposition of shifted *unit-step
+responses*, ``y(t_n) = sum_k du_k S(t_n - t_k)``. This module provides the
+step responses (on a uniform grid or at arbitrary times, optionally delayed)
+and the superposition (FFT on uniform grids, explicit sums on non-uniform
+ones); the effect modules beside it and the extended-model fit in
+``creep_online.diagnostics.extended`` reuse them. numpy/scipy plus the core
+simulator only.
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import numpy as np
+from scipy.fft import irfft, next_fast_len, rfft
+from scipy.interpolate import CubicSpline
+
+from ..discretize import resonance_poles, step_response_grid
+from ..errors import DataError
+
+#: Points per grid of the multi-resolution step response used at arbitrary times.
+MULTIGRID_POINTS = 2048
+#: Ratio between successive grids of the multi-resolution step response.
+MULTIGRID_RATIO = 8.0
+#: Non-uniform records: at most this many (samples x input changes) pairs are summed explicitly.
+MAX_PAIRS = 20_000_000
+
+StepFn = Callable[[np.ndarray], np.ndarray]
+
+
+# --------------------------------------------------------------------------- time grids
+def is_uniform(t: np.ndarray, rtol: float = 1e-6) -> bool:
+    """True when the sampling step varies by less than ``rtol`` relative."""
+    t = np.asarray(t, dtype=float)
+    if t.size < 3:
+        return True
+    h = (t[-1] - t[0]) / (t.size - 1)
+    return bool(np.max(np.abs(np.diff(t) - h)) <= rtol * h + 1e-12 * abs(t[-1]))
+
+
+# --------------------------------------------------------------------------- unit-step responses
+def creep_step(alpha: float, tau: np.ndarray) -> np.ndarray:
+    """Unit-step response of 1/s^alpha: tau^alpha / Gamma(1 + alpha) (0 for tau <= 0)."""
+    tau = np.asarray(tau, dtype=float)
+    return np.power(np.maximum(tau, 0.0), alpha) / math.gamma(1.0 + alpha)
+
+
+def resonance_step(fn_hz: float, zeta: float, tau: np.ndarray) -> np.ndarray:
+    """Unit-step response of 1/(1 + a1 s + a2 s^2) with a2 = 1/wn^2, a1 = 2 zeta/wn, at times tau.
+
+    ``1 + (p2 e^{p1 t} - p1 e^{p2 t}) / (p1 - p2)``, written with expm1 so that it
+    is accurate for repeated and stiff poles.
+    """
+    tau = np.maximum(np.asarray(tau, dtype=float), 0.0)
+    wn = 2.0 * math.pi * fn_hz
+    a1, a2 = 2.0 * zeta / wn, 1.0 / wn**2
+    p1, p2 = resonance_poles(a1, a2)  # slow, fast
+    d = p2 - p1
+    # S = 1 - e^{p1 t} + p1 e^{p1 t} (e^{d t} - 1)/d  (limit-safe form of the two-pole formula)
+    x = d * tau
+    small = np.abs(x) < 1e-6
+    ratio = np.empty(tau.shape, dtype=complex)
+    ratio[~small] = np.expm1(x[~small]) / d
+    ratio[small] = tau[small] * (1.0 + x[small] / 2.0)
+    e1 = np.exp(p1 * tau)
+    return (1.0 - e1 + p1 * e1 * ratio).real
+
+
+def base_step_grid(alpha: float, a1: float, a2: float, h: float, n: int) -> np.ndarray:
+    """Exact unit-step response of 1/(s^alpha (1 + a1 s + a2 s^2)) at k h, k = 0..n-1."""
+    return step_response_grid(alpha, a1, a2, h, n)
+
+
+def base_step_at(alpha: float, a1: float, a2: float, tau: np.ndarray) -> np.ndarray:
+    """The base unit-step response at arbitrary times tau (>= 0), e.g. a log-spaced record.
+
+    Multi-resolution: exact responses on uniform grids of ``MULTIGRID_POINTS``
+    points whose spans shrink by ``MULTIGRID_RATIO`` down to the smallest tau,
+    each time interpolated (cubic) from the finest grid that covers it.
+    """
+    tau = np.asarray(tau, dtype=float)
+    out = np.zeros(tau.shape)
+    pos = tau > 0
+    if not pos.any():
+        return out
+    tp = tau[pos]
+    res = np.zeros(tp.shape)
+    span = float(tp.max()) * 1.0001
+    lo = float(tp.min())
+    m = MULTIGRID_POINTS
+    done = np.zeros(tp.shape, dtype=bool)
+    for _ in range(64):
+        h = span / (m - 1)
+        grid = step_response_grid(alpha, a1, a2, h, m)
+        last = span / MULTIGRID_RATIO <= lo
+        sel = ~done & ((tp > span / MULTIGRID_RATIO) | last)
+        if sel.any():
+            res[sel] = CubicSpline(np.arange(m) * h, grid)(tp[sel])
+            done |= sel
+        if last:
+            break
+        span /= MULTIGRID_RATIO
+    out[pos] = res
+    return out
+
+
+def delayed_grid(s: np.ndarray, h: float, delay: float) -> np.ndarray:
+    """S(k h - delay) from S on the grid k h (S = 0 before 0), by cubic interpolation."""
+    if delay <= 0.0:
+        return s
+    n = s.size
+    tk = np.arange(n) * h - delay
+    out = np.zeros(n)
+    ok = tk > 0
+    out[ok] = CubicSpline(np.arange(n) * h, s)(tk[ok])
+    return out
+
+
+# --------------------------------------------------------------------------- superposition
+class Superposer:
+    """Zero-order-hold superposition y = sum_k dx_k S(t - t_k) for fixed input rows.
+
+    Built once per record and input features (rows of ``x``); ``apply(S)``
+    then costs one FFT of S plus one inverse FFT per row on uniform grids
+    (the input spectra are cached), or an explicit sum over the input changes
+    on non-uniform ones. ``x_pre`` is the input before the record (default:
+    the first sample, i.e. deviation variables; 0 = from rest) and ``t_pre``
+    the time of that first jump (default t[0]).
+    """
+
+    def __init__(self, t: np.ndarray, x: np.ndarray, x_pre=None, t_pre: float | None = None) -> None:
+        self.t = np.asarray(t, dtype=float)
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        n = self.t.size
+        if x.shape[1] != n:
+            raise DataError(f"input rows have {x.shape[1]} samples, time has {n}")
+        pre = x[:, 0] if x_pre is None else np.broadcast_to(np.asarray(x_pre, dtype=float), (x.shape[0],))
+        self.dx = np.diff(x, axis=1, prepend=pre[:, None])
+        self.rows = x.shape[0]
+        self.n = n
+        self.t_pre = float(self.t[0] if t_pre is None else t_pre)
+        self.uniform = is_uniform(self.t) and self.t_pre == self.t[0]
+        if self.uniform:
+            self.h = (self.t[-1] - self.t[0]) / max(n - 1, 1)
+            self.nfft = next_fast_len(2 * n)
+            self.spectra = rfft(self.dx, self.nfft, axis=1)
+        else:
+            self.h = float("nan")
+            any_change = np.flatnonzero(np.any(self.dx != 0.0, axis=0))
+            if any_change.size * n > MAX_PAIRS:
+                raise DataError(
+                    f"non-uniform time with {any_change.size} input changes: the exact superposition would need "
+                    f"{any_change.size * n} step-response evaluations; resample to a uniform grid first")
+            self.change = any_change
+            tc = self.t[any_change].copy()
+            if any_change.size and any_change[0] == 0:
+                tc[0] = self.t_pre
+            self.tau = self.t[None, :] - tc[:, None]  # (changes, n)
+
+    @property
+    def grid_tau(self) -> np.ndarray:
+        """Times k h (uniform records) at which apply() wants the step response."""
+        return np.arange(self.n) * self.h
+
+    def apply(self, step: np.ndarray | StepFn) -> np.ndarray:
+        """Rows of outputs for a step response given on the grid (uniform) or as a function of tau."""
+        if self.uniform:
+            s = step(self.grid_tau) if callable(step) else np.asarray(step, dtype=float)
+            fs = rfft(s, self.nfft)
+            return irfft(self.spectra * fs[None, :], self.nfft, axis=1)[:, : self.n]
+        if not callable(step):
+            raise ValueError("non-uniform records need the step response as a function of time")
+        if self.change.size == 0:
+            return np.zeros((self.rows, self.n))
+        tau = self.tau
+        s = np.zeros(tau.shape)
+        pos = tau > 0
+        s[pos] = step(tau[pos])
+        return self.dx[:, self.change] @ s

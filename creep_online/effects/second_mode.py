@@ -1,0 +1,95 @@
+"""``second_mode``: a higher structural mode, a parallel path ``g / (1 + a1' s + a2' s^2)``.
+
+Nonlinear parameters: the mode's frequency and damping (log10 scale); the gain
+is linear. Starts: a grid over the frequency band plus the base residual's
+spectral peaks, and starts where this mode takes over a resonance the base
+fit locked onto. Signature: ringing at a frequency the first mode lacks.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.signal import cont2discrete
+
+from .base import FitView, OutputCompensator, ParallelEffect, ParamSpec, StepFn
+from .responses import resonance_step
+
+FN = "second_mode.log10_fn"
+ZETA = "second_mode.log10_zeta"
+
+
+class _ModeCompensator(OutputCompensator):
+    """The mode's ZOH state-space model driven by the base input, its output subtracted."""
+
+    def __init__(self, dt: float, params: dict) -> None:
+        wn = 2 * math.pi * float(params["fn_hz"])
+        a = np.array([[0.0, 1.0], [-wn * wn, -2 * float(params["zeta"]) * wn]])
+        b = np.array([[0.0], [wn * wn]])
+        ad, bd, *_ = cont2discrete((a, b, np.eye(2), np.zeros((2, 1))), dt, method="zoh")
+        self.ad, self.bd = ad, bd[:, 0]
+        self.x = np.zeros(2)
+        self.gain = float(params["gain"])
+        self.ref = 0.0
+
+    def start(self, v0: float, y0: float) -> None:
+        self.ref = v0
+
+    def output(self, y: float, v: float, n: int, t: float) -> float:
+        y -= self.gain * self.x[0]  # output at this sample, then advance the state with this input
+        self.x = self.ad @ self.x + self.bd * (v - self.ref)
+        return y
+
+
+class SecondMode(ParallelEffect):
+    name = "second_mode"
+    term = "parallel g / (1 + a1' s + a2' s^2) (a higher structural mode)"
+
+    def parallel_step(self, params: dict) -> StepFn:
+        g, fn, z = float(params["gain"]), float(params["fn_hz"]), float(params.get("zeta", 0.05))
+        return lambda tau: g * resonance_step(fn, z, tau)
+
+    def unit_step(self, theta: dict[str, float]) -> StepFn:
+        fn, z = 10 ** theta[FN], 10 ** theta[ZETA]
+        return lambda tau: resonance_step(fn, z, tau)
+
+    def nonlinear_params(self, data) -> list[ParamSpec]:
+        hi = math.log10(0.5 * data.fs) if data.uniform else math.log10(1.0 / data.h)
+        lo = math.log10(1.0 / (data.t[-1] - data.t[0]))
+        return [ParamSpec(FN, lo, hi), ParamSpec(ZETA, -3.0, 0.5)]
+
+    def start_values(self, data, peaks: list[float]) -> list[tuple[list[float], list[float]]]:
+        fn = self.nonlinear_params(data)[0]
+        lo, hi = fn.lo, fn.hi
+        on_peaks = [math.log10(f) for f in peaks if 10 ** lo < f < 10 ** hi]
+        return [(list(np.linspace(lo + 0.05 * (hi - lo), hi - 0.01 * (hi - lo), 24)), on_peaks),
+                ([math.log10(0.05)], [math.log10(0.02), math.log10(0.08)])]
+
+    def takeover_starts(self, base: np.ndarray) -> list[np.ndarray]:
+        """The base may have locked onto the higher mode: hand it to this one, move the base down."""
+        starts = []
+        for factor in (0.25, 0.4, 0.6):
+            th = np.concatenate([base[:3], np.zeros(2)])
+            th[3], th[4] = base[1], base[2]
+            th[1], th[2] = base[1] + math.log10(factor), math.log10(0.2)
+            starts.append(th)
+        return starts
+
+    def fitted_params(self, fit: FitView) -> dict:
+        return {"gain": fit.coef[self.gain_column], "fn_hz": 10 ** fit.theta[FN], "zeta": 10 ** fit.theta[ZETA]}
+
+    def compensator(self, dt: float, params: dict) -> OutputCompensator:
+        return _ModeCompensator(dt, params)
+
+    def signature(self, params: dict, fit, base, where: dict, data) -> str:
+        fn = params.get("fn_hz", float("nan"))
+        near = [pk for pk in where.get("spectrum_peaks", []) if abs(pk["f_hz"] - params.get("fn_hz", 0)) < 0.1 * params.get("fn_hz", 1)]
+        extra = f"; residual spectrum peak at {near[0]['f_hz']:.4g} Hz" if near else ""
+        return f"second resonance at {fn:.4g} Hz (zeta {params.get('zeta', float('nan')):.2g}){extra}"
+
+    def example_params(self, model, t, u, y_base, rng) -> dict:
+        # a higher mode is weaker than the first: its resonance peak is 10-40 % of the first mode's
+        zeta2 = rng.uniform(0.02, 0.08)
+        peak1 = abs(model.b) * model.wn ** -model.alpha / (2.0 * model.zeta)
+        gain = 2.0 * zeta2 * rng.uniform(0.1, 0.4) * peak1
+        return {"gain": gain * rng.choice([-1, 1]), "fn_hz": model.fn * rng.uniform(2.5, 5.0), "zeta": zeta2}
