@@ -32,12 +32,11 @@ from ._threads import single_threaded
 from .discretize import foh_matrices_batch, step_response_grid
 from .errors import DataError, IdentificationError
 from .metrics import fit_percent, noise_std_estimate
+from .model import IDENTIFY_ALPHA_BOUNDS as ALPHA_BOUNDS  # alpha search interval of layer 1 and the polish
 from .model import CreepModel
 from .record import SAFE_AMPLITUDE, Record, check_time_and_output
 from .simulate import fractional_integral, superpose, uniform_step
 
-#: alpha search interval of layer 1 and the polish.
-ALPHA_BOUNDS = (1e-4, 0.999)
 #: At most this many input changes count as a piecewise-constant (step) input.
 MAX_STEP_FRACTION = 0.05
 #: Relative 1-sigma above which a parameter is reported as poorly determined.
