@@ -236,7 +236,7 @@ class Design:
         else:
             dyn = [sup.apply(lambda tt: fx.base_step_at(alpha, a1, a2, tt - d))]
             tau = None
-        usup = data.superposer()
+        usup = data.superposer()  # parallel paths are fitted on the plain input (the forward model feeds them v)
         for e in self.stages[Stage.PARALLEL]:
             step = e.unit_step(p)
             shifted = (lambda tt, step=step: step(tt - d))
