@@ -10,7 +10,6 @@ report (HTML + PNG plots when matplotlib is installed, JSON always) in
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time
@@ -19,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CreepOnlineError
+from ._common import print_json
 
 SCENARIOS = ("stationary", "payload")
 #: The payload scenario's added mass fraction (a2 *= 1 + PAYLOAD_MASS at half the duration).
@@ -216,7 +216,7 @@ def _status(loop, truth) -> str:
 def _print_summary(r: dict, as_json: bool) -> None:
     public = {k: v for k, v in r.items() if not k.startswith("_") and k != "trace"}
     if as_json:
-        print(json.dumps(public, indent=2, default=float))
+        print_json(public)
         return
     t = r["truth"]
     m = r["model"]
