@@ -1,7 +1,8 @@
 """``creep-online stream --source SPEC``: run the online estimator on a recorded or live stream.
 
 ``csv:FILE`` is replayed sample by sample through ``OnlineEstimator.update``
-as fast as it goes (``--block`` uses ``update_block``), timing every call.
+as fast as it goes (``--block`` uses ``update_block``), timing every call;
+``csv:FILE?realtime=1`` (any option) goes through the file's source instead.
 Any other spec (``serial:PORT``, ``can:IFACE:CHANNEL``, ``canlog:FILE`` or a
 plug-in's kind) is opened by ``creep_online.io.registry.open_source`` and fed
 by ``creep_online.io.feed.FeedLoop``: sequence gaps reach the estimator as
@@ -14,6 +15,7 @@ import importlib
 import math
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -140,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
         raise DataError(f"--max-samples must be at least 1, got {args.max_samples}")
     if args.duration is not None and not args.duration > 0:
         raise DataError(f"--duration must be > 0 s, got {args.duration:g}")
-    if spec.lower().startswith("csv:"):
+    if spec.lower().startswith("csv:") and not _has_options(spec[4:]):
         est, latency, extra = _run_csv(spec[4:], args)
     else:
         est, latency, extra = _run_live(spec, args)
@@ -217,6 +219,11 @@ def _run_csv(path: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dict
         end = _end("interrupted", "interrupted (Ctrl-C)")
     trace.write()
     return est, _latency(ns[:k] / 1e3), {"file": rec.source, **({"end": end} if end else {})}
+
+
+def _has_options(path: str) -> bool:
+    """``FILE?key=value``: a CSV replayed through its source (e.g. ``?realtime=1``), unless FILE has a '?'."""
+    return "?" in path and not Path(path).exists()
 
 
 def _check_dt(args: argparse.Namespace, h: float, source: str) -> None:
