@@ -37,7 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise", type=float, default=2e-4, help="output noise std")
     p.add_argument("--adc-bits", type=int, default=20)
     p.add_argument("--adc-range", type=float, default=10.0)
-    p.add_argument("--effects", default="", help="hidden effects (DESIGN.md section 5): 'drift;delay:delay_s=1e-3' "
+    p.add_argument("--effects", default="", help="hidden effects (docs/diagnostics.md catalogue): 'drift;delay:delay_s=1e-3' "
                         "(name[:k=v,..] joined by ';', list values as a/b/c) or a JSON object")
     p.add_argument("--faults", default="", help="garbage=N,bitflip=N,drop=N,dup=N,reorder=N,stall=N,disconnect=N"
                                                 ",stall_s=S,disconnect_s=S (N a count, or a probability < 1)")
