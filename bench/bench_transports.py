@@ -10,7 +10,8 @@
   ASCII lines (no checksum, no sequence accounting).
 * latency at 10 kHz, real time, binary serial: from the plant's sample time
   (``t0 + seq / rate`` on the shared monotonic clock) to the return of
-  ``OnlineEstimator.update`` for that sample; p50/p99/max. Baseline: the same
+  ``OnlineEstimator.update`` for that sample (``creep_online.io.feed.FeedLoop``
+  with ``SampleAge``, the loop ``creep-online stream`` and ``demo`` run); p50/p99/max. Baseline: the same
   with the readline reader (no estimator).
 * sustained: 10 kHz binary serial in real time for 60 s (10 s with --quick):
   samples lost, CRC errors, worst plant lag.
@@ -29,6 +30,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from creep_online.io.feed import FeedLoop, SampleAge  # noqa: E402
 from creep_online.io.sources import open_source  # noqa: E402
 from hil_sim import PlantConfig, generate, parse_params, run_virtual_plant  # noqa: E402
 from hil_sim.harness import PlantProcess  # noqa: E402
@@ -136,22 +138,17 @@ def latency_serial(seconds: float, with_estimator: bool = True) -> dict:
         est = OnlineEstimator(1.0 / RATE)
         src = open_source(f"serial:{plant.port}?rate={RATE:g}&start=S", on_event=None)
         t0 = plant.wait_event("start")["t0_monotonic"]
-        lat = np.empty(n_total)
-        k = 0
-        last = -1
-        now = time.monotonic
-        deadline = now() + seconds * 3 + 60
-        while last < n_total - 1 and now() < deadline:
-            for s in src.read(0.05):
-                est.update(s.u, s.y)
-                lat[k] = now() - (t0 + s.seq / RATE)
-                k += 1
-                last = s.seq
+        loop = FeedLoop(src, lambda _dt: est, dt=1.0 / RATE, latency=SampleAge(t0, 1.0 / RATE),
+                        read_timeout=0.05, duration=seconds * 3 + 60,
+                        stop_when=lambda lp: lp.last_seq is not None and lp.last_seq >= n_total - 1)
+        end = loop.run()
         src.close()
+        if end.error is not None:
+            raise end.error
         ledger = plant.wait_event("end", timeout=30)["ledger"]
-    lat_us = lat[:k] * 1e6
-    return {"samples": k, "expected": n_total, "missing": src.stats.missing, "crc_errors": src.stats.crc_errors,
-            "latency_us": dist(lat_us), "plant_late_max_ms": ledger["late_max_s"] * 1e3,
+    return {"samples": loop.fed, "expected": n_total, "missing": src.stats.missing,
+            "crc_errors": src.stats.crc_errors, "latency_us": dist(loop.latency_us()),
+            "plant_late_max_ms": ledger["late_max_s"] * 1e3,
             "estimate": est.estimate.to_dict() if est.model else None}
 
 

@@ -1,4 +1,4 @@
-"""The ``creep-online`` command line (DESIGN.md section 6).
+"""The ``creep-online`` command line (its stable keys and exit codes: README.md, docs/reliability.md).
 
 Each sub-command lives in ``creep_online.commands.<name>`` and exposes
 ``register(subparsers)``, which adds its parser and sets ``func``. Any

@@ -18,6 +18,14 @@ class IdentificationError(CreepOnlineError, RuntimeError):
     """Identification could not produce an estimate from the data."""
 
 
+class TransportError(CreepOnlineError):
+    """A live source could not be opened or was lost for good (port, adapter, plug-in); one-line message.
+
+    ``creep-online stream`` ends with exit code 4 when the link is lost after samples
+    arrived (docs/reliability.md).
+    """
+
+
 class OutputError(CreepOnlineError, OSError):
     """An output file or folder that cannot (or must not) be written, with the reason."""
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from creep_online import CreepModel, simulate
+from creep_online.io.params import parse_params as _parse_params
 
 SCHEDULES = ("step", "staircase", "updown", "square")
 
@@ -22,19 +23,13 @@ DEFAULT_PARAMS = {"alpha": 0.12, "fn": 420.0, "zeta": 0.08, "b": 2.5}
 
 
 def parse_params(text: str | None) -> CreepModel:
-    """``alpha=..,a1=..,a2=..,b=..`` (or ``fn=..,zeta=..`` instead of a1/a2) -> CreepModel."""
-    vals = dict(DEFAULT_PARAMS)
-    if text:
-        for item in text.split(","):
-            if not item.strip():
-                continue
-            if "=" not in item:
-                raise ValueError(f"--params: expected name=value, got {item!r}")
-            k, v = item.split("=", 1)
-            vals[k.strip()] = float(v)
-    if "a1" in vals and "a2" in vals:
-        return CreepModel(vals["alpha"], vals["a1"], vals["a2"], vals.get("b", 1.0))
-    return CreepModel.from_resonance(vals["alpha"], vals["fn"], vals["zeta"], vals.get("b", 1.0))
+    """The plant's model: ``creep_online.io.params.parse_params`` over :data:`DEFAULT_PARAMS`.
+
+    Either ``alpha=..,fn=..,zeta=..,b=..`` or ``alpha=..,a1=..,a2=..,b=..``;
+    what the text leaves out comes from the demo plant (a ModelError, a
+    ValueError, names anything else).
+    """
+    return _parse_params(text, DEFAULT_PARAMS)
 
 
 def make_input(schedule: str, t: np.ndarray, *, amplitude: float = 1.0, period: float = 2.0,

@@ -10,7 +10,6 @@ report (HTML + PNG plots when matplotlib is installed, JSON always) in
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time
@@ -19,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CreepOnlineError
+from ._common import print_json
 
 SCENARIOS = ("stationary", "payload")
 #: The payload scenario's added mass fraction (a2 *= 1 + PAYLOAD_MASS at half the duration).
@@ -143,56 +143,38 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _stream(src, est, truth, n_total: int, args, t0: float, progress: Progress) -> dict:
-    rate = args.rate
-    dt = 1.0 / rate
-    seqs, us, ys = [], [], []
-    lat_ns: list[float] = []
+    from ..io.feed import FeedLoop, SampleAge
+    dt = 1.0 / args.rate
     trace: list[dict] = []
     next_trace = 0.0
-    last_seq = None
-    has_gap = hasattr(est, "gap")
-    gaps_unfed = 0
-    wall0 = time.monotonic()
-    deadline = wall0 + args.duration * 3 + 60
-    update = est.update
-    now = time.monotonic
-    while True:
-        batch = src.read(0.05)
-        for s in batch:
-            if last_seq is not None and s.seq > last_seq + 1:
-                if has_gap:
-                    est.gap(s.seq - last_seq - 1)
-                else:
-                    gaps_unfed += s.seq - last_seq - 1
-            last_seq = s.seq
-            update(s.u, s.y)
-            lat_ns.append(now() - (t0 + s.seq * dt))
-            seqs.append(s.seq)
-            us.append(s.u)
-            ys.append(s.y)
-        t_plant = (last_seq or 0) * dt
-        if t_plant >= next_trace and last_seq is not None:
+
+    def show(loop: FeedLoop) -> None:
+        nonlocal next_trace
+        t_plant = loop.last_seq * dt
+        if t_plant >= next_trace:
             e = est.estimate
             trace.append({"t": t_plant, "alpha": e.alpha, "a1": e.a1, "a2": e.a2, "b": e.b,
-                          "phase": e.phase, "quality": e.quality, "events": len(e.events), "wall": now() - wall0})
+                          "phase": e.phase, "quality": e.quality, "events": len(e.events),
+                          "wall": time.monotonic() - loop.started})
             next_trace = t_plant + 0.1
-        if batch:
-            progress.show(_status(est, truth, src, last_seq, wall0, lat_ns))
-        if last_seq is not None and last_seq >= n_total - 1:
-            break
-        if src.ended or now() > deadline:
-            break
-    wall = now() - wall0
-    lat = np.asarray(lat_ns) * 1e6
+        progress.show(_status(loop, truth))
+
+    loop = FeedLoop(src, lambda _dt: est, dt=dt, latency=SampleAge(t0, dt), read_timeout=0.05,
+                    duration=args.duration * 3 + 60, on_batch=show, record=True,
+                    stop_when=lambda loop: loop.last_seq is not None and loop.last_seq >= n_total - 1)
+    end = loop.run()
+    if end.error is not None:      # Ctrl-C, a lost port, a bug: the CLI reports it (130, 2, 3)
+        raise end.error
+    lat = loop.latency_us()
     e = est.estimate
-    trace.append({"t": (last_seq or 0) * dt, "alpha": e.alpha, "a1": e.a1, "a2": e.a2, "b": e.b,
-                  "phase": e.phase, "quality": e.quality, "wall": wall})
+    trace.append({"t": (loop.last_seq or 0) * dt, "alpha": e.alpha, "a1": e.a1, "a2": e.a2, "b": e.b,
+                  "phase": e.phase, "quality": e.quality, "wall": loop.wall_s})
     return {
         "estimate": e.to_dict(), "model": est.model.describe() if est.model else None,
-        "errors": _errors(est.model, truth), "samples_received": len(seqs), "samples_sent_by_plant": n_total,
-        "wall_s": wall, "achieved_rate_sps": len(seqs) / wall if wall > 0 else 0.0,
-        "latency_us": _dist(lat), "gaps_not_fed": gaps_unfed,
-        "trace": trace, "_seq": np.asarray(seqs), "_u": np.asarray(us), "_y": np.asarray(ys),
+        "errors": _errors(est.model, truth), "samples_received": loop.fed, "samples_sent_by_plant": n_total,
+        "wall_s": loop.wall_s, "achieved_rate_sps": loop.fed / loop.wall_s if loop.wall_s > 0 else 0.0,
+        "latency_us": _dist(lat), "gaps_not_fed": loop.lost_not_fed,
+        "trace": trace, "_seq": np.asarray(loop.seqs), "_u": np.asarray(loop.us), "_y": np.asarray(loop.ys),
         "_lat_us": lat,
     }
 
@@ -203,11 +185,13 @@ def _dist(x: np.ndarray) -> dict:
     return {"p50": float(np.percentile(x, 50)), "p99": float(np.percentile(x, 99)), "max": float(np.max(x))}
 
 
-def _status(est, truth, src, last_seq, wall0, lat_ns) -> str:
+def _status(loop, truth) -> str:
+    """The live line: plant time, rate, phase, latest change, estimate and its error, latency, link trouble."""
+    est, src = loop.estimator, loop.source
     e = est.estimate
-    el = time.monotonic() - wall0
+    el = time.monotonic() - loop.started
     n = src.stats.samples
-    text = f"t={(last_seq or 0) * est.dt:6.2f}s {n / max(el, 1e-9) / 1e3:5.1f} kS/s "
+    text = f"t={(loop.last_seq or 0) * est.dt:6.2f}s {n / max(el, 1e-9) / 1e3:5.1f} kS/s "
     text += f"[{e.phase}/{e.quality}] "
     if e.events:
         ev = e.events[-1]
@@ -219,9 +203,9 @@ def _status(est, truth, src, last_seq, wall0, lat_ns) -> str:
         err = _errors(m, truth)
         text += (f"alpha={m.alpha:.4f} ({err['alpha_abs']:+.1e}) fn={m.fn:.1f}Hz ({100 * err['fn_rel']:+.2f}%) "
                  f"zeta={m.zeta:.3f} b={m.b:.4f} ({100 * err['b_rel']:+.2f}%) ")
-    recent = lat_ns[-2000:]
-    if recent:
-        text += f"lat p99={np.percentile(recent, 99) * 1e6:.0f}us "
+    recent = loop.recent_latency_us(2000)
+    if recent.size:
+        text += f"lat p99={np.percentile(recent, 99):.0f}us "
     st = src.stats
     bad = st.missing + st.bad_frames + st.sequence.duplicates + st.disconnects
     if bad:
@@ -232,7 +216,7 @@ def _status(est, truth, src, last_seq, wall0, lat_ns) -> str:
 def _print_summary(r: dict, as_json: bool) -> None:
     public = {k: v for k, v in r.items() if not k.startswith("_") and k != "trace"}
     if as_json:
-        print(json.dumps(public, indent=2, default=float))
+        print_json(public)
         return
     t = r["truth"]
     m = r["model"]

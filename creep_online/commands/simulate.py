@@ -21,7 +21,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "for a zero-order-held input to ~1e-14), 'paper' (eq. 13, the multi-term "
                                    "Grunwald-Letnikov recursion exactly as FOMCON lsim computes it), "
                                    "'split' (exact ZOH fractional integral + exact FOH resonance).")
-    p.add_argument("--params", required=True, help="alpha=..,a1=..,a2=..,b=.. (b defaults to 1)")
+    p.add_argument("--params", required=True, help="alpha=..,a1=..,a2=..,b=.. or alpha=..,fn=..,zeta=..,b=.. "
+                                                    "(fn in Hz; b defaults to 1)")
     p.add_argument("--input", required=True, help="CSV with header t,u (uniform sampling)")
     p.add_argument("-o", "--output", required=True,
                    help="CSV to write (t,u,y; written atomically, never over the input)")

@@ -1,10 +1,12 @@
 """``creep-online stream --source SPEC``: run the online estimator on a recorded or live stream.
 
 ``csv:FILE`` is replayed sample by sample through ``OnlineEstimator.update``
-as fast as it goes (``--block`` uses ``update_block``), timing every call.
-Any other spec (``serial:PORT``, ``can:IFACE:CHANNEL``, ``canlog:FILE``) is
-opened by ``creep_online.io.sources.open_source``; sequence gaps are passed
-to the estimator as lost samples (time advances, output unused).
+as fast as it goes (``--block`` uses ``update_block``), timing every call;
+``csv:FILE?realtime=1`` (any option) goes through the file's source instead.
+Any other spec (``serial:PORT``, ``can:IFACE:CHANNEL``, ``canlog:FILE`` or a
+plug-in's kind) is opened by ``creep_online.io.registry.open_source`` and fed
+by ``creep_online.io.feed.FeedLoop``: sequence gaps reach the estimator as
+lost samples (time advances, output unused), each ``update()`` is timed.
 """
 from __future__ import annotations
 
@@ -13,10 +15,11 @@ import importlib
 import math
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
-from ..errors import CreepOnlineError, DataError
+from ..errors import CreepOnlineError, DataError, TransportError
 from ..io import load_csv
 from ..online import OnlineEstimator, warm_kernels
 from ._common import print_json
@@ -41,7 +44,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "plant, detects abrupt changes and gates outliers (docs/online.md). Prints the "
                                    "final estimate, its quality and the per-sample update() latency.",
                        epilog=EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--source", required=True, help="csv:FILE | serial:PORT | can:IFACE:CHANNEL | canlog:FILE")
+    p.add_argument("--source", required=True, help="csv:FILE | serial:PORT | can:IFACE:CHANNEL | canlog:FILE | "
+                                                    "KIND:... of an installed plug-in (docs/transports.md)")
     p.add_argument("--json", action="store_true",
                    help="print JSON (alpha a1 a2 b samples latency_us{p50,p99,max} phase quality ...)")
     p.add_argument("--t-c", type=float, default=None, help="start-up search window after the first input change, s "
@@ -113,11 +117,10 @@ def _cell(v) -> str:
     return repr(float(v))
 
 
-def _latency(ns: np.ndarray) -> dict:
-    """p50/p99/max (+ mean, count over 1 ms) of per-sample update() time, in microseconds."""
-    if ns.size == 0:
+def _latency(us: np.ndarray) -> dict:
+    """p50/p99/max (+ mean, count over 1 ms) of per-sample update() time, given in microseconds."""
+    if us.size == 0:
         return {"p50": 0.0, "p99": 0.0, "max": 0.0, "mean": 0.0, "over_1ms": 0}
-    us = ns / 1e3
     return {"p50": float(np.percentile(us, 50)), "p99": float(np.percentile(us, 99)), "max": float(us.max()),
             "mean": float(us.mean()), "over_1ms": int(np.count_nonzero(us > 1000.0))}
 
@@ -140,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
         raise DataError(f"--max-samples must be at least 1, got {args.max_samples}")
     if args.duration is not None and not args.duration > 0:
         raise DataError(f"--duration must be > 0 s, got {args.duration:g}")
-    if spec.lower().startswith("csv:"):
+    if spec.lower().startswith("csv:") and not _has_options(spec[4:]):
         est, latency, extra = _run_csv(spec[4:], args)
     else:
         est, latency, extra = _run_live(spec, args)
@@ -216,7 +219,12 @@ def _run_csv(path: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dict
     except KeyboardInterrupt:
         end = _end("interrupted", "interrupted (Ctrl-C)")
     trace.write()
-    return est, _latency(ns[:k]), {"file": rec.source, **({"end": end} if end else {})}
+    return est, _latency(ns[:k] / 1e3), {"file": rec.source, **({"end": end} if end else {})}
+
+
+def _has_options(path: str) -> bool:
+    """``FILE?key=value``: a CSV replayed through its source (e.g. ``?realtime=1``), unless FILE has a '?'."""
+    return "?" in path and not Path(path).exists()
 
 
 def _check_dt(args: argparse.Namespace, h: float, source: str) -> None:
@@ -233,78 +241,45 @@ def _end(reason: str, message: str = "") -> dict:
 
 def _run_live(spec: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dict, dict]:
     try:
-        sources = importlib.import_module("creep_online.io.sources")
+        registry = importlib.import_module("creep_online.io.registry")
+        feed = importlib.import_module("creep_online.io.feed")
     except ModuleNotFoundError as exc:
         raise CreepOnlineError(f"{spec}: live sources are not available in this build ({exc.name} missing)") from None
     if args.trace is not None:
         from ..io.safe_files import check_output
         check_output(args.trace)
     warm_kernels()                          # compile before the first sample arrives
-    source = sources.open_source(spec)
-    est: OnlineEstimator | None = None
+    source = registry.open_source(spec)
     trace = Trace(None, 1.0)
-    pending: list = []
-    ns: list[int] = []
-    clock = time.perf_counter_ns
-    last_seq = None
-    deadline = math.inf if args.duration is None else time.monotonic() + args.duration
-    end = None
-    read = getattr(source, "read", None)
+    options = _options(args)
 
-    def batches():
-        if read is None:            # a plain iterable of samples
-            for smp in source:
-                yield [smp]
-            return
-        while not getattr(source, "ended", False):
-            yield read(0.1)
+    def make_estimator(dt: float) -> OnlineEstimator:
+        nonlocal trace
+        trace = Trace(args.trace, dt)
+        return OnlineEstimator(dt, **options)
 
+    def add_to_trace(loop, _sample) -> None:
+        if trace.due(loop.estimator.samples):
+            trace.add(loop.estimator)
+
+    def enough(loop) -> bool:
+        return (loop.estimator is not None and args.max_samples is not None
+                and loop.estimator.samples >= args.max_samples)
+
+    loop = feed.FeedLoop(source, make_estimator, dt=args.dt, duration=args.duration, stop_when=enough,
+                         on_sample=add_to_trace if args.trace is not None else None)
     try:
-        for batch in batches():
-            for s in batch:
-                if est is None:
-                    pending.append(s)
-                    dt = args.dt or getattr(source, "dt", None)
-                    if not dt and len(pending) >= 2 and pending[-1].seq > pending[0].seq:
-                        dt = (pending[-1].t - pending[0].t) / (pending[-1].seq - pending[0].seq)
-                    if not dt or dt <= 0:
-                        continue
-                    est = OnlineEstimator(dt, **_options(args))
-                    trace = Trace(args.trace, dt)
-                    todo, pending = pending, []
-                else:
-                    todo = (s,)
-                for smp in todo:
-                    if last_seq is not None and smp.seq > last_seq + 1:
-                        est.gap(smp.seq - last_seq - 1)
-                    last_seq = smp.seq
-                    t0 = clock()
-                    est.update(smp.u, smp.y)
-                    ns.append(clock() - t0)
-                    if trace.due(est.samples):
-                        trace.add(est)
-            done = est is not None and args.max_samples is not None and est.samples >= args.max_samples
-            if done or time.monotonic() > deadline:
-                end = _end("limit")
-                break
-    except KeyboardInterrupt:
-        end = _end("interrupted", "interrupted (Ctrl-C)")
-    except sources.TransportError as exc:
-        end = _end("link_lost", str(exc))
-    except Exception as exc:  # noqa: BLE001 - keep the work done so far; say what stopped it
-        if est is None:
-            raise
-        end = _end("error", f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"[:300])
+        end = loop.run()
     finally:
         source.close()
     stats = getattr(source, "stats", None)
     trace.write()
+    est = loop.estimator
     if est is None:
-        why = end["message"] if end and end["message"] else "fewer than 2 samples arrived; cannot tell the sampling step (use --dt)"
-        raise (sources.TransportError if end and end["reason"] == "link_lost" else DataError)(
-            f"{spec}: no estimate: {why}")
+        why = end.message or "fewer than 2 samples arrived; cannot tell the sampling step (use --dt)"
+        raise (TransportError if end.reason == "link_lost" else DataError)(f"{spec}: no estimate: {why}")
     extra = {"source_stats": stats.as_dict() if stats is not None and hasattr(stats, "as_dict") else {},
-             "end": end or _end("end_of_stream")}
+             "end": _end(end.reason, end.message)}
     if stats is not None and hasattr(stats, "summary"):
         extra["link"] = stats.summary()
-    return est, _latency(np.asarray(ns, dtype=np.int64)), extra
+    return est, _latency(loop.latency_us()), extra

@@ -74,7 +74,7 @@ class CanDecoder:
         try:
             import cantools
         except ImportError:  # pragma: no cover - depends on the environment
-            from .sources import TransportError
+            from ..errors import TransportError
             raise TransportError("CAN sources need cantools: pip install 'creep_online[can]'") from None
         path = Path(dbc) if dbc else dbc_path()
         try:

@@ -13,9 +13,13 @@ source says so once and re-creates the bus with exponential backoff, or raises
 from __future__ import annotations
 
 
+from typing import Any
+
+from ..errors import DataError, TransportError
 from .can_frames import COUNTER_MODULUS, CanDecoder
 from .frames import RawSample
-from .sources import ReconnectingSource, TransportError
+from .source_options import DBC, RATE, WINDOW, Option, flag
+from .sources import ReconnectingSource
 
 #: Frames taken from the bus per read() call at most (bounds the work per call).
 BATCH = 512
@@ -30,16 +34,29 @@ def _can():
 
 
 class CanSource(ReconnectingSource):
-    """Samples from a live CAN bus."""
+    """Samples from a live CAN bus (``can:INTERFACE:CHANNEL?rate=10000&...``)."""
 
     link = "adapter"
+    options = tuple(WINDOW.with_default(32) if o is WINDOW else o for o in ReconnectingSource.options) + (
+        RATE,
+        DBC,
+        Option("bitrate", int, None, "bus bit rate (slcan default 1 Mbit/s)"),
+        Option("fd", flag, False, "CAN FD"),
+    )
+    target_label = "interface and channel"
+
+    @classmethod
+    def from_spec(cls, spec: str, target: str, **kwargs: Any) -> "CanSource":
+        """``INTERFACE:CHANNEL`` -> CanSource(interface, channel)."""
+        if ":" not in target:
+            raise DataError(f"{spec!r}: CAN spec needs an interface and a channel, e.g. can:slcan:/dev/ttyACM0")
+        interface, channel = target.split(":", 1)
+        return cls(interface, channel, **kwargs)
 
     def __init__(self, interface: str, channel: str, *, rate: float | None = None, dbc: str | None = None,
                  bitrate: int | None = None, fd: bool = False, reconnect: bool = True,
                  reconnect_timeout: float | None = None, window: int = 32, stall: float = 0.5,
                  bus_kwargs: dict | None = None, **kw) -> None:
-        kw.pop("format", None)
-        kw.pop("start", None)
         super().__init__(window=window, modulus=COUNTER_MODULUS, rate=rate, t_from_seq=True, stall=stall,
                          reconnect=reconnect, reconnect_timeout=reconnect_timeout, **kw)
         self.name = f"can:{interface}:{channel}"

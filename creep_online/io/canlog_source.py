@@ -13,14 +13,18 @@ from ..errors import DataError
 from .can_frames import COUNTER_MODULUS, CanDecoder
 from .can_source import BATCH, _can
 from .frames import RawSample
+from .source_options import DBC, RATE, REALTIME, WINDOW
 from .sources import SampleSource
 
 
 class CanLogSource(SampleSource):
+    """Samples decoded from a CAN log file (``canlog:FILE?rate=10000``); a file cannot stall."""
+
+    options = (RATE, DBC, REALTIME, WINDOW.with_default(32))
+    target_label = "file"
+
     def __init__(self, path: str, *, rate: float | None = None, dbc: str | None = None, realtime: bool = False,
                  window: int = 32, stall: float = 0.5, **kw) -> None:
-        for k in ("format", "start", "reconnect", "reconnect_timeout", "bitrate", "fd"):
-            kw.pop(k, None)
         super().__init__(window=window, modulus=COUNTER_MODULUS, rate=rate, t_from_seq=True,
                          stall=stall, **kw)
         self.name = f"canlog:{path}"

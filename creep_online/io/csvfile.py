@@ -1,4 +1,4 @@
-"""CSV files with header ``t,u,y`` (other columns ignored), DESIGN.md section 6.
+"""CSV files with header ``t,u,y`` (other columns ignored; the rules: docs/reliability.md).
 
 Every problem becomes a DataError whose one-line message names the file, the
 row and what is wrong; nothing is silently dropped or repaired.

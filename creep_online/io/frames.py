@@ -1,6 +1,6 @@
 """Wire formats of a sample stream and incremental parsers that survive garbage.
 
-Two formats (DESIGN.md section 7):
+Two formats (docs/transports.md, "Serial frame formats"):
 
 ASCII lines
     ``seq,t,u,y`` then optionally ``*HHHH`` (CRC-16/CCITT-FALSE of every byte

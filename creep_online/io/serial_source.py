@@ -12,9 +12,12 @@ from __future__ import annotations
 
 import os
 import select
+from typing import Any
 
+from ..errors import DataError, TransportError
 from .frames import SCALE_U, SCALE_Y, RawSample, make_parser
-from .sources import ReconnectingSource, TransportError
+from .source_options import RATE, Option, choice
+from .sources import ReconnectingSource
 
 
 def _serial():
@@ -26,9 +29,33 @@ def _serial():
 
 
 class SerialSource(ReconnectingSource):
-    """Samples from a serial port or pyserial URL."""
+    """Samples from a serial port or pyserial URL (``serial:PORT?rate=10000&...``).
+
+    Spec keys this class does not declare stay in PORT, so a pyserial URL keeps
+    its own options (``socket://host:port?logging=debug``).
+    """
 
     link = "port"
+    options = ReconnectingSource.options + (
+        Option("format", choice("auto", "ascii", "binary"), "auto", "frame format (auto-detected by default)"),
+        RATE,
+        Option("baud", int, 921600, "baud rate", keyword="baudrate"),
+        Option("checksum", choice("auto", "required", "none"), "auto", "ASCII line checksum policy"),
+        Option("scale_u", float, SCALE_U, "binary input LSB"),
+        Option("scale_y", float, SCALE_Y, "binary output LSB"),
+        Option("start", str, None, "text sent after opening (e.g. a recorder's start command)"),
+    )
+    keeps_unknown_options = True
+    target_label = "port"
+
+    @classmethod
+    def from_spec(cls, spec: str, target: str, **kwargs: Any) -> "SerialSource":
+        """Open PORT; keys left in it are pyserial's URL options, so a device path must have none."""
+        port, _, rest = target.partition("?")
+        if rest and "://" not in port:
+            names = ", ".join(sorted(o.name for o in cls.options))
+            raise DataError(f"{spec}: unknown option(s) {rest!r} for a serial port (options: {names})")
+        return cls(target, **kwargs)
 
     def __init__(self, port: str, *, baudrate: int = 921600, format: str = "auto",
                  rate: float | None = None, checksum: str = "auto",

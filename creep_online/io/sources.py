@@ -1,20 +1,12 @@
-"""Live and recorded sample sources behind one interface: ``open_source(spec)``.
+"""The source contract: every live or recorded stream yields ordered, accounted :class:`Sample` objects.
 
-Specs (DESIGN.md section 6/7)::
-
-    csv:FILE                       a t,u,y file, replayed sample by sample
-    serial:PORT_OR_URL             /dev/ttyUSB0, /dev/pts/N, socket://host:port, loop://
-    can:slcan:PORT                 SLCAN adapter (or the simulated plant's pty)
-    can:virtual:CHANNEL            python-can's in-process virtual bus
-    can:<interface>:<channel>      any other python-can interface (socketcan:can0, pcan:PCAN_USBBUS1, ...)
-    canlog:FILE                    replay of a .asc / .blf / .csv CAN log
-
-Options follow a ``?`` as ``key=value`` pairs joined by ``&`` (or are passed
-as keyword arguments): ``format=auto|ascii|binary``, ``rate=HZ`` (binary and
-CAN frames carry a counter, not a time), ``baud=N``, ``reconnect=0|1``,
-``reconnect_timeout=S``, ``stall=S``, ``window=N`` (reorder window),
-``start=TEXT`` (bytes sent after opening, e.g. to start a recorder),
-``dbc=FILE``, ``bitrate=N``, ``fd=0|1``.
+A source is a :class:`SampleSource` subclass that implements
+``_read_raw(timeout)`` and declares the ``?key=value`` options its spec takes
+(``options``, see ``source_options.Option``); :class:`ReconnectingSource` adds
+reopening a lost link with backoff. Which class opens which spec kind
+(``csv:``, ``serial:``, ``can:``, ``canlog:`` or a plug-in's) is decided by
+``creep_online.io.registry``; this module imports none of the concrete
+sources. The kinds, options and how to add one: docs/transports.md.
 
 Every source yields :class:`Sample` objects in sequence order; everything that
 was not a good sample is counted in :class:`SourceStats` and never delivered.
@@ -24,16 +16,14 @@ from __future__ import annotations
 import sys
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Iterator, NamedTuple
-from urllib.parse import parse_qsl
+from typing import Any, Callable, ClassVar, Iterator, NamedTuple
 
-from ..errors import CreepOnlineError, DataError
+from ..errors import TransportError
 from .frames import ParserStats, RawSample
 from .sequence import SequenceStats, SequenceTracker
+from .source_options import RECONNECT, RECONNECT_TIMEOUT, STALL, WINDOW, Option
 
-
-class TransportError(CreepOnlineError):
-    """A source could not be opened or was lost for good (one-line message)."""
+__all__ = ["Sample", "SourceStats", "SampleSource", "ReconnectingSource", "TransportError", "open_source"]
 
 
 class Sample(NamedTuple):
@@ -102,9 +92,23 @@ class SampleSource:
     Subclasses implement ``_read_raw(timeout) -> list[RawSample] | None``
     (``None`` = the stream ended for good) and may override ``close``.
     ``t_from_seq`` sources (binary, CAN) derive time from the unwrapped counter.
+
+    What a spec ``KIND:TARGET?key=value`` may say is declared on the class:
+    ``options`` (the keys, converted and passed as constructor keywords),
+    ``target_label`` (what TARGET is, for messages), ``keeps_unknown_options``
+    (unknown keys stay in TARGET instead of being refused) and ``from_spec``
+    (how TARGET becomes constructor arguments).
     """
 
     name = "source"
+    options: ClassVar[tuple[Option, ...]] = (WINDOW, STALL)
+    target_label: ClassVar[str] = "target"
+    keeps_unknown_options: ClassVar[bool] = False
+
+    @classmethod
+    def from_spec(cls, spec: str, target: str, **kwargs: Any) -> "SampleSource":
+        """Open the source named by ``target`` (the spec after ``KIND:``, options removed)."""
+        return cls(target, **kwargs)
 
     def __init__(self, *, window: int = 16, modulus: int | None = None, rate: float | None = None,
                  t_from_seq: bool = False, stall: float = 0.5,
@@ -201,7 +205,7 @@ class SampleSource:
         return self._dt_est
 
 
-# ------------------------------------------------------------------ CSV replay
+# ------------------------------------------------------------------ sources over a link
 class ReconnectingSource(SampleSource):
     """A source over a link that can disappear (a serial port, a CAN adapter).
 
@@ -211,6 +215,8 @@ class ReconnectingSource(SampleSource):
     """
 
     link = "link"  # what the messages call it
+    options = SampleSource.options + (RECONNECT, RECONNECT_TIMEOUT)
+    target_label = "port"
 
     def __init__(self, *, reconnect: bool = True, reconnect_timeout: float | None = None, **kw) -> None:
         super().__init__(**kw)
@@ -258,102 +264,4 @@ class ReconnectingSource(SampleSource):
         return True
 
 
-class CsvSource(SampleSource):
-    """A ``t,u,y`` CSV file as a stream (sequence = row index), optionally paced in real time."""
-
-    def __init__(self, path: str, *, realtime: bool = False, chunk: int = 1000, **kw) -> None:
-        from .csvfile import load_csv
-        super().__init__(**kw)
-        self.name = f"csv:{path}"
-        rec = load_csv(path)
-        self.record = rec
-        self.rate = 1.0 / rec.h if rec.h > 0 else None
-        self._i = 0
-        self._chunk = int(chunk)
-        self._realtime = realtime
-        self._t0 = time.monotonic()
-
-    def _read_raw(self, timeout: float) -> list[RawSample] | None:
-        rec, i = self.record, self._i
-        if i >= len(rec):
-            return None
-        stop = min(i + self._chunk, len(rec))
-        if self._realtime:
-            due = int((time.monotonic() - self._t0) / rec.h) + 1
-            stop = min(stop, max(due, i))
-            if stop == i:
-                time.sleep(min(timeout, rec.h))
-                return []
-        out = [RawSample(k, float(rec.t[k]), float(rec.u[k]), float(rec.y[k]), 0) for k in range(i, stop)]
-        self._i = stop
-        return out
-
-
-# ------------------------------------------------------------------ spec parsing
-#: Options understood by open_source; anything else stays in a pyserial URL.
-KNOWN_OPTIONS = {"format", "rate", "baud", "reconnect", "reconnect_timeout", "stall", "window",
-                 "start", "dbc", "bitrate", "fd", "checksum", "scale_u", "scale_y", "realtime",
-                 "frame"}
-
-
-def split_options(rest: str) -> tuple[str, dict[str, str]]:
-    """``PORT?k=v&k2=v2`` -> (PORT, {k: v}); unknown keys stay in the port string."""
-    if "?" not in rest:
-        return rest, {}
-    base, query = rest.split("?", 1)
-    ours: dict[str, str] = {}
-    theirs: list[str] = []
-    for k, v in parse_qsl(query, keep_blank_values=True):
-        if k in KNOWN_OPTIONS:
-            ours[k] = v
-        else:
-            theirs.append(f"{k}={v}" if v else k)
-    port = base + ("?" + "&".join(theirs) if theirs else "")
-    return port, ours
-
-
-_CONVERT = {"rate": float, "baud": int, "reconnect": lambda v: v.lower() not in ("0", "false", "no", "off"),
-            "reconnect_timeout": float, "stall": float, "window": int, "bitrate": int,
-            "fd": lambda v: v.lower() not in ("0", "false", "no", "off"),
-            "realtime": lambda v: v.lower() not in ("0", "false", "no", "off"),
-            "scale_u": float, "scale_y": float}
-
-
-def _convert(spec: str, opts: dict[str, str]) -> dict:
-    out: dict = {}
-    for k, v in opts.items():
-        try:
-            out[k] = _CONVERT.get(k, str)(v)
-        except ValueError:
-            raise DataError(f"{spec}: option {k}={v!r} is not valid") from None
-    if "baud" in out:
-        out["baudrate"] = out.pop("baud")
-    return out
-
-
-def open_source(spec: str, **options) -> SampleSource:
-    """Open a sample source from a spec string (see the module docstring)."""
-    if ":" not in spec:
-        raise DataError(f"{spec!r}: not a source spec (use csv:FILE, serial:PORT, can:IFACE:CHANNEL or canlog:FILE)")
-    kind, rest = spec.split(":", 1)
-    kind = kind.lower()
-    target, opts = split_options(rest)
-    kw = {**_convert(spec, opts), **options}
-    if not target:
-        raise DataError(f"{spec!r}: missing {'file' if kind in ('csv', 'canlog') else 'port'} after '{kind}:'")
-    if kind == "csv":
-        allowed = {"realtime", "window", "stall", "on_event", "chunk"}
-        return CsvSource(target, **{k: v for k, v in kw.items() if k in allowed})
-    if kind == "serial":
-        from .serial_source import SerialSource
-        return SerialSource(target, **kw)
-    if kind == "can":
-        if ":" not in target:
-            raise DataError(f"{spec!r}: CAN spec needs an interface and a channel, e.g. can:slcan:/dev/ttyACM0")
-        interface, channel = target.split(":", 1)
-        from .can_source import CanSource
-        return CanSource(interface, channel, **kw)
-    if kind == "canlog":
-        from .canlog_source import CanLogSource
-        return CanLogSource(target, **kw)
-    raise DataError(f"{spec!r}: unknown source kind {kind!r} (csv, serial, can, canlog)")
+from .registry import open_source  # noqa: E402 - the historical import path of open_source

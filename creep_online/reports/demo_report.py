@@ -7,10 +7,11 @@ the plant's true value, and the latency distribution.
 from __future__ import annotations
 
 import html
-import json
 from pathlib import Path
 
 import numpy as np
+
+from ..io.jsonable import json_text
 
 
 def write_report(out_dir: str | Path, r: dict) -> str:
@@ -24,7 +25,7 @@ def write_report(out_dir: str | Path, r: dict) -> str:
 def _write(out: Path, r: dict) -> str:
     """summary.json, plots and report.html into folder ``out``."""
     public = {k: v for k, v in r.items() if not k.startswith("_")}
-    (out / "summary.json").write_text(json.dumps(public, indent=2, default=_json_default))
+    (out / "summary.json").write_text(json_text(public))
     try:
         import matplotlib
         matplotlib.use("Agg")
@@ -37,14 +38,6 @@ def _write(out: Path, r: dict) -> str:
     page = out / "report.html"
     page.write_text(_html(r, pngs))
     return f"{page} (+ summary.json, {len(pngs)} PNG plots)"
-
-
-def _json_default(x):
-    if isinstance(x, (np.floating, np.integer)):
-        return x.item()
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    return str(x)
 
 
 def _plot_fit(plt, out: Path, r: dict) -> str | None:

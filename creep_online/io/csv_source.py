@@ -1,0 +1,47 @@
+"""``csv:FILE``: a ``t,u,y`` file replayed as a sample stream (sequence number = row index).
+
+The file is read and checked whole by ``creep_online.io.csvfile.load_csv``
+(the same rules and one-line errors as ``identify``), then handed out in
+chunks, or paced at the file's own step with ``?realtime=1``.
+"""
+from __future__ import annotations
+
+import time
+
+from .frames import RawSample
+from .source_options import REALTIME, STALL, WINDOW
+from .sources import SampleSource
+
+
+class CsvSource(SampleSource):
+    """A ``t,u,y`` CSV file as a stream (sequence = row index), optionally paced in real time."""
+
+    options = (REALTIME, WINDOW, STALL)
+    target_label = "file"
+
+    def __init__(self, path: str, *, realtime: bool = False, chunk: int = 1000, **kw) -> None:
+        from .csvfile import load_csv
+        super().__init__(**kw)
+        self.name = f"csv:{path}"
+        rec = load_csv(path)
+        self.record = rec
+        self.rate = 1.0 / rec.h if rec.h > 0 else None
+        self._i = 0
+        self._chunk = int(chunk)
+        self._realtime = realtime
+        self._t0 = time.monotonic()
+
+    def _read_raw(self, timeout: float) -> list[RawSample] | None:
+        rec, i = self.record, self._i
+        if i >= len(rec):
+            return None
+        stop = min(i + self._chunk, len(rec))
+        if self._realtime:
+            due = int((time.monotonic() - self._t0) / rec.h) + 1
+            stop = min(stop, max(due, i))
+            if stop == i:
+                time.sleep(min(timeout, rec.h))
+                return []
+        out = [RawSample(k, float(rec.t[k]), float(rec.u[k]), float(rec.y[k]), 0) for k in range(i, stop)]
+        self._i = stop
+        return out
