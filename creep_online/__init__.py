@@ -20,8 +20,6 @@ _configure_numba_cache()
 from .errors import CreepOnlineError, DataError, IdentificationError, ModelError, OutputError
 from .model import CreepModel
 from .record import Record
-from .simulate import simulate, step_response
-from .identification import identify
 
 __version__ = "0.1.0"
 
@@ -31,7 +29,10 @@ __all__ = [
 ]
 
 # The API mirrors the CLI; the heavier layers load on first use, not on import.
-_LAZY = {"OnlineEstimator": ("online", "OnlineEstimator"), "diagnose": ("diagnostics", "diagnose")}
+# simulate and identify load scipy and numba (~1 s): the CLI's --help must not pay for them.
+_LAZY = {"OnlineEstimator": ("online", "OnlineEstimator"), "diagnose": ("diagnostics", "diagnose"),
+         "simulate": ("simulate", "simulate"), "step_response": ("simulate", "step_response"),
+         "identify": ("identification", "identify")}
 
 
 def __getattr__(name: str):

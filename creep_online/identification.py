@@ -31,6 +31,7 @@ from . import kernels
 from ._threads import single_threaded
 from .discretize import foh_matrices_batch, step_response_grid
 from .errors import DataError, IdentificationError
+from .global_fit import GlobalFit, at_floor, floor_ratio, global_fit, global_uncertainty, n_bic
 from .metrics import fit_percent, noise_std_estimate
 from .model import CreepModel
 from .record import SAFE_AMPLITUDE, Record, check_time_and_output
@@ -383,6 +384,7 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
     u, y_raw = rec.u, rec.y
     sched = input_schedule(t, u)
     free_offset = offset is None and _pre_step_samples(sched) >= MIN_OFFSET_SAMPLES
+    user_offset = offset
     offset = _offset(y_raw, sched) if offset is None else float(offset)
     y = y_raw - offset
     warnings: list[str] = []
@@ -408,6 +410,22 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
         y = y - info["offset"]
         stages["polish"] = {**info, **model.params()}
     y_hat = model.b * model_output(model.alpha, model.a1, model.a2, h, u)
+    fast_residual = y - y_hat
+    if polish and not at_floor(fast_residual):
+        found = _escalate(rec.u, y_raw, h, model, fast_residual, user_offset, stages)
+        if found is not None:
+            model, uncertainty = found.model, global_uncertainty(found)
+            offset, u0 = (user_offset or 0.0) + found.offset, float(rec.u[0]) if found.problem.init else 0.0
+            u, y = rec.u - u0, y_raw - offset
+            y_hat = found.y_hat - found.offset
+            if found.problem.init:
+                warnings.append("the record starts in operation (the plant moves at the first sample): its initial "
+                                f"state was estimated with {found.problem.linear_count - 1 - int(found.problem.offset)} "
+                                "free-response terms (past steps, resonance modes)")
+    ratio = floor_ratio(y - y_hat)
+    if polish and ratio > FLOOR_WARNING:
+        warnings.append(f"the fit does not reach the noise floor (residual rms {ratio:.2f} x its white-noise level): "
+                        "the data hold something the model does not (another effect, coloured noise, timing)")
     warnings += _identifiability(t, u, y, h, model, t_c, sched, noise)
     warnings += [f"{k} is poorly determined by these data (1-sigma {sd / abs(getattr(model, k)):.0%})"
                  for k, sd in uncertainty.items() if sd > POORLY_DETERMINED * abs(getattr(model, k))]
@@ -415,6 +433,27 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
         model=model, fit_percent=fit_percent(y, y_hat), elapsed_s=time.perf_counter() - start,
         t_c=t_c, offset=offset, input_offset=u0, warnings=warnings, stages=stages,
         uncertainty=uncertainty, noise_std=noise, y_hat=y_hat + offset)
+
+
+#: Residual rms above this multiple of its white-noise level after all starts: warn.
+FLOOR_WARNING = 1.1
+
+
+def _escalate(u: np.ndarray, y_raw: np.ndarray, h: float, model: CreepModel, fast_residual: np.ndarray,
+              user_offset: float | None, stages: dict) -> GlobalFit | None:
+    """The global multi-start fit, warm-started from the layers; its result if it beats theirs (BIC)."""
+    start = time.perf_counter()
+    y = y_raw if user_offset is None else y_raw - user_offset
+    try:
+        found = global_fit(u, y, h, warm=[model], offset_free=user_offset is None)
+    except ValueError:
+        return None
+    fast_bic = n_bic(fast_residual, 3 + 1 + int(user_offset is None))
+    better = found.bic < fast_bic
+    stages["global"] = {"elapsed_s": time.perf_counter() - start, "initial_state": found.problem.init,
+                        "starts": len(found.info["tried"]), "floor_ratio": floor_ratio(found.residual),
+                        "kept": bool(better), **found.model.params()}
+    return found if better else None
 
 
 def _positive(name: str, value: float | None) -> None:

@@ -22,7 +22,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.signal import fftconvolve
 
 from . import kernels
 from .discretize import foh_matrices, step_response_grid
@@ -62,6 +61,34 @@ def input_changes(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return idx.astype(np.int64), du[idx]
 
 
+def fast_length(n: int) -> int:
+    """Smallest 2^a 3^b 5^c >= n: an FFT length numpy transforms quickly."""
+    best = 1 << max(int(n - 1).bit_length(), 0)
+    p5 = 1
+    while p5 < best:
+        p35 = p5
+        while p35 < best:
+            v = p35
+            while v < n:
+                v *= 2
+            best = min(best, v)
+            p35 *= 3
+        p5 *= 5
+    return best
+
+
+def causal_convolve(x: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """The first len(x) samples of the full convolution x * kernel, by real FFT.
+
+    numpy's FFT rather than scipy.signal.fftconvolve: importing scipy.signal
+    costs about a second, which a command-line call pays every time.
+    """
+    n = x.shape[0]
+    m = fast_length(n + min(kernel.shape[0], n) - 1)
+    k = kernel[:n]
+    return np.fft.irfft(np.fft.rfft(x, m) * np.fft.rfft(k, m), m)[:n]
+
+
 def superpose(step_response: np.ndarray, u: np.ndarray) -> np.ndarray:
     """ZOH response from a unit-step response: sparse sum for few changes, FFT for many."""
     idx, size = input_changes(u)
@@ -70,7 +97,7 @@ def superpose(step_response: np.ndarray, u: np.ndarray) -> np.ndarray:
         return kernels.superpose_steps(step_response, idx, size, n)
     du = np.zeros(n)
     du[idx] = size
-    return fftconvolve(du, step_response)[:n]
+    return causal_convolve(du, step_response)
 
 
 def simulate(model: CreepModel, t: np.ndarray, u: np.ndarray, method: str = "exact",
@@ -101,7 +128,7 @@ def fractional_integral(u: np.ndarray, h: float, alpha: float, memory: int | Non
     length = n if memory is None else min(n, int(memory) + 1)
     c = kernels.zoh_integral_weights(alpha, h, math.gamma(1.0 + alpha), length)
     if memory is None and n > 2048:
-        return fftconvolve(u, c)[:n]
+        return causal_convolve(u, c)
     return kernels.fractional_integral_zoh(u, c)
 
 

@@ -113,7 +113,8 @@ def make_record(family: str, seed: int, *, snr_db: tuple[float, float] = (30.0, 
     if family == "in_operation":
         hist = int(round(rng.uniform(1.0, 5.0) * fs))
         total = hist + n
-        idx = _random_holds(rng, total, int(0.05 * fs), int(1.0 * fs), 0)
+        longest = max(int(min(1.0, n / fs / 3.0) * fs), int(0.05 * fs) + 1)  # the record holds changes too
+        idx = _random_holds(rng, total, int(0.05 * fs), longest, 0)
         levels = rng.uniform(0.2, 1.0, idx.size) * rng.choice([-1.0, 1.0], idx.size)
         u_all = _held(total, idx, levels) * scale
         y_all = simulate(model, np.arange(total) / fs, u_all)
