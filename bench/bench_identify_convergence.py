@@ -93,6 +93,24 @@ def table(records, results) -> dict:
                                             "fraction": total / len(records)}}
 
 
+def timing_check(count: int) -> dict:
+    """Asynchronous sampling (item 3): random staircases whose changes reach the plant between samples,
+    and the same plants with every change on a sample; how often identify warns, and alpha's error."""
+    from creep_online.validation import make_async_record
+    out = {}
+    for label, sync in (("asynchronous", False), ("synchronous_control", True)):
+        warned, errs, gaps = 0, [], []
+        for seed in range(count):
+            rec = make_async_record(seed, synchronous=sync)
+            r = identify(rec.t, rec.u, rec.y)
+            warned += any("asynchronous" in w for w in r.warnings)
+            errs.append(abs(r.model.alpha / rec.model.alpha - 1) * 100)
+            gaps.append(fit_percent(rec.y, rec.truth) - r.fit_percent)
+        out[label] = {"records": count, "warned": warned, "alpha_error_percent_median": float(np.median(errs)),
+                      "alpha_error_percent_max": float(np.max(errs)), "fit_gap_points_median": float(np.median(gaps))}
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--per-family", type=int, default=30)
@@ -104,8 +122,11 @@ def main() -> None:
     records = list(validation_set(args.per_family, tuple(args.families.split(","))))
     for rec in records:
         rec.true_fit = fit_percent(rec.y, rec.truth)
+    head = _baseline.subprocess.run(["git", "-C", _baseline.ROOT, "rev-parse", "HEAD"], capture_output=True,
+                                    text=True).stdout.strip()
     report = {"bench": "identify_convergence", "floor_points": FLOOR_POINTS, "per_family": args.per_family,
-              "after": table(records, run_ours(records))}
+              "after": {"commit": head, **table(records, run_ours(records))},
+              "timing": timing_check(args.per_family)}
     if not args.no_baseline:
         base, commit = run_baseline(records, args.baseline_ref)
         report["before"] = {"commit": commit, **table(records, base)}

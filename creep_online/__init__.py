@@ -20,6 +20,7 @@ _configure_numba_cache()
 from .errors import CreepOnlineError, DataError, IdentificationError, ModelError, OutputError
 from .model import CreepModel
 from .record import Record
+from .simulate import simulate, step_response  # light: the module loads numba and scipy on first call
 
 __version__ = "0.1.0"
 
@@ -29,9 +30,8 @@ __all__ = [
 ]
 
 # The API mirrors the CLI; the heavier layers load on first use, not on import.
-# simulate and identify load scipy and numba (~1 s): the CLI's --help must not pay for them.
+# identify loads scipy and numba (~1 s): the CLI's --help must not pay for them.
 _LAZY = {"OnlineEstimator": ("online", "OnlineEstimator"), "diagnose": ("diagnostics", "diagnose"),
-         "simulate": ("simulate", "simulate"), "step_response": ("simulate", "step_response"),
          "identify": ("identification", "identify")}
 
 

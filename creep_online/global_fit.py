@@ -49,9 +49,9 @@ FLOOR_SLACK = 0.01
 ALPHA_RANGE = (1e-4, 0.999)
 
 
-def floor_ratio(r: np.ndarray) -> float:
-    """rms(r) over the white-noise level of r (second differences): 1 for a residual that is pure noise."""
-    noise = noise_std_estimate(r)
+def floor_ratio(r: np.ndarray, noise: float | None = None) -> float:
+    """rms(r) over the white-noise level of r (second differences, unless given): 1 for pure noise."""
+    noise = noise_std_estimate(r) if noise is None else noise
     if not (math.isfinite(noise) and noise > 0):
         return float("inf") if np.any(r) else 1.0
     return float(np.sqrt(np.mean(r * r))) / noise
@@ -85,7 +85,7 @@ def at_floor(r: np.ndarray) -> bool:
     noise = noise_std_estimate(r)
     if not (math.isfinite(noise) and noise > 0):
         return not np.any(r)
-    if floor_ratio(r) > 1.0 + FLOOR_SLACK + 2.5 / math.sqrt(max(r.size, 1)):
+    if floor_ratio(r, noise) > 1.0 + FLOOR_SLACK + 2.5 / math.sqrt(max(r.size, 1)):
         return False
     for width in BLOCKS:
         stat, k = block_ratio(r, width, noise)

@@ -23,8 +23,6 @@ import math
 
 import numpy as np
 
-from . import kernels
-from .discretize import foh_matrices, step_response_grid
 from .errors import DataError
 from .model import CreepModel
 
@@ -89,9 +87,25 @@ def causal_convolve(x: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     return np.fft.irfft(np.fft.rfft(x, m) * np.fft.rfft(k, m), m)[:n]
 
 
+#: The last input and its changes: fits simulate the same input dozens of times, and comparing
+#: it with a copy is cheaper than a diff + nonzero over it (a copy, so in-place edits are seen).
+_LAST_CHANGES: list = [None, None]
+
+
+def _changes_cached(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """input_changes(u), reused when u equals the previous call's input."""
+    copy, changes = _LAST_CHANGES
+    if copy is not None and copy.shape == u.shape and np.array_equal(copy, u):
+        return changes
+    changes = input_changes(u)
+    _LAST_CHANGES[:] = [np.array(u, dtype=float), changes]
+    return changes
+
+
 def superpose(step_response: np.ndarray, u: np.ndarray) -> np.ndarray:
     """ZOH response from a unit-step response: sparse sum for few changes, FFT for many."""
-    idx, size = input_changes(u)
+    from . import kernels  # numba: loaded on first use, so that importing the package stays light
+    idx, size = _changes_cached(u)
     n = u.shape[0]
     if idx.size <= SPARSE_STEP_LIMIT:
         return kernels.superpose_steps(step_response, idx, size, n)
@@ -109,6 +123,8 @@ def simulate(model: CreepModel, t: np.ndarray, u: np.ndarray, method: str = "exa
         raise DataError(f"t and u differ in length ({np.size(t)} vs {u.size})")
     if not np.all(np.isfinite(u)):
         raise DataError("input u contains NaN or inf")
+    from . import kernels
+    from .discretize import step_response_grid
     if method == "exact":
         if memory is not None:
             raise ValueError("the exact method has full memory; 'memory' applies to paper and split")
@@ -124,6 +140,7 @@ def simulate(model: CreepModel, t: np.ndarray, u: np.ndarray, method: str = "exa
 
 def fractional_integral(u: np.ndarray, h: float, alpha: float, memory: int | None = None) -> np.ndarray:
     """z = D^-alpha u at the samples for a zero-order-held u: exact (full memory) or truncated."""
+    from . import kernels
     n = u.size
     length = n if memory is None else min(n, int(memory) + 1)
     c = kernels.zoh_integral_weights(alpha, h, math.gamma(1.0 + alpha), length)
@@ -134,6 +151,8 @@ def fractional_integral(u: np.ndarray, h: float, alpha: float, memory: int | Non
 
 def split_form(model: CreepModel, h: float, u: np.ndarray, memory: int | None = None) -> np.ndarray:
     """Split form with gain 1: exact ZOH fractional integral, then the FOH-exact resonance."""
+    from . import kernels
+    from .discretize import foh_matrices
     z = fractional_integral(u, h, model.alpha, memory)
     phi, g0, g1 = foh_matrices(model.a1, model.a2, h)
     return kernels.resonance_foh(z, phi, g0, g1, h)
@@ -141,5 +160,6 @@ def split_form(model: CreepModel, h: float, u: np.ndarray, memory: int | None = 
 
 def step_response(model: CreepModel, t: np.ndarray) -> np.ndarray:
     """Exact unit-step response on a uniform grid t starting at 0."""
+    from .discretize import step_response_grid
     h = uniform_step(t)
     return model.b * step_response_grid(model.alpha, model.a1, model.a2, h, np.size(t))

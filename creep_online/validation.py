@@ -135,3 +135,35 @@ def validation_set(per_family: int = 30, families: tuple[str, ...] = FAMILIES):
     for family in families:
         for seed in range(per_family):
             yield make_record(family, seed)
+
+
+#: Sub-steps per sample of the asynchronous records' change instants.
+ASYNC_SUBSTEPS = 16
+
+
+def make_async_record(seed: int, *, synchronous: bool = False) -> ValidationRecord:
+    """A random staircase (5-50 ms holds) whose changes reach the plant between samples.
+
+    The change instants are uniform in continuous time (quantized to 1/16 of a
+    sample for the exact simulation on a 16x finer grid); the recorded u shows
+    each change at the first sample at or after it, as an ADC on its own
+    clock records a DAC's output. ``synchronous`` puts every change on a sample
+    (the control case).
+    """
+    rng = np.random.default_rng([seed, 99])
+    fs = float(rng.choice(SAMPLE_RATES))
+    n = int(rng.integers(5000, 20001))
+    model = random_model(rng, fs)
+    m = ASYNC_SUBSTEPS
+    fine_idx = _random_holds(rng, n * m, max(int(0.005 * fs), 2) * m, max(int(0.05 * fs), 3) * m,
+                             int(rng.integers(1, n // 50)) * m)
+    if synchronous:
+        fine_idx = fine_idx - fine_idx % m
+    levels = rng.uniform(-1.0, 1.0, fine_idx.size) * _log_uniform(rng, 1e-2, 1e2)
+    y_fine = simulate(model, np.arange(n * m) / (fs * m), _held(n * m, fine_idx, levels))
+    y_clean = y_fine[::m]
+    u = _held(n, -(-fine_idx // m), levels)        # seen at the first sample at or after the change
+    std = float(np.std(y_clean)) * 10 ** (-rng.uniform(40.0, 60.0) / 20)
+    y = y_clean + rng.normal(0.0, std, n)
+    return ValidationRecord("async_staircase" if not synchronous else "sync_staircase", seed, model,
+                            np.arange(n) / fs, u, y, y_clean, std)

@@ -93,3 +93,35 @@ def test_static_summaries_match_the_commands():
     sub = next(a for a in build_parser()._actions if a.dest == "command")
     helps = {c.dest: c.help for c in sub._choices_actions}
     assert helps == SUMMARIES
+
+
+def test_asynchronous_input_changes_are_warned_and_synchronous_ones_not():
+    from creep_online.validation import make_async_record
+    for seed in (50, 51):
+        warn = identify(*_arrays(make_async_record(seed))).warnings
+        assert any("asynchronous" in w for w in warn), warn
+        ok = identify(*_arrays(make_async_record(seed, synchronous=True)))
+        assert not any("asynchronous" in w for w in ok.warnings), ok.warnings
+
+
+def _arrays(rec):
+    return rec.t, rec.u, rec.y
+
+
+def test_timing_check_recovers_a_known_sub_sample_shift():
+    """Residual = exact response to steps 0.3 sample earlier minus the on-grid one: the per-change
+    shift comes out near 0.3 (first order in the shift) and is flagged; pure noise is not."""
+    from creep_online.timing import check_timing
+    m, h, n = CreepModel.from_resonance(0.1, 30.0, 0.3), 1e-3, 4000
+    fine = step_response_grid(m.alpha, m.a1, m.a2, h / 10, 10 * n + 10)
+    step = fine[::10][:n + 1]
+    idx = np.array([100, 900, 1700, 2600, 3300])
+    size = np.array([1.0, -0.5, 2.0, -1.0, 0.7])
+    late = np.zeros(n)
+    for i0, a in zip(idx, size):
+        late[i0:] += a * (fine[3:3 + 10 * (n - i0):10] - step[:n - i0])
+    noise = 1e-5
+    rng = np.random.default_rng(0)
+    chk = check_timing(step, idx, size, late + rng.normal(0, noise, n), noise)
+    assert chk.flagged and np.allclose(chk.shift, 0.3, atol=0.05)
+    assert not check_timing(step, idx, size, rng.normal(0, noise, n), noise).flagged
