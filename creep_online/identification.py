@@ -32,7 +32,7 @@ from ._threads import single_threaded
 from .discretize import foh_matrices_batch, step_response_grid
 from .errors import DataError, IdentificationError
 from .global_fit import GlobalFit, at_floor, floor_ratio, global_fit, global_uncertainty, n_bic
-from .metrics import fit_percent, noise_std_estimate
+from .metrics import fit_percent, long_run_variance_factor, noise_std_estimate
 from .model import CreepModel
 from .record import SAFE_AMPLITUDE, Record, check_time_and_output
 from .simulate import fractional_integral, input_changes, superpose, uniform_step
@@ -499,6 +499,10 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
                                 f"state was estimated with {found.problem.linear_count - 1 - int(found.problem.offset)} "
                                 "free-response terms (past steps, resonance modes)")
     final_noise = noise_std_estimate(y - y_hat)
+    inflate = math.sqrt(long_run_variance_factor(y - y_hat))
+    uncertainty = {k: sd * inflate for k, sd in uncertainty.items()}
+    if inflate > 1.0:
+        stages["uncertainty_inflation"] = {"factor": inflate}
     ratio = floor_ratio(y - y_hat, final_noise)
     timing = _timing(model, h, u, y - y_hat, sched, final_noise) if polish else None
     if timing is not None:
