@@ -10,7 +10,12 @@
   FOMCON-style baseline (full-memory eq. 13 + finite-difference TRF on all four
   parameters, from the same starting point) run once in the same process.
 
-Usage: python bench/bench_identify.py [--quick]   (--quick: fewer repeats; the 100,000-sample
+* --speed-only: warm p50 of this code and of --previous (default main; ``git archive``
+  into a temp dir, run in its own interpreter) alternating in three rounds, ratio
+  previous / ours; and the wall time of fresh ``creep-online --help`` and
+  ``creep-online identify`` (12,000 samples) processes.
+
+Usage: python bench/bench_identify.py [--quick] [--speed-only [--previous REF]]   (--quick: fewer repeats; the 100,000-sample
 baseline is then estimated from one eq. 13 simulation instead of run, which takes minutes)
 """
 from __future__ import annotations
