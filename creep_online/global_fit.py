@@ -165,13 +165,6 @@ class GlobalFit:
     def offset(self) -> float:
         return float(self.coef[1]) if self.problem.offset else 0.0
 
-    @property
-    def free_response(self) -> np.ndarray:
-        """The fitted free response of the initial state (offset excluded; zeros when at rest)."""
-        d = self.info["design"]
-        k0 = 1 + int(self.problem.offset)
-        return d.nuisance[:, k0 - 1:] @ self.coef[k0:] if self.problem.init else np.zeros_like(self.y_hat)
-
 
 def grid_starts(prob: Problem, f_lo: float, f_hi: float,
                 alphas: tuple[float, ...] = GRID_ALPHAS,

@@ -16,6 +16,11 @@ squares with trust-region-reflective steps (``least_squares(method="trf")``):
 ``t_c`` and the starting point come from the data: a coarse creep fit gives a
 first alpha, a grid over (fn, zeta) on the first transient gives the
 resonance, and ``t_c`` is the resonance's settling time.
+
+When the result is not at the noise floor, ``global_fit`` takes over
+(multi-start, free offset, the initial state of records taken in operation).
+The final residual is tested for input changes that fall between samples
+(``timing``), and the 1-sigma intervals are widened for coloured residuals.
 """
 from __future__ import annotations
 
@@ -378,33 +383,6 @@ def _covariance_sd(jac_s: np.ndarray, s: np.ndarray, r: np.ndarray, m: CreepMode
     return {"alpha": float(sd[0]), "a1": float(sd[1] * m.a1), "a2": float(sd[2] * m.a2), "b": float(sd[3])}
 
 
-def _uncertainty(shape, p: np.ndarray, s: np.ndarray, r: np.ndarray, m: CreepModel,
-                 free_offset: bool) -> dict[str, float]:
-    """1-sigma std of (alpha, a1, a2, b) from the Gauss-Newton covariance of the full problem.
-
-    The Jacobian is of the model b s(p) (+ c) in all parameters, gain (and
-    offset) included, so their correlation with alpha is accounted for; the
-    projected Jacobian of the fit alone would hide it.
-    """
-    cols = []
-    for k in range(p.size):
-        step = 1e-6 * max(abs(p[k]), 1e-3)
-        dp = p.copy()
-        dp[k] += step
-        cols.append(m.b * (shape(dp) - s) / step)
-    cols.append(s)
-    if free_offset:
-        cols.append(np.ones_like(s))
-    jac = np.column_stack(cols)
-    sigma2 = float(r @ r) / max(r.size - jac.shape[1], 1)
-    try:
-        cov = sigma2 * np.linalg.inv(jac.T @ jac)
-    except np.linalg.LinAlgError:
-        return {k: float("inf") for k in ("alpha", "a1", "a2", "b")}
-    sd = np.sqrt(np.abs(np.diag(cov)))
-    return {"alpha": float(sd[0]), "a1": float(sd[1] * m.a1), "a2": float(sd[2] * m.a2), "b": float(sd[3])}
-
-
 # --------------------------------------------------------------------------- driver
 #: Fewest samples before the first input change from which an output offset is estimated.
 MIN_OFFSET_SAMPLES = 100
@@ -433,13 +411,15 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
              alpha0: float | None = None, resonance0: tuple[float, float] | None = None,
              layer1_step: float | None = None, retune: bool = True, polish: bool = True,
              offset: float | None = None, source: str = "<array>") -> IdentificationResult:
-    """Identify (alpha, a1, a2, b) from a uniformly sampled record with zero initial state.
+    """Identify (alpha, a1, a2, b) from a uniformly sampled record, at rest or taken in operation.
 
     ``t_c`` (end of the transient, s), ``alpha0`` and ``resonance0`` =
     (fn_hz, zeta) override the data-driven choices; ``offset`` is the output
     level at rest (default: fitted jointly when at least MIN_OFFSET_SAMPLES
     precede the first input change, else 0). ``polish`` runs the joint
-    4-parameter refinement. Warnings say what the data cannot determine.
+    4-parameter refinement and, when the fit misses the noise floor, the global
+    fit (which also estimates the initial state of a record that starts with
+    the plant moving). Warnings say what the data cannot determine.
     """
     start = time.perf_counter()
     check_options(t_c=t_c, alpha0=alpha0, resonance0=resonance0, layer1_step=layer1_step, offset=offset)
