@@ -125,3 +125,15 @@ def test_timing_check_recovers_a_known_sub_sample_shift():
     chk = check_timing(step, idx, size, late + rng.normal(0, noise, n), noise)
     assert chk.flagged and np.allclose(chk.shift, 0.3, atol=0.05)
     assert not check_timing(step, idx, size, rng.normal(0, noise, n), noise).flagged
+
+
+def test_long_run_variance_factor_is_one_for_white_and_1_plus_rho_over_1_minus_rho_for_ar1():
+    from creep_online.metrics import long_run_variance_factor
+    rng = np.random.default_rng(3)
+    n = 50000
+    assert long_run_variance_factor(rng.normal(size=n)) < 1.3
+    e, ar, acc = rng.normal(size=n), np.empty(n), 0.0
+    for i in range(n):
+        acc = 0.9 * acc + e[i]
+        ar[i] = acc
+    assert long_run_variance_factor(ar) == pytest.approx(19.0, rel=0.3)
