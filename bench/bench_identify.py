@@ -10,7 +10,12 @@
   FOMCON-style baseline (full-memory eq. 13 + finite-difference TRF on all four
   parameters, from the same starting point) run once in the same process.
 
-Usage: python bench/bench_identify.py [--quick]   (--quick: fewer repeats; the 100,000-sample
+* --speed-only: warm p50 of this code and of --previous (default main; ``git archive``
+  into a temp dir, run in its own interpreter) alternating in three rounds, ratio
+  previous / ours; and the wall time of fresh ``creep-online --help`` and
+  ``creep-online identify`` (12,000 samples) processes.
+
+Usage: python bench/bench_identify.py [--quick] [--speed-only [--previous REF]]   (--quick: fewer repeats; the 100,000-sample
 baseline is then estimated from one eq. 13 simulation instead of run, which takes minutes)
 """
 from __future__ import annotations
@@ -27,6 +32,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from creep_online import CreepModel  # noqa: E402
 from creep_online.identification import identify, layer1_alpha  # noqa: E402
@@ -139,10 +145,88 @@ def speed(repeats: int, full_baseline: bool) -> dict:
     return out
 
 
+#: Runs in the previous code's interpreter: warm p50 of identify on the speed records.
+PREVIOUS_CODE = """
+import json, sys, time
+import numpy as np
+from creep_online.identification import identify
+from creep_online.plants import LOAD_CELL, NANOPOSITIONER
+out = {}
+for case in (LOAD_CELL, NANOPOSITIONER):
+    t, u, y, _ = case.run(40.0, seed=1)
+    identify(t, u, y)
+    times = []
+    for _ in range(int(sys.argv[1])):
+        t0 = time.perf_counter()
+        identify(t, u, y)
+        times.append(time.perf_counter() - t0)
+    out[case.name] = float(np.median(times))
+print(json.dumps(out))
+"""
+
+
+def speed_vs_previous(repeats: int, ref: str) -> dict:
+    """Warm p50 of this code and of ``ref`` (git archive, own interpreter), alternating in rounds so
+    both see the same machine load; ratio = previous / ours."""
+    import _baseline
+    path, commit = _baseline.extract(ref)
+    _baseline.run_python(path, PREVIOUS_CODE, "1")           # compile its numba cache once
+    ours = {c.name: [] for c in (LOAD_CELL, NANOPOSITIONER)}
+    prev = {c.name: [] for c in (LOAD_CELL, NANOPOSITIONER)}
+    data = {c.name: c.run(40.0, seed=1) for c in (LOAD_CELL, NANOPOSITIONER)}
+    for t, u, y, _ in data.values():
+        identify(t, u, y)
+    rounds = 3
+    for _ in range(rounds):
+        for name, (t, u, y, _) in data.items():
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                identify(t, u, y)
+                ours[name].append(time.perf_counter() - t0)
+        for name, p50 in json.loads(_baseline.run_python(path, PREVIOUS_CODE, str(repeats))).items():
+            prev[name].append(p50)
+    out = {"previous_commit": commit, "repeats_per_round": repeats, "rounds": rounds}
+    for name in ours:
+        mine, theirs = float(np.median(ours[name])), float(np.median(prev[name]))
+        out[name] = {"samples": int(data[name][0].size), "p50_s": mine, "previous_p50_s": theirs,
+                     "speedup": theirs / mine}
+    return out
+
+
+def cold_cli(repeats: int) -> dict:
+    """Wall time of fresh ``creep-online`` processes: --help, and identify of 12,000 samples (numba cache warm)."""
+    import subprocess
+    import tempfile
+    t, u, y, _ = LOAD_CELL.run(40.0, seed=1)
+    path = os.path.join(tempfile.mkdtemp(prefix="creep_cli_"), "load_cell.csv")
+    np.savetxt(path, np.column_stack((t, u, y)), delimiter=",", header="t,u,y", comments="")
+    cmd = [sys.executable, "-m", "creep_online"]
+    out = {}
+    for label, args in (("help", ["--help"]), ("identify_12000", ["identify", path, "--json"])):
+        subprocess.run(cmd + args, check=True, capture_output=True)   # caches (numba, OS) warm
+        times = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            subprocess.run(cmd + args, check=True, capture_output=True)
+            times.append(time.perf_counter() - t0)
+        out[label] = distribution(times)
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer seeds and repeats")
+    ap.add_argument("--speed-only", action="store_true",
+                    help="only the warm speed against --previous and the cold command line")
+    ap.add_argument("--previous", default="main", help="git ref of the previous code for the speed ratio")
     args = ap.parse_args()
+    if args.speed_only:
+        report = {"bench": "identify_speed", "machine": {"cpus": os.cpu_count(), "python": platform.python_version()},
+                  "warm": speed_vs_previous(5 if args.quick else 15, args.previous),
+                  "cold_cli": cold_cli(5 if args.quick else 10)}
+        json.dump(report, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return
     report = {
         "bench": "identify", "machine": {"cpus": os.cpu_count(), "python": platform.python_version()},
         "recovery": recovery(2 if args.quick else 5),

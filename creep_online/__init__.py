@@ -20,8 +20,7 @@ _configure_numba_cache()
 from .errors import CreepOnlineError, DataError, IdentificationError, ModelError, OutputError
 from .model import CreepModel
 from .record import Record
-from .simulate import simulate, step_response
-from .identification import identify
+from .simulate import simulate, step_response  # light: the module loads numba and scipy on first call
 
 __version__ = "0.1.0"
 
@@ -31,7 +30,9 @@ __all__ = [
 ]
 
 # The API mirrors the CLI; the heavier layers load on first use, not on import.
-_LAZY = {"OnlineEstimator": ("online", "OnlineEstimator"), "diagnose": ("diagnostics", "diagnose")}
+# identify loads scipy and numba (~1 s): the CLI's --help must not pay for them.
+_LAZY = {"OnlineEstimator": ("online", "OnlineEstimator"), "diagnose": ("diagnostics", "diagnose"),
+         "identify": ("identification", "identify")}
 
 
 def __getattr__(name: str):

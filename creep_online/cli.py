@@ -15,14 +15,28 @@ import warnings
 from .errors import CreepOnlineError, CreepOnlineWarning
 
 COMMANDS = ("identify", "simulate", "stream", "diagnose", "fit", "demo")
+#: One-line help of each command for the top-level listing, so that ``--help`` imports no command
+#: (their modules load scipy and numba); tests check they match what the commands register.
+SUMMARIES = {
+    "identify": "identify alpha, a1, a2, b from a t,u,y CSV (two-layer TRF)",
+    "simulate": "simulate the model for the input of a t,u CSV",
+    "stream": "run the online estimator on a stream (csv:FILE, serial:PORT, can:..., canlog:FILE)",
+    "diagnose": "find which catalogue effect the creep model is missing",
+    "fit": "fit the creep model extended by catalogue effects",
+    "demo": "stream the simulated plant over a pty and identify it live",
+}
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The full parser; with ``only``, just that command is imported and the others are listed by name."""
     parser = argparse.ArgumentParser(
         prog="creep-online",
         description="Identify the fractional-order creep model b / (s^alpha (1 + a1 s + a2 s^2)), batch or online.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS:
+        if only is not None and name != only:
+            sub.add_parser(name, help=SUMMARIES[name])
+            continue
         try:
             module = importlib.import_module(f"creep_online.commands.{name}")
         except ModuleNotFoundError as exc:
@@ -50,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
 
     ``creep-online stream`` has its own codes for how a stream ended (see its --help).
     """
-    parser = build_parser()
+    parser = build_parser(only=_requested(sys.argv[1:] if argv is None else argv))
     args = parser.parse_args(argv)
     try:
         with warnings.catch_warnings():
@@ -72,6 +86,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"creep-online {args.command}: internal error: {type(exc).__name__}: {_one_line(exc)} "
               f"(please report it; CREEP_ONLINE_DEBUG=1 shows the traceback)", file=sys.stderr)
         return 3
+
+
+def _requested(argv: list[str]) -> str:
+    """The command named on the command line ('' when none: only the top-level listing is needed)."""
+    for arg in argv:
+        if not arg.startswith("-"):
+            return arg if arg in COMMANDS else ""
+    return ""
 
 
 def _one_line(exc: BaseException) -> str:

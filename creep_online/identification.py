@@ -16,6 +16,11 @@ squares with trust-region-reflective steps (``least_squares(method="trf")``):
 ``t_c`` and the starting point come from the data: a coarse creep fit gives a
 first alpha, a grid over (fn, zeta) on the first transient gives the
 resonance, and ``t_c`` is the resonance's settling time.
+
+When the result is not at the noise floor, ``global_fit`` takes over
+(multi-start, free offset, the initial state of records taken in operation).
+The final residual is tested for input changes that fall between samples
+(``timing``), and the 1-sigma intervals are widened for coloured residuals.
 """
 from __future__ import annotations
 
@@ -31,11 +36,13 @@ from . import kernels
 from ._threads import single_threaded
 from .discretize import foh_matrices_batch, step_response_grid
 from .errors import DataError, IdentificationError
-from .metrics import fit_percent, noise_std_estimate
+from .global_fit import GlobalFit, at_floor, floor_ratio, global_fit, global_uncertainty, n_bic
+from .metrics import fit_percent, long_run_variance_factor, noise_std_estimate
 from .model import IDENTIFY_ALPHA_BOUNDS as ALPHA_BOUNDS  # alpha search interval of layer 1 and the polish
 from .model import CreepModel
 from .record import SAFE_AMPLITUDE, Record, check_time_and_output
-from .simulate import fractional_integral, superpose, uniform_step
+from .simulate import fractional_integral, input_changes, superpose, uniform_step
+from .timing import TimingCheck, check_timing
 
 #: At most this many input changes count as a piecewise-constant (step) input.
 MAX_STEP_FRACTION = 0.05
@@ -214,6 +221,9 @@ def model_output(alpha: float, a1: float, a2: float, h: float, u: np.ndarray, n:
     return superpose(s, u[:n])
 
 
+#: Longest first transient (samples) the starting grid scores: 4096 samples resolve 2 periods of
+#: fs/2048; slower resonances are found by the global fallback's grid.
+GRID_WINDOW = 4096
 #: The (fn, zeta) starting grid: 28 log-spaced frequencies x these damping ratios.
 GRID_ZETAS = (0.01, 0.03, 0.1, 0.3, 0.7, 1.5, 4.0)
 
@@ -278,43 +288,88 @@ def joint_polish(t: np.ndarray, u: np.ndarray, y: np.ndarray, model: CreepModel,
     def shape(p: np.ndarray) -> np.ndarray:
         return model_output(p[0], math.exp(p[1]), math.exp(p[2]), h, u)
 
-    def residual(p: np.ndarray) -> np.ndarray:
+    def residual(s: np.ndarray) -> np.ndarray:
         if free_offset:
-            return _projected_affine(y, shape(p))[2]
-        return _projected(y, shape(p))[1]
+            return _projected_affine(y, s)[2]
+        return _projected(y, s)[1]
 
     start = time.perf_counter()
     p0 = np.array([model.alpha, math.log(model.a1), math.log(model.a2)])
-    lo = [ALPHA_BOUNDS[0], p0[1] - 5, p0[2] - 5]
-    hi = [ALPHA_BOUNDS[1], p0[1] + 5, p0[2] + 5]
-    sol = least_squares(residual, p0, bounds=(lo, hi), method="trf", x_scale=[0.01, 0.1, 0.1],
-                        diff_step=1e-7, xtol=1e-10, ftol=1e-10)
-    s = shape(sol.x)
+    lo = np.array([ALPHA_BOUNDS[0], p0[1] - 5, p0[2] - 5])
+    hi = np.array([ALPHA_BOUNDS[1], p0[1] + 5, p0[2] + 5])
+    x, s, jac_s, nfev = _gauss_newton(shape, residual, p0, lo, hi)
     if free_offset:
         b, c, r = _projected_affine(y, s)
     else:
         (b, r), c = _projected(y, s), 0.0
-    polished = CreepModel(float(sol.x[0]), math.exp(sol.x[1]), math.exp(sol.x[2]), b)
-    info = {"nfev": int(sol.nfev), "elapsed_s": time.perf_counter() - start, "offset": c,
-            "uncertainty": _uncertainty(shape, sol.x, s, r, polished, free_offset)}
+    polished = CreepModel(float(x[0]), math.exp(x[1]), math.exp(x[2]), b)
+    info = {"nfev": nfev, "elapsed_s": time.perf_counter() - start, "offset": c,
+            "uncertainty": _covariance_sd(jac_s, s, r, polished, free_offset)}
     return polished, info
 
 
-def _uncertainty(shape, p: np.ndarray, s: np.ndarray, r: np.ndarray, m: CreepModel,
-                 free_offset: bool) -> dict[str, float]:
-    """1-sigma std of (alpha, a1, a2, b) from the Gauss-Newton covariance of the full problem.
+#: Forward-difference step of the polish (relative, as scipy's diff_step) and its stopping rules.
+POLISH_DIFF_STEP = 1e-7
+POLISH_MAX_ITER = 30
 
-    The Jacobian is of the model b s(p) (+ c) in all parameters, gain (and
-    offset) included, so their correlation with alpha is accounted for; the
-    projected Jacobian of the fit alone would hide it.
+
+def _gauss_newton(shape, residual, p0: np.ndarray, lo: np.ndarray, hi: np.ndarray):
+    """Levenberg-Marquardt on the projected residual, bounded by clipping: (x, s(x), ds/dx, evaluations).
+
+    ``shape`` maps parameters to the unit-gain output, ``residual`` an output
+    to the projected residual (gain and offset removed).
+
+    Replaces scipy's least_squares in the warm-started polish: three
+    parameters, a start already close, so a few Gauss-Newton steps do;
+    scipy's wrapper cost about as much as the simulations. The shape
+    derivatives of the last Jacobian are returned for the covariance (the
+    final step is below the parameters' own noise, so they need no refresh).
     """
-    cols = []
-    for k in range(p.size):
-        step = 1e-6 * max(abs(p[k]), 1e-3)
-        dp = p.copy()
-        dp[k] += step
-        cols.append(m.b * (shape(dp) - s) / step)
-    cols.append(s)
+    x = np.clip(p0, lo, hi)
+    s = shape(x)
+    r = residual(s)
+    cost, lam, nfev = float(r @ r), 0.0, 1
+    jac_s = None
+    for _ in range(POLISH_MAX_ITER):
+        steps = POLISH_DIFF_STEP * np.maximum(1.0, np.abs(x))
+        cols_r, cols_s = [], []
+        for k in range(x.size):
+            xk = x.copy()
+            xk[k] += steps[k]
+            sk = shape(xk)
+            cols_s.append((sk - s) / steps[k])
+            cols_r.append((residual(sk) - r) / steps[k])
+            nfev += 1
+        jac, jac_s = np.column_stack(cols_r), np.column_stack(cols_s)
+        a, g = jac.T @ jac, jac.T @ r
+        d = np.maximum(np.diag(a), 1e-300)
+        while True:
+            try:
+                dx = -np.linalg.solve(a + lam * np.diag(d), g)
+            except np.linalg.LinAlgError:
+                dx = np.zeros_like(x)
+            xn = np.clip(x + dx, lo, hi)
+            sn = shape(xn)
+            rn = residual(sn)
+            nfev += 1
+            cn = float(rn @ rn)
+            if cn <= cost or lam > 1e10:
+                break
+            lam = max(10.0 * lam, 1e-4)
+        if cn > cost:
+            break
+        moved = float(np.max(np.abs(xn - x) / np.maximum(1.0, np.abs(x))))
+        decrease = (cost - cn) / max(cost, 1e-300)
+        x, s, r, cost, lam = xn, sn, rn, cn, lam / 10.0
+        if moved < 1e-10 or decrease < 1e-12:
+            break
+    return x, s, jac_s, nfev
+
+
+def _covariance_sd(jac_s: np.ndarray, s: np.ndarray, r: np.ndarray, m: CreepModel,
+                   free_offset: bool) -> dict[str, float]:
+    """1-sigma of (alpha, a1, a2, b) from the Gauss-Newton covariance of the full model b s(p) (+ c)."""
+    cols = [m.b * jac_s[:, k] for k in range(jac_s.shape[1])] + [s]
     if free_offset:
         cols.append(np.ones_like(s))
     jac = np.column_stack(cols)
@@ -355,13 +410,15 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
              alpha0: float | None = None, resonance0: tuple[float, float] | None = None,
              layer1_step: float | None = None, retune: bool = True, polish: bool = True,
              offset: float | None = None, source: str = "<array>") -> IdentificationResult:
-    """Identify (alpha, a1, a2, b) from a uniformly sampled record with zero initial state.
+    """Identify (alpha, a1, a2, b) from a uniformly sampled record, at rest or taken in operation.
 
     ``t_c`` (end of the transient, s), ``alpha0`` and ``resonance0`` =
     (fn_hz, zeta) override the data-driven choices; ``offset`` is the output
     level at rest (default: fitted jointly when at least MIN_OFFSET_SAMPLES
     precede the first input change, else 0). ``polish`` runs the joint
-    4-parameter refinement. Warnings say what the data cannot determine.
+    4-parameter refinement and, when the fit misses the noise floor, the global
+    fit (which also estimates the initial state of a record that starts with
+    the plant moving). Warnings say what the data cannot determine.
     """
     start = time.perf_counter()
     check_options(t_c=t_c, alpha0=alpha0, resonance0=resonance0, layer1_step=layer1_step, offset=offset)
@@ -382,6 +439,7 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
     u, y_raw = rec.u, rec.y
     sched = input_schedule(t, u)
     free_offset = offset is None and _pre_step_samples(sched) >= MIN_OFFSET_SAMPLES
+    user_offset = offset
     offset = _offset(y_raw, sched) if offset is None else float(offset)
     y = y_raw - offset
     warnings: list[str] = []
@@ -407,6 +465,33 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
         y = y - info["offset"]
         stages["polish"] = {**info, **model.params()}
     y_hat = model.b * model_output(model.alpha, model.a1, model.a2, h, u)
+    fast_residual = y - y_hat
+    if polish and not at_floor(fast_residual):
+        found = _escalate(rec.u, y_raw, h, model, fast_residual, user_offset, stages)
+        if found is not None:
+            model, uncertainty = found.model, global_uncertainty(found)
+            offset, u0 = (user_offset or 0.0) + found.offset, float(rec.u[0]) if found.problem.init else 0.0
+            u, y = rec.u - u0, y_raw - offset
+            y_hat = found.y_hat - found.offset
+            if found.problem.init:
+                warnings.append("the record starts in operation (the plant moves at the first sample): its initial "
+                                f"state was estimated with {found.problem.linear_count - 1 - int(found.problem.offset)} "
+                                "free-response terms (past steps, resonance modes)")
+    final_noise = noise_std_estimate(y - y_hat)
+    inflate = math.sqrt(long_run_variance_factor(y - y_hat))
+    uncertainty = {k: sd * inflate for k, sd in uncertainty.items()}
+    if inflate > 1.0:
+        stages["uncertainty_inflation"] = {"factor": inflate}
+    ratio = floor_ratio(y - y_hat, final_noise)
+    timing = _timing(model, h, u, y - y_hat, sched, final_noise) if polish else None
+    if timing is not None:
+        stages["timing"] = {"excess_sigmas": timing.excess_sigmas, "flagged": timing.flagged,
+                            "median_shift_samples": float(np.nanmedian(timing.shift))}
+        if timing.flagged:
+            warnings.append(timing.describe())
+    if polish and ratio > FLOOR_WARNING:
+        warnings.append(f"the fit does not reach the noise floor (residual rms {ratio:.2f} x its white-noise level): "
+                        "the data hold something the model does not (another effect, coloured noise, timing)")
     warnings += _identifiability(t, u, y, h, model, t_c, sched, noise)
     warnings += [f"{k} is poorly determined by these data (1-sigma {sd / abs(getattr(model, k)):.0%})"
                  for k, sd in uncertainty.items() if sd > POORLY_DETERMINED * abs(getattr(model, k))]
@@ -414,6 +499,52 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
         model=model, fit_percent=fit_percent(y, y_hat), elapsed_s=time.perf_counter() - start,
         t_c=t_c, offset=offset, input_offset=u0, warnings=warnings, stages=stages,
         uncertainty=uncertainty, noise_std=noise, y_hat=y_hat + offset)
+
+
+def _timing(model: CreepModel, h: float, u: np.ndarray, residual: np.ndarray,
+            sched: InputSchedule, noise: float) -> TimingCheck | None:
+    """The sub-sample timing test of the input changes (piecewise-constant inputs only)."""
+    if not sched.piecewise:
+        return None
+    idx, size = input_changes(u)
+    step = model.b * step_response_grid(model.alpha, model.a1, model.a2, h, u.size + 1)
+    return check_timing(step, idx, size, residual, noise)
+
+
+#: Residual rms above this multiple of its white-noise level after all starts: warn.
+FLOOR_WARNING = 1.1
+
+
+#: Fewest samples before the first input change that can show the plant at rest.
+REST_SAMPLES = 20
+
+
+def starts_at_rest(y: np.ndarray, sched: InputSchedule) -> bool:
+    """Whether the output is constant up to noise before the first input change (then no free
+    initial-state terms are tried: a record from rest does not need them)."""
+    first = _pre_step_samples(sched)
+    if first < REST_SAMPLES:
+        return False
+    head = y[:first] - np.mean(y[:first])
+    return at_floor(head)
+
+
+def _escalate(u: np.ndarray, y_raw: np.ndarray, h: float, model: CreepModel, fast_residual: np.ndarray,
+              user_offset: float | None, stages: dict) -> GlobalFit | None:
+    """The global multi-start fit, warm-started from the layers; its result if it beats theirs (BIC)."""
+    start = time.perf_counter()
+    y = y_raw if user_offset is None else y_raw - user_offset
+    try:
+        found = global_fit(u, y, h, warm=[model], offset_free=user_offset is None,
+                           try_init=not starts_at_rest(y, input_schedule(np.arange(u.size) * h, u)))
+    except ValueError:
+        return None
+    fast_bic = n_bic(fast_residual, 3 + 1 + int(user_offset is None))
+    better = found.bic < fast_bic
+    stages["global"] = {"elapsed_s": time.perf_counter() - start, "initial_state": found.problem.init,
+                        "starts": len(found.info["tried"]), "floor_ratio": floor_ratio(found.residual),
+                        "kept": bool(better), **found.model.params()}
+    return found if better else None
 
 
 def _positive(name: str, value: float | None) -> None:
@@ -488,7 +619,7 @@ def _layered(t, u, y, h, sched, t_c, alpha0, resonance0, layer1_step, retune, st
         stages["alpha_start"] = info
     # 2. resonance start: grid on the first transient with that alpha
     if resonance0 is None:
-        window = int(sched.index[0]) + max(int(min(tc0, 0.5 * holds[0]) / h), 8)
+        window = int(sched.index[0]) + min(max(int(min(tc0, 0.5 * holds[0]) / h), 8), GRID_WINDOW)
         window = min(window, first_stop)
         f_hi = 0.45 / h
         f_lo = min(max(2.0 / (window * h), 1e-3), f_hi / 4)

@@ -264,3 +264,111 @@ def head_quadrature(alpha: float, slow: complex, fast: complex, wn: float, damp:
         out[k, 0] /= gamma1
         out[k, 1] /= gamma1
     return out
+
+
+@njit(cache=CACHE)
+def foh_grid_costs_projected(z: np.ndarray, y_perp: np.ndarray, q: np.ndarray, phi: np.ndarray, g0: np.ndarray,
+                             g1: np.ndarray, h: float) -> np.ndarray:
+    """``foh_grid_costs`` with fixed nuisance columns projected out.
+
+    ``q`` (n x k) is an orthonormal basis of the nuisance columns (offset,
+    free response) and ``y_perp`` the data with them projected out. For each
+    resonance the cost is min over b of ||y_perp - b P s||^2 with
+    P s . P s = s.s - sum_j (s.q_j)^2, accumulated in one pass.
+    """
+    n_grid = phi.shape[0]
+    n = z.shape[0]
+    k_cols = q.shape[1]
+    yy = 0.0
+    for i in range(n):
+        yy += y_perp[i] * y_perp[i]
+    costs = np.empty(n_grid)
+    sq = np.empty(k_cols)
+    for k in range(n_grid):
+        x0 = 0.0
+        x1 = 0.0
+        ss = 0.0
+        sy = 0.0
+        for j in range(k_cols):
+            sq[j] = 0.0
+        for i in range(n - 1):
+            slope = (z[i + 1] - z[i]) / h
+            nx0 = phi[k, 0, 0] * x0 + phi[k, 0, 1] * x1 + g0[k, 0] * z[i] + g1[k, 0] * slope
+            nx1 = phi[k, 1, 0] * x0 + phi[k, 1, 1] * x1 + g0[k, 1] * z[i] + g1[k, 1] * slope
+            x0 = nx0
+            x1 = nx1
+            ss += x0 * x0
+            sy += x0 * y_perp[i + 1]
+            for j in range(k_cols):
+                sq[j] += x0 * q[i + 1, j]
+        for j in range(k_cols):
+            ss -= sq[j] * sq[j]
+        costs[k] = yy - sy * sy / ss if ss > 1e-300 else yy
+    return costs
+
+
+@njit(cache=CACHE)
+def foh_grid_costs_free(z: np.ndarray, y_perp: np.ndarray, q: np.ndarray, phi: np.ndarray, g0: np.ndarray,
+                        g1: np.ndarray, h: float) -> np.ndarray:
+    """``foh_grid_costs_projected`` with the resonance's two free modes also fitted per grid point.
+
+    For a record taken in operation the resonance's initial state rings on;
+    its two modes (x marched from [1, 0] and [0, 1]) depend on the grid
+    point, so they join the forced response s in a 3-column least squares
+    after the fixed columns ``q`` are projected out: cost = |y_perp|^2 -
+    v' G^-1 v with G the projected Gram matrix of (s, m1, m2).
+    """
+    n_grid = phi.shape[0]
+    n = z.shape[0]
+    k_cols = q.shape[1]
+    yy = 0.0
+    for i in range(n):
+        yy += y_perp[i] * y_perp[i]
+    costs = np.empty(n_grid)
+    cq = np.zeros((3, k_cols))
+    for k in range(n_grid):
+        x = np.zeros((3, 2))
+        x[1, 0] = 1.0
+        x[2, 1] = 1.0
+        gram = np.zeros((3, 3))
+        v = np.zeros(3)
+        cq[:, :] = 0.0
+        # sample 0: only the free modes are non-zero (m1 = 1, m2 = 0)
+        gram[1, 1] += 1.0
+        v[1] += y_perp[0]
+        for j in range(k_cols):
+            cq[1, j] += q[0, j]
+        for i in range(n - 1):
+            slope = (z[i + 1] - z[i]) / h
+            for c in range(3):
+                f0 = 0.0
+                f1 = 0.0
+                if c == 0:
+                    f0 = g0[k, 0] * z[i] + g1[k, 0] * slope
+                    f1 = g0[k, 1] * z[i] + g1[k, 1] * slope
+                nx0 = phi[k, 0, 0] * x[c, 0] + phi[k, 0, 1] * x[c, 1] + f0
+                nx1 = phi[k, 1, 0] * x[c, 0] + phi[k, 1, 1] * x[c, 1] + f1
+                x[c, 0] = nx0
+                x[c, 1] = nx1
+            for a in range(3):
+                xa = x[a, 0]
+                v[a] += xa * y_perp[i + 1]
+                for b in range(a, 3):
+                    gram[a, b] += xa * x[b, 0]
+                for j in range(k_cols):
+                    cq[a, j] += xa * q[i + 1, j]
+        for a in range(3):
+            for b in range(a, 3):
+                acc = gram[a, b]
+                for j in range(k_cols):
+                    acc -= cq[a, j] * cq[b, j]
+                gram[a, b] = acc
+                gram[b, a] = acc
+        scale = np.sqrt(np.abs(np.diag(gram))) + 1e-300
+        gs = gram / np.outer(scale, scale)
+        vs = v / scale
+        for a in range(3):
+            gs[a, a] += 1e-10
+        sol = np.linalg.solve(gs, vs)
+        costs[k] = yy - np.dot(vs, sol)
+    return costs

@@ -32,3 +32,24 @@ def noise_std_estimate(y: np.ndarray) -> float:
         return float("nan")
     d2 = np.diff(y, 2) / np.sqrt(6.0)
     return float(1.4826 * np.median(np.abs(d2 - np.median(d2))))
+
+
+def long_run_variance_factor(r: np.ndarray, width: int | None = None) -> float:
+    """How much more a slowly varying weighted sum of r varies than white noise of r's variance would.
+
+    The ratio (block-mean variance x width) / variance over blocks of ``width``
+    samples (default n / 50, 16 to 256): 1 for white noise, (1 + rho) / (1 - rho)
+    for AR(1) noise with blocks much longer than its correlation time. Gauss-
+    Newton covariances assume white noise; their variances are multiplied by
+    this factor (never below 1), since the parameters' sensitivities are slow
+    compared with the noise.
+    """
+    r = np.asarray(r, dtype=float)
+    r = r - r.mean()
+    width = int(np.clip(r.size // 50, 16, 256)) if width is None else int(width)
+    k = r.size // width
+    var = float(r @ r) / max(r.size, 1)
+    if k < 8 or var <= 0.0:
+        return 1.0
+    means = r[:k * width].reshape(k, width).mean(axis=1)
+    return max(1.0, float(np.mean(means * means)) * width / var)

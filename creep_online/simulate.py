@@ -22,10 +22,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.signal import fftconvolve
 
-from . import kernels
-from .discretize import foh_matrices, step_response_grid
 from .errors import DataError
 from .model import CreepModel
 
@@ -62,15 +59,59 @@ def input_changes(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return idx.astype(np.int64), du[idx]
 
 
+def fast_length(n: int) -> int:
+    """Smallest 2^a 3^b 5^c >= n: an FFT length numpy transforms quickly."""
+    best = 1 << max(int(n - 1).bit_length(), 0)
+    p5 = 1
+    while p5 < best:
+        p35 = p5
+        while p35 < best:
+            v = p35
+            while v < n:
+                v *= 2
+            best = min(best, v)
+            p35 *= 3
+        p5 *= 5
+    return best
+
+
+def causal_convolve(x: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """The first len(x) samples of the full convolution x * kernel, by real FFT.
+
+    numpy's FFT rather than scipy.signal.fftconvolve: importing scipy.signal
+    costs about a second, which a command-line call pays every time.
+    """
+    n = x.shape[0]
+    m = fast_length(n + min(kernel.shape[0], n) - 1)
+    k = kernel[:n]
+    return np.fft.irfft(np.fft.rfft(x, m) * np.fft.rfft(k, m), m)[:n]
+
+
+#: The last input and its changes: fits simulate the same input dozens of times, and comparing
+#: it with a copy is cheaper than a diff + nonzero over it (a copy, so in-place edits are seen).
+_LAST_CHANGES: list = [None, None]
+
+
+def _changes_cached(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """input_changes(u), reused when u equals the previous call's input."""
+    copy, changes = _LAST_CHANGES
+    if copy is not None and copy.shape == u.shape and np.array_equal(copy, u):
+        return changes
+    changes = input_changes(u)
+    _LAST_CHANGES[:] = [np.array(u, dtype=float), changes]
+    return changes
+
+
 def superpose(step_response: np.ndarray, u: np.ndarray) -> np.ndarray:
     """ZOH response from a unit-step response: sparse sum for few changes, FFT for many."""
-    idx, size = input_changes(u)
+    from . import kernels  # numba: loaded on first use, so that importing the package stays light
+    idx, size = _changes_cached(u)
     n = u.shape[0]
     if idx.size <= SPARSE_STEP_LIMIT:
         return kernels.superpose_steps(step_response, idx, size, n)
     du = np.zeros(n)
     du[idx] = size
-    return fftconvolve(du, step_response)[:n]
+    return causal_convolve(du, step_response)
 
 
 def simulate(model: CreepModel, t: np.ndarray, u: np.ndarray, method: str = "exact",
@@ -82,6 +123,8 @@ def simulate(model: CreepModel, t: np.ndarray, u: np.ndarray, method: str = "exa
         raise DataError(f"t and u differ in length ({np.size(t)} vs {u.size})")
     if not np.all(np.isfinite(u)):
         raise DataError("input u contains NaN or inf")
+    from . import kernels
+    from .discretize import step_response_grid
     if method == "exact":
         if memory is not None:
             raise ValueError("the exact method has full memory; 'memory' applies to paper and split")
@@ -97,16 +140,19 @@ def simulate(model: CreepModel, t: np.ndarray, u: np.ndarray, method: str = "exa
 
 def fractional_integral(u: np.ndarray, h: float, alpha: float, memory: int | None = None) -> np.ndarray:
     """z = D^-alpha u at the samples for a zero-order-held u: exact (full memory) or truncated."""
+    from . import kernels
     n = u.size
     length = n if memory is None else min(n, int(memory) + 1)
     c = kernels.zoh_integral_weights(alpha, h, math.gamma(1.0 + alpha), length)
     if memory is None and n > 2048:
-        return fftconvolve(u, c)[:n]
+        return causal_convolve(u, c)
     return kernels.fractional_integral_zoh(u, c)
 
 
 def split_form(model: CreepModel, h: float, u: np.ndarray, memory: int | None = None) -> np.ndarray:
     """Split form with gain 1: exact ZOH fractional integral, then the FOH-exact resonance."""
+    from . import kernels
+    from .discretize import foh_matrices
     z = fractional_integral(u, h, model.alpha, memory)
     phi, g0, g1 = foh_matrices(model.a1, model.a2, h)
     return kernels.resonance_foh(z, phi, g0, g1, h)
@@ -114,5 +160,6 @@ def split_form(model: CreepModel, h: float, u: np.ndarray, memory: int | None = 
 
 def step_response(model: CreepModel, t: np.ndarray) -> np.ndarray:
     """Exact unit-step response on a uniform grid t starting at 0."""
+    from .discretize import step_response_grid
     h = uniform_step(t)
     return model.b * step_response_grid(model.alpha, model.a1, model.a2, h, np.size(t))

@@ -12,14 +12,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("identify", help="identify alpha, a1, a2, b from a t,u,y CSV (two-layer TRF)",
                        description="Two-layer identification (Tashakori et al. 2024): layer 1 finds alpha "
                                    "from the creep regime, layer 2 a1, a2, b from the transient, then an "
-                                   "optional joint polish. Zero initial state; u is held between samples.")
+                                   "optional joint polish; if the fit misses the noise floor, a multi-start global fit, "
+                                   "which also estimates the initial state of a record taken in operation. "
+                                   "u is held between samples.")
     p.add_argument("data", help="CSV file with header t,u,y (uniform sampling)")
     p.add_argument("--json", action="store_true", help="print JSON (alpha a1 a2 b fit_percent elapsed_s ...)")
     p.add_argument("--t-c", type=float, default=None, help="end of the transient in s (default: from the data)")
     p.add_argument("--alpha0", type=float, default=None, help="starting alpha (default: coarse creep fit)")
     p.add_argument("--layer1-step", type=float, default=None, help="coarse step of layer 1 in s")
     p.add_argument("--no-retune", action="store_true", help="skip the eq. 12 retune of alpha")
-    p.add_argument("--no-polish", action="store_true", help="skip the joint 4-parameter polish")
+    p.add_argument("--no-polish", action="store_true", help="skip the joint 4-parameter polish (and the global fit)")
     p.set_defaults(func=run)
 
 
