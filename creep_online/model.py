@@ -13,7 +13,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from .effects import check_effect_names, simulate_with_effects
+from .effects.base import check_effect_names
 from .errors import ModelError
 
 # --------------------------------------------------------------------------- alpha search bounds
@@ -146,6 +146,7 @@ class ExtendedModel:
     def simulate(self, t: np.ndarray, u: np.ndarray, u_pre: float | None = 0.0,
                  t_pre: float | None = None) -> np.ndarray:
         """Output for a zero-order-held input (from rest by default, like ``simulate``)."""
+        from .effects.forward import simulate_with_effects
         return simulate_with_effects(self.base, t, u, self.effects, offset=self.offset, u_pre=u_pre, t_pre=t_pre)
 
     def with_effects(self, **effects: dict) -> "ExtendedModel":

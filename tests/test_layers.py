@@ -19,6 +19,7 @@ LAYERS = {
     "_numba_cache": 1, "_threads": 1, "kernels": 1, "discretize": 1, "metrics": 1, "record": 1,
     "model": 1, "effects": 1, "simulate": 1, "plants": 1,
     "io": 2, "identification": 2, "online": 2,
+    "global_fit": 2, "initial_state": 2, "timing": 2, "validation": 2,
     "diagnostics": 3,
     "reports": 4,
     "commands": 5, "cli": 5, "__main__": 5, "__init__": 5,

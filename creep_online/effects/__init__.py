@@ -29,14 +29,24 @@ from .base import (BUILTIN_EFFECTS, ENTRY_POINT_GROUP, AdditiveEffect, Compensat
                    InputCompensator, InputEffect, OutputCompensator, OutputFilterEffect, ParallelEffect, ParamSpec,
                    Stage, check_effect_names, discover_entry_points, effect_names, get_effect, in_forward_order,
                    register_effect, unregister_effect)
-from .forward import simulate_with_effects
 from .hysteresis import (HYSTERESIS_THRESHOLDS, INITIAL_STATES, hysteresis_input, last_direction, loop_width,
                          play_operators)
-from .leakage import leakage_filter
 from .nonlinear_gain import polynomial_input
 from .periodic_disturbance import periodic_columns
-from .responses import (MAX_PAIRS, MULTIGRID_POINTS, MULTIGRID_RATIO, StepFn, Superposer, base_step_at,
-                        base_step_grid, creep_step, delayed_grid, is_uniform, resonance_step)
+
+# The forward model and the step responses load scipy and numba (~1 s): they load on first use,
+# so that importing the model (and the CLI's --help) stays light.
+_LAZY = {"simulate_with_effects": "forward", "leakage_filter": "leakage", **{name: "responses" for name in (
+    "MAX_PAIRS", "MULTIGRID_POINTS", "MULTIGRID_RATIO", "StepFn", "Superposer", "base_step_at", "base_step_grid",
+    "creep_step", "delayed_grid", "is_uniform", "resonance_step")}}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 #: The built-in catalogue (stable names, CLI and JSON). ``effect_names()`` adds plug-ins.
 EFFECTS: tuple[str, ...] = tuple(BUILTIN_EFFECTS)
