@@ -528,7 +528,7 @@ def memory_kernels() -> dict:
     """Fractional integral of a unit step at 10 kHz: SOE (full memory) vs truncated GL (ring buffer of L)."""
     from creep_online.kernels import zoh_integral_weights
     from creep_online.online import kernels as K
-    from creep_online.online.soe import SoeBasis
+    from creep_online.online.soe import SOE_TOP, SoeBasis
     h = 1e-4
     out: dict = {}
     for alpha in (0.0133, 0.02, 0.06, 0.3):
@@ -538,7 +538,7 @@ def memory_kernels() -> dict:
         for length in (1_000, 10_000, 100_000):
             trunc = (length * h) ** alpha / math.gamma(1 + alpha)   # z(t) of a step after L samples: flat
             row[f"truncated_L{length}_rel_err_at_100s"] = trunc / exact - 1
-        basis = SoeBasis.build(h, horizon_s=3600.0, top=3000.0)
+        basis = SoeBasis.build(h, horizon_s=3600.0, top=SOE_TOP)
         tt = np.geomspace(h, 3600.0, 2000)
         soe = basis.step_response(alpha, tt)
         row["soe_max_rel_err_1e-4_to_3600s"] = float(np.max(np.abs(soe / (tt**alpha / math.gamma(1 + alpha)) - 1)))
@@ -555,7 +555,7 @@ def memory_kernels() -> dict:
         a = time.perf_counter()
         K.truncated_gl_block(u, ring, np.zeros(1, dtype=np.int64), c, z)
         cost[f"truncated_L{length}_us_per_sample"] = (time.perf_counter() - a) / n * 1e6
-    basis = SoeBasis.build(h, top=3000.0)
+    basis = SoeBasis.build(h, top=SOE_TOP)
     hist = np.empty((n, basis.size))
     zeta = np.zeros(basis.size)
     K.node_history(u[:100], basis.decay, basis.gain, zeta.copy(), hist[:100])
