@@ -563,7 +563,7 @@ def memory_kernels() -> dict:
     K.node_history(u, basis.decay, basis.gain, zeta, hist)
     cost["soe_nodes_us_per_sample_incl_history_store"] = (time.perf_counter() - a) / n * 1e6
     out["cost"] = cost
-    out["reference_to_beat"] = "fracmem (PyPI): 9-14 us/sample, ~5e-4 error (DESIGN.md section 2)"
+    out["reference_to_beat"] = "fracmem (PyPI): 9-14 us/sample, ~5e-4 error"
     return out
 
 

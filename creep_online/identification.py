@@ -70,7 +70,7 @@ class IdentificationResult:
     y_hat: np.ndarray | None = field(default=None, repr=False)
 
     def to_dict(self) -> dict:
-        """JSON-ready summary (DESIGN.md section 6 keys first)."""
+        """JSON-ready summary: the stable keys first (the ``identify --json`` keys, tests/test_cli.py)."""
         m = self.model
         return {
             "alpha": m.alpha, "a1": m.a1, "a2": m.a2, "b": m.b,

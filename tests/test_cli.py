@@ -1,4 +1,4 @@
-"""The identify and simulate commands: stable JSON keys (DESIGN.md section 6) and behaviour."""
+"""The identify and simulate commands: stable JSON keys and behaviour."""
 import json
 
 import numpy as np

@@ -6,7 +6,7 @@ output with that sample's parameters: ``y[n] = b[n] psi[n] . v(alpha[n])``.
 This is the "frozen-time" time-varying model: at each instant the plant is the
 creep model with the current parameters applied to the whole input history.
 With constant parameters it equals ``creep_online.simulate.simulate``
-(tested to < 1e-5 of the output range in tests/test_online_plant.py).
+(tested to < 1e-5 of the output range in tests/test_online_kernels.py).
 """
 from __future__ import annotations
 

@@ -24,7 +24,7 @@ dot product of the same states with ``w(alpha)``, and so is its alpha
 derivative (``dw_i/dalpha = w_i (pi cot(pi alpha) - ln lam_i)``). This is what
 lets the online estimator re-evaluate its whole window for a new alpha exactly
 (the paper's Remark 3) without recomputation. Measured against the closed form
-``t^alpha / Gamma(1+alpha)`` (tests/test_online_soe.py, docs/online.md):
+``t^alpha / Gamma(1+alpha)`` (tests/test_online_kernels.py, docs/online.md):
 dx = 0.8 gives 38-40 nodes for a one-hour horizon at 10 kHz and a relative
 error below 2e-6 for alpha <= 0.1 and below 1.2e-4 for alpha up to 0.95.
 """
