@@ -419,7 +419,7 @@ def memory_run(samples: int, chunk: int = 1_000_000) -> dict:
     """Block mode over a long stream generated chunk by chunk: samples/s and RSS at start and end."""
     from creep_online.model import CreepModel
     from creep_online.online import OnlineEstimator
-    from creep_online.online.plant import PlantStream
+    from hil_sim.varying_plant import PlantStream
     h = 1e-4
     model = CreepModel.from_resonance(0.02, 300.0, 0.05, 0.15)
     plant = PlantStream(h, model.alpha, model.a1, model.a2, model.b)
@@ -571,7 +571,7 @@ def drift_run() -> dict:
     """alpha +20 %, b +10 % over 60 s; square-wave input; tracking error vs forgetting window."""
     from creep_online.model import CreepModel
     from creep_online.online import OnlineEstimator
-    from creep_online.online.plant import simulate_varying
+    from hil_sim.varying_plant import simulate_varying
     h = 2e-3
     t = np.arange(int(75 / h)) * h
     base = CreepModel.from_resonance(0.05, 20.0, 0.2, 1.0)

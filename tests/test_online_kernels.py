@@ -15,7 +15,7 @@ import pytest
 from creep_online.model import ONLINE_ALPHA_BOUNDS, CreepModel
 from creep_online.online import kernels as K
 from creep_online.online import window as W
-from creep_online.online.plant import simulate_varying
+from hil_sim.varying_plant import simulate_varying
 from creep_online.online.search import ResonanceSearch
 from creep_online.online.soe import SOE_TOP, SoeBasis, resonance_zoh
 from creep_online.online.tracker import WindowTracker

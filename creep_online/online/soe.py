@@ -40,7 +40,7 @@ DEFAULT_DX = 0.8
 #: Fastest node, in units of 1/h: faster modes settle within h/30 and are lumped into D.
 DEFAULT_TOP = 30.0
 #: Fastest node (units of 1/h) of the online estimator's basis, and of the simulators that reproduce or
-#: judge it (``online/plant.py``, ``hil_sim/scenarios.py``, the benches).
+#: judge it (``hil_sim/varying_plant.py``, ``hil_sim/scenarios.py``, the benches).
 SOE_TOP = 3000.0
 #: Slowest node, in units of 1/horizon: slower modes are lumped into one integrator.
 DEFAULT_BOTTOM = 1e-3

@@ -13,9 +13,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..simulate import uniform_step
-from . import kernels as K
-from .soe import SOE_TOP, SoeBasis, pack_coefficients
+from creep_online.online import kernels as K
+from creep_online.online.soe import SOE_TOP, SoeBasis, pack_coefficients
+from creep_online.simulate import uniform_step
 
 
 @njit(cache=True)
