@@ -38,7 +38,7 @@ from creep_online import CreepModel  # noqa: E402
 from creep_online.identification import identify, layer1_alpha  # noqa: E402
 from creep_online.kernels import gl_paper  # noqa: E402
 from creep_online.metrics import noise_floor_fit  # noqa: E402
-from creep_online.plants import LOAD_CELL, NANOPOSITIONER, RECOVERY_CASES  # noqa: E402
+from hil_sim.experiments import LOAD_CELL, NANOPOSITIONER, RECOVERY_CASES  # noqa: E402
 
 
 def distribution(samples: list[float]) -> dict[str, float]:
@@ -150,7 +150,10 @@ PREVIOUS_CODE = """
 import json, sys, time
 import numpy as np
 from creep_online.identification import identify
-from creep_online.plants import LOAD_CELL, NANOPOSITIONER
+try:
+    from hil_sim.experiments import LOAD_CELL, NANOPOSITIONER
+except ImportError:  # a revision before the presets moved out of the library
+    from creep_online.plants import LOAD_CELL, NANOPOSITIONER
 out = {}
 for case in (LOAD_CELL, NANOPOSITIONER):
     t, u, y, _ = case.run(40.0, seed=1)

@@ -1,6 +1,6 @@
 """Global convergence of ``identify`` on the randomized validation set (issue 9, item 1).
 
-For every record of ``creep_online.validation`` (seeded; 7 input families) the
+For every record of ``hil_sim.validation`` (seeded; 7 input families) the
 fit% of ``identify`` is compared with the fit% of the true model on the same
 noisy record (its history included for records taken in operation). A record is
 "at the floor" when the fit is within 0.05 points of the truth's. The same
@@ -25,7 +25,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from creep_online.identification import identify  # noqa: E402
 from creep_online.metrics import fit_percent  # noqa: E402
-from creep_online.validation import FAMILIES, validation_set  # noqa: E402
+from hil_sim.validation import FAMILIES, validation_set  # noqa: E402
 
 import _baseline  # noqa: E402
 
@@ -96,7 +96,7 @@ def table(records, results) -> dict:
 def timing_check(count: int) -> dict:
     """Asynchronous sampling (item 3): random staircases whose changes reach the plant between samples,
     and the same plants with every change on a sample; how often identify warns, and alpha's error."""
-    from creep_online.validation import make_async_record
+    from hil_sim.validation import make_async_record
     out = {}
     for label, sync in (("asynchronous", False), ("synchronous_control", True)):
         warned, errs, gaps = 0, [], []

@@ -20,7 +20,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from creep_online import CreepModel, simulate  # noqa: E402
 from creep_online.identification import identify  # noqa: E402
-from creep_online.plants import FOUR_STEP, LOAD_CELL, STRONG_CREEP  # noqa: E402
+from hil_sim.experiments import FOUR_STEP, LOAD_CELL, STRONG_CREEP  # noqa: E402
 
 PARAMS = ("alpha", "a1", "a2", "b")
 

@@ -419,7 +419,7 @@ def memory_run(samples: int, chunk: int = 1_000_000) -> dict:
     """Block mode over a long stream generated chunk by chunk: samples/s and RSS at start and end."""
     from creep_online.model import CreepModel
     from creep_online.online import OnlineEstimator
-    from creep_online.online.plant import PlantStream
+    from hil_sim.varying_plant import PlantStream
     h = 1e-4
     model = CreepModel.from_resonance(0.02, 300.0, 0.05, 0.15)
     plant = PlantStream(h, model.alpha, model.a1, model.a2, model.b)
@@ -528,7 +528,7 @@ def memory_kernels() -> dict:
     """Fractional integral of a unit step at 10 kHz: SOE (full memory) vs truncated GL (ring buffer of L)."""
     from creep_online.kernels import zoh_integral_weights
     from creep_online.online import kernels as K
-    from creep_online.online.soe import SoeBasis
+    from creep_online.online.soe import SOE_TOP, SoeBasis
     h = 1e-4
     out: dict = {}
     for alpha in (0.0133, 0.02, 0.06, 0.3):
@@ -538,7 +538,7 @@ def memory_kernels() -> dict:
         for length in (1_000, 10_000, 100_000):
             trunc = (length * h) ** alpha / math.gamma(1 + alpha)   # z(t) of a step after L samples: flat
             row[f"truncated_L{length}_rel_err_at_100s"] = trunc / exact - 1
-        basis = SoeBasis.build(h, horizon_s=3600.0, top=3000.0)
+        basis = SoeBasis.build(h, horizon_s=3600.0, top=SOE_TOP)
         tt = np.geomspace(h, 3600.0, 2000)
         soe = basis.step_response(alpha, tt)
         row["soe_max_rel_err_1e-4_to_3600s"] = float(np.max(np.abs(soe / (tt**alpha / math.gamma(1 + alpha)) - 1)))
@@ -555,7 +555,7 @@ def memory_kernels() -> dict:
         a = time.perf_counter()
         K.truncated_gl_block(u, ring, np.zeros(1, dtype=np.int64), c, z)
         cost[f"truncated_L{length}_us_per_sample"] = (time.perf_counter() - a) / n * 1e6
-    basis = SoeBasis.build(h, top=3000.0)
+    basis = SoeBasis.build(h, top=SOE_TOP)
     hist = np.empty((n, basis.size))
     zeta = np.zeros(basis.size)
     K.node_history(u[:100], basis.decay, basis.gain, zeta.copy(), hist[:100])
@@ -563,7 +563,7 @@ def memory_kernels() -> dict:
     K.node_history(u, basis.decay, basis.gain, zeta, hist)
     cost["soe_nodes_us_per_sample_incl_history_store"] = (time.perf_counter() - a) / n * 1e6
     out["cost"] = cost
-    out["reference_to_beat"] = "fracmem (PyPI): 9-14 us/sample, ~5e-4 error (DESIGN.md section 2)"
+    out["reference_to_beat"] = "fracmem (PyPI): 9-14 us/sample, ~5e-4 error"
     return out
 
 
@@ -571,7 +571,7 @@ def drift_run() -> dict:
     """alpha +20 %, b +10 % over 60 s; square-wave input; tracking error vs forgetting window."""
     from creep_online.model import CreepModel
     from creep_online.online import OnlineEstimator
-    from creep_online.online.plant import simulate_varying
+    from hil_sim.varying_plant import simulate_varying
     h = 2e-3
     t = np.arange(int(75 / h)) * h
     base = CreepModel.from_resonance(0.05, 20.0, 0.2, 1.0)

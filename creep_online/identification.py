@@ -36,7 +36,7 @@ from . import kernels
 from ._threads import single_threaded
 from .discretize import foh_matrices_batch, step_response_grid
 from .errors import DataError, IdentificationError
-from .global_fit import GlobalFit, at_floor, floor_ratio, global_fit, global_uncertainty, n_bic
+from .global_fit import GRID_ZETAS, GlobalFit, at_floor, floor_ratio, global_fit, global_uncertainty, n_bic
 from .metrics import fit_percent, long_run_variance_factor, noise_std_estimate
 from .model import IDENTIFY_ALPHA_BOUNDS as ALPHA_BOUNDS  # alpha search interval of layer 1 and the polish
 from .model import CreepModel
@@ -70,7 +70,7 @@ class IdentificationResult:
     y_hat: np.ndarray | None = field(default=None, repr=False)
 
     def to_dict(self) -> dict:
-        """JSON-ready summary (DESIGN.md section 6 keys first)."""
+        """JSON-ready summary: the stable keys first (the ``identify --json`` keys, tests/test_cli.py)."""
         m = self.model
         return {
             "alpha": m.alpha, "a1": m.a1, "a2": m.a2, "b": m.b,
@@ -224,8 +224,8 @@ def model_output(alpha: float, a1: float, a2: float, h: float, u: np.ndarray, n:
 #: Longest first transient (samples) the starting grid scores: 4096 samples resolve 2 periods of
 #: fs/2048; slower resonances are found by the global fallback's grid.
 GRID_WINDOW = 4096
-#: The (fn, zeta) starting grid: 28 log-spaced frequencies x these damping ratios.
-GRID_ZETAS = (0.01, 0.03, 0.1, 0.3, 0.7, 1.5, 4.0)
+#: The (fn, zeta) starting grid: 28 log-spaced frequencies x the damping ratios ``GRID_ZETAS`` (those of
+#: the global fit's starting grid, ``global_fit.py``).
 
 
 def resonance_grid(t: np.ndarray, u: np.ndarray, y: np.ndarray, alpha: float, stop: int,

@@ -48,12 +48,10 @@ from numba import njit
 from scipy.linalg import expm
 
 from creep_online.identification import identify
-from creep_online.online.soe import SoeBasis
+from creep_online.online.soe import SOE_TOP, SoeBasis
 
 #: Output noise: 40 dB below the rms of the noise-free output.
 SNR_DB = 40.0
-#: Fastest SOE node in units of 1/h (faster ones are lumped into the direct term D).
-SOE_TOP = 3000.0
 #: SOE node spacing in ln(lambda): finer than the estimator's 0.8 so the judge is the more accurate one.
 SOE_DX = 0.5
 #: SOE memory horizon in units of the record span (the accuracy holds up to it).

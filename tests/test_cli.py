@@ -1,4 +1,4 @@
-"""The identify and simulate commands: stable JSON keys (DESIGN.md section 6) and behaviour."""
+"""The identify and simulate commands: stable JSON keys and behaviour."""
 import json
 
 import numpy as np
@@ -7,7 +7,7 @@ import pytest
 from creep_online import CreepModel, simulate
 from creep_online.cli import main
 from creep_online.io import load_csv, save_csv
-from creep_online.plants import LOAD_CELL
+from hil_sim.experiments import LOAD_CELL
 
 
 @pytest.fixture

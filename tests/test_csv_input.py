@@ -1,4 +1,4 @@
-"""CSV input: every malformed file gives one line naming file and problem (DESIGN.md section 6)."""
+"""CSV input: every malformed file gives one line naming file and problem (docs/reliability.md)."""
 import subprocess
 import sys
 

@@ -10,7 +10,7 @@ import pytest
 from creep_online import CreepModel, DataError, simulate
 from creep_online.identification import creep_asymptote, identify, input_schedule, layer1_alpha
 from creep_online.metrics import noise_floor_fit
-from creep_online.plants import RECOVERY_CASES, Experiment
+from hil_sim.experiments import RECOVERY_CASES, Experiment
 from creep_online.discretize import step_response_grid
 
 TOL = {"alpha": 0.01, "a1": 0.03, "a2": 0.03, "b": 0.03}

@@ -1,6 +1,6 @@
 """Global convergence of identify (issue 9): every input family, records taken in operation, the floor test.
 
-The records come from ``creep_online.validation`` with seeds the bench does
+The records come from ``hil_sim.validation`` with seeds the bench does
 not use (the bench runs seeds 0-29), so nothing here was tuned on. "At the
 floor": the fit% within 0.05 points of the true model's on the same noisy
 record.
@@ -17,9 +17,9 @@ from creep_online.global_fit import at_floor
 from creep_online.identification import identify
 from creep_online.initial_state import free_columns, past_offsets
 from creep_online.metrics import fit_percent
-from creep_online.plants import Experiment
+from hil_sim.experiments import Experiment
 from creep_online.simulate import causal_convolve, simulate
-from creep_online.validation import FAMILIES, make_record
+from hil_sim.validation import FAMILIES, make_record
 
 
 @pytest.mark.parametrize("family", FAMILIES)
@@ -96,7 +96,7 @@ def test_static_summaries_match_the_commands():
 
 
 def test_asynchronous_input_changes_are_warned_and_synchronous_ones_not():
-    from creep_online.validation import make_async_record
+    from hil_sim.validation import make_async_record
     for seed in (50, 51):
         warn = identify(*_arrays(make_async_record(seed))).warnings
         assert any("asynchronous" in w for w in warn), warn

@@ -1,31 +1,47 @@
-"""The one-way layer rule, read from the source (imports inside functions count too).
+"""The one-way layer rule: errors <- model (CreepModel, ExtendedModel, simulate, effects) <- {io, fit, online}
+<- diagnostics <- reports <- commands / cli. ``hil_sim`` imports creep_online, never the reverse (only the
+demo command starts it).
 
-errors <- model (CreepModel, ExtendedModel, simulate, effects) <- {io, identification, online}
-<- diagnostics <- reports <- commands / cli. ``hil_sim`` imports creep_online, never the reverse
-(only the demo command starts it).
+The rule is written once, as the import-linter contracts in ``pyproject.toml`` (``[tool.importlinter]``);
+both checks here read it from there, so they cannot disagree:
+
+- ``test_import_linter_contracts`` runs import-linter (the ``test`` extra installs it). It follows chains
+  of imports, so it also catches an upward path through another package (e.g. through ``hil_sim``) and
+  an effect reaching ``model.py`` indirectly.
+- The AST checks read every module's own import statements (imports inside functions count, those under
+  ``if TYPE_CHECKING:`` do not, as in the contracts). They see what import-linter cannot: a module taking
+  a name from the package root (``from creep_online import identify``), which the root's ``__getattr__``
+  resolves by importing a higher layer; import-linter sees that only as an import of the container.
 """
 from __future__ import annotations
 
 import ast
+import sys
+import tomllib
 from pathlib import Path
 
 import pytest
 
-PACKAGE = Path(__file__).resolve().parents[1] / "creep_online"
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "creep_online"
+PYPROJECT = ROOT / "pyproject.toml"
 
-#: Layer of each top-level module or sub-package (a module may import its own layer and those below).
-LAYERS = {
-    "errors": 0,
-    "_numba_cache": 1, "_threads": 1, "kernels": 1, "discretize": 1, "metrics": 1, "record": 1,
-    "model": 1, "effects": 1, "simulate": 1, "plants": 1,
-    "io": 2, "identification": 2, "online": 2,
-    "global_fit": 2, "initial_state": 2, "timing": 2, "validation": 2,
-    "diagnostics": 3,
-    "reports": 4,
-    "commands": 5, "cli": 5, "__main__": 5, "__init__": 5,
-}
-#: The only library modules allowed to import the simulated plant.
-MAY_IMPORT_HIL_SIM = {"creep_online.commands.demo"}
+
+def _contracts() -> dict[str, dict]:
+    config = tomllib.loads(PYPROJECT.read_text())["tool"]["importlinter"]
+    return {c["id"]: c for c in config["contracts"]}
+
+
+CONTRACTS = _contracts()
+
+#: Layer of each top-level module or sub-package (a module may import its own layer and those below),
+#: from the contract's list (highest first); the package root's ``__init__`` stands above them all.
+LAYERS = {tail.strip(): rank
+          for rank, layer in enumerate(reversed(CONTRACTS["layers"]["layers"]))
+          for tail in layer.split(":")}
+LAYERS["__init__"] = len(CONTRACTS["layers"]["layers"])
+#: The only library modules allowed to import the simulated plant (the contract's one ignored import).
+MAY_IMPORT_HIL_SIM = {rule.split("->")[0].strip() for rule in CONTRACTS["no-hil-sim"]["ignore_imports"]}
 
 
 def _module_name(path: Path) -> str:
@@ -71,6 +87,19 @@ def _layer(module: str) -> int | None:
 MODULES = sorted(PACKAGE.rglob("*.py"))
 
 
+def test_import_linter_contracts():
+    """The contracts in pyproject.toml hold (what `lint-imports` checks; CI runs only pytest)."""
+    from importlinter.cli import lint_imports  # the `test` extra installs import-linter
+
+    assert set(CONTRACTS) == {"layers", "no-hil-sim", "effects-not-model"}
+    saved = sys.path[:]                    # lint_imports puts the working directory on sys.path
+    try:
+        status = lint_imports(config_filename=str(PYPROJECT), no_cache=True, no_logo=True)
+    finally:
+        sys.path[:] = saved
+    assert status == 0, "an import-linter contract is broken: see the captured output above"
+
+
 def test_every_module_has_a_layer():
     assert {p.relative_to(PACKAGE).parts[0].removesuffix(".py") for p in MODULES} <= set(LAYERS)
 
@@ -87,5 +116,8 @@ def test_imports_point_down(path):
 
 def test_effects_do_not_import_the_model_module():
     """model.py builds on the effects (ExtendedModel); the effects need only a model's four parameters."""
+    contract = CONTRACTS["effects-not-model"]
+    assert contract["source_modules"] == ["creep_online.effects"]
+    assert contract["forbidden_modules"] == ["creep_online.model"]
     for path in (PACKAGE / "effects").glob("*.py"):
         assert "creep_online.model" not in _imports(path), path.name

@@ -14,7 +14,7 @@ import pytest
 from creep_online.errors import CreepOnlineError, DataError
 from creep_online.model import CreepModel
 from creep_online.online import OnlineEstimate, OnlineEstimator
-from creep_online.online.plant import simulate_varying
+from hil_sim.varying_plant import simulate_varying
 from creep_online.simulate import simulate
 from hil_sim import scenarios
 
@@ -361,7 +361,7 @@ def test_update_block_rejects_two_dimensional_and_mismatched_arrays():
 
 def test_long_forgetting_run_has_no_overflow():
     """The forgetting weight g = f^-n is renormalised: a short window over many samples stays finite."""
-    from creep_online.online.plant import PlantStream
+    from hil_sim.varying_plant import PlantStream
     h = 1e-3
     model = CreepModel.from_resonance(0.05, 20.0, 0.2, 1.0)
     plant = PlantStream(h, model.alpha, model.a1, model.a2, model.b)

@@ -12,12 +12,12 @@ import math
 import numpy as np
 import pytest
 
-from creep_online.model import CreepModel
+from creep_online.model import ONLINE_ALPHA_BOUNDS, CreepModel
 from creep_online.online import kernels as K
 from creep_online.online import window as W
-from creep_online.online.plant import simulate_varying
+from hil_sim.varying_plant import simulate_varying
 from creep_online.online.search import ResonanceSearch
-from creep_online.online.soe import SoeBasis, resonance_zoh
+from creep_online.online.soe import SOE_TOP, SoeBasis, resonance_zoh
 from creep_online.online.tracker import WindowTracker
 from creep_online.simulate import fractional_integral, simulate
 
@@ -25,11 +25,11 @@ from creep_online.simulate import fractional_integral, simulate
 def _tracker(model: CreepModel, h: float, lin: tuple[float, float] | None = None, free: bool = False,
              window_s: float | None = None, history: int = 1 << 14) -> WindowTracker:
     """A tracker whose parameters are the model's (linearized at ``lin``, default the model's resonance)."""
-    basis = SoeBasis.build(h, top=3000.0)
+    basis = SoeBasis.build(h, top=SOE_TOP)
     a1l, a2l = lin or (model.a1, model.a2)
     theta = np.array([model.alpha, math.log(a1l), math.log(a2l), model.b, 0.0])
     tr = WindowTracker(basis, theta, window_s=window_s, free=free, ring=np.zeros((2, history)), gate=0.0,
-                       burst=3, stuck=10**9, alpha_bounds=(0.002, 0.95), refit_every=10**9,
+                       burst=3, stuck=10**9, alpha_bounds=ONLINE_ALPHA_BOUNDS, refit_every=10**9,
                        test_every=10**9, detect=False)
     tr.theta[1:3] = np.log([model.a1, model.a2])
     tr._coefficients()
@@ -179,7 +179,7 @@ def test_search_finds_the_basin(alpha, fn, zeta, b, fs, seconds):
     u = np.where(t >= 0.01, 1.0, 0.0)
     y = simulate(CreepModel.from_resonance(alpha, fn, zeta, b), t, u)
     y = y + np.random.default_rng(0).normal(0, 0.01 * np.sqrt(np.mean(y**2)), t.size)
-    r = ResonanceSearch(SoeBasis.build(h, top=3000.0), u, y).run()
+    r = ResonanceSearch(SoeBasis.build(h, top=SOE_TOP), u, y).run()
     found = CreepModel(r.alpha, r.a1, r.a2, r.b)
     assert r.alpha == pytest.approx(alpha, rel=0.05)
     assert found.fn == pytest.approx(fn, rel=0.03)

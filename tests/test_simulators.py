@@ -103,7 +103,7 @@ def test_truncated_memory_error_is_the_dropped_tail(alpha):
     z_short = fractional_integral(np.ones(n), h, alpha, memory=memory)
     tail = ((n - 1) * h) ** alpha - (memory * h) ** alpha
     assert z_full[-1] - z_short[-1] == pytest.approx(tail / math.gamma(1 + alpha), rel=1e-10)
-    if alpha == 0.0133:  # DESIGN.md: N/L = 10 loses ~3 %
+    if alpha == 0.0133:  # README.md, short-memory table: N/L = 10 loses ~3 %
         assert 0.025 < (z_full[-1] - z_short[-1]) / z_full[-1] < 0.035
 
 

@@ -24,6 +24,7 @@ from scipy.stats import chi2
 
 from ..effects import effect_names, get_effect
 from ..errors import CreepOnlineError, DataError
+from ..io.jsonable import jsonable
 from ..metrics import noise_std_estimate
 from ..record import Record
 from . import extended as ext
@@ -57,14 +58,15 @@ class Candidate:
     def to_dict(self) -> dict:
         return {"effect": self.effect, "evidence": self.evidence, "significant": self.significant,
                 "fit_percent_after": self.fit.fit_percent, "residual_rms_after": self.fit.residual_rms,
-                "params": _jsonable(self.fit.effect_params.get(self.effect, self.fit.effect_params)),
+                "params": jsonable(self.fit.effect_params.get(self.effect, self.fit.effect_params)),
                 "lr_statistic": self.lr_statistic, "lr_pvalue": self.lr_pvalue,
                 "extra_params": self.extra_params, "signature": self.signature}
 
 
 @dataclass
 class Diagnosis:
-    """The whole workflow's answer (``to_dict`` is the ``diagnose --json`` schema)."""
+    """The whole workflow's answer (``to_dict`` is the ``diagnose --json`` schema; its nested parameters,
+    location and residual analysis go through ``io.jsonable``: numpy to Python, non-finite numbers to None)."""
 
     source: str
     base: ext.ExtendedFit
@@ -97,26 +99,11 @@ class Diagnosis:
             "base_model": {**b.model.describe(), "offset": b.offset},
             "combination": None if self.combination is None else {
                 "effects": list(self.combination.fit.effects), **self.combination.to_dict(),
-                "params": _jsonable(self.combination.fit.effect_params)},
-            "skipped": self.skipped, "location": _jsonable(self.location),
-            "residual_analysis": _jsonable(self.residual_analysis),
+                "params": jsonable(self.combination.fit.effect_params)},
+            "skipped": self.skipped, "location": jsonable(self.location),
+            "residual_analysis": jsonable(self.residual_analysis),
             "warnings": self.warnings, "elapsed_s": self.elapsed_s, "source": self.source,
         }
-
-
-def _jsonable(x):
-    """Plain Python floats/lists/dicts (NaN kept as float) for json.dumps."""
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, (np.floating, np.integer)):
-        return x.item()
-    if isinstance(x, (np.bool_,)):
-        return bool(x)
-    return x
 
 
 # --------------------------------------------------------------------------- applicability

@@ -37,10 +37,10 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..errors import DataError
-from ..model import CreepModel
+from ..model import ONLINE_ALPHA_BOUNDS, CreepModel
 from . import window as W
 from .search import ResonanceSearch
-from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SoeBasis
+from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SOE_TOP, SoeBasis
 from .tracker import WindowTracker
 
 PHASES = ("buffering", "searching", "tracking")
@@ -51,8 +51,6 @@ MAX_SEARCH_SAMPLES = 1 << 15
 BUFFER_SAMPLES = 1 << 17
 #: Largest history kept for replays (samples).
 MAX_HISTORY = 1 << 16
-#: Node above which the SOE lumps the fast modes into a direct term (units 1/h).
-SOE_TOP = 3000.0
 #: Relative 1-sigma limits for "determined" parameters (half the accuracy goals).
 DETERMINED = {"alpha": 0.01, "b": 0.015, "a1": 0.025, "a2": 0.025}
 #: Live error (window rms) above this multiple of the noise floor is "degraded".
@@ -108,7 +106,7 @@ class OnlineEstimator:
     alpha0:         optional hint: an extra starting candidate for the search (None: none needed).
     horizon_s:      memory horizon of the SOE fractional integral (s).
     soe_dx:         SOE node spacing in ln(lambda).
-    alpha_bounds:   search interval of alpha.
+    alpha_bounds:   search interval of alpha (default ``model.ONLINE_ALPHA_BOUNDS``).
     t_c_max:        upper limit of the automatic search window (s); the tracker refines slower resonances.
     outlier_gate:   innovation gate in robust scales (0 disables the gate).
     burst_s:        longest run of gated outputs treated as outliers (s); longer is a shift.
@@ -119,7 +117,7 @@ class OnlineEstimator:
     def __init__(self, dt: float, *, window_s: float | None = 10.0, update_every_s: float = 0.1,
                  t_c: float | None = None, alpha0: float | None = None,
                  horizon_s: float = DEFAULT_HORIZON_S, soe_dx: float = DEFAULT_DX,
-                 alpha_bounds: tuple[float, float] = (0.002, 0.95), t_c_max: float = 2.0,
+                 alpha_bounds: tuple[float, float] = ONLINE_ALPHA_BOUNDS, t_c_max: float = 2.0,
                  outlier_gate: float = 8.0, burst_s: float = 0.002, detect_changes: bool = True,
                  work_units: int | None = None) -> None:
         self.dt = dt

@@ -23,6 +23,7 @@ from typing import Generator
 import numpy as np
 from numba import njit
 
+from ..model import ONLINE_ALPHA_BOUNDS
 from . import kernels
 from .soe import SoeBasis
 from .window import resonance_step
@@ -201,8 +202,8 @@ class ResonanceSearch:
     def _refine(self, alpha: float, fn: float, z: float, stride: int) -> Generator:
         """Pattern search in (ln alpha, ln fn, ln zeta) from a start; returns (cost, alpha, fn, zeta)."""
         p = np.log([alpha, fn, z])
-        lo = np.log([0.002, 1e-3, 0.003])
-        hi = np.log([0.95, 0.45 / self.basis.h, 3.0])
+        lo = np.log([ONLINE_ALPHA_BOUNDS[0], 1e-3, 0.003])
+        hi = np.log([ONLINE_ALPHA_BOUNDS[1], 0.45 / self.basis.h, 3.0])
         best = yield from self._cost_at(p, stride)
         steps = np.array([0.5, 0.25, 0.6])
         for _ in range(6):

@@ -24,7 +24,7 @@ dot product of the same states with ``w(alpha)``, and so is its alpha
 derivative (``dw_i/dalpha = w_i (pi cot(pi alpha) - ln lam_i)``). This is what
 lets the online estimator re-evaluate its whole window for a new alpha exactly
 (the paper's Remark 3) without recomputation. Measured against the closed form
-``t^alpha / Gamma(1+alpha)`` (tests/test_online_soe.py, docs/online.md):
+``t^alpha / Gamma(1+alpha)`` (tests/test_online_kernels.py, docs/online.md):
 dx = 0.8 gives 38-40 nodes for a one-hour horizon at 10 kHz and a relative
 error below 2e-6 for alpha <= 0.1 and below 1.2e-4 for alpha up to 0.95.
 """
@@ -39,6 +39,9 @@ import numpy as np
 DEFAULT_DX = 0.8
 #: Fastest node, in units of 1/h: faster modes settle within h/30 and are lumped into D.
 DEFAULT_TOP = 30.0
+#: Fastest node (units of 1/h) of the online estimator's basis, and of the simulators that reproduce or
+#: judge it (``hil_sim/varying_plant.py``, ``hil_sim/scenarios.py``, the benches).
+SOE_TOP = 3000.0
 #: Slowest node, in units of 1/horizon: slower modes are lumped into one integrator.
 DEFAULT_BOTTOM = 1e-3
 #: Default memory horizon (s) for which the accuracy above is guaranteed.

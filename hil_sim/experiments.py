@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .model import CreepModel
-from .simulate import simulate
+from creep_online.model import CreepModel
+from creep_online.simulate import simulate
 
 
 @dataclass(frozen=True)

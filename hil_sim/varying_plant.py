@@ -6,16 +6,16 @@ output with that sample's parameters: ``y[n] = b[n] psi[n] . v(alpha[n])``.
 This is the "frozen-time" time-varying model: at each instant the plant is the
 creep model with the current parameters applied to the whole input history.
 With constant parameters it equals ``creep_online.simulate.simulate``
-(tested to < 1e-5 of the output range in tests/test_online_plant.py).
+(tested to < 1e-5 of the output range in tests/test_online_kernels.py).
 """
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-from ..simulate import uniform_step
-from . import kernels as K
-from .soe import SoeBasis, pack_coefficients
+from creep_online.online import kernels as K
+from creep_online.online.soe import SOE_TOP, SoeBasis, pack_coefficients
+from creep_online.simulate import uniform_step
 
 
 @njit(cache=True)
@@ -47,7 +47,7 @@ def simulate_varying(t: np.ndarray, u: np.ndarray, alpha: np.ndarray | float, a1
     alpha = np.broadcast_to(np.asarray(alpha, dtype=float), u.shape).copy()
     b = np.broadcast_to(np.asarray(b, dtype=float), u.shape).copy()
     span = max(float(t[-1] - t[0]), 10 * h)
-    basis = SoeBasis.build(h, horizon_s=horizon_s or 10 * span, top=3000.0)
+    basis = SoeBasis.build(h, horizon_s=horizon_s or 10 * span, top=SOE_TOP)
     co = pack_coefficients(basis, a1, a2)
     st = np.zeros(basis.size + 2)
     return _varying(u, alpha, b, st, co, basis.lam, basis.dx, a1, a2)
@@ -57,7 +57,7 @@ class PlantStream:
     """The same plant, fed chunk by chunk with persistent state (for endless streams in the bench)."""
 
     def __init__(self, h: float, alpha: float, a1: float, a2: float, b: float, horizon_s: float = 3600.0) -> None:
-        self.basis = SoeBasis.build(h, horizon_s=horizon_s, top=3000.0)
+        self.basis = SoeBasis.build(h, horizon_s=horizon_s, top=SOE_TOP)
         self.co = pack_coefficients(self.basis, a1, a2)
         self.st = np.zeros(self.basis.size + 2)
         self.alpha, self.a1, self.a2, self.b = alpha, a1, a2, b

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .model import CreepModel
-from .simulate import simulate
+from creep_online.model import CreepModel
+from creep_online.simulate import simulate
 
 FAMILIES = ("step", "staircase", "random_staircase", "prbs", "multisine", "triangle", "in_operation")
 #: Sample rates drawn from (Hz).
