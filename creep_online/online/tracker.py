@@ -105,6 +105,7 @@ class WindowTracker:
         self._snaps: list[tuple] = []
         self._theta_at: dict[int, np.ndarray] = {}
         self._last_h = np.zeros((self.theta.size, self.theta.size))   # J^T J of the last LM step
+        self._last_g = np.zeros(self.theta.size)                       # and J^T r
         st, S = self._fresh(self.a1, self.a2)
         sc = st[:W.SC_SIZE]
         sc[W.SC_GATE] = gate
@@ -267,12 +268,16 @@ class WindowTracker:
 
     def _lm(self, theta: np.ndarray, free: np.ndarray, mu: float, stats: tuple, lin: tuple,
             out: np.ndarray) -> Generator:
-        """One Levenberg-Marquardt step (one unit); returns the next damping mu.
+        """One Levenberg-Marquardt step in two units (normal equations, then the trial); returns the
+        next damping mu. J^T J at the starting point is left in ``_last_h`` (for the covariance).
 
         ``stats`` = (F, fy, fyy) true-scale, ``lin`` = the linearization point they were built at.
         """
         lo, hi = self.alpha_bounds
-        mu = W.lm_step(theta, free, mu, *lin, self.basis.lam, self.basis.dx, *stats, lo, hi, out, self._last_h)
+        lam, dx = self.basis.lam, self.basis.dx
+        cost = W.lm_normal(theta, *lin, lam, dx, *stats, self._last_h, self._last_g)
+        yield
+        mu = W.lm_trial(theta, free, mu, self._last_h, self._last_g, cost, *lin, lam, dx, *stats, lo, hi, out)
         yield
         return mu
 
@@ -291,28 +296,37 @@ class WindowTracker:
                 break
         W.covariance(self._last_h, free, cov)
         yield
+        yield from self._accept(theta, cov, float(out[1]), lin)
+
+    def _accept(self, theta: np.ndarray, cov: np.ndarray, cost: float, lin: tuple) -> Generator:
+        """Swap a re-fit in (one unit), then its 1-sigma and what it triggers (another).
+
+        Plain floats, not numpy, on 4-element vectors: a numpy call costs ~2 us here.
+        """
+        new, old = theta.tolist(), self.theta.tolist()
         if lin != (self.a1l, self.a2l):
             return                         # re-linearized meanwhile: the next refit decides
-        if not np.all(np.isfinite(theta)) or theta[3] == 0.0:
+        if not all(map(math.isfinite, new)) or new[3] == 0.0:
             self.rejected += 1             # a failed fit is never swapped in
             return
-        previous = self.theta.copy()
-        step = np.abs(theta[:4] - previous[:4]) / np.maximum(np.abs(previous[:4]), 1e-300)
-        self.converged = self.converged or bool(np.all(step < 0.01))
+        step = max(abs(a - b) / max(abs(b), 1e-300) for a, b in zip(new[:4], old[:4]))
+        self.converged = self.converged or step < 0.01
         self.theta[:] = theta
         self._coefficients()
         self.refits += 1
+        yield
         neff = float(self.sc[W.SC_NEFF])
-        cost = float(out[1])
-        sigma2 = max(cost, 0.0) / max(neff - theta.size, 1.0)
-        sd = [math.sqrt(abs(cov[i, i]) * sigma2) if math.isfinite(cov[i, i]) else math.inf for i in range(5)]
-        std = {"alpha": sd[0], "a1": sd[1] * self.a1, "a2": sd[2] * self.a2, "b": sd[3], "offset": sd[4]}
-        self.fit = Fit(theta=theta.copy(), cost=cost, neff=neff, std=std, sample=self.n)
-        if abs(self.a1 / self.a1l - 1) > RELINEARIZE or abs(self.a2 / self.a2l - 1) > RELINEARIZE:
+        sigma2 = max(cost, 0.0) / max(neff - len(new), 1.0)
+        var = cov.diagonal()[:5].tolist()
+        sd = [math.sqrt(abs(v) * sigma2) if math.isfinite(v) else math.inf for v in var]
+        a1, a2 = math.exp(new[1]), math.exp(new[2])
+        std = {"alpha": sd[0], "a1": sd[1] * a1, "a2": sd[2] * a2, "b": sd[3], "offset": sd[4]}
+        self.fit = Fit(theta=theta, cost=cost, neff=neff, std=std, sample=self.n)
+        if abs(a1 / self.a1l - 1) > RELINEARIZE or abs(a2 / self.a2l - 1) > RELINEARIZE:
             if not any(j.__name__ == "_relinearize_job" for j in self._jobs):
                 self._jobs.append(self._relinearize_job(None))
         elif self.events:
-            self._settle_events(previous)
+            self._settle_events(old)
 
     # ------------------------------------------------------------------ relinearization (replay)
     def _ring_position(self, index: int) -> int:
@@ -340,6 +354,7 @@ class WindowTracker:
         phi[self.q + W.FREE:] = np.exp(-np.asarray(FREE_RATES[:self.n_free]) * self.h * oldest)
         chunk = self.replay_chunk
         snaps: list[tuple] = []
+        yield
         lin = (a1, a2)
         lay_sy = slice(lay["sy"], lay["co"])
         i = oldest
@@ -467,12 +482,14 @@ class WindowTracker:
         lead = min(int(16.0 * self.a2 / self.a1 / self.h), u.size // 4)   # two (old) settling times
         search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, fixed_alpha=self.alpha,
                                  work=self.work_memory)
+        yield
         while not search.step():
             yield
         r = search.result
         if r is not None and math.isfinite(r.cost) and r.a1 > 0 and r.a2 > 0 and r.b != 0:
             self.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
             self._coefficients()
+            yield
         # re-fits wait for the replay from the change: until it is swapped in, the live statistics
         # still hold the pre-change window, and a fit of them would report a second change
         yield from self._relinearize_job(n0)
@@ -496,15 +513,15 @@ class WindowTracker:
         counts the samples since the last input change."""
         return self.n - self.sc[W.SC_SINCE] > since + 1
 
-    def _settle_events(self, previous: np.ndarray) -> None:
+    def _settle_events(self, previous: list[float]) -> None:
         """Once the fit after a change has stopped moving, record what moved and by how much."""
         ev = self.events[-1] if self.events else None
         if ev is None or ev["settled"]:
             return
-        step = np.abs(self.theta[:4] - previous[:4]) / np.maximum(np.abs(previous[:4]), 1e-300)
-        if np.all(step < 0.002) and self.n * self.h - ev["detected_t"] > 1.0:
+        now = self.theta[:4].tolist()
+        step = max(abs(a - b) / max(abs(b), 1e-300) for a, b in zip(now, previous[:4]))
+        if step < 0.002 and self.n * self.h - ev["detected_t"] > 1.0:
             before = ev.pop("_before")
-            now = self.theta[:4]
             change = {"alpha": now[0] / before[0] - 1, "a1": math.exp(now[1] - before[1]) - 1,
                       "a2": math.exp(now[2] - before[2]) - 1, "b": now[3] / before[3] - 1}
             ev["relative_change"] = {k: float(v) for k, v in change.items()}
