@@ -480,8 +480,10 @@ class WindowTracker:
         zeta0 = st[self.lay["phi"]:self.lay["phi"] + self.q].copy()
         u, y = yield from self._ring_segment(n0, self.n)
         lead = min(int(16.0 * self.a2 / self.a1 / self.h), u.size // 4)   # two (old) settling times
+        # the live estimate competes with the grid: the window re-fits often follow a change
+        # before the test confirms it, and the grid's best basin can be a wrong one
         search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, fixed_alpha=self.alpha,
-                                 work=self.work_memory)
+                                 work=self.work_memory, extra=((self.alpha, self.a1, self.a2),))
         yield
         while not search.step():
             yield
