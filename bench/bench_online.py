@@ -79,6 +79,8 @@ PARAMS = ("alpha", "a1", "a2", "b")
 
 # --------------------------------------------------------------------------- latency stream
 H = 1e-4
+#: Samples per second of the latency stream.
+SECOND = int(round(1.0 / H))
 SECONDS = 100.0
 PLANT = {"alpha": 0.05, "fn_hz": 300.0, "zeta": 0.1, "b": 0.15}
 T_REST = 0.1
@@ -233,6 +235,9 @@ def latency_run(make_estimator, u: np.ndarray, y: np.ndarray, gc_mode: str, trut
                              "share": float(np.mean(background)),
                              "cpu_us": dist(cpu_us[background]) if background.any() else None},
         "refit_calls_cpu_us": dist(cpu_us[refits]) if refits.any() else None,
+        # where the cost is: the adaptation after a change vs settled tracking (the stream's changes)
+        "cpu_us_p99_per_second": [round(float(np.percentile(cpu_us[k:k + SECOND], 99)), 1)
+                                  for k in range(0, n, SECOND)],
         "wall_minus_cpu_over_100us": int(np.count_nonzero(wall_us - cpu_us > 100.0)),
         "slowest_cpu": [where(int(k)) for k in order[:10]],
         "slowest_wall": [where(int(k)) for k in np.argsort(wall_us)[::-1][:5]],

@@ -128,6 +128,23 @@ def test_stationary_scenario_families(family, seed):
 
 
 # ---------------------------------------------------------------------- changes and drift
+@pytest.mark.parametrize("family, seed", [("stiffness", 1), ("payload", 4)])
+def test_a_change_is_followed_sample_by_sample(family, seed):
+    """In real time (update() per sample, background work in bounded units), not just in block mode.
+
+    stiffness 1 (damping x1.7) once left the post-change search walking a flat valley for 7 s
+    of stream; the refinement now stops at ``search.MAX_EVALS`` evaluations per candidate.
+    """
+    sc = scenarios.make(family, seed)
+    est = OnlineEstimator(sc.h)
+    update = est.update
+    for u, y in zip(sc.u.tolist(), sc.y.tolist()):
+        update(u, y)
+    e = est.estimate
+    assert _within(e, sc.final_truth), (sc.params, _errors(e, sc.final_truth), e.reason)
+    assert any(abs(v["t"] - sc.change_time) < 1.0 and v["settled"] for v in e.events), e.events
+
+
 @pytest.mark.parametrize("family, seed", [("payload", 0), ("payload", 1), ("stiffness", 0)])
 def test_abrupt_change_is_detected_named_and_followed(family, seed):
     sc = scenarios.make(family, seed)

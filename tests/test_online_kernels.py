@@ -207,3 +207,28 @@ def test_varying_plant_equals_simulate_when_constant():
     ref = simulate(model, t, u)
     out = simulate_varying(t, u, model.alpha, model.a1, model.a2, model.b)
     assert np.max(np.abs(out - ref)) < 1e-5 * np.ptp(ref)
+
+
+def test_small_cholesky_covariance_equals_numpy_inverse_and_refuses_singular():
+    """The hand-rolled Cholesky inverse (no LAPACK call per re-fit) against numpy, on random SPD matrices."""
+    rng = np.random.default_rng(3)
+    for n in (5, 9, 11):
+        J = rng.normal(size=(40, n)) * np.geomspace(1e-4, 1e4, n)      # badly scaled columns
+        H = J.T @ J
+        free = np.ones(n)
+        free[rng.integers(n)] = 0.0                 # a held parameter: its row and column drop out
+        cov = np.empty((n, n))
+        W.covariance(H, free, cov)
+        keep = free == 1.0
+        ref = np.linalg.inv(H[np.ix_(keep, keep)])
+        np.testing.assert_allclose(cov[np.ix_(keep, keep)], ref, rtol=1e-8)
+        x = rng.normal(size=n)
+        L = np.empty((n, n))
+        assert W._cholesky(H, L)
+        out = np.empty(n)
+        W._cholesky_solve(L, x, out)
+        np.testing.assert_allclose(H @ out, x, rtol=1e-6, atol=1e-9 * np.abs(x).max())
+    singular = np.ones((4, 4))                      # rank one
+    cov = np.empty((4, 4))
+    W.covariance(singular, np.ones(4), cov)
+    assert np.all(np.isinf(cov))

@@ -508,7 +508,7 @@ class OnlineEstimator:
     def _catch_up(self, units: int) -> None:
         """Feed the buffer into the new tracker, a few samples per unit, then go live (gate open)."""
         tr = self._tracker
-        per_unit = max(2, 6000 // (tr.p * tr.p // 2 + tr.q))
+        per_unit = tr.replay_chunk
         status = np.empty(per_unit, dtype=np.int64)
         while units > 0 and self._replayed < self._nbuf:
             units -= 1

@@ -42,6 +42,12 @@ FINE_ROWS = 2000
 UNIT_WORK = 4000
 #: Candidates refined from the grid.
 REFINE = 3
+#: Cost evaluations per refined candidate at most in the post-change search (``fixed_alpha``).
+#: A typical refinement takes 40-120; a start in a flat valley walked for 300-570 (seen after a
+#: damping change: 7 s of searching at 10 kHz sample by sample) and ended no better: the window
+#: re-fits polish what the search returns. The start-up search has no cap (a 1 kHz mode with
+#: zeta 0.02 needs its long walk).
+MAX_EVALS = 150
 
 
 @dataclass
@@ -206,14 +212,16 @@ class ResonanceSearch:
         hi = np.log([ONLINE_ALPHA_BOUNDS[1], 0.45 / self.basis.h, 3.0])
         best = yield from self._cost_at(p, stride)
         steps = np.array([0.5, 0.25, 0.6])
+        evals = 1
         for _ in range(6):
             improved = True
-            while improved:
+            while improved and (self.fixed_alpha is None or evals < MAX_EVALS):
                 improved = False
                 for j in self._axes():
                     for sign in (1.0, -1.0):
                         trial = p.copy()
                         trial[j] = min(max(trial[j] + sign * steps[j], lo[j]), hi[j])
+                        evals += 1
                         c = yield from self._cost_at(trial, stride)
                         if c < best:
                             best, p, improved = c, trial, True
