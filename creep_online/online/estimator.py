@@ -59,6 +59,8 @@ DETERMINED = {"alpha": 0.01, "b": 0.015, "a1": 0.025, "a2": 0.025}
 FLOOR_RATIO = 2.0
 #: An input sample further than this many input ranges from the last accepted one is a glitch.
 INPUT_GATE = 20.0
+#: Drift columns with ``track_drift``: 1 the gain's rate, 2 the gain's and alpha's.
+DRIFT_COLUMNS = 2
 
 
 @dataclass
@@ -114,6 +116,8 @@ class OnlineEstimator:
     burst_s:        longest run of gated outputs treated as outliers (s); longer is a shift.
     detect_changes: run the change test (likelihood ratio every 0.5 s).
     work_units:     background units per update() (None: max(1, floor(dt / 100 us))).
+    track_drift:    model a linear drift of b and alpha inside the window (two more linear parameters);
+                    the estimate is then the value at the newest sample, with ``b_rate``, ``alpha_rate``.
     """
 
     def __init__(self, dt: float, *, window_s: float | None = 10.0, update_every_s: float = 0.1,
@@ -121,7 +125,7 @@ class OnlineEstimator:
                  horizon_s: float = DEFAULT_HORIZON_S, soe_dx: float = DEFAULT_DX,
                  alpha_bounds: tuple[float, float] = (0.002, 0.95), t_c_max: float = 2.0,
                  outlier_gate: float = 8.0, burst_s: float = 0.002, detect_changes: bool = True,
-                 work_units: int | None = None) -> None:
+                 work_units: int | None = None, track_drift: bool = True) -> None:
         self.dt = dt
         self.window_s = window_s
         self.update_every_s = update_every_s
@@ -135,6 +139,7 @@ class OnlineEstimator:
         self.burst_s = burst_s
         self.detect_changes = detect_changes
         self.work_units = work_units
+        self.track_drift = track_drift
         self._validate()
         self.reset()
 
@@ -499,7 +504,8 @@ class OnlineEstimator:
         self._tracker = WindowTracker(
             self.basis, theta, window_s=self.window_s, free=bool(self._u_ref), ring=self._ring, work=self._hist_work,
             gate=0.0, burst=self._burst, stuck=max(10, int(round(0.05 / self._h))), alpha_bounds=(lo, hi),
-            refit_every=self._refit_every, test_every=self._test_every, detect=bool(self.detect_changes))
+            refit_every=self._refit_every, test_every=self._test_every, detect=bool(self.detect_changes),
+            drift=DRIFT_COLUMNS if self.track_drift else 0)
         if self.frozen:
             self._tracker.sc[W.SC_ACC] = 0.0
         self._tracker.fitting = False

@@ -49,7 +49,18 @@ RESEARCH_S = 1.0
 #: Levenberg-Marquardt steps per window re-fit and per change test.
 REFIT_STEPS = 2
 TEST_STEPS = 4
-#: theta = [alpha, ln a1, ln a2, b, offset, free-response weights...]
+#: The drift rates enter the fit when they would lower the window cost by this many noise variances
+#: (score test at rates zero; chi-square with 2 degrees of freedom: p ~ 4e-6), and leave it when their
+#: Wald statistic falls below DRIFT_OFF. Where the data cannot tell drift from creep (a single step)
+#: the rates stay out and the fit is the constant-parameter one.
+DRIFT_ON = 25.0
+DRIFT_OFF = 9.0
+#: The test waits until the window is converged and spans this long (s): drift is slow, and early
+#: misfit must not pass for it.
+DRIFT_MIN_S = 5.0
+#: Largest plausible drift, relative to the parameter (1/s): faster "drift" is misfit (the rates go off).
+DRIFT_MAX = 0.02
+#: theta = [alpha, ln a1, ln a2, b, offset, free-response weights..., b'/b, alpha'] (the last two with drift)
 
 
 @dataclass
@@ -63,23 +74,39 @@ class Fit:
     sample: int = 0
 
 
+def _gn_gain(H: np.ndarray, g: np.ndarray, idx: np.ndarray) -> float:
+    """Cost reduction g^T H^-1 g of a full Gauss-Newton step over the parameters ``idx`` (0 if singular)."""
+    A = H[np.ix_(idx, idx)]
+    d = np.sqrt(np.abs(np.diag(A))) + 1e-300
+    try:
+        x = np.linalg.solve(A / np.outer(d, d), g[idx] / d)
+    except np.linalg.LinAlgError:
+        return 0.0
+    gain = float(x @ (g[idx] / d))
+    return gain if math.isfinite(gain) else 0.0
+
+
 class WindowTracker:
     """Exponentially forgotten output-error statistics and the jobs that fit them."""
 
     def __init__(self, basis: SoeBasis, theta: np.ndarray, *, window_s: float | None, free: bool,
                  ring: np.ndarray, gate: float, burst: int, stuck: int, alpha_bounds: tuple[float, float],
-                 refit_every: int, test_every: int, detect: bool, work: np.ndarray | None = None) -> None:
+                 refit_every: int, test_every: int, detect: bool, work: np.ndarray | None = None,
+                 drift: int = 0) -> None:
         self.basis = basis
         self.h = basis.h
         self.q = basis.size
         self.n_free = len(FREE_RATES) if free else 0
-        self.lay = W.layout(self.q, self.n_free)
+        self.n_rate = int(drift)         # drift columns: 0 none, 1 gain rate, 2 gain and alpha rates
+        self.lay = W.layout(self.q, self.n_free, self.n_rate)
         self.p = self.lay["p"]
         self.alpha_bounds = alpha_bounds
         self.refit_every = refit_every
         self.test_every = test_every
         self.detect = detect
-        self.theta = np.zeros(5 + self.n_free)
+        self.drift_on = False            # the rates are fitted (switched by the score and Wald tests)
+        self.drift_stat = 0.0            # the last test statistic (score when off, Wald when on)
+        self.theta = np.zeros(5 + self.n_free + self.n_rate)
         self.theta[:len(theta)] = theta
         self.forget = 1.0 if window_s is None else math.exp(-self.h / window_s)
         self.ring = ring                 # (2, H) history, owned by the caller (pre-faulted)
@@ -132,6 +159,21 @@ class WindowTracker:
         return float(self.theta[4])
 
     @property
+    def b_rate(self) -> float:
+        """Drift of b (per second) at the last fit; 0 without drift columns."""
+        return float(self.theta[5 + self.n_free] * self.theta[3]) if self.n_rate > 0 else 0.0
+
+    @property
+    def alpha_rate(self) -> float:
+        """Drift of alpha (per second) at the last fit; 0 without the alpha drift column."""
+        return float(self.theta[6 + self.n_free]) if self.n_rate > 1 else 0.0
+
+    @property
+    def rate_rows(self) -> slice:
+        """Rows of the drift columns in phi, S and sy."""
+        return slice(self.p - self.n_rate, self.p)
+
+    @property
     def n(self) -> int:
         """Samples fed."""
         return int(self.sc[W.SC_N])
@@ -147,6 +189,8 @@ class WindowTracker:
         st[W.SC_FORGET] = self.forget
         st[W.SC_A1L] = a1l
         st[W.SC_A2L] = a2l
+        st[W.SC_H] = self.h
+        st[W.SC_NR] = self.n_rate
         co = st[lay["co"]:lay["ztail"]]
         co[:q] = self.basis.decay
         co[q:2 * q] = self.basis.gain
@@ -154,7 +198,7 @@ class WindowTracker:
         co[2 * q + 18:] = np.exp(-np.asarray(FREE_RATES[:self.n_free]) * self.h)
         phi = st[lay["phi"]:lay["m"]]
         phi[q + W.ONE] = 1.0
-        phi[q + W.FREE:] = 1.0
+        phi[q + W.FREE:q + W.FREE + self.n_free] = 1.0
         return st, np.zeros((self.p, self.p))
 
     def _install(self, st: np.ndarray, S: np.ndarray) -> None:
@@ -165,7 +209,8 @@ class WindowTracker:
         self.m = st[lay["m"]:lay["sy"]]
         self.sy = st[lay["sy"]:lay["co"]]
         self.co = st[lay["co"]:lay["ztail"]]
-        self.ztail = st[lay["ztail"]:lay["size"]]
+        self.ztail = st[lay["ztail"]:lay["md"]]
+        self.md = st[lay["md"]:lay["size"]]
         self.a1l, self.a2l = float(st[W.SC_A1L]), float(st[W.SC_A2L])
         self._coefficients()
         self._snaps = []
@@ -173,6 +218,8 @@ class WindowTracker:
     def _coefficients(self) -> None:
         """The model coefficients for theta, and what the gate needs to know of the estimate."""
         W.full_coefficients(self.theta, self.a1l, self.a2l, self.basis.lam, self.basis.dx, self.m)
+        if self.n_rate > 1:
+            W.drift_coefficients(self.theta, self.a1l, self.a2l, self.basis.lam, self.basis.dx, self.md)
         self.sc[W.SC_BABS] = abs(self.b)
         settle = 8.0 * self.a2 / self.a1
         self.sc[W.SC_HOLD] = min(max(20.0, 2.0 * settle / self.h), 2.0 / self.h)
@@ -237,12 +284,54 @@ class WindowTracker:
             pass
 
     def _true_stats(self) -> Generator:
-        """Full symmetric true-scale copy of the window statistics (one unit)."""
+        """Full symmetric true-scale copy of the window statistics (one unit).
+
+        The drift columns' time origin moves to the newest sample first, so the
+        fit's alpha and b are the values now, not window averages.
+        """
+        W.rereference(self.st, self.S, float(self.sc[W.SC_N]))
         g = self.sc[W.SC_G]
         F = np.empty((self.p, self.p))
         W.symmetrize(self.S, F, 1.0 / g)
         yield
         return F, self.sy / g, self.sc[W.SC_SYY] / g
+
+    def _drift_test(self, theta: np.ndarray, free: np.ndarray, cov: np.ndarray, stats: tuple, lin: tuple,
+                    cost: float) -> Generator:
+        """Switch the drift rates on (score test) or off (Wald test); returns the statistic (one unit when off).
+
+        Off: the Gauss-Newton cost reduction that freeing the rates would bring,
+        over the noise variance (``DRIFT_ON``). On: the rates' Wald statistic
+        (``DRIFT_OFF``); switching off zeroes them (the next re-fit moves alpha
+        and b back to the constant-parameter fit).
+        """
+        sigma2 = max(cost, 0.0) / max(float(self.sc[W.SC_NEFF]) - theta.size, 1.0)
+        if not sigma2 > 0.0:
+            return 0.0
+        rates = np.arange(5 + self.n_free, theta.size)
+        if self.drift_on:
+            sub = cov[np.ix_(rates, rates)]
+            if not np.all(np.isfinite(sub)):
+                return 0.0
+            r = theta[rates]
+            try:
+                stat = float(r @ np.linalg.solve(sub, r)) / sigma2
+            except np.linalg.LinAlgError:
+                stat = 0.0
+            plausible = abs(r[0]) < DRIFT_MAX and (r.size < 2 or abs(r[1]) < DRIFT_MAX * abs(theta[0]))
+            if stat < DRIFT_OFF or not plausible:
+                self.drift_on = False
+                theta[rates] = 0.0
+            return stat
+        C = np.empty((self.p, theta.size))
+        W.jacobian_coefficients(theta, *lin, self.basis.lam, self.basis.dx, C)
+        H, g, _ = W.normal_equations(theta, C, *stats)
+        yield
+        both = np.flatnonzero(free != 0.0)
+        stat = (_gn_gain(H, g, np.concatenate([both, rates])) - _gn_gain(H, g, both)) / sigma2
+        if stat > DRIFT_ON:
+            self.drift_on = True
+        return stat
 
     def _lm(self, theta: np.ndarray, free: np.ndarray, mu: float, stats: tuple, lin: tuple,
             out: np.ndarray) -> Generator:
@@ -261,6 +350,9 @@ class WindowTracker:
         free = np.ones(self.theta.size)
         if self.window_start and (self.n - self.window_start) * self.h < ALPHA_HOLD_S:
             free[0] = 0.0                  # a short window after a change does not determine alpha
+            free[5 + self.n_free:] = 0.0   # nor any drift
+        if not self.drift_on:
+            free[5 + self.n_free:] = 0.0
         cov = np.empty((self.theta.size, self.theta.size))
         out = np.empty(3)
         theta = self.theta.copy()
@@ -270,6 +362,10 @@ class WindowTracker:
                 break
         W.covariance(self._last_h, free, cov)
         yield
+        span = (self.n - self.window_start) * self.h
+        if self.n_rate and free[0] != 0.0 and np.all(np.isfinite(theta)) and self.converged \
+                and span >= DRIFT_MIN_S:
+            self.drift_stat = yield from self._drift_test(theta, free, cov, stats, lin, out[1])
         if lin != (self.a1l, self.a2l):
             return                         # re-linearized meanwhile: the next refit decides
         if not np.all(np.isfinite(theta)) or theta[3] == 0.0:
@@ -286,6 +382,10 @@ class WindowTracker:
         sigma2 = max(cost, 0.0) / max(neff - theta.size, 1.0)
         sd = [math.sqrt(abs(cov[i, i]) * sigma2) if math.isfinite(cov[i, i]) else math.inf for i in range(5)]
         std = {"alpha": sd[0], "a1": sd[1] * self.a1, "a2": sd[2] * self.a2, "b": sd[3], "offset": sd[4]}
+        for k, name in enumerate(("b_rate", "alpha_rate")[:self.n_rate]):
+            i = 5 + self.n_free + k
+            v = math.sqrt(abs(cov[i, i]) * sigma2) if math.isfinite(cov[i, i]) else math.inf
+            std[name] = (v * abs(theta[3]) if k == 0 else v) if self.drift_on else math.inf
         self.fit = Fit(theta=theta.copy(), cost=cost, neff=neff, std=std, sample=self.n)
         if abs(self.a1 / self.a1l - 1) > RELINEARIZE or abs(self.a2 / self.a2l - 1) > RELINEARIZE:
             if not any(j.__name__ == "_relinearize_job" for j in self._jobs):
@@ -316,7 +416,14 @@ class WindowTracker:
         if oldest > 0:
             skip = max(skip, int(16.0 * a2 / a1 / self.h))
         phi[:self.q] = self.ztail
-        phi[self.q + W.FREE:] = np.exp(-np.asarray(FREE_RATES[:self.n_free]) * self.h * oldest)
+        phi[self.q + W.FREE:self.q + W.FREE + self.n_free] = \
+            np.exp(-np.asarray(FREE_RATES[:self.n_free]) * self.h * oldest)
+        st[W.SC_N] = oldest                # the drift columns' time, and their coefficients at the new point
+        st[W.SC_TREF] = self.sc[W.SC_TREF]
+        if self.n_rate:
+            W.full_coefficients(self.theta, a1, a2, self.basis.lam, self.basis.dx, st[lay["m"]:lay["sy"]])
+            if self.n_rate > 1:
+                W.drift_coefficients(self.theta, a1, a2, self.basis.lam, self.basis.dx, st[lay["md"]:lay["size"]])
         chunk = max(4, 20000 // (self.p * self.p // 2 + self.q))
         snaps: list[tuple] = []
         lin = (a1, a2)
@@ -339,7 +446,7 @@ class WindowTracker:
         for part in ("phi", "sy", "co"):
             new[lay[part]:lay[part] + (lay[{"phi": "m", "sy": "co", "co": "ztail"}[part]] - lay[part])] = \
                 st[lay[part]:lay[{"phi": "m", "sy": "co", "co": "ztail"}[part]]]
-        for k in (W.SC_G, W.SC_SYY, W.SC_NEFF, W.SC_A1L, W.SC_A2L):
+        for k in (W.SC_G, W.SC_SYY, W.SC_NEFF, W.SC_A1L, W.SC_A2L, W.SC_TREF):
             new[k] = st[k]
         self._install(new, S)
         self._snaps = snaps                # the change test keeps its reference through a replay
@@ -366,6 +473,11 @@ class WindowTracker:
         W.symmetrize(self.S - S0, R, 1.0 / g)
         ry = (self.sy - sy0) / g
         ryy = (self.sc[W.SC_SYY] - syy0) / g
+        # the drift columns are left out (their time origin may have moved since the snapshot; over the
+        # test's second the drift is negligible): zero rows carry no information, the rates do not move
+        R[self.rate_rows, :] = 0.0
+        R[:, self.rate_rows] = 0.0
+        ry[self.rate_rows] = 0.0
         nr = self.n - n0
         lin = (self.a1l, self.a2l)
         yield
@@ -416,6 +528,8 @@ class WindowTracker:
         """
         self.window_start = self.n
         self.converged = False
+        self.theta[5 + self.n_free:] = 0.0     # drift rates start afresh with the new window
+        self.drift_on = False
         self._snaps = []
         self._jobs = [self._research_job(self.n)]
 
@@ -434,6 +548,7 @@ class WindowTracker:
         n0 = max(n_detect, oldest)
         st, S = self._fresh(self.a1l, self.a2l)       # node states fast-forwarded to n0 (no statistics)
         st[self.lay["phi"]:self.lay["phi"] + self.q] = self.ztail
+        st[W.SC_N] = oldest
         chunk = max(16, 4000 // (self.q + 10))
         i = oldest
         while i < n0:
