@@ -37,6 +37,9 @@ FREE_RATES = (0.03, 0.2, 1.0, 5.0)
 CHANGE_LR = 100.0
 #: A move must also exceed this many 1-sigma of the recent fit (undetermined parameters never "move").
 CHANGE_SIGMAS = 5.0
+#: ... and exceed this multiple of the median statistic of the last CHANGE_HISTORY tests.
+CHANGE_JUMP = 3.0
+CHANGE_HISTORY = 8
 #: Smallest relative moves that count as a change (a1, a2, b): below them the window just follows.
 CHANGE_MOVE = {"a1": 0.08, "a2": 0.05, "b": 0.03}
 #: After a detected change alpha is held this long (s): the new window is too short to determine it,
@@ -104,6 +107,7 @@ class WindowTracker:
         self.refit_every = refit_every
         self.test_every = test_every
         self.detect = detect
+        self._lr_recent: list[float] = []   # statistics of the last change tests (no change found)
         self.drift_on = False            # the rates are fitted (switched by the score and Wald tests)
         self.drift_stat = 0.0            # the last test statistic (score when off, Wald when on)
         self.theta = np.zeros(5 + self.n_free + self.n_rate)
@@ -504,7 +508,11 @@ class WindowTracker:
                   "b": math.sqrt(abs(cov[3, 3]) * sigma2) / max(abs(theta[3]), 1e-300)}
         moved = {k: v for k, v in moves.items()
                  if abs(v) > CHANGE_MOVE[k] and abs(v) > CHANGE_SIGMAS * rel_sd[k]}
-        if lr < CHANGE_LR or not moved or lin != (self.a1l, self.a2l):
+        # the test is calibrated against its own recent level: a drifting plant (or a model that is
+        # slightly off) raises the statistic slowly and evenly, a change makes it jump
+        level = float(np.median(self._lr_recent)) if len(self._lr_recent) >= 4 else 0.0
+        if lr < max(CHANGE_LR, CHANGE_JUMP * level) or not moved or lin != (self.a1l, self.a2l):
+            self._lr_recent = (self._lr_recent + [float(lr)])[-CHANGE_HISTORY:]
             return
         self.theta[0] = theta0[0]          # alpha as it was before the change (the refits chased it since)
         self._restart_window(n0, S0, sy0, syy0)
@@ -530,6 +538,7 @@ class WindowTracker:
         self.converged = False
         self.theta[5 + self.n_free:] = 0.0     # drift rates start afresh with the new window
         self.drift_on = False
+        self._lr_recent = []
         self._snaps = []
         self._jobs = [self._research_job(self.n)]
 
