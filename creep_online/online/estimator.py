@@ -65,7 +65,13 @@ DRIFT_COLUMNS = 2
 
 @dataclass
 class OnlineEstimate:
-    """The estimator's current answer. Every number is finite."""
+    """The estimator's current answer. Every number is finite.
+
+    With drift tracking (``track_drift``) alpha and b are the values at the
+    newest re-fit (not window averages); ``b_rate`` and ``alpha_rate`` are their
+    drift per second, 0 while the data show no significant drift, and
+    ``rate_uncertainty`` their 1-sigma (empty while they are 0).
+    """
 
     alpha: float
     a1: float
@@ -91,6 +97,9 @@ class OnlineEstimate:
     shifts: int = 0
     relinearizations: int = 0
     events: list = field(default_factory=list)
+    b_rate: float = 0.0
+    alpha_rate: float = 0.0
+    rate_uncertainty: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         """JSON-ready dict."""
@@ -180,6 +189,8 @@ class OnlineEstimator:
             raise DataError(f"outlier_gate must be >= 0 (0 disables it), got {self.outlier_gate!r}")
         if self.work_units is not None and not (isinstance(self.work_units, int) and self.work_units >= 1):
             raise DataError(f"work_units must be a positive integer or None, got {self.work_units!r}")
+        if not isinstance(self.track_drift, bool):
+            raise DataError(f"track_drift must be True or False, got {self.track_drift!r}")
         if self.horizon_s <= self.dt:
             raise DataError(f"horizon_s ({self.horizon_s}) must exceed dt ({self.dt})")
 
@@ -284,7 +295,9 @@ class OnlineEstimator:
                                   skipped=self.skipped_nonfinite, input_outliers=self.input_outliers)
         a1, a2 = tr.a1, tr.a2
         wn = 1.0 / math.sqrt(a2)
-        std = {k: _finite(v, math.inf) for k, v in tr.fit.std.items() if k != "offset"}
+        std = {k: _finite(tr.fit.std[k], math.inf) for k in ("alpha", "a1", "a2", "b") if k in tr.fit.std}
+        rate_std = {k: _finite(tr.fit.std[k], math.inf) for k in ("b_rate", "alpha_rate")
+                    if tr.drift_on and k in tr.fit.std}
         return OnlineEstimate(
             alpha=_finite(tr.alpha), a1=_finite(a1), a2=_finite(a2), b=_finite(tr.b), phase=self._phase,
             quality=quality, reason=reason, uncertainty=std, t=self.samples * self._h, samples=self.samples,
@@ -294,7 +307,8 @@ class OnlineEstimator:
             noise_rms=_finite(self._noise()),
             residual_rms=_finite(self._residual()), outliers=int(tr.sc[W.SC_OUTLIERS]),
             shifts=int(tr.sc[W.SC_SHIFTS]), relinearizations=tr.relinearizations,
-            input_outliers=self.input_outliers, events=self.events)
+            input_outliers=self.input_outliers, events=self.events, b_rate=_finite(tr.b_rate),
+            alpha_rate=_finite(tr.alpha_rate), rate_uncertainty=rate_std)
 
     def predict_one(self, u: float) -> float | None:
         """Model output at the next sample if u is applied now (no state change); None without a model."""
