@@ -15,7 +15,9 @@ Phases (``OnlineEstimate.phase``):
     exponentially forgotten window cost every ``update_every_s``, a
     likelihood-ratio change test every half second (a change restarts the
     window; ``estimate.events`` lists them), and a re-linearization by replay
-    when the resonance moves.
+    when the resonance moves. With ``track_drift`` the window model also has a
+    linear drift of b and alpha, switched on when the data show it
+    (``estimate.b_rate``, ``alpha_rate``); alpha and b are then the values now.
 
 Work per ``update()``: one sample of O(P^2) statistics (~1 us) plus at most
 ``work_units`` units of background work (a few us each). The default unit count
@@ -639,4 +641,7 @@ def warm_kernels() -> None:
     W.cost_of(tr.theta, *lin, tr.basis.lam, tr.basis.dx, F, fy, 1.0)
     W.symmetrize(tr.S, F, 1.0)
     W.replay(tr.ring, 0, 4, 1, tr.st.copy(), tr.S.copy())
+    W.rereference(tr.st.copy(), tr.S.copy(), float(tr.sc[W.SC_N]) + 1.0)
+    W.drift_coefficients(tr.theta, *lin, tr.basis.lam, tr.basis.dx, np.empty(tr.q + W.ONE))
+    W.drift_score(H, g, np.ones(n), max(n - 2, 1))
     T.WindowTracker  # noqa: B018 - imported for its kernels

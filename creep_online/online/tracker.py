@@ -6,7 +6,11 @@ remembers the sample and advances the states. Heavy work is a queue of
 resumable jobs, one small unit per ``work()`` call:
 
 * **refit** every ``refit_every`` samples: Levenberg-Marquardt steps on the
-  exact window cost over (alpha, ln a1, ln a2, b, offset, free responses);
+  exact window cost over (alpha, ln a1, ln a2, b, offset, free responses and,
+  with drift columns, the rates b'/b and alpha'); the drift columns' time
+  origin moves to the newest sample first, so alpha and b are the values now.
+  The rates are fitted only while a score test (on) / Wald test (off) says
+  the data show drift (``DRIFT_ON``, ``DRIFT_OFF``);
 * **relinearize** when a1 or a2 moved more than ``RELINEARIZE`` from the point
   the resonance states were computed at: the remembered samples are replayed
   into fresh statistics (the nodes fast-forwarded, the resonance states
@@ -14,8 +18,9 @@ resumable jobs, one small unit per ``work()`` call:
 * **change test** every ``test_every`` samples: the statistics of the last
   second are the difference of two snapshots (exact for exponential
   forgetting); a fit on them against the window's estimate is a
-  likelihood-ratio test. A significant, physically large move restarts the
-  window at the change (the event names the parameters and their moves).
+  likelihood-ratio test. A significant, physically large move that is also
+  a jump against the recent tests' level restarts the window at the change
+  (the event names the parameters and their moves).
 """
 from __future__ import annotations
 
@@ -75,18 +80,6 @@ class Fit:
     neff: float = 0.0
     std: dict = field(default_factory=dict)
     sample: int = 0
-
-
-def _gn_gain(H: np.ndarray, g: np.ndarray, idx: np.ndarray) -> float:
-    """Cost reduction g^T H^-1 g of a full Gauss-Newton step over the parameters ``idx`` (0 if singular)."""
-    A = H[np.ix_(idx, idx)]
-    d = np.sqrt(np.abs(np.diag(A))) + 1e-300
-    try:
-        x = np.linalg.solve(A / np.outer(d, d), g[idx] / d)
-    except np.linalg.LinAlgError:
-        return 0.0
-    gain = float(x @ (g[idx] / d))
-    return gain if math.isfinite(gain) else 0.0
 
 
 class WindowTracker:
@@ -312,27 +305,28 @@ class WindowTracker:
         sigma2 = max(cost, 0.0) / max(float(self.sc[W.SC_NEFF]) - theta.size, 1.0)
         if not sigma2 > 0.0:
             return 0.0
-        rates = np.arange(5 + self.n_free, theta.size)
+        r0 = 5 + self.n_free
         if self.drift_on:
-            sub = cov[np.ix_(rates, rates)]
-            if not np.all(np.isfinite(sub)):
-                return 0.0
-            r = theta[rates]
-            try:
-                stat = float(r @ np.linalg.solve(sub, r)) / sigma2
-            except np.linalg.LinAlgError:
-                stat = 0.0
+            r = theta[r0:]
+            if r.size == 1:
+                stat = r[0] * r[0] / cov[r0, r0] / sigma2
+            else:                              # the 2x2 Wald form in closed form
+                c00, c01, c11 = cov[r0, r0], cov[r0, r0 + 1], cov[r0 + 1, r0 + 1]
+                det = c00 * c11 - c01 * c01
+                stat = (c11 * r[0] ** 2 - 2.0 * c01 * r[0] * r[1] + c00 * r[1] ** 2) / det / sigma2 \
+                    if det > 0.0 else 0.0
+            stat = float(stat) if math.isfinite(stat) else 0.0
             plausible = abs(r[0]) < DRIFT_MAX and (r.size < 2 or abs(r[1]) < DRIFT_MAX * abs(theta[0]))
             if stat < DRIFT_OFF or not plausible:
                 self.drift_on = False
-                theta[rates] = 0.0
+                theta[r0:] = 0.0
             return stat
         C = np.empty((self.p, theta.size))
         W.jacobian_coefficients(theta, *lin, self.basis.lam, self.basis.dx, C)
         H, g, _ = W.normal_equations(theta, C, *stats)
         yield
-        both = np.flatnonzero(free != 0.0)
-        stat = (_gn_gain(H, g, np.concatenate([both, rates])) - _gn_gain(H, g, both)) / sigma2
+        stat = W.drift_score(H, g, free, r0) / sigma2
+        yield
         if stat > DRIFT_ON:
             self.drift_on = True
         return stat

@@ -299,6 +299,52 @@ def rereference(st: np.ndarray, S: np.ndarray, n_new: float) -> None:
         sy[r0 + k] -= t * vs[k]
 
 
+@njit(cache=CACHE)
+def _gn_gain(H: np.ndarray, g: np.ndarray, mask: np.ndarray) -> float:
+    """g^T H^-1 g over the parameters with mask != 0 (the cost reduction of a full Gauss-Newton step); 0 if singular."""
+    k = 0
+    for i in range(mask.shape[0]):
+        if mask[i] != 0.0:
+            k += 1
+    idx = np.empty(k, dtype=np.int64)
+    k = 0
+    for i in range(mask.shape[0]):
+        if mask[i] != 0.0:
+            idx[k] = i
+            k += 1
+    A = np.empty((k, k))
+    r = np.empty(k)
+    for a in range(k):
+        r[a] = g[idx[a]] / (math.sqrt(abs(H[idx[a], idx[a]])) + 1e-300)
+    for a in range(k):
+        da = math.sqrt(abs(H[idx[a], idx[a]])) + 1e-300
+        for c in range(k):
+            A[a, c] = H[idx[a], idx[c]] / (da * (math.sqrt(abs(H[idx[c], idx[c]])) + 1e-300))
+    if not (np.all(np.isfinite(A)) and np.all(np.isfinite(r))):
+        return 0.0
+    w = np.linalg.eigvalsh(A)
+    if not w[0] > 1e-13 * w[k - 1]:
+        return 0.0
+    x = np.linalg.solve(A, r)
+    gain = 0.0
+    for a in range(k):
+        gain += x[a] * r[a]
+    return gain if math.isfinite(gain) else 0.0
+
+
+@njit(cache=CACHE)
+def drift_score(H: np.ndarray, g: np.ndarray, free: np.ndarray, r0: int) -> float:
+    """Cost reduction that freeing the drift rates (parameters r0..) would add to a Gauss-Newton step.
+
+    ``free`` marks the parameters fitted without the rates (their entries from r0 on are ignored).
+    """
+    without = free.copy()
+    without[r0:] = 0.0
+    both = without.copy()
+    both[r0:] = 1.0
+    return _gn_gain(H, g, both) - _gn_gain(H, g, without)
+
+
 def layout(q: int, n_free: int, n_rate: int = 0) -> dict:
     """Offsets of the parts of the flat state array ``st`` (one array: fewer arguments per numba call).
 
