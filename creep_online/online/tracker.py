@@ -308,10 +308,13 @@ class WindowTracker:
         r0 = 5 + self.n_free
         if self.drift_on:
             r = theta[r0:]
-            if r.size == 1:
-                stat = r[0] * r[0] / cov[r0, r0] / sigma2
+            sub = cov[r0:, r0:]
+            if not np.all(np.isfinite(sub)):   # singular: the rates are undetermined
+                stat = 0.0
+            elif r.size == 1:
+                stat = r[0] * r[0] / sub[0, 0] / sigma2 if sub[0, 0] > 0.0 else 0.0
             else:                              # the 2x2 Wald form in closed form
-                c00, c01, c11 = cov[r0, r0], cov[r0, r0 + 1], cov[r0 + 1, r0 + 1]
+                c00, c01, c11 = sub[0, 0], sub[0, 1], sub[1, 1]
                 det = c00 * c11 - c01 * c01
                 stat = (c11 * r[0] ** 2 - 2.0 * c01 * r[0] * r[1] + c00 * r[1] ** 2) / det / sigma2 \
                     if det > 0.0 else 0.0
