@@ -169,7 +169,11 @@ def test_abrupt_change_is_detected_named_and_followed(family, seed):
 
 
 def test_tracks_a_drifting_plant():
-    """alpha +20 % and b +10 % over 60 s (square-wave input, 250 Hz)."""
+    """alpha +20 % and b +10 % over 60 s (square-wave input, 250 Hz).
+
+    The drift rates follow it with or without forgetting; a window that neither
+    forgets nor models drift averages over the whole record and lags.
+    """
     h = 4e-3
     t = np.arange(int(75 / h)) * h
     base = CreepModel.from_resonance(0.05, 20.0, 0.2, 1.0)
@@ -180,18 +184,78 @@ def test_tracks_a_drifting_plant():
     y = y + np.random.default_rng(0).normal(0, 0.01 * np.sqrt(np.mean(y**2)), t.size)
     tracking = OnlineEstimator(h, window_s=5.0)
     growing = OnlineEstimator(h, window_s=None)
-    errs, errs_none = [], []
+    static = OnlineEstimator(h, window_s=None, track_drift=False)
+    errs, errs_none, errs_static = [], [], []
     for k0 in range(0, t.size, 2500):
         sl = slice(k0, k0 + 2500)
-        tracking.update_block(u[sl], y[sl])
-        growing.update_block(u[sl], y[sl])
+        for est in (tracking, growing, static):
+            est.update_block(u[sl], y[sl])
         k = min(k0 + 2500, t.size) - 1
         if t[k] > 20:
             errs.append(abs(tracking.estimate.alpha / alpha[k] - 1))
             errs_none.append(abs(growing.estimate.alpha / alpha[k] - 1))
-    assert max(errs) < 0.04
-    assert tracking.estimate.b == pytest.approx(b[-1], rel=0.02)
-    assert max(errs_none) > 2 * max(errs)       # forgetting is what makes it follow
+            errs_static.append(abs(static.estimate.alpha / alpha[k] - 1))
+    assert max(errs) < 0.02
+    assert max(errs_none) < 0.02
+    assert tracking.estimate.b == pytest.approx(b[-1], rel=0.01)
+    assert growing.estimate.b == pytest.approx(b[-1], rel=0.01)
+    assert max(errs_static) > 2 * max(errs)     # neither forgetting nor rates: it lags
+
+
+DRIFT_SEEDS = (100, 101, 102, 103, 104, 105)     # not the bench's seeds 0-19 the drift model was developed on
+
+
+@pytest.fixture(scope="module")
+def drift_runs():
+    """The drift family (alpha +10-20 %, b +5-10 % over 60 s at 2 kHz) on seeds the model was not tuned on."""
+    runs = []
+    for seed in DRIFT_SEEDS:
+        sc = scenarios.make("drift", seed)
+        est = OnlineEstimator(sc.h)
+        est.update_block(sc.u, sc.y)
+        runs.append((sc, est.estimate))
+    return runs
+
+
+def test_drift_family_is_followed(drift_runs):
+    """alpha and b are the values now, not window averages: within tolerance at the end of the drift.
+
+    The damping is another matter in this family: small staircase steps on a large level at
+    40 dB leave a1 with a 1-sigma of 5-10 % even over the whole record, so a miss of a1 or a2
+    must only never read "good".
+    """
+    creep_ok = 0
+    for sc, e in drift_runs:
+        err = _errors(e, sc.final_truth)
+        creep_ok += err["alpha"] < TOL["alpha"] and err["b"] < TOL["b"]
+        if not _within(e, sc.final_truth):
+            assert e.quality != "good", (sc.seed, err, e.reason)
+    assert creep_ok >= 5, [(sc.seed, _errors(e, sc.final_truth)) for sc, e in drift_runs]
+
+
+def test_drift_family_reports_honest_uncertainty_and_rates(drift_runs):
+    """Errors of alpha and b lie within 3 reported sigma; the drift rates have the drift's sign."""
+    honest = 0
+    for sc, e in drift_runs:
+        err = {k: abs(getattr(e, k) - sc.final_truth[k]) for k in ("alpha", "b")}
+        honest += all(err[k] <= 3.0 * e.uncertainty[k] for k in err)
+        if e.rate_uncertainty:                  # the rates are on: both grow in this family
+            assert e.b_rate / e.b > 0 and e.alpha_rate > 0, (sc.seed, e.b_rate, e.alpha_rate)
+            assert set(e.rate_uncertainty) == {"b_rate", "alpha_rate"}
+        else:
+            assert e.b_rate == 0.0 and e.alpha_rate == 0.0
+    assert honest >= 5
+    assert sum(bool(e.rate_uncertainty) for _, e in drift_runs) >= 5
+
+
+def test_no_drift_rates_from_a_single_step(load_cell):
+    """One step cannot tell a drifting gain from creep: the rates stay off and alpha keeps its accuracy."""
+    model, t, u, y = load_cell
+    est = OnlineEstimator(5e-3)
+    est.update_block(u, y)
+    e = est.estimate
+    assert e.b_rate == 0.0 and e.alpha_rate == 0.0 and e.rate_uncertainty == {}
+    assert _within(e, _truth(model), scale=0.25)
 
 
 # ---------------------------------------------------------------------- robustness (issue 14)
@@ -341,8 +405,10 @@ def test_predict_one_and_learn_one(load_cell):
 
 
 def test_parameters_are_stored_verbatim_and_round_trip():
-    est = OnlineEstimator(2e-4, window_s=5.0, alpha0=0.3, alpha_bounds=(0.01, 0.9), work_units=2)
+    est = OnlineEstimator(2e-4, window_s=5.0, alpha0=0.3, alpha_bounds=(0.01, 0.9), work_units=2,
+                          track_drift=False)
     params = est.get_params()
+    assert params["track_drift"] is False
     assert params["dt"] == 2e-4 and params["window_s"] == 5.0 and params["alpha_bounds"] == (0.01, 0.9)
     assert params["update_every_s"] == 0.1 and params["work_units"] == 2
     clone = OnlineEstimator(**params)
@@ -353,7 +419,8 @@ def test_parameters_are_stored_verbatim_and_round_trip():
                                     {"dt": 1e-3, "t_c": -1.0}, {"dt": 1e-3, "window_s": 0.0},
                                     {"dt": 1e-3, "alpha_bounds": (0.9, 0.1)}, {"dt": 1e-3, "t_c_max": -1.0},
                                     {"dt": 1e-3, "update_every_s": 0.0}, {"dt": 1e-3, "work_units": 0},
-                                    {"dt": 1e-3, "outlier_gate": -1.0}, {"dt": "fast"}])
+                                    {"dt": 1e-3, "outlier_gate": -1.0}, {"dt": "fast"},
+                                    {"dt": 1e-3, "track_drift": "yes"}])
 def test_bad_parameters_raise_one_line_errors(kwargs):
     dt = kwargs.pop("dt")
     with pytest.raises(DataError) as info:

@@ -23,14 +23,14 @@ from creep_online.simulate import fractional_integral, simulate
 
 
 def _tracker(model: CreepModel, h: float, lin: tuple[float, float] | None = None, free: bool = False,
-             window_s: float | None = None, history: int = 1 << 14) -> WindowTracker:
+             window_s: float | None = None, history: int = 1 << 14, drift: int = 0) -> WindowTracker:
     """A tracker whose parameters are the model's (linearized at ``lin``, default the model's resonance)."""
     basis = SoeBasis.build(h, top=SOE_TOP)
     a1l, a2l = lin or (model.a1, model.a2)
     theta = np.array([model.alpha, math.log(a1l), math.log(a2l), model.b, 0.0])
     tr = WindowTracker(basis, theta, window_s=window_s, free=free, ring=np.zeros((2, history)), gate=0.0,
                        burst=3, stuck=10**9, alpha_bounds=ONLINE_ALPHA_BOUNDS, refit_every=10**9,
-                       test_every=10**9, detect=False)
+                       test_every=10**9, detect=False, drift=drift)
     tr.theta[1:3] = np.log([model.a1, model.a2])
     tr._coefficients()
     return tr
@@ -167,6 +167,45 @@ def test_replay_reproduces_the_statistics():
     _feed(fresh, u, y)
     assert np.allclose(tr.S, fresh.S, rtol=1e-9, atol=1e-12 * np.abs(fresh.S).max())
     assert np.allclose(tr.sy, fresh.sy, rtol=1e-9, atol=1e-12 * np.abs(fresh.sy).max())
+
+
+def test_rereference_equals_accumulating_with_the_new_time_origin():
+    """Moving the drift columns' time origin in the statistics = accumulating with that origin (m fixed)."""
+    model = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
+    h, n = 1e-3, 3000
+    u = _staircase(n, 300, 4)
+    y = simulate(model, np.arange(n) * h, u)
+    moved = _tracker(model, h, window_s=1.0, drift=2)
+    _feed(moved, u, y)
+    W.rereference(moved.st, moved.S, float(n))
+    direct = _tracker(model, h, window_s=1.0, drift=2)
+    direct.sc[W.SC_TREF] = n
+    _feed(direct, u, y)
+    assert moved.sc[W.SC_TREF] == n
+    assert np.allclose(moved.S, direct.S, rtol=1e-8, atol=1e-11 * np.abs(direct.S).max())
+    assert np.allclose(moved.sy, direct.sy, rtol=1e-8, atol=1e-11 * np.abs(direct.sy).max())
+
+
+def test_drift_columns_model_a_drifting_gain_and_alpha():
+    """With the true rates the window cost of a drifting plant is far below the constant-parameter cost."""
+    base = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
+    h, n = 1e-3, 8000
+    t = np.arange(n) * h
+    u = _staircase(n, 400, 5)
+    alpha_dot, beta = 0.1 * 0.003, 0.002          # alpha +0.3 %/s, b +0.2 %/s
+    tau = t - t[-1]
+    y = simulate_varying(t, u, 0.1 * (1 + 0.003 * tau), base.a1, base.a2, 1 + beta * tau)
+    tr = _tracker(base, h, drift=2)
+    _feed(tr, u, y)
+    W.rereference(tr.st, tr.S, float(n - 1))
+    F = np.empty((tr.p, tr.p))
+    W.symmetrize(tr.S, F, 1.0 / tr.sc[W.SC_G])
+    fy, fyy = tr.sy / tr.sc[W.SC_G], tr.sc[W.SC_SYY] / tr.sc[W.SC_G]
+    theta = tr.theta.copy()
+    constant = W.cost_of(theta, tr.a1l, tr.a2l, tr.basis.lam, tr.basis.dx, F, fy, fyy)
+    theta[-2:] = beta, alpha_dot
+    drifting = W.cost_of(theta, tr.a1l, tr.a2l, tr.basis.lam, tr.basis.dx, F, fy, fyy)
+    assert drifting < 0.01 * constant, (drifting, constant)
 
 
 @pytest.mark.parametrize("alpha, fn, zeta, b, fs, seconds", [(0.3, 25.0, 0.2, 1.2, 2000, 0.3),

@@ -132,7 +132,8 @@ def _report(est: OnlineEstimator, latency: dict, extra: dict) -> dict:
            "zeta": e.zeta, "offset": e.offset, "uncertainty": e.uncertainty, "skipped": est.skipped_nonfinite,
            "gaps": est.gaps, "alpha_updates": est.alpha_updates, "divergences": est.divergences,
            "outliers": e.outliers, "input_outliers": e.input_outliers, "noise_rms": e.noise_rms,
-           "residual_rms": e.residual_rms, "events": e.events, "t": e.t, "dt": est.dt}
+           "residual_rms": e.residual_rms, "events": e.events, "t": e.t, "dt": est.dt,
+           "b_rate": e.b_rate, "alpha_rate": e.alpha_rate}
     out.update(extra)
     return out
 

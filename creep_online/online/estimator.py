@@ -15,7 +15,9 @@ Phases (``OnlineEstimate.phase``):
     exponentially forgotten window cost every ``update_every_s``, a
     likelihood-ratio change test every half second (a change restarts the
     window; ``estimate.events`` lists them), and a re-linearization by replay
-    when the resonance moves.
+    when the resonance moves. With ``track_drift`` the window model also has a
+    linear drift of b and alpha, switched on when the data show it
+    (``estimate.b_rate``, ``alpha_rate``); alpha and b are then the values now.
 
 Work per ``update()``: one sample of O(P^2) statistics (~1 us) plus at most
 ``work_units`` units of background work (a few us each). The default unit count
@@ -57,11 +59,19 @@ DETERMINED = {"alpha": 0.01, "b": 0.015, "a1": 0.025, "a2": 0.025}
 FLOOR_RATIO = 2.0
 #: An input sample further than this many input ranges from the last accepted one is a glitch.
 INPUT_GATE = 20.0
+#: Drift columns with ``track_drift``: 1 the gain's rate, 2 the gain's and alpha's.
+DRIFT_COLUMNS = 2
 
 
 @dataclass
 class OnlineEstimate:
-    """The estimator's current answer. Every number is finite."""
+    """The estimator's current answer. Every number is finite.
+
+    With drift tracking (``track_drift``) alpha and b are the values at the
+    newest re-fit (not window averages); ``b_rate`` and ``alpha_rate`` are their
+    drift per second, 0 while the data show no significant drift, and
+    ``rate_uncertainty`` their 1-sigma (empty while they are 0).
+    """
 
     alpha: float
     a1: float
@@ -87,6 +97,9 @@ class OnlineEstimate:
     shifts: int = 0
     relinearizations: int = 0
     events: list = field(default_factory=list)
+    b_rate: float = 0.0
+    alpha_rate: float = 0.0
+    rate_uncertainty: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         """JSON-ready dict."""
@@ -112,6 +125,8 @@ class OnlineEstimator:
     burst_s:        longest run of gated outputs treated as outliers (s); longer is a shift.
     detect_changes: run the change test (likelihood ratio every 0.5 s).
     work_units:     background units per update() (None: max(1, floor(dt / 100 us))).
+    track_drift:    model a linear drift of b and alpha inside the window (two more linear parameters);
+                    the estimate is then the value at the newest sample, with ``b_rate``, ``alpha_rate``.
     """
 
     def __init__(self, dt: float, *, window_s: float | None = 10.0, update_every_s: float = 0.1,
@@ -119,7 +134,7 @@ class OnlineEstimator:
                  horizon_s: float = DEFAULT_HORIZON_S, soe_dx: float = DEFAULT_DX,
                  alpha_bounds: tuple[float, float] = ONLINE_ALPHA_BOUNDS, t_c_max: float = 2.0,
                  outlier_gate: float = 8.0, burst_s: float = 0.002, detect_changes: bool = True,
-                 work_units: int | None = None) -> None:
+                 work_units: int | None = None, track_drift: bool = True) -> None:
         self.dt = dt
         self.window_s = window_s
         self.update_every_s = update_every_s
@@ -133,6 +148,7 @@ class OnlineEstimator:
         self.burst_s = burst_s
         self.detect_changes = detect_changes
         self.work_units = work_units
+        self.track_drift = track_drift
         self._validate()
         self.reset()
 
@@ -173,6 +189,8 @@ class OnlineEstimator:
             raise DataError(f"outlier_gate must be >= 0 (0 disables it), got {self.outlier_gate!r}")
         if self.work_units is not None and not (isinstance(self.work_units, int) and self.work_units >= 1):
             raise DataError(f"work_units must be a positive integer or None, got {self.work_units!r}")
+        if not isinstance(self.track_drift, bool):
+            raise DataError(f"track_drift must be True or False, got {self.track_drift!r}")
         if self.horizon_s <= self.dt:
             raise DataError(f"horizon_s ({self.horizon_s}) must exceed dt ({self.dt})")
 
@@ -277,7 +295,9 @@ class OnlineEstimator:
                                   skipped=self.skipped_nonfinite, input_outliers=self.input_outliers)
         a1, a2 = tr.a1, tr.a2
         wn = 1.0 / math.sqrt(a2)
-        std = {k: _finite(v, math.inf) for k, v in tr.fit.std.items() if k != "offset"}
+        std = {k: _finite(tr.fit.std[k], math.inf) for k in ("alpha", "a1", "a2", "b") if k in tr.fit.std}
+        rate_std = {k: _finite(tr.fit.std[k], math.inf) for k in ("b_rate", "alpha_rate")
+                    if tr.drift_on and k in tr.fit.std}
         return OnlineEstimate(
             alpha=_finite(tr.alpha), a1=_finite(a1), a2=_finite(a2), b=_finite(tr.b), phase=self._phase,
             quality=quality, reason=reason, uncertainty=std, t=self.samples * self._h, samples=self.samples,
@@ -287,7 +307,8 @@ class OnlineEstimator:
             noise_rms=_finite(self._noise()),
             residual_rms=_finite(self._residual()), outliers=int(tr.sc[W.SC_OUTLIERS]),
             shifts=int(tr.sc[W.SC_SHIFTS]), relinearizations=tr.relinearizations,
-            input_outliers=self.input_outliers, events=self.events)
+            input_outliers=self.input_outliers, events=self.events, b_rate=_finite(tr.b_rate),
+            alpha_rate=_finite(tr.alpha_rate), rate_uncertainty=rate_std)
 
     def predict_one(self, u: float) -> float | None:
         """Model output at the next sample if u is applied now (no state change); None without a model."""
@@ -497,7 +518,8 @@ class OnlineEstimator:
         self._tracker = WindowTracker(
             self.basis, theta, window_s=self.window_s, free=bool(self._u_ref), ring=self._ring, work=self._hist_work,
             gate=0.0, burst=self._burst, stuck=max(10, int(round(0.05 / self._h))), alpha_bounds=(lo, hi),
-            refit_every=self._refit_every, test_every=self._test_every, detect=bool(self.detect_changes))
+            refit_every=self._refit_every, test_every=self._test_every, detect=bool(self.detect_changes),
+            drift=DRIFT_COLUMNS if self.track_drift else 0)
         if self.frozen:
             self._tracker.sc[W.SC_ACC] = 0.0
         self._tracker.fitting = False
@@ -617,4 +639,7 @@ def warm_kernels() -> None:
     W.cost_of(tr.theta, *lin, tr.basis.lam, tr.basis.dx, F, fy, 1.0)
     W.symmetrize(tr.S, F, 1.0)
     W.replay(tr.ring, 0, 4, 1, tr.st.copy(), tr.S.copy())
+    W.rereference(tr.st.copy(), tr.S.copy(), float(tr.sc[W.SC_N]) + 1.0)
+    W.drift_coefficients(tr.theta, *lin, tr.basis.lam, tr.basis.dx, np.empty(tr.q + W.ONE))
+    W.drift_score(H, g, np.ones(n), max(n - 2, 1))
     T.WindowTracker  # noqa: B018 - imported for its kernels

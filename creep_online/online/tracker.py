@@ -6,7 +6,11 @@ remembers the sample and advances the states. Heavy work is a queue of
 resumable jobs, one small unit per ``work()`` call:
 
 * **refit** every ``refit_every`` samples: Levenberg-Marquardt steps on the
-  exact window cost over (alpha, ln a1, ln a2, b, offset, free responses);
+  exact window cost over (alpha, ln a1, ln a2, b, offset, free responses and,
+  with drift columns, the rates b'/b and alpha'); the drift columns' time
+  origin moves to the newest sample first, so alpha and b are the values now.
+  The rates are fitted only while a score test (on) / Wald test (off) says
+  the data show drift (``DRIFT_ON``, ``DRIFT_OFF``);
 * **relinearize** when a1 or a2 moved more than ``RELINEARIZE`` from the point
   the resonance states were computed at: the remembered samples are replayed
   into fresh statistics (the nodes fast-forwarded, the resonance states
@@ -14,8 +18,9 @@ resumable jobs, one small unit per ``work()`` call:
 * **change test** every ``test_every`` samples: the statistics of the last
   second are the difference of two snapshots (exact for exponential
   forgetting); a fit on them against the window's estimate is a
-  likelihood-ratio test. A significant, physically large move restarts the
-  window at the change (the event names the parameters and their moves).
+  likelihood-ratio test. A significant, physically large move that is also
+  a jump against the recent tests' level restarts the window at the change
+  (the event names the parameters and their moves).
 """
 from __future__ import annotations
 
@@ -37,6 +42,9 @@ FREE_RATES = (0.03, 0.2, 1.0, 5.0)
 CHANGE_LR = 100.0
 #: A move must also exceed this many 1-sigma of the recent fit (undetermined parameters never "move").
 CHANGE_SIGMAS = 5.0
+#: ... and exceed this multiple of the median statistic of the last CHANGE_HISTORY tests.
+CHANGE_JUMP = 3.0
+CHANGE_HISTORY = 8
 #: Smallest relative moves that count as a change (a1, a2, b): below them the window just follows.
 CHANGE_MOVE = {"a1": 0.08, "a2": 0.05, "b": 0.03}
 #: After a detected change alpha is held this long (s): the new window is too short to determine it,
@@ -55,7 +63,18 @@ TEST_STEPS = 4
 UNIT_MACS = 40000
 #: Jobs that run before the long ones (``WindowTracker._next_job``).
 PERIODIC_JOBS = ("_refit_job", "_change_job")
-#: theta = [alpha, ln a1, ln a2, b, offset, free-response weights...]
+#: The drift rates enter the fit when they would lower the window cost by this many noise variances
+#: (score test at rates zero; chi-square with 2 degrees of freedom: p ~ 4e-6), and leave it when their
+#: Wald statistic falls below DRIFT_OFF. Where the data cannot tell drift from creep (a single step)
+#: the rates stay out and the fit is the constant-parameter one.
+DRIFT_ON = 25.0
+DRIFT_OFF = 9.0
+#: The test waits until the window is converged and spans this long (s): drift is slow, and early
+#: misfit must not pass for it.
+DRIFT_MIN_S = 5.0
+#: Largest plausible drift, relative to the parameter (1/s): faster "drift" is misfit (the rates go off).
+DRIFT_MAX = 0.02
+#: theta = [alpha, ln a1, ln a2, b, offset, free-response weights..., b'/b, alpha'] (the last two with drift)
 
 
 @dataclass
@@ -74,12 +93,14 @@ class WindowTracker:
 
     def __init__(self, basis: SoeBasis, theta: np.ndarray, *, window_s: float | None, free: bool,
                  ring: np.ndarray, gate: float, burst: int, stuck: int, alpha_bounds: tuple[float, float],
-                 refit_every: int, test_every: int, detect: bool, work: np.ndarray | None = None) -> None:
+                 refit_every: int, test_every: int, detect: bool, work: np.ndarray | None = None,
+                 drift: int = 0) -> None:
         self.basis = basis
         self.h = basis.h
         self.q = basis.size
         self.n_free = len(FREE_RATES) if free else 0
-        self.lay = W.layout(self.q, self.n_free)
+        self.n_rate = int(drift)         # drift columns: 0 none, 1 gain rate, 2 gain and alpha rates
+        self.lay = W.layout(self.q, self.n_free, self.n_rate)
         self.p = self.lay["p"]
         #: samples per light unit of a replay (each costs the P^2 statistics update and the states)
         self.replay_chunk = max(2, UNIT_MACS // (self.p * self.p + 4 * self.q))
@@ -87,7 +108,10 @@ class WindowTracker:
         self.refit_every = refit_every
         self.test_every = test_every
         self.detect = detect
-        self.theta = np.zeros(5 + self.n_free)
+        self._lr_recent: list[float] = []   # statistics of the last change tests (no change found)
+        self.drift_on = False            # the rates are fitted (switched by the score and Wald tests)
+        self.drift_stat = 0.0            # the last test statistic (score when off, Wald when on)
+        self.theta = np.zeros(5 + self.n_free + self.n_rate)
         self.theta[:len(theta)] = theta
         self.forget = 1.0 if window_s is None else math.exp(-self.h / window_s)
         self.ring = ring                 # (2, H) history, owned by the caller (pre-faulted)
@@ -141,6 +165,21 @@ class WindowTracker:
         return float(self.theta[4])
 
     @property
+    def b_rate(self) -> float:
+        """Drift of b (per second) at the last fit; 0 without drift columns."""
+        return float(self.theta[5 + self.n_free] * self.theta[3]) if self.n_rate > 0 else 0.0
+
+    @property
+    def alpha_rate(self) -> float:
+        """Drift of alpha (per second) at the last fit; 0 without the alpha drift column."""
+        return float(self.theta[6 + self.n_free]) if self.n_rate > 1 else 0.0
+
+    @property
+    def rate_rows(self) -> slice:
+        """Rows of the drift columns in phi, S and sy."""
+        return slice(self.p - self.n_rate, self.p)
+
+    @property
     def n(self) -> int:
         """Samples fed."""
         return int(self.sc[W.SC_N])
@@ -156,6 +195,8 @@ class WindowTracker:
         st[W.SC_FORGET] = self.forget
         st[W.SC_A1L] = a1l
         st[W.SC_A2L] = a2l
+        st[W.SC_H] = self.h
+        st[W.SC_NR] = self.n_rate
         co = st[lay["co"]:lay["ztail"]]
         co[:q] = self.basis.decay
         co[q:2 * q] = self.basis.gain
@@ -163,7 +204,7 @@ class WindowTracker:
         co[2 * q + 18:] = np.exp(-np.asarray(FREE_RATES[:self.n_free]) * self.h)
         phi = st[lay["phi"]:lay["m"]]
         phi[q + W.ONE] = 1.0
-        phi[q + W.FREE:] = 1.0
+        phi[q + W.FREE:q + W.FREE + self.n_free] = 1.0
         return st, np.zeros((self.p, self.p))
 
     def _install(self, st: np.ndarray, S: np.ndarray) -> None:
@@ -174,7 +215,8 @@ class WindowTracker:
         self.m = st[lay["m"]:lay["sy"]]
         self.sy = st[lay["sy"]:lay["co"]]
         self.co = st[lay["co"]:lay["ztail"]]
-        self.ztail = st[lay["ztail"]:lay["size"]]
+        self.ztail = st[lay["ztail"]:lay["md"]]
+        self.md = st[lay["md"]:lay["size"]]
         self.a1l, self.a2l = float(st[W.SC_A1L]), float(st[W.SC_A2L])
         self._coefficients()
         self._snaps = []
@@ -182,6 +224,8 @@ class WindowTracker:
     def _coefficients(self) -> None:
         """The model coefficients for theta, and what the gate needs to know of the estimate."""
         W.full_coefficients(self.theta, self.a1l, self.a2l, self.basis.lam, self.basis.dx, self.m)
+        if self.n_rate > 1:
+            W.drift_coefficients(self.theta, self.a1l, self.a2l, self.basis.lam, self.basis.dx, self.md)
         self.sc[W.SC_BABS] = abs(self.b)
         settle = 8.0 * self.a2 / self.a1
         self.sc[W.SC_HOLD] = min(max(20.0, 2.0 * settle / self.h), 2.0 / self.h)
@@ -259,12 +303,58 @@ class WindowTracker:
             pass
 
     def _true_stats(self) -> Generator:
-        """Full symmetric true-scale copy of the window statistics (one unit)."""
+        """Full symmetric true-scale copy of the window statistics (one unit).
+
+        The drift columns' time origin moves to the newest sample first, so the
+        fit's alpha and b are the values now, not window averages.
+        """
+        W.rereference(self.st, self.S, float(self.sc[W.SC_N]))
         g = self.sc[W.SC_G]
         F = np.empty((self.p, self.p))
         W.symmetrize(self.S, F, 1.0 / g)
         yield
         return F, self.sy / g, self.sc[W.SC_SYY] / g
+
+    def _drift_test(self, theta: np.ndarray, free: np.ndarray, cov: np.ndarray, stats: tuple, lin: tuple,
+                    cost: float) -> Generator:
+        """Switch the drift rates on (score test) or off (Wald test); returns the statistic (one unit when off).
+
+        Off: the Gauss-Newton cost reduction that freeing the rates would bring,
+        over the noise variance (``DRIFT_ON``). On: the rates' Wald statistic
+        (``DRIFT_OFF``); switching off zeroes them (the next re-fit moves alpha
+        and b back to the constant-parameter fit).
+        """
+        sigma2 = max(cost, 0.0) / max(float(self.sc[W.SC_NEFF]) - theta.size, 1.0)
+        if not sigma2 > 0.0:
+            return 0.0
+        r0 = 5 + self.n_free
+        if self.drift_on:
+            r = theta[r0:]
+            sub = cov[r0:, r0:]
+            if not np.all(np.isfinite(sub)):   # singular: the rates are undetermined
+                stat = 0.0
+            elif r.size == 1:
+                stat = r[0] * r[0] / sub[0, 0] / sigma2 if sub[0, 0] > 0.0 else 0.0
+            else:                              # the 2x2 Wald form in closed form
+                c00, c01, c11 = sub[0, 0], sub[0, 1], sub[1, 1]
+                det = c00 * c11 - c01 * c01
+                stat = (c11 * r[0] ** 2 - 2.0 * c01 * r[0] * r[1] + c00 * r[1] ** 2) / det / sigma2 \
+                    if det > 0.0 else 0.0
+            stat = float(stat) if math.isfinite(stat) else 0.0
+            plausible = abs(r[0]) < DRIFT_MAX and (r.size < 2 or abs(r[1]) < DRIFT_MAX * abs(theta[0]))
+            if stat < DRIFT_OFF or not plausible:
+                self.drift_on = False
+                theta[r0:] = 0.0
+            return stat
+        C = np.empty((self.p, theta.size))
+        W.jacobian_coefficients(theta, *lin, self.basis.lam, self.basis.dx, C)
+        H, g, _ = W.normal_equations(theta, C, *stats)
+        yield
+        stat = W.drift_score(H, g, free, r0) / sigma2
+        yield
+        if stat > DRIFT_ON:
+            self.drift_on = True
+        return stat
 
     def _lm(self, theta: np.ndarray, free: np.ndarray, mu: float, stats: tuple, lin: tuple,
             out: np.ndarray) -> Generator:
@@ -287,6 +377,9 @@ class WindowTracker:
         free = np.ones(self.theta.size)
         if self.window_start and (self.n - self.window_start) * self.h < ALPHA_HOLD_S:
             free[0] = 0.0                  # a short window after a change does not determine alpha
+            free[5 + self.n_free:] = 0.0   # nor any drift
+        if not self.drift_on:
+            free[5 + self.n_free:] = 0.0
         cov = np.empty((self.theta.size, self.theta.size))
         out = np.empty(3)
         theta = self.theta.copy()
@@ -296,6 +389,10 @@ class WindowTracker:
                 break
         W.covariance(self._last_h, free, cov)
         yield
+        span = (self.n - self.window_start) * self.h
+        if self.n_rate and free[0] != 0.0 and np.all(np.isfinite(theta)) and self.converged \
+                and span >= DRIFT_MIN_S:
+            self.drift_stat = yield from self._drift_test(theta, free, cov, stats, lin, out[1])
         yield from self._accept(theta, cov, float(out[1]), lin)
 
     def _accept(self, theta: np.ndarray, cov: np.ndarray, cost: float, lin: tuple) -> Generator:
@@ -317,10 +414,13 @@ class WindowTracker:
         yield
         neff = float(self.sc[W.SC_NEFF])
         sigma2 = max(cost, 0.0) / max(neff - len(new), 1.0)
-        var = cov.diagonal()[:5].tolist()
+        var = cov.diagonal().tolist()
         sd = [math.sqrt(abs(v) * sigma2) if math.isfinite(v) else math.inf for v in var]
         a1, a2 = math.exp(new[1]), math.exp(new[2])
         std = {"alpha": sd[0], "a1": sd[1] * a1, "a2": sd[2] * a2, "b": sd[3], "offset": sd[4]}
+        for k, name in enumerate(("b_rate", "alpha_rate")[:self.n_rate]):
+            v = sd[5 + self.n_free + k]
+            std[name] = (v * abs(new[3]) if k == 0 else v) if self.drift_on else math.inf
         self.fit = Fit(theta=theta, cost=cost, neff=neff, std=std, sample=self.n)
         if abs(a1 / self.a1l - 1) > RELINEARIZE or abs(a2 / self.a2l - 1) > RELINEARIZE:
             if not any(j.__name__ == "_relinearize_job" for j in self._jobs):
@@ -351,7 +451,14 @@ class WindowTracker:
         if oldest > 0:
             skip = max(skip, int(16.0 * a2 / a1 / self.h))
         phi[:self.q] = self.ztail
-        phi[self.q + W.FREE:] = np.exp(-np.asarray(FREE_RATES[:self.n_free]) * self.h * oldest)
+        phi[self.q + W.FREE:self.q + W.FREE + self.n_free] = \
+            np.exp(-np.asarray(FREE_RATES[:self.n_free]) * self.h * oldest)
+        st[W.SC_N] = oldest                # the drift columns' time, and their coefficients at the new point
+        st[W.SC_TREF] = self.sc[W.SC_TREF]
+        if self.n_rate:
+            W.full_coefficients(self.theta, a1, a2, self.basis.lam, self.basis.dx, st[lay["m"]:lay["sy"]])
+            if self.n_rate > 1:
+                W.drift_coefficients(self.theta, a1, a2, self.basis.lam, self.basis.dx, st[lay["md"]:lay["size"]])
         chunk = self.replay_chunk
         snaps: list[tuple] = []
         yield
@@ -375,7 +482,7 @@ class WindowTracker:
         for part in ("phi", "sy", "co"):
             new[lay[part]:lay[part] + (lay[{"phi": "m", "sy": "co", "co": "ztail"}[part]] - lay[part])] = \
                 st[lay[part]:lay[{"phi": "m", "sy": "co", "co": "ztail"}[part]]]
-        for k in (W.SC_G, W.SC_SYY, W.SC_NEFF, W.SC_A1L, W.SC_A2L):
+        for k in (W.SC_G, W.SC_SYY, W.SC_NEFF, W.SC_A1L, W.SC_A2L, W.SC_TREF):
             new[k] = st[k]
         self._install(new, S)
         self._snaps = snaps                # the change test keeps its reference through a replay
@@ -402,6 +509,11 @@ class WindowTracker:
         W.symmetrize(self.S - S0, R, 1.0 / g)
         ry = (self.sy - sy0) / g
         ryy = (self.sc[W.SC_SYY] - syy0) / g
+        # the drift columns are left out (their time origin may have moved since the snapshot; over the
+        # test's second the drift is negligible): zero rows carry no information, the rates do not move
+        R[self.rate_rows, :] = 0.0
+        R[:, self.rate_rows] = 0.0
+        ry[self.rate_rows] = 0.0
         nr = self.n - n0
         lin = (self.a1l, self.a2l)
         yield
@@ -428,7 +540,11 @@ class WindowTracker:
                   "b": math.sqrt(abs(cov[3, 3]) * sigma2) / max(abs(theta[3]), 1e-300)}
         moved = {k: v for k, v in moves.items()
                  if abs(v) > CHANGE_MOVE[k] and abs(v) > CHANGE_SIGMAS * rel_sd[k]}
-        if lr < CHANGE_LR or not moved or lin != (self.a1l, self.a2l):
+        # the test is calibrated against its own recent level: a drifting plant (or a model that is
+        # slightly off) raises the statistic slowly and evenly, a change makes it jump
+        level = float(np.median(self._lr_recent)) if len(self._lr_recent) >= 4 else 0.0
+        if lr < max(CHANGE_LR, CHANGE_JUMP * level) or not moved or lin != (self.a1l, self.a2l):
+            self._lr_recent = (self._lr_recent + [float(lr)])[-CHANGE_HISTORY:]
             return
         self.theta[0] = theta0[0]          # alpha as it was before the change (the refits chased it since)
         self._restart_window(n0, S0, sy0, syy0)
@@ -452,6 +568,9 @@ class WindowTracker:
         """
         self.window_start = self.n
         self.converged = False
+        self.theta[5 + self.n_free:] = 0.0     # drift rates start afresh with the new window
+        self.drift_on = False
+        self._lr_recent = []
         self._snaps = []
         self._jobs = [self._research_job(self.n)]
 
@@ -470,6 +589,7 @@ class WindowTracker:
         n0 = max(n_detect, oldest)
         st, S = self._fresh(self.a1l, self.a2l)       # node states fast-forwarded to n0 (no statistics)
         st[self.lay["phi"]:self.lay["phi"] + self.q] = self.ztail
+        st[W.SC_N] = oldest
         chunk = max(16, UNIT_MACS // (10 * self.q))        # node states only: ~10 flops per node
         i = oldest
         while i < n0:

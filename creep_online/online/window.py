@@ -10,9 +10,24 @@ none of alpha, b or the offset, and on the resonance only through a fixed
 ``phi[Q+2], phi[Q+3]``    ``dx/da1`` (sensitivity states)
 ``phi[Q+4], phi[Q+5]``    ``dx/da2``
 ``phi[Q+6]``              1 (the output offset)
-``phi[Q+7:]``             free responses ``exp(-mu_j t)`` (streams that start in
+``phi[Q+7:Q+7+M]``        free responses ``exp(-mu_j t)`` (streams that start in
                           operation: the unknown past input's fading memory)
+``phi[P-R:]``             drift regressors (R = 0-2): ``tau * pm`` and ``tau * pd``
+                          with ``tau = t - t_ref`` (s, <= 0 inside the window after
+                          a re-reference), ``pm`` the model part of the prediction
+                          and ``pd`` its alpha-derivative at the current estimate
 ========================  =====================================================
+
+Drift: with the gain and alpha moving linearly inside the window, ``b(t) =
+b (1 + beta tau)`` and ``alpha(t) = alpha + alpha_dot tau``, the output is to
+first order ``phi . m + beta tau pm + alpha_dot tau pd``. The two drift
+columns are *pseudo-linear* regressors (``pm``, ``pd`` are computed with the
+estimate of their sample's time, as in extended least squares): they cost two
+statistics columns and one extra dot product per sample, and beta (relative
+gain rate, 1/s) and alpha_dot (1/s) are two more linear parameters. Moving the
+reference ``t_ref`` to the newest sample (``rereference``, at every re-fit)
+makes ``alpha`` and ``b`` in theta the values at the newest sample, not the
+window averages.
 
 By partial fractions (``kernels.model_coefficients``) the exact output is
 ``b (zeta . v_z(alpha, a) + x(a) . v_x(alpha, a))``; with ``x(a) = x(al) +
@@ -83,6 +98,9 @@ SC_TSCALE = 37    # |b du| of the last input change: how far a mismatched model 
 SC_ULAST = 38     # the previous input
 SC_REPRATE = 39   # long-run rate of outputs exactly equal to the previous one (~0 for a noisy sensor)
 SC_REPK = 40      # smoothing factor of that rate (~10 s)
+SC_TREF = 41      # sample index at which the drift regressors' time tau is zero
+SC_H = 42         # sampling step (s)
+SC_NR = 43        # number of drift columns R (0, 1: gain rate, 2: gain and alpha rates)
 SC_SIZE = 44
 
 
@@ -211,20 +229,139 @@ def full_coefficients(theta: np.ndarray, a1l: float, a2l: float, lam: np.ndarray
         m[i] = theta[4 + i - q - ONE]
 
 
-def layout(q: int, n_free: int) -> dict:
+@njit(cache=CACHE)
+def drift_coefficients(theta: np.ndarray, a1l: float, a2l: float, lam: np.ndarray, dx: float,
+                       md: np.ndarray) -> None:
+    """md = b dk/dalpha over the model part (Q + 6 entries): the alpha-derivative of the model output's coefficients."""
+    q = lam.shape[0]
+    k = np.zeros(q + ONE)
+    dk = np.zeros(q + ONE)
+    coefficients(theta[0], math.exp(theta[1]), math.exp(theta[2]), a1l, a2l, lam, dx, k, dk)
+    b = theta[3]
+    for i in range(q + ONE):
+        md[i] = b * dk[i]
+
+
+@njit(cache=CACHE)
+def rereference(st: np.ndarray, S: np.ndarray, n_new: float) -> None:
+    """Move the drift columns' time origin to sample ``n_new`` in the statistics (S, sy).
+
+    A drift column is ``tau * h`` with the helper ``h = phi . v`` (``v`` = the
+    model coefficients m, or md for alpha); moving the origin by T seconds is
+    ``tau * h - T h``, a linear map of the regressor, applied here to S and sy
+    with the helper statistics ``S v`` computed from the current v (the same
+    pseudo-linear approximation as the columns themselves).
+    """
+    sc = st[:SC_SIZE]
+    nr = int(sc[SC_NR])
+    t = (n_new - sc[SC_TREF]) * sc[SC_H]
+    sc[SC_TREF] = n_new
+    if nr == 0 or t == 0.0:
+        return
+    q = int(sc[SC_NQ])
+    p = q + FREE + int(sc[SC_NM]) + nr
+    o = SC_SIZE
+    m = st[o + p:o + 2 * p]
+    sy = st[o + 2 * p:o + 3 * p]
+    c0 = o + 3 * p
+    nco = 2 * q + 18 + int(sc[SC_NM])
+    md = st[c0 + nco + q:c0 + nco + 2 * q + ONE]
+    nv = q + ONE
+    V = np.zeros((nv, nr))
+    V[:, 0] = m[:nv]
+    if nr > 1:
+        V[:, 1] = md
+    G = np.zeros((p, nr))            # full(S) @ V, from the upper triangle
+    for i in range(p):
+        for j in range(nv):
+            sij = S[i, j] if i <= j else S[j, i]
+            for k in range(nr):
+                G[i, k] += sij * V[j, k]
+    vg = np.zeros((nr, nr))
+    for k in range(nr):
+        for l in range(nr):
+            for j in range(nv):
+                vg[k, l] += V[j, k] * G[j, l]
+    r0 = p - nr
+    for l in range(nr):
+        j = r0 + l
+        for i in range(j + 1):
+            v = S[i, j] - t * G[i, l]
+            if i >= r0:
+                k = i - r0
+                v += -t * G[j, k] + t * t * vg[k, l]
+            S[i, j] = v
+            S[j, i] = v                  # the statistics are kept whole (see _accumulate)
+    vs = np.zeros(nr)
+    for k in range(nr):
+        for j in range(nv):
+            vs[k] += V[j, k] * sy[j]
+    for k in range(nr):
+        sy[r0 + k] -= t * vs[k]
+
+
+@njit(cache=CACHE)
+def _gn_gain(H: np.ndarray, g: np.ndarray, mask: np.ndarray) -> float:
+    """g^T H^-1 g over the parameters with mask != 0 (the cost reduction of a full Gauss-Newton step); 0 if singular."""
+    k = 0
+    for i in range(mask.shape[0]):
+        if mask[i] != 0.0:
+            k += 1
+    idx = np.empty(k, dtype=np.int64)
+    k = 0
+    for i in range(mask.shape[0]):
+        if mask[i] != 0.0:
+            idx[k] = i
+            k += 1
+    A = np.empty((k, k))
+    r = np.empty(k)
+    for a in range(k):
+        r[a] = g[idx[a]] / (math.sqrt(abs(H[idx[a], idx[a]])) + 1e-300)
+    for a in range(k):
+        da = math.sqrt(abs(H[idx[a], idx[a]])) + 1e-300
+        for c in range(k):
+            A[a, c] = H[idx[a], idx[c]] / (da * (math.sqrt(abs(H[idx[c], idx[c]])) + 1e-300))
+    if not (np.all(np.isfinite(A)) and np.all(np.isfinite(r))):
+        return 0.0
+    w = np.linalg.eigvalsh(A)
+    if not w[0] > 1e-13 * w[k - 1]:
+        return 0.0
+    x = np.linalg.solve(A, r)
+    gain = 0.0
+    for a in range(k):
+        gain += x[a] * r[a]
+    return gain if math.isfinite(gain) else 0.0
+
+
+@njit(cache=CACHE)
+def drift_score(H: np.ndarray, g: np.ndarray, free: np.ndarray, r0: int) -> float:
+    """Cost reduction that freeing the drift rates (parameters r0..) would add to a Gauss-Newton step.
+
+    ``free`` marks the parameters fitted without the rates (their entries from r0 on are ignored).
+    """
+    without = free.copy()
+    without[r0:] = 0.0
+    both = without.copy()
+    both[r0:] = 1.0
+    return _gn_gain(H, g, both) - _gn_gain(H, g, without)
+
+
+def layout(q: int, n_free: int, n_rate: int = 0) -> dict:
     """Offsets of the parts of the flat state array ``st`` (one array: fewer arguments per numba call).
 
     ``st`` = [scalars (SC_SIZE) | regressor phi (P) | coefficients m (P) | sy (P) |
     co (2Q + 18 + M: node decays and gains, resonance, free-response decays) |
-    ztail (Q: node states before the oldest remembered sample)].
+    ztail (Q: node states before the oldest remembered sample) |
+    md (Q + 6: alpha-derivative of the model coefficients, b dk/dalpha)].
     """
-    p = q + FREE + n_free
+    p = q + FREE + n_free + n_rate
     o = {"sc": 0, "phi": SC_SIZE}
     o["m"] = o["phi"] + p
     o["sy"] = o["m"] + p
     o["co"] = o["sy"] + p
     o["ztail"] = o["co"] + 2 * q + 18 + n_free
-    o["size"] = o["ztail"] + q
+    o["md"] = o["ztail"] + q
+    o["size"] = o["md"] + q + ONE
     o["p"] = p
     return o
 
@@ -291,6 +428,24 @@ def _monitor(y: float, pred: float, sc: np.ndarray) -> None:
 
 
 @njit(cache=CACHE, fastmath=FAST)
+def _drift_regressors(phi: np.ndarray, m: np.ndarray, md: np.ndarray, sc: np.ndarray, q: int, p: int,
+                      nr: int) -> float:
+    """Set the drift columns of phi for the sample with index ``sc[SC_N]``; returns the model part of the prediction."""
+    pm = 0.0
+    for i in range(q + ONE):
+        pm += phi[i] * m[i]
+    if nr > 0:
+        tau = (sc[SC_N] - sc[SC_TREF]) * sc[SC_H]
+        phi[p - nr] = tau * pm
+        if nr > 1:
+            pd = 0.0
+            for i in range(q + ONE):
+                pd += phi[i] * md[i]
+            phi[p - nr + 1] = tau * pd
+    return pm
+
+
+@njit(cache=CACHE, fastmath=FAST)
 def sample(u: float, y: float, st: np.ndarray, S: np.ndarray, ring: np.ndarray) -> int:
     """One sample: predict, gate, accumulate, monitor, remember, advance. Returns a status code.
 
@@ -302,7 +457,8 @@ def sample(u: float, y: float, st: np.ndarray, S: np.ndarray, ring: np.ndarray) 
     """
     sc = st[:SC_SIZE]
     q = int(sc[SC_NQ])
-    p = q + FREE + int(sc[SC_NM])
+    nr = int(sc[SC_NR])
+    p = q + FREE + int(sc[SC_NM]) + nr
     o = SC_SIZE
     phi = st[o:o + p]
     m = st[o + p:o + 2 * p]
@@ -310,8 +466,8 @@ def sample(u: float, y: float, st: np.ndarray, S: np.ndarray, ring: np.ndarray) 
     c0 = o + 3 * p
     co = st[c0:c0 + 2 * q + 18 + int(sc[SC_NM])]
     ztail = st[c0 + co.shape[0]:c0 + co.shape[0] + q]
-    pred = 0.0
-    for i in range(p):
+    pred = _drift_regressors(phi, m, st[c0 + co.shape[0] + q:c0 + co.shape[0] + 2 * q + ONE], sc, q, p, nr)
+    for i in range(q + ONE, p):
         pred += phi[i] * m[i]
     sc[SC_PRED] = pred
     status = 0
@@ -678,20 +834,29 @@ def replay(ring: np.ndarray, p0: int, n: int, skip: int, st: np.ndarray, S: np.n
 
     No gate, no prediction: the ring holds the outputs as they were used (NaN
     where they were not), so a replay reproduces the accepted samples exactly
-    for a new linearization point.
+    for a new linearization point. ``st[SC_N]`` must hold the index of the
+    first replayed sample (the drift columns' time); it advances with the replay.
+    The drift columns use the coefficients ``m``, ``md`` in ``st`` (the current
+    estimate) for every replayed sample.
     """
     sc = st[:SC_SIZE]
     q = int(sc[SC_NQ])
-    p = q + FREE + int(sc[SC_NM])
+    nr = int(sc[SC_NR])
+    p = q + FREE + int(sc[SC_NM]) + nr
     o = SC_SIZE
     phi = st[o:o + p]
+    m = st[o + p:o + 2 * p]
     sy = st[o + 2 * p:o + 3 * p]
     c0 = o + 3 * p
     co = st[c0:c0 + 2 * q + 18 + int(sc[SC_NM])]
+    md = st[c0 + co.shape[0] + q:c0 + co.shape[0] + 2 * q + ONE]
     size = ring.shape[1]
     for k in range(n):
         pos = (p0 + k) % size
         y = ring[1, pos]
         if k >= skip and y == y:
+            if nr > 0:
+                _drift_regressors(phi, m, md, sc, q, p, nr)
             _accumulate(y, phi, S, sy, sc)
         advance(phi, co, q, ring[0, pos])
+        sc[SC_N] += 1.0
