@@ -627,12 +627,9 @@ def warm_kernels() -> None:
     n = tr.theta.size
     F = np.eye(tr.p)
     fy = np.ones(tr.p)
-    C = np.empty((tr.p, n))
     lin = (tr.a1l, tr.a2l)
-    W.jacobian_coefficients(tr.theta, *lin, tr.basis.lam, tr.basis.dx, C)
-    H, g, cost = W.normal_equations(tr.theta, C, F, fy, 1.0)
-    W.lm_step(tr.theta.copy(), np.ones(n), 1e-3, *lin, tr.basis.lam, tr.basis.dx, F, fy, 1.0, 0.01, 0.9,
-              np.empty(3), np.empty((n, n)))
+    H, g = np.empty((n, n)), np.empty(n)
+    cost = W.lm_normal(tr.theta, *lin, tr.basis.lam, tr.basis.dx, F, fy, 1.0, H, g)
     W.lm_trial(tr.theta.copy(), np.ones(n), 1e-3, H, g, cost, *lin, tr.basis.lam, tr.basis.dx, F, fy, 1.0,
                0.01, 0.9, np.empty(3))
     W.covariance(H, np.ones(n), np.empty((n, n)))

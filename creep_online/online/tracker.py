@@ -81,6 +81,11 @@ DRIFT_MAX = 0.02
 #: theta = [alpha, ln a1, ln a2, b, offset, free-response weights..., b'/b, alpha'] (the last two with drift)
 
 
+def _largest_move(new: list[float], old: list[float]) -> float:
+    """Largest relative move of alpha, ln a1, ln a2, b (plain floats: numpy on 4-vectors costs ~2 us)."""
+    return max(abs(a - b) / max(abs(b), 1e-300) for a, b in zip(new[:4], old[:4]))
+
+
 @dataclass
 class Fit:
     """The window's last fit: parameters, cost, 1-sigma std, and when."""
@@ -350,9 +355,8 @@ class WindowTracker:
                 self.drift_on = False
                 theta[r0:] = 0.0
             return stat
-        C = np.empty((self.p, theta.size))
-        W.jacobian_coefficients(theta, *lin, self.basis.lam, self.basis.dx, C)
-        H, g, _ = W.normal_equations(theta, C, *stats)
+        H, g = np.empty((theta.size, theta.size)), np.empty(theta.size)
+        W.lm_normal(theta, *lin, self.basis.lam, self.basis.dx, *stats, H, g)
         yield
         stat = W.drift_score(H, g, free, r0) / sigma2
         yield
@@ -410,8 +414,7 @@ class WindowTracker:
         if not all(map(math.isfinite, new)) or new[3] == 0.0:
             self.rejected += 1             # a failed fit is never swapped in
             return
-        step = max(abs(a - b) / max(abs(b), 1e-300) for a, b in zip(new[:4], old[:4]))
-        self.converged = self.converged or step < 0.01
+        self.converged = self.converged or _largest_move(new, old) < 0.01
         self.theta[:] = theta
         self._coefficients()
         self.refits += 1
@@ -645,8 +648,7 @@ class WindowTracker:
         if ev is None or ev["settled"]:
             return
         now = self.theta[:4].tolist()
-        step = max(abs(a - b) / max(abs(b), 1e-300) for a, b in zip(now, previous[:4]))
-        if step < 0.002 and self.n * self.h - ev["detected_t"] > 1.0:
+        if _largest_move(now, previous) < 0.002 and self.n * self.h - ev["detected_t"] > 1.0:
             before = ev.pop("_before")
             change = {"alpha": now[0] / before[0] - 1, "a1": math.exp(now[1] - before[1]) - 1,
                       "a2": math.exp(now[2] - before[2]) - 1, "b": now[3] / before[3] - 1}

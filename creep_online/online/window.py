@@ -36,7 +36,7 @@ near the linearization point is ``phi . m`` with a coefficient vector ``m``
 (``coefficients``). The exponentially forgotten statistics ``S = sum g phi
 phi^T``, ``sy``, ``syy`` therefore give the window's output-error cost, its
 gradient and its Gauss-Newton matrix for all parameters at once, in O(P^2)
-(``lm_step``). The tracker re-linearizes (replays its history) when the
+(``lm_normal``, ``lm_trial``). The tracker re-linearizes (replays its history) when the
 resonance moves away from the linearization point.
 
 Statistics are accumulated with a growing weight ``g = forget^-n`` (no O(P^2)
@@ -727,30 +727,15 @@ def lm_trial(theta: np.ndarray, free: np.ndarray, mu: float, H: np.ndarray, g: n
 @njit(cache=CACHE)
 def lm_normal(theta: np.ndarray, a1l: float, a2l: float, lam: np.ndarray, dx: float, F: np.ndarray,
               fy: np.ndarray, fyy: float, H_out: np.ndarray, g_out: np.ndarray) -> float:
-    """The first half of ``lm_step`` (Jacobian and normal equations, ~6 us at P ~ 50): J^T J into
-    ``H_out``, J^T r into ``g_out``; returns the window cost at theta. ``lm_trial`` is the second half."""
+    """The first half of a Levenberg-Marquardt step (Jacobian and normal equations, ~6 us at P ~ 50):
+    J^T J into ``H_out``, J^T r into ``g_out``; returns the window cost at theta. ``lm_trial`` is the
+    second half (the tracker runs them as two units of background work)."""
     C = np.empty((fy.shape[0], theta.shape[0]))
     jacobian_coefficients(theta, a1l, a2l, lam, dx, C)
     H, g, cost = normal_equations(theta, C, F, fy, fyy)
     H_out[:, :] = H
     g_out[:] = g
     return cost
-
-
-@njit(cache=CACHE)
-def lm_step(theta: np.ndarray, free: np.ndarray, mu: float, a1l: float, a2l: float, lam: np.ndarray, dx: float,
-            F: np.ndarray, fy: np.ndarray, fyy: float, lo: float, hi: float, out: np.ndarray,
-            H_out: np.ndarray) -> float:
-    """One Levenberg-Marquardt step in one call (Jacobian, normal equations, trial): ~10 us at P ~ 50.
-
-    ``H_out`` receives J^T J at the starting point (for the covariance);
-    otherwise as ``lm_trial``.
-    """
-    C = np.empty((fy.shape[0], theta.shape[0]))
-    jacobian_coefficients(theta, a1l, a2l, lam, dx, C)
-    H, g, cost = normal_equations(theta, C, F, fy, fyy)
-    H_out[:, :] = H
-    return lm_trial(theta, free, mu, H, g, cost, a1l, a2l, lam, dx, F, fy, fyy, lo, hi, out)
 
 
 @njit(cache=CACHE)
