@@ -13,6 +13,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 # Before numba is imported: a read-only install caches kernels in a per-user directory.
+from ._lazy import lazy_attributes as _lazy_attributes
 from ._numba_cache import configure as _configure_numba_cache
 
 _configure_numba_cache()
@@ -31,13 +32,5 @@ __all__ = [
 
 # The API mirrors the CLI; the heavier layers load on first use, not on import.
 # identify loads scipy and numba (~1 s): the CLI's --help must not pay for them.
-_LAZY = {"OnlineEstimator": ("online", "OnlineEstimator"), "diagnose": ("diagnostics", "diagnose"),
-         "identify": ("identification", "identify")}
-
-
-def __getattr__(name: str):
-    if name in _LAZY:
-        import importlib
-        module, attr = _LAZY[name]
-        return getattr(importlib.import_module(f".{module}", __name__), attr)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+_LAZY = {"OnlineEstimator": "online", "diagnose": "diagnostics", "identify": "identification"}
+__getattr__ = _lazy_attributes(__name__, _LAZY)

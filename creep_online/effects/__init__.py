@@ -25,6 +25,7 @@ from entry points in the group ``creep_online.effects`` or from
 linear path. The names below are re-exported so that
 ``from creep_online.effects import ...`` keeps working.
 """
+from .._lazy import lazy_attributes
 from .base import (BUILTIN_EFFECTS, ENTRY_POINT_GROUP, AdditiveEffect, Compensator, DelayEffect, Effect, FitView,
                    InputCompensator, InputEffect, OutputCompensator, OutputFilterEffect, ParallelEffect, ParamSpec,
                    Stage, check_effect_names, discover_entry_points, effect_names, get_effect, in_forward_order,
@@ -40,12 +41,7 @@ _LAZY = {"simulate_with_effects": "forward", "leakage_filter": "leakage", **{nam
     "MAX_PAIRS", "MULTIGRID_POINTS", "MULTIGRID_RATIO", "StepFn", "Superposer", "base_step_at", "base_step_grid",
     "creep_step", "delayed_grid", "is_uniform", "resonance_step")}}
 
-
-def __getattr__(name: str):
-    if name in _LAZY:
-        import importlib
-        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_attributes(__name__, _LAZY)
 
 
 #: The built-in catalogue (stable names, CLI and JSON). ``effect_names()`` adds plug-ins.

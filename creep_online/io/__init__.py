@@ -1,4 +1,6 @@
 """Data in: files and live transports. Each source yields samples; nothing bad passes as good."""
+from .._lazy import lazy_attributes
+from ..errors import TransportError  # noqa: F401 - with the sources, as before (errors is light)
 from .csvfile import load_csv, save_csv
 
 __all__ = ["load_csv", "save_csv"]
@@ -8,13 +10,4 @@ _LAZY = {"open_source": "registry", "register_source": "registry", "available_so
          "Sample": "sources", "SourceStats": "sources", "SampleSource": "sources",
          "ReconnectingSource": "sources", "Option": "source_options", "FeedLoop": "feed"}
 
-
-def __getattr__(name: str):
-    """The source API on first use, so ``import creep_online.io`` stays light."""
-    if name == "TransportError":
-        from ..errors import TransportError
-        return TransportError
-    if name in _LAZY:
-        import importlib
-        return getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_attributes(__name__, _LAZY)
