@@ -446,6 +446,55 @@ def _drift_regressors(phi: np.ndarray, m: np.ndarray, md: np.ndarray, sc: np.nda
 
 
 @njit(cache=CACHE, fastmath=FAST)
+def gate(y: float, pred: float, sc: np.ndarray) -> int:
+    """Monitor the output, gate it on its innovation, update the robust scales (shared by both trackers).
+
+    Returns 0 accepted, 2 rejected as an outlier, 3 beyond the gate but
+    accepted (rejections were dense: a shift or a change, not an outlier).
+    """
+    status = 0
+    e = y - pred
+    scale = sc[SC_SCALE]
+    _monitor(y, pred, sc)
+    width = sc[SC_GATE] * scale
+    if sc[SC_SINCE] < sc[SC_HOLD]:
+        # just after an input step a model that is slightly off misses the transient by up to
+        # about its size: those samples are the informative ones, not outliers
+        width += 2.0 * sc[SC_TSCALE]
+    sc[SC_RUN] *= sc[SC_GDECAY]
+    if sc[SC_GATE] > 0.0 and scale > 0.0 and abs(e) > width:
+        # isolated outliers are rejected; dense rejections (a burst longer than SC_BURST within
+        # ~20 ms, or a model that no longer fits) are accepted: a shift or a change is followed
+        if sc[SC_RUN] < sc[SC_BURST]:
+            sc[SC_OUTLIERS] += 1.0
+            status = 2
+        else:
+            sc[SC_SHIFTS] += 1.0
+            status = 3
+        sc[SC_RUN] += 1.0
+    if status != 2:
+        a = abs(e)
+        if scale > 0.0:
+            sc[SC_SCALE] = scale + sc[SC_SCALEK] * (1.25 * min(a, 4.0 * scale) - scale)
+        else:
+            sc[SC_SCALE] = 1.25 * a
+        sc[SC_E2] += sc[SC_MONK] * (e * e - sc[SC_E2])
+    return status
+
+
+@njit(cache=CACHE, fastmath=FAST)
+def note_input(u: float, sc: np.ndarray) -> None:
+    """Input bookkeeping for the gate: samples since the last input change and that change's size."""
+    if u != sc[SC_ULAST]:
+        sc[SC_TSCALE] = sc[SC_BABS] * abs(u - sc[SC_ULAST])
+        sc[SC_ULAST] = u
+        sc[SC_SINCE] = 0.0
+    else:
+        sc[SC_SINCE] += 1.0
+
+
+
+@njit(cache=CACHE, fastmath=FAST)
 def sample(u: float, y: float, st: np.ndarray, S: np.ndarray, ring: np.ndarray) -> int:
     """One sample: predict, gate, accumulate, monitor, remember, advance. Returns a status code.
 
@@ -474,43 +523,14 @@ def sample(u: float, y: float, st: np.ndarray, S: np.ndarray, ring: np.ndarray) 
     if y != y:
         status = 1
     else:
-        e = y - pred
-        scale = sc[SC_SCALE]
-        _monitor(y, pred, sc)
-        gate = sc[SC_GATE] * scale
-        if sc[SC_SINCE] < sc[SC_HOLD]:
-            # just after an input step a model that is slightly off misses the transient by up to
-            # about its size: those samples are the informative ones, not outliers
-            gate += 2.0 * sc[SC_TSCALE]
-        sc[SC_RUN] *= sc[SC_GDECAY]
-        if sc[SC_GATE] > 0.0 and scale > 0.0 and abs(e) > gate:
-            # isolated outliers are rejected; dense rejections (a burst longer than SC_BURST within
-            # ~20 ms, or a model that no longer fits) are accepted: a shift or a change is followed
-            if sc[SC_RUN] < sc[SC_BURST]:
-                sc[SC_OUTLIERS] += 1.0
-                status = 2
-            else:
-                sc[SC_SHIFTS] += 1.0
-                status = 3
-            sc[SC_RUN] += 1.0
+        status = gate(y, pred, sc)
         if status != 2:
-            a = abs(e)
-            if scale > 0.0:
-                sc[SC_SCALE] = scale + sc[SC_SCALEK] * (1.25 * min(a, 4.0 * scale) - scale)
-            else:
-                sc[SC_SCALE] = 1.25 * a
-            sc[SC_E2] += sc[SC_MONK] * (e * e - sc[SC_E2])
             if sc[SC_ACC] > 0.0 and sc[SC_STUCK] == 0.0:
                 _accumulate(y, phi, S, sy, sc)
             elif status == 0:
                 status = 4
     _remember(u, y if status == 0 or status == 3 else math.nan, co, q, sc, ring, ztail)
-    if u != sc[SC_ULAST]:
-        sc[SC_TSCALE] = sc[SC_BABS] * abs(u - sc[SC_ULAST])
-        sc[SC_ULAST] = u
-        sc[SC_SINCE] = 0.0
-    else:
-        sc[SC_SINCE] += 1.0
+    note_input(u, sc)
     advance(phi, co, q, u)
     sc[SC_N] += 1.0
     if sc[SC_N] >= sc[SC_DUE]:
