@@ -32,6 +32,10 @@ default ``bench/results/online_latency.json``):
    10,000 samples; samples/s by wall and by thread CPU time (feeding stops after
    120 s of wall time: ``stopped_early``; a revision's subprocess is killed
    after 600 s).
+   ``--refits window,recursive`` (the default) measures both of Remark 3's
+   strategies (``OnlineEstimator(dt, refit=...)``) one after the other on the
+   same stream: the window tracker under ``current``, the recursive tracker
+   under ``current_recursive`` (worktree only).
 4. the baseline (``--baseline``, default 773e268, the estimator before the
    rework) measured by the same functions, on the same stream, in a subprocess
    whose PYTHONPATH is ``git archive <rev> creep_online`` unpacked in a temporary
@@ -354,8 +358,10 @@ def ratios(cur: dict, base: dict) -> dict:
     return out
 
 
-def latency_section(baseline: str, gc_modes: list[str], seconds: float = SECONDS, current: str = "worktree") -> dict:
-    """Stream, current code, then the baseline in a subprocess (one after the other)."""
+def latency_section(baseline: str, gc_modes: list[str], seconds: float = SECONDS, current: str = "worktree",
+                    refits: tuple[str, ...] = ("window", "recursive")) -> dict:
+    """Stream, current code (each Remark-3 strategy in ``refits``), then the baseline in a subprocess (one after
+    the other)."""
     from creep_online.online.estimator import OnlineEstimator, warm_kernels
     t0 = time.perf_counter()
     s = make_stream(seconds)
@@ -381,11 +387,21 @@ def latency_section(baseline: str, gc_modes: list[str], seconds: float = SECONDS
             t0 = time.perf_counter()
             warm_kernels()
             warm_s = time.perf_counter() - t0
-            cur = measure(lambda: OnlineEstimator(H), stream, gc_modes, truth_end)
+            cur = measure(lambda: OnlineEstimator(H), stream, gc_modes, truth_end) if "window" in refits else None
+            if "recursive" in refits:
+                rec = measure(lambda: OnlineEstimator(H, refit="recursive"), stream, gc_modes, truth_end)
+                rec["meets_goal_cpu"] = {q: rec[f"latency_gc_{gc_modes[0]}"]["cpu_us"][q] <= g
+                                         for q, g in GOAL_CPU_US.items()}
+                rec["refit"] = "recursive"
+                doc["current_recursive"] = rec
+                cur = cur or {}
             import creep_online
             cur.update(revision=before["head"], source=before, package=creep_online.__file__, warm_s=warm_s)
             if source_state() != before:
                 cur["source_note"] = "creep_online changed on disk during the run; the measured code is 'source'"
+            if "window" not in refits:
+                doc["current"] = cur
+                return doc
         else:
             cur = run_archived(current, "current", stream, gc_modes, truth_end, work)
             if "error" in cur:
@@ -634,6 +650,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--gc", choices=("both", "freeze", "nofreeze"), default="both",
                     help="latency runs after gc.freeze(), with the collector as is, or both")
     ap.add_argument("--quick", action="store_true", help="memory section: 3.6 M instead of 36 M samples")
+    ap.add_argument("--refits", default="window,recursive",
+                    help="latency section: Remark 3 strategies measured in this checkout (window, recursive)")
     ap.add_argument("--seconds", type=float, default=SECONDS, help="latency stream length (s; 100 = 10^6 samples)")
     ap.add_argument("--out", default=None,
                     help="JSON file (default with the latency section: bench/results/online_latency.json)")
@@ -641,7 +659,8 @@ def main(argv: list[str] | None = None) -> dict:
     sys.path.insert(0, str(ROOT))
     gc_modes = ["freeze", "nofreeze"] if args.gc == "both" else [args.gc]
     sections = {
-        "latency": lambda: latency_section(args.baseline, gc_modes, args.seconds, args.current),
+        "latency": lambda: latency_section(args.baseline, gc_modes, args.seconds, args.current,
+                                           tuple(args.refits.split(","))),
         "memory": lambda: memory_run(3_600_000 if args.quick else 36_000_000),
         "accuracy": lambda: {name: accuracy_run(name, p) for name, p in PLANTS.items()},
         "naive": naive_run,

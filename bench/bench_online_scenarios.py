@@ -4,7 +4,12 @@ Usage (from the repository root, with the package installed or ``PYTHONPATH=.``)
 
     python bench/bench_online_scenarios.py [--plants 20] [--families payload,drift]
         [--baseline 773e268|none] [--mode block|single] [--kwargs '{"window_s": 5}']
-        [--out bench/results/online_scenarios.json]
+        [--refit window|recursive] [--out bench/results/online_scenarios.json]
+
+``--refit`` picks Remark 3's strategy of the current tree's estimator (it is
+added to ``--kwargs``; the baseline gets the same kwargs without it, since
+older revisions have no such parameter). The recursive tracker's numbers are in
+``bench/results/online_recursive.json`` (``--refit recursive --baseline none``).
 
 What it does:
 
@@ -255,6 +260,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--baseline", default="773e268", help="git revision of the baseline estimator, or 'none'")
     ap.add_argument("--mode", choices=("block", "single"), default="block")
     ap.add_argument("--kwargs", default="{}", help="JSON dict passed to OnlineEstimator(dt, **kwargs)")
+    ap.add_argument("--refit", choices=("window", "recursive"), default=None,
+                    help="Remark 3's strategy of the current estimator (default: the estimator's default)")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "online_scenarios.json"))
     return ap.parse_args(argv)
 
@@ -285,9 +292,10 @@ def main(argv: list[str] | None = None) -> dict:
         files = sorted((work / "scenarios").glob("*.npz"))
         gen_s = time.perf_counter() - start
         base = None if args.baseline == "none" else start_baseline(args.baseline, files, args.mode, kwargs, work)
-        current = run_files(files, args.mode, kwargs)
+        current_kwargs = kwargs if args.refit is None else {**kwargs, "refit": args.refit}
+        current = run_files(files, args.mode, current_kwargs)
         run_s = time.perf_counter() - start - gen_s
-        doc = {"config": {"plants": args.plants, "families": families, "mode": args.mode, "kwargs": kwargs,
+        doc = {"config": {"plants": args.plants, "families": families, "mode": args.mode, "kwargs": current_kwargs,
                           "tolerances": TOL, "traj_dt_s": TRAJ_DT, "scatter_s": SCATTER_S},
                "current": {"revision": git_head(), "families": summarize(current, truth),
                            "run_s": run_s}}

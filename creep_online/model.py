@@ -34,6 +34,9 @@ EXTENDED_FIT_ALPHA_BOUNDS = (1e-3, 0.999)
 #: integral is validated (error < 1.2e-4 up to alpha = 0.95, ``online/soe.py``); 0.002 the smallest alpha
 #: of its start-up grid's range.
 ONLINE_ALPHA_BOUNDS = (0.002, 0.95)
+#: The online estimator's two Remark-3 strategies (``OnlineEstimator(refit=...)``, ``--refit``), default first:
+#: re-fit over the forgetting window, or carry on recursively with the newest estimate (docs/online.md).
+ONLINE_REFITS = ("window", "recursive")
 
 
 @dataclass(frozen=True)

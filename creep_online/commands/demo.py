@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CreepOnlineError
+from ..model import ONLINE_REFITS as REFITS
 from ._common import print_json
 
 SCENARIOS = ("stationary", "payload")
@@ -38,6 +39,8 @@ def register(subparsers) -> None:
                    help="stationary: a constant plant; payload: half-way through, a payload adds 50 %% to the "
                         "moving mass (fn drops by 18 %%) while the input keeps stepping: watch the estimator "
                         "detect the change and follow it")
+    p.add_argument("--refit", choices=REFITS, default=None,
+                   help="the estimator's Remark-3 strategy: window (default) or recursive (docs/online.md)")
     p.add_argument("--effects", default="", help="hidden effects for the plant (see python -m hil_sim --help)")
     p.add_argument("--faults", default="", help="fault injection, e.g. drop=5,bitflip=5,garbage=5,reorder=3")
     p.add_argument("--seed", type=int, default=0)
@@ -120,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
             truth = CreepModel(truth.alpha, truth.a1, truth.a2 * (1.0 + PAYLOAD_MASS), truth.b)
         n_total = int(ready["samples"])
         warm_kernels()
-        est = OnlineEstimator(1.0 / args.rate)
+        est = OnlineEstimator(1.0 / args.rate, **({} if args.refit is None else {"refit": args.refit}))
         events: list[str] = []
         src = open_source(f"serial:{plant.port}?rate={args.rate!r}&start=S", on_event=events.append)
         start = plant.wait_event("start", timeout=60)

@@ -22,6 +22,7 @@ import numpy as np
 from ..errors import CreepOnlineError, DataError, TransportError
 from ..io import load_csv
 from ..online import OnlineEstimator, warm_kernels
+from ..model import ONLINE_REFITS as REFITS
 from ._common import print_json
 
 
@@ -54,6 +55,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                                                                "(default: none needed)")
     p.add_argument("--window", default=None,
                    help="forgetting time constant in s (default: the estimator's, 10 s); 'none' keeps everything")
+    p.add_argument("--refit", choices=REFITS, default=None,
+                   help="Remark 3's strategy: window re-fits over the forgetting window (default), recursive "
+                        "carries on with the newest estimate (constant work per sample; docs/online.md)")
     p.add_argument("--trace", default=None, metavar="FILE",
                    help="write the estimate's trajectory as CSV (t, alpha, a1, a2, b, fn_hz, zeta, quality, "
                         "reason, events), every 10 ms of stream time")
@@ -71,6 +75,8 @@ def _options(args: argparse.Namespace) -> dict:
         opts["t_c"] = args.t_c
     if args.alpha0 is not None:
         opts["alpha0"] = args.alpha0
+    if args.refit is not None:
+        opts["refit"] = args.refit
     if args.window is not None:
         text = str(args.window).strip().lower()
         if text in ("none", "inf"):

@@ -10,8 +10,12 @@ Phases (``OnlineEstimate.phase``):
     small slices: no starting guess is needed. If the resonance found needs a
     longer window, the buffer grows and the search runs again.
 ``tracking``
-    The window tracker (``tracker.py``) replays the buffer and follows the
-    plant: a Levenberg-Marquardt re-fit of all four parameters on the exact
+    The tracker replays the buffer and follows the plant. Two strategies
+    (DESIGN.md section 4, Remark 3; ``refit``): ``"window"`` (default,
+    ``tracker.py``) recomputes over the window; ``"recursive"``
+    (``recursive.py``) carries on with the newest estimate (a Gauss-Newton
+    recursive prediction-error method with a CUSUM change detector, constant
+    work per sample, no replay, no drift model). The window tracker: a Levenberg-Marquardt re-fit of all four parameters on the exact
     exponentially forgotten window cost every ``update_every_s``, a
     likelihood-ratio change test every half second (a change restarts the
     window; ``estimate.events`` lists them), and a re-linearization by replay
@@ -39,10 +43,12 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..errors import DataError
-from ..model import ONLINE_ALPHA_BOUNDS, CreepModel
+from ..model import ONLINE_ALPHA_BOUNDS, ONLINE_REFITS, CreepModel
 from . import window as W
 from .search import ResonanceSearch
 from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SOE_TOP, SoeBasis
+from . import recursive as R
+from .recursive import RecursiveTracker
 from .tracker import WindowTracker
 
 PHASES = ("buffering", "searching", "tracking")
@@ -61,6 +67,8 @@ FLOOR_RATIO = 2.0
 INPUT_GATE = 20.0
 #: Drift columns with ``track_drift``: 1 the gain's rate, 2 the gain's and alpha's.
 DRIFT_COLUMNS = 2
+#: The two Remark-3 strategies (``refit``): recompute over the window, or carry on recursively.
+REFITS = ONLINE_REFITS
 
 
 @dataclass
@@ -126,7 +134,11 @@ class OnlineEstimator:
     detect_changes: run the change test (likelihood ratio every 0.5 s).
     work_units:     background units per update() (None: max(1, floor(dt / 100 us))).
     track_drift:    model a linear drift of b and alpha inside the window (two more linear parameters);
-                    the estimate is then the value at the newest sample, with ``b_rate``, ``alpha_rate``.
+                    the estimate is then the value at the newest sample, with ``b_rate``, ``alpha_rate``
+                    (window tracker only: the recursive one follows drift through its forgetting).
+    refit:          Remark 3's strategy: ``"window"`` re-fits over the forgetting window (replays when the
+                    resonance moves), ``"recursive"`` carries on with the newest estimate (RPEM, constant
+                    work per sample; docs/online.md, "Remark 3: window vs recursive").
     """
 
     def __init__(self, dt: float, *, window_s: float | None = 10.0, update_every_s: float = 0.1,
@@ -134,7 +146,7 @@ class OnlineEstimator:
                  horizon_s: float = DEFAULT_HORIZON_S, soe_dx: float = DEFAULT_DX,
                  alpha_bounds: tuple[float, float] = ONLINE_ALPHA_BOUNDS, t_c_max: float = 2.0,
                  outlier_gate: float = 8.0, burst_s: float = 0.002, detect_changes: bool = True,
-                 work_units: int | None = None, track_drift: bool = True) -> None:
+                 work_units: int | None = None, track_drift: bool = True, refit: str = "window") -> None:
         self.dt = dt
         self.window_s = window_s
         self.update_every_s = update_every_s
@@ -149,6 +161,7 @@ class OnlineEstimator:
         self.detect_changes = detect_changes
         self.work_units = work_units
         self.track_drift = track_drift
+        self.refit = refit
         self._validate()
         self.reset()
 
@@ -191,6 +204,8 @@ class OnlineEstimator:
             raise DataError(f"work_units must be a positive integer or None, got {self.work_units!r}")
         if not isinstance(self.track_drift, bool):
             raise DataError(f"track_drift must be True or False, got {self.track_drift!r}")
+        if not (isinstance(self.refit, str) and self.refit in REFITS):
+            raise DataError(f"refit must be one of {', '.join(REFITS)}, got {self.refit!r}")
         if self.horizon_s <= self.dt:
             raise DataError(f"horizon_s ({self.horizon_s}) must exceed dt ({self.dt})")
 
@@ -230,7 +245,8 @@ class OnlineEstimator:
         self._search: ResonanceSearch | None = None
         self._search_rounds = 0
         self._tc_used = 0.0
-        self._tracker: WindowTracker | None = None
+        self._tracker: WindowTracker | RecursiveTracker | None = None
+        self._recursive = self.refit == "recursive"
         self._catchup = 0
         return self
 
@@ -348,7 +364,10 @@ class OnlineEstimator:
         else:
             du = self._input(u)
         # tr.feed() inlined: one Python call less on the per-sample path
-        status = W.sample(du, y, tr.st, tr.S, tr.ring)
+        if self._recursive:
+            status = R.sample(du, y, tr.st, tr.P, tr.CT)
+        else:
+            status = W.sample(du, y, tr.st, tr.S, tr.ring)
         if status >= 8:
             tr._schedule()
         if tr._jobs:
@@ -399,7 +418,7 @@ class OnlineEstimator:
                 self._buffer(du, math.nan)
 
     @property
-    def _live(self) -> WindowTracker | None:
+    def _live(self) -> WindowTracker | RecursiveTracker | None:
         """The tracker once it is fed directly (after the start-up buffer has been replayed)."""
         return self._tracker if self._catchup == 0 else None
 
@@ -515,11 +534,17 @@ class OnlineEstimator:
         theta = np.array([res.alpha, math.log(res.a1), math.log(res.a2), res.b, res.c])
         lo, hi = (float(v) for v in self.alpha_bounds)
         theta[0] = min(max(theta[0], lo), hi)
-        self._tracker = WindowTracker(
-            self.basis, theta, window_s=self.window_s, free=bool(self._u_ref), ring=self._ring, work=self._hist_work,
-            gate=0.0, burst=self._burst, stuck=max(10, int(round(0.05 / self._h))), alpha_bounds=(lo, hi),
-            refit_every=self._refit_every, test_every=self._test_every, detect=bool(self.detect_changes),
-            drift=DRIFT_COLUMNS if self.track_drift else 0)
+        if self._recursive:
+            self._tracker = RecursiveTracker(
+                self.basis, theta, window_s=self.window_s, free=bool(self._u_ref), gate=0.0, burst=self._burst,
+                stuck=max(10, int(round(0.05 / self._h))), alpha_bounds=(lo, hi), refit_every=self._refit_every,
+                detect=bool(self.detect_changes), scale=res.b * (self._u_hi - self._u_lo))
+        else:
+            self._tracker = WindowTracker(
+                self.basis, theta, window_s=self.window_s, free=bool(self._u_ref), ring=self._ring, work=self._hist_work,
+                gate=0.0, burst=self._burst, stuck=max(10, int(round(0.05 / self._h))), alpha_bounds=(lo, hi),
+                refit_every=self._refit_every, test_every=self._test_every, detect=bool(self.detect_changes),
+                drift=DRIFT_COLUMNS if self.track_drift else 0)
         if self.frozen:
             self._tracker.sc[W.SC_ACC] = 0.0
         self._tracker.fitting = False
@@ -546,7 +571,10 @@ class OnlineEstimator:
             self._nbuf = 0
             tr.sc[W.SC_GATE] = float(self.outlier_gate)
             tr.fitting = True
-            tr._jobs.append(tr._refit_job())
+            if self._recursive:
+                tr.publish()
+            else:
+                tr._jobs.append(tr._refit_job())
 
     # ------------------------------------------------------------------ monitoring
     def _noise(self) -> float:
@@ -640,3 +668,4 @@ def warm_kernels() -> None:
     W.drift_coefficients(tr.theta, *lin, tr.basis.lam, tr.basis.dx, np.empty(tr.q + W.ONE))
     W.drift_score(H, g, np.ones(n), max(n - 2, 1))
     T.WindowTracker  # noqa: B018 - imported for its kernels
+    R.warm()
