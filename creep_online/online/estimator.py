@@ -571,9 +571,7 @@ class OnlineEstimator:
             self._nbuf = 0
             tr.sc[W.SC_GATE] = float(self.outlier_gate)
             tr.fitting = True
-            if self._recursive:
-                tr.publish()
-            else:
+            if not self._recursive:        # the recursive tracker has no jobs: its estimate is always current
                 tr._jobs.append(tr._refit_job())
 
     # ------------------------------------------------------------------ monitoring

@@ -47,9 +47,12 @@ Per sample, in one numba call (``sample``), at a constant cost:
    resonance step, ``C`` and ``m`` are recomputed exactly (a few us, inside
    the same numba call).
 
-Python runs only every ``refit_every`` samples (publishing the fit: 1-sigma
-from ``P``, which is an absolute covariance because the gain uses the
-innovation variance) and at an alarm (the event). Drift: with forgetting the
+Python runs on the sample path only at an alarm (to record the event) and
+then every ``refit_every`` samples until the event has settled: in settled
+tracking ``update()`` is the numba call and nothing else (a Python slow path
+once every 1000 samples, measured, cost 30-70 us there with cold caches).
+The fit (``fit``: 1-sigma from ``P``, an absolute covariance because the gain
+uses the innovation variance) is built when the estimate is read. Drift: with forgetting the
 estimate follows slow drift by itself; ``b_rate`` and ``alpha_rate`` are 0.
 """
 from __future__ import annotations
@@ -95,7 +98,8 @@ R_TOLA = 21       # refresh tolerance of alpha (absolute)
 R_TOLLN = 22      # refresh tolerance of ln a1, ln a2 and of b (relative)
 R_EVLR = 23       # LR at the last alarm
 R_UPDATES = 24    # parameter updates (accepted samples)
-R_SIZE = 25
+R_CHECKN = 25     # samples between interim looks of the change test (divides R_TESTN)
+R_SIZE = 26
 
 #: Per-sample bounds of a step (alpha absolute, ln a1 and ln a2): the recursion stays in the basin.
 STEP_ALPHA = 0.002
@@ -109,6 +113,7 @@ TOL_LN = 5e-3
 #: jump factor against the median of the last GLR_HISTORY blocks; after a detected change no new
 #: alarm for QUIET_S and the history restarts (the re-convergence is itself a burst of innovations).
 TEST_S = 0.5
+CHECK_S = 0.05
 GLR_MIN = 100.0
 GLR_JUMP = 5.0
 GLR_HISTORY = 8
@@ -118,8 +123,8 @@ JUMP_LN = 0.3
 APPLY_JUMP = False
 #: Prior 1-sigma at the start (from the search) and after a detected change: alpha (absolute,
 #: plus a share of alpha), ln a1, ln a2, b (relative); offset and free responses in output units.
-START_SD = {"alpha": 0.01, "alpha_rel": 0.1, "ln_a": 0.1, "b_rel": 0.1}
-RESET_SD = {"ln_a": 0.5, "b_rel": 0.3}
+START_SD = {"alpha": 0.01, "alpha_rel": 0.1, "ln_a": 0.1, "b_rel": 0.1, "offset_rel": 10.0}
+RESET_SD = {"ln_a": 0.3, "b_rel": 0.3}
 
 
 def layout(q: int, n_free: int) -> dict:
@@ -140,9 +145,17 @@ def layout(q: int, n_free: int) -> dict:
     o["z"] = o["lam"] + q
     o["info"] = o["z"] + n
     o["hist"] = o["info"] + n * n
-    o["size"] = o["hist"] + GLR_HISTORY
+    o["work"] = o["hist"] + GLR_HISTORY
+    o["size"] = o["work"] + _work_size(n, o["p"])
     o["n"] = n
     return o
+
+
+@njit(cache=CACHE)
+def _work_size(n: int, p: int) -> int:
+    """Scratch of the test and the refresh (no allocation on the sample path): two n x n matrices, three
+    n-vectors, the sorted history, and the P x n Jacobian."""
+    return 2 * n * n + 3 * n + GLR_HISTORY + p * n
 
 
 @njit(cache=CACHE)
@@ -184,7 +197,8 @@ def refresh(st: np.ndarray, CT: np.ndarray) -> None:
         sc[W.SC_A1L] = a1
         sc[W.SC_A2L] = a2
         r[R_RELIN] += 1.0
-    C = np.empty((p, n))
+    wo = rb + R_SIZE + 7 * n + q + n * n + GLR_HISTORY + 2 * n * n + 3 * n + GLR_HISTORY
+    C = st[wo:wo + p * n].reshape((p, n))
     W.jacobian_coefficients(theta, a1, a2, lam, r[R_DX], C)
     for i in range(p):
         s = 0.0
@@ -265,8 +279,11 @@ def _rpem(e: float, phi: np.ndarray, m: np.ndarray, P: np.ndarray, CT: np.ndarra
 
 
 @njit(cache=CACHE)
-def change_test(st: np.ndarray, P: np.ndarray, CT: np.ndarray) -> None:
-    """End of a test block: the GLR statistic of a parameter jump; on a change, apply the jump and reset P."""
+def change_test(st: np.ndarray, P: np.ndarray, CT: np.ndarray, final: bool) -> None:
+    """The GLR statistic of a parameter jump over the block so far; on a change, restart from the estimate at
+    the block's start and reset P. ``final``: the block ends (its statistic joins the history, the next one
+    starts); otherwise an interim look (every ``CHECK_S``: a change is caught within ~50 ms of the step that
+    reveals it, while its transient still rings for the re-started recursion)."""
     sc = st[:W.SC_SIZE]
     q = int(sc[W.SC_NQ])
     rb = _base(sc)
@@ -280,44 +297,62 @@ def change_test(st: np.ndarray, P: np.ndarray, CT: np.ndarray) -> None:
     z = st[zo:zo + n]
     info = st[zo + n:zo + n + n * n]
     hist = st[zo + n + n * n:zo + n + n * n + GLR_HISTORY]
-    A = np.empty((n, n))
+    wo = zo + n + n * n + GLR_HISTORY
+    A = st[wo:wo + n * n].reshape((n, n))
+    L = st[wo + n * n:wo + 2 * n * n].reshape((n, n))
+    v = wo + 2 * n * n
+    d = st[v:v + n]
+    rhs = st[v + n:v + 2 * n]
+    jump = st[v + 2 * n:v + 3 * n]
+    srt = st[v + 3 * n:v + 3 * n + GLR_HISTORY]
+    # the normalised information (unit diagonal; a parameter without information cannot jump)
+    for i in range(n):
+        d[i] = math.sqrt(abs(info[i * n + i]) * (1.0 + 1e-9)) + 1e-150
+    finite = True
     for i in range(n):
         for k in range(n):
-            A[i, k] = info[i * n + k]
-    for i in range(n):               # a parameter without information cannot jump (free responses died out)
-        A[i, i] += 1e-9 * A[i, i] + 1e-300
+            A[i, k] = info[i * n + k] / (d[i] * d[k])
+            finite = finite and math.isfinite(A[i, k])
+        A[i, i] *= 1.0 + 1e-9
+        rhs[i] = z[i] / d[i]
+        finite = finite and math.isfinite(rhs[i])
     lr = 0.0
-    jump = np.zeros(n)
-    sd = np.full(n, np.inf)            # 1-sigma of the jump estimate: sqrt(diag(I^-1))
-    d = np.sqrt(np.abs(np.diag(A))) + 1e-300
-    An = A / np.outer(d, d)
-    L = np.empty((n, n))
-    if np.all(np.isfinite(An)) and W._cholesky(An, L):
-        W._cholesky_solve(L, z / d, jump)
+    sd1 = math.inf                     # 1-sigma of the jump in ln a1, ln a2, b: sqrt(diag(I^-1))
+    sd2 = math.inf
+    sd3 = math.inf
+    if finite and W._cholesky(A, L):
+        W._cholesky_solve(L, rhs, jump)
         for i in range(n):
+            lr += jump[i] * rhs[i]
             jump[i] /= d[i]
-            lr += jump[i] * z[i]
-        e = np.zeros(n)
-        col = np.empty(n)
         for j in range(1, 4):
-            e[j] = 1.0
-            W._cholesky_solve(L, e, col)
-            e[j] = 0.0
-            sd[j] = math.sqrt(abs(col[j])) / d[j]
+            for i in range(n):
+                rhs[i] = 1.0 if i == j else 0.0
+            W._cholesky_solve(L, rhs, A[0])        # A is free now: its first row holds the column
+            sdj = math.sqrt(abs(A[0, j])) / d[j]
+            if j == 1:
+                sd1 = sdj
+            elif j == 2:
+                sd2 = sdj
+            else:
+                sd3 = sdj
+    else:
+        for i in range(n):
+            jump[i] = 0.0
     r[R_LR] = lr
     quiet = r[R_QUIET] > 0.0
     nh = int(r[R_NHIST])
-    level = np.median(hist[:nh]) if nh >= GLR_HISTORY // 2 else math.inf    # no reference yet: no alarm
+    level = _median(hist, nh, srt) if nh >= GLR_HISTORY // 2 else math.inf    # no reference yet: no alarm
     # a physically large move (tracker.CHANGE_MOVE) that the block determines (CHANGE_SIGMAS of its 1-sigma)
-    moved = np.zeros(4, dtype=np.bool_)
-    big = False
-    for j in range(1, 4):
-        size = abs(jump[j]) / (abs(theta[3]) if j == 3 else 1.0)
-        limit = CHANGE_MOVE_A1 if j == 1 else (CHANGE_MOVE_A2 if j == 2 else CHANGE_MOVE_B)
-        moved[j] = size > limit and abs(jump[j]) > CHANGE_SIGMAS * sd[j]
-        big = big or moved[j]
+    m1 = abs(jump[1]) > CHANGE_MOVE_A1 and abs(jump[1]) > CHANGE_SIGMAS * sd1
+    m2 = abs(jump[2]) > CHANGE_MOVE_A2 and abs(jump[2]) > CHANGE_SIGMAS * sd2
+    m3 = abs(jump[3]) > CHANGE_MOVE_B * abs(theta[3]) and abs(jump[3]) > CHANGE_SIGMAS * sd3
+    big = m1 or m2 or m3
     if not quiet and lr > r[R_LIMIT] and lr > r[R_JUMPK] * level and big:
-        theta[0] = snap[0]                 # alpha as before the change: the samples since chased the change
+        # the estimate as before the change (the block's start): the samples since chased the change with the
+        # old covariance; the re-convergence starts from there, alpha held (creep does not jump)
+        for j in range(4):
+            theta[j] = snap[j]
         for j in range(1, n if APPLY_JUMP else 1):
             step = jump[j]
             if j == 1 or j == 2:
@@ -326,10 +361,10 @@ def change_test(st: np.ndarray, P: np.ndarray, CT: np.ndarray) -> None:
                 step = min(max(step, -JUMP_LN * abs(theta[3])), JUMP_LN * abs(theta[3]))
             theta[j] += step
         theta[2] = max(theta[2], r[R_LNA2MIN])
-        # covariance resetting in the directions that jumped (and the offset, which a jump of b moves):
-        # alpha keeps its variance (creep does not jump with a payload), nothing else is disturbed
+        # covariance resetting in the directions that jumped: the resonance (a1 and a2 together: a new a2
+        # moves the best a1) and/or the gain, and the offset; alpha keeps its variance, nothing else moves
         for j in range(1, 5):
-            if j == 4 or moved[j]:
+            if j == 4 or (j <= 2 and (m1 or m2)) or (j == 3 and m3):
                 for k in range(n):
                     P[j, k] = 0.0
                     P[k, j] = 0.0
@@ -341,6 +376,8 @@ def change_test(st: np.ndarray, P: np.ndarray, CT: np.ndarray) -> None:
         r[R_NHIST] = 0.0
         sc[W.SC_DUE] = sc[W.SC_N]          # the caller records the event at this sample (flag 8)
         refresh(st, CT)
+    elif not final:
+        return
     elif not quiet:
         if nh < GLR_HISTORY:
             hist[nh] = lr
@@ -356,6 +393,20 @@ def change_test(st: np.ndarray, P: np.ndarray, CT: np.ndarray) -> None:
     for j in range(n * n):
         info[j] = 0.0
     r[R_SNAPN] = sc[W.SC_N]
+
+
+@njit(cache=CACHE)
+def _median(x: np.ndarray, count: int, work: np.ndarray) -> float:
+    """Median of x[:count] (insertion sort into work: a handful of values, no allocation)."""
+    for i in range(count):
+        v = x[i]
+        j = i
+        while j > 0 and work[j - 1] > v:
+            work[j] = work[j - 1]
+            j -= 1
+        work[j] = v
+    h = count // 2
+    return work[h] if count % 2 else 0.5 * (work[h - 1] + work[h])
 
 
 @njit(cache=CACHE, fastmath=FAST)
@@ -401,8 +452,8 @@ def sample(u: float, y: float, st: np.ndarray, P: np.ndarray, CT: np.ndarray) ->
     sc[W.SC_N] += 1.0
     if r[R_QUIET] > 0.0:
         r[R_QUIET] -= 1.0
-    if int(sc[W.SC_N]) % int(r[R_TESTN]) == 0:
-        change_test(st, P, CT)
+    if int(sc[W.SC_N]) % int(r[R_CHECKN]) == 0:
+        change_test(st, P, CT, int(sc[W.SC_N]) % int(r[R_TESTN]) == 0)
     if int(sc[W.SC_N]) % int(r[R_EVERY]) == 0:
         ref = st[t0 + n:t0 + 2 * n]
         if abs(theta[0] - ref[0]) > r[R_TOLA] or abs(theta[1] - ref[1]) > r[R_TOLLN] \
@@ -453,8 +504,7 @@ class RecursiveTracker:
         self.drift_on = False
         self.events: list[dict] = []
         self.false_alarms = 0            # alarms after which nothing moved (no event kept)
-        self.refits = 0                  # fits published
-        self.rejected = 0
+        self.rejected = 0                # never: the recursion has no fits to reject
         self._jobs: list = []            # no background jobs: the interface the estimator polls
         self._alarms = 0
         n = lay["n"]
@@ -472,7 +522,7 @@ class RecursiveTracker:
         st[W.SC_MONK] = min(1.0, h / 0.2)
         st[W.SC_REPK] = min(1.0, h / 10.0)
         st[W.SC_ACC] = 1.0
-        st[W.SC_DUE] = refit_every
+        st[W.SC_DUE] = math.inf          # Python is called only at an alarm (and until its event settles)
         theta0 = np.zeros(n)
         theta0[:len(theta)] = theta
         a1, a2 = math.exp(theta0[1]), math.exp(theta0[2])
@@ -487,17 +537,18 @@ class RecursiveTracker:
         phi[q + W.FREE:q + W.FREE + self.n_free] = 1.0
         r = st[lay["r"]:lay["theta"]]
         lo, hi = alpha_bounds
-        r[[R_FORGET, R_TESTN, R_JUMPK, R_LIMIT, R_QUIETN, R_EVERY, R_LO, R_HI, R_DX, R_COSTK, R_LNA2MIN, R_NP,
-           R_TOLA, R_TOLLN]] = [
-            self.forget, max(10, round(TEST_S / h)), GLR_JUMP, GLR_MIN if detect else math.inf,
+        check = max(1, round(CHECK_S / h))
+        r[[R_FORGET, R_TESTN, R_CHECKN, R_JUMPK, R_LIMIT, R_QUIETN, R_EVERY, R_LO, R_HI, R_DX, R_COSTK, R_LNA2MIN,
+           R_NP, R_TOLA, R_TOLLN]] = [
+            self.forget, check * max(1, round(TEST_S / (check * h))), check, GLR_JUMP, GLR_MIN if detect else math.inf,
             round(QUIET_S / h), max(1, round(REFRESH_S / h)), lo, hi, basis.dx,
             min(1.0, h / (window_s or 30.0)), 2.0 * math.log(h / math.pi), n, TOL_ALPHA, TOL_LN]
         st[lay["theta"]:lay["ref"]] = theta0
         st[lay["snap"]:lay["prior"]] = theta0
         st[lay["lam"]:lay["z"]] = basis.lam
-        b, sc_out = abs(theta0[3]), max(abs(scale), 1e-300)
+        b, sc_out = abs(theta0[3]), max(abs(scale), 1e-150)
         alpha0 = float(theta0[0])
-        start = np.full(n, sc_out ** 2)
+        start = np.full(n, (START_SD["offset_rel"] * sc_out) ** 2)
         start[:4] = [(START_SD["alpha"] + START_SD["alpha_rel"] * alpha0) ** 2, START_SD["ln_a"] ** 2,
                      START_SD["ln_a"] ** 2, (START_SD["b_rel"] * b) ** 2]
         prior = start.copy()
@@ -513,7 +564,8 @@ class RecursiveTracker:
         self.S = self.P = np.diag(start)     # S: the name the estimator's shared code passes
         self.ring = self.CT = np.zeros((n, self.p))
         refresh(st, self.CT)
-        self.fit = Fit(theta=self.theta.copy())
+        self._check = self.theta[:4].tolist()     # the estimate at the last settle check
+        self._fit: Fit | None = None
 
     # ------------------------------------------------------------------ parameters
     @property
@@ -579,32 +631,35 @@ class RecursiveTracker:
 
     # ------------------------------------------------------------------ publication and events
     def _schedule(self) -> None:
-        """Record a new alarm, publish the fit when due, settle the last event; set the next due sample."""
-        n = self.n
+        """Record a new alarm; while an event is open check every ``refit_every`` samples whether it settled."""
         alarms = int(self.r[R_ALARMS])
         if alarms > self._alarms:
             self._alarms = alarms
             self._record_alarm()
-        if n >= self.fit.sample + self.refit_every or self.fit.sample == 0:
-            self.publish()
-        self.sc[W.SC_DUE] = self.fit.sample + self.refit_every
+        elif self.events and not self.events[-1]["settled"]:
+            self._settle_events(self._check)
+        self._check = self.theta[:4].tolist()
+        self.sc[W.SC_DUE] = self.n + self.refit_every if self.events and not self.events[-1]["settled"] else math.inf
 
-    def publish(self) -> None:
-        """Swap the current estimate in as the fit: 1-sigma from P (an absolute covariance)."""
+    @property
+    def refits(self) -> int:
+        """Parameter updates (one per accepted sample)."""
+        return int(self.r[R_UPDATES])
+
+    @property
+    def fit(self) -> Fit:
+        """The current estimate as a fit: theta, mean squared innovation over the window times its effective
+        length, the 1-sigma from P (built when read, cached per sample)."""
+        n = self.n
+        if self._fit is not None and self._fit.sample == n:
+            return self._fit
         new = self.theta.tolist()
-        old = self.fit.theta.tolist()
-        if not all(map(math.isfinite, new)) or new[3] == 0.0:
-            self.rejected += 1
-            return
-        var = self.P.diagonal().tolist()
-        sd = [math.sqrt(v) if v >= 0.0 else math.inf for v in var]
+        sd = [math.sqrt(v) if v >= 0.0 else math.inf for v in self.P.diagonal().tolist()]
         a1, a2 = math.exp(new[1]), math.exp(new[2])
         std = {"alpha": sd[0], "a1": sd[1] * a1, "a2": sd[2] * a2, "b": sd[3], "offset": sd[4]}
         neff = min(float(self.r[R_UPDATES]), 1.0 / max(1.0 - self.forget, 1e-300))
-        self.fit = Fit(theta=self.theta.copy(), cost=float(self.r[R_COST]) * neff, neff=neff, std=std, sample=self.n)
-        self.refits += 1
-        if self.events and not self.events[-1]["settled"]:
-            self._settle_events(old)
+        self._fit = Fit(theta=self.theta.copy(), cost=float(self.r[R_COST]) * neff, neff=neff, std=std, sample=n)
+        return self._fit
 
     def _record_alarm(self) -> None:
         """The CUSUM fired (covariance already reset by the kernel): open an event, or restart the open one."""
