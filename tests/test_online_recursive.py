@@ -9,6 +9,7 @@ Tolerances are the issue's: alpha 2 %, b 3 %, a1 and a2 5 %.
 """
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -266,3 +267,23 @@ def test_bad_refit_is_a_one_line_error(refit):
     with pytest.raises(DataError) as info:
         OnlineEstimator(1e-3, refit=refit)
     assert "\n" not in str(info.value) and "refit" in str(info.value)
+
+
+def test_stream_command_takes_refit(tmp_path, capsys):
+    """``creep-online stream --refit recursive`` runs the recursive tracker (same default as the API: window);
+    an unknown strategy is an argparse error (exit 2)."""
+    from creep_online.cli import main
+    from creep_online.io.csvfile import save_csv
+    t = np.arange(24_000) * 5e-4
+    u = np.where(t >= 0.05, 1.0, 0.0) + np.where(t >= 6.0, -2.0, 0.0)
+    model = CreepModel.from_resonance(0.1, 60.0, 0.2, 3.0)
+    y = simulate(model, t, u) + np.random.default_rng(0).normal(0, 1e-3, t.size)
+    path = tmp_path / "run.csv"
+    save_csv(path, t, u, y)
+    assert main(["stream", "--source", f"csv:{path}", "--json", "--refit", "recursive"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["phase"] == "tracking" and out["alpha"] == pytest.approx(0.1, rel=TOL["alpha"])
+    assert out["b"] == pytest.approx(3.0, rel=TOL["b"])
+    with pytest.raises(SystemExit) as info:
+        main(["stream", "--source", f"csv:{path}", "--refit", "rls"])
+    assert info.value.code == 2
