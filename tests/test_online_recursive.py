@@ -287,3 +287,21 @@ def test_stream_command_takes_refit(tmp_path, capsys):
     with pytest.raises(SystemExit) as info:
         main(["stream", "--source", f"csv:{path}", "--refit", "rls"])
     assert info.value.code == 2
+
+
+def test_predict_one_freeze_and_reset(stepping):
+    """The estimator's API works the same with the recursive tracker: a one-step prediction at the noise
+    floor, a frozen estimate that stays, reset() back to buffering."""
+    h, u, y, ref, model = stepping
+    est = OnlineEstimator(h, refit="recursive")
+    n = 110_000
+    est.update_block(u[:n], y[:n])
+    clean = simulate(model, np.arange(n + 1) * h, u[:n + 1])[-1]
+    assert est.predict_one(u[n]) == pytest.approx(clean, abs=3 * est.estimate.noise_rms)
+    est.freeze()
+    before = est.estimate
+    est.update_block(u[n:], 1.1 * y[n:])             # a wrong output while frozen moves nothing
+    after = est.estimate
+    assert (after.alpha, after.a1, after.a2, after.b) == (before.alpha, before.a1, before.a2, before.b)
+    est.reset()
+    assert est.phase == "buffering" and est.estimate.samples == 0

@@ -286,7 +286,7 @@ class OnlineEstimator:
 
     @property
     def alpha_updates(self) -> int:
-        """Window re-fits done."""
+        """Window re-fits done (``refit="recursive"``: parameter updates, one per accepted sample)."""
         return 0 if self._tracker is None else self._tracker.refits
 
     @property

@@ -170,24 +170,27 @@ def _base(sc: np.ndarray) -> int:
 
 
 @njit(cache=CACHE)
-def refresh(st: np.ndarray, CT: np.ndarray) -> None:
-    """Move the linearization point to the current resonance (states carried on to first order) and
-    recompute the resonance step, the Jacobian coefficients ``CT`` (n x P) and ``m`` exactly."""
+def _parts(st: np.ndarray) -> tuple:
+    """Views of ``st`` (``layout``): scalars, Q, P, phi, m, co, recursive scalars, n, offset of theta."""
     sc = st[:W.SC_SIZE]
     q = int(sc[W.SC_NQ])
     nm = int(sc[W.SC_NM])
     p = q + W.FREE + nm
     o = W.SC_SIZE
-    phi = st[o:o + p]
-    m = st[o + p:o + 2 * p]
     c0 = o + 3 * p
-    co = st[c0:c0 + 2 * q + 18 + nm]
     rb = _base(sc)
     r = st[rb:rb + R_SIZE]
-    n = int(r[R_NP])
-    theta = st[rb + R_SIZE:rb + R_SIZE + n]
-    ref = st[rb + R_SIZE + n:rb + R_SIZE + 2 * n]
-    lam = st[rb + R_SIZE + 6 * n:rb + R_SIZE + 6 * n + q]
+    return sc, q, p, st[o:o + p], st[o + p:o + 2 * p], st[c0:c0 + 2 * q + 18 + nm], r, int(r[R_NP]), rb + R_SIZE
+
+
+@njit(cache=CACHE)
+def refresh(st: np.ndarray, CT: np.ndarray) -> None:
+    """Move the linearization point to the current resonance (states carried on to first order) and
+    recompute the resonance step, the Jacobian coefficients ``CT`` (n x P) and ``m`` exactly."""
+    sc, q, p, phi, m, co, r, n, t0 = _parts(st)
+    theta = st[t0:t0 + n]
+    ref = st[t0 + n:t0 + 2 * n]
+    lam = st[t0 + 6 * n:t0 + 6 * n + q]
     a1 = math.exp(theta[1])
     a2 = math.exp(theta[2])
     d1 = a1 - sc[W.SC_A1L]
@@ -199,7 +202,7 @@ def refresh(st: np.ndarray, CT: np.ndarray) -> None:
         sc[W.SC_A1L] = a1
         sc[W.SC_A2L] = a2
         r[R_RELIN] += 1.0
-    wo = rb + R_SIZE + 7 * n + q + n * n + GLR_HISTORY + 2 * n * n + 3 * n + GLR_HISTORY
+    wo = t0 + 7 * n + q + n * n + GLR_HISTORY + 2 * n * n + 3 * n + GLR_HISTORY
     C = st[wo:wo + p * n].reshape((p, n))
     W.jacobian_coefficients(theta, a1, a2, lam, r[R_DX], C)
     for i in range(p):
@@ -411,21 +414,9 @@ def sample(u: float, y: float, st: np.ndarray, P: np.ndarray, CT: np.ndarray) ->
 
     Low bits: 0 accepted, 1 output missing (NaN), 2 rejected as an outlier,
     3 beyond the gate but accepted, 4 not used (adaptation paused or output
-    stuck). Flag 8: the caller's work is due (a publication or an alarm).
+    stuck). Flag 8: the caller's work is due (an alarm, or the settle check of an open event).
     """
-    sc = st[:W.SC_SIZE]
-    q = int(sc[W.SC_NQ])
-    nm = int(sc[W.SC_NM])
-    p = q + W.FREE + nm
-    o = W.SC_SIZE
-    phi = st[o:o + p]
-    m = st[o + p:o + 2 * p]
-    c0 = o + 3 * p
-    co = st[c0:c0 + 2 * q + 18 + nm]
-    rb = _base(sc)
-    r = st[rb:rb + R_SIZE]
-    n = int(r[R_NP])
-    t0 = rb + R_SIZE
+    sc, q, p, phi, m, co, r, n, t0 = _parts(st)
     theta = st[t0:t0 + n]
     pred = 0.0
     for i in range(p):
