@@ -93,7 +93,7 @@ R_RELIN = 11      # moves of the linearization point (states carried on)
 R_LO = 12         # alpha bounds
 R_HI = 13
 R_DX = 14         # SOE node spacing
-R_COST = 15       # mean e^2 over the forgetting window
+R_COST = 15       # mean e^2 over the forgetting window (times R_COSTW; restarted at a detected change)
 R_COSTK = 16      # its smoothing factor
 R_SNAPN = 17      # sample index of the test block's start
 R_ALARMN = 18     # R_SNAPN at the last alarm: the change happened after it
@@ -104,7 +104,8 @@ R_TOLLN = 22      # refresh tolerance of ln a1, ln a2 and of b (relative)
 R_EVLR = 23       # LR at the last alarm
 R_UPDATES = 24    # parameter updates (accepted samples)
 R_CHECKN = 25     # samples between interim looks of the change test (divides R_TESTN)
-R_SIZE = 26
+R_COSTW = 26      # weight of R_COST (the same smoothing of 1): R_COST / R_COSTW is the mean, also when restarted
+R_SIZE = 27
 
 #: Per-sample bounds of a step (alpha absolute, ln a1 and ln a2): the recursion stays in the basin.
 STEP_ALPHA = 0.002
@@ -123,6 +124,8 @@ GLR_MIN = 100.0
 GLR_JUMP = 5.0
 GLR_HISTORY = 8
 QUIET_S = 1.5
+#: A detection within this long (s) of the last one (or of its restart) restarts that event.
+MERGE_S = 5.0
 #: Prior 1-sigma at the start (from the search) and after a detected change: alpha (absolute,
 #: plus a share of alpha), ln a1, ln a2, b (relative); offset and free responses in output units.
 START_SD = {"alpha": 0.01, "alpha_rel": 0.1, "ln_a": 0.1, "b_rel": 0.1, "offset_rel": 10.0}
@@ -280,6 +283,7 @@ def _rpem(e: float, phi: np.ndarray, m: np.ndarray, P: np.ndarray, CT: np.ndarra
             for k in range(n):
                 P[i, k] *= f
     r[R_COST] += r[R_COSTK] * (e * e - r[R_COST])
+    r[R_COSTW] += r[R_COSTK] * (1.0 - r[R_COSTW])
     r[R_UPDATES] += 1.0
 
 
@@ -373,6 +377,8 @@ def change_test(st: np.ndarray, P: np.ndarray, CT: np.ndarray, final: bool) -> N
         r[R_EVLR] = lr
         r[R_QUIET] = r[R_QUIETN]
         r[R_NHIST] = 0.0
+        r[R_COST] = 0.0                    # the window error restarts with the change, as the window tracker's
+        r[R_COSTW] = 0.0
         sc[W.SC_DUE] = sc[W.SC_N]          # the caller records the event at this sample (flag 8)
         refresh(st, CT)
     elif not final:
@@ -645,29 +651,36 @@ class RecursiveTracker:
         a1, a2 = math.exp(new[1]), math.exp(new[2])
         std = {"alpha": sd[0], "a1": sd[1] * a1, "a2": sd[2] * a2, "b": sd[3], "offset": sd[4]}
         neff = min(float(self.r[R_UPDATES]), 1.0 / max(1.0 - self.forget, 1e-300))
-        self._fit = Fit(theta=self.theta.copy(), cost=float(self.r[R_COST]) * neff, neff=neff, std=std, sample=n)
+        mean = float(self.r[R_COST]) / float(self.r[R_COSTW]) if self.r[R_COSTW] > 0.0 else 0.0
+        self._fit = Fit(theta=self.theta.copy(), cost=mean * neff, neff=neff, std=std, sample=n)
         return self._fit
 
     def _record_alarm(self) -> None:
-        """The CUSUM fired (covariance already reset by the kernel): open an event, or restart the open one."""
+        """The change test fired (covariance already reset by the kernel): open an event, or restart the last
+        one when it is open or was detected less than ``MERGE_S`` ago (the same change seen again while the
+        resonance re-converges: one event, whose moves are measured from before it once all has settled)."""
         g = float(self.r[R_EVLR])
         last = self.events[-1] if self.events else None
-        if last is not None and not last["settled"]:
+        now = self.n * self.h
+        if last is not None and (not last["settled"] or now - last["_last_t"] < MERGE_S):
             last["restarts"] += 1
             last["lr"] = max(last["lr"], g)
+            last["settled"] = False
+            last["_last_t"] = now
+            last.pop("settled_t", None)
             return
         snap = self.st[self.lay["snap"]:self.lay["prior"]]
         self.events.append({"t": float(self.r[R_ALARMN]) * self.h, "detected_t": self.n * self.h, "moved": [],
                             "relative_change": {}, "lr": g, "settled": False, "restarts": 1,
-                            "_before": snap[:4].copy()})
+                            "_before": snap[:4].copy(), "_last_t": self.n * self.h})
 
     def _settle_events(self, previous: list[float]) -> None:
         """Once the estimate has stopped moving after a change, record what moved; an alarm after which
         nothing moved beyond ``tracker.CHANGE_MOVE`` was a false alarm and leaves no event."""
         ev = self.events[-1]
         now = self.theta[:4].tolist()
-        if _largest_move(now, previous) < 0.002 and self.n * self.h - ev["detected_t"] > 1.0:
-            before = ev.pop("_before")
+        if _largest_move(now, previous) < 0.002 and self.n * self.h - ev["_last_t"] > 1.0:
+            before = ev["_before"]
             change = {"alpha": now[0] / before[0] - 1, "a1": math.exp(now[1] - before[1]) - 1,
                       "a2": math.exp(now[2] - before[2]) - 1, "b": now[3] / before[3] - 1}
             moved = sorted(k for k, v in change.items() if abs(v) > CHANGE_MOVE.get(k, 0.02))
