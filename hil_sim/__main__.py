@@ -21,12 +21,16 @@ from .links import PtyLink
 from .plant import SCHEDULES, PlantConfig, generate, parse_effects, parse_params
 from .runner import CAN_FRAMES, TRANSPORTS, Runner, emit_event
 
+CAPANCDT = "capancdt"
+
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m hil_sim", description=__doc__.splitlines()[0])
-    p.add_argument("--rate", type=float, default=10_000.0, help="samples per second (default 10000)")
+    p.add_argument("--rate", type=float, default=None,
+                   help="samples per second (default 10000; capancdt: 3906.25, the controller's fastest rate)")
     p.add_argument("--duration", type=float, default=20.0, help="record length in seconds (default 20)")
-    p.add_argument("--transport", choices=TRANSPORTS[:-1], default="serial-binary")
+    p.add_argument("--transport", choices=TRANSPORTS[:-1] + (CAPANCDT,), default="serial-binary",
+                   help="capancdt: a capaNCDT 6200-style TCP data port on 127.0.0.1 (hil_sim/capancdt_server.py)")
     p.add_argument("--can-frame", choices=CAN_FRAMES, default="pair",
                    help="slcan: samples per CAN frame: sample (1), pair (2, classic), block (7, CAN FD)")
     p.add_argument("--params", default="", help="alpha=..,a1=..,a2=..,b=.. or alpha=..,fn=..,zeta=..,b=..")
@@ -50,6 +54,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--link", default=None, help="stable symlink to the pty (needed to reconnect after a disconnect)")
     p.add_argument("--linger", type=float, default=2.0, help="keep the port open this long after the end (s)")
     p.add_argument("--ledger", default=None, help="write the injected-fault ledger (JSON) here")
+    g = p.add_argument_group("capancdt transport")
+    g.add_argument("--command-rate", type=float, default=1000.0, help="rate of the actuator command in Hz (default 1000)")
+    g.add_argument("--command-file", default=None, help="write the command's t,u schedule here (the source's ?command=)")
+    g.add_argument("--frames-per-packet", type=int, default=4, help="measuring frames per TCP packet (default 4)")
+    g.add_argument("--sensor-range", type=float, default=200.0, help="measuring range in um (default 200)")
+    g.add_argument("--sensor-offset", type=float, default=None, help="standoff in um (default: mid-range)")
+    g.add_argument("--sensor-channels", type=int, default=1, help="channels in the stream (default 1)")
+    g.add_argument("--sensor-channel", type=int, default=1, help="the channel that measures the actuator (default 1)")
+    g.add_argument("--counter-start", type=int, default=0, help="frame counter of the first frame (default 0)")
+    g.add_argument("--port", type=int, default=0, help="TCP port (default: an ephemeral one)")
     return p
 
 
@@ -66,6 +80,8 @@ def _payload(text: str) -> tuple[float, float] | None:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.rate is None:
+        args.rate = 3906.25 if args.transport == CAPANCDT else 10_000.0
     try:
         model = parse_params(args.params)
         spec = FaultSpec.parse(args.faults)
@@ -78,6 +94,9 @@ def main(argv: list[str] | None = None) -> int:
                       adc_bits=args.adc_bits, adc_range=args.adc_range, effects=effects,
                       payload=_payload(args.payload),
                       seed=args.seed)
+    if args.transport == CAPANCDT:
+        from .capancdt_server import serve
+        return serve(args, cfg, spec)
     rec = generate(cfg)
     link_path = args.link
     if link_path is None and "disconnect" in spec.counts:

@@ -137,11 +137,12 @@ class PlantRecord:
     lsb: float
 
 
-def generate(cfg: PlantConfig) -> PlantRecord:
-    """The full sampled record of the plant for this configuration."""
-    n = max(2, int(round(cfg.duration * cfg.rate)))
+def generate(cfg: PlantConfig, u: np.ndarray | None = None) -> PlantRecord:
+    """The full sampled record of the plant for this configuration (``u``: an input that replaces the schedule)."""
+    n = max(2, int(round(cfg.duration * cfg.rate))) if u is None else len(u)
     t = np.arange(n) / cfg.rate
-    u = make_input(cfg.schedule, t, amplitude=cfg.amplitude, period=cfg.period, t_start=cfg.t_start)
+    if u is None:
+        u = make_input(cfg.schedule, t, amplitude=cfg.amplitude, period=cfg.period, t_start=cfg.t_start)
     if cfg.effects:
         y_clean = apply_effects(cfg.model, t, u, cfg.effects)
     elif cfg.payload is not None:
