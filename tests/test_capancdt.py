@@ -294,3 +294,63 @@ def test_stream_command_end_to_end(tmp_path):
     assert res["samples"] == n and res["source_stats"]["missing"] == 0
     assert res["alpha"] == pytest.approx(0.12, rel=0.05) and res["b"] == pytest.approx(2.5, rel=0.02)
     assert res["offset"] == pytest.approx(100.0, abs=0.01)       # the sensor's standoff (mid-range)
+
+
+# ------------------------------------------------------------------ configurations not tuned on
+def random_configuration(seed: int) -> dict:
+    """Channels, packet size, counter start, data rate and command rate drawn over what the controller allows."""
+    rng = np.random.default_rng(1000 + seed)
+    channels = int(rng.integers(1, 5))
+    return {"channels": channels, "channel": int(rng.integers(1, channels + 1)),
+            "frames_per_packet": int(rng.integers(1, 17)), "counter_start": int(rng.integers(0, 2**32)),
+            "rate": RATE / 2 ** int(rng.integers(0, 4)), "command_rate": float(rng.uniform(50.0, 3900.0)),
+            "range": float(rng.choice([50.0, 200.0, 500.0, 1000.0, 2000.0])), "drop_frames": int(rng.integers(1, 9))}
+
+
+def run_configuration(cfg: dict, tmp_path) -> None:
+    """One run over loopback with two drops; every sample exact, every drop counted as its length."""
+    cmd = tmp_path / f"cmd{cfg['counter_start']}.csv"
+    duration = max(1.5, 300 * cfg["frames_per_packet"] / cfg["rate"])   # room for the fault plan's 300 packets
+    args = ["--transport", "capancdt", "--fast", "--duration", str(duration), "--t-start", "0.05", "--schedule",
+            "staircase", "--period", "0.1", "--seed", "9", "--rate", str(cfg["rate"]),
+            "--command-rate", str(cfg["command_rate"]), "--sensor-channels", str(cfg["channels"]),
+            "--sensor-channel", str(cfg["channel"]), "--frames-per-packet", str(cfg["frames_per_packet"]),
+            "--counter-start", str(cfg["counter_start"]), "--sensor-range", str(cfg["range"]),
+            "--command-file", str(cmd), "--faults", f"drop=2,drop_frames={cfg['drop_frames']}", "--linger", "5"]
+    with PlantProcess(args) as plant:
+        n = plant.ready["samples"]
+        spec = f"capancdt:{plant.port}?command={cmd}&channel={cfg['channel']}&rate={cfg['rate']}&range={cfg['range']}"
+        with open_source(spec, on_event=None) as src:
+            samples = read_all(src, cfg["counter_start"] + n - 1)
+        ledger = plant.wait_event("end", timeout=60)["ledger"]
+    truth = sensor_record(PlantConfig(parse_params(""), rate=cfg["rate"], duration=duration, schedule="staircase",
+                                      period=0.1, t_start=0.05, seed=9),
+                          command_rate=cfg["command_rate"], range_um=cfg["range"], channels=cfg["channels"],
+                          channel=cfg["channel"])
+    idx = np.array([s.seq for s in samples]) - cfg["counter_start"]
+    assert np.array_equal([s.y for s in samples], truth.raw[idx, cfg["channel"] - 1] * (cfg["range"] / FULL_SCALE))
+    k = [int(Fraction(int(i)) * Fraction(cfg["command_rate"]) / Fraction(cfg["rate"])) for i in idx]
+    u_ref = make_input("staircase", np.array(k) / cfg["command_rate"], period=0.1, t_start=0.05)
+    assert np.array_equal([s.u for s in samples], u_ref)
+    assert missing_runs(samples) == [cfg["drop_frames"]] * len(ledger["dropped"]) and len(ledger["dropped"]) == 2
+    assert src.stats.missing == ledger["dropped_samples"] and src.stats.parser.malformed == 0
+
+
+def check_configurations(seeds, tmp_path) -> None:
+    failed = []
+    for seed in seeds:
+        try:
+            run_configuration(random_configuration(seed), tmp_path)
+        except AssertionError as exc:
+            failed.append((seed, random_configuration(seed), str(exc).splitlines()[0]))
+    print(f"capancdt random configurations: {len(seeds) - len(failed)}/{len(seeds)} pass")
+    assert not failed, failed
+
+
+def test_random_configurations(tmp_path):
+    check_configurations(range(2), tmp_path)
+
+
+@pytest.mark.slow
+def test_random_configurations_at_scale(tmp_path):
+    check_configurations(range(2, 22), tmp_path)

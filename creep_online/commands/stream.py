@@ -45,6 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "final estimate, its quality and the per-sample update() latency.",
                        epilog=EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--source", required=True, help="csv:FILE | serial:PORT | can:IFACE:CHANNEL | canlog:FILE | "
+                                                    "capancdt:HOST:PORT?command=FILE | "
                                                     "KIND:... of an installed plug-in (docs/transports.md)")
     p.add_argument("--json", action="store_true",
                    help="print JSON (alpha a1 a2 b samples latency_us{p50,p99,max} phase quality ...)")

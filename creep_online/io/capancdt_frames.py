@@ -29,10 +29,12 @@ plausible header is followed, exactly where the packet ends, by another
 header of the same controller (order and serial number, channel field, frame
 size); once locked, every header must match that identity and every value
 must fit in 24 bits (a top byte of 0x00 or 0xFF; since any four consecutive
-bytes of a payload hold one top byte, a payload can never contain ``MEAS``,
-so a cut packet that swallowed the next header is caught), else the place is
-counted (``malformed``), skipped, and the parser searches for the next
-``MEAS`` and locks again. Bytes outside any packet are counted as ``garbage_bytes``.
+bytes of a payload hold one top byte, a payload can never contain ``MEAS``)
+and ``MEAS`` must not occur anywhere after the packet's start (so a packet
+cut short and completed by the next header's bytes is caught; the price: a
+packet whose counter bytes spell ``MEAS``, with its first value, is refused,
+about once in 2^32 frames), else the place is counted (``malformed``),
+skipped, and the parser searches for the next ``MEAS`` and locks again. Bytes outside any packet are counted as ``garbage_bytes``.
 """
 from __future__ import annotations
 
@@ -53,7 +55,8 @@ COUNTER_MODULUS = 2**32
 MAX_FRAMES = 4096
 _PAIR_HIGH_BITS = 0xAAAAAAAAAAAAAAAA   # the upper bit of every 2-bit channel entry must be 0
 _VALUES = np.dtype("<i4")
-_SPAN = 1 << 24                      # a value's top byte is 0x00 (or 0xFF, a negative math result)
+_TOP_BYTES = b"\x00\xff"              # a value's top byte: 0x00 (or 0xFF, a negative math result)
+_TAIL = struct.Struct("<HHI")         # frames, bytes per frame, counter (offset 24)
 
 
 class Identity(NamedTuple):
@@ -128,6 +131,7 @@ class CapancdtParser:
     stats: ParserStats = field(default_factory=ParserStats)
     identity: Identity | None = None    # the controller locked onto (kept across reconnects)
     locked: bool = False
+    _key: bytes = b""                   # header bytes 0..19 of the locked controller
     _buf: bytearray = field(default_factory=bytearray, repr=False)
 
     def feed(self, data: bytes) -> list[Packet]:
@@ -152,17 +156,19 @@ class CapancdtParser:
         buf = self._buf
         if len(buf) - pos < HEADER_LEN:
             return None
-        fields = HEADER.unpack_from(buf, pos)
-        if _plausible(fields) != self.identity:
+        frames, frame_bytes, counter = _TAIL.unpack_from(buf, pos + 24)
+        # the identity, compared as bytes: magic, order, serial, channels; then the frame size
+        if buf[pos:pos + 20] != self._key or frame_bytes != self.identity.frame_bytes \
+                or not 1 <= frames <= MAX_FRAMES:
             return self._bad_header(pos)
-        end = pos + HEADER_LEN + fields[5] * fields[6]
+        end = pos + HEADER_LEN + frames * frame_bytes
         if len(buf) < end:
-            return None if self._fits(pos + HEADER_LEN, len(buf)) else self._bad_header(pos)
-        values = self._values(fields, pos)
+            return None if self._fits(pos, len(buf)) else self._bad_header(pos)
+        values = self._values(frames, pos, end)
         if values is None:
             return self._bad_header(pos)
         self.stats.frames += 1
-        return end, Packet(fields[7], values)
+        return end, Packet(counter, values)
 
     def _bad_header(self, pos: int) -> tuple[int, None]:
         """No valid packet where one was due: count it, skip a byte and search for the next header."""
@@ -194,9 +200,10 @@ class CapancdtParser:
             return later, None
         fields, end = verdict
         self.identity = _plausible(fields)
+        self._key = bytes(buf[pos:pos + 20])
         self.locked = True
         self.stats.frames += 1
-        return end, Packet(fields[7], self._values(fields, pos))
+        return end, Packet(fields[7], self._values(fields[5], pos, end))
 
     def _confirmed(self, pos: int) -> tuple[tuple, int] | str | None:
         """(fields, end) when the header at ``pos`` is followed at its end by one of the same identity;
@@ -210,8 +217,8 @@ class CapancdtParser:
             return None
         end = pos + HEADER_LEN + fields[5] * fields[6]
         if len(buf) < end + HEADER_LEN:
-            return "wait" if self._fits(pos + HEADER_LEN, min(end, len(buf))) else None
-        if _plausible(HEADER.unpack_from(buf, end)) != ident or self._values(fields, pos) is None:
+            return "wait" if self._fits(pos, min(end, len(buf))) else None
+        if _plausible(HEADER.unpack_from(buf, end)) != ident or self._values(fields[5], pos, end) is None:
             return None
         return fields, end
 
@@ -225,23 +232,22 @@ class CapancdtParser:
             k = buf.find(MAGIC, k + 1)
         return None
 
-    def _fits(self, start: int, stop: int) -> bool:
-        """Whether the complete values received so far of a packet whose payload is still arriving fit in
-        24 bits: a header that claims more frames than were sent is refuted by the next header's bytes."""
-        n = (stop - start) // 4
-        if n <= 0:
-            return True
-        values = np.frombuffer(bytes(self._buf[start:start + 4 * n]), _VALUES)
-        return bool(values.min() >= -_SPAN and values.max() < _SPAN)
-
-    def _values(self, fields: tuple, pos: int) -> np.ndarray | None:
-        """The packet's values, shape (M, N); None unless every one fits in 24 bits (see the module docstring)."""
-        frames, frame_bytes = fields[5], fields[6]
+    def _fits(self, pos: int, stop: int) -> bool:
+        """Whether what has arrived of the packet at ``pos`` (up to ``stop``) can still be one: no ``MEAS``
+        after its start and 24-bit values. A header that claims more frames than were sent, or that was cut
+        and completed by the next header's bytes, is refuted by those bytes."""
+        if self._buf.find(MAGIC, pos + 1, stop) >= 0:
+            return False
         start = pos + HEADER_LEN
-        values = np.frombuffer(bytes(self._buf[start:start + frames * frame_bytes]), _VALUES).reshape(frames, -1)
-        if values.min() < -_SPAN or values.max() >= _SPAN:
+        n = (stop - start) // 4
+        return n <= 0 or not self._buf[start + 3:start + 4 * n:4].translate(None, _TOP_BYTES)
+
+    def _values(self, frames: int, pos: int, end: int) -> np.ndarray | None:
+        """The values of the packet at ``pos``, shape (M, N); None unless it passes :meth:`_fits`."""
+        if not self._fits(pos, end):
             return None
-        return values
+        payload = bytes(self._buf[pos + HEADER_LEN:end])
+        return np.frombuffer(payload, _VALUES).reshape(frames, -1)
 
     def restart(self) -> None:
         """A new connection starts on a packet boundary: forget the partial bytes, keep the identity.
