@@ -90,6 +90,19 @@ def test_random_packets_in_random_chunks_come_through_exact():
         assert parser.stats.garbage_bytes == 0 and parser.stats.malformed == 0
 
 
+def test_a_reconfigured_controller_is_followed_from_its_first_packet():
+    """Another identity (here: other channels) after a lock: one malformed place, then the new packets,
+    the first of them included once the second confirms it (a fuzz-found case: it used to be skipped)."""
+    old = manual_packet(0, [[1]], [1]) + manual_packet(1, [[2]], [1])
+    new = manual_packet(2, [[3, 4]], [1, 2]) + manual_packet(3, [[5, 6]], [1, 2]) + manual_packet(4, [[7, 8]], [1, 2])
+    parser = CapancdtParser()
+    got = parser.feed(old + new)
+    assert [(p.counter, p.values.tolist()) for p in got] == [(0, [[1]]), (1, [[2]]), (2, [[3, 4]]), (3, [[5, 6]]),
+                                                            (4, [[7, 8]])]
+    assert parser.stats.malformed == 1 and parser.stats.garbage_bytes == 0
+    assert channel_list(parser.identity.channels) == [1, 2]
+
+
 # ------------------------------------------------------------------ fuzzing the parser
 OPS = st.sampled_from(["keep", "keep", "keep", "garbage", "trunc", "flip", "drop", "dup"])
 FAST = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])

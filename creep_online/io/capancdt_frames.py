@@ -171,11 +171,11 @@ class CapancdtParser:
         return end, Packet(counter, values)
 
     def _bad_header(self, pos: int) -> tuple[int, None]:
-        """No valid packet where one was due: count it, skip a byte and search for the next header."""
+        """No valid packet where one was due: count it and search from here (a header of another identity
+        that the next one confirms, e.g. a reconfigured controller, is taken at once)."""
         self.stats.malformed += 1
-        self.stats.garbage_bytes += 1
         self.locked = False
-        return pos + 1, None
+        return pos, None
 
     def _search(self, pos: int) -> tuple[int, Packet | None] | None:
         """Find a header confirmed by the next one; skip (and count) everything before it."""

@@ -30,7 +30,7 @@ from .frames import RawSample
 from .source_options import RECONNECT, RECONNECT_TIMEOUT, STALL, WINDOW, Option
 from .sources import ReconnectingSource
 
-#: The controller's data port (its manual's default) and fastest data rate (2^8 us per frame).
+#: The controller's data port (as public DT6220 scripts use it) and fastest data rate (sample time 256 us).
 DATA_PORT = 10001
 DATA_RATE = 3906.25
 #: Measuring range assumed when none is given: a CS02 sensor (200 um).
