@@ -1,7 +1,8 @@
 """``python -m hil_sim``: the simulated amplifier + plant in its own process.
 
 stdout, line 1: the port to open (a ``/dev/pts/N`` path, or the ``--link``
-symlink). Every further stdout line is a JSON event: ``ready`` (model,
+symlink; ``127.0.0.1:PORT`` for ``--transport capancdt``, served by
+``capancdt_server``). Every further stdout line is a JSON event: ``ready`` (model,
 rate, sample count), ``start`` (``t0_monotonic``: sample n was taken at
 ``t0 + n / rate`` on the system monotonic clock), ``stall``, ``disconnect``,
 ``reconnect``, ``end`` (with the fault ledger). ``--ledger FILE`` also writes

@@ -103,6 +103,18 @@ def test_a_reconfigured_controller_is_followed_from_its_first_packet():
     assert channel_list(parser.identity.channels) == [1, 2]
 
 
+def test_a_cut_header_completed_by_a_damaged_one_is_not_taken():
+    """A header cut after 28 bytes, then a header whose magic lost a bit: the 'counter' would be the damaged
+    magic and the 'values' the next header's order and serial numbers (a fuzz-found case)."""
+    chans = [1, 3]
+    packets = [manual_packet(c, [[c, c]], chans) for c in range(6)]
+    damaged = b"L" + packets[2][1:]
+    data = packets[0] + packets[1][:28] + damaged + b"".join(packets[3:])
+    parser = CapancdtParser()
+    got = parser.feed(data)
+    assert [(p.counter, p.values.tolist()) for p in got] == [(c, [[c, c]]) for c in (0, 3, 4, 5)]
+
+
 # ------------------------------------------------------------------ fuzzing the parser
 OPS = st.sampled_from(["keep", "keep", "keep", "garbage", "trunc", "flip", "drop", "dup"])
 FAST = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -361,9 +373,9 @@ def check_configurations(seeds, tmp_path) -> None:
 
 
 def test_random_configurations(tmp_path):
-    check_configurations(range(2), tmp_path)
+    check_configurations(range(1), tmp_path)
 
 
 @pytest.mark.slow
 def test_random_configurations_at_scale(tmp_path):
-    check_configurations(range(2, 22), tmp_path)
+    check_configurations(range(1, 21), tmp_path)

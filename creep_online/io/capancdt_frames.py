@@ -34,7 +34,10 @@ and ``MEAS`` must not occur anywhere after the packet's start (so a packet
 cut short and completed by the next header's bytes is caught; the price: a
 packet whose counter bytes spell ``MEAS``, with its first value, is refused,
 about once in 2^32 frames), else the place is counted (``malformed``),
-skipped, and the parser searches for the next ``MEAS`` and locks again. Bytes outside any packet are counted as ``garbage_bytes``.
+skipped, and the parser searches for the next ``MEAS`` and locks again. A
+valid header whose counter went backwards or jumped by 2^20 frames or more
+within one connection is taken only once the next header confirms it (so a
+header cut short and completed by a damaged next header is not). Bytes outside any packet are counted as ``garbage_bytes``.
 """
 from __future__ import annotations
 
@@ -53,6 +56,9 @@ FULL_SCALE = 0xFFFFFF               # 24-bit measuring value at the end of the r
 COUNTER_MODULUS = 2**32
 #: Largest frame count accepted in one packet (anything above is a corrupt header).
 MAX_FRAMES = 4096
+#: Counter advance beyond which (or backwards) a packet within one connection needs the next header's
+#: confirmation: 2^20 frames, 4.5 min at 3.9 kSa/s.
+MAX_JUMP = 1 << 20
 _PAIR_HIGH_BITS = 0xAAAAAAAAAAAAAAAA   # the upper bit of every 2-bit channel entry must be 0
 _VALUES = np.dtype("<i4")
 _TOP_BYTES = b"\x00\xff"              # a value's top byte: 0x00 (or 0xFF, a negative math result)
@@ -132,6 +138,7 @@ class CapancdtParser:
     identity: Identity | None = None    # the controller locked onto (kept across reconnects)
     locked: bool = False
     _key: bytes = b""                   # header bytes 0..19 of the locked controller
+    _next: int | None = None            # the counter the next packet should carry (within a connection)
     _buf: bytearray = field(default_factory=bytearray, repr=False)
 
     def feed(self, data: bytes) -> list[Packet]:
@@ -161,14 +168,21 @@ class CapancdtParser:
         if buf[pos:pos + 20] != self._key or frame_bytes != self.identity.frame_bytes \
                 or not 1 <= frames <= MAX_FRAMES:
             return self._bad_header(pos)
+        if self._next is not None and (counter - self._next) % COUNTER_MODULUS >= MAX_JUMP:
+            self.locked = False             # plausible but unexpected: taken once the next header confirms it
+            return pos, None
         end = pos + HEADER_LEN + frames * frame_bytes
         if len(buf) < end:
             return None if self._fits(pos, len(buf)) else self._bad_header(pos)
         values = self._values(frames, pos, end)
         if values is None:
             return self._bad_header(pos)
+        return end, self._accept(counter, values)
+
+    def _accept(self, counter: int, values: np.ndarray) -> Packet:
         self.stats.frames += 1
-        return end, Packet(counter, values)
+        self._next = (counter + values.shape[0]) % COUNTER_MODULUS
+        return Packet(counter, values)
 
     def _bad_header(self, pos: int) -> tuple[int, None]:
         """No valid packet where one was due: count it and search from here (a header of another identity
@@ -202,8 +216,7 @@ class CapancdtParser:
         self.identity = _plausible(fields)
         self._key = bytes(buf[pos:pos + 20])
         self.locked = True
-        self.stats.frames += 1
-        return end, Packet(fields[7], self._values(fields[5], pos, end))
+        return end, self._accept(fields[7], self._values(fields[5], pos, end))
 
     def _confirmed(self, pos: int) -> tuple[tuple, int] | str | None:
         """(fields, end) when the header at ``pos`` is followed at its end by one of the same identity;
@@ -257,3 +270,4 @@ class CapancdtParser:
         self.stats.garbage_bytes += len(self._buf)
         self._buf.clear()
         self.locked = self.identity is not None
+        self._next = None                   # the controller counted on while we were away
