@@ -21,8 +21,6 @@ import select
 import socket
 from typing import Any
 
-import numpy as np
-
 from ..errors import DataError, TransportError
 from .capancdt_frames import COUNTER_MODULUS, CapancdtParser, Identity, Packet, channel_list, scale
 from .command_schedule import CommandSchedule
@@ -130,15 +128,20 @@ class CapancdtSource(ReconnectingSource):
         return out
 
     def _samples(self, packet: Packet) -> list[RawSample]:
-        """The packet's frames as samples: y from our channel, u held from the schedule, seq = counter."""
-        m = packet.values.shape[0]
-        counters = (packet.counter + np.arange(m, dtype=np.int64)) % COUNTER_MODULUS
+        """The packet's frames as samples: y from our channel, u held from the schedule, seq = counter.
+
+        Plain Python per frame: a packet holds a few frames, where numpy's per-call overhead dominates.
+        """
         if self.counter0 is None:
-            self.counter0 = int(packet.counter)
-        elapsed = (counters - self.counter0) % COUNTER_MODULUS
-        u = self.schedule.at(elapsed / self.rate)
-        y = scale(packet.values[:, self._channel_column()].astype(np.float64), self.range_um)
-        return [RawSample(c, 0.0, a, b, 0) for c, a, b in zip(counters.tolist(), u.tolist(), y.tolist())]
+            self.counter0 = packet.counter
+        first = packet.counter
+        c0, rate, lsb = self.counter0, self.rate, scale(1.0, self.range_um)
+        held = self.schedule.at_time
+        out = []
+        for j, raw in enumerate(packet.values[:, self._channel_column()].tolist()):
+            c = (first + j) % COUNTER_MODULUS
+            out.append(RawSample(c, 0.0, held(((c - c0) % COUNTER_MODULUS) / rate), raw * lsb, 0))
+        return out
 
     def _channel_column(self) -> int:
         """Where our channel sits in a frame (present channels, lowest first) for the locked controller."""

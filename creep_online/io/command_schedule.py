@@ -12,6 +12,7 @@ aligned with the sensor's frame counter.
 """
 from __future__ import annotations
 
+from bisect import bisect_right
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +33,7 @@ class CommandSchedule:
         if t.size > 1 and not np.all(np.diff(t) > 0):
             raise DataError(f"{source}: the command schedule's times must increase strictly")
         self.t, self.u, self.source = t, u, source
+        self._t_list, self._u_list = t.tolist(), u.tolist()   # for the per-sample lookup
 
     @classmethod
     def load(cls, path: str | Path) -> "CommandSchedule":
@@ -62,6 +64,10 @@ class CommandSchedule:
         """The held command at times ``t`` (s from the start)."""
         idx = np.searchsorted(self.t, t, side="right") - 1
         return self.u[np.maximum(idx, 0)]
+
+    def at_time(self, t: float) -> float:
+        """The held command at one time ``t`` (s): :meth:`at` for a single sample, without numpy's overhead."""
+        return self._u_list[max(bisect_right(self._t_list, t) - 1, 0)]
 
     def write(self, path: str | Path) -> None:
         """Save as ``t,u`` CSV with exact (repr) numbers, so :meth:`load` returns the same schedule."""
