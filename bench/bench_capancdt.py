@@ -44,17 +44,11 @@ from creep_online.io.feed import FeedLoop, SampleAge  # noqa: E402
 from creep_online.io.sources import open_source  # noqa: E402
 from hil_sim.harness import PlantProcess  # noqa: E402
 
+from bench_transports import dist  # noqa: E402  (bench/ is on the path of a bench script)
+
 RATE = 3906.25
 PLANT = ["--transport", "capancdt", "--rate", str(RATE), "--t-start", "0.2", "--schedule", "square",
          "--period", "1.0", "--linger", "5"]
-
-
-def dist(x) -> dict:
-    x = np.asarray(x, dtype=float)
-    if x.size == 0:
-        return {"p50": None, "p99": None, "max": None, "n": 0}
-    return {"p50": float(np.percentile(x, 50)), "p99": float(np.percentile(x, 99)), "max": float(x.max()),
-            "n": int(x.size)}
 
 
 def _children_cpu() -> float:

@@ -94,13 +94,16 @@ class CapancdtSource(ReconnectingSource):
         sock.setblocking(False)
         self._sock = sock
 
-    def _close_link(self) -> None:
+    def _close_socket(self) -> None:
         if self._sock is not None:
             try:
                 self._sock.close()
             except OSError:
                 pass
         self._sock = None
+
+    def _close_link(self) -> None:
+        self._close_socket()
         self.parser.restart()
 
     @property
@@ -155,12 +158,7 @@ class CapancdtSource(ReconnectingSource):
         return self._column[1]
 
     def close(self) -> None:
-        if self._sock is not None:
-            try:
-                self._sock.close()
-            except OSError:
-                pass
-            self._sock = None
+        self._close_socket()
         super().close()
 
 
