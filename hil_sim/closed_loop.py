@@ -12,8 +12,8 @@ compensator takes the estimator's model according to ``mode``:
 ``known``          the true initial model from the start (no estimator needed);
 ``uncompensated``  u = r / g with g the plant's static gain 1 s after a step (b / Gamma(1 + alpha)).
 
-``creep_error`` measures what the issue asks: output minus reference from the
-end of the resonance transient after each step to the end of its hold.
+``creep_online.metrics.creep_error`` measures what the issue asks: output minus
+reference from the end of the resonance transient after each step to the end of its hold.
 """
 from __future__ import annotations
 
@@ -22,7 +22,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from creep_online.metrics import creep_error  # noqa: F401 - re-exported for the bench and tests
 from creep_online.model import CreepModel
 from creep_online.online.compensator import CreepCompensator
 

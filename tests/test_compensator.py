@@ -233,7 +233,8 @@ def adaptive_vs_frozen(seed: int, duration: float = 30.0, **est_kwargs) -> float
     10 kHz; alpha +20 % and b +10 % over the run; a random 5-level staircase; the compensators take the
     live estimate (adaptive: every 1 ms while the estimate is good; frozen: its first good one only)."""
     from creep_online.online import OnlineEstimator
-    from hil_sim.closed_loop import creep_error, run_closed_loop, staircase
+    from creep_online.metrics import creep_error
+    from hil_sim.closed_loop import run_closed_loop, staircase
     rng = np.random.default_rng(seed)
     plant = CreepModel.from_resonance(rng.uniform(0.05, 0.3), rng.uniform(200.0, 800.0), rng.uniform(0.03, 0.2),
                                       rng.uniform(1.0, 4.0))
@@ -268,3 +269,18 @@ def test_adaptive_beats_frozen_on_drifting_random_plants():
               f"(ratios {np.round(ratios, 1).tolist()})")
         if kwargs:               # the default change test can fire in a compensated hold: reported, not required
             assert frac >= 0.75
+
+
+def test_creep_error_windows():
+    """metrics.creep_error: each hold from settle_s after its step to its end, early holds skipped."""
+    from creep_online.metrics import creep_error
+    t = np.arange(1000) * 0.01
+    r = np.where(t >= 1.0, 1.0, 0.0) + np.where(t >= 5.0, 1.0, 0.0)
+    y = r.copy()
+    y[(t >= 1.0) & (t < 1.2)] += 5.0          # the transient: excluded
+    y[(t >= 3.0) & (t < 5.0)] += 0.1          # creep in the first hold
+    y[t >= 9.0] -= 0.3                        # creep in the second hold
+    ce = creep_error(t, r, y, settle_s=0.5)
+    assert [p["t"] for p in ce["per_hold"]] == [1.0, 5.0]
+    assert ce["max_abs"] == pytest.approx(0.3) and ce["per_hold"][0]["max_abs"] == pytest.approx(0.1)
+    assert [p["t"] for p in creep_error(t, r, y, 0.5, skip_before=2.0)["per_hold"]] == [5.0]

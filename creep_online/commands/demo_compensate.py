@@ -146,7 +146,7 @@ def _judge(result: dict, r: np.ndarray, truth, comp, sender: _Sender, ready: dic
     """Creep errors measured (compensated) and simulated (uncompensated), and what the loop did."""
     from ..metrics import creep_error
     from ..simulate import simulate
-    seq, y, u = result["_seq"], result["_y"], result["_u"]
+    seq, y = result["_seq"], result["_y"]
     dt = 1.0 / float(ready["rate"])
     n = r.size
     t = np.arange(n) * dt
