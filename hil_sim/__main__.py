@@ -159,9 +159,11 @@ def _closed_loop(args, model, drift: tuple[float, float], spec, effects) -> int:
     from .command_runner import CommandRunner
     refused = [name for name, given in (("--faults", spec.counts), ("--effects", effects),
                                         ("--payload", args.payload), ("--fast", args.fast)) if given]
-    if args.transport != "serial-binary" or refused:
-        print(f"hil_sim: --command-input runs on --transport serial-binary without "
-              f"{', '.join(refused) or 'other transports'}", file=sys.stderr)
+    if args.transport != "serial-binary":
+        print(f"hil_sim: --command-input needs --transport serial-binary (got {args.transport})", file=sys.stderr)
+        return 2
+    if refused:
+        print(f"hil_sim: --command-input cannot be combined with {', '.join(refused)}", file=sys.stderr)
         return 2
     link = PtyLink(args.link)
     stop = threading.Event()
