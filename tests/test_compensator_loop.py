@@ -86,3 +86,14 @@ def test_demo_compensate_writes_the_compensation_report(tmp_path):
     assert math.isfinite(measured["rms"]) and uncomp["rms"] > 5 * measured["rms"]
     for name in ("report.html", "compensation.png", "fit.png"):
         assert (report / name).is_file(), name
+
+
+def test_command_input_refuses_what_it_cannot_do_in_one_line():
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    for extra, message in ((["--transport", "serial-ascii"], "needs --transport serial-binary"),
+                           (["--faults", "drop=2"], "cannot be combined with --faults"),
+                           (["--drift", "beta=1"], "--drift takes alpha=..,b=..")):
+        proc = subprocess.run([sys.executable, "-m", "hil_sim", "--command-input", *extra],
+                              capture_output=True, text=True, env=env, timeout=120)
+        assert proc.returncode == 2 and message in proc.stderr and "Traceback" not in proc.stderr
+        assert len(proc.stderr.strip().splitlines()) == 1
