@@ -97,3 +97,34 @@ def test_command_input_refuses_what_it_cannot_do_in_one_line():
                               capture_output=True, text=True, env=env, timeout=120)
         assert proc.returncode == 2 and message in proc.stderr and "Traceback" not in proc.stderr
         assert len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_command_frames_survive_garbage_and_bit_flips_on_a_real_pty():
+    """The plant's side parses commands with the sample parser: garbage skipped and counted, a corrupt
+    frame dropped (CRC), the rest applied at their sample numbers; stale and non-command frames counted."""
+    from creep_online.io.frames import encode_binary
+    from hil_sim.command_runner import CommandRunner
+    from hil_sim.links import PtyLink
+    link = PtyLink()
+    try:
+        runner = CommandRunner(CreepModel(0.1, 1e-4, 1e-8, 1.0), RATE, 100, link, start_timeout=5.0)
+        bad = bytearray(encode_command(3, 0.3))
+        bad[10] ^= 0x04
+        wire = (b"S\x01\x02garbage" + encode_command(0, 0.1) + encode_command(1, 0.2) + bytes(bad)
+                + encode_binary(7, 1.0, 2.0) + encode_command(4, 0.4) + encode_command(500, 9.0))
+        fd = os.open(link.tty, os.O_WRONLY | os.O_NOCTTY)
+        try:
+            os.write(fd, wire)
+        finally:
+            os.close(fd)
+        assert runner.wait_first_command()
+        deadline = time.monotonic() + 5
+        while runner.ledger.commands < 3 and time.monotonic() < deadline:
+            runner._take_commands(0.05)
+    finally:
+        link.close()
+    led = runner.ledger
+    assert (led.commands, led.crc_errors, led.other_frames, led.stale) == (3, 1, 1, 1)
+    assert led.garbage_bytes >= 10
+    np.testing.assert_allclose(runner.cmd[[0, 1, 4]], [0.1, 0.2, 0.4], atol=1e-6)   # 1e-6 per LSB
+    assert np.isnan(runner.cmd[[2, 3, 5]]).all()
