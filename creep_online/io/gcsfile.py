@@ -158,8 +158,9 @@ def load_gcs(path: str | Path, u_column: str | None = None, y_column: str | None
     sep = chr(int(_number(path, header, "SEPARATOR", int)))
     iu = column_index(path, names, u_column, "input") if u_column else 0
     iy = column_index(path, names, y_column, "output") if y_column else 1
+    readgcsarray = _pipython_reader()
     try:
-        _, data = _pipython_reader()(str(path))
+        _, data = readgcsarray(str(path))
     except (ValueError, IndexError, KeyError, UnicodeDecodeError):
         raise DataError(f"{path}: {_first_bad_row(path, first_data, sep, len(names))}") from None
     u = np.asarray(data[iu], dtype=float)
