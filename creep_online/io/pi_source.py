@@ -149,10 +149,12 @@ class PiSource(ReconnectingSource):
         self.recordings += 1
 
     def _close_link(self) -> None:
+        """Close through the context-manager exit: plain close() leaves the GCSDevice registered in
+        pipython's class-wide connection callbacks, and the next connection would call into this dead one."""
         dev, self._dev = self._dev, None
         if dev is not None:
             try:
-                dev.close()
+                dev.__exit__(None, None, None)
             except Exception:  # noqa: BLE001 - closing a dead port may fail; it is gone either way
                 pass
 
@@ -169,10 +171,9 @@ class PiSource(ReconnectingSource):
         except TransportError:
             raise
         except Exception as exc:  # noqa: BLE001 - pyserial / pipython errors: classified below
-            error = self._error(exc)
             if not self._is_link_error(exc):
-                raise error from None
-            self._lost(str(error).split(": ", 1)[-1])
+                raise self._error(exc) from None
+            self._lost(f"no answer to '{self._doing}': {_reason(exc)}")
             return []
 
     def _poll(self, timeout: float) -> list[RawSample]:
@@ -187,13 +188,22 @@ class PiSource(ReconnectingSource):
         return []
 
     def _fetch(self, n: int) -> list[RawSample]:
+        """Points read+1 .. read+n of both tables (pipython reads the rows in its own thread).
+
+        The error check (ERR?) is made here after the rows, not by pipython's reading
+        thread, whose own check is outside its error handling (a link lost there would
+        print a thread traceback).
+        """
         dev = self._dev
-        header = self._call(f"DRR? {self._read + 1} {n} 1 2", dev.qDRR, [1, 2], self._read + 1, n)
-        deadline = time.monotonic() + self.timeout_s + n * 1e-4
-        while dev.bufstate is not True:          # pipython reads the rows in its own thread
-            if time.monotonic() > deadline:
-                raise TransportError(f"{self.name}: DRR? answered {n} points too slowly")
-            time.sleep(0.0005)
+        command = f"DRR? {self._read + 1} {n} 1 2"
+        dev.errcheck = False
+        try:
+            header = self._call(command, dev.qDRR, [1, 2], self._read + 1, n)
+            while dev.bufstate is not True:          # raises pipython's timeout if the rows stop
+                time.sleep(0.0005)
+        finally:
+            dev.errcheck = True
+        self._check_error(command)
         u, y = dev.bufdata[:2]
         if not self.rate:
             self.rate = 1.0 / float(header["SAMPLE_TIME"])
@@ -202,6 +212,12 @@ class PiSource(ReconnectingSource):
         self._read += n
         self._last_count = -1
         return [RawSample(seq0 + i, 0.0, u[i], y[i], 0) for i in range(n)]
+
+    def _check_error(self, command: str) -> None:
+        code = self._call("ERR?", self._dev.qERR)
+        if code:
+            self._doing = command
+            raise self._gcs[2](code)
 
     # -------------------------------------------------------------- errors
     def _is_link_error(self, exc: BaseException) -> bool:
@@ -217,7 +233,7 @@ class PiSource(ReconnectingSource):
             text = GCSError.translate_error(exc.val)
             return TransportError(f"{self.name}: the controller refused '{self._doing}': GCS error {exc.val} "
                                   f"({text.rsplit(' ', 1)[0] if text.endswith(str(exc.val)) else text})")
-        return TransportError(f"{self.name}: link lost at '{self._doing}' ({_reason(exc)})")
+        return TransportError(f"{self.name}: no answer to '{self._doing}' ({_reason(exc)})")
 
     def close(self) -> None:
         self._close_link()
