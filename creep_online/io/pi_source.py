@@ -12,8 +12,8 @@ sends, in GCS 2 syntax::
     DRT 0 4 0                  start recording now (trigger source 4, "immediately")
 
 and then, while streaming, ``DRL? 1`` (points recorded so far) and
-``DRR? OFFSET N 1 2`` for the points not read yet, at most ``chunk`` at a time;
-pipython checks ``ERR?`` after each. The recorder's header gives the sample
+``DRR? OFFSET N 1 2`` for the points not read yet, at most ``chunk`` at a time,
+each DRR? followed by ``ERR?`` (and DRL? too when nothing new was recorded). The recorder's header gives the sample
 time (``SAMPLE_TIME``). Point i of a recording gets sequence number
 ``base + i``; a record table is finite, so when a recording has stopped
 growing and has been read to the end, the source starts the next one
@@ -177,9 +177,20 @@ class PiSource(ReconnectingSource):
             return []
 
     def _poll(self, timeout: float) -> list[RawSample]:
-        count = self._call("DRL? 1", self._dev.qDRL, 1)[1]
+        """One DRL?; then the new points, a new recording when this one has stopped, or a short wait.
+
+        DRL? is sent without its own ERR? round trip (one fewer per poll): the
+        error register is read after every DRR? and whenever the count stands still.
+        """
+        dev = self._dev
+        dev.errcheck = False
+        try:
+            count = self._call("DRL? 1", dev.qDRL, 1)[1]
+        finally:
+            dev.errcheck = True
         if count > self._read:
             return self._fetch(min(count - self._read, self.chunk))
+        self._check_error("DRL? 1")
         if count == self._last_count and self._read > 0:
             self._arm()               # the recording stopped (table full) and all of it was read
             return []
