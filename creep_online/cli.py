@@ -20,7 +20,7 @@ COMMANDS = ("identify", "simulate", "stream", "diagnose", "fit", "demo")
 SUMMARIES = {
     "identify": "identify alpha, a1, a2, b from a t,u,y CSV (two-layer TRF)",
     "simulate": "simulate the model for the input of a t,u CSV",
-    "stream": "run the online estimator on a stream (csv:FILE, serial:PORT, can:..., canlog:FILE)",
+    "stream": "run the online estimator on a stream (csv:FILE, serial:PORT, can:..., canlog:FILE, pi:PORT)",
     "diagnose": "find which catalogue effect the creep model is missing",
     "fit": "fit the creep model extended by catalogue effects",
     "demo": "stream the simulated plant over a pty and identify it live",

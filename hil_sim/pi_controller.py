@@ -40,8 +40,9 @@ and start where the previous one ended (throughput measurements).
 
 stdout: line 1 the port; then JSON events ``ready`` (model, rate, samples),
 ``trigger`` (servo cycle where a recording starts, its points), ``disconnect``,
-``end``. ``--disconnect-after S`` closes the port S seconds after the first
-trigger (a pulled cable) and exits.
+``reconnect``, ``end``. ``--disconnect-after S`` closes the port S seconds after
+the first trigger (a pulled cable) and exits, or with ``--back-after S2`` opens a
+new pty behind ``--link`` S2 seconds later and goes on answering.
 """
 from __future__ import annotations
 
@@ -283,14 +284,24 @@ COMMANDS = {"*IDN?": Controller.q_idn, "CSV?": Controller.q_csv, "ERR?": Control
             "DRR?": Controller.q_drr, "VOL?": Controller.q_vol, "POS?": Controller.q_pos}
 
 
-def serve(link: PtyLink, ctl: Controller, disconnect_after: float | None) -> None:
-    """Answer commands line by line until stopped (SIGTERM) or the simulated cable is pulled."""
+def serve(link: PtyLink, ctl: Controller, disconnect_after: float | None, back_after: float | None) -> None:
+    """Answer commands line by line until stopped (SIGTERM) or the simulated cable is pulled for good.
+
+    The cable is pulled ``disconnect_after`` s after the first trigger; with ``back_after``
+    it is plugged in again that many seconds later (a new pty behind ``--link``) and the
+    controller, which kept running, answers again.
+    """
     buf = b""
     while True:
         if disconnect_after is not None and ctl.t0 is not None and time.monotonic() - ctl.t0 > disconnect_after:
             emit("disconnect", after_s=disconnect_after, recorded=ctl.recorded())
             link.close()
-            return
+            if back_after is None:
+                return
+            time.sleep(back_after)
+            link.reopen()
+            buf, disconnect_after = b"", None
+            emit("reconnect", tty=link.tty)
         chunk = link.read_available(0.05)
         if not chunk:
             continue
@@ -317,6 +328,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fast", action="store_true", help="recordings complete at once (throughput, no real time)")
     p.add_argument("--disconnect-after", type=float, default=None,
                    help="close the port this many seconds after the first trigger and exit (a pulled cable)")
+    p.add_argument("--back-after", type=float, default=None,
+                   help="with --disconnect-after: plug the cable in again this many seconds later (needs --link)")
     p.add_argument("--link", default=None, help="stable symlink to the pty")
     return p
 
@@ -339,7 +352,7 @@ def main(argv: list[str] | None = None) -> int:
     ctl = Controller(plant, args.rate, args.table_points, fast=args.fast)
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
     try:
-        serve(link, ctl, args.disconnect_after)
+        serve(link, ctl, args.disconnect_after, args.back_after)
     finally:
         emit("end", recorded=ctl.recorded())
         link.close()

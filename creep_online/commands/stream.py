@@ -38,13 +38,13 @@ once samples have arrived):
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("stream", help="run the online estimator on a stream (csv:FILE, serial:PORT, can:..., canlog:FILE)",
+    p = sub.add_parser("stream", help="run the online estimator on a stream (csv:FILE, serial:PORT, can:..., canlog:FILE, pi:PORT)",
                        description="Online identification of all four parameters: a global search over "
                                    "(alpha, fn, zeta) on the first samples, then a window fit that follows the "
                                    "plant, detects abrupt changes and gates outliers (docs/online.md). Prints the "
                                    "final estimate, its quality and the per-sample update() latency.",
                        epilog=EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--source", required=True, help="csv:FILE | serial:PORT | can:IFACE:CHANNEL | canlog:FILE | "
+    p.add_argument("--source", required=True, help="csv:FILE | serial:PORT | can:IFACE:CHANNEL | canlog:FILE | pi:PORT | "
                                                     "KIND:... of an installed plug-in (docs/transports.md)")
     p.add_argument("--json", action="store_true",
                    help="print JSON (alpha a1 a2 b samples latency_us{p50,p99,max} phase quality ...)")

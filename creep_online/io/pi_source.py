@@ -2,8 +2,10 @@
 
 The controller is driven by PI's own library, ``pipython``: a ``GCSDevice``
 on pipython's pure-Python RS-232 gateway (``PISerial(port, baudrate)``, which
-calls ``ConnectRS232``; PI's GCS DLL is not needed). On connecting the source
-sends, in GCS 2 syntax::
+calls ``ConnectRS232``; PI's GCS DLL is not needed), whose ``read()`` here
+waits for bytes with ``select`` instead of letting pipython spin on it
+(``wait=0``: the stock gateway). On connecting the source sends, in GCS 2
+syntax::
 
     *IDN?                      who is there (kept in ``source.idn``)
     SAI?                       the axes, when ``axis`` is not given (the first one is used)
@@ -19,9 +21,10 @@ time (``SAMPLE_TIME``). Point i of a recording gets sequence number
 growing and has been read to the end, the source starts the next one
 (``DRT`` again) and numbers it from the host clock (``base`` = time since the
 first trigger / sample time, never less than where the last recording ended).
-The points lost while re-triggering are therefore counted as a gap (an
-estimate good to the host's command latency, about a millisecond), and the
-estimator is told about them.
+The points lost while re-triggering are therefore counted as a gap, and the
+estimator is told about them; the count is an estimate good to half the DRT
+round trip (kept per recording in ``trigger_uncertainty_s``; about a
+millisecond on a quiet machine).
 
 Errors: a GCS error code from the controller (a refused record option, an
 invalid axis) is a :class:`TransportError` naming the command and the code;
@@ -35,7 +38,7 @@ from typing import Any
 
 from ..errors import TransportError
 from .frames import RawSample
-from .source_options import Option
+from .source_options import Option, flag
 from .sources import ReconnectingSource
 
 #: GCS record options used by default (pipython.datarectools.RecordOptions).
@@ -56,6 +59,26 @@ def _pipython():
     return GCSDevice, PISerial, GCSError
 
 
+def _waiting_gateway(PISerial: type) -> type:
+    """pipython's ``PISerial`` whose ``read()`` first waits (select, at most 2 ms) for bytes to arrive.
+
+    pipython polls ``read()`` in a loop without sleeping while it waits for a
+    reply; with the stock gateway that loop keeps a core busy, which on a small
+    machine is taken from the process that has to answer (and from the
+    estimator). Everything else is pipython's own gateway, unchanged.
+    """
+    import select
+
+    class WaitingPISerial(PISerial):
+        def read(self):
+            fd = getattr(self._ser, "fd", None)
+            if fd is not None and not self._ser.in_waiting:
+                select.select([fd], [], [], 0.002)
+            return super().read()
+
+    return WaitingPISerial
+
+
 class PiSource(ReconnectingSource):
     """Samples from a PI controller's data recorder (``pi:PORT?baud=115200&rtr=1&...``)."""
 
@@ -69,13 +92,15 @@ class PiSource(ReconnectingSource):
         Option("y_record", int, ACTUAL_POSITION, "record option of the output (2 current position)"),
         Option("chunk", int, 2000, "most points read per DRR? query"),
         Option("timeout", float, 2.0, "seconds without a reply before the link counts as lost"),
+        Option("wait", flag, True, "wait for reply bytes with select (0: pipython's stock gateway, which spins)"),
     )
 
     def __init__(self, port: str, *, baudrate: int = 115200, rtr: int = 1, axis: str | None = None,
                  u_record: int = PIEZO_VOLTAGE, y_record: int = ACTUAL_POSITION, chunk: int = 2000,
-                 timeout: float = 2.0, reconnect: bool = True, reconnect_timeout: float | None = None,
-                 window: int = 16, stall: float = 0.5, **kw: Any) -> None:
-        self._gcs = _pipython()
+                 timeout: float = 2.0, wait: bool = True, reconnect: bool = True,
+                 reconnect_timeout: float | None = None, window: int = 16, stall: float = 0.5, **kw: Any) -> None:
+        GCSDevice, PISerial, GCSError = _pipython()
+        self._gcs = (GCSDevice, _waiting_gateway(PISerial) if wait else PISerial, GCSError)
         super().__init__(window=window, rate=None, t_from_seq=True, stall=stall, reconnect=reconnect,
                          reconnect_timeout=reconnect_timeout, **kw)
         if rtr < 1 or chunk < 1 or not timeout > 0:
@@ -91,6 +116,8 @@ class PiSource(ReconnectingSource):
         self.idn = ""
         self._doing = "connecting"
         self.recordings = 0        # recordings started (DRT)
+        #: per recording: half the DRT round trip, the bound on the error of its host-clock numbering
+        self.trigger_uncertainty_s: list[float] = []
         self._dev = None
         self._t_first: float | None = None   # host time of the first trigger
         self._base = 0             # sequence number of point 1 of the present recording
@@ -136,7 +163,9 @@ class PiSource(ReconnectingSource):
         """Start a recording now (DRT) and number its points after everything already handed out."""
         before = time.monotonic()
         self._call(f"DRT 0 {TRIGGER_IMMEDIATELY} 0", self._dev.DRT, 0, TRIGGER_IMMEDIATELY, 0)
-        now = (before + time.monotonic()) / 2
+        after = time.monotonic()
+        now = (before + after) / 2
+        self.trigger_uncertainty_s.append((after - before) / 2)
         if self._t_first is None:
             self._t_first = now
             self._base = 0
