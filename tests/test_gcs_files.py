@@ -130,12 +130,15 @@ def test_unknown_column_lists_the_columns(tmp_path, capsys):
 
 
 def test_missing_pipython_is_one_line(tmp_path):
-    """With pipython unimportable (sys.modules blocks it), a GCS file names the extra to install."""
+    """With pipython unimportable (sys.modules blocks it), a GCS file and a pi: source each name the extra."""
     path = tmp_path / "rec.dat"
     path.write_text(GOOD_HEADER + ROWS)
     code = ("import sys; sys.modules['pipython'] = None; sys.modules['pipython.pitools'] = None; "
-            "from creep_online.cli import main; sys.exit(main(sys.argv[1:]))")
-    r = subprocess.run([sys.executable, "-c", code, "identify", str(path)], capture_output=True, text=True)
-    assert r.returncode == 2
-    assert r.stderr.strip() == ("creep-online identify: error: reading GCS data-recorder files needs pipython: "
-                                "pip install 'creep_online[pi]'")
+            "from creep_online.cli import main; "
+            "codes = [main(['identify', sys.argv[1]]), main(['stream', '--source', 'pi:/dev/ttyUSB0'])]; "
+            "print(codes)")
+    r = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True)
+    assert r.stdout.strip() == "[2, 2]"
+    assert r.stderr.strip().splitlines() == [
+        "creep-online identify: error: reading GCS data-recorder files needs pipython: pip install 'creep_online[pi]'",
+        "creep-online stream: error: pi sources need pipython: pip install 'creep_online[pi]'"]
