@@ -142,3 +142,19 @@ def test_missing_pipython_is_one_line(tmp_path):
     assert r.stderr.strip().splitlines() == [
         "creep-online identify: error: reading GCS data-recorder files needs pipython: pip install 'creep_online[pi]'",
         "creep-online stream: error: pi sources need pipython: pip install 'creep_online[pi]'"]
+
+
+def test_a_saved_drr_answer_reads_back(tmp_path):
+    """The controller's own qDRR answer saved as is (# REM and bare '#' lines, rows ending ' \\n')."""
+    from hil_sim.pi_controller import Controller
+    _, rec = random_plant(8, rate=5000.0, duration=1.0)
+    ctl = Controller(rec, 5000.0, table_points=4000, fast=True, rtr=2)
+    ctl.handle("DRT 0 4 0")
+    answer = ctl.handle("DRR? 1 2500 1 2")
+    assert answer.count(" \n") == answer.count("\n") - 1          # the GCS multi-line convention
+    path = tmp_path / "answer.dat"
+    path.write_text(answer)
+    got = load_record(path)
+    np.testing.assert_allclose(got.u, rec.u[0:5000:2], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(got.y, rec.y[0:5000:2], rtol=1e-9, atol=1e-12)
+    assert got.h == pytest.approx(2 / 5000.0)
