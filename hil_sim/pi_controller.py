@@ -190,10 +190,21 @@ class Controller:
             return []
         return tables
 
-    def drc_set(self, args):
+    def _table_reply(self, args, settings: dict, default: tuple) -> str | None:
+        """``t=a b`` per table (DRC?, DRT?)."""
+        tables = self._tables(args)
+        return gcs_reply([f"{t}={settings.get(t, default)[0]} {settings.get(t, default)[1]}"
+                          for t in tables]) if tables else None
+
+    @staticmethod
+    def _triples(args) -> list[tuple[int, str, str]]:
+        """``t a b t a b ...`` (DRC, DRT) -> [(t, a, b), ...]; ValueError (syntax error) otherwise."""
         if not args or len(args) % 3:
             raise ValueError
-        triples = [(int(args[i]), args[i + 1], int(args[i + 2])) for i in range(0, len(args), 3)]
+        return [(int(args[i]), args[i + 1], args[i + 2]) for i in range(0, len(args), 3)]
+
+    def drc_set(self, args):
+        triples = [(table, source, int(option)) for table, source, option in self._triples(args)]
         for table, source, option in triples:
             if not 1 <= table <= TABLES or (option not in RECORD_OPTIONS and option != 0):
                 self.error = OUT_OF_RANGE
@@ -209,27 +220,21 @@ class Controller:
         return None
 
     def q_drc(self, args):
-        tables = self._tables(args)
-        return gcs_reply([f"{t}={self.config.get(t, ('0', 0))[0]} {self.config.get(t, ('0', 0))[1]}"
-                          for t in tables]) if tables else None
+        return self._table_reply(args, self.config, ("0", 0))
 
     def drt_set(self, args):
-        if not args or len(args) % 3:
-            raise ValueError
-        for i in range(0, len(args), 3):
-            table, source = int(args[i]), int(args[i + 1])
-            if not 0 <= table <= TABLES or not 0 <= source <= 9:
-                self.error = OUT_OF_RANGE
-                return None
+        triples = [(table, int(source), value) for table, source, value in self._triples(args)]
+        if any(not 0 <= table <= TABLES or not 0 <= source <= 9 for table, source, _ in triples):
+            self.error = OUT_OF_RANGE
+            return None
+        for table, source, value in triples:
             for t in (range(1, TABLES + 1) if table == 0 else (table,)):
-                self.triggers[t] = (source, args[i + 2])
+                self.triggers[t] = (source, value)
         self.trigger()
         return None
 
     def q_drt(self, args):
-        tables = self._tables(args)
-        return gcs_reply([f"{t}={self.triggers.get(t, (0, '0'))[0]} {self.triggers.get(t, (0, '0'))[1]}"
-                          for t in tables]) if tables else None
+        return self._table_reply(args, self.triggers, (0, "0"))
 
     def q_drl(self, args):
         tables = self._tables(args)
