@@ -114,6 +114,20 @@ def test_pi_source_streams_recordings_and_counts_the_hand_over_gaps():
     assert stats["duplicates"] == stats["late"] == stats["disconnects"] == 0
 
 
+def test_a_slow_recording_is_not_taken_for_a_finished_one():
+    """10 points/s (RTR 100 at 1 kHz): polls faster than the points come must not re-trigger."""
+    proc, plant = controller(["--rate", "1000", "--duration", "3", "--params", random_params(3)])
+    with proc:
+        src = open_source(f"pi:{proc.port}?rtr=100", on_event=None)
+        got = []
+        deadline = time.monotonic() + 30
+        while len(got) < 8 and time.monotonic() < deadline:
+            got += src.read(0.05)
+        src.close()
+    assert src.recordings == 1 and src.stats.missing == 0 and src.rate == pytest.approx(10.0)
+    np.testing.assert_allclose([s.y for s in got], plant.y[np.arange(len(got)) * 100], rtol=1e-9, atol=1e-12)
+
+
 @pytest.fixture(scope="module")
 def live_controller():
     """One real-time controller for the CLI tests (a refused command changes nothing in it)."""

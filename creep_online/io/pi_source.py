@@ -123,6 +123,7 @@ class PiSource(ReconnectingSource):
         self._base = 0             # sequence number of point 1 of the present recording
         self._read = 0             # points of the present recording already read
         self._last_count = -1      # DRL? at the previous poll
+        self._count_since = 0.0    # host time it last changed
         self._open(first=True)
 
     # -------------------------------------------------------------- link
@@ -208,6 +209,8 @@ class PiSource(ReconnectingSource):
     def _poll(self, timeout: float) -> list[RawSample]:
         """One DRL?; then the new points, a new recording when this one has stopped, or a short wait.
 
+        "Stopped" means: all of it read and no new point for 4 sample times (at least 50 ms).
+
         DRL? is sent without its own ERR? round trip (one fewer per poll): the
         error register is read after every DRR? and whenever the count stands still.
         """
@@ -217,14 +220,17 @@ class PiSource(ReconnectingSource):
             count = self._call("DRL? 1", dev.qDRL, 1)[1]
         finally:
             dev.errcheck = True
+        now = time.monotonic()
+        if count != self._last_count:
+            self._last_count, self._count_since = count, now
         if count > self._read:
             return self._fetch(min(count - self._read, self.chunk))
         self._check_error("DRL? 1")
-        if count == self._last_count and self._read > 0:
+        dt = self.dt or 0.0
+        if self._read > 0 and now - self._count_since > max(0.05, 4 * dt):
             self._arm()               # the recording stopped (table full) and all of it was read
             return []
-        self._last_count = count
-        time.sleep(min(timeout, max(0.002, 4 * (self.dt or 0.0))))
+        time.sleep(min(timeout, max(0.002, dt)))
         return []
 
     def _fetch(self, n: int) -> list[RawSample]:
@@ -250,7 +256,6 @@ class PiSource(ReconnectingSource):
         seq0 = self._base + self._read
         self.stats.parser.frames += 1            # one DRR? answer
         self._read += n
-        self._last_count = -1
         return [RawSample(seq0 + i, 0.0, u[i], y[i], 0) for i in range(n)]
 
     def _check_error(self, command: str) -> None:
