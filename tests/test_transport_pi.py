@@ -7,8 +7,6 @@ independent reference for every value read.
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 import time
 
 import numpy as np
