@@ -34,7 +34,7 @@ from ..errors import DataError
 from ..record import MIN_SAMPLES, Record
 from .csvfile import _read_text
 
-__all__ = ["is_gcs_file", "read_gcs_header", "load_gcs", "column_index"]
+__all__ = ["is_gcs_file", "read_gcs_header", "load_gcs", "column_names", "column_index"]
 
 _NAME_KEY = re.compile(r"NAME(\d+)$")
 
