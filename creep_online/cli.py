@@ -12,7 +12,7 @@ import os
 import sys
 import warnings
 
-from .errors import CreepOnlineError, CreepOnlineWarning
+from .errors import CreepOnlineError, CreepOnlineWarning, one_line as _one_line
 
 COMMANDS = ("identify", "simulate", "stream", "diagnose", "fit", "demo")
 #: One-line help of each command for the top-level listing, so that ``--help`` imports no command
@@ -94,12 +94,6 @@ def _requested(argv: list[str]) -> str:
         if not arg.startswith("-"):
             return arg if arg in COMMANDS else ""
     return ""
-
-
-def _one_line(exc: BaseException) -> str:
-    """The exception's message on one line (first line, at most 300 characters)."""
-    text = str(exc).strip().splitlines()
-    return (text[0] if text else type(exc).__name__)[:300]
 
 
 if __name__ == "__main__":
