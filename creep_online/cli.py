@@ -14,7 +14,7 @@ import warnings
 
 from .errors import CreepOnlineError, CreepOnlineWarning, one_line as _one_line
 
-COMMANDS = ("identify", "simulate", "stream", "diagnose", "fit", "demo")
+COMMANDS = ("identify", "simulate", "stream", "diagnose", "fit", "demo", "batch")
 #: One-line help of each command for the top-level listing, so that ``--help`` imports no command
 #: (their modules load scipy and numba); tests check they match what the commands register.
 SUMMARIES = {
@@ -24,6 +24,7 @@ SUMMARIES = {
     "diagnose": "find which catalogue effect the creep model is missing",
     "fit": "fit the creep model extended by catalogue effects",
     "demo": "stream the simulated plant over a pty and identify it live",
+    "batch": "identify a fleet of records (folder, glob or long id,t,u,y CSV) on Dask",
 }
 
 
