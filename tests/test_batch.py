@@ -89,8 +89,6 @@ def test_a_folder_a_glob_and_a_long_file_name_the_same_records(fleet):
         rec = job.load()
         assert np.array_equal(rec.t, unit.t) and np.array_equal(rec.u, unit.u) and np.array_equal(rec.y, unit.y)
     assert long[3].error == f"{root / 'long.csv'}: line {1 + 3 * 5000 + 3} (id bad unit), column y: not a number: 'x'"
-    kept = find_records(str(root / "records"), exclude=(root / "records" / "broken.csv",))
-    assert [j.id for j in kept] == [u.id for u in units]      # an output of the batch is not a record
     single = find_records(str(root / "records" / "unit0001.csv"))
     assert [(j.id, j.path) for j in single] == [("unit0001", str(root / "records" / "unit0001.csv"))]
 
@@ -198,6 +196,23 @@ def test_long_format_on_the_cluster_to_parquet(fleet, direct, cluster, tmp_path)
     for unit in units[:3]:
         _assert_matches(table[unit.id], direct[unit.id])
     assert table["bad unit"]["alpha"] is None and "column y: not a number: 'x'" in table["bad unit"]["error"]
+
+
+def test_an_earlier_table_is_not_a_record_and_no_record_is_overwritten(fleet, cluster, tmp_path, capsys):
+    from creep_online.cli import main
+    root, units = fleet
+    folder = tmp_path / "records"
+    folder.mkdir()
+    for unit in units[:2]:
+        (folder / f"{unit.id}.csv").write_bytes((root / "records" / f"{unit.id}.csv").read_bytes())
+    assert main(["batch", str(folder), "--out", str(folder / f"{units[0].id}.csv")]) == 2
+    assert "refusing to overwrite the input file" in capsys.readouterr().err
+    argv = ["batch", str(folder), "--scheduler", cluster.scheduler_address, "--out", str(folder / "fleet.csv"),
+            "--json"]
+    for _ in range(2):   # the second run finds the first run's table in the folder
+        assert main(argv) == 0
+        summary = json.loads(capsys.readouterr().out)
+        assert [r["id"] for r in summary["rows"]] == [u.id for u in units[:2]]
 
 
 def test_ctrl_c_stops_cleanly_and_keeps_the_rows_done(fleet, tmp_path):

@@ -59,13 +59,30 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         check_table_path(args.out)   # suffix and pyarrow, before any work
     distributed()                    # the one-line hint before any work when Dask is missing
-    jobs = find_records(args.records, exclude=tuple(p for p in outputs if p is not None))
+    jobs = [j for j in find_records(args.records) if not _is_batch_table(j.path)]
+    if not jobs:
+        raise CreepOnlineError(f"{args.records}: holds only batch tables, no records")
     inputs = [j.path for j in jobs if j.path] + ([args.records] if Path(args.records).is_file() else [])
     for path in outputs:
         if path is not None:
-            check_output(path, inputs)
+            check_output(path, inputs)   # never over a record
     rows, times, interrupted = _run(args, jobs)
     return _finish(args, jobs, rows, times, interrupted, outputs)
+
+
+def _is_batch_table(path: str | None) -> bool:
+    """True for a table an earlier batch wrote (its header is the table's columns): not a record.
+
+    So ``--out records/fleet.csv`` can be run again over ``records/``.
+    """
+    from ..fleet import COLUMNS
+    if path is None:
+        return False
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            return fh.readline(4096).strip() == ",".join(COLUMNS)
+    except OSError:
+        return False
 
 
 def _outputs(args: argparse.Namespace) -> tuple[Path | None, Path | None]:

@@ -52,8 +52,8 @@ class RecordJob:
         return Record(t, u, y, source=self.source).validate(MIN_SAMPLES)
 
 
-def find_records(spec: str, exclude: tuple[str | Path, ...] = ()) -> list[RecordJob]:
-    """The records named by ``spec`` (folder, glob or long-format CSV), minus the files in ``exclude``.
+def find_records(spec: str) -> list[RecordJob]:
+    """The records named by ``spec`` (folder, glob or long-format CSV).
 
     A folder gives its ``*.csv`` files (not recursive); a glob its matching
     files (``**`` recurses); a file with an ``id`` column its records, one per
@@ -70,8 +70,6 @@ def find_records(spec: str, exclude: tuple[str | Path, ...] = ()) -> list[Record
         return _jobs_of_file(path)
     else:
         raise DataError(f"{spec}: no such file or folder (give a folder, a glob or a long-format id,t,u,y CSV)")
-    skip = {Path(p).resolve() for p in exclude}
-    files = [p for p in files if p.resolve() not in skip]
     if not files:
         raise DataError(where)
     return [RecordJob(name, str(p), path=str(p)) for name, p in zip(_unique_ids(files), files)]
