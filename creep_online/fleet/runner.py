@@ -1,13 +1,17 @@
 """The records of a fleet on ``dask.distributed``: a local cluster by default, or an existing scheduler.
 
-Local clusters run one single-threaded worker *process* per core. Threads would
-share one interpreter: the identification is numba kernels called from
-Python (scipy's trust-region loop, the layers, the noise tests), and the
-kernels hold the GIL, so two threads ran barely faster than one
-(``bench/results/batch.json``, ``threads``); and Python's warning capture,
-which fills each row's ``warnings``, is per process, not per thread. BLAS is
-held to one thread inside each fit (``creep_online._threads``), so one
-process per core uses the machine without oversubscribing it.
+Local clusters run one single-threaded worker *process* per core, for two
+reasons. The identification is numba kernels (compiled without ``nogil``)
+driven by Python (scipy's trust-region loop, the layers, the noise tests), so
+threads of one interpreter serialise on the GIL wherever a record is in a
+kernel or in Python (only numpy's array loops release it; how much that leaves
+to a second thread could not be measured on the loaded 2-core machine). And
+the warning capture that fills each row's ``warnings`` is process-wide
+(``warnings.catch_warnings`` is not thread-safe): two records on two threads
+could swap or lose their warnings. BLAS is held to one thread inside each fit
+(``creep_online._threads``), so one process per core does not oversubscribe
+the machine. The price is the start-up (each process imports numpy, scipy,
+numba and dask): ``bench/results/batch.json``.
 
 Records are submitted in a bounded window (``WINDOW_PER_THREAD`` per worker
 thread), so a fleet of 10,000 long-format records never sits in the
