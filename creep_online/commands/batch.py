@@ -102,19 +102,27 @@ def _run(args: argparse.Namespace, jobs: list) -> tuple[list[dict[str, Any]], di
     start = t0 = time.perf_counter()
     interrupted = False
     try:
+        if show:   # start-up takes seconds; Ctrl-C is taken once the workers run (docs/fleet.md)
+            where = f"connecting to {args.scheduler}" if args.scheduler else "starting the local Dask cluster"
+            sys.stdout.write(f"{where} and warming up its workers ...")
+            sys.stdout.flush()
         with dask_client(args.scheduler, args.workers) as client:
             t0 = time.perf_counter()
             if show:
                 progress = Progress(len(jobs))
                 progress.show(0, 0)
+            failed = 0
             for row in run_on_dask(jobs, client, diagnose_it=args.diagnose, identify_options=options):
                 rows.append(row)
+                failed += bool(row["error"])
                 if progress:
-                    progress.show(len(rows), sum(1 for r in rows if r["error"]))
+                    progress.show(len(rows), failed)
     except KeyboardInterrupt:
         interrupted = True
-    if progress:
-        progress.close()
+    finally:
+        if show:   # end the status line, whatever happened
+            sys.stdout.write("\n")
+            sys.stdout.flush()
     order = {job.id: i for i, job in enumerate(jobs)}
     rows.sort(key=lambda r: order[r["id"]])
     return rows, {"startup_s": t0 - start, "elapsed_s": time.perf_counter() - t0}, interrupted
@@ -166,7 +174,8 @@ def format_summary(summary: dict[str, Any]) -> str:
 
 
 class Progress:
-    """One self-rewriting status line on the terminal: done/total, rate, failures, time left."""
+    """One self-rewriting status line on the terminal (carriage return + erase line): done/total, rate,
+    failures, time left."""
 
     def __init__(self, total: int) -> None:
         self.total = total
@@ -178,11 +187,7 @@ class Progress:
         filled = int(width * done / max(self.total, 1))
         rate = done / elapsed if elapsed > 0 and done else 0.0
         left = f", {(self.total - done) / rate:.0f} s left" if rate else ""
-        text = f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{self.total} records, {rate:.1f}/s{left}" \
+        text = f"\r\x1b[K[{'#' * filled}{'.' * (width - filled)}] {done}/{self.total} records, {rate:.1f}/s{left}" \
                + (f", {failed} failed" if failed else "")
-        sys.stdout.write(text + " " * 8)
-        sys.stdout.flush()
-
-    def close(self) -> None:
-        sys.stdout.write("\n")
+        sys.stdout.write(text)
         sys.stdout.flush()
