@@ -103,6 +103,13 @@ def test_nothing_to_read_is_one_line(tmp_path):
     (tmp_path / "long.csv").write_text("id,t,u,y\nA,0,0,0\n,1,1,1\n")
     with pytest.raises(DataError, match=r"line 3: no id"):
         find_records(str(tmp_path / "long.csv"))
+    (tmp_path / "long.csv").write_bytes(b"id,t,u,y\nA,0,0,\xff\n")
+    with pytest.raises(DataError, match=r"long.csv: not a UTF-8 text file"):
+        find_records(str(tmp_path / "long.csv"))
+    (tmp_path / "long.csv").write_text("\n\nid,t,u,y\nA,0,0,0\nA,1,inf,0\nB,0,1,2\nB,1,2\n")
+    bad_a, bad_b = find_records(str(tmp_path / "long.csv"))
+    assert bad_a.error.endswith("line 5 (id A), column u: 'inf' (NaN/inf not allowed)")
+    assert bad_b.error.endswith("line 7 (id B) has 3 field(s), expected at least 4")
 
 
 def test_same_file_names_in_two_folders_get_distinct_ids(tmp_path):

@@ -13,15 +13,17 @@ from __future__ import annotations
 import csv
 import glob
 import math
+from array import array
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterable
 
 import numpy as np
 
 from ..errors import DataError
 from ..record import MIN_SAMPLES, Record
 # the CSV module's own file checks and header rule, so a long-format file fails exactly like a t,u,y one
-from .csvfile import _header, _read_text, load_csv
+from .csvfile import _check_kind, _header, load_csv
 
 #: Columns of a long-format file (any order; other columns are ignored).
 LONG_COLUMNS = ("id", "t", "u", "y")
@@ -82,51 +84,92 @@ def _unique_ids(files: list[Path]) -> list[str]:
 
 
 def _jobs_of_file(path: Path) -> list[RecordJob]:
-    """One file: long format when its header has an ``id`` column, else a single record."""
-    text = _read_text(path)
-    lines = text.splitlines()
-    first = next((i for i, ln in enumerate(lines) if ln.strip()), None)
-    if first is None:
-        raise DataError(f"{path}: empty file (expected a header id,t,u,y)")
-    names = [c.strip().lower() for c in next(csv.reader([lines[first]]))]
-    if "id" not in names:
-        return [RecordJob(path.stem, str(path), path=str(path))]
-    cols = _header(path, lines[first], LONG_COLUMNS)
-    return read_long(path, lines[first + 1:], cols, first + 2)
+    """One file: long format when its header has an ``id`` column, else a single record.
+
+    A long file is parsed as it is read (never all of its text in memory at
+    once); a record's samples cost 24 bytes a row.
+    """
+    _check_kind(path)
+    try:
+        with path.open(encoding="utf-8-sig", newline="") as fh:
+            lineno, header = 0, ""
+            for lineno, header in enumerate(fh, start=1):
+                if header.strip():
+                    break
+            if not header.strip():
+                raise DataError(f"{path}: empty file (expected a header id,t,u,y)")
+            names = [c.strip().lower() for c in next(csv.reader([header]))]
+            if "id" not in names:
+                return [RecordJob(path.stem, str(path), path=str(path))]
+            return read_long(path, fh, _header(path, header, LONG_COLUMNS), lineno + 1)
+    except UnicodeDecodeError as exc:
+        raise DataError(f"{path}: not a UTF-8 text file (undecodable byte)") from None
+    except csv.Error as exc:
+        raise DataError(f"{path}: not a CSV file ({exc})") from None
+    except OSError as exc:
+        raise DataError(f"{path}: cannot read ({exc.strerror})") from None
 
 
-def read_long(path: Path, body: list[str], cols: list[int], first_lineno: int) -> list[RecordJob]:
-    """Group the rows of a long-format body by id; each record's numbers checked on their own."""
-    rows: dict[str, list[tuple[int, list[str]]]] = {}
+def read_long(path: Path, body: Iterable[str], cols: list[int], first_lineno: int) -> list[RecordJob]:
+    """Group the rows of a long-format body by id; each record's numbers checked on their own.
+
+    Each id's numbers go straight into a flat array of doubles (24 bytes a
+    row), so a long file costs little more memory than its text.
+    """
+    groups: dict[str, _Group] = {}
+    width = max(cols) + 1
+    c_id, c_t, c_u, c_y = cols
     for lineno, row in enumerate(csv.reader(body), start=first_lineno):
         if not row or all(not c.strip() for c in row):
             continue
-        if len(row) <= cols[0] or not row[cols[0]].strip():
+        key = row[c_id].strip() if len(row) > c_id else ""
+        if not key:
             raise DataError(f"{path}: line {lineno}: no id (every row of a long-format file needs one)")
-        rows.setdefault(row[cols[0]].strip(), []).append((lineno, row))
-    if not rows:
-        raise DataError(f"{path}: no data rows")
-    return [_long_job(path, key, group, cols) for key, group in rows.items()]
-
-
-def _long_job(path: Path, key: str, group: list[tuple[int, list[str]]], cols: list[int]) -> RecordJob:
-    """The job of one id: its samples, or the first bad cell as its error."""
-    source = f"{path}[id={key}]"
-    width = max(cols) + 1
-    out = np.empty((len(group), 3))
-    for n, (lineno, row) in enumerate(group):
+        group = groups.get(key)
+        if group is None:
+            group = groups[key] = _Group()
+        if group.error is not None:
+            continue
         if len(row) < width:
-            return RecordJob(key, source, error=f"{path}: line {lineno} (id {key}) has {len(row)} field(s), "
-                                                f"expected at least {width}")
-        for k, c in enumerate(cols[1:]):
-            cell = row[c].strip()
-            try:
-                value = float(cell)
-            except ValueError:
-                return RecordJob(key, source, error=f"{path}: line {lineno} (id {key}), column "
-                                                    f"{LONG_COLUMNS[k + 1]}: not a number: {cell[:30]!r}")
-            if not math.isfinite(value):
-                return RecordJob(key, source, error=f"{path}: line {lineno} (id {key}), column "
-                                                    f"{LONG_COLUMNS[k + 1]}: {cell!r} (NaN/inf not allowed)")
-            out[n, k] = value
-    return RecordJob(key, source, samples=(out[:, 0].copy(), out[:, 1].copy(), out[:, 2].copy()))
+            group.error = f"{path}: line {lineno} (id {key}) has {len(row)} field(s), expected at least {width}"
+            continue
+        try:
+            t, u, y = float(row[c_t]), float(row[c_u]), float(row[c_y])
+        except ValueError:
+            group.error = _bad_cell(path, lineno, key, row, cols)
+            continue
+        if (t - t) or (u - u) or (y - y):   # NaN or inf (x - x is NaN for both, 0 otherwise)
+            group.error = _bad_cell(path, lineno, key, row, cols)
+            continue
+        group.values.extend((t, u, y))
+    if not groups:
+        raise DataError(f"{path}: no data rows")
+    return [group.job(path, key) for key, group in groups.items()]
+
+
+class _Group:
+    """The samples of one id so far (flat t,u,y doubles), or its first error."""
+
+    def __init__(self) -> None:
+        self.values = array("d")
+        self.error: str | None = None
+
+    def job(self, path: Path, key: str) -> RecordJob:
+        source = f"{path}[id={key}]"
+        if self.error is not None:
+            return RecordJob(key, source, error=self.error)
+        tuy = np.frombuffer(self.values, dtype=float).reshape(-1, 3)
+        return RecordJob(key, source, samples=(tuy[:, 0].copy(), tuy[:, 1].copy(), tuy[:, 2].copy()))
+
+
+def _bad_cell(path: Path, lineno: int, key: str, row: list[str], cols: list[int]) -> str:
+    """The one-line error of the first cell of ``row`` that is not a finite number."""
+    for name, c in zip(LONG_COLUMNS[1:], cols[1:]):
+        cell = row[c].strip()
+        try:
+            value = float(cell)
+        except ValueError:
+            return f"{path}: line {lineno} (id {key}), column {name}: not a number: {cell[:30]!r}"
+        if not math.isfinite(value):
+            return f"{path}: line {lineno} (id {key}), column {name}: {cell!r} (NaN/inf not allowed)"
+    raise AssertionError("no bad cell in a row that failed")  # pragma: no cover - callers checked
