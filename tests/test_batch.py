@@ -145,6 +145,24 @@ def test_robust_z_is_the_modified_z_score():
     assert robust_z(same) == pytest.approx((same - 5.0) / (1.2533 * 0.4))
 
 
+def test_outliers_need_five_records_and_a_flipped_gain_is_one():
+    from creep_online.fleet.summary import flag_outliers
+    rng = np.random.default_rng(5)
+
+    def rows(n):
+        return [{"id": f"u{k}", "error": "", "alpha": 0.02 * (1 + 0.01 * rng.normal()), "fn_hz": 350.0 + rng.normal(),
+                 "zeta": 0.08 * (1 + 0.01 * rng.normal()), "b": 1.8 * (1 + 0.01 * rng.normal())} for k in range(n)]
+    few = rows(4)
+    few[0]["fn_hz"] = 100.0
+    assert flag_outliers(few) == {} and all(r["outlier"] == "" for r in few)
+    fleet = rows(30)
+    fleet[3]["b"] *= -1.0        # same magnitude, wired backwards
+    fleet[7]["fn_hz"] = 250.0
+    flags = flag_outliers(fleet)
+    assert set(flags) == {"u3", "u7"} and flags["u3"] == {"b": -np.inf} and set(flags["u7"]) == {"fn_hz"}
+    assert fleet[3]["outlier"] == "b" and fleet[7]["outlier"] == "fn_hz"
+
+
 # ------------------------------------------------------------------ the cluster
 def test_fleet_on_a_local_cluster_matches_direct_identify(fleet, direct, cluster):
     from dask.distributed import Client
