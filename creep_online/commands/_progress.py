@@ -32,31 +32,25 @@ class Progress:
         self.period = TTY_PERIOD if self.tty else PLAIN_PERIOD
         self._last = 0.0
         self._lock = threading.Lock()
-        self._stage = ""
+        self._text = ""
         self._stage_t0 = 0.0
         self._ticker: threading.Thread | None = None
         self._stop = threading.Event()
 
     def show(self, text: str, force: bool = False) -> None:
-        """Write ``text`` as the status line (at most once per period unless ``force``)."""
+        """Make ``text`` the status line (written at most once per period unless ``force``)."""
         if not self.enabled:
             return
-        with self._lock:
-            now = time.monotonic()
-            if not force and now - self._last < self.period:
-                return
-            self._last = now
-            if self.tty:
-                self.stream.write("\r" + text[:self.width].ljust(self.width))
-            else:
-                self.stream.write(text + "\n")
-            self.stream.flush()
+        self._text = text
+        now = time.monotonic()
+        if force or now - self._last >= self.period:
+            self._write(text, now)
 
     def stage(self, text: str) -> None:
-        """Start a named stage: shown at once, then refreshed with its elapsed time on a terminal."""
+        """Start a named stage: shown at once; on a terminal a ticker then adds its elapsed time."""
         if not self.enabled:
             return
-        self._stage, self._stage_t0 = text, time.monotonic()
+        self._stage_t0 = time.monotonic()
         self.show(text, force=True)
         if self.tty and self._ticker is None:
             self._ticker = threading.Thread(target=self._tick, name="progress", daemon=True)
@@ -64,7 +58,17 @@ class Progress:
 
     def _tick(self) -> None:
         while not self._stop.wait(self.period):
-            self.show(f"{self._stage} {time.monotonic() - self._stage_t0:5.1f} s", force=True)
+            now = time.monotonic()
+            self._write(f"{self._text} {now - self._stage_t0:5.1f} s", now)
+
+    def _write(self, text: str, now: float) -> None:
+        with self._lock:
+            self._last = now
+            if self.tty:
+                self.stream.write("\r" + text[:self.width].ljust(self.width))
+            else:
+                self.stream.write(text + "\n")
+            self.stream.flush()
 
     def close(self) -> None:
         """Stop the ticker and erase the line (a terminal) so the command's output starts clean."""

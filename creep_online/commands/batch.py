@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import CreepOnlineError
+from ._progress import for_command
 from ._common import print_json
 
 SUMMARY = "identify a fleet of records (folder, glob or long id,t,u,y CSV) on Dask"
@@ -96,33 +97,23 @@ def _run(args: argparse.Namespace, jobs: list) -> tuple[list[dict[str, Any]], di
     and whether Ctrl-C stopped the batch."""
     from ..fleet.runner import dask_client, run_on_dask
     options = {"retune": not args.no_retune, "polish": not args.no_polish}
-    show = not args.json and sys.stdout.isatty()
-    progress = None
     rows: list[dict[str, Any]] = []
     start = t0 = time.perf_counter()
     interrupted = False
-    try:
-        if show:   # start-up takes seconds; Ctrl-C is taken once the workers run (docs/fleet.md)
+    with for_command(args.json) as progress:
+        try:   # start-up takes seconds; Ctrl-C is taken once the workers run (docs/fleet.md)
             where = f"connecting to {args.scheduler}" if args.scheduler else "starting the local Dask cluster"
-            sys.stdout.write(f"{where} and warming up its workers ...")
-            sys.stdout.flush()
-        with dask_client(args.scheduler, args.workers) as client:
-            t0 = time.perf_counter()
-            if show:
-                progress = Progress(len(jobs))
-                progress.show(0, 0)
-            failed = 0
-            for row in run_on_dask(jobs, client, diagnose_it=args.diagnose, identify_options=options):
-                rows.append(row)
-                failed += bool(row["error"])
-                if progress:
-                    progress.show(len(rows), failed)
-    except KeyboardInterrupt:
-        interrupted = True
-    finally:
-        if show:   # end the status line, whatever happened
-            sys.stdout.write("\n")
-            sys.stdout.flush()
+            progress.stage(f"{where} and warming up its workers ...")
+            with dask_client(args.scheduler, args.workers) as client:
+                t0 = time.perf_counter()
+                progress.stage(bar_text(0, len(jobs), 0, 0.0))
+                failed = 0
+                for row in run_on_dask(jobs, client, diagnose_it=args.diagnose, identify_options=options):
+                    rows.append(row)
+                    failed += bool(row["error"])
+                    progress.show(bar_text(len(rows), len(jobs), failed, time.perf_counter() - t0))
+        except KeyboardInterrupt:
+            interrupted = True
     order = {job.id: i for i, job in enumerate(jobs)}
     rows.sort(key=lambda r: order[r["id"]])
     return rows, {"startup_s": t0 - start, "elapsed_s": time.perf_counter() - t0}, interrupted
@@ -173,21 +164,11 @@ def format_summary(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-class Progress:
-    """One self-rewriting status line on the terminal (carriage return + erase line): done/total, rate,
-    failures, time left."""
-
-    def __init__(self, total: int) -> None:
-        self.total = total
-        self.t0 = time.perf_counter()
-
-    def show(self, done: int, failed: int) -> None:
-        elapsed = time.perf_counter() - self.t0
-        width = 30
-        filled = int(width * done / max(self.total, 1))
-        rate = done / elapsed if elapsed > 0 and done else 0.0
-        left = f", {(self.total - done) / rate:.0f} s left" if rate else ""
-        text = f"\r\x1b[K[{'#' * filled}{'.' * (width - filled)}] {done}/{self.total} records, {rate:.1f}/s{left}" \
-               + (f", {failed} failed" if failed else "")
-        sys.stdout.write(text)
-        sys.stdout.flush()
+def bar_text(done: int, total: int, failed: int, elapsed: float) -> str:
+    """The batch's status line: a bar, done/total, rate, time left, failures."""
+    width = 30
+    filled = int(width * done / max(total, 1))
+    rate = done / elapsed if elapsed > 0 and done else 0.0
+    left = f", {(total - done) / rate:.0f} s left" if rate else ""
+    return f"[{'#' * filled}{'.' * (width - filled)}] {done}/{total} records, {rate:.1f}/s{left}" \
+        + (f", {failed} failed" if failed else "")
