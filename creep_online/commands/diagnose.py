@@ -7,6 +7,7 @@ from ..diagnostics import diagnose
 from ..diagnostics.loading import load_for_diagnosis
 from ..effects import effect_names
 from ._common import add_column_options, print_json
+from ._progress import for_command
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -33,8 +34,11 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         from ..io.safe_files import check_report_dir
         check_report_dir(args.report)   # before the work, not after it
-    inp = load_for_diagnosis(args.data, args.u_column, args.y_column)
-    result = diagnose(inp.record, candidates=candidates, u_pre=inp.u_pre, t_pre=inp.t_pre)
+    with for_command(args.json) as progress:
+        progress.stage(f"diagnose {args.data}: loading")
+        inp = load_for_diagnosis(args.data, args.u_column, args.y_column)
+        result = diagnose(inp.record, candidates=candidates, u_pre=inp.u_pre, t_pre=inp.t_pre,
+                          progress=lambda stage: progress.stage(f"diagnose {args.data}: {stage}"))
     result.warnings[:0] = inp.notes
     report_path = None
     if args.report:

@@ -6,6 +6,7 @@ import argparse
 from ..identification import identify
 from ..io.csvfile import load_record
 from ._common import add_column_options, print_json
+from ._progress import for_command
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -27,9 +28,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    rec = load_record(args.data, args.u_column, args.y_column)
-    res = identify(rec.t, rec.u, rec.y, t_c=args.t_c, alpha0=args.alpha0, layer1_step=args.layer1_step,
-                   retune=not args.no_retune, polish=not args.no_polish, source=rec.source)
+    with for_command(args.json) as progress:
+        progress.stage(f"identify {args.data}: loading")
+        rec = load_record(args.data, args.u_column, args.y_column)
+        progress.stage(f"identify {args.data}: {len(rec)} samples, fitting")
+        res = identify(rec.t, rec.u, rec.y, t_c=args.t_c, alpha0=args.alpha0, layer1_step=args.layer1_step,
+                       retune=not args.no_retune, polish=not args.no_polish, source=rec.source)
     if args.json:
         out = res.to_dict()
         out["samples"] = len(rec)
