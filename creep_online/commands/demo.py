@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 import time
 from pathlib import Path
 
@@ -19,6 +18,7 @@ import numpy as np
 
 from ..errors import CreepOnlineError
 from ._common import print_json
+from ._progress import Progress
 
 SCENARIOS = ("stationary", "payload", "drift")
 #: The payload scenario's added mass fraction (a2 *= 1 + PAYLOAD_MASS at half the duration).
@@ -58,35 +58,6 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-class Progress:
-    """A status line: rewritten in place on a terminal, one line every few seconds otherwise (CI logs)."""
-
-    def __init__(self, enabled: bool, stream=sys.stderr) -> None:
-        self.enabled = enabled
-        self.stream = stream
-        self.tty = bool(getattr(stream, "isatty", lambda: False)())
-        self.period = 0.25 if self.tty else 2.0
-        self._last = 0.0
-
-    def show(self, text: str, force: bool = False) -> None:
-        if not self.enabled:
-            return
-        now = time.monotonic()
-        if not force and now - self._last < self.period:
-            return
-        self._last = now
-        if self.tty:
-            self.stream.write("\r" + text[:160].ljust(160))
-        else:
-            self.stream.write(text + "\n")
-        self.stream.flush()
-
-    def close(self) -> None:
-        if self.enabled and self.tty:
-            self.stream.write("\n")
-            self.stream.flush()
-
-
 def _errors(model, truth) -> dict:
     if model is None:
         return {}
@@ -122,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     for flag, value in (("--params", args.params), ("--effects", args.effects), ("--faults", args.faults)):
         if value:
             plant_args += [flag, value]
-    progress = Progress(not args.quiet)
+    progress = Progress(not args.quiet, width=160)
     progress.show(f"demo: starting the simulated plant (hil_sim, {args.rate:g} Hz, {args.transport})...", force=True)
     try:
         plant = PlantProcess(plant_args)
