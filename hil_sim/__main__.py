@@ -49,6 +49,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--payload", default="", help="T:M: at time T (s) a payload adds the fraction M to the moving "
                                                  "mass (a2 *= 1 + M; the state continues), e.g. 10:0.5")
+    p.add_argument("--command-input", action="store_true",
+                   help="closed loop: the DAC applies the reader's command frames (binary frames with the command "
+                        "status bit, one per sample) instead of playing --schedule; serial-binary only")
+    p.add_argument("--drift", default="", help="alpha=A,b=B: alpha and b drift by the fractions A and B over the "
+                                               "record (e.g. alpha=0.2,b=0.1)")
     p.add_argument("--fast", action="store_true", help="as fast as possible instead of real time")
     p.add_argument("--wait-start", action="store_true",
                    help="serial: hold the stream until the reader sends a byte (slcan always waits for 'O')")
@@ -90,11 +95,18 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         print(f"hil_sim: {exc}", file=sys.stderr)
         return 2
+    try:
+        drift = _drift(args.drift)
+    except ValueError as exc:
+        print(f"hil_sim: {exc}", file=sys.stderr)
+        return 2
+    if args.command_input:
+        return _closed_loop(args, model, drift, spec, effects)
     cfg = PlantConfig(model=model, rate=args.rate, duration=args.duration, schedule=args.schedule,
                       amplitude=args.amplitude, period=args.period, t_start=args.t_start, noise=args.noise,
                       adc_bits=args.adc_bits, adc_range=args.adc_range, effects=effects,
                       payload=_payload(args.payload),
-                      seed=args.seed)
+                      seed=args.seed, drift=drift)
     if args.transport == CAPANCDT:
         from .capancdt_server import serve
         return serve(args, cfg, spec)
@@ -144,6 +156,52 @@ def main(argv: list[str] | None = None) -> int:
         ledger.write(args.ledger)
     try:
         emit_event("end", ledger=ledger.to_dict(), stopped=stop.is_set())
+        stop.wait(args.linger)
+    except BrokenPipeError:
+        pass
+    link.close()
+    return 0
+
+
+def _drift(text: str) -> tuple[float, float]:
+    """``alpha=A,b=B`` -> (A, B) relative drifts over the record; empty -> no drift."""
+    out = {"alpha": 0.0, "b": 0.0}
+    for item in filter(None, (x.strip() for x in text.split(","))):
+        key, _, value = item.partition("=")
+        if key.strip() not in out:
+            raise ValueError(f"--drift takes alpha=..,b=.. (fractions over the record), got {item!r}")
+        out[key.strip()] = float(value)
+    return out["alpha"], out["b"]
+
+
+def _closed_loop(args, model, drift: tuple[float, float], spec, effects) -> int:
+    """``--command-input``: the plant steps in real time on the reader's command frames."""
+    from .command_runner import CommandRunner
+    refused = [name for name, given in (("--faults", spec.counts), ("--effects", effects),
+                                        ("--payload", args.payload), ("--fast", args.fast)) if given]
+    if args.transport != "serial-binary":
+        print(f"hil_sim: --command-input needs --transport serial-binary (got {args.transport})", file=sys.stderr)
+        return 2
+    if refused:
+        print(f"hil_sim: --command-input cannot be combined with {', '.join(refused)}", file=sys.stderr)
+        return 2
+    link = PtyLink(args.link)
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    n = max(2, int(round(args.duration * args.rate)))
+    runner = CommandRunner(model, args.rate, n, link, noise=args.noise, adc_bits=args.adc_bits,
+                           adc_range=args.adc_range, seed=args.seed, drift=drift, events=emit_event, stop=stop)
+    print(link.port, flush=True)
+    emit_event("ready", port=link.port, tty=link.tty, transport=args.transport, rate=args.rate, samples=n,
+               samples_per_frame=1, model=model.params(), schedule="command", noise=args.noise,
+               lsb=runner.lsb, effects={}, faults={}, drift={"alpha": drift[0], "b": drift[1]},
+               pid=os.getpid())
+    if runner.wait_first_command():
+        runner.run()
+        link.drain(timeout=max(1.0, args.linger))
+    try:
+        emit_event("end", ledger=runner.ledger.to_dict(), stopped=stop.is_set(), produced=runner.produced)
         stop.wait(args.linger)
     except BrokenPipeError:
         pass
