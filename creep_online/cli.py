@@ -12,18 +12,19 @@ import os
 import sys
 import warnings
 
-from .errors import CreepOnlineError, CreepOnlineWarning
+from .errors import CreepOnlineError, CreepOnlineWarning, one_line as _one_line
 
-COMMANDS = ("identify", "simulate", "stream", "diagnose", "fit", "demo")
+COMMANDS = ("identify", "simulate", "stream", "diagnose", "fit", "demo", "batch")
 #: One-line help of each command for the top-level listing, so that ``--help`` imports no command
 #: (their modules load scipy and numba); tests check they match what the commands register.
 SUMMARIES = {
     "identify": "identify alpha, a1, a2, b from a t,u,y CSV (two-layer TRF)",
     "simulate": "simulate the model for the input of a t,u CSV",
-    "stream": "run the online estimator on a stream (csv:FILE, serial:PORT, can:..., canlog:FILE)",
+    "stream": "run the online estimator on a stream (csv:FILE, serial:PORT, can:..., canlog:FILE, pi:PORT)",
     "diagnose": "find which catalogue effect the creep model is missing",
     "fit": "fit the creep model extended by catalogue effects",
     "demo": "stream the simulated plant over a pty and identify it live",
+    "batch": "identify a fleet of records (folder, glob or long id,t,u,y CSV) on Dask",
 }
 
 
@@ -94,12 +95,6 @@ def _requested(argv: list[str]) -> str:
         if not arg.startswith("-"):
             return arg if arg in COMMANDS else ""
     return ""
-
-
-def _one_line(exc: BaseException) -> str:
-    """The exception's message on one line (first line, at most 300 characters)."""
-    text = str(exc).strip().splitlines()
-    return (text[0] if text else type(exc).__name__)[:300]
 
 
 if __name__ == "__main__":

@@ -36,3 +36,9 @@ class CreepOnlineWarning(UserWarning):
 
 class DataWarning(CreepOnlineWarning):
     """A doubtful but usable data file (e.g. a last line without end-of-line)."""
+
+
+def one_line(exc: BaseException) -> str:
+    """The exception's message on one line (first line, at most 300 characters): how every error is shown."""
+    text = str(exc).strip().splitlines()
+    return (text[0] if text else type(exc).__name__)[:300]

@@ -53,3 +53,28 @@ def long_run_variance_factor(r: np.ndarray, width: int | None = None) -> float:
         return 1.0
     means = r[:k * width].reshape(k, width).mean(axis=1)
     return max(1.0, float(np.mean(means * means)) * width / var)
+
+
+def creep_error(t: np.ndarray, r: np.ndarray, y: np.ndarray, settle_s: float,
+                skip_before: float = 0.0) -> dict:
+    """Output minus reference on every hold, from ``settle_s`` after its step to its end.
+
+    Returns the worst ``max_abs``, the ``rms`` over all windows and ``per_hold``
+    (start time, max abs, rms); holds starting before ``skip_before`` are left out.
+    """
+    steps = np.flatnonzero(np.diff(r) != 0) + 1
+    ends = np.append(steps[1:], r.size)
+    per, pooled = [], []
+    for s, e in zip(steps, ends):
+        if t[s] < skip_before:
+            continue
+        sel = slice(int(np.searchsorted(t, t[s] + settle_s)), int(e))
+        err = y[sel] - r[sel]
+        if err.size == 0:
+            continue
+        per.append({"t": float(t[s]), "max_abs": float(np.max(np.abs(err))),
+                    "rms": float(np.sqrt(np.mean(err * err)))})
+        pooled.append(err)
+    allerr = np.concatenate(pooled) if pooled else np.zeros(1)
+    return {"max_abs": float(np.max(np.abs(allerr))), "rms": float(np.sqrt(np.mean(allerr * allerr))),
+            "per_hold": per}

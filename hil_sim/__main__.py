@@ -1,7 +1,8 @@
 """``python -m hil_sim``: the simulated amplifier + plant in its own process.
 
 stdout, line 1: the port to open (a ``/dev/pts/N`` path, or the ``--link``
-symlink). Every further stdout line is a JSON event: ``ready`` (model,
+symlink; ``127.0.0.1:PORT`` for ``--transport capancdt``, served by
+``capancdt_server``). Every further stdout line is a JSON event: ``ready`` (model,
 rate, sample count), ``start`` (``t0_monotonic``: sample n was taken at
 ``t0 + n / rate`` on the system monotonic clock), ``stall``, ``disconnect``,
 ``reconnect``, ``end`` (with the fault ledger). ``--ledger FILE`` also writes
@@ -21,12 +22,16 @@ from .links import PtyLink
 from .plant import SCHEDULES, PlantConfig, generate, parse_effects, parse_params
 from .runner import CAN_FRAMES, TRANSPORTS, Runner, emit_event
 
+CAPANCDT = "capancdt"
+
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m hil_sim", description=__doc__.splitlines()[0])
-    p.add_argument("--rate", type=float, default=10_000.0, help="samples per second (default 10000)")
+    p.add_argument("--rate", type=float, default=None,
+                   help="samples per second (default 10000; capancdt: 3906.25, the controller's fastest rate)")
     p.add_argument("--duration", type=float, default=20.0, help="record length in seconds (default 20)")
-    p.add_argument("--transport", choices=TRANSPORTS[:-1], default="serial-binary")
+    p.add_argument("--transport", choices=TRANSPORTS[:-1] + (CAPANCDT,), default="serial-binary",
+                   help="capancdt: a capaNCDT 6200-style TCP data port on 127.0.0.1 (hil_sim/capancdt_server.py)")
     p.add_argument("--can-frame", choices=CAN_FRAMES, default="pair",
                    help="slcan: samples per CAN frame: sample (1), pair (2, classic), block (7, CAN FD)")
     p.add_argument("--params", default="", help="alpha=..,a1=..,a2=..,b=.. or alpha=..,fn=..,zeta=..,b=..")
@@ -44,12 +49,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--payload", default="", help="T:M: at time T (s) a payload adds the fraction M to the moving "
                                                  "mass (a2 *= 1 + M; the state continues), e.g. 10:0.5")
+    p.add_argument("--command-input", action="store_true",
+                   help="closed loop: the DAC applies the reader's command frames (binary frames with the command "
+                        "status bit, one per sample) instead of playing --schedule; serial-binary only")
+    p.add_argument("--drift", default="", help="alpha=A,b=B: alpha and b drift by the fractions A and B over the "
+                                               "record (e.g. alpha=0.2,b=0.1)")
     p.add_argument("--fast", action="store_true", help="as fast as possible instead of real time")
     p.add_argument("--wait-start", action="store_true",
                    help="serial: hold the stream until the reader sends a byte (slcan always waits for 'O')")
     p.add_argument("--link", default=None, help="stable symlink to the pty (needed to reconnect after a disconnect)")
     p.add_argument("--linger", type=float, default=2.0, help="keep the port open this long after the end (s)")
     p.add_argument("--ledger", default=None, help="write the injected-fault ledger (JSON) here")
+    g = p.add_argument_group("capancdt transport")
+    g.add_argument("--command-rate", type=float, default=1000.0, help="rate of the actuator command in Hz (default 1000)")
+    g.add_argument("--command-file", default=None, help="write the command's t,u schedule here (the source's ?command=)")
+    g.add_argument("--frames-per-packet", type=int, default=4, help="measuring frames per TCP packet (default 4)")
+    g.add_argument("--sensor-range", type=float, default=200.0, help="measuring range in um (default 200)")
+    g.add_argument("--sensor-offset", type=float, default=None, help="standoff in um (default: mid-range)")
+    g.add_argument("--sensor-channels", type=int, default=1, help="channels in the stream (default 1)")
+    g.add_argument("--sensor-channel", type=int, default=1, help="the channel that measures the actuator (default 1)")
+    g.add_argument("--counter-start", type=int, default=0, help="frame counter of the first frame (default 0)")
+    g.add_argument("--port", type=int, default=0, help="TCP port (default: an ephemeral one)")
     return p
 
 
@@ -66,6 +86,8 @@ def _payload(text: str) -> tuple[float, float] | None:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.rate is None:
+        args.rate = 3906.25 if args.transport == CAPANCDT else 10_000.0
     try:
         model = parse_params(args.params)
         spec = FaultSpec.parse(args.faults)
@@ -73,11 +95,21 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         print(f"hil_sim: {exc}", file=sys.stderr)
         return 2
+    try:
+        drift = _drift(args.drift)
+    except ValueError as exc:
+        print(f"hil_sim: {exc}", file=sys.stderr)
+        return 2
+    if args.command_input:
+        return _closed_loop(args, model, drift, spec, effects)
     cfg = PlantConfig(model=model, rate=args.rate, duration=args.duration, schedule=args.schedule,
                       amplitude=args.amplitude, period=args.period, t_start=args.t_start, noise=args.noise,
                       adc_bits=args.adc_bits, adc_range=args.adc_range, effects=effects,
                       payload=_payload(args.payload),
-                      seed=args.seed)
+                      seed=args.seed, drift=drift)
+    if args.transport == CAPANCDT:
+        from .capancdt_server import serve
+        return serve(args, cfg, spec)
     rec = generate(cfg)
     link_path = args.link
     if link_path is None and "disconnect" in spec.counts:
@@ -124,6 +156,52 @@ def main(argv: list[str] | None = None) -> int:
         ledger.write(args.ledger)
     try:
         emit_event("end", ledger=ledger.to_dict(), stopped=stop.is_set())
+        stop.wait(args.linger)
+    except BrokenPipeError:
+        pass
+    link.close()
+    return 0
+
+
+def _drift(text: str) -> tuple[float, float]:
+    """``alpha=A,b=B`` -> (A, B) relative drifts over the record; empty -> no drift."""
+    out = {"alpha": 0.0, "b": 0.0}
+    for item in filter(None, (x.strip() for x in text.split(","))):
+        key, _, value = item.partition("=")
+        if key.strip() not in out:
+            raise ValueError(f"--drift takes alpha=..,b=.. (fractions over the record), got {item!r}")
+        out[key.strip()] = float(value)
+    return out["alpha"], out["b"]
+
+
+def _closed_loop(args, model, drift: tuple[float, float], spec, effects) -> int:
+    """``--command-input``: the plant steps in real time on the reader's command frames."""
+    from .command_runner import CommandRunner
+    refused = [name for name, given in (("--faults", spec.counts), ("--effects", effects),
+                                        ("--payload", args.payload), ("--fast", args.fast)) if given]
+    if args.transport != "serial-binary":
+        print(f"hil_sim: --command-input needs --transport serial-binary (got {args.transport})", file=sys.stderr)
+        return 2
+    if refused:
+        print(f"hil_sim: --command-input cannot be combined with {', '.join(refused)}", file=sys.stderr)
+        return 2
+    link = PtyLink(args.link)
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    n = max(2, int(round(args.duration * args.rate)))
+    runner = CommandRunner(model, args.rate, n, link, noise=args.noise, adc_bits=args.adc_bits,
+                           adc_range=args.adc_range, seed=args.seed, drift=drift, events=emit_event, stop=stop)
+    print(link.port, flush=True)
+    emit_event("ready", port=link.port, tty=link.tty, transport=args.transport, rate=args.rate, samples=n,
+               samples_per_frame=1, model=model.params(), schedule="command", noise=args.noise,
+               lsb=runner.lsb, effects={}, faults={}, drift={"alpha": drift[0], "b": drift[1]},
+               pid=os.getpid())
+    if runner.wait_first_command():
+        runner.run()
+        link.drain(timeout=max(1.0, args.linger))
+    try:
+        emit_event("end", ledger=runner.ledger.to_dict(), stopped=stop.is_set(), produced=runner.produced)
         stop.wait(args.linger)
     except BrokenPipeError:
         pass

@@ -1,8 +1,10 @@
 """Fault injection plan and the ledger of what was injected.
 
-``--faults garbage=N,bitflip=N,drop=N,dup=N,reorder=N,stall=N,disconnect=N``
+``--faults garbage=N,bitflip=N,drop=N,dup=N,reorder=N,stall=N,disconnect=N,badheader=N``
 with N an exact count (integer >= 1) or a per-frame probability (0 < p < 1);
-``stall_s=`` and ``disconnect_s=`` set the durations. Faults land on distinct
+``stall_s=`` and ``disconnect_s=`` set the durations, ``drop_frames=`` how many
+measuring frames a capaNCDT drop skips (``badheader`` and ``drop_frames`` are
+the capaNCDT transport's: a frame there is one TCP packet). Faults land on distinct
 frames at least ``spacing`` frames apart and away from both ends, so each one
 is separately observable and the receiver's counters can be compared exactly
 with the ledger.
@@ -14,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-KINDS = ("garbage", "bitflip", "drop", "dup", "reorder", "stall", "disconnect")
+KINDS = ("garbage", "bitflip", "drop", "dup", "reorder", "stall", "disconnect", "badheader")
 
 
 @dataclass
@@ -22,6 +24,7 @@ class FaultSpec:
     counts: dict = field(default_factory=dict)      # kind -> count or probability
     stall_s: float = 1.5
     disconnect_s: float = 0.5
+    drop_frames: int = 1                            # capancdt: measuring frames skipped by one drop
 
     @classmethod
     def parse(cls, text: str | None) -> "FaultSpec":
@@ -35,10 +38,13 @@ class FaultSpec:
             k, v = (s.strip() for s in item.split("=", 1))
             if k in ("stall_s", "disconnect_s"):
                 setattr(spec, k, float(v))
+            elif k == "drop_frames":
+                spec.drop_frames = int(v)
             elif k in KINDS:
                 spec.counts[k] = float(v)
             else:
-                raise ValueError(f"--faults: unknown fault {k!r}; choose from {', '.join(KINDS)}, stall_s, disconnect_s")
+                raise ValueError(f"--faults: unknown fault {k!r}; choose from {', '.join(KINDS)}, stall_s, disconnect_s, "
+                                 "drop_frames")
         return spec
 
 
@@ -58,13 +64,16 @@ class Ledger:
     disconnects: list = field(default_factory=list)
     disconnect_lost_samples: int = 0
     late_max_s: float = 0.0                            # worst pacing lag of the sender
+    bad_headers: list = field(default_factory=list)    # capancdt: packets sent with a corrupt header
+    bad_header_samples: int = 0                        # capancdt: measuring frames in those packets
+    dropped_samples: int = 0                           # capancdt: measuring frames skipped by drops
 
     def to_dict(self) -> dict:
         d = dict(self.__dict__)
         d["counts"] = {k: len(getattr(self, a)) for k, a in
                        (("drop", "dropped"), ("dup", "duplicated"), ("reorder", "reordered"),
                         ("bitflip", "bitflips"), ("garbage", "garbage"), ("stall", "stalls"),
-                        ("disconnect", "disconnects"))}
+                        ("disconnect", "disconnects"), ("badheader", "bad_headers"))}
         return d
 
     def write(self, path: str) -> None:

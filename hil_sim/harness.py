@@ -20,12 +20,15 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 class PlantProcess:
-    """``with PlantProcess(["--rate", "10000", ...]) as plant: plant.port, plant.wait_event("end")``."""
+    """``with PlantProcess(["--rate", "10000", ...]) as plant: plant.port, plant.wait_event("end")``.
 
-    def __init__(self, args: list[str], *, startup_timeout: float = 120.0) -> None:
+    ``module`` is the program to run (``hil_sim.pi_controller`` for the emulated PI controller).
+    """
+
+    def __init__(self, args: list[str], *, startup_timeout: float = 120.0, module: str = "hil_sim") -> None:
         env = dict(os.environ)
         env["PYTHONPATH"] = str(REPO) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-        self.proc = subprocess.Popen([sys.executable, "-m", "hil_sim", *args], stdout=subprocess.PIPE,
+        self.proc = subprocess.Popen([sys.executable, "-m", module, *args], stdout=subprocess.PIPE,
                                      stderr=subprocess.PIPE, text=True, env=env)
         self.events: list[dict] = []
         self._q: queue.Queue = queue.Queue()

@@ -126,6 +126,7 @@ class PlantConfig:
     effects: dict = field(default_factory=dict)
     seed: int = 0
     payload: tuple[float, float] | None = None   # (time s, added mass fraction): a2 *= 1 + m from then on
+    drift: tuple[float, float] = (0.0, 0.0)      # relative drift of (alpha, b) over the record, linear in time
 
 
 @dataclass
@@ -137,13 +138,19 @@ class PlantRecord:
     lsb: float
 
 
-def generate(cfg: PlantConfig) -> PlantRecord:
-    """The full sampled record of the plant for this configuration."""
-    n = max(2, int(round(cfg.duration * cfg.rate)))
+def generate(cfg: PlantConfig, u: np.ndarray | None = None) -> PlantRecord:
+    """The full sampled record of the plant for this configuration (``u``: an input that replaces the schedule)."""
+    n = max(2, int(round(cfg.duration * cfg.rate))) if u is None else len(u)
     t = np.arange(n) / cfg.rate
-    u = make_input(cfg.schedule, t, amplitude=cfg.amplitude, period=cfg.period, t_start=cfg.t_start)
+    if u is None:
+        u = make_input(cfg.schedule, t, amplitude=cfg.amplitude, period=cfg.period, t_start=cfg.t_start)
     if cfg.effects:
         y_clean = apply_effects(cfg.model, t, u, cfg.effects)
+    elif any(cfg.drift):
+        from .varying_plant import simulate_varying
+        m = cfg.model
+        frac = t / max(t[-1], 1e-12)
+        y_clean = simulate_varying(t, u, m.alpha * (1 + cfg.drift[0] * frac), m.a1, m.a2, m.b * (1 + cfg.drift[1] * frac))
     elif cfg.payload is not None:
         from .scenarios import simulate_tv
         at, mass = cfg.payload

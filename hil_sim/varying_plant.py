@@ -62,8 +62,9 @@ class PlantStream:
         self.st = np.zeros(self.basis.size + 2)
         self.alpha, self.a1, self.a2, self.b = alpha, a1, a2, b
 
-    def step_block(self, u: np.ndarray) -> np.ndarray:
-        """Noise-free output for the next len(u) input samples."""
+    def step_block(self, u: np.ndarray, alpha: np.ndarray | None = None, b: np.ndarray | None = None) -> np.ndarray:
+        """Noise-free output for the next len(u) input samples (per-sample alpha and b if given)."""
         u = np.ascontiguousarray(u, dtype=float)
-        return _varying(u, np.full(u.size, self.alpha), np.full(u.size, self.b), self.st, self.co,
-                        self.basis.lam, self.basis.dx, self.a1, self.a2)
+        alpha = np.full(u.size, self.alpha) if alpha is None else np.ascontiguousarray(alpha, dtype=float)
+        b = np.full(u.size, self.b) if b is None else np.ascontiguousarray(b, dtype=float)
+        return _varying(u, alpha, b, self.st, self.co, self.basis.lam, self.basis.dx, self.a1, self.a2)

@@ -237,3 +237,28 @@ def test_noise_free_simulated_data_has_nothing_missing():
     res = diagnose((t, u, simulate(m, t, u)))
     assert res.verdict == "none"
     assert any("nothing is missing" in w for w in res.warnings)
+
+
+def _strong_leakage_record(seed: int) -> tuple:
+    """Strong leakage (base residual 26x the noise) on a lightly damped, strongly creeping plant."""
+    rng = np.random.default_rng(seed)
+    t, u = staircase(6000, 1e-3, rng, hold_s=(0.2, 1.0))
+    model = CreepModel.from_resonance(0.73, 53.0, 0.02, 1.13)
+    y_eff = simulate_with_effects(model, t, u, {"leakage": {"tau_s": 16.0}})
+    unexplained = fit_base(prepare(t, u, y_eff)).residual_rms
+    noise = unexplained / math.sqrt(26.0 ** 2 - 1)
+    return t, u, y_eff + noise * rng.standard_normal(t.size), model, noise
+
+
+@pytest.mark.parametrize("seed", [5, 6])
+def test_a_strong_effect_does_not_trap_the_extended_fit_in_the_base_fits_resonance(seed):
+    """The base fit of a strong-leakage record lands on a wrong resonance (damping at its bound); the
+    leakage fit warm-started from it stopped at ~3x the noise. A restart over (alpha, fn, zeta) with the
+    effect's fitted parameters kept reaches the floor and the true resonance."""
+    t, u, y, model, noise = _strong_leakage_record(seed)
+    data = prepare(t, u, y)
+    base = fit_base(data)
+    fit = fit_extended(data, ("leakage",), base)
+    assert fit.residual_rms < 1.1 * noise
+    assert abs(fit.model.fn / model.fn - 1) < 0.02 and abs(fit.model.alpha - model.alpha) < 0.01
+    assert abs(fit.effect_params["leakage"]["tau_s"] / 16.0 - 1) < 0.1

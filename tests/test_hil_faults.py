@@ -145,7 +145,7 @@ def test_all_faults_together_realtime():
     samples, stats, led = stream("binary", faults, fast=False, duration=3.0)
     s = stats.as_dict()
     assert led["counts"] == {"drop": 3, "dup": 3, "reorder": 3, "bitflip": 3, "garbage": 3, "stall": 1,
-                             "disconnect": 1}, led
+                             "disconnect": 1, "badheader": 0}, led
     assert s["duplicates"] == 3 and s["reordered"] == 3 and s["crc_errors"] == 3, (s, led)
     assert s["garbage_bytes"] == led["garbage_bytes"] and s["malformed"] == 0
     assert s["stalls"] == 1 and s["disconnects"] == 1 and s["reconnects"] == 1

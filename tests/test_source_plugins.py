@@ -114,7 +114,7 @@ def test_unknown_option_names_the_sources_options(toy_registered, capsys):
     ("serial:/dev/ttyUSB9?dbc=a.dbc", "unknown option(s) 'dbc=a.dbc' for a serial port"),
     ("serial:/dev/ttyUSB9?format=bin", "expected one of auto, ascii, binary"),
     ("serial:/dev/ttyUSB9?reconnect=maybe", "option reconnect='maybe' is not valid"),
-    ("nosuch:thing", "unknown source kind 'nosuch' (csv, serial, can, canlog, toy)"),
+    ("nosuch:thing", "unknown source kind 'nosuch' (csv, serial, can, canlog, pi, capancdt, toy)"),
     ("toy:", "missing model parameters after 'toy:'"),
 ])
 def test_bad_specs_are_one_line_errors(toy_registered, capsys, spec, words):

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 import time
 from pathlib import Path
 
@@ -20,10 +19,13 @@ import numpy as np
 from ..errors import CreepOnlineError
 from ..model import ONLINE_REFITS as REFITS
 from ._common import print_json
+from ._progress import Progress
 
-SCENARIOS = ("stationary", "payload")
+SCENARIOS = ("stationary", "payload", "drift")
 #: The payload scenario's added mass fraction (a2 *= 1 + PAYLOAD_MASS at half the duration).
 PAYLOAD_MASS = 0.5
+#: The drift scenario: alpha and b grow by these fractions over the run (temperature).
+DRIFT = (0.2, 0.1)
 
 
 def register(subparsers) -> None:
@@ -38,7 +40,16 @@ def register(subparsers) -> None:
     p.add_argument("--scenario", choices=SCENARIOS, default="stationary",
                    help="stationary: a constant plant; payload: half-way through, a payload adds 50 %% to the "
                         "moving mass (fn drops by 18 %%) while the input keeps stepping: watch the estimator "
-                        "detect the change and follow it")
+                        "detect the change and follow it; drift: alpha +20 %% and b +10 %% over the run")
+    p.add_argument("--compensate", action="store_true",
+                   help="close the loop: a CreepCompensator turns a staircase reference into the plant's commands "
+                        "(sent over the pty; hil_sim --command-input) and takes the live estimate (docs/compensation.md)")
+    p.add_argument("--bandwidth", type=float, default=None,
+                   help="--compensate: reference filter corner in Hz (default: half the plant's natural frequency)")
+    p.add_argument("--u-min", type=float, default=None, help="--compensate: actuator range, lower end (default none)")
+    p.add_argument("--u-max", type=float, default=None, help="--compensate: actuator range, upper end (default none)")
+    p.add_argument("--amplitude", type=float, default=1.0, help="--compensate: reference staircase height (default 1)")
+    p.add_argument("--period", type=float, default=None, help="--compensate: hold of each level in s (default 2)")
     p.add_argument("--refit", choices=REFITS, default=None,
                    help="the estimator's Remark-3 strategy: window (default) or recursive (docs/online.md)")
     p.add_argument("--effects", default="", help="hidden effects for the plant (see python -m hil_sim --help)")
@@ -48,35 +59,6 @@ def register(subparsers) -> None:
     p.add_argument("--json", action="store_true", help="print the summary as JSON instead of text")
     p.add_argument("--quiet", action="store_true", help="no live progress")
     p.set_defaults(func=run)
-
-
-class Progress:
-    """A status line: rewritten in place on a terminal, one line every few seconds otherwise (CI logs)."""
-
-    def __init__(self, enabled: bool, stream=sys.stderr) -> None:
-        self.enabled = enabled
-        self.stream = stream
-        self.tty = bool(getattr(stream, "isatty", lambda: False)())
-        self.period = 0.25 if self.tty else 2.0
-        self._last = 0.0
-
-    def show(self, text: str, force: bool = False) -> None:
-        if not self.enabled:
-            return
-        now = time.monotonic()
-        if not force and now - self._last < self.period:
-            return
-        self._last = now
-        if self.tty:
-            self.stream.write("\r" + text[:160].ljust(160))
-        else:
-            self.stream.write(text + "\n")
-        self.stream.flush()
-
-    def close(self) -> None:
-        if self.enabled and self.tty:
-            self.stream.write("\n")
-            self.stream.flush()
 
 
 def _errors(model, truth) -> dict:
@@ -100,6 +82,8 @@ def run(args: argparse.Namespace) -> int:
     out_dir = Path(args.report)
     from ..io.safe_files import check_report_dir
     check_report_dir(out_dir)   # before the run, not after it
+    if args.compensate:
+        return _run_compensated(args, out_dir)
     payload = args.scenario == "payload"
     schedule = args.schedule or ("square" if payload else "step")
     plant_args = ["--rate", repr(args.rate), "--duration", repr(args.duration), "--transport", args.transport,
@@ -107,10 +91,12 @@ def run(args: argparse.Namespace) -> int:
                   "--linger", "30"]
     if payload:
         plant_args += ["--payload", f"{args.duration / 2!r}:{PAYLOAD_MASS!r}"]
+    if args.scenario == "drift":
+        plant_args += ["--drift", f"alpha={DRIFT[0]!r},b={DRIFT[1]!r}"]
     for flag, value in (("--params", args.params), ("--effects", args.effects), ("--faults", args.faults)):
         if value:
             plant_args += [flag, value]
-    progress = Progress(not args.quiet)
+    progress = Progress(not args.quiet, width=160)
     progress.show(f"demo: starting the simulated plant (hil_sim, {args.rate:g} Hz, {args.transport})...", force=True)
     try:
         plant = PlantProcess(plant_args)
@@ -121,6 +107,8 @@ def run(args: argparse.Namespace) -> int:
         truth = CreepModel(**ready["model"])
         if payload:        # the estimate is judged against the plant as it ends
             truth = CreepModel(truth.alpha, truth.a1, truth.a2 * (1.0 + PAYLOAD_MASS), truth.b)
+        if args.scenario == "drift":
+            truth = CreepModel(truth.alpha * (1 + DRIFT[0]), truth.a1, truth.a2, truth.b * (1 + DRIFT[1]))
         n_total = int(ready["samples"])
         warm_kernels()
         est = OnlineEstimator(1.0 / args.rate, **({} if args.refit is None else {"refit": args.refit}))
@@ -145,7 +133,19 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _stream(src, est, truth, n_total: int, args, t0: float, progress: Progress) -> dict:
+def _run_compensated(args: argparse.Namespace, out_dir: Path) -> int:
+    """``--compensate``: the closed loop (``demo_compensate``), then the usual summary and report."""
+    from .demo_compensate import print_compensation, run_compensated
+    result = run_compensated(args, Progress(not args.quiet))
+    from ..reports.demo_report import write_report
+    result["report"] = write_report(out_dir, result)
+    _print_summary(result, args.json)
+    if not args.json:
+        print_compensation(result["compensation"])
+    return 0
+
+
+def _stream(src, est, truth, n_total: int, args, t0: float, progress: Progress, on_batch=None) -> dict:
     from ..io.feed import FeedLoop, SampleAge
     dt = 1.0 / args.rate
     trace: list[dict] = []
@@ -161,6 +161,8 @@ def _stream(src, est, truth, n_total: int, args, t0: float, progress: Progress) 
                           "wall": time.monotonic() - loop.started})
             next_trace = t_plant + 0.1
         progress.show(_status(loop, truth))
+        if on_batch is not None:        # --compensate: adapt and send the next commands
+            on_batch(loop)
 
     loop = FeedLoop(src, lambda _dt: est, dt=dt, latency=SampleAge(t0, dt), read_timeout=0.05,
                     duration=args.duration * 3 + 60, on_batch=show, record=True,

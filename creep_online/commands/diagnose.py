@@ -6,7 +6,8 @@ import argparse
 from ..diagnostics import diagnose
 from ..diagnostics.loading import load_for_diagnosis
 from ..effects import effect_names
-from ._common import print_json
+from ._common import add_column_options, print_json
+from ._progress import for_command
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -15,7 +16,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "bands, input regimes), fits each catalogue effect as an extension "
                                    f"({', '.join(effect_names())}), ranks them by evidence (BIC drop) and names the "
                                    "missing one, or 'none'. Non-uniform (e.g. log-spaced) time is supported.")
-    p.add_argument("data", help="CSV file with header t,u,y")
+    p.add_argument("data", help="CSV file with header t,u,y, or a PI GCS data-recorder file")
+    add_column_options(p)
     p.add_argument("--json", action="store_true",
                    help="print JSON (fit_percent residual_rms noise_rms verdict missing_effects ...)")
     p.add_argument("--report", metavar="DIR", default=None,
@@ -32,8 +34,11 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         from ..io.safe_files import check_report_dir
         check_report_dir(args.report)   # before the work, not after it
-    inp = load_for_diagnosis(args.data)
-    result = diagnose(inp.record, candidates=candidates, u_pre=inp.u_pre, t_pre=inp.t_pre)
+    with for_command(args.json) as progress:
+        progress.stage(f"diagnose {args.data}: loading")
+        inp = load_for_diagnosis(args.data, args.u_column, args.y_column)
+        result = diagnose(inp.record, candidates=candidates, u_pre=inp.u_pre, t_pre=inp.t_pre,
+                          progress=lambda stage: progress.stage(f"diagnose {args.data}: {stage}"))
     result.warnings[:0] = inp.notes
     report_path = None
     if args.report:

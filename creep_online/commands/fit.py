@@ -8,6 +8,7 @@ from ..diagnostics.loading import load_for_diagnosis
 from ..effects import effect_names
 from ..metrics import noise_std_estimate
 from ._common import print_json
+from ._progress import for_command
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -28,11 +29,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     effects = check_effects(args.effects)
-    inp = load_for_diagnosis(args.data)
-    rec = inp.record
-    data = prepare(rec.t, rec.u, rec.y, source=rec.source, u_pre=inp.u_pre, t_pre=inp.t_pre)
-    base = fit_base(data)
-    fit = fit_extended(data, effects, base)
+    with for_command(args.json) as progress:
+        progress.stage(f"fit {args.data}: loading")
+        inp = load_for_diagnosis(args.data)
+        rec = inp.record
+        data = prepare(rec.t, rec.u, rec.y, source=rec.source, u_pre=inp.u_pre, t_pre=inp.t_pre)
+        progress.stage(f"fit {args.data}: base model")
+        base = fit_base(data)
+        progress.stage(f"fit {args.data}: base model + {', '.join(effects)}")
+        fit = fit_extended(data, effects, base)
     noise = noise_std_estimate(fit.residual)
     out = {**fit.to_dict(), "fit_percent_before": base.fit_percent, "residual_rms_before": base.residual_rms,
            "noise_rms": noise, "samples": data.n, "file": rec.source, "notes": inp.notes + data.notes}
@@ -42,8 +47,10 @@ def run(args: argparse.Namespace) -> int:
         from ..errors import DataError
         if not data.uniform:
             raise DataError(f"{rec.source}: --online needs uniformly sampled time")
-        live = live_error(data.t - data.t[0], data.u, data.y, fit.effect_params, window_s=args.window,
-                          base_model=base.model, extended_model=fit.model)
+        with for_command(args.json) as progress:
+            progress.stage(f"fit {args.data}: streaming through the online estimator")
+            live = live_error(data.t - data.t[0], data.u, data.y, fit.effect_params, window_s=args.window,
+                              base_model=base.model, extended_model=fit.model)
         out["online_live_error"] = live
     if args.json:
         print_json(out)

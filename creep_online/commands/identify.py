@@ -4,8 +4,9 @@ from __future__ import annotations
 import argparse
 
 from ..identification import identify
-from ..io import load_csv
-from ._common import print_json
+from ..io.csvfile import load_record
+from ._common import add_column_options, print_json
+from ._progress import for_command
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -15,7 +16,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "optional joint polish; if the fit misses the noise floor, a multi-start global fit, "
                                    "which also estimates the initial state of a record taken in operation. "
                                    "u is held between samples.")
-    p.add_argument("data", help="CSV file with header t,u,y (uniform sampling)")
+    p.add_argument("data", help="CSV file with header t,u,y (uniform sampling), or a PI GCS data-recorder file")
+    add_column_options(p)
     p.add_argument("--json", action="store_true", help="print JSON (alpha a1 a2 b fit_percent elapsed_s ...)")
     p.add_argument("--t-c", type=float, default=None, help="end of the transient in s (default: from the data)")
     p.add_argument("--alpha0", type=float, default=None, help="starting alpha (default: coarse creep fit)")
@@ -26,9 +28,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    rec = load_csv(args.data)
-    res = identify(rec.t, rec.u, rec.y, t_c=args.t_c, alpha0=args.alpha0, layer1_step=args.layer1_step,
-                   retune=not args.no_retune, polish=not args.no_polish, source=rec.source)
+    with for_command(args.json) as progress:
+        progress.stage(f"identify {args.data}: loading")
+        rec = load_record(args.data, args.u_column, args.y_column)
+        progress.stage(f"identify {args.data}: {len(rec)} samples, fitting")
+        res = identify(rec.t, rec.u, rec.y, t_c=args.t_c, alpha0=args.alpha0, layer1_step=args.layer1_step,
+                       retune=not args.no_retune, polish=not args.no_polish, source=rec.source)
     if args.json:
         out = res.to_dict()
         out["samples"] = len(rec)

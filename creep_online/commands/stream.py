@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CreepOnlineError, DataError, TransportError
-from ..io import load_csv
+from ..io.csvfile import load_record
 from ..online import OnlineEstimator, warm_kernels
 from ..model import ONLINE_REFITS as REFITS
-from ._common import print_json
+from ._common import add_column_options, print_json
 
 
 #: How a stream ended -> exit code. Every end after the first sample prints the estimate and the counters.
@@ -39,13 +39,14 @@ once samples have arrived):
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("stream", help="run the online estimator on a stream (csv:FILE, serial:PORT, can:..., canlog:FILE)",
+    p = sub.add_parser("stream", help="run the online estimator on a stream (csv:FILE, serial:PORT, can:..., canlog:FILE, pi:PORT)",
                        description="Online identification of all four parameters: a global search over "
                                    "(alpha, fn, zeta) on the first samples, then a window fit that follows the "
                                    "plant, detects abrupt changes and gates outliers (docs/online.md). Prints the "
                                    "final estimate, its quality and the per-sample update() latency.",
                        epilog=EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--source", required=True, help="csv:FILE | serial:PORT | can:IFACE:CHANNEL | canlog:FILE | "
+    p.add_argument("--source", required=True, help="csv:FILE | serial:PORT | can:IFACE:CHANNEL | canlog:FILE | pi:PORT | "
+                                                    "capancdt:HOST:PORT?command=FILE | "
                                                     "KIND:... of an installed plug-in (docs/transports.md)")
     p.add_argument("--json", action="store_true",
                    help="print JSON (alpha a1 a2 b samples latency_us{p50,p99,max} phase quality ...)")
@@ -63,6 +64,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "reason, events), every 10 ms of stream time")
     p.add_argument("--dt", type=float, default=None, help="sampling step in s (live sources; default: from the stream)")
     p.add_argument("--block", action="store_true", help="csv: feed the whole file with update_block (throughput)")
+    add_column_options(p)
     p.add_argument("--max-samples", type=int, default=None, help="stop after this many samples (live sources)")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds (live sources)")
     p.set_defaults(func=run)
@@ -189,7 +191,7 @@ def run(args: argparse.Namespace) -> int:
 def _run_csv(path: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dict, dict]:
     if not path:
         raise DataError("csv: missing file name after 'csv:'")
-    rec = load_csv(path)
+    rec = load_record(path, args.u_column, args.y_column)
     if not rec.is_uniform:
         raise DataError(f"{rec.source}: time is not uniformly sampled; the online estimator needs a fixed step")
     _check_dt(args, rec.h, rec.source)
@@ -234,6 +236,15 @@ def _has_options(path: str) -> bool:
     return "?" in path and not Path(path).exists()
 
 
+def _column_options(spec: str, args: argparse.Namespace) -> dict:
+    """--u-column/--y-column go to a file source (csv:FILE?...); a live stream has no named columns."""
+    given = {k: v for k, v in (("u_column", args.u_column), ("y_column", args.y_column)) if v is not None}
+    if given and not spec.lower().startswith("csv:"):
+        raise DataError(f"{spec}: --u-column/--y-column choose columns of a file (csv:FILE); "
+                        "a live source has no named columns")
+    return given
+
+
 def _check_dt(args: argparse.Namespace, h: float, source: str) -> None:
     """--dt must agree with the file's own time column (a different step is refused, not ignored)."""
     if args.dt is not None and not math.isclose(args.dt, h, rel_tol=1e-6):
@@ -256,7 +267,7 @@ def _run_live(spec: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dic
         from ..io.safe_files import check_output
         check_output(args.trace)
     warm_kernels()                          # compile before the first sample arrives
-    source = registry.open_source(spec)
+    source = registry.open_source(spec, **_column_options(spec, args))
     trace = Trace(None, 1.0)
     options = _options(args)
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 from scipy.stats import chi2
@@ -161,7 +162,7 @@ def _start_from_identify(data: ext.Prepared, warnings: list[str]):
 
 def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_identify: bool = True,
              u_pre: float | None = None, t_pre: float | None = None, combine: bool = True,
-             max_nfev: int = ext.MAX_NFEV) -> Diagnosis:
+             max_nfev: int = ext.MAX_NFEV, progress: Callable[[str], None] | None = None) -> Diagnosis:
     """Compare, locate, explain: fit the base model, every candidate effect, rank them, give the verdict.
 
     ``record_or_t_u_y`` is a ``Record`` or a ``(t, u, y)`` tuple. ``u_pre`` /
@@ -169,9 +170,11 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
     test logged from t > 0); by default the record starts in equilibrium at
     u[0]. ``combine`` also fits the two best significant effects together.
     ``candidates``: the effects to try (default: every registered one,
-    ``creep_online.effects.effect_names()``).
+    ``creep_online.effects.effect_names()``). ``progress`` is called with the
+    name of each stage as it starts (the CLI shows it on a terminal).
     """
     start = time.perf_counter()
+    report = progress or (lambda _stage: None)
     t, u, y, source = _as_arrays(record_or_t_u_y, step_before=u_pre is not None)
     pre_notes = []
     if u_pre is None and t_pre is None and np.ptp(u) == 0.0:
@@ -182,7 +185,9 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
         ext.check_effects([name])
     data = ext.prepare(t, u, y, source=source, u_pre=u_pre, t_pre=t_pre)
     warnings = pre_notes + list(data.notes)
+    report("base model: two-layer identification" if use_identify else "base model")
     start_model = _start_from_identify(data, warnings) if use_identify else None
+    report("base model: joint fit")
     base = ext.fit_base(data, start=start_model, max_nfev=max_nfev)
     if u_pre is None and t_pre is None and u[0] != 0.0:
         # equilibrium at u[0] (default) or at rest with a jump 0 -> u[0] at t[0]: let the fit decide
@@ -211,11 +216,12 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
     if exact:
         warnings.append(f"the base model reproduces the data to {base.residual_rms / float(np.std(data.y)):.1e} "
                         "of their spread (noise-free data?): nothing is missing")
-    for name in candidates:
+    for i, name in enumerate(candidates, 1):
         why = applicable(data, name)
         if why is not None:
             skipped[name] = why
             continue
+        report(f"[{i}/{len(candidates)}] fitting the base model + {name}")
         fit = ext.fit_extended(data, (name,), base, max_nfev=max_nfev)
         ev, lr, pv, dk = evidence(base, fit, data.n)
         sig = (not exact and ev > EVIDENCE_THRESHOLD
@@ -235,6 +241,7 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
     sig = [c for c in ranked if c.significant]
     if combine and len(sig) >= 2:
         pair = (sig[0].effect, sig[1].effect)
+        report(f"fitting the two best together: {pair[0]} + {pair[1]}")
         fit = ext.fit_extended(data, pair, base, max_nfev=max_nfev, warm=sig[0].fit)
         ev, lr, pv, dk = evidence(base, fit, data.n)
         ev1 = evidence(sig[0].fit, fit, data.n)[0]

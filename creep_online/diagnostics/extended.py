@@ -30,7 +30,7 @@ from scipy.optimize import least_squares
 from .. import effects as fx
 from ..effects import FitView, InputEffect, ParamSpec, Stage, check_effect_names, effect_names, get_effect
 from ..errors import DataError, ModelError
-from ..metrics import fit_percent, rms
+from ..metrics import fit_percent, noise_std_estimate, rms
 from ..model import EXTENDED_FIT_ALPHA_BOUNDS as ALPHA_BOUNDS
 from ..model import CreepModel, ExtendedModel, with_effects
 from ..record import check_amplitudes, check_time_and_output
@@ -54,6 +54,16 @@ EXPLORE_EXCITATION = 0.3
 FULL_TOL = 1e-7
 #: Evaluations of the final polish on the whole record after exploring on a prefix.
 FULL_NFEV = 8
+#: An extended fit that explains most of the base misfit (residual below RESTART_EXPLAINED of the
+#: base's) but stays above RESTART_ABOVE_FLOOR times its own noise estimate is restarted from a grid
+#: over the base parameters (alpha, fn, zeta) with the effect's fitted parameters kept: a strong
+#: effect pulls the base fit (and so the warm start) into a wrong resonance. (A wrong candidate
+#: explains little and is not restarted: the diagnosis pays for the restart only where it can help.)
+RESTART_ABOVE_FLOOR = 1.2
+RESTART_EXPLAINED = 0.5
+#: The restart grid: alpha values and damping values (fn: the record's frequency-response peaks and two defaults).
+RESTART_ALPHAS = (0.05, 0.2, 0.4, 0.7, 0.95)
+RESTART_ZETAS = (0.03, 0.1, 0.3, 1.0)
 
 
 # --------------------------------------------------------------------------- prepared data
@@ -561,7 +571,43 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
         c = design.cost(th)
         if c < best_cost:
             best, best_cost = th, c
-    return _result(design, best)
+    fit = _result(design, best)
+    if RESTART_ABOVE_FLOOR * noise_std_estimate(fit.residual) < fit.residual_rms \
+            < RESTART_EXPLAINED * base.residual_rms:
+        th = _restart_base(design, explore, best, max_nfev)
+        if design.cost(th) < best_cost:
+            fit = _result(design, th)
+    return fit
+
+
+def _restart_base(design: Design, explore: Design, best: np.ndarray, max_nfev: int) -> np.ndarray:
+    """The best of a grid over alpha, fn, zeta with the effects' parameters of ``best`` kept, polished.
+
+    Global convergence of an extended fit: the warm starts come from the base
+    fit, which a strong effect distorts (e.g. strong leakage drives the base
+    damping to its bound); with the effect's parameters already near their
+    values, the base parameters are searched again.
+    """
+    data = design.data
+    fmax = 10 ** design.hi[1] / 2.0
+    fns = _frf_peaks(data) + [fmax / 10.0, fmax / 100.0]
+    starts = [np.concatenate([[a, math.log10(fn), math.log10(z)], best[3:]])
+              for a in RESTART_ALPHAS + (float(best[0]),) for fn in fns for z in RESTART_ZETAS]
+    costs = []
+    for th in starts:
+        try:
+            costs.append(explore.cost(np.clip(th, explore.lo, explore.hi)))
+        except (ValueError, ModelError, np.linalg.LinAlgError):
+            costs.append(np.inf)
+    out, out_cost = best, design.cost(best)
+    for i in np.argsort(costs)[:2]:
+        th = _optimise(explore, starts[i], max_nfev)
+        if explore is not design:
+            th = _optimise(design, th, FULL_NFEV, FULL_TOL)
+        c = design.cost(th)
+        if c < out_cost:
+            out, out_cost = th, c
+    return out
 
 
 # --------------------------------------------------------------------------- refit a model

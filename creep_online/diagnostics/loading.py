@@ -1,4 +1,4 @@
-"""Read a record for diagnosis: ``load_csv`` plus two documented readings of creep-test logs.
+"""Read a record for diagnosis: ``load_record`` (CSV or PI GCS file) plus two documented readings of creep-test logs.
 
 * Repeated time stamps (a logger rounding early times, e.g. to 1 ms) are
   merged into one sample at their mean output (counted in the notes).
@@ -6,7 +6,7 @@
   t[0] > 0, is read as a step from 0 applied at t = 0 before logging began
   (``u_pre = 0``, ``t_pre = 0``): the usual creep-test log.
 
-Every other problem is the ``DataError`` of ``creep_online.io.load_csv``.
+Every other problem is the ``DataError`` of ``creep_online.io.csvfile.load_record``.
 """
 from __future__ import annotations
 
@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError, DataWarning
-from ..io import load_csv
-from ..io.csvfile import read_columns
+from ..io.csvfile import load_record, read_columns
+from ..io.gcsfile import is_gcs_file
 from ..record import MIN_SAMPLES, Record
 
 
@@ -46,15 +46,23 @@ def merge_repeated_times(t: np.ndarray, u: np.ndarray, y: np.ndarray) -> tuple[n
     return t[keep], u_first, y_m, int(t.size - keep.sum())
 
 
-def load_for_diagnosis(path: str | Path) -> DiagnosisInput:
-    """Load ``t,u,y`` for diagnosis (see the module notes); DataError naming file and problem otherwise."""
+def load_for_diagnosis(path: str | Path, u_column: str | None = None,
+                       y_column: str | None = None) -> DiagnosisInput:
+    """Load a record for diagnosis (see the module notes); DataError naming file and problem otherwise.
+
+    ``u_column``/``y_column`` choose the input and output columns by name (``load_record``).
+    A GCS file's time comes from its sample time, so only the CSV readings apply to CSV files.
+    """
     try:
-        return DiagnosisInput(load_csv(path))
+        return DiagnosisInput(load_record(path, u_column, y_column))
     except DataError as first:
+        if is_gcs_file(path):
+            raise
+        names = ("t", (u_column or "u").strip().lower(), (y_column or "y").strip().lower())
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore", DataWarning)   # already said by load_csv
-            cols = read_columns(path)  # raises the file-level errors itself
-        t, u, y = cols["t"], cols["u"], cols["y"]
+            warnings.simplefilter("ignore", DataWarning)   # already said by load_record
+            cols = read_columns(path, names)  # raises the file-level errors itself
+        t, u, y = cols["t"], cols[names[1]], cols[names[2]]
         notes = []
         if t.size >= 2 and np.all(np.diff(t) >= 0) and np.any(np.diff(t) == 0):
             try:

@@ -1,6 +1,7 @@
-"""``csv:FILE``: a ``t,u,y`` file replayed as a sample stream (sequence number = row index).
+"""``csv:FILE``: a ``t,u,y`` file (or a PI GCS data-recorder file) replayed as a sample stream.
 
-The file is read and checked whole by ``creep_online.io.csvfile.load_csv``
+The sequence number is the row index. The file is read and checked whole by
+``creep_online.io.csvfile.load_record``
 (the same rules and one-line errors as ``identify``), then handed out in
 chunks, or paced at the file's own step with ``?realtime=1``.
 """
@@ -9,21 +10,24 @@ from __future__ import annotations
 import time
 
 from .frames import RawSample
-from .source_options import REALTIME, STALL, WINDOW
+from .source_options import REALTIME, STALL, WINDOW, Option
 from .sources import SampleSource
 
 
 class CsvSource(SampleSource):
     """A ``t,u,y`` CSV file as a stream (sequence = row index), optionally paced in real time."""
 
-    options = (REALTIME, WINDOW, STALL)
+    options = (REALTIME, WINDOW, STALL,
+               Option("u_column", str, None, "input column (CSV header name or GCS NAMEi)"),
+               Option("y_column", str, None, "output column (CSV header name or GCS NAMEi)"))
     target_label = "file"
 
-    def __init__(self, path: str, *, realtime: bool = False, chunk: int = 1000, **kw) -> None:
-        from .csvfile import load_csv
+    def __init__(self, path: str, *, realtime: bool = False, chunk: int = 1000,
+                 u_column: str | None = None, y_column: str | None = None, **kw) -> None:
+        from .csvfile import load_record
         super().__init__(**kw)
         self.name = f"csv:{path}"
-        rec = load_csv(path)
+        rec = load_record(path, u_column, y_column)
         self.record = rec
         self.rate = 1.0 / rec.h if rec.h > 0 else None
         self._i = 0

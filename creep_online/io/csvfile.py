@@ -1,5 +1,10 @@
 """CSV files with header ``t,u,y`` (other columns ignored; the rules: docs/reliability.md).
 
+``load_record`` is the one entry point of the file commands: it also takes PI
+GCS data-recorder files (recognised by their ``#`` header, read by
+``creep_online.io.gcsfile``) and lets the input and output columns be chosen
+by name in both kinds of file.
+
 Every problem becomes a DataError whose one-line message names the file, the
 row and what is wrong; nothing is silently dropped or repaired.
 """
@@ -165,6 +170,26 @@ def load_csv(path: str | Path, min_samples: int = MIN_SAMPLES, need_output: bool
     cols = read_columns(path, required)
     y = cols.get("y", np.zeros_like(cols["t"]))
     rec = Record(cols["t"], cols["u"], y, source=str(path))
+    return rec.validate(min_samples)
+
+
+def load_record(path: str | Path, u_column: str | None = None, y_column: str | None = None,
+                min_samples: int = MIN_SAMPLES) -> Record:
+    """A ``t,u,y`` CSV or a GCS data-recorder file (told apart by content), input/output columns by name.
+
+    CSV: ``u_column``/``y_column`` name header columns (default ``u``, ``y``;
+    time is always ``t``). GCS: they name NAMEi columns (default NAME0, NAME1).
+    """
+    from .gcsfile import is_gcs_file, load_gcs
+    if is_gcs_file(path):
+        return load_gcs(path, u_column, y_column, min_samples)
+    if u_column is None and y_column is None:
+        return load_csv(path, min_samples)
+    names = ("t", (u_column or "u").strip().lower(), (y_column or "y").strip().lower())
+    if len(set(names)) < 3:
+        raise DataError(f"{path}: time, input and output must be three different columns (got {','.join(names)})")
+    cols = read_columns(path, names)
+    rec = Record(cols["t"], cols[names[1]], cols[names[2]], source=str(path))
     return rec.validate(min_samples)
 
 

@@ -103,6 +103,19 @@ def encode_binary_raw(seq: int, raw_u: int, raw_y: int, status: int = 0) -> byte
     return SYNC + body + _CRC.pack(crc16(body))
 
 
+#: ``status`` bit of a command frame (host -> amplifier): ``u`` is the DAC value to apply at sample ``seq``.
+STATUS_COMMAND = 0x80000000
+
+
+def encode_command(seq: int, u: float, scale_u: float = SCALE_U) -> bytes:
+    """A command frame: the binary frame with ``STATUS_COMMAND`` set and y = 0 (same sync, length, CRC).
+
+    The amplifier parses it with :class:`BinaryParser`, so commands get the
+    same resynchronisation and CRC protection as samples.
+    """
+    return encode_binary(seq, u, 0.0, STATUS_COMMAND, scale_u=scale_u)
+
+
 def encode_ascii(seq: int, t: float, u: float, y: float, checksum: bool = True) -> bytes:
     """One ASCII line ``seq,t,u,y[*HHHH]\\n`` (repr-exact floats; numpy scalars written as plain numbers)."""
     body = f"{operator.index(seq)},{float(t)!r},{float(u)!r},{float(y)!r}".encode()

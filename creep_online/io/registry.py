@@ -29,6 +29,8 @@ BUILTIN_SOURCES: dict[str, str] = {
     "serial": "creep_online.io.serial_source:SerialSource",
     "can": "creep_online.io.can_source:CanSource",
     "canlog": "creep_online.io.canlog_source:CanLogSource",
+    "pi": "creep_online.io.pi_source:PiSource",
+    "capancdt": "creep_online.io.capancdt_source:CapancdtSource",
 }
 
 _registered: dict[str, str | type] = {}      # register_source(): wins over everything else
@@ -137,5 +139,6 @@ def open_source(spec: str, **options: Any) -> "SampleSource":
 
 
 def _kinds_hint() -> str:
-    examples = {"csv": "csv:FILE", "serial": "serial:PORT", "can": "can:IFACE:CHANNEL", "canlog": "canlog:FILE"}
+    examples = {"csv": "csv:FILE", "serial": "serial:PORT", "can": "can:IFACE:CHANNEL", "canlog": "canlog:FILE", "pi": "pi:PORT",
+                "capancdt": "capancdt:HOST:PORT"}
     return ", ".join(examples.get(k, f"{k}:...") for k in available_sources())

@@ -34,6 +34,8 @@ def _write(out: Path, r: dict) -> str:
         return (f"{out / 'summary.json'} (matplotlib is not installed: no plots; "
                 "pip install 'creep_online[plots]')")
     pngs = [_plot_fit(plt, out, r), _plot_convergence(plt, out, r), _plot_latency(plt, out, r)]
+    if "compensation" in r:        # demo --compensate
+        pngs.insert(0, _plot_compensation(plt, out, r))
     pngs = [p for p in pngs if p]
     page = out / "report.html"
     page.write_text(_html(r, pngs))
@@ -73,6 +75,34 @@ def _plot_fit(plt, out: Path, r: dict) -> str | None:
     axes[1].legend()
     fig.tight_layout()
     path = out / "fit.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path.name
+
+
+def _plot_compensation(plt, out: Path, r: dict) -> str | None:
+    """Reference, output compensated (measured) and uncompensated (simulated), and both creep errors."""
+    ref, y_comp, y_unc = r["_r"], r["_y_full"], r["_y_uncomp"]
+    c = r["compensation"]
+    t = np.arange(ref.size) / r["rate_hz"]
+    step = max(1, ref.size // 20000)
+    fig, axes = plt.subplots(2, 1, figsize=(9, 7), sharex=True)
+    ax = axes[0]
+    ax.plot(t[::step], y_unc[::step], lw=0.8, color="tab:red", label="output, uncompensated (u = r/g, simulated)")
+    ax.plot(t[::step], y_comp[::step], lw=0.8, color="tab:blue", label="output, compensated (measured)")
+    ax.plot(t[::step], ref[::step], lw=1.0, ls="--", color="k", label="reference")
+    ax.axvline(c["first_model_t"], color="0.6", lw=0.8)
+    ax.set(ylabel="y", title="Creep compensation: the output follows the reference")
+    ax.legend(fontsize=8)
+    ax = axes[1]
+    ax.plot(t[::step], (y_unc - ref)[::step], lw=0.8, color="tab:red", label="uncompensated")
+    ax.plot(t[::step], (y_comp - ref)[::step], lw=0.8, color="tab:blue", label="compensated")
+    ax.axvline(c["first_model_t"], color="0.6", lw=0.8, label="first good estimate")
+    ax.set_yscale("symlog", linthresh=1e-3)
+    ax.set(xlabel="plant time (s)", ylabel="output - reference", title="Creep error over time")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    path = out / "compensation.png"
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path.name
@@ -122,6 +152,18 @@ def _plot_latency(plt, out: Path, r: dict) -> str | None:
     return path.name
 
 
+def _compensation_html(r: dict) -> str:
+    c = r.get("compensation")
+    if not c:
+        return ""
+    m, un = c["creep_error_compensated"], c["creep_error_uncompensated_simulated"]
+    return (f"<h2>Creep compensation</h2><p>Reference filter {c['bandwidth_hz']:.0f} Hz, first good estimate at "
+            f"{c['first_model_t']:.2f} s, {c['model_changes']} model updates, {c['clipped']} clipped commands. "
+            f"Creep error after the resonance transient, holds after the first estimate: compensated (measured) "
+            f"max {m['max_abs']:.2e}, rms {m['rms']:.2e}; uncompensated (simulated) max {un['max_abs']:.2e}, "
+            f"rms {un['rms']:.2e}.</p>")
+
+
 def _html(r: dict, pngs: list[str]) -> str:
     rows = []
     m, t, e = r.get("model"), r["truth"], r.get("errors", {})
@@ -143,6 +185,6 @@ def _html(r: dict, pngs: list[str]) -> str:
 p50 {lat['p50']:.0f} us, p99 {lat['p99']:.0f} us, max {lat['max']:.0f} us.</p>
 <h2>Estimate vs truth</h2><p>phase {html.escape(r['estimate']['phase'])}, quality {html.escape(r['estimate']['quality'])}</p>
 <table><tr><th>parameter</th><th>estimate</th><th>true</th><th>error</th></tr>{''.join(rows)}</table>
-{imgs}
+{_compensation_html(r)}{imgs}
 <h2>Transport counters</h2><table>{counters}</table>
 </body></html>"""

@@ -1,0 +1,163 @@
+"""The records of a fleet on ``dask.distributed``: a local cluster by default, or an existing scheduler.
+
+Local clusters run one single-threaded worker *process* per core, for two
+reasons. The identification is numba kernels (compiled without ``nogil``)
+driven by Python (scipy's trust-region loop, the layers, the noise tests), so
+threads of one interpreter serialise on the GIL wherever a record is in a
+kernel or in Python (only numpy's array loops release it; how much that leaves
+to a second thread could not be measured on the loaded 2-core machine). And
+the warning capture that fills each row's ``warnings`` is process-wide
+(``warnings.catch_warnings`` is not thread-safe): two records on two threads
+could swap or lose their warnings. BLAS is held to one thread inside each fit
+(``creep_online._threads``), so one process per core does not oversubscribe
+the machine. The price is the start-up (each process imports numpy, scipy,
+numba and dask): ``bench/results/batch.json``.
+
+Records are submitted in a bounded window (``WINDOW_PER_THREAD`` per worker
+thread), so a fleet of 10,000 long-format records never sits in the
+scheduler's memory at once and Ctrl-C has little to cancel. Dask is imported
+here, when a batch runs: it is the ``fleet`` extra.
+"""
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import signal
+import threading
+from itertools import islice
+from typing import Any, Iterable, Iterator
+
+from ..errors import CreepOnlineError, one_line
+from ..io.fleet_records import RecordJob
+from .row import empty_row
+
+#: Seconds to wait for an existing scheduler before giving up with a one-line error.
+CONNECT_TIMEOUT_S = 10.0
+#: Records in flight per worker thread.
+WINDOW_PER_THREAD = 4
+INSTALL_HINT = "pip install 'creep_online[fleet]'"
+
+
+def distributed():
+    """The ``dask.distributed`` module, or a one-line CreepOnlineError naming the extra to install."""
+    try:
+        import dask.distributed
+    except ImportError:
+        raise CreepOnlineError(f"batch identification needs Dask ({INSTALL_HINT})") from None
+    return dask.distributed
+
+
+def default_workers() -> int:
+    """One worker process per core this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str | None = None, workers: int | None = None) -> Iterator[Any]:
+    """A ``Client`` of the scheduler at ``scheduler``, or of a new local cluster of ``workers`` processes.
+
+    The local cluster (and only it) is shut down on exit; an existing cluster is left running.
+    """
+    dd = distributed()
+    if scheduler:
+        try:
+            client = dd.Client(scheduler, timeout=CONNECT_TIMEOUT_S)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise CreepOnlineError(f"cannot reach the Dask scheduler at {scheduler}: {one_line(exc)}") from None
+        with contextlib.closing(client):
+            warm_up_workers(client, scheduler)
+            yield client
+        return
+    if workers is not None and workers < 1:
+        raise CreepOnlineError(f"--workers must be at least 1 (got {workers})")
+    with _workers_ignore_ctrl_c():
+        cluster = dd.LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
+                                  host="127.0.0.1", dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+    with contextlib.closing(cluster), contextlib.closing(dd.Client(cluster)) as client:
+        warm_up_workers(client, "the local cluster")
+        yield client
+
+
+@contextlib.contextmanager
+def _workers_ignore_ctrl_c() -> Iterator[None]:
+    """Ignore SIGINT while the worker processes start, so that they inherit "ignore".
+
+    Ctrl-C on a terminal signals the whole foreground process group: without
+    this every worker printed its own KeyboardInterrupt traceback. Python keeps
+    an inherited "ignore" (it installs its KeyboardInterrupt handler only over
+    the default), so the workers stay quiet and the batch process alone
+    handles Ctrl-C: it cancels the queued records and shuts the cluster down.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def warm_up_workers(client: Any, where: str) -> dict[str, float]:
+    """Run ``warm_up`` on every worker (imports, numba loads): {worker: seconds}.
+
+    A worker that cannot import creep_online fails here, once, with a one-line
+    error, rather than on every record.
+    """
+    from .job import warm_up
+    try:
+        return client.run(warm_up)
+    except Exception as exc:  # noqa: BLE001 - whatever the remote side raised, say it on one line
+        raise CreepOnlineError(f"the workers of {where} cannot run creep_online: {type(exc).__name__}: "
+                               f"{one_line(exc)}") from None
+
+
+def run_on_dask(jobs: Iterable[RecordJob], client: Any, *, diagnose_it: bool = False,
+                identify_options: dict[str, Any] | None = None) -> Iterator[dict[str, Any]]:
+    """Yield one row per job, in the order they finish (``run_record`` on the cluster's workers).
+
+    A record that was bad before any work (``job.error``) gets its row here at
+    once. A task the cluster itself could not run (a worker died, creep_online
+    missing on a remote worker) gets a row with that error. Closing the
+    generator (e.g. on Ctrl-C) cancels what is still queued.
+    """
+    from .job import run_record
+    dd = distributed()
+    options = {"diagnose_it": diagnose_it, "identify_options": identify_options}
+    pending = []
+    for job in jobs:
+        if job.error is not None:
+            yield run_record(job, **options)
+        else:
+            pending.append(job)
+    queue = iter(pending)
+    in_flight: dict[str, tuple[Any, RecordJob]] = {}
+    done = dd.as_completed()
+
+    def submit(n: int) -> None:
+        for job in islice(queue, n):
+            future = client.submit(run_record, job, pure=False, **options)
+            in_flight[future.key] = (future, job)
+            done.add(future)
+
+    threads = sum(client.nthreads().values()) or 1
+    submit(WINDOW_PER_THREAD * threads)
+    try:
+        for future in done:
+            submit(1)
+            job = in_flight.pop(future.key)[1]
+            try:
+                row = future.result()
+            except Exception as exc:  # noqa: BLE001 - the cluster failed this one record; go on
+                row = empty_row(job)
+                row["error"] = f"the cluster could not run it: {type(exc).__name__}: {one_line(exc)}"
+            future.release()
+            yield row
+    finally:
+        done.clear()
+        if in_flight:
+            client.cancel([future for future, _ in in_flight.values()])

@@ -1,0 +1,359 @@
+"""Feedforward creep compensation from the (live) model: the command u that makes the output follow r.
+
+The plant is ``G(s) = b / (s^alpha (1 + a1 s + a2 s^2))``. Its exact inverse is
+improper (relative degree 2 + alpha), so the reference is first shaped by a
+critically damped filter of relative degree 3, ``F(s) = 1/(1 + tau s)^3``, and
+the compensator realises
+
+    u = F(s) G(s)^-1 r = (1/b) I^(1-alpha) [ (1 + a1 s + a2 s^2) s F(s) r ]
+
+Why this shape:
+
+* **relative degree 3 >= 2 + alpha**: ``F G^-1`` is proper (strictly, by
+  1 - alpha), so the command is bounded for a step and needs no derivative of
+  the raw reference;
+* **critically damped** (three equal real poles): the shaped reference has no
+  overshoot, so the output does not overshoot the reference either;
+* **the resonance is inverted exactly**: the zeros ``1 + a1 s + a2 s^2`` of the
+  inverse cancel the plant's lightly damped poles, so the command contains no
+  energy at the resonance and the output is ``F r``, not ringing; with a model
+  error the residual ringing is that error times ``|F(j wn)|`` (default corner
+  at half the natural frequency: 0.09);
+* ``s^alpha = s * s^(alpha-1)``: a derivative (taken exactly from the filter
+  states) followed by the fractional *integral* of order ``1 - alpha``, which is
+  the sum-of-exponentials machinery of ``soe.py`` with the same fixed nodes.
+
+The SOE node states are filters of the shaped reference's derivatives only
+(``compensator_kernels``): they do not depend on the model. ``set_model`` just
+recomputes the output coefficients (K powers, ~1 us), so the compensator can
+take the estimator's model every sample. The command is the exact average of
+the continuous inverse over the coming sample (zero-order hold without the
+half-sample lag).
+
+Actuator range: the command is clipped to ``[u_min, u_max]``; with
+``anti_windup`` the states then advance with the reference the clipped command
+really achieves, so the creep integral never accumulates a history the plant
+did not receive, and tracking resumes as soon as the reference is reachable.
+
+Hysteresis: a model from ``fit --effects hysteresis`` (``ExtendedModel`` with
+a ``hysteresis`` effect: ``v = u + sum_i w_i play_{r_i}[u]`` on the input) is
+inverted analytically (``pi_inverse``): the creep inverse gives v, the inverse
+Prandtl-Ishlinskii operator gives u.
+"""
+from __future__ import annotations
+
+import inspect
+import math
+
+import numpy as np
+
+from ..errors import DataError, ModelError
+from ..model import CreepModel, ExtendedModel
+from . import compensator_kernels as CK
+from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SoeBasis
+
+#: Effects the compensator inverts (the rest of an ExtendedModel is refused, by name).
+INVERTIBLE_EFFECTS = ("hysteresis",)
+#: Default corner of the reference filter, as a fraction of the model's natural frequency.
+BANDWIDTH_FRACTION = 0.5
+#: Pass-through commands remembered for the first model's replay (older ones are forgotten).
+MAX_REPLAY = 1 << 22
+
+
+class CreepCompensator:
+    """Command u for reference r, sample by sample, inverting creep, resonance (and hysteresis).
+
+    Every constructor argument is stored verbatim (``get_params``).
+
+    dt:           sampling step (s).
+    model:        initial model (CreepModel, or ExtendedModel with ``hysteresis``); None: set it later.
+    bandwidth_hz: corner of the reference filter ``1/(1 + s/(2 pi f))^3``; None: half the natural
+                  frequency of the first model (the states then start with that model).
+    u_min, u_max: actuator range (None: unbounded on that side).
+    anti_windup:  when clipped, advance the states with the reference the clipped command achieves.
+    horizon_s:    memory horizon of the SOE fractional integral (s).
+    soe_dx:       SOE node spacing in ln(lambda).
+
+    Before there is a model ``command(r)`` passes r through unchanged (clipped):
+    the estimator needs an input to find a model. Those commands are
+    remembered (up to ``MAX_REPLAY`` samples) and the first model replays them
+    (``compensator_kernels.replay``), so compensation starts from what the
+    plant really received and the pass-through phase leaves no creep behind.
+    """
+
+    def __init__(self, dt: float, model: CreepModel | ExtendedModel | None = None, *,
+                 bandwidth_hz: float | None = None, u_min: float | None = None, u_max: float | None = None,
+                 anti_windup: bool = True, horizon_s: float = DEFAULT_HORIZON_S, soe_dx: float = DEFAULT_DX) -> None:
+        self.dt = dt
+        self.model = model
+        self.bandwidth_hz = bandwidth_hz
+        self.u_min = u_min
+        self.u_max = u_max
+        self.anti_windup = anti_windup
+        self.horizon_s = horizon_s
+        self.soe_dx = soe_dx
+        self._validate()
+        self.reset()
+
+    # ------------------------------------------------------------------ parameters
+    @classmethod
+    def _param_names(cls) -> list[str]:
+        return [p for p in inspect.signature(cls.__init__).parameters if p != "self"]
+
+    def get_params(self) -> dict:
+        """Constructor arguments as given (``CreepCompensator(**c.get_params())`` is an equal compensator)."""
+        return {name: getattr(self, name) for name in self._param_names()}
+
+    def _validate(self) -> None:
+        for name in ("dt", "horizon_s", "soe_dx"):
+            _positive(name, getattr(self, name))
+        if self.bandwidth_hz is not None:
+            _positive("bandwidth_hz", self.bandwidth_hz)
+            if self.bandwidth_hz >= 0.5 / self.dt:
+                raise DataError(f"bandwidth_hz ({self.bandwidth_hz}) must be below the Nyquist frequency "
+                                f"({0.5 / self.dt:g} Hz)")
+        for name in ("u_min", "u_max"):
+            v = getattr(self, name)
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v)):
+                raise DataError(f"{name} must be a number or None, got {v!r}")
+        if self.u_min is not None and self.u_max is not None and not self.u_min < self.u_max:
+            raise DataError(f"u_min must be below u_max, got {self.u_min} and {self.u_max}")
+        if not isinstance(self.anti_windup, bool):
+            raise DataError(f"anti_windup must be True or False, got {self.anti_windup!r}")
+        if self.horizon_s <= self.dt:
+            raise DataError(f"horizon_s ({self.horizon_s}) must exceed dt ({self.dt})")
+
+    # ------------------------------------------------------------------ lifecycle
+    def reset(self) -> "CreepCompensator":
+        """Forget the reference history and counters; back to the constructor's model."""
+        self._lo = -math.inf if self.u_min is None else float(self.u_min)
+        self._hi = math.inf if self.u_max is None else float(self.u_max)
+        self._basis = SoeBasis.build(float(self.dt), horizon_s=float(self.horizon_s), dx=float(self.soe_dx))
+        self._tau: float | None = None
+        self._st: np.ndarray | None = None
+        self._current: CreepModel | ExtendedModel | None = None
+        self._base: CreepModel | None = None
+        self._offset = 0.0
+        self._hy = np.zeros(4)
+        self._hy_on = False
+        self._out = np.zeros(3)
+        self._applied: list[float] = []   # pass-through commands not yet replayed
+        self.samples = 0
+        self.clipped = 0
+        self.model_changes = 0
+        if self.bandwidth_hz is not None:
+            self._build(1.0 / (2.0 * math.pi * float(self.bandwidth_hz)))
+        if self.model is not None:
+            self.set_model(self.model)
+        return self
+
+    def _build(self, tau: float) -> None:
+        """The model-independent discretisation (one matrix exponential per node) and zero states."""
+        e, M, m, phi, gam, pz, P, pr, Ax, ax, C, d = node_discretization(self._basis.lam, tau, float(self.dt))
+        self._tau = tau
+        self._e, self._M, self._m, self._phi, self._gam = e, M, m, phi, gam
+        self._avg = (pz, P, pr, Ax, ax, C, d)
+        q = self._basis.size
+        self._st = np.zeros(3 + 3 * q)
+        self._Wz = np.zeros((3, q))
+        self._Ux = np.zeros(3)
+        self._ur = 0.0
+
+    # ------------------------------------------------------------------ model
+    @property
+    def current_model(self) -> CreepModel | ExtendedModel | None:
+        """The model the commands are computed from now (None: pass-through)."""
+        return self._current
+
+    @property
+    def tau(self) -> float | None:
+        """Time constant (s) of each of the reference filter's three lags (None until known)."""
+        return self._tau
+
+    def set_model(self, model: CreepModel | ExtendedModel | None) -> "CreepCompensator":
+        """Compute from now on with ``model`` (cheap: K powers; nothing happens if it is unchanged)."""
+        if model is self._current or (model is not None and model == self._current):
+            return self
+        if model is None:
+            self._current = None
+            self._base = None
+            return self
+        base, offset, hysteresis = _split(model)
+        if self._tau is None:
+            self._build(1.0 / (2.0 * math.pi * BANDWIDTH_FRACTION * base.fn))
+        pz, P, pr, Ax, ax, C, d = self._avg
+        self._ur = float(CK.output_coefficients(base.alpha, base.a1, base.a2, base.b, self._tau, self._basis.lam,
+                                                self._basis.dx, pz, P, pr, Ax, ax, C, d, self._Wz, self._Ux))
+        old_hy = self._current.effects.get("hysteresis") if isinstance(self._current, ExtendedModel) else None
+        if hysteresis != old_hy:
+            self._hy_on = hysteresis is not None
+            self._hy = pack_hysteresis(hysteresis) if hysteresis is not None else np.zeros(4)
+        if self._current is not None:
+            self.model_changes += 1
+        if self._base is not None and base.b != self._base.b:
+            self._st *= base.b / self._base.b     # the gain scales the output of the whole history
+        self._current, self._base, self._offset = model, base, offset
+        if self._applied:
+            CK.replay(self._st, self._e, self._M, self._m, self._phi, self._gam, self._Wz, self._Ux, self._ur,
+                      np.asarray(self._applied[-MAX_REPLAY:], dtype=float), self._hy, self._hy_on)
+            self._applied = []
+        return self
+
+    # ------------------------------------------------------------------ commands
+    def command(self, r: float) -> float:
+        """The command for this sample's reference r (held by the DAC until the next sample)."""
+        r = float(r)
+        if not math.isfinite(r):
+            raise DataError(f"reference must be finite, got {r!r}")
+        self.samples += 1
+        if self._base is None:
+            return self._pass(r)
+        u = CK.command_step(self._st, self._e, self._M, self._m, self._phi, self._gam, self._Wz, self._Ux,
+                            self._ur, r - self._offset, self._lo, self._hi, self.anti_windup, self._hy,
+                            self._hy_on, self._out)
+        self.clipped += int(self._out[1])
+        return u
+
+    def command_block(self, r: np.ndarray) -> np.ndarray:
+        """Commands for a block of references with the current model (same numbers as ``command`` in a loop)."""
+        r = np.ascontiguousarray(r, dtype=float)
+        if not np.all(np.isfinite(r)):
+            raise DataError("reference contains NaN or inf")
+        if self._base is None:
+            return np.array([self.command(v) for v in r])
+        u = np.empty_like(r)
+        r_eff = np.empty_like(r)
+        self.clipped += CK.command_block(self._st, self._e, self._M, self._m, self._phi, self._gam, self._Wz,
+                                         self._Ux, self._ur, r - self._offset, self._lo, self._hi, self.anti_windup,
+                                         self._hy, self._hy_on, u, r_eff)
+        self.samples += r.size
+        return u
+
+    @property
+    def shaped_reference(self) -> float:
+        """The output the plant should show now (filtered reference, after any clipping), or nan before a model."""
+        return math.nan if self._base is None else float(self._st[2]) + self._offset
+
+    def _pass(self, r: float) -> float:
+        u = min(max(r, self._lo), self._hi)
+        self.clipped += int(u != r)
+        self._applied.append(u)
+        if len(self._applied) > 2 * MAX_REPLAY:
+            del self._applied[:-MAX_REPLAY]
+        return u
+
+
+# --------------------------------------------------------------------------- discretisation
+def filter_matrices(tau: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(A, B, C, d) of the reference filter 1/(1 + tau s)^3: x' = A x + B r, tau^k x3^(k) = C[k-1] x + d[k-1] r."""
+    A = np.array([[-1.0, 0.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, -1.0]]) / tau
+    B = np.array([1.0, 0.0, 0.0]) / tau
+    C = np.array([[0.0, 1.0, -1.0], [1.0, -2.0, 1.0], [-3.0, 3.0, -1.0]])
+    d = np.array([0.0, 0.0, 1.0])
+    return A, B, C, d
+
+
+def node_discretization(lam: np.ndarray, tau: float, h: float) -> tuple:
+    """Exact zero-order-hold transitions and sample averages of the filter and of every node bank.
+
+    For node lam, the continuous system ``x' = A x + B r``, ``z_k' = -lam z_k +
+    C[k] x + d[k] r`` (k = 1..3) and its running integral are advanced over one
+    sample by one matrix exponential (Van Loan); rows are read off for
+    ``z(h)`` and ``(1/h) int_0^h z``. Returns (e, M, m, Phi, Gam, pz, P, pr, Ax, ax, C, d).
+    """
+    from scipy.linalg import expm
+    A, B, C, d = filter_matrices(tau)
+    q = lam.size
+    n = 6
+    e, pz = np.empty(q), np.empty(q)
+    M, P = np.empty((q, 3, 3)), np.empty((q, 3, 3))
+    m, pr = np.empty((q, 3)), np.empty((q, 3))
+    for i, li in enumerate(lam):
+        F = np.zeros((2 * n + 1, 2 * n + 1))   # states [x, z], input r, integrals of [x, z]
+        F[:3, :3] = A
+        F[:3, n] = B
+        F[3:6, :3] = C
+        F[3:6, 3:6] = -li * np.eye(3)
+        F[3:6, n] = d
+        F[n + 1:, :n] = np.eye(n)
+        E = expm(F * h)
+        e[i] = E[3, 3]
+        M[i] = E[3:6, :3]
+        m[i] = E[3:6, n]
+        pz[i] = E[n + 4, 3] / h
+        P[i] = E[n + 4:n + 7, :3] / h
+        pr[i] = E[n + 4:n + 7, n] / h
+    phi, gam = E[:3, :3].copy(), E[:3, n].copy()
+    Ax, ax = E[n + 1:n + 4, :3] / h, E[n + 1:n + 4, n] / h
+    return (e, np.ascontiguousarray(M), m, np.ascontiguousarray(phi), gam, pz, np.ascontiguousarray(P), pr,
+            np.ascontiguousarray(Ax), ax, C, d)
+
+
+# --------------------------------------------------------------------------- hysteresis
+def pi_inverse(r: np.ndarray, w: np.ndarray, w0: float = 1.0) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+    """Analytic inverse of ``v = w0 u + sum_i w_i play_{r_i}[u]`` (thresholds r_i > 0, any order).
+
+    With thresholds sorted and the partial slopes ``S_j = w0 + w_1 + .. + w_j``
+    all positive (a monotone loop), the inverse is again a PI operator:
+    ``u = v/w0 + sum_j wh_j play_{rh_j}[v]``, ``rh_j = w0 r_j + sum_{i<j} w_i (r_j - r_i)``,
+    ``wh_j = -w_j / (S_j S_(j-1))``. Returns (rh, wh, 1/w0, order): sorted by threshold.
+    """
+    order = np.argsort(r, kind="stable")
+    r = np.asarray(r, dtype=float)[order]
+    w = np.asarray(w, dtype=float)[order]
+    if np.any(r <= 0):
+        raise ModelError("hysteresis thresholds must be > 0 (the identity term is the w0 = 1 path)")
+    S = w0 + np.cumsum(w)
+    S_prev = np.concatenate(([w0], S[:-1]))
+    if w0 <= 0 or np.any(S <= 0):
+        j = int(np.argmax(S <= 0)) if w0 > 0 else -1
+        raise ModelError("hysteresis cannot be inverted: the loop is not monotone (partial slope "
+                         f"{S[j] if j >= 0 else w0:.3g} <= 0{'' if j < 0 else f' at threshold {r[j]:.4g}'})")
+    rh = w0 * r + np.array([np.sum(w[:j] * (r[j] - r[:j])) for j in range(r.size)])
+    wh = -w / (S * S_prev)
+    return rh, wh, 1.0 / w0, order
+
+
+def pack_hysteresis(params: dict) -> np.ndarray:
+    """The ``hy`` array of ``compensator_kernels._hysteresis``: inverse and forward PI, initial offsets."""
+    from ..effects.hysteresis import INITIAL_STATES
+    r = np.atleast_1d(np.asarray(params.get("r", []), dtype=float))
+    w = np.atleast_1d(np.asarray(params.get("w", []), dtype=float))
+    initial = params.get("initial", "centred")
+    if initial not in INITIAL_STATES or r.shape != w.shape:
+        raise ModelError(f"hysteresis needs matching r and w lists and initial in {', '.join(INITIAL_STATES)}")
+    rh, wh, w0h, order = pi_inverse(r, w)
+    c = INITIAL_STATES[initial]
+    n = r.size
+    return np.concatenate(([n, w0h, 1.0], rh, wh, c * rh, r[order], w[order], c * r[order], [0.0]))
+
+
+def _split(model: CreepModel | ExtendedModel) -> tuple[CreepModel, float, dict | None]:
+    """(base model, output offset, hysteresis params or None); ModelError for effects it cannot invert."""
+    if isinstance(model, CreepModel):
+        return model, 0.0, None
+    if not isinstance(model, ExtendedModel):
+        raise ModelError(f"the compensator needs a CreepModel or an ExtendedModel, got {type(model).__name__}")
+    other = sorted(set(model.effects) - set(INVERTIBLE_EFFECTS))
+    if other:
+        raise ModelError(f"the compensator inverts creep, resonance and {', '.join(INVERTIBLE_EFFECTS)}; "
+                         f"it cannot invert {', '.join(other)}")
+    return model.base, float(model.offset), model.effects.get("hysteresis")
+
+
+def _positive(name: str, value) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise DataError(f"{name} must be a positive finite number, got {value!r}")
+
+
+def warm_kernels() -> None:
+    """Compile (or load from numba's cache) the compensator's kernels before a real-time loop."""
+    c = CreepCompensator(1e-3, CreepModel(0.1, 1e-3, 1e-6, 1.0), u_min=-1.0, u_max=1.0)
+    c.command(0.5)
+    c.command_block(np.array([0.5, 2.0]))
+    c.set_model(CreepModel(0.2, 1e-3, 1e-6, 1.0).with_effects(hysteresis={"r": [0.1], "w": [0.1]}))
+    c.command(0.5)
+    c.command_block(np.array([0.5, 0.6]))
+    c = CreepCompensator(1e-3)
+    c.command(0.5)
+    c.set_model(CreepModel(0.1, 1e-3, 1e-6, 1.0))

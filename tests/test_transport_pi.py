@@ -1,0 +1,199 @@
+"""PI controllers: pipython itself, unchanged, against hil_sim's emulated controller over a real pty.
+
+The emulator (``python -m hil_sim.pi_controller``) runs in its own process;
+the tests rebuild its plant from the same arguments (``plant_config``) as the
+independent reference for every value read.
+"""
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pipython", reason="pipython is an optional extra (creep_online[pi])")
+
+from pipython import GCSDevice, GCSError  # noqa: E402
+from pipython.pidevice.interfaces.piserial import PISerial  # noqa: E402
+
+from creep_online.cli import main  # noqa: E402
+from creep_online.io import open_source  # noqa: E402
+from hil_sim.harness import PlantProcess  # noqa: E402
+from hil_sim.pi_controller import build_parser, plant_config  # noqa: E402
+from hil_sim.plant import generate  # noqa: E402
+
+
+def random_params(seed: int) -> str:
+    """A plant over the issue's ranges (alpha 0.02-0.4, fn 100-800 Hz, zeta 0.03-0.3, b 0.5-5)."""
+    rng = np.random.default_rng(seed)
+    return (f"alpha={rng.uniform(0.02, 0.4):.4f},fn={rng.uniform(100, 800):.1f},"
+            f"zeta={rng.uniform(0.03, 0.3):.3f},b={rng.uniform(0.5, 5):.3f}")
+
+
+def controller(args: list[str]):
+    """(the emulator process, its plant record rebuilt here from the same arguments)."""
+    plant = generate(plant_config(build_parser().parse_args(args)))
+    return PlantProcess(args, module="hil_sim.pi_controller"), plant
+
+
+def test_pipython_configures_the_recorder_and_reads_the_plant():
+    seed, rtr = 2, 3
+    args = ["--rate", "5000", "--duration", "1", "--params", random_params(seed), "--schedule", "staircase",
+            "--period", "0.2", "--seed", str(seed), "--fast", "--table-points", "1200"]
+    proc, plant = controller(args)
+    with proc, GCSDevice(gateway=PISerial(proc.port, 115200)) as dev:
+        assert type(dev.gcsdevice).__name__ == "GCS2Device"      # pipython chose GCS 2 from CSV?
+        assert "E-727" in dev.qIDN() and dev.qSAI() == ["1"]
+        dev.RTR(rtr)
+        assert dev.qRTR() == rtr
+        dev.DRC([1, 2], ["1", "1"], [7, 2])
+        assert dev.qDRC([1, 2]) == {1: ["1", 7], 2: ["1", 2]}
+        dev.DRT(0, 4, 0)
+        assert dev.qDRT([1]) == {1: [4, "0"]}
+        n = min(1200, (plant.u.size - 1) // rtr + 1)
+        assert dev.qDRL([1, 2]) == {1: n, 2: n}
+        u, y = [], []
+        for offset in range(1, n + 1, 500):                    # in chunks, as the pi: source reads
+            count = min(500, n - offset + 1)
+            header = dev.qDRR([1, 2], offset, count)
+            while dev.bufstate is not True:
+                time.sleep(0.001)
+            u += dev.bufdata[0]
+            y += dev.bufdata[1]
+        assert header["SAMPLE_TIME"] == pytest.approx(rtr / 5000.0)
+        assert header["NAME0"] == "Voltage of output channel 1" and header["NAME1"] == "Current Position of axis 1"
+        cycles = np.arange(n) * rtr
+        np.testing.assert_allclose(u, plant.u[cycles], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(y, plant.y[cycles], rtol=1e-9, atol=1e-12)
+        with pytest.raises(GCSError) as refused:
+            dev.DRC(1, "1", 99)                                # no such record option
+        assert refused.value.val == 17
+        with pytest.raises(GCSError) as unknown:
+            dev.send("XYZ 1")
+        assert unknown.value.val == 2
+        assert dev.qERR() == 0
+
+
+def test_pi_source_streams_recordings_and_counts_the_hand_over_gaps():
+    rate, rtr, points = 10_000.0, 2, 3000
+    args = ["--rate", f"{rate:g}", "--duration", "3", "--params", random_params(5), "--t-start", "0.05",
+            "--table-points", str(points)]
+    proc, plant = controller(args)
+    with proc:
+        src = open_source(f"pi:{proc.port}?rtr={rtr}", on_event=None)
+        got = []
+        deadline = time.monotonic() + 60
+        while src.recordings < 4 and time.monotonic() < deadline:
+            got += src.read(0.05)
+        src.close()
+        triggers = [e["cycle"] for e in proc.events if e.get("event") == "trigger"]
+    assert src.rate == pytest.approx(rate / rtr) and "E-727" in src.idn
+    assert len(triggers) >= 4 and len(got) >= 3 * points
+    seq = np.array([s.seq for s in got])
+    assert np.all(np.diff(seq) > 0)
+    for k in range(3):                          # three whole recordings
+        chunk = got[k * points:(k + 1) * points]
+        cycles = triggers[k] + np.arange(points) * rtr
+        np.testing.assert_allclose([s.y for s in chunk], plant.y[cycles], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose([s.u for s in chunk], plant.u[cycles], rtol=1e-9, atol=1e-12)
+        # numbering from the host clock (relative to the first DRT): within half of this and of the
+        # first DRT round trip (+1 ms) of the controller's own trigger time
+        bound = src.trigger_uncertainty_s[0] + src.trigger_uncertainty_s[k] + 1e-3
+        assert abs(chunk[0].seq - triggers[k] / rtr) <= bound * rate / rtr
+        assert chunk[0].t == pytest.approx(chunk[0].seq * rtr / rate)
+    for k in range(2):                          # the points lost while re-triggering: estimated vs true
+        estimated = got[(k + 1) * points].seq - got[k * points].seq - points
+        true = (triggers[k + 1] - triggers[k]) // rtr - points
+        bound = src.trigger_uncertainty_s[k] + src.trigger_uncertainty_s[k + 1] + 1e-3
+        assert abs(estimated - true) <= bound * rate / rtr
+    stats = src.stats.as_dict()
+    assert stats["missing"] == seq[-1] - seq[0] + 1 - len(got) and stats["gaps"] <= len(triggers) - 1
+    assert stats["duplicates"] == stats["late"] == stats["disconnects"] == 0
+
+
+def test_a_slow_recording_is_not_taken_for_a_finished_one():
+    """10 points/s (RTR 100 at 1 kHz): polls faster than the points come must not re-trigger."""
+    proc, plant = controller(["--rate", "1000", "--duration", "3", "--params", random_params(3)])
+    with proc:
+        src = open_source(f"pi:{proc.port}?rtr=100", on_event=None)
+        got = []
+        deadline = time.monotonic() + 30
+        while len(got) < 8 and time.monotonic() < deadline:
+            got += src.read(0.05)
+        src.close()
+    assert src.recordings == 1 and src.stats.missing == 0 and src.rate == pytest.approx(10.0)
+    np.testing.assert_allclose([s.y for s in got], plant.y[np.arange(len(got)) * 100], rtol=1e-9, atol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def live_controller():
+    """One real-time controller for the CLI tests (a refused command changes nothing in it)."""
+    args = ["--rate", "10000", "--duration", "8", "--params", random_params(7), "--schedule", "square",
+            "--period", "1", "--t-start", "0.05", "--noise", "1e-4"]
+    proc, _ = controller(args)
+    with proc:
+        yield proc
+
+
+def test_gcs_error_is_one_line(live_controller, capsys):
+    port = live_controller.port
+    code = main(["stream", "--source", f"pi:{port}?u_record=99", "--max-samples", "100"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert err == (f"creep-online stream: error: pi:{port}: the controller refused 'DRC 1 1 99 2 1 2': "
+                   "GCS error 17 (Parameter out of range)")
+
+
+def test_stream_cli_identifies_the_controllers_plant(live_controller, capsys):
+    code = main(["stream", "--source", f"pi:{live_controller.port}", "--max-samples", "30000", "--json"])
+    truth = live_controller.ready["model"]
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and out["samples"] >= 30000
+    assert out["source_stats"]["missing"] == 0 and out["source_stats"]["frames"] > 10
+    assert out["alpha"] == pytest.approx(truth["alpha"], abs=0.01)
+    assert out["b"] == pytest.approx(truth["b"], rel=0.02)
+    assert out["a2"] == pytest.approx(truth["a2"], rel=0.05)
+
+
+def test_disconnect_is_one_line_and_exit_4(capsys):
+    proc, _ = controller(["--rate", "5000", "--duration", "5", "--disconnect-after", "0.8"])
+    with proc:
+        code = main(["stream", "--source", f"pi:{proc.port}?reconnect=0&timeout=0.5", "--duration", "20",
+                     "--json"])
+        proc.wait_event("disconnect", timeout=5)
+    captured = capsys.readouterr()
+    out = json.loads(captured.out)
+    lines = captured.err.strip().splitlines()
+    assert code == 4 and out["samples"] > 1000 and out["source_stats"]["disconnects"] == 1
+    assert lines[-1].startswith(f"creep-online stream: link lost: pi:{proc.port}: controller disappeared (no answer to ")
+    assert lines[-1].endswith("reconnect is off") and "Traceback" not in captured.err
+
+
+def test_reconnect_after_a_pulled_cable_numbers_on_from_the_clock(tmp_path):
+    rate = 5000.0
+    link = str(tmp_path / "pi_port")
+    args = ["--rate", f"{rate:g}", "--duration", "4", "--params", random_params(9), "--link", link,
+            "--disconnect-after", "0.6", "--back-after", "0.4"]
+    proc, plant = controller(args)
+    events: list[str] = []
+    with proc:
+        src = open_source(f"pi:{link}?timeout=0.3", on_event=events.append)
+        got = []
+        deadline = time.monotonic() + 60
+        while src.stats.reconnects < 1 or len(got) < 5000:
+            got += src.read(0.05)
+            assert time.monotonic() < deadline, src.stats.summary()
+        src.close()
+        triggers = [e["cycle"] for e in proc.events if e.get("event") == "trigger"]
+    assert src.stats.disconnects == 1 and len(triggers) == 2
+    assert any("controller disappeared (no answer to" in e for e in events)
+    seq = np.array([s.seq for s in got])
+    first_after = int(np.flatnonzero(np.diff(seq) > 1)[0]) + 1     # the outage is one gap
+    before, after = got[:first_after], got[first_after:]
+    np.testing.assert_allclose([s.y for s in before], plant.y[np.arange(len(before))], rtol=1e-9, atol=1e-12)
+    cycles = triggers[1] + np.arange(len(after))
+    np.testing.assert_allclose([s.y for s in after], plant.y[cycles], rtol=1e-9, atol=1e-12)
+    bound = src.trigger_uncertainty_s[0] + src.trigger_uncertainty_s[1] + 1e-3
+    assert abs(after[0].seq - triggers[1]) <= bound * rate
+    assert src.stats.missing == after[0].seq - before[-1].seq - 1 > 0.4 * rate
