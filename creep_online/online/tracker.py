@@ -59,6 +59,13 @@ ALPHA_HOLD_S = 2.0
 WAIT = "wait"
 #: Post-change samples the resonance search waits for after a detection (s).
 RESEARCH_S = 1.0
+#: Search steps (``ResonanceSearch.step``, ~4000 multiply-adds, ~3 us) per unit of background work: a unit
+#: of ~10 us like a Levenberg-Marquardt step. At one step per unit a search on 2 s at 10 kHz took ~4 s of
+#: stream sample by sample (a wrong-basin start was taken for a change meanwhile).
+SEARCH_STEPS = 3
+#: Post-change searches at most: 1 s of samples, then twice as many while the result is ambiguous or misfits
+#: (``_resolved``), up to the ring's half or the search's work memory (3.3 s at 10 kHz).
+RESEARCH_PASSES = 3
 #: Levenberg-Marquardt steps per window re-fit and per change test.
 REFIT_STEPS = 2
 TEST_STEPS = 4
@@ -544,8 +551,8 @@ class WindowTracker:
         n0, S0, sy0, syy0, g0, lin0, theta0 = snap
         g = float(self.sc[W.SC_G])
         if g < g0 or self.fit.sample < n0 or lin0 != (self.a1l, self.a2l) or n0 < self.window_start \
-                or not self.converged:
-            return
+                or not self.converged or self._researching():
+            return                         # (a misfit being re-searched is not a change of the plant)
         R = np.empty_like(self.S)
         W.symmetrize(self.S - S0, R, 1.0 / g)
         ry = (self.sy - sy0) / g
@@ -631,12 +638,13 @@ class WindowTracker:
         n0 = max(n_detect, int(self.sc[W.SC_RSTART]))
         zeta0 = yield from self._nodes_at(n0)
         starts = None
-        for extend in (False, True):
-            if extend:                     # a second pass on twice the samples, from the first one's basins
-                while self.n < n0 + 2 * u.size:
+        cap = min(self.ring.shape[1] // 2, 1 << 15 if self.work_memory is None else self.work_memory.shape[0])
+        for attempt in range(RESEARCH_PASSES):
+            if attempt:                    # another pass on twice the samples, from the last one's basins
+                while self.n < n0 + min(2 * u.size, cap):
                     yield WAIT
                 starts = [c[1:] for c in search.candidates]
-            u, y = yield from self._ring_segment(n0, self.n)
+            u, y = yield from self._ring_segment(n0, min(self.n, n0 + cap))
             lead = min(int(16.0 * self.a2 / self.a1 / self.h), u.size // 4)   # two (old) settling times
             # the live estimate competes with the grid: the window re-fits often follow a change
             # before the test confirms it, and the grid's best basin can be a wrong one
@@ -644,10 +652,8 @@ class WindowTracker:
                                      work=self.work_memory, extra=((self.alpha, self.a1, self.a2),),
                                      starts=starts)
             yield
-            while not search.step():
-                yield
-            cap = min(self.ring.shape[1] // 2, 1 << 15 if self.work_memory is None else self.work_memory.shape[0])
-            if self._resolved(search) or 2 * u.size > cap:
+            yield from self._run_search(search)
+            if self._resolved(search) or u.size >= cap:
                 break
         r = search.result
         if r is not None and math.isfinite(r.cost) and r.a1 > 0 and r.a2 > 0 and r.b != 0:
@@ -658,6 +664,16 @@ class WindowTracker:
         # still hold the pre-change window, and a fit of them would report a second change
         yield from self._relinearize_job(n0)
         self.fitting = True
+
+    @staticmethod
+    def _run_search(search: ResonanceSearch) -> Generator:
+        """A search to its result, ``SEARCH_STEPS`` steps per unit."""
+        while not any(search.step() for _ in range(SEARCH_STEPS)):
+            yield
+
+    def _researching(self) -> bool:
+        """Is a search of the resonance queued (after a change, or by the re-search trigger)?"""
+        return any(j.__name__ in ("_research_job", "_research_again_job") for j in self._jobs)
 
     def _resolved(self, search: ResonanceSearch) -> bool:
         """Did the post-change search find one basin clearly (its fit near the noise floor, and the best
@@ -707,7 +723,7 @@ class WindowTracker:
     def _watch(self, rms: float, broken: bool) -> None:
         """After each re-fit: start a re-search once the error has sat above the noise floor (or the fit has
         been broken) for ``RESEARCH_AFTER_S`` (plain floats: runs at every re-fit)."""
-        if not self.fitting or any(j.__name__ in ("_research_job", "_research_again_job") for j in self._jobs):
+        if not self.fitting or self._researching():
             return
         floor = float(self.sc[W.SC_NOISE])
         if not (broken or (floor > 0.0 and rms > RESEARCH_RATIO * floor)):
@@ -740,8 +756,7 @@ class WindowTracker:
                                  fixed_alpha=self.alpha if self.window_start else None, alphas=(self.alpha,),
                                  extra=((self.alpha, self.a1, self.a2),))
         yield
-        while not search.step():
-            yield
+        yield from self._run_search(search)
         r = search.result
         live = (self.alpha, self.a1, self.a2)
         c_live, _, _ = yield from search.exact_cost(*live)
