@@ -648,7 +648,8 @@ class WindowTracker:
                     yield WAIT
                 starts = [c[1:] for c in search.candidates]
             u, y = yield from self._ring_segment(n0, min(self.n, n0 + cap))
-            lead = min(int(16.0 * self.a2 / self.a1 / self.h), u.size // 4)   # two (old) settling times
+            settle = int(16.0 * self.a2 / self.a1 / self.h)      # two (old) settling times
+            lead = min(settle, u.size // 4)
             # the live estimate competes with the grid: the window re-fits often follow a change
             # before the test confirms it, and the grid's best basin can be a wrong one
             search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, fixed_alpha=self.alpha,
@@ -656,7 +657,8 @@ class WindowTracker:
                                      starts=starts)
             yield
             yield from self._run_search(search)
-            if self._resolved(search) or u.size >= cap:
+            # (with a shortened lead the misfit may be the unknown resonance state at the segment's start)
+            if self._resolved(search) or u.size >= cap or lead < settle:
                 break
         r = search.result
         if r is not None and math.isfinite(r.cost) and r.a1 > 0 and r.a2 > 0 and r.b != 0:
