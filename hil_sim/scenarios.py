@@ -476,7 +476,8 @@ def quiet_start(seed: int) -> Scenario:
     small = _held(t, t0, np.arange(0.0, t_big, 0.3), rng.uniform(0.0, 0.1, int(t_big / 0.3) + 1))
     big = _held(t, t0 + t_big, np.arange(0.0, 10.0, 0.5), rng.uniform(-1.0, 1.0, 20))
     u = np.where(t >= t0 + t_big, big, small)
-    return _build("quiet_start", seed, rng, h, u, truth, {**params, "input": "quiet_start", "big_from_s": t0 + t_big})[0]
+    info = {**params, "input": "quiet_start", "big_from_s": t0 + t_big}
+    return _build("quiet_start", seed, rng, h, u, truth, info)[0]
 
 
 FAMILIES: dict[str, Callable[[int], Scenario]] = {

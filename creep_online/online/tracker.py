@@ -63,7 +63,8 @@ RESEARCH_S = 1.0
 #: of ~10 us like a Levenberg-Marquardt step. At one step per unit a search on 2 s at 10 kHz took ~4 s of
 #: stream sample by sample (a wrong-basin start was taken for a change meanwhile).
 SEARCH_STEPS = 3
-#: Post-change searches at most: 1 s of samples, then twice as many while the result misfits (``_resolved``), up to the ring's half or the search's work memory (3.3 s at 10 kHz).
+#: Post-change searches at most: 1 s of samples, then twice as many while the result misfits (``_resolved``),
+#: up to the ring's half or the search's work memory (3.3 s at 10 kHz).
 RESEARCH_PASSES = 3
 #: Levenberg-Marquardt steps per window re-fit and per change test.
 REFIT_STEPS = 2
@@ -640,14 +641,17 @@ class WindowTracker:
             yield WAIT
         n0 = max(n_detect, int(self.sc[W.SC_RSTART]))
         zeta0 = yield from self._nodes_at(n0)
-        starts = None
         cap = min(self.ring.shape[1] // 2, 1 << 15 if self.work_memory is None else self.work_memory.shape[0])
-        for attempt in range(RESEARCH_PASSES):
-            if attempt:                    # another pass on twice the samples, from the last one's basins
-                while self.n < n0 + min(2 * u.size, cap):
+        search: ResonanceSearch | None = None
+        seg = 0
+        for _ in range(RESEARCH_PASSES):
+            starts = None
+            if search is not None:         # another pass on twice the samples, from the last one's basins
+                while self.n < n0 + min(2 * seg, cap):
                     yield WAIT
                 starts = [c[1:] for c in search.candidates]
             u, y = yield from self._ring_segment(n0, min(self.n, n0 + cap))
+            seg = u.size
             settle = int(16.0 * self.a2 / self.a1 / self.h)      # two (old) settling times
             lead = min(settle, u.size // 4)
             # the live estimate competes with the grid: the window re-fits often follow a change
