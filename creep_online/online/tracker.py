@@ -665,7 +665,12 @@ class WindowTracker:
             if self._resolved(search) or u.size >= cap or lead < settle:
                 break
         r = search.result
-        if r is not None and math.isfinite(r.cost) and r.a1 > 0 and r.a2 > 0 and r.b != 0:
+        # the search's result replaces the estimate only when clearly better on the segment (as a re-search):
+        # where every candidate fits at the noise floor (one small step) the re-fits do better from the estimate
+        c_live, _, _ = yield from search.exact_cost(self.alpha, self.a1, self.a2)
+        rows = int(np.count_nonzero(np.isfinite(search.y[search.lead:])))
+        better = r is not None and r.cost > 0.0 and not rows * math.log(c_live / r.cost) <= RESEARCH_LR
+        if better and math.isfinite(r.cost) and r.a1 > 0 and r.a2 > 0 and r.b != 0:
             self.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
             self._coefficients()
             yield
