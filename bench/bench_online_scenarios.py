@@ -2,7 +2,7 @@
 
 Usage (from the repository root, with the package installed or ``PYTHONPATH=.``)::
 
-    python bench/bench_online_scenarios.py [--plants 20] [--families payload,drift]
+    python bench/bench_online_scenarios.py [--plants 20] [--seed-offset 0] [--families payload,drift]
         [--baseline 773e268|none] [--mode block|single] [--kwargs '{"window_s": 5}']
         [--refit window|recursive] [--out bench/results/online_scenarios.json]
 
@@ -14,7 +14,8 @@ older revisions have no such parameter). The recursive tracker's numbers are in
 What it does:
 
 1. draws ``--plants`` scenarios per family from ``hil_sim.scenarios`` (seeds
-   0..plants-1, so every run sees the same plants) and saves them as npz in a
+   offset..offset+plants-1, so every run sees the same plants; ``--seed-offset``
+   draws fresh ones to check that a change was not tuned to the usual seeds) and saves them as npz in a
    temporary directory;
 2. runs ``OnlineEstimator(dt, **kwargs)`` of this working tree over them in
    this process and, at the same time, the ``--baseline`` revision's
@@ -128,12 +129,12 @@ def worker_main(argv: list[str]) -> None:
 
 
 # --------------------------------------------------------------------------- scenarios and truth
-def generate(families: list[str], plants: int, folder: Path) -> dict[str, dict]:
+def generate(families: list[str], plants: int, folder: Path, offset: int = 0) -> dict[str, dict]:
     """Make and save the scenarios; keep for each only the truth at the chunk ends (the metrics' needs)."""
     from hil_sim.scenarios import make
     truth = {}
     for fam in families:
-        for seed in range(plants):
+        for seed in range(offset, offset + plants):
             scen = make(fam, seed)
             name = f"{fam}_{seed:03d}.npz"
             scen.save(folder / name)
@@ -255,7 +256,8 @@ def _jsonable(x):
 # --------------------------------------------------------------------------- main
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--plants", type=int, default=20, help="scenarios per family (seeds 0..plants-1)")
+    ap.add_argument("--plants", type=int, default=20, help="scenarios per family (seeds offset..offset+plants-1)")
+    ap.add_argument("--seed-offset", type=int, default=0, help="first seed (fresh plants: e.g. 1000)")
     ap.add_argument("--families", default=None, help="comma-separated subset of hil_sim.scenarios.FAMILIES")
     ap.add_argument("--baseline", default="773e268", help="git revision of the baseline estimator, or 'none'")
     ap.add_argument("--mode", choices=("block", "single"), default="block")
@@ -288,14 +290,15 @@ def main(argv: list[str] | None = None) -> dict:
     with tempfile.TemporaryDirectory(prefix="online_scenarios_") as tmp:
         work = Path(tmp)
         (work / "scenarios").mkdir()
-        truth = generate(families, args.plants, work / "scenarios")
+        truth = generate(families, args.plants, work / "scenarios", args.seed_offset)
         files = sorted((work / "scenarios").glob("*.npz"))
         gen_s = time.perf_counter() - start
         base = None if args.baseline == "none" else start_baseline(args.baseline, files, args.mode, kwargs, work)
         current_kwargs = kwargs if args.refit is None else {**kwargs, "refit": args.refit}
         current = run_files(files, args.mode, current_kwargs)
         run_s = time.perf_counter() - start - gen_s
-        doc = {"config": {"plants": args.plants, "families": families, "mode": args.mode, "kwargs": current_kwargs,
+        doc = {"config": {"plants": args.plants, "seed_offset": args.seed_offset, "families": families, "mode": args.mode,
+                          "kwargs": current_kwargs,
                           "tolerances": TOL, "traj_dt_s": TRAJ_DT, "scatter_s": SCATTER_S},
                "current": {"revision": git_head(), "families": summarize(current, truth),
                            "run_s": run_s}}

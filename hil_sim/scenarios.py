@@ -30,6 +30,8 @@ controller     random staircase (5-50 ms holds), stationary; 12 s at 10 kHz
 close_modes    two weaker modes (residues 0.1-0.4) 1.3-2.5x above the first; 12 s at 10 kHz;
                ``truth_best`` = best second-order fit (``identify`` on the noise-free record)
 mid_operation  12 s taken 5 s into operation after a history of steps (u[0] != 0), t re-zeroed
+quiet_start    small steps first (levels 0-0.1 for 1.5-3 s: the start-up search sees little of the
+               resonance), then steps of +-1 every 0.5 s; 10 s at 10 kHz, fn 2-300 Hz
 
 Draws are log-uniform: strong_creep as listed; the other families alpha
 0.01-0.5, zeta 0.02-0.5, b = +-10^U(-1,1). Every input rests at 0 for
@@ -463,9 +465,25 @@ def mid_operation(seed: int) -> Scenario:
     return scen
 
 
+def quiet_start(seed: int) -> Scenario:
+    """A start the search can get wrong: 1.5-3 s of small steps (levels 0-0.1 every 0.3 s, the resonance
+    near the noise), then steps to +-1 every 0.5 s (the jump stays within 20 input ranges: not a glitch)."""
+    rng = np.random.default_rng([seed, 8])
+    h = 1e-4
+    t = np.arange(int(10.0 / h)) * h
+    truth, params = _split(_stationary_plant(rng, 2.0, 300.0))
+    t0, t_big = _start(rng), float(rng.uniform(1.5, 3.0))
+    small = _held(t, t0, np.arange(0.0, t_big, 0.3), rng.uniform(0.0, 0.1, int(t_big / 0.3) + 1))
+    big = _held(t, t0 + t_big, np.arange(0.0, 10.0, 0.5), rng.uniform(-1.0, 1.0, 20))
+    u = np.where(t >= t0 + t_big, big, small)
+    info = {**params, "input": "quiet_start", "big_from_s": t0 + t_big}
+    return _build("quiet_start", seed, rng, h, u, truth, info)[0]
+
+
 FAMILIES: dict[str, Callable[[int], Scenario]] = {
     "strong_creep": strong_creep, "payload": payload, "stiffness": stiffness, "drift": drift,
-    "controller": controller, "close_modes": close_modes, "mid_operation": mid_operation}
+    "controller": controller, "close_modes": close_modes, "mid_operation": mid_operation,
+    "quiet_start": quiet_start}
 
 
 def make(family: str, seed: int) -> Scenario:

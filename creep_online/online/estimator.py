@@ -79,6 +79,8 @@ class OnlineEstimate:
     newest re-fit (not window averages); ``b_rate`` and ``alpha_rate`` are their
     drift per second, 0 while the data show no significant drift, and
     ``rate_uncertainty`` their 1-sigma (empty while they are 0).
+    ``researches`` lists the re-searches of the resonance the tracker ran
+    (why, the likelihood ratio, whether it switched and what moved).
     """
 
     alpha: float
@@ -108,6 +110,7 @@ class OnlineEstimate:
     b_rate: float = 0.0
     alpha_rate: float = 0.0
     rate_uncertainty: dict = field(default_factory=dict)
+    researches: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         """JSON-ready dict."""
@@ -324,7 +327,8 @@ class OnlineEstimator:
             residual_rms=_finite(self._residual()), outliers=int(tr.sc[W.SC_OUTLIERS]),
             shifts=int(tr.sc[W.SC_SHIFTS]), relinearizations=tr.relinearizations,
             input_outliers=self.input_outliers, events=self.events, b_rate=_finite(tr.b_rate),
-            alpha_rate=_finite(tr.alpha_rate), rate_uncertainty=rate_std)
+            alpha_rate=_finite(tr.alpha_rate), rate_uncertainty=rate_std,
+            researches=[dict(r) for r in tr.researches])
 
     def predict_one(self, u: float) -> float | None:
         """Model output at the next sample if u is applied now (no state change); None without a model."""
@@ -600,7 +604,9 @@ class OnlineEstimator:
             ev = tr.events[-1]
             return "changing", f"change detected at t={ev['t']:.3g} s ({', '.join(ev['moved'])} moved)"
         if tr.fit.sample == 0:
-            return "provisional", "first window fit pending"
+            rs = tr.researches[-1] if tr.researches and tr.researches[-1]["switched"] else None
+            return "provisional", ("first window fit pending" if rs is None else
+                                   f"resonance re-searched at t={rs['t']:.3g} s ({', '.join(rs['moved'])} moved)")
         held = tr.sc[W.SC_SINCE] * self._h
         if self.window_s is not None and held > 3.0 * self.window_s:    # < 5 % of the last step's weight left
             return "provisional", (f"input constant for {held:.3g} s: the window no longer holds an input change "

@@ -496,6 +496,7 @@ class RecursiveTracker:
         self.fitting = True
         self.drift_on = False
         self.events: list[dict] = []
+        self.researches: list[dict] = []   # the window tracker's re-searches of the resonance; none here
         self.false_alarms = 0            # alarms after which nothing moved (no event kept)
         self.rejected = 0                # never: the recursion has no fits to reject
         self._jobs: list = []            # no background jobs: the interface the estimator polls

@@ -12,7 +12,11 @@ Every ``step()`` does a bounded unit of work (a few thousand multiply-adds:
 part of one model evaluation over the buffer), so the search can run inside
 ``update()`` at 10 kHz. The coarse grid evaluates every ``stride``-th sample
 (the states still advance at every sample, so the model is exact; only the
-cost sums skip rows), the refinement every sample up to ``FINE_ROWS``.
+cost sums skip rows), the refinement every sample up to ``FINE_ROWS``. The row
+kept in each block of ``stride`` samples is at a pseudo-random offset: rows at a
+fixed stride alias the resonance (every 5th sample of a 10 kHz record cannot
+tell a 1168 Hz ringing from an 835 Hz one: the search picked the wrong one
+after a payload change).
 """
 from __future__ import annotations
 
@@ -62,19 +66,28 @@ class SearchResult:
     cost: float
 
 
+@njit(cache=True, inline="always")
+def _kept(k: int, stride: int) -> bool:
+    """Is row k the one kept in its block of ``stride`` (a multiplicative hash of the block picks it)?"""
+    if stride == 1:
+        return True
+    block = k // stride
+    return k - block * stride == (((block * 2654435761) & 0xFFFFFFFF) >> 16) % stride
+
+
 @njit(cache=True)
 def _rows(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx0: float, vx1: float,
           rc: np.ndarray, x: np.ndarray, r0: int, r1: int, stride: int, lead: int, acc: np.ndarray) -> None:
     """Model rows r0..r1 (states x carried); sums for the projected cost into acc.
 
     acc = [n, sum s, sum s^2, sum y, sum s y, sum y^2] over rows k >= lead with
-    k % stride == 0 and a finite y.
+    a finite y, one per block of ``stride`` samples (``_kept``).
     """
     q = vz.shape[0]
     x0 = x[0]
     x1 = x[1]
     for k in range(r0, r1):
-        if k >= lead and k % stride == 0 and y[k] == y[k]:
+        if k >= lead and _kept(k, stride) and y[k] == y[k]:
             s = vx0 * x0 + vx1 * x1
             for i in range(q):
                 s += hist[k, i] * vz[i]
@@ -156,6 +169,14 @@ class ResonanceSearch:
             self.units += 1
             next(self._gen, None)
         return self.result is not None
+
+    def exact_cost(self, alpha: float, a1: float, a2: float) -> Generator:
+        """Projected cost per row of one candidate on every row after ``lead`` (as ``result.cost``), in units.
+
+        The generator's return value is (cost, b, c): a candidate from elsewhere
+        (the live estimate) judged on equal terms with the search's result.
+        """
+        return self._evaluate(alpha, a1, a2, 1)
 
     def run(self) -> SearchResult:
         """To completion (block mode)."""

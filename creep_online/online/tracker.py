@@ -20,7 +20,12 @@ resumable jobs, one small unit per ``work()`` call:
   forgetting); a fit on them against the window's estimate is a
   likelihood-ratio test. A significant, physically large move that is also
   a jump against the recent tests' level restarts the window at the change
-  (the event names the parameters and their moves).
+  (the event names the parameters and their moves);
+* **re-search** when the window's error stays above the noise floor or the
+  fit breaks down (``_watch``): the local re-fits never leave a wrong
+  resonance basin, so the resonance is searched again on the recent samples
+  with the live estimate competing, and replaces it only when clearly better
+  (a likelihood ratio; ``researches`` records each one and what moved).
 """
 from __future__ import annotations
 
@@ -54,6 +59,13 @@ ALPHA_HOLD_S = 2.0
 WAIT = "wait"
 #: Post-change samples the resonance search waits for after a detection (s).
 RESEARCH_S = 1.0
+#: Search steps (``ResonanceSearch.step``, ~4000 multiply-adds, ~3 us) per unit of background work: a unit
+#: of ~10 us like a Levenberg-Marquardt step. At one step per unit a search on 2 s at 10 kHz took ~4 s of
+#: stream sample by sample (a wrong-basin start was taken for a change meanwhile).
+SEARCH_STEPS = 3
+#: Post-change searches at most: 1 s of samples, then twice as many while the result misfits (``_resolved``),
+#: up to the ring's half or the search's work memory (3.3 s at 10 kHz).
+RESEARCH_PASSES = 3
 #: Levenberg-Marquardt steps per window re-fit and per change test.
 REFIT_STEPS = 2
 TEST_STEPS = 4
@@ -78,6 +90,28 @@ DRIFT_MIN_S = 5.0
 DRIFT_TEST_EVERY = 5
 #: Largest plausible drift, relative to the parameter (1/s): faster "drift" is misfit (the rates go off).
 DRIFT_MAX = 0.02
+#: Re-search trigger: the window's rms error above this multiple of the noise floor ...
+RESEARCH_RATIO = 1.5
+#: ... for this long (s), or a broken fit (non-finite cost), starts a search of the resonance on the
+#: recent samples with the live estimate as a candidate.
+RESEARCH_AFTER_S = 1.0
+#: Longest segment searched (s; also bounded by the search's work memory). The search's model has constant
+#: parameters: on 16 s of a drifting plant (2 kHz) it preferred alpha +29 %, b -33 % (a gain drift looks
+#: like creep), on 2 s the drift is a fraction of the tolerances, and at 10 kHz sample by sample the
+#: search takes ~2 s of stream (the pattern search's cost is the resonance recursion over every row).
+RESEARCH_SEGMENT_S = 2.0
+#: The search's result replaces the live estimate when its likelihood ratio on those samples exceeds this
+#: (rows x ln(cost ratio); chi-square with 3 degrees of freedom: p ~ 1e-6) and the resonance moves by more
+#: than CHANGE_MOVE (or alpha by more than RESEARCH_ALPHA_MOVE): a small move the re-fits make anyway.
+RESEARCH_LR = 30.0
+RESEARCH_ALPHA_MOVE = 0.02
+#: A re-search that changed nothing doubles the wait before the next one, up to this (s): where the data
+#: cannot do better (unmodeled dynamics) the searches become rare.
+RESEARCH_MAX_WAIT_S = 16.0
+#: Resonances the window fit may reach (those of the search): fn <= 0.45 fs, zeta 0.003-3. Beyond them the
+#: regressor's coefficients overflow (a fit that collapsed a2 to 1e-11 left a NaN window for good).
+FN_MAX_FS = 0.45
+ZETA_BOUNDS = (0.003, 3.0)
 #: theta = [alpha, ln a1, ln a2, b, offset, free-response weights..., b'/b, alpha'] (the last two with drift)
 
 
@@ -126,6 +160,10 @@ class WindowTracker:
         self.ring = ring                 # (2, H) history, owned by the caller (pre-faulted)
         self.work_memory = work          # (N, Q) scratch for the post-change search (pre-faulted)
         self.events: list[dict] = []
+        self.researches: list[dict] = []   # re-searches of the resonance (``_research_again_job``)
+        self._misfit_since: int | None = None   # first re-fit of the current run of misfits
+        self._research_wait = int(RESEARCH_AFTER_S / self.h)
+        self._next_research = 0            # earliest sample of the next re-search (backoff)
         self.relinearizations = 0
         self.refits = 0
         self.rejected = 0                # refits discarded (non-finite or zero gain)
@@ -408,11 +446,17 @@ class WindowTracker:
 
         Plain floats, not numpy, on 4-element vectors: a numpy call costs ~2 us here.
         """
+        self._bound_resonance(theta)
         new, old = theta.tolist(), self.theta.tolist()
         if lin != (self.a1l, self.a2l):
             return                         # re-linearized meanwhile: the next refit decides
-        if not all(map(math.isfinite, new)) or new[3] == 0.0:
+        # a sum of squares below zero is the linearized cost breaking down far from the linearization
+        # point (seen: -2.5 against 1-4, after a post-change search in a wrong basin): its sigma would be 0
+        # and the quality "good"
+        negative = cost < -1e-9 * abs(float(self.sc[W.SC_SYY]) / max(float(self.sc[W.SC_G]), 1e-300))
+        if not all(map(math.isfinite, new)) or new[3] == 0.0 or not math.isfinite(cost) or negative:
             self.rejected += 1             # a failed fit is never swapped in
+            self._watch(math.inf, True)
             return
         self.converged = self.converged or _largest_move(new, old) < 0.01
         self.theta[:] = theta
@@ -429,6 +473,7 @@ class WindowTracker:
             v = sd[5 + self.n_free + k]
             std[name] = (v * abs(new[3]) if k == 0 else v) if self.drift_on else math.inf
         self.fit = Fit(theta=theta, cost=cost, neff=neff, std=std, sample=self.n)
+        self._watch(math.sqrt(max(cost, 0.0) / max(neff, 1.0)), False)
         if abs(a1 / self.a1l - 1) > RELINEARIZE or abs(a2 / self.a2l - 1) > RELINEARIZE:
             if not any(j.__name__ == "_relinearize_job" for j in self._jobs):
                 self._jobs.append(self._relinearize_job(None))
@@ -510,8 +555,8 @@ class WindowTracker:
         n0, S0, sy0, syy0, g0, lin0, theta0 = snap
         g = float(self.sc[W.SC_G])
         if g < g0 or self.fit.sample < n0 or lin0 != (self.a1l, self.a2l) or n0 < self.window_start \
-                or not self.converged:
-            return
+                or not self.converged or self._researching():
+            return                         # (a misfit being re-searched is not a change of the plant)
         R = np.empty_like(self.S)
         W.symmetrize(self.S - S0, R, 1.0 / g)
         ry = (self.sy - sy0) / g
@@ -579,6 +624,8 @@ class WindowTracker:
         self.drift_on = False
         self._lr_recent = []
         self._snaps = []
+        self._misfit_since = None
+        self._research_wait = int(RESEARCH_AFTER_S / self.h)
         self._jobs = [self._research_job(self.n)]
 
     def _research_job(self, n_detect: int) -> Generator:
@@ -592,9 +639,71 @@ class WindowTracker:
         wait = int(RESEARCH_S / self.h)
         while self.n < n_detect + wait or (not self._input_moved(n_detect) and self.n < n_detect + 3 * wait):
             yield WAIT
+        n0 = max(n_detect, int(self.sc[W.SC_RSTART]))
+        zeta0 = yield from self._nodes_at(n0)
+        cap = min(self.ring.shape[1] // 2, 1 << 15 if self.work_memory is None else self.work_memory.shape[0])
+        search: ResonanceSearch | None = None
+        seg = 0
+        for _ in range(RESEARCH_PASSES):
+            starts = None
+            if search is not None:         # another pass on twice the samples, from the last one's basins
+                while self.n < n0 + min(2 * seg, cap):
+                    yield WAIT
+                starts = [c[1:] for c in search.candidates]
+            u, y = yield from self._ring_segment(n0, min(self.n, n0 + cap))
+            seg = u.size
+            settle = int(16.0 * self.a2 / self.a1 / self.h)      # two (old) settling times
+            lead = min(settle, u.size // 4)
+            # the live estimate competes with the grid: the window re-fits often follow a change
+            # before the test confirms it, and the grid's best basin can be a wrong one
+            search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, fixed_alpha=self.alpha,
+                                     work=self.work_memory, extra=((self.alpha, self.a1, self.a2),),
+                                     starts=starts)
+            yield
+            yield from self._run_search(search)
+            # (with a shortened lead the misfit may be the unknown resonance state at the segment's start)
+            if self._resolved(search) or u.size >= cap or lead < settle:
+                break
+        r = search.result
+        # the search's result replaces the estimate only when clearly better on the segment (as a re-search):
+        # where every candidate fits at the noise floor (one small step) the re-fits do better from the estimate
+        c_live, _, _ = yield from search.exact_cost(self.alpha, self.a1, self.a2)
+        rows = int(np.count_nonzero(np.isfinite(search.y[search.lead:])))
+        better = r is not None and r.cost > 0.0 and not rows * math.log(c_live / r.cost) <= RESEARCH_LR
+        if better and math.isfinite(r.cost) and r.a1 > 0 and r.a2 > 0 and r.b != 0:
+            self.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
+            self._coefficients()
+            yield
+        # re-fits wait for the replay from the change: until it is swapped in, the live statistics
+        # still hold the pre-change window, and a fit of them would report a second change
+        yield from self._relinearize_job(n0)
+        self.fitting = True
+
+    @staticmethod
+    def _run_search(search: ResonanceSearch) -> Generator:
+        """A search to its result, ``SEARCH_STEPS`` steps per unit."""
+        while not any(search.step() for _ in range(SEARCH_STEPS)):
+            yield
+
+    def _researching(self) -> bool:
+        """Is a search of the resonance queued (after a change, or by the re-search trigger)?"""
+        return any(j.__name__ in ("_research_job", "_research_again_job") for j in self._jobs)
+
+    def _resolved(self, search: ResonanceSearch) -> bool:
+        """Does the post-change search's result fit its samples near the noise floor? If not, the segment
+        carries too little information (a single small input step) or a transient: search a longer one.
+
+        (Tried and dropped: also searching again while another basin's candidate was within a likelihood
+        ratio of 30. On a well damped mode (zeta 0.4) neighbouring candidates are one broad valley the
+        re-fits settle, and the extra passes delayed re-convergence from 2 to 4 s.)
+        """
+        noise = float(self.sc[W.SC_NOISE])
+        return search.result.cost <= (RESEARCH_RATIO * noise) ** 2
+
+    def _nodes_at(self, n0: int) -> Generator:
+        """The exact node state before remembered sample n0 (fast-forwarded from the ring's oldest, in units)."""
         oldest = int(self.sc[W.SC_RSTART])
-        n0 = max(n_detect, oldest)
-        st, S = self._fresh(self.a1l, self.a2l)       # node states fast-forwarded to n0 (no statistics)
+        st, S = self._fresh(self.a1l, self.a2l)       # node states only (no statistics)
         st[self.lay["phi"]:self.lay["phi"] + self.q] = self.ztail
         st[W.SC_N] = oldest
         chunk = max(16, UNIT_MACS // (10 * self.q))        # node states only: ~10 flops per node
@@ -604,24 +713,92 @@ class WindowTracker:
             W.replay(self.ring, self._ring_position(i), n, n, st, S)
             i += n
             yield
-        zeta0 = st[self.lay["phi"]:self.lay["phi"] + self.q].copy()
-        u, y = yield from self._ring_segment(n0, self.n)
-        lead = min(int(16.0 * self.a2 / self.a1 / self.h), u.size // 4)   # two (old) settling times
-        # the live estimate competes with the grid: the window re-fits often follow a change
-        # before the test confirms it, and the grid's best basin can be a wrong one
-        search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, fixed_alpha=self.alpha,
-                                 work=self.work_memory, extra=((self.alpha, self.a1, self.a2),))
+        return st[self.lay["phi"]:self.lay["phi"] + self.q].copy()
+
+    # ------------------------------------------------------------------ re-search trigger
+    def _bound_resonance(self, theta: np.ndarray) -> bool:
+        """Keep (ln a1, ln a2) within the resonances the sampling represents; True if they were outside."""
+        ln_a2_min = 2.0 * math.log(self.h / (2.0 * math.pi * FN_MAX_FS))
+        hit = False
+        if not theta[2] >= ln_a2_min:      # also NaN
+            theta[2] = ln_a2_min
+            hit = True
+        ln_zeta = theta[1] - math.log(2.0) - 0.5 * theta[2]
+        lo, hi = math.log(ZETA_BOUNDS[0]), math.log(ZETA_BOUNDS[1])
+        if not lo <= ln_zeta <= hi:
+            theta[1] += min(max(ln_zeta, lo), hi) - ln_zeta if math.isfinite(ln_zeta) else 0.0
+            hit = True
+        return hit
+
+    def _watch(self, rms: float, broken: bool) -> None:
+        """After each re-fit: start a re-search once the error has sat above the noise floor (or the fit has
+        been broken) for ``RESEARCH_AFTER_S`` (plain floats: runs at every re-fit)."""
+        if not self.fitting or self._researching():
+            return
+        floor = float(self.sc[W.SC_NOISE])
+        if not (broken or (floor > 0.0 and rms > RESEARCH_RATIO * floor)):
+            self._misfit_since = None
+            return
+        n = self.n
+        if self._misfit_since is None:
+            self._misfit_since = n
+        span = int(RESEARCH_AFTER_S / self.h)
+        if n - self._misfit_since >= span and n - self.window_start >= span and n >= self._next_research:
+            reason = "fit broken" if broken else f"window error {rms / floor:.1f}x the noise floor"
+            self._jobs.append(self._research_again_job(reason))
+
+    def _research_again_job(self, reason: str) -> Generator:
+        """Search the resonance (and alpha, unless it is held after a change) on the recent samples with the
+        live estimate competing; switch to the result only if its likelihood ratio says it is clearly better.
+
+        The samples: those since the window start that the ring and the search's work memory hold (the
+        newest ones). Both candidates are judged by the same exact projected cost on them.
+        """
+        n1 = self.n
+        cap = min(self.work_memory.shape[0] if self.work_memory is not None else 1 << 15,
+                  int(RESEARCH_SEGMENT_S / self.h))
+        n0 = max(self.window_start, int(self.sc[W.SC_RSTART]), n1 - cap)
+        zeta0 = yield from self._nodes_at(n0)
+        u, y = yield from self._ring_segment(n0, n1)
+        lead = min(int(16.0 * self.a2 / self.a1 / self.h), u.size // 4)   # two settling times
+        # after a change alpha was determined before it (creep does not jump): the resonance only, 7x cheaper
+        search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, work=self.work_memory,
+                                 fixed_alpha=self.alpha if self.window_start else None, alphas=(self.alpha,),
+                                 extra=((self.alpha, self.a1, self.a2),))
         yield
-        while not search.step():
-            yield
+        yield from self._run_search(search)
         r = search.result
-        if r is not None and math.isfinite(r.cost) and r.a1 > 0 and r.a2 > 0 and r.b != 0:
-            self.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
-            self._coefficients()
-            yield
-        # re-fits wait for the replay from the change: until it is swapped in, the live statistics
-        # still hold the pre-change window, and a fit of them would report a second change
-        yield from self._relinearize_job(n0)
+        live = (self.alpha, self.a1, self.a2)
+        c_live, _, _ = yield from search.exact_cost(*live)
+        rows = int(np.count_nonzero(np.isfinite(y[search.lead:])))
+        lr = rows * math.log(c_live / r.cost) if r.cost > 0.0 and c_live > 0.0 else 0.0
+        lr = lr if math.isfinite(c_live) else math.inf
+        change = {"alpha": r.alpha / live[0] - 1, "a1": r.a1 / live[1] - 1, "a2": r.a2 / live[2] - 1,
+                  "b": r.b / self.b - 1 if self.b else 0.0}
+        moved = sorted(k for k in ("a1", "a2") if abs(change[k]) > CHANGE_MOVE[k])
+        if abs(change["alpha"]) > RESEARCH_ALPHA_MOVE:
+            moved = ["alpha"] + moved
+        switch = lr > RESEARCH_LR and bool(moved) and math.isfinite(r.cost) and r.b != 0.0
+        self.researches = (self.researches + [{
+            "t": n1 * self.h, "done_t": self.n * self.h, "reason": reason, "segment_s": (n1 - n0) * self.h,
+            "lr": float(lr), "switched": switch, "moved": moved if switch else [],
+            "relative_change": {k: float(v) for k, v in change.items()}}])[-50:]
+        self._misfit_since = None
+        if not switch:                     # the data cannot do better here: search less often
+            self._next_research = self.n + self._research_wait
+            self._research_wait = min(2 * self._research_wait, int(RESEARCH_MAX_WAIT_S / self.h))
+            return
+        self._research_wait = int(RESEARCH_AFTER_S / self.h)
+        self.theta[0:4] = (r.alpha, math.log(r.a1), math.log(r.a2), r.b)
+        self.theta[5 + self.n_free:] = 0.0
+        self.drift_on = False
+        self._coefficients()
+        self.converged = False
+        self._lr_recent = []
+        self.fit = Fit(theta=self.theta.copy())   # quality: "first window fit pending" until the next re-fit
+        self.fitting = False               # the old statistics belong to the old resonance: rebuild first
+        yield
+        yield from self._relinearize_job(None)
         self.fitting = True
 
     def _ring_segment(self, n0: int, n1: int) -> Generator:
