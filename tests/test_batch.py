@@ -250,7 +250,10 @@ def test_ctrl_c_stops_cleanly_and_keeps_the_rows_done(fleet, tmp_path):
     master, slave = pty.openpty()
     proc = subprocess.Popen([sys.executable, "-m", "creep_online", "batch", str(many), "--workers", "1",
                              "--out", str(tmp_path / "t.csv")], stdin=subprocess.DEVNULL, stdout=slave,
-                            stderr=slave, start_new_session=True)
+                            stderr=slave, start_new_session=True,
+                            # SIGINT back to its default: a suite started in the background by a shell
+                            # has it ignored, and the child would inherit that (no KeyboardInterrupt)
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     os.close(slave)
     seen, done = b"", 0
     deadline = time.monotonic() + 90
