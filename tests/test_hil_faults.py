@@ -60,13 +60,18 @@ def check_samples(fmt, samples, rec):
     tol = 0.0 if fmt == "ascii" else 5.1e-7
     assert np.max(np.abs(u - rec.u[seq])) <= tol
     assert np.max(np.abs(y - rec.y[seq])) <= tol
-    return u, y
+    return u, y, seq
 
 
-def check_converges(u, y, rec):
+def check_converges(u, y, seq, rec):
+    """The estimator fed as the feed loop feeds it: each run of delivered samples, gap(n) for the lost ones."""
     from creep_online.online import OnlineEstimator
     est = OnlineEstimator(1.0 / RATE)
-    est.update_block(u, y)
+    breaks = np.flatnonzero(np.diff(seq) > 1) + 1
+    for a, b in zip(np.r_[0, breaks], np.r_[breaks, seq.size]):
+        if a:
+            est.gap(int(seq[a] - seq[a - 1] - 1))
+        est.update_block(u[a:b], y[a:b])
     m = est.model
     assert m is not None, est.estimate
     true = parse_params("")
@@ -112,8 +117,8 @@ def test_fault_counted_exactly(fmt, kind, rec):
         assert s["malformed"] == (4 if fmt == "ascii" else 0)
         expected_zero(stats, {"garbage_bytes", "malformed"})
     assert len(samples) == int(RATE * DURATION) - s["missing"]
-    u, y = check_samples(fmt, samples, rec)
-    check_converges(u, y, rec)
+    u, y, seq = check_samples(fmt, samples, rec)
+    check_converges(u, y, seq, rec)
 
 
 @pytest.mark.parametrize("fmt", ["ascii", "binary"])
@@ -122,8 +127,8 @@ def test_stall_counted(fmt, rec):
     assert led["counts"]["stall"] == 2
     assert stats.stalls == 2
     expected_zero(stats, {"stalls"})
-    u, y = check_samples(fmt, samples, rec)
-    check_converges(u, y, rec)
+    u, y, seq = check_samples(fmt, samples, rec)
+    check_converges(u, y, seq, rec)
 
 
 @pytest.mark.parametrize("fmt", ["ascii", "binary"])
@@ -134,8 +139,8 @@ def test_disconnect_reconnects(fmt):
     assert stats.disconnects == 2 and stats.reconnects == 2
     assert stats.missing == led["disconnect_lost_samples"] and stats.sequence.gaps == 2
     expected_zero(stats, {"disconnects", "reconnects", "missing", "gaps"})
-    u, y = check_samples(fmt, samples, rec)
-    check_converges(u, y, rec)
+    u, y, seq = check_samples(fmt, samples, rec)
+    check_converges(u, y, seq, rec)
 
 
 def test_all_faults_together_realtime():
@@ -151,8 +156,8 @@ def test_all_faults_together_realtime():
     assert s["stalls"] == 1 and s["disconnects"] == 1 and s["reconnects"] == 1
     assert s["missing"] == 3 + 3 + led["disconnect_lost_samples"]
     assert s["gaps"] == 3 + 3 + 1
-    u, y = check_samples("binary", samples, rec)
-    check_converges(u, y, rec)
+    u, y, seq = check_samples("binary", samples, rec)
+    check_converges(u, y, seq, rec)
 
 
 def test_reconnect_off_exits_with_clear_message():

@@ -104,6 +104,11 @@ RESEARCH_SEGMENT_S = 2.0
 #: (rows x ln(cost ratio); chi-square with 3 degrees of freedom: p ~ 1e-6) and the resonance moves by more
 #: than CHANGE_MOVE (or alpha by more than RESEARCH_ALPHA_MOVE): a small move the re-fits make anyway.
 RESEARCH_LR = 30.0
+#: A re-search result whose gain differs from the live one by more than this factor (or in sign) is not
+#: taken: on a segment without excitation (a compensated hold: the command creeps smoothly, the output
+#: stays flat) the offset and free responses fit the output alone and the search "finds" b ~ 0, a
+#: degenerate model that then misfits the whole window (measured: b -99 %, window error 400x the floor).
+RESEARCH_GAIN_RATIO = 5.0
 RESEARCH_ALPHA_MOVE = 0.02
 #: A re-search that changed nothing doubles the wait before the next one, up to this (s): where the data
 #: cannot do better (unmodeled dynamics) the searches become rare.
@@ -454,6 +459,15 @@ class WindowTracker:
         # point (seen: -2.5 against 1-4, after a post-change search in a wrong basin): its sigma would be 0
         # and the quality "good"
         negative = cost < -1e-9 * abs(float(self.sc[W.SC_SYY]) / max(float(self.sc[W.SC_G]), 1e-300))
+        near = (abs(math.exp(new[1]) / self.a1l - 1) <= RELINEARIZE
+                and abs(math.exp(new[2]) / self.a2l - 1) <= RELINEARIZE)
+        if negative and near:
+            # near the linearization point the linearized cost holds: below zero it is the rounding of
+            # syy - 2 m.sy + m.S.m on an output far above a tiny noise (a compensated plant read through a
+            # 20-bit ADC: every fit was rejected and the quality never left "first window fit pending").
+            # The output's own noise level (second differences) stands in for the window cost.
+            cost = float(self.sc[W.SC_NOISE]) ** 2 * float(self.sc[W.SC_NEFF])
+            negative = False
         if not all(map(math.isfinite, new)) or new[3] == 0.0 or not math.isfinite(cost) or negative:
             self.rejected += 1             # a failed fit is never swapped in
             self._watch(math.inf, True)
@@ -778,7 +792,9 @@ class WindowTracker:
         moved = sorted(k for k in ("a1", "a2") if abs(change[k]) > CHANGE_MOVE[k])
         if abs(change["alpha"]) > RESEARCH_ALPHA_MOVE:
             moved = ["alpha"] + moved
-        switch = lr > RESEARCH_LR and bool(moved) and math.isfinite(r.cost) and r.b != 0.0
+        gain_ratio = r.b / self.b if self.b else 0.0
+        plausible = 1.0 / RESEARCH_GAIN_RATIO < gain_ratio < RESEARCH_GAIN_RATIO
+        switch = lr > RESEARCH_LR and bool(moved) and math.isfinite(r.cost) and plausible
         self.researches = (self.researches + [{
             "t": n1 * self.h, "done_t": self.n * self.h, "reason": reason, "segment_s": (n1 - n0) * self.h,
             "lr": float(lr), "switched": switch, "moved": moved if switch else [],
