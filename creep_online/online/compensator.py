@@ -42,7 +42,6 @@ Prandtl-Ishlinskii operator gives u.
 """
 from __future__ import annotations
 
-import inspect
 import math
 
 import numpy as np
@@ -51,6 +50,7 @@ from ..errors import DataError, ModelError
 from ..model import CreepModel, ExtendedModel
 from . import compensator_kernels as CK
 from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SoeBasis
+from .stored_params import StoredParams
 
 #: Effects the compensator inverts (the rest of an ExtendedModel is refused, by name).
 INVERTIBLE_EFFECTS = ("hysteresis",)
@@ -60,7 +60,7 @@ BANDWIDTH_FRACTION = 0.5
 MAX_REPLAY = 1 << 22
 
 
-class CreepCompensator:
+class CreepCompensator(StoredParams):
     """Command u for reference r, sample by sample, inverting creep, resonance (and hysteresis).
 
     Every constructor argument is stored verbatim (``get_params``).
@@ -96,14 +96,6 @@ class CreepCompensator:
         self.reset()
 
     # ------------------------------------------------------------------ parameters
-    @classmethod
-    def _param_names(cls) -> list[str]:
-        return [p for p in inspect.signature(cls.__init__).parameters if p != "self"]
-
-    def get_params(self) -> dict:
-        """Constructor arguments as given (``CreepCompensator(**c.get_params())`` is an equal compensator)."""
-        return {name: getattr(self, name) for name in self._param_names()}
-
     def _validate(self) -> None:
         for name in ("dt", "horizon_s", "soe_dx"):
             _positive(name, getattr(self, name))

@@ -36,7 +36,6 @@ the model says it should move is reported (``quality="degraded"``).
 """
 from __future__ import annotations
 
-import inspect
 import math
 from dataclasses import asdict, dataclass, field
 
@@ -50,6 +49,7 @@ from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SOE_TOP, SoeBasis
 from . import recursive as R
 from .recursive import RecursiveTracker
 from .tracker import WindowTracker
+from .stored_params import StoredParams
 
 PHASES = ("buffering", "searching", "tracking")
 QUALITIES = ("none", "provisional", "good", "changing", "degraded")
@@ -117,7 +117,7 @@ class OnlineEstimate:
         return asdict(self)
 
 
-class OnlineEstimator:
+class OnlineEstimator(StoredParams):
     """Fractional creep model identified sample by sample (scikit-learn / river style).
 
     Every constructor argument is stored verbatim (``get_params``); derived
@@ -169,14 +169,6 @@ class OnlineEstimator:
         self.reset()
 
     # ------------------------------------------------------------------ parameters
-    @classmethod
-    def _param_names(cls) -> list[str]:
-        return [p for p in inspect.signature(cls.__init__).parameters if p != "self"]
-
-    def get_params(self) -> dict:
-        """Constructor arguments as given (``OnlineEstimator(**est.get_params())`` is an equal estimator)."""
-        return {name: getattr(self, name) for name in self._param_names()}
-
     def _validate(self) -> None:
         def positive(name: str, value, allow_none: bool = False) -> None:
             if value is None and allow_none:

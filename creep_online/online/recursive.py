@@ -69,7 +69,7 @@ from numba import njit
 
 from . import window as W
 from .soe import SoeBasis
-from .tracker import CHANGE_MOVE, CHANGE_SIGMAS, FREE_RATES, Fit, _largest_move
+from .tracker import CHANGE_MOVE, CHANGE_SIGMAS, FREE_RATES, Fit, ParameterView, _largest_move
 
 CACHE = True
 CHANGE_MOVE_A1 = CHANGE_MOVE["a1"]
@@ -469,7 +469,7 @@ def block(u: np.ndarray, y: np.ndarray, st: np.ndarray, P: np.ndarray, CT: np.nd
     return u.shape[0]
 
 
-class RecursiveTracker:
+class RecursiveTracker(ParameterView):
     """Gauss-Newton RPEM on the window tracker's regressor: constant work per sample, no replay.
 
     The estimator reads the same names as from ``WindowTracker``: ``alpha``,
@@ -562,26 +562,6 @@ class RecursiveTracker:
         self._fit: Fit | None = None
 
     # ------------------------------------------------------------------ parameters
-    @property
-    def alpha(self) -> float:
-        return float(self.theta[0])
-
-    @property
-    def a1(self) -> float:
-        return math.exp(self.theta[1])
-
-    @property
-    def a2(self) -> float:
-        return math.exp(self.theta[2])
-
-    @property
-    def b(self) -> float:
-        return float(self.theta[3])
-
-    @property
-    def offset(self) -> float:
-        return float(self.theta[4])
-
     b_rate = 0.0                         # drift is followed by the forgetting, not modelled
     alpha_rate = 0.0
 

@@ -136,7 +136,33 @@ class Fit:
     sample: int = 0
 
 
-class WindowTracker:
+class ParameterView:
+    """The model parameters read from ``theta`` = [alpha, ln a1, ln a2, b, offset, ...] (both trackers)."""
+
+    theta: np.ndarray
+
+    @property
+    def alpha(self) -> float:
+        return float(self.theta[0])
+
+    @property
+    def a1(self) -> float:
+        return math.exp(self.theta[1])
+
+    @property
+    def a2(self) -> float:
+        return math.exp(self.theta[2])
+
+    @property
+    def b(self) -> float:
+        return float(self.theta[3])
+
+    @property
+    def offset(self) -> float:
+        return float(self.theta[4])
+
+
+class WindowTracker(ParameterView):
     """Exponentially forgotten output-error statistics and the jobs that fit them."""
 
     def __init__(self, basis: SoeBasis, theta: np.ndarray, *, window_s: float | None, free: bool,
@@ -194,27 +220,6 @@ class WindowTracker:
         sc[W.SC_ACC] = 1.0
         self._install(st, S)
         self._schedule()
-
-    # ------------------------------------------------------------------ parameters
-    @property
-    def alpha(self) -> float:
-        return float(self.theta[0])
-
-    @property
-    def a1(self) -> float:
-        return math.exp(self.theta[1])
-
-    @property
-    def a2(self) -> float:
-        return math.exp(self.theta[2])
-
-    @property
-    def b(self) -> float:
-        return float(self.theta[3])
-
-    @property
-    def offset(self) -> float:
-        return float(self.theta[4])
 
     @property
     def b_rate(self) -> float:
