@@ -503,32 +503,15 @@ class RecursiveTracker(ParameterView):
         self._alarms = 0
         n = lay["n"]
         st = np.zeros(lay["size"])
-        st[W.SC_NQ] = q
-        st[W.SC_NM] = self.n_free
-        st[W.SC_G] = 1.0
-        st[W.SC_FORGET] = self.forget
-        st[W.SC_H] = h
-        st[W.SC_GATE] = gate
-        st[W.SC_BURST] = burst
-        st[W.SC_GDECAY] = math.exp(-1.0 / max(5.0, 0.02 / h))
-        st[W.SC_STUCKN] = stuck
-        st[W.SC_SCALEK] = min(1.0, h / 0.5)
-        st[W.SC_MONK] = min(1.0, h / 0.2)
-        st[W.SC_REPK] = min(1.0, h / 10.0)
-        st[W.SC_ACC] = 1.0
-        st[W.SC_DUE] = math.inf          # Python is called only at an alarm (and until its event settles)
         theta0 = np.zeros(n)
         theta0[:len(theta)] = theta
         a1, a2 = math.exp(theta0[1]), math.exp(theta0[2])
-        st[W.SC_A1L], st[W.SC_A2L] = a1, a2
+        W.start_state(st, lay, basis.decay, basis.gain, np.exp(-np.asarray(FREE_RATES[:self.n_free]) * h),
+                      self.forget, h, a1, a2)
+        W.set_monitors(st[:W.SC_SIZE], h, gate, burst, stuck)
+        st[W.SC_DUE] = math.inf          # Python is called only at an alarm (and until its event settles)
         co = st[lay["co"]:lay["ztail"]]
-        co[:q] = basis.decay
-        co[q:2 * q] = basis.gain
-        W.resonance_coefficients(a1, a2, h, co[2 * q:2 * q + 18])
-        co[2 * q + 18:] = np.exp(-np.asarray(FREE_RATES[:self.n_free]) * h)
         phi = st[lay["phi"]:lay["m"]]
-        phi[q + W.ONE] = 1.0
-        phi[q + W.FREE:q + W.FREE + self.n_free] = 1.0
         r = st[lay["r"]:lay["theta"]]
         lo, hi = alpha_bounds
         check = max(1, round(CHECK_S / h))

@@ -209,15 +209,7 @@ class WindowTracker(ParameterView):
         self._last_h = np.zeros((self.theta.size, self.theta.size))   # J^T J of the last LM step
         self._last_g = np.zeros(self.theta.size)                       # and J^T r
         st, S = self._fresh(self.a1, self.a2)
-        sc = st[:W.SC_SIZE]
-        sc[W.SC_GATE] = gate
-        sc[W.SC_BURST] = burst
-        sc[W.SC_GDECAY] = math.exp(-1.0 / max(5.0, 0.02 / self.h))
-        sc[W.SC_STUCKN] = stuck
-        sc[W.SC_SCALEK] = min(1.0, self.h / 0.5)
-        sc[W.SC_MONK] = min(1.0, self.h / 0.2)
-        sc[W.SC_REPK] = min(1.0, self.h / 10.0)
-        sc[W.SC_ACC] = 1.0
+        W.set_monitors(st[:W.SC_SIZE], self.h, gate, burst, stuck)
         self._install(st, S)
         self._schedule()
 
@@ -244,24 +236,10 @@ class WindowTracker(ParameterView):
     # ------------------------------------------------------------------ state arrays
     def _fresh(self, a1l: float, a2l: float) -> tuple[np.ndarray, np.ndarray]:
         """Empty statistics and zero states for a linearization point (weight 1)."""
-        lay, q = self.lay, self.q
-        st = np.zeros(lay["size"])
-        st[W.SC_NQ] = q
-        st[W.SC_NM] = self.n_free
-        st[W.SC_G] = 1.0
-        st[W.SC_FORGET] = self.forget
-        st[W.SC_A1L] = a1l
-        st[W.SC_A2L] = a2l
-        st[W.SC_H] = self.h
-        st[W.SC_NR] = self.n_rate
-        co = st[lay["co"]:lay["ztail"]]
-        co[:q] = self.basis.decay
-        co[q:2 * q] = self.basis.gain
-        W.resonance_coefficients(a1l, a2l, self.h, co[2 * q:2 * q + 18])
-        co[2 * q + 18:] = np.exp(-np.asarray(FREE_RATES[:self.n_free]) * self.h)
-        phi = st[lay["phi"]:lay["m"]]
-        phi[q + W.ONE] = 1.0
-        phi[q + W.FREE:q + W.FREE + self.n_free] = 1.0
+        st = np.zeros(self.lay["size"])
+        W.start_state(st, self.lay, self.basis.decay, self.basis.gain,
+                      np.exp(-np.asarray(FREE_RATES[:self.n_free]) * self.h), self.forget, self.h, a1l, a2l,
+                      self.n_rate)
         return st, np.zeros((self.p, self.p))
 
     def _install(self, st: np.ndarray, S: np.ndarray) -> None:

@@ -366,6 +366,44 @@ def layout(q: int, n_free: int, n_rate: int = 0) -> dict:
     return o
 
 
+def start_state(st: np.ndarray, lay: dict, decay: np.ndarray, gain: np.ndarray, free_decay: np.ndarray,
+                forget: float, h: float, a1l: float, a2l: float, n_rate: int = 0) -> None:
+    """A fresh state array's header, coefficients and constant regressor entries (both trackers).
+
+    ``decay``/``gain``: the SOE nodes' per-sample decay and input gain; ``free_decay``: the free
+    responses' per-sample decay; the resonance coefficients at the linearization point (a1l, a2l).
+    """
+    q, n_free = decay.size, free_decay.size
+    st[SC_NQ] = q
+    st[SC_NM] = n_free
+    st[SC_G] = 1.0
+    st[SC_FORGET] = forget
+    st[SC_A1L] = a1l
+    st[SC_A2L] = a2l
+    st[SC_H] = h
+    st[SC_NR] = n_rate
+    co = st[lay["co"]:lay["ztail"]]
+    co[:q] = decay
+    co[q:2 * q] = gain
+    resonance_coefficients(a1l, a2l, h, co[2 * q:2 * q + 18])
+    co[2 * q + 18:] = free_decay
+    phi = st[lay["phi"]:lay["m"]]
+    phi[q + ONE] = 1.0
+    phi[q + FREE:q + FREE + n_free] = 1.0
+
+
+def set_monitors(sc: np.ndarray, h: float, gate: float, burst: int, stuck: int) -> None:
+    """The output gate, the stuck-output test and the monitors' smoothing (both trackers), statistics on."""
+    sc[SC_GATE] = gate
+    sc[SC_BURST] = burst
+    sc[SC_GDECAY] = math.exp(-1.0 / max(5.0, 0.02 / h))
+    sc[SC_STUCKN] = stuck
+    sc[SC_SCALEK] = min(1.0, h / 0.5)
+    sc[SC_MONK] = min(1.0, h / 0.2)
+    sc[SC_REPK] = min(1.0, h / 10.0)
+    sc[SC_ACC] = 1.0
+
+
 FAST = {"contract", "reassoc", "arcp"}   # no "nnan": the kernels test for NaN
 
 
