@@ -126,3 +126,27 @@ def test_search_rows_do_not_alias_the_resonance():
     strided = cost(1168.0, 0.017, 5) / cost(835.0, 0.0232, 5)
     assert every_row > 30
     assert strided > 0.5 * every_row
+
+
+def test_a_research_reaches_the_stream_json_text_and_trace(wrong_basin_record, tmp_path, capsys):
+    """Issue 8: a re-search that replaced the resonance is reported where changes are (JSON, text, trace)."""
+    import csv
+    import json
+
+    from creep_online.cli import main
+    from creep_online.io.csvfile import save_csv
+
+    u, y, _ = wrong_basin_record
+    path = tmp_path / "quiet.csv"
+    save_csv(path, np.arange(u.size) * H, u, y)
+    trace = tmp_path / "trace.csv"
+    assert main(["stream", "--source", f"csv:{path}", "--block", "--json", "--trace", str(trace)]) == 0
+    out = json.loads(capsys.readouterr().out)
+    switched = [r for r in out["researches"] if r["switched"]]
+    assert switched and set(switched[0]["moved"]) & {"a1", "a2"}
+    with open(trace, newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert rows[0]["researches"] == "" and rows[-1]["researches"].startswith(f"{switched[0]['t']:.4g}:")
+    assert main(["stream", "--source", f"csv:{path}", "--block"]) == 0
+    text = capsys.readouterr().out
+    assert f"resonance re-searched at t = {switched[0]['t']:.4g} s" in text and "likelihood ratio" in text

@@ -7,7 +7,7 @@ from typing import Any
 from ..io.jsonable import json_text
 from ..io.params import parse_params
 
-__all__ = ["print_json", "parse_params", "add_column_options"]
+__all__ = ["print_json", "parse_params", "add_column_options", "research_lines"]
 
 
 def add_column_options(parser) -> None:
@@ -23,3 +23,23 @@ def print_json(obj: Any) -> None:
     """Write one JSON document to stdout (non-finite numbers as null: ``creep_online.io.jsonable``)."""
     sys.stdout.write(json_text(obj))
     sys.stdout.write("\n")
+
+
+def research_lines(researches: list[dict]) -> list[str]:
+    """One line per re-search of the resonance that replaced the estimate, and one for those that kept it.
+
+    A re-search runs when the window's error stays above the noise floor (or a
+    fit breaks): the user sees when the estimator left a wrong resonance, why,
+    and what moved (``OnlineEstimate.researches``).
+    """
+    lines = []
+    for rs in researches:
+        if rs["switched"]:
+            moves = ", ".join(f"{k} {100 * v:+.1f} %" for k, v in rs["relative_change"].items())
+            lines.append(f"resonance re-searched at t = {rs['t']:.4g} s ({rs['reason']}): "
+                         f"{', '.join(rs['moved'])} moved ({moves}; likelihood ratio {rs['lr']:.3g})")
+    kept = [rs for rs in researches if not rs["switched"]]
+    if kept:
+        lines.append(f"{len(kept)} re-search(es) of the resonance kept the estimate (the data could not do better; "
+                     f"last at t = {kept[-1]['t']:.4g} s: {kept[-1]['reason']})")
+    return lines

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import CreepOnlineError
 from ..model import ONLINE_REFITS as REFITS
-from ._common import print_json
+from ._common import print_json, research_lines
 from ._progress import Progress
 
 SCENARIOS = ("stationary", "payload", "drift")
@@ -201,6 +201,9 @@ def _status(loop, truth) -> str:
     if e.events:
         ev = e.events[-1]
         text += f"change@{ev['t']:.1f}s({','.join(ev['moved']) or '?'}) "
+    switched = [rs for rs in e.researches if rs["switched"]]
+    if switched:
+        text += f"research@{switched[-1]['t']:.1f}s({','.join(switched[-1]['moved'])}) "
     if e.outliers or e.input_outliers:
         text += f"outliers y{e.outliers} u{e.input_outliers} "
     m = est.model
@@ -249,6 +252,8 @@ def _print_summary(r: dict, as_json: bool) -> None:
             moves = ", ".join(f"{k} {100 * v:+.1f} %" for k, v in ev["relative_change"].items())
             print(f"    change near t = {ev['t']:.2f} s, detected at {ev['detected_t']:.2f} s: "
                   f"{', '.join(ev['moved']) or 'nothing significant'} moved ({moves})")
+        for line in research_lines(est.get("researches", [])):
+            print(f"    {line}")
         print(f"    alpha {m['alpha']:.5f}  (true {t['alpha']:.5f}, error {e['alpha_abs']:+.2e})")
         print(f"    fn    {m['fn_hz']:.2f} Hz (true {t['fn_hz']:.2f}, error {100 * e['fn_rel']:+.3f} %)")
         print(f"    zeta  {m['zeta']:.4f}  (true {t['zeta']:.4f}, error {100 * e['zeta_rel']:+.3f} %)")

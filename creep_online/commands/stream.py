@@ -23,7 +23,7 @@ from ..errors import CreepOnlineError, DataError, TransportError
 from ..io.csvfile import load_record
 from ..online import OnlineEstimator, warm_kernels
 from ..model import ONLINE_REFITS as REFITS
-from ._common import add_column_options, print_json
+from ._common import add_column_options, print_json, research_lines
 
 
 #: How a stream ended -> exit code. Every end after the first sample prints the estimate and the counters.
@@ -61,7 +61,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "carries on with the newest estimate (constant work per sample; docs/online.md)")
     p.add_argument("--trace", default=None, metavar="FILE",
                    help="write the estimate's trajectory as CSV (t, alpha, a1, a2, b, fn_hz, zeta, quality, "
-                        "reason, events), every 10 ms of stream time")
+                        "reason, events, researches: the re-searches that replaced the resonance), every 10 ms "
+                        "of stream time")
     p.add_argument("--dt", type=float, default=None, help="sampling step in s (live sources; default: from the stream)")
     p.add_argument("--block", action="store_true", help="csv: feed the whole file with update_block (throughput)")
     add_column_options(p)
@@ -94,7 +95,7 @@ def _options(args: argparse.Namespace) -> dict:
 class Trace:
     """The estimate's trajectory, one row per ``period`` seconds of stream time (``--trace FILE``)."""
 
-    COLUMNS = ("t", "alpha", "a1", "a2", "b", "fn_hz", "zeta", "quality", "reason", "events")
+    COLUMNS = ("t", "alpha", "a1", "a2", "b", "fn_hz", "zeta", "quality", "reason", "events", "researches")
 
     def __init__(self, path: str | None, dt: float, period: float = 0.01) -> None:
         self.path = path
@@ -107,7 +108,8 @@ class Trace:
     def add(self, est: OnlineEstimator) -> None:
         e = est.estimate
         events = ";".join(f"{ev['t']:.4g}:{'+'.join(ev['moved'])}" for ev in e.events)
-        self.rows.append((e.t, e.alpha, e.a1, e.a2, e.b, e.fn_hz, e.zeta, e.quality, e.reason, events))
+        switched = ";".join(f"{rs['t']:.4g}:{'+'.join(rs['moved'])}" for rs in e.researches if rs["switched"])
+        self.rows.append((e.t, e.alpha, e.a1, e.a2, e.b, e.fn_hz, e.zeta, e.quality, e.reason, events, switched))
 
     def write(self) -> None:
         if self.path is None:
@@ -141,7 +143,7 @@ def _report(est: OnlineEstimator, latency: dict, extra: dict) -> dict:
            "gaps": est.gaps, "alpha_updates": est.alpha_updates, "divergences": est.divergences,
            "outliers": e.outliers, "input_outliers": e.input_outliers, "noise_rms": e.noise_rms,
            "residual_rms": e.residual_rms, "events": e.events, "t": e.t, "dt": est.dt,
-           "b_rate": e.b_rate, "alpha_rate": e.alpha_rate}
+           "b_rate": e.b_rate, "alpha_rate": e.alpha_rate, "researches": e.researches}
     out.update(extra)
     return out
 
@@ -177,6 +179,8 @@ def run(args: argparse.Namespace) -> int:
         moves = ", ".join(f"{k} {100 * v:+.1f} %" for k, v in ev["relative_change"].items())
         print(f"  change near t = {ev['t']:.4g} s (detected {ev['detected_t']:.4g} s): "
               f"{', '.join(ev['moved']) or 'nothing significant'} moved ({moves})")
+    for line in research_lines(e.researches):
+        print(f"  {line}")
     if "throughput_sps" in extra:
         print(f"  block mode: {extra['throughput_sps']:.4g} samples/s")
     else:
