@@ -75,13 +75,28 @@ def test_load_cell_single_samples_phases_and_accuracy(load_cell):
 
 
 def test_nanopositioner_block_textbook_accuracy(nanopositioner):
-    """The paper's experiment: alpha and b within 0.3 % (issue 8: keep what works)."""
+    """The paper's experiment: b within 0.3 %, alpha within 3 of its reported 1-sigma (issue 8: keep what works).
+
+    At 40 dB the data determine alpha to ~0.35 % (1-sigma, reported and seen: 0.04-0.7 % over seeds 0-5), so
+    0.3 % on alpha is a coin toss there; the 0.3 % of the paper is asserted at 60 dB below (1-sigma 0.035 %).
+    """
     model, t, u, y = nanopositioner
     est = OnlineEstimator(1e-4)
     est.update_block(u, y)
     e = est.estimate
-    assert abs(e.alpha / model.alpha - 1) < 0.003 and abs(e.b / model.b - 1) < 0.003
+    assert abs(e.b / model.b - 1) < 0.003
+    assert abs(e.alpha - model.alpha) < 3 * e.uncertainty["alpha"] < 0.02 * model.alpha
     assert e.fn_hz == pytest.approx(300.0, rel=0.002)
+
+
+@pytest.mark.parametrize("seed", [0, 5])
+def test_nanopositioner_textbook_accuracy_at_60_db(seed):
+    """alpha and b within 0.3 % where the noise allows it (seeds 0-5 at 60 dB: alpha 0.01-0.07 %)."""
+    model, t, u, y = _plant(0.02, 300.0, 0.05, 0.15, 1e-4, 3.0, 10.0, 0.01, seed=seed, snr_db=60.0)
+    est = OnlineEstimator(1e-4)
+    est.update_block(u, y)
+    e = est.estimate
+    assert abs(e.alpha / model.alpha - 1) < 0.003 and abs(e.b / model.b - 1) < 0.003
 
 
 def test_block_and_single_agree(load_cell):

@@ -227,7 +227,12 @@ class ResonanceSearch:
         return found
 
     def _refine(self, alpha: float, fn: float, z: float, stride: int) -> Generator:
-        """Pattern search in (ln alpha, ln fn, ln zeta) from a start; returns (cost, alpha, fn, zeta)."""
+        """Pattern search in (ln alpha, ln fn, ln zeta) from a start; returns (cost, alpha, fn, zeta).
+
+        Axis steps (shrunk by 0.4 when a sweep finds nothing, six times), each
+        successful sweep followed by a Hooke-Jeeves pattern move; the walk stops
+        early in the basin of a better candidate refined before.
+        """
         p = np.log([alpha, fn, z])
         lo = np.log([ONLINE_ALPHA_BOUNDS[0], 1e-3, 0.003])
         hi = np.log([ONLINE_ALPHA_BOUNDS[1], 0.45 / self.basis.h, 3.0])
@@ -238,6 +243,7 @@ class ResonanceSearch:
             improved = True
             while improved and (self.fixed_alpha is None or evals < MAX_EVALS):
                 improved = False
+                base = p
                 for j in self._axes():
                     for sign in (1.0, -1.0):
                         trial = p.copy()
@@ -247,8 +253,33 @@ class ResonanceSearch:
                         if c < best:
                             best, p, improved = c, trial, True
                             break
+                if improved:
+                    # a pattern move (Hooke-Jeeves) along the sweep's net move, doubled while it pays: the
+                    # axis steps alone crawl along a curved (fn, zeta) valley (measured: 195000 units from
+                    # 12 Hz down to a 3.1 Hz mode on a 2 s buffer, with it 39000)
+                    move = p - base
+                    while True:
+                        trial = np.clip(p + move, lo, hi)
+                        evals += 1
+                        c = yield from self._cost_at(trial, stride)
+                        if not c < best:
+                            break
+                        best, p = c, trial
+                        move = 2.0 * move
+                if improved and self._in_found_basin(best, *np.exp(p)):
+                    return (best, *np.exp(p))
             steps *= 0.4
         return (best, *np.exp(p))
+
+    def _in_found_basin(self, cost: float, alpha: float, fn: float, z: float) -> bool:
+        """Has the walk reached the basin of a candidate refined before, one that fits at least as well?
+
+        It would end where that one did: the rest of the walk is spent for
+        nothing (a start at 160 Hz walking down to an already found 2.7 Hz mode
+        on 1.2 s at 10 kHz: 22400 units instead of 25150; before the pattern
+        moves, 92000 units were spent converging a second time).
+        """
+        return any(c <= cost and _same_basin((a, f, zz), (alpha, fn, z)) for c, a, f, zz in self.candidates)
 
     def _axes(self) -> range:
         """Pattern-search axes: (ln alpha, ln fn, ln zeta), alpha left out when it is fixed."""
@@ -273,7 +304,7 @@ class ResonanceSearch:
             starts = list(self.starts)
         for alpha, a1, a2 in self.extra:
             starts.append((alpha, 1 / (2 * math.pi * math.sqrt(a2)), a1 / (2 * math.sqrt(a2))))
-        for alpha, fn, z in starts:
+        for alpha, fn, z in _unique(starts):
             cand = yield from self._refine(alpha, fn, z, fine)
             self.candidates.append(cand)
         self.candidates.sort(key=lambda r: r[0])
@@ -283,6 +314,16 @@ class ResonanceSearch:
         cost, b, c = yield from self._evaluate(alpha, a1, a2, 1)
         self.result = SearchResult(alpha=float(alpha), a1=float(a1), a2=float(a2), b=float(b), c=float(c),
                                    cost=float(cost))
+
+
+def _same_basin(p: tuple, q: tuple) -> bool:
+    """Are two (alpha, fn, zeta) points neighbours: fn within 35 %, zeta within a factor 1.65, alpha within 10 %?
+
+    The fn and zeta limits are the grid's spacing (``_distinct``); alpha's keeps
+    apart candidates that share a resonance but not the creep.
+    """
+    return (abs(math.log(p[1] / q[1])) <= 0.3 and abs(math.log(p[2] / q[2])) <= 0.5
+            and abs(math.log(p[0] / q[0])) <= 0.1)
 
 
 def _distinct(found: list, count: int) -> list:
@@ -296,3 +337,13 @@ def _distinct(found: list, count: int) -> list:
         if len(out) == count:
             break
     return [(a, f, z) for a, f, z in out]
+
+
+def _unique(starts: list) -> list:
+    """Starts without the repeats: after a first search its refined candidates often coincide (measured:
+    three identical starts, each refined for 78000 units on a 2 s buffer)."""
+    out: list = []
+    for s in starts:
+        if not any(_same_basin(s, o) for o in out):
+            out.append(s)
+    return out
