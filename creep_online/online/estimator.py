@@ -597,6 +597,11 @@ class OnlineEstimator(StoredParams):
         if tr.events and (not tr.events[-1]["settled"] or now - tr.events[-1]["detected_t"] < 1.5):
             ev = tr.events[-1]
             return "changing", f"change detected at t={ev['t']:.3g} s ({', '.join(ev['moved'])} moved)"
+        dis = tr.disagreement
+        if dis is not None and now - dis["t"] < 1.5:
+            moves = ", ".join(f"{k} {100 * v:+.0f} %" for k, v in dis["moves"].items())
+            return "changing", (f"the last second disagrees with the window's estimate ({moves}, likelihood ratio "
+                                f"{dis['lr']:.3g}): the plant may be changing")
         if tr.fit.sample == 0:
             rs = tr.researches[-1] if tr.researches and tr.researches[-1]["switched"] else None
             return "provisional", ("first window fit pending" if rs is None else

@@ -497,6 +497,7 @@ class RecursiveTracker(ParameterView):
         self.drift_on = False
         self.events: list[dict] = []
         self.researches: list[dict] = []   # the window tracker's re-searches of the resonance; none here
+        self.disagreement: dict | None = None   # the window tracker's change-test disagreement; none here
         self.false_alarms = 0            # alarms after which nothing moved (no event kept)
         self.rejected = 0                # never: the recursion has no fits to reject
         self._jobs: list = []            # no background jobs: the interface the estimator polls
