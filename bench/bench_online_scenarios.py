@@ -34,7 +34,8 @@ What it does:
    after ``change_time`` (re-convergence; inf if never) and from the start
    (convergence), the scatter over the last 3 s (median over runs of the std
    of each relative error), and the fraction of runs reporting quality
-   "good" while outside ("dishonest good").
+   "good" while outside ("dishonest good"), and the seconds of the trajectory that read "good" while
+   outside (``good_while_outside_s``: one point per 0.1 s chunk).
 
 Lengths and rates (hil_sim.scenarios): 12-16 s at 10 kHz (strong_creep also at
 1-2 kHz), payload and stiffness 16 s at 10 kHz, drift 60 s at 2 kHz,
@@ -80,7 +81,7 @@ def chunk_size(h: float) -> int:
 def run_estimator(u: np.ndarray, y: np.ndarray, h: float, mode: str, kwargs: dict) -> dict:
     """Feed one record to ``OnlineEstimator``; trajectory after each chunk, final estimate, or the error."""
     from creep_online.online import OnlineEstimator
-    traj: dict[str, list] = {k: [] for k in ("samples", *PARAMS)}
+    traj: dict[str, list] = {k: [] for k in ("samples", "quality", *PARAMS)}
     out: dict = {"error": None, "quality": None, "phase": None, "final": None, "traj": traj}
     start = time.perf_counter()
     try:
@@ -90,6 +91,7 @@ def run_estimator(u: np.ndarray, y: np.ndarray, h: float, mode: str, kwargs: dic
             _feed(est, u[k:k + step], y[k:k + step], mode)
             e = est.estimate
             traj["samples"].append(min(k + step, u.size))
+            traj["quality"].append(e.quality)
             for p in PARAMS:
                 traj[p].append(float(getattr(e, p)))
         e = est.estimate
@@ -199,10 +201,20 @@ def run_metrics(res: dict, tr: dict) -> dict:
     row.update(final_rel_error=final, within=within,
                within_all=all(within.values()), convergence_s=settle_time(t, inside, 0.0),
                scatter={p: float(np.std(errs[p][last])) for p in PARAMS},
-               dishonest_good=res["quality"] == "good" and not all(within.values()))
+               dishonest_good=res["quality"] == "good" and not all(within.values()),
+               good_while_outside_s=_good_while_outside(res["traj"].get("quality"), inside, t))
     if tr["change_time"] is not None:
         row["reconvergence_s"] = settle_time(t, inside, tr["change_time"])
     return row
+
+
+def _good_while_outside(quality: list | None, inside: np.ndarray, t: np.ndarray) -> float | None:
+    """Seconds of the trajectory (one point per chunk) that read "good" while outside the tolerances."""
+    if not quality or len(quality) < inside.size:
+        return None
+    good = np.array([q == "good" for q in quality[:inside.size]])
+    dt = np.diff(t, prepend=0.0)
+    return float(np.sum(dt[good & ~inside]))
 
 
 def _dist(x: list[float]) -> dict:
@@ -210,6 +222,14 @@ def _dist(x: list[float]) -> dict:
     if not x:
         return None
     return {"median": float(np.median(x)), "p90": float(np.percentile(x, 90, method="higher"))}
+
+
+def _good_outside_summary(seconds: list, n: int) -> dict | None:
+    """Over the runs: the share that read "good" while outside at any time, and the seconds (median, p90, max)."""
+    x = [v for v in seconds if v is not None]
+    if not x:
+        return None
+    return {"runs_with_any": sum(v > 0 for v in x) / n, **_dist(x), "max": float(max(x))}
 
 
 def family_metrics(rows: list[dict]) -> dict:
@@ -224,6 +244,7 @@ def family_metrics(rows: list[dict]) -> dict:
                                       for p in PARAMS},
            "convergence_s": _dist([r["convergence_s"] for r in ok]),
            "dishonest_good": sum(r["dishonest_good"] for r in ok) / n,
+           "good_while_outside_s": _good_outside_summary([r.get("good_while_outside_s") for r in ok], n),
            "quality": {q: sum(r["quality"] == q for r in ok) for q in sorted({r["quality"] for r in ok})},
            "failure_messages": sorted({r["error"] for r in rows if r["error"] is not None})}
     if any("reconvergence_s" in r for r in ok):
