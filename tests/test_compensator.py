@@ -271,6 +271,29 @@ def test_adaptive_beats_frozen_on_drifting_random_plants():
             assert frac >= 0.75
 
 
+def test_the_change_test_stays_quiet_on_a_drifting_compensated_plant():
+    """Adaptive compensation of a drifting plant (random drifting plant 2: alpha 0.17 +20 %, b +10 % over
+    30 s): flat holds, then steps. The change test predicts its last second with the window's drift rates;
+    without them (alpha's drift over a second is ~5 noise levels here) the step at 5 s, just after the
+    rates came on, was taken for a change, the window restarted, and re-searches on flat holds took a wrong
+    resonance (before the fix: events at 5.5 and 11 s, b -97 % at 12 s; creep error 3787 by the end of a 30 s
+    run)."""
+    from creep_online.online import OnlineEstimator
+    from hil_sim.closed_loop import random_drifting_plant, run_closed_loop, staircase
+    plant, levels = random_drifting_plant(2)
+    t = np.arange(int(12.0 / H)) * H
+    r = staircase(t, levels, 5.0, t_start=0.05)
+    alpha = plant.alpha * (1 + 0.2 * t / 30.0)
+    b = plant.b * (1 + 0.1 * t / 30.0)
+    est = OnlineEstimator(H)
+    run_closed_loop(t, r, plant, "adaptive", alpha=alpha, b=b, estimator=est,
+                    compensator=CreepCompensator(H, bandwidth_hz=plant.fn / 2), block=100, seed=2)
+    e = est.estimate
+    print(f"events {est.events}, quality {e.quality}, alpha {e.alpha / alpha[-1] - 1:+.2%}, b {e.b / b[-1] - 1:+.2%}")
+    assert est.events == [] and e.quality == "good"
+    assert abs(e.alpha / alpha[-1] - 1) < 0.01 and abs(e.b / b[-1] - 1) < 0.01
+
+
 def test_creep_error_windows():
     """metrics.creep_error: each hold from settle_s after its step to its end, early holds skipped."""
     from creep_online.metrics import creep_error
