@@ -143,6 +143,36 @@ def test_the_first_model_replays_the_pass_through_commands():
     assert np.max(np.abs(y - shaped_reference(t, r, comp.tau))[late]) < 1e-4
 
 
+def test_the_first_models_replay_is_spread_over_the_calls():
+    """After 0.3 s of pass-through the first model does not replay 3000 commands in one call: each command()
+    replays REPLAY_CHUNK of them and passes its own reference through (remembered) until caught up. command
+    and command_block agree through it, and the plant (exact simulator) then follows the shaped reference."""
+    from creep_online.online.compensator import REPLAY_CHUNK
+    t = np.arange(int(1.0 / H)) * H
+    r = np.where(t >= 0.01, 0.6, 0.0) + np.where(t >= 0.5, 0.3, 0.0)
+    k_model = 3000
+    a, b = CreepCompensator(H), CreepCompensator(H)
+    u = [a.command(v) for v in r[:k_model]]
+    ub = b.command_block(r[:k_model])
+    a.set_model(DEMO)
+    b.set_model(DEMO)
+    assert a.replaying == k_model and math.isnan(a.shaped_reference)
+    left = [a.replaying]
+    while a.replaying:
+        u.append(a.command(r[len(u)]))
+        left.append(a.replaying)
+    caught = len(u)                  # the call that caught up compensates its own sample
+    assert np.array_equal(u[:-1], r[:caught - 1]) and u[-1] != r[caught - 1]
+    print(f"3000 remembered commands replayed in {caught - k_model} calls")
+    assert all(x - y == REPLAY_CHUNK - 1 for x, y in zip(left[:-2], left[1:-1]))   # a chunk per call
+    u = np.concatenate((u, [a.command(v) for v in r[caught:]]))
+    np.testing.assert_array_equal(u, np.concatenate((ub, b.command_block(r[k_model:]))))
+    y = simulate(DEMO, t, u)
+    settle = 10 * a.tau + DEMO.settling_time
+    late = (t > t[caught] + settle) & ~((t >= 0.5) & (t < 0.5 + 10 * a.tau))
+    assert np.max(np.abs(y - shaped_reference(t, r, a.tau))[late]) < 1e-4
+
+
 def test_command_and_command_block_agree():
     t = np.arange(2000) * H
     r = np.where(t > 0.02, 0.8, 0.0)
