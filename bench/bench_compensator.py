@@ -175,37 +175,49 @@ def time_interleaved(calls: dict, n: int) -> tuple[dict, float]:
 
     Interleaving puts every call under the same machine (other processes, interrupts, frequency):
     the empty call's outliers are the machine's, and what a real call has beyond them is its own.
-    Returns ({name: (cpu_ns, wall_ns, gc_marked)}, loop seconds).
+    Each call is marked when a garbage-collector pass or a context switch of the thread (getrusage,
+    outside the timed interval) fell inside it.
+    Returns ({name: (cpu_ns, wall_ns, gc_marked, switch_marked)}, loop seconds).
     """
     import gc
+    import resource
     names, fns = list(calls), list(calls.values())
     cpu, wall = np.empty((len(fns), n)), np.empty((len(fns), n))
     marked = np.zeros((len(fns), n), dtype=bool)
+    switched = np.zeros((len(fns), n), dtype=bool)
     counter = _GcCount()
     gc.callbacks.append(counter)
+    who = resource.RUSAGE_THREAD
     try:
         t0 = time.perf_counter()
         for k in range(n):
             for j, f in enumerate(fns):
                 g0 = counter.passes
+                s0 = resource.getrusage(who)
                 c0, w0 = time.thread_time_ns(), time.perf_counter_ns()
                 f(k)
                 cpu[j, k], wall[j, k] = time.thread_time_ns() - c0, time.perf_counter_ns() - w0
+                s1 = resource.getrusage(who)
                 marked[j, k] = counter.passes != g0
+                switched[j, k] = s1.ru_nivcsw + s1.ru_nvcsw != s0.ru_nivcsw + s0.ru_nvcsw
         loop_s = time.perf_counter() - t0
     finally:
         gc.callbacks.remove(counter)
-    return {name: (cpu[j], wall[j], marked[j]) for j, name in enumerate(names)}, loop_s
+    return {name: (cpu[j], wall[j], marked[j], switched[j]) for j, name in enumerate(names)}, loop_s
 
 
-def cost_summary(cpu: np.ndarray, wall: np.ndarray, marked: np.ndarray, loop_s: float, empty: dict | None) -> dict:
+def cost_summary(cpu: np.ndarray, wall: np.ndarray, marked: np.ndarray, switched: np.ndarray, loop_s: float,
+                 empty: dict | None) -> dict:
     """p50/p99/max per clock, calls over the budget per second of loop time, and the same minus the empty
-    call's (noise-corrected: what remains is the call's own work)."""
-    out = {"cpu_us": dist(cpu / 1e3), "wall_us": dist(wall / 1e3)}
+    call's (noise-corrected: what remains is the call's own work); how many of the slow calls spanned a
+    garbage-collector pass or a context switch."""
+    out = {"cpu_us": dist(cpu / 1e3), "wall_us": dist(wall / 1e3), "calls": int(cpu.size)}
     for clock, x in (("cpu", cpu), ("wall", wall)):
         over = x > BUDGET_US * 1e3
+        out[f"over_budget_{clock}"] = int(over.sum())
         out[f"over_budget_per_s_{clock}"] = float(over.sum() / loop_s)
         out[f"over_budget_{clock}_during_gc"] = int((over & marked).sum())
+        out[f"over_budget_{clock}_with_context_switch"] = int((over & switched).sum())
         if empty is not None:
             out[f"over_budget_per_s_{clock}_corrected"] = \
                 out[f"over_budget_per_s_{clock}"] - empty[f"over_budget_per_s_{clock}"]
@@ -295,8 +307,9 @@ def main() -> None:
     p.add_argument("--duration", type=float, default=60.0)
     p.add_argument("--cases", default=",".join(CASES), help=f"comma-separated subset of {', '.join(CASES)}")
     p.add_argument("--random-seeds", default="0-19", help="random drifting plants: seeds as a-b or a,b,c")
-    p.add_argument("--random-duration", type=float, default=30.0)
+    p.add_argument("--random-duration", type=float, default=60.0)
     p.add_argument("--jobs", type=int, default=1, help="processes for the random plants")
+    p.add_argument("--random-key", default="random_plants", help="JSON key of the random case (e.g. a fresh seed set)")
     p.add_argument("--out", default=None, help="JSON file; the cases run replace theirs, the others are kept")
     args = p.parse_args()
     cases = args.cases.split(",")
@@ -321,7 +334,7 @@ def main() -> None:
     if "drift" in cases:
         out["drift"] = drift_case(t, range(args.seeds))
     if "random" in cases:
-        out["random_plants"] = random_case(parse_seeds(args.random_seeds), args.random_duration, args.jobs)
+        out[args.random_key] = random_case(parse_seeds(args.random_seeds), args.random_duration, args.jobs)
     if "cost" in cases:
         out["cost"] = cost_case()
     out["elapsed_s"] = time.perf_counter() - started
