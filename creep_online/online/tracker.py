@@ -205,6 +205,7 @@ class WindowTracker(ParameterView):
         self._mu = 1e-3
         self._jobs: list[Generator] = []
         self._snaps: list[tuple] = []
+        self._shift = np.zeros((self.q + W.ONE, max(self.n_rate, 1)))   # total drift-origin move (``_since``)
         self._theta_at: dict[int, np.ndarray] = {}
         self._last_h = np.zeros((self.theta.size, self.theta.size))   # J^T J of the last LM step
         self._last_g = np.zeros(self.theta.size)                       # and J^T r
@@ -351,17 +352,34 @@ class WindowTracker(ParameterView):
         return F, self.sy / g, self.sc[W.SC_SYY] / g
 
     def _rereference(self, n_new: float) -> None:
-        """Move the drift columns' time origin to sample ``n_new``: in the live statistics and, by the same
-        linear map, in the change test's snapshots, so that their differences stay the statistics of the
-        segments since (the test then predicts with the drift, see ``_change_job``)."""
-        if self.n_rate:
-            lay_sy = slice(self.lay["sy"], self.lay["co"])
-            for snap in self._snaps:
-                tmp = self.st.copy()
-                tmp[lay_sy] = snap[2]
-                W.rereference(tmp, snap[1], n_new)
-                snap[2][:] = tmp[lay_sy]
+        """Move the drift columns' time origin to sample ``n_new`` in the live statistics, and add the move
+        to ``_shift``, the running total the change test brings its snapshot up to (``_since``)."""
+        t = (n_new - float(self.sc[W.SC_TREF])) * float(self.sc[W.SC_H])
+        if self.n_rate and t != 0.0:
+            nv = self.q + W.ONE                # the map's helper coefficients v, as W.rereference reads them
+            self._shift[:, 0] += t * self.m[:nv]
+            if self.n_rate > 1:
+                self._shift[:, 1] += t * self.md
         W.rereference(self.st, self.S, n_new)
+
+    def _since(self, S0: np.ndarray, sy0: np.ndarray, shift0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Statistics of the samples since a snapshot: live minus the snapshot moved to the live drift origin.
+
+        A move of the origin is the regressor map x -> x (I - E), E holding t v in the rate columns' rows
+        0..nv-1. Two such maps compose additively (E fills only rate columns and reads none: E_i E_j = 0), so
+        every move since the snapshot is one map with D = the sum of t v since (``_shift``), applied as
+        ``W.rereference`` applies one; only the rate rows and columns change (S is kept whole).
+        """
+        dS, dsy = self.S - S0, self.sy - sy0
+        if self.n_rate:
+            D = self._shift - shift0
+            nv, r0 = D.shape[0], self.p - self.n_rate
+            G = S0[:, :nv] @ D
+            dS[:, r0:] += G
+            dS[r0:, :] += G.T
+            dS[r0:, r0:] -= D.T @ G[:nv]
+            dsy[r0:] += D.T @ sy0[:nv]
+        return dS, dsy
 
     def _drift_test(self, theta: np.ndarray, free: np.ndarray, cov: np.ndarray, stats: tuple, lin: tuple,
                     cost: float) -> Generator:
@@ -535,7 +553,7 @@ class WindowTracker(ParameterView):
             i += n
             if self.detect and i % self.test_every == 0 and i - oldest > skip:
                 snaps = (snaps + [(i, S.copy(), st[lay_sy].copy(), float(st[W.SC_SYY]), float(st[W.SC_G]),
-                                   lin, self._theta_at.get(i, self.theta).copy())])[-3:]
+                                   lin, self._theta_at.get(i, self.theta).copy(), np.zeros_like(self._shift))])[-3:]
             if i >= self.n:                # caught up: swap now (a yield would let a new sample in)
                 break
             yield
@@ -548,12 +566,13 @@ class WindowTracker(ParameterView):
             new[k] = st[k]
         self._install(new, S)
         self._snaps = snaps                # the change test keeps its reference through a replay
+        self._shift[:] = 0.0               # (replayed at one origin: the snapshots' and the statistics' own)
         self.relinearizations += 1
 
     # ------------------------------------------------------------------ change detection
     def _snapshot(self) -> None:
         self._snaps.append((self.n, self.S.copy(), self.sy.copy(), float(self.sc[W.SC_SYY]),
-                            float(self.sc[W.SC_G]), (self.a1l, self.a2l), self.theta.copy()))
+                            float(self.sc[W.SC_G]), (self.a1l, self.a2l), self.theta.copy(), self._shift.copy()))
         self._theta_at[self.n] = self.theta.copy()     # the estimate at each snapshot instant
         for old in [k for k in self._theta_at if k < self.n - 4 * self.test_every]:
             del self._theta_at[old]
@@ -562,20 +581,22 @@ class WindowTracker(ParameterView):
 
     def _change_job(self, snap: tuple) -> Generator:
         """Likelihood-ratio test of the samples since the snapshot against the window's estimate."""
-        n0, S0, sy0, syy0, g0, lin0, theta0 = snap
+        n0, S0, sy0, syy0, g0, lin0, theta0, shift0 = snap
         g = float(self.sc[W.SC_G])
         if g < g0 or self.fit.sample < n0 or lin0 != (self.a1l, self.a2l) or n0 < self.window_start \
                 or not self.converged or self._researching():
             return                         # (a misfit being re-searched is not a change of the plant)
-        R = np.empty_like(self.S)
-        W.symmetrize(self.S - S0, R, 1.0 / g)
-        ry = (self.sy - sy0) / g
+        dS, dsy = self._since(S0, sy0, shift0)
         ryy = (self.sc[W.SC_SYY] - syy0) / g
-        # the drift columns stay in, at the window's rates (the snapshots moved with the time origin,
-        # ``_rereference``): over a second the drift is not negligible (alpha +0.7 %/s at a 2e-4 noise on a
-        # 0.5 output is ~5 noise levels), and without it a drifting plant's step looked like a change
         nr = self.n - n0
         lin = (self.a1l, self.a2l)
+        yield                              # (dS, g, ryy, nr, lin: one instant; the samples since wait)
+        R = np.empty_like(self.S)
+        W.symmetrize(dS, R, 1.0 / g)
+        ry = dsy / g
+        # the drift columns stay in, at the window's rates (the snapshot moved to the live time origin,
+        # ``_since``): over a second the drift is not negligible (alpha +0.7 %/s at a 2e-4 noise on a
+        # 0.5 output is ~5 noise levels), and without it a drifting plant's step looked like a change
         yield
         before = W.cost_of(self.theta, *lin, self.basis.lam, self.basis.dx, R, ry, ryy)
         theta = self.theta.copy()
