@@ -7,7 +7,8 @@ answers, the estimator learns from (command, noisy output), and the
 compensator takes the estimator's model according to ``mode``:
 
 ``adaptive``       the estimator's current model after every block, whenever its quality is ``good``
-                   (a model the estimator itself calls changing or degraded is not applied);
+                   (a model the estimator itself calls changing or degraded is not applied, nor one the
+                   compensator cannot take: ``CreepCompensator.accepts``);
 ``frozen``         the first model the estimator calls ``good`` (after 10 s: whatever it has), never again
                    (the estimator is not fed after it);
 ``known``          the true initial model from the start (no estimator needed);
@@ -82,6 +83,8 @@ def run_closed_loop(t: np.ndarray, r: np.ndarray, plant: CreepModel, mode: str, 
         if estimator.estimate.quality not in TRUSTED and (mode == "adaptive" or t[k1 - 1] < FROZEN_WAIT_S):
             continue
         if m != comp.current_model:
+            if not comp.accepts(m):
+                continue             # a model the compensator cannot take: the last one is held
             comp.set_model(m)
             model_t.append(float(t[k1 - 1]))
             models.append(m)
