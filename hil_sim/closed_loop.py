@@ -7,9 +7,13 @@ answers, the estimator learns from (command, noisy output), and the
 compensator takes the estimator's model according to ``mode``:
 
 ``adaptive``       the estimator's current model after every block, whenever its quality is ``good``
-                   (a model the estimator itself calls changing or degraded is not applied);
-``frozen``         the first model the estimator calls ``good`` (after 10 s: whatever it has), never again;
+                   (a model the estimator itself calls changing or degraded is not applied, nor one the
+                   compensator cannot take: ``CreepCompensator.accepts``);
+``frozen``         the first model the estimator calls ``good`` (after 10 s: whatever it has), never again
+                   (the estimator is not fed after it);
 ``known``          the true initial model from the start (no estimator needed);
+``oracle``         the true current parameters (alpha, b per sample) at every block: the limit of a
+                   compensator that inverts the frozen-time plant (no estimator needed);
 ``uncompensated``  u = r / g with g the plant's static gain 1 s after a step (b / Gamma(1 + alpha)).
 
 ``creep_online.metrics.creep_error`` measures what the issue asks: output minus
@@ -27,7 +31,7 @@ from creep_online.online.compensator import CreepCompensator
 
 from .varying_plant import PlantStream
 
-MODES = ("adaptive", "frozen", "known", "uncompensated")
+MODES = ("adaptive", "frozen", "known", "oracle", "uncompensated")
 
 
 @dataclass
@@ -65,18 +69,22 @@ def run_closed_loop(t: np.ndarray, r: np.ndarray, plant: CreepModel, mode: str, 
     frozen = False
     for k0 in range(0, n, block):
         k1 = min(n, k0 + block)
+        if mode == "oracle":
+            comp.set_model(CreepModel(alpha[k0], plant.a1, plant.a2, b[k0]))
         u = r[k0:k1] / gain if mode == "uncompensated" else comp.command_block(r[k0:k1])
         yc = stream.step_block(u, alpha[k0:k1], b[k0:k1])
         u_all[k0:k1], y_clean[k0:k1] = u, yc
-        if estimator is None or mode in ("known", "uncompensated"):
-            continue
+        if estimator is None or mode in ("known", "oracle", "uncompensated") or frozen:
+            continue                 # (frozen: the estimator's later models are never used: not fed)
         estimator.update_block(u, yc + noise * rng.standard_normal(k1 - k0))
         m = estimator.model
-        if m is None or frozen:
+        if m is None:
             continue
         if estimator.estimate.quality not in TRUSTED and (mode == "adaptive" or t[k1 - 1] < FROZEN_WAIT_S):
             continue
         if m != comp.current_model:
+            if not comp.accepts(m):
+                continue             # a model the compensator cannot take: the last one is held
             comp.set_model(m)
             model_t.append(float(t[k1 - 1]))
             models.append(m)
@@ -96,3 +104,42 @@ def staircase(t: np.ndarray, levels, hold_s: float, t_start: float = 0.0) -> np.
     k = np.floor((t - t_start) / hold_s).astype(int)
     out = np.asarray(levels, dtype=float)[np.clip(k, 0, len(levels) - 1)]
     return np.where(t >= t_start, out, 0.0)
+
+
+def random_drifting_plant(seed: int) -> tuple[CreepModel, np.ndarray]:
+    """A seeded random plant over the issue's ranges, and the 6 levels of its staircase.
+
+    alpha 0.02-0.6, fn 100-2000 Hz (log-uniform; for 10 kHz sampling), zeta 0.02-0.7, b of random
+    sign and magnitude 0.1-10 (log-uniform); levels 0.2-1.0.
+    """
+    rng = np.random.default_rng(seed)
+    plant = CreepModel.from_resonance(rng.uniform(0.02, 0.6), float(np.exp(rng.uniform(math.log(100.0),
+                                                                                       math.log(2000.0)))),
+                                      rng.uniform(0.02, 0.7),
+                                      float(rng.choice([-1.0, 1.0]) * 10 ** rng.uniform(-1.0, 1.0)))
+    return plant, rng.uniform(0.2, 1.0, 6)
+
+
+def drifting_comparison(seed: int, duration: float = 30.0, est_kwargs: dict | None = None,
+                        modes: tuple = ("frozen", "adaptive", "oracle"), dt: float = 1e-4) -> dict:
+    """Creep error per mode on ``random_drifting_plant(seed)`` while alpha drifts +20 % and b +10 % over the run.
+
+    A 6-level staircase (holds of duration / 6, the first left out of the error: start-up), noise 2e-4,
+    the estimator fed and read every 100 samples (``OnlineEstimator(dt, **est_kwargs)``), the reference
+    filter at half the plant's natural frequency. Returns {mode: creep error max abs} plus ``plant``.
+    """
+    from creep_online.metrics import creep_error
+    from creep_online.online import OnlineEstimator
+    plant, levels = random_drifting_plant(seed)
+    t = np.arange(int(round(duration / dt))) * dt
+    hold = duration / len(levels)
+    r = staircase(t, levels, hold, t_start=0.05)
+    alpha = plant.alpha * (1 + 0.2 * t / duration)
+    b = plant.b * (1 + 0.1 * t / duration)
+    out: dict = {"plant": plant.describe()}
+    for mode in modes:
+        est = OnlineEstimator(dt, **(est_kwargs or {})) if mode in ("frozen", "adaptive") else None
+        rec = run_closed_loop(t, r, plant, mode, alpha=alpha, b=b, estimator=est,
+                              compensator=CreepCompensator(dt, bandwidth_hz=plant.fn / 2), block=100, seed=seed)
+        out[mode] = creep_error(t, r, rec.y_clean, plant.settling_time, skip_before=hold)["max_abs"]
+    return out

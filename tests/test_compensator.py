@@ -143,6 +143,69 @@ def test_the_first_model_replays_the_pass_through_commands():
     assert np.max(np.abs(y - shaped_reference(t, r, comp.tau))[late]) < 1e-4
 
 
+def test_the_first_models_replay_is_spread_over_the_calls():
+    """After 0.3 s of pass-through the first model does not replay 3000 commands in one call: each command()
+    replays REPLAY_CHUNK of them and passes its own reference through (remembered) until caught up. command
+    and command_block agree through it, and the plant (exact simulator) then follows the shaped reference."""
+    from creep_online.online.compensator import REPLAY_CHUNK
+    t = np.arange(int(1.0 / H)) * H
+    r = np.where(t >= 0.01, 0.6, 0.0) + np.where(t >= 0.5, 0.3, 0.0)
+    k_model = 3000
+    a, b = CreepCompensator(H), CreepCompensator(H)
+    u = [a.command(v) for v in r[:k_model]]
+    ub = b.command_block(r[:k_model])
+    a.set_model(DEMO)
+    b.set_model(DEMO)
+    assert a.replaying == k_model and math.isnan(a.shaped_reference)
+    left = [a.replaying]
+    while a.replaying:
+        u.append(a.command(r[len(u)]))
+        left.append(a.replaying)
+    caught = len(u)                  # the call that caught up compensates its own sample
+    assert np.array_equal(u[:-1], r[:caught - 1]) and u[-1] != r[caught - 1]
+    print(f"3000 remembered commands replayed in {caught - k_model} calls")
+    assert all(x - y == REPLAY_CHUNK - 1 for x, y in zip(left[:-2], left[1:-1]))   # a chunk per call
+    u = np.concatenate((u, [a.command(v) for v in r[caught:]]))
+    np.testing.assert_array_equal(u, np.concatenate((ub, b.command_block(r[k_model:]))))
+    y = simulate(DEMO, t, u)
+    settle = 10 * a.tau + DEMO.settling_time
+    late = (t > t[caught] + settle) & ~((t >= 0.5) & (t < 0.5 + 10 * a.tau))
+    assert np.max(np.abs(y - shaped_reference(t, r, a.tau))[late]) < 1e-4
+
+
+def pinned_spectral_radius(comp: CreepCompensator, model: CreepModel) -> float:
+    """Largest |eigenvalue| of the compensator's state recursion with the command pinned (anti-windup, replay):
+    the states' own update with r_eff = (u - base) / ur substituted, built from the kernel's matrices."""
+    ur, Wz, Ux = comp._coefficients(model)
+    q = comp._e.size
+    A, bv, cv = np.zeros((3 + 3 * q, 3 + 3 * q)), np.zeros(3 + 3 * q), np.zeros(3 + 3 * q)
+    A[:3, :3], bv[:3], cv[:3] = comp._phi, comp._gam, Ux
+    for k in range(3):
+        rows = 3 + k * q + np.arange(q)
+        A[rows, rows] = comp._e
+        A[rows, :3] = comp._M[:, k, :]
+        bv[rows], cv[rows] = comp._m[:, k], Wz[k]
+    return float(np.max(np.abs(np.linalg.eigvals(A - np.outer(bv, cv) / ur))))
+
+
+def test_a_model_whose_pinned_recursion_is_unstable_is_refused():
+    """Pinned (anti-windup, the first model's replay), the states' poles are the zeros of the sampled inverse;
+    the one near -1 leaves the unit circle for an overdamped resonance far above the filter's corner. Such an
+    estimate (called good for random drifting plant 4: fn 2694 Hz, zeta 1.36, the truth 463 Hz, 0.68) made
+    the replay of 12 s of pass-through grow to 1e119. It is refused with one clear error, accepts() says so
+    beforehand, and the check agrees with the pinned recursion's eigenvalues."""
+    comp = CreepCompensator(H, bandwidth_hz=231.3)
+    bad = CreepModel.from_resonance(0.5924, 2694.0, 1.36, 1.672)
+    good = CreepModel.from_resonance(0.5908, 462.6, 0.684, 1.674)
+    assert pinned_spectral_radius(comp, bad) > 1.001 and pinned_spectral_radius(comp, good) < 1 + 1e-9
+    assert not comp.accepts(bad) and comp.accepts(good)
+    with pytest.raises(ModelError, match="recursion would be unstable"):
+        comp.set_model(bad)
+    assert comp.current_model is None
+    comp.set_model(good)
+    assert comp.current_model == good
+
+
 def test_command_and_command_block_agree():
     t = np.arange(2000) * H
     r = np.where(t > 0.02, 0.8, 0.0)
@@ -252,23 +315,75 @@ def adaptive_vs_frozen(seed: int, duration: float = 30.0, **est_kwargs) -> float
 
 def test_adaptive_beats_frozen_on_a_drifting_random_plant():
     """The issue's goal (>= 5x smaller creep error for adaptive) on one seeded random plant (~10 s), with the
-    estimator configured for a plant that drifts rather than jumps (docs/compensation.md, limits)."""
-    ratio = adaptive_vs_frozen(1, detect_changes=False)
+    default estimator (its change test predicts with the drift rates: no false change in compensated holds)."""
+    ratio = adaptive_vs_frozen(1)
     print(f"adaptive vs frozen, seed 1: {ratio:.1f}x")
     assert ratio >= 5
 
 
 @pytest.mark.slow
 def test_adaptive_beats_frozen_on_drifting_random_plants():
-    """Seeds 0-7 with the default estimator and without its change test; report the pass fractions."""
+    """Random drifting plants 0-7 over the issue's ranges (``random_drifting_plant``: alpha 0.02-0.6,
+    fn 100-2000 Hz, zeta 0.02-0.7, b of either sign 0.1-10; 60 s, alpha +20 %, b +10 %), default estimator
+    and ``detect_changes=False``. The frozen-time oracle (true parameters every 10 ms) bounds what any
+    adaptive compensator can do (it reaches 5x on plants 1, 2, 4 only: a large alpha's drift re-weights the
+    history). Measured (bench ``random_plants``, same function and seeds): adaptive within 1.25x of the
+    oracle on 6 of 8 with either setting, 5x on 1 and 2. The misses: plant 4, whose estimator settles on a
+    wrong resonance (fn 2694 Hz for 463: refused by the compensator, the last model held), and plant 5
+    (alpha 0.49, b 0.13), worse than frozen with either setting: open (docs/compensation.md, limits)."""
+    from hil_sim.closed_loop import drifting_comparison
     seeds = range(8)
+    oracle = {s: drifting_comparison(s, 60.0, modes=("oracle",))["oracle"] for s in seeds}
     for kwargs in ({}, {"detect_changes": False}):
-        ratios = np.array([adaptive_vs_frozen(s, **kwargs) for s in seeds])
-        frac = float(np.mean(ratios >= 5))
-        print(f"adaptive vs frozen {kwargs or 'default'}: {frac:.0%} of {len(seeds)} plants reach 5x "
-              f"(ratios {np.round(ratios, 1).tolist()})")
-        if kwargs:               # the default change test can fire in a compensated hold: reported, not required
-            assert frac >= 0.75
+        runs = {s: drifting_comparison(s, 60.0, kwargs, modes=("frozen", "adaptive")) for s in seeds}
+        ratio = np.array([runs[s]["frozen"] / runs[s]["adaptive"] for s in seeds])
+        limit = np.array([runs[s]["frozen"] / oracle[s] for s in seeds])
+        near = np.array([runs[s]["adaptive"] <= 1.25 * oracle[s] for s in seeds])
+        print(f"adaptive vs frozen {kwargs or 'default'}: {np.mean(ratio >= 5):.0%} of {len(seeds)} plants reach 5x "
+              f"(ratios {np.round(ratio, 1).tolist()}; oracle {np.round(limit, 1).tolist()})")
+        assert near.sum() >= 6 and np.sum(ratio[limit >= 5] >= 5) >= 2
+
+
+def test_the_change_test_stays_quiet_on_a_drifting_compensated_plant():
+    """Adaptive compensation of a drifting plant (random drifting plant 2: alpha 0.17 +20 %, b +10 % over
+    30 s): flat holds, then steps. The change test predicts its last second with the window's drift rates;
+    without them (alpha's drift over a second is ~5 noise levels here) the step at 5 s, just after the
+    rates came on, was taken for a change, the window restarted, and re-searches on flat holds took a wrong
+    resonance (before the fix: events at 5.5 and 11 s, b -97 % at 12 s; creep error 3787 by the end of a 30 s
+    run)."""
+    from creep_online.online import OnlineEstimator
+    from hil_sim.closed_loop import random_drifting_plant, run_closed_loop, staircase
+    plant, levels = random_drifting_plant(2)
+    t = np.arange(int(12.0 / H)) * H
+    r = staircase(t, levels, 5.0, t_start=0.05)
+    alpha = plant.alpha * (1 + 0.2 * t / 30.0)
+    b = plant.b * (1 + 0.1 * t / 30.0)
+    est = OnlineEstimator(H)
+    run_closed_loop(t, r, plant, "adaptive", alpha=alpha, b=b, estimator=est,
+                    compensator=CreepCompensator(H, bandwidth_hz=plant.fn / 2), block=100, seed=2)
+    e = est.estimate
+    print(f"events {est.events}, quality {e.quality}, alpha {e.alpha / alpha[-1] - 1:+.2%}, b {e.b / b[-1] - 1:+.2%}")
+    assert est.events == [] and e.quality == "good"
+    assert abs(e.alpha / alpha[-1] - 1) < 0.01 and abs(e.b / b[-1] - 1) < 0.01
+
+
+def test_an_undetermined_resonance_does_not_move_in_a_flat_hold():
+    """Random drifting plant 1008 (alpha 0.12, 1142 Hz, zeta 0.17, b -9.3; drift over 60 s), compensated: in
+    the flat hold after 10 s the last second barely determines the resonance (ln a2 1-sigma 0.4), and its fit
+    wanders (a2 +232 %). Judged in ln a2, the scale of its 1-sigma, that is 3 sigma, not 5.9 as exp(d) - 1:
+    no change. Before: an event at 14.5 s, the window restarted and no estimate was good for 25 s."""
+    from creep_online.online import OnlineEstimator
+    from hil_sim.closed_loop import random_drifting_plant, run_closed_loop, staircase
+    plant, levels = random_drifting_plant(1008)
+    t = np.arange(int(16.0 / H)) * H
+    r = staircase(t, levels, 10.0, t_start=0.05)
+    alpha = plant.alpha * (1 + 0.2 * t / 60.0)
+    b = plant.b * (1 + 0.1 * t / 60.0)
+    est = OnlineEstimator(H)
+    run_closed_loop(t, r, plant, "adaptive", alpha=alpha, b=b, estimator=est,
+                    compensator=CreepCompensator(H, bandwidth_hz=plant.fn / 2), block=100, seed=1008)
+    print(f"events {est.events}, quality {est.estimate.quality}")
+    assert est.events == [] and est.estimate.quality == "good"
 
 
 def test_creep_error_windows():

@@ -135,7 +135,8 @@ class _Sender:
     def step(self, loop, est) -> None:
         """After each batch of samples: take a good estimate, then send the next commands."""
         m = est.model
-        if m is not None and est.estimate.quality == "good" and m != self.comp.current_model:
+        if m is not None and est.estimate.quality == "good" and m != self.comp.current_model \
+                and self.comp.accepts(m):    # (one it cannot take: the last good one is held)
             self.comp.set_model(m)
             self.model_t.append(loop.last_seq or 0)
         self.send_upto((loop.last_seq or 0) + 1 + self.lead)

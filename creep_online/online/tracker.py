@@ -211,6 +211,7 @@ class WindowTracker(ParameterView):
         self._mu = 1e-3
         self._jobs: list[Generator] = []
         self._snaps: list[tuple] = []
+        self._shift = np.zeros((self.q + W.ONE, max(self.n_rate, 1)))   # total drift-origin move (``_since``)
         self._theta_at: dict[int, np.ndarray] = {}
         self._last_h = np.zeros((self.theta.size, self.theta.size))   # J^T J of the last LM step
         self._last_g = np.zeros(self.theta.size)                       # and J^T r
@@ -349,12 +350,42 @@ class WindowTracker(ParameterView):
         The drift columns' time origin moves to the newest sample first, so the
         fit's alpha and b are the values now, not window averages.
         """
-        W.rereference(self.st, self.S, float(self.sc[W.SC_N]))
+        self._rereference(float(self.sc[W.SC_N]))
         g = self.sc[W.SC_G]
         F = np.empty((self.p, self.p))
         W.symmetrize(self.S, F, 1.0 / g)
         yield
         return F, self.sy / g, self.sc[W.SC_SYY] / g
+
+    def _rereference(self, n_new: float) -> None:
+        """Move the drift columns' time origin to sample ``n_new`` in the live statistics, and add the move
+        to ``_shift``, the running total the change test brings its snapshot up to (``_since``)."""
+        t = (n_new - float(self.sc[W.SC_TREF])) * float(self.sc[W.SC_H])
+        if self.n_rate and t != 0.0:
+            nv = self.q + W.ONE                # the map's helper coefficients v, as W.rereference reads them
+            self._shift[:, 0] += t * self.m[:nv]
+            if self.n_rate > 1:
+                self._shift[:, 1] += t * self.md
+        W.rereference(self.st, self.S, n_new)
+
+    def _since(self, S0: np.ndarray, sy0: np.ndarray, shift0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Statistics of the samples since a snapshot: live minus the snapshot moved to the live drift origin.
+
+        A move of the origin is the regressor map x -> x (I - E), E holding t v in the rate columns' rows
+        0..nv-1. Two such maps compose additively (E fills only rate columns and reads none: E_i E_j = 0), so
+        every move since the snapshot is one map with D = the sum of t v since (``_shift``), applied as
+        ``W.rereference`` applies one; only the rate rows and columns change (S is kept whole).
+        """
+        dS, dsy = self.S - S0, self.sy - sy0
+        if self.n_rate:
+            D = self._shift - shift0
+            nv, r0 = D.shape[0], self.p - self.n_rate
+            G = S0[:, :nv] @ D
+            dS[:, r0:] += G
+            dS[r0:, :] += G.T
+            dS[r0:, r0:] -= D.T @ G[:nv]
+            dsy[r0:] += D.T @ sy0[:nv]
+        return dS, dsy
 
     def _drift_test(self, theta: np.ndarray, free: np.ndarray, cov: np.ndarray, stats: tuple, lin: tuple,
                     cost: float) -> Generator:
@@ -528,7 +559,7 @@ class WindowTracker(ParameterView):
             i += n
             if self.detect and i % self.test_every == 0 and i - oldest > skip:
                 snaps = (snaps + [(i, S.copy(), st[lay_sy].copy(), float(st[W.SC_SYY]), float(st[W.SC_G]),
-                                   lin, self._theta_at.get(i, self.theta).copy())])[-3:]
+                                   lin, self._theta_at.get(i, self.theta).copy(), np.zeros_like(self._shift))])[-3:]
             if i >= self.n:                # caught up: swap now (a yield would let a new sample in)
                 break
             yield
@@ -541,12 +572,13 @@ class WindowTracker(ParameterView):
             new[k] = st[k]
         self._install(new, S)
         self._snaps = snaps                # the change test keeps its reference through a replay
+        self._shift[:] = 0.0               # (replayed at one origin: the snapshots' and the statistics' own)
         self.relinearizations += 1
 
     # ------------------------------------------------------------------ change detection
     def _snapshot(self) -> None:
         self._snaps.append((self.n, self.S.copy(), self.sy.copy(), float(self.sc[W.SC_SYY]),
-                            float(self.sc[W.SC_G]), (self.a1l, self.a2l), self.theta.copy()))
+                            float(self.sc[W.SC_G]), (self.a1l, self.a2l), self.theta.copy(), self._shift.copy()))
         self._theta_at[self.n] = self.theta.copy()     # the estimate at each snapshot instant
         for old in [k for k in self._theta_at if k < self.n - 4 * self.test_every]:
             del self._theta_at[old]
@@ -555,22 +587,22 @@ class WindowTracker(ParameterView):
 
     def _change_job(self, snap: tuple) -> Generator:
         """Likelihood-ratio test of the samples since the snapshot against the window's estimate."""
-        n0, S0, sy0, syy0, g0, lin0, theta0 = snap
+        n0, S0, sy0, syy0, g0, lin0, theta0, shift0 = snap
         g = float(self.sc[W.SC_G])
         if g < g0 or self.fit.sample < n0 or lin0 != (self.a1l, self.a2l) or n0 < self.window_start \
                 or not self.converged or self._researching():
             return                         # (a misfit being re-searched is not a change of the plant)
-        R = np.empty_like(self.S)
-        W.symmetrize(self.S - S0, R, 1.0 / g)
-        ry = (self.sy - sy0) / g
+        dS, dsy = self._since(S0, sy0, shift0)
         ryy = (self.sc[W.SC_SYY] - syy0) / g
-        # the drift columns are left out (their time origin may have moved since the snapshot; over the
-        # test's second the drift is negligible): zero rows carry no information, the rates do not move
-        R[self.rate_rows, :] = 0.0
-        R[:, self.rate_rows] = 0.0
-        ry[self.rate_rows] = 0.0
         nr = self.n - n0
         lin = (self.a1l, self.a2l)
+        yield                              # (dS, g, ryy, nr, lin: one instant; the samples since wait)
+        R = np.empty_like(self.S)
+        W.symmetrize(dS, R, 1.0 / g)
+        ry = dsy / g
+        # the drift columns stay in, at the window's rates (the snapshot moved to the live time origin,
+        # ``_since``): over a second the drift is not negligible (alpha +0.7 %/s at a 2e-4 noise on a
+        # 0.5 output is ~5 noise levels), and without it a drifting plant's step looked like a change
         yield
         before = W.cost_of(self.theta, *lin, self.basis.lam, self.basis.dx, R, ry, ryy)
         theta = self.theta.copy()
@@ -593,8 +625,12 @@ class WindowTracker(ParameterView):
         # relative 1-sigma of the recent fit (ln a1, ln a2 are relative already)
         rel_sd = {"a1": math.sqrt(abs(cov[1, 1]) * sigma2), "a2": math.sqrt(abs(cov[2, 2]) * sigma2),
                   "b": math.sqrt(abs(cov[3, 3]) * sigma2) / max(abs(theta[3]), 1e-300)}
+        # significant on the scale the 1-sigma is on (ln a1, ln a2; b relative): for a large move of an
+        # undetermined resonance exp(d) - 1 is far larger than d (a flat compensated hold: a2 +232 % against a
+        # 40 % 1-sigma passed as 5.9 sigma, it is 3.0 in ln a2, and the window restarted on no change)
+        size = {"a1": abs(theta[1] - self.theta[1]), "a2": abs(theta[2] - self.theta[2]), "b": abs(moves["b"])}
         moved = {k: v for k, v in moves.items()
-                 if abs(v) > CHANGE_MOVE[k] and abs(v) > CHANGE_SIGMAS * rel_sd[k]}
+                 if abs(v) > CHANGE_MOVE[k] and size[k] > CHANGE_SIGMAS * rel_sd[k]}
         # the test is calibrated against its own recent level: a drifting plant (or a model that is
         # slightly off) raises the statistic slowly and evenly, a change makes it jump
         level = float(np.median(self._lr_recent)) if len(self._lr_recent) >= 4 else 0.0
