@@ -372,3 +372,171 @@ def foh_grid_costs_free(z: np.ndarray, y_perp: np.ndarray, q: np.ndarray, phi: n
         sol = np.linalg.solve(gs, vs)
         costs[k] = yy - np.dot(vs, sol)
     return costs
+
+
+@njit(cache=CACHE)
+def state_march_sensitivity(n_samples: int, h: float, alpha: float, gamma1: float, psi1: float, phi: np.ndarray,
+                            dphi: np.ndarray, head: np.ndarray, dhead: np.ndarray, taylor: np.ndarray,
+                            dtaylor: np.ndarray) -> np.ndarray:
+    """``state_march`` and its forward sensitivities: rows S, dS/dalpha, dS/da1, dS/da2 (shape (4, n)).
+
+    The march x_{n+1} = Phi x_n + f_n is differentiated term by term:
+    dx_{n+1} = Phi dx_n + dPhi x_n + df_n, with dPhi = 0 for alpha. ``dphi``
+    (2, 2, 2) and ``dtaylor`` (2, terms, 2) are the a1 and a2 derivatives of
+    ``phi`` and ``taylor``; ``dhead`` (3, n_head, 2) those of ``head`` for
+    (alpha, a1, a2). Beyond the head, d v^(m)/d alpha = v^(m) (ln t - psi1) +
+    v(t) t^-m dP_m with P_m = prod_{i<m} (alpha - i) and psi1 = digamma(1 + alpha).
+    Row 0 is ``state_march``'s S bit for bit (same operations in the same order).
+    """
+    out = np.zeros((4, n_samples))
+    n_head = head.shape[0]
+    n_terms = taylor.shape[0]
+    dpm = np.zeros(n_terms)        # dP_m / d alpha
+    pm = 1.0
+    for m in range(1, n_terms):
+        dpm[m] = dpm[m - 1] * (alpha - (m - 1)) + pm
+        pm *= alpha - (m - 1)
+    x0 = 0.0
+    x1 = 0.0
+    dx = np.zeros((3, 2))
+    f = np.zeros((4, 2))           # f_n and its derivatives (alpha, a1, a2)
+    inv_gamma = 1.0 / gamma1
+    for n in range(n_samples - 1):
+        if n < n_head:
+            f[0, 0] = head[n, 0]
+            f[0, 1] = head[n, 1]
+            for j in range(3):
+                f[1 + j, 0] = dhead[j, n, 0]
+                f[1 + j, 1] = dhead[j, n, 1]
+        else:
+            t = n * h
+            deriv = t**alpha * inv_gamma
+            plain = deriv              # v(t) t^-m, for the dP_m term
+            log_t = np.log(t) - psi1
+            f0 = taylor[0, 0] * deriv
+            f1 = taylor[0, 1] * deriv
+            fa0 = 0.0
+            fa1 = 0.0
+            g10 = dtaylor[0, 0, 0] * deriv
+            g11 = dtaylor[0, 0, 1] * deriv
+            g20 = dtaylor[1, 0, 0] * deriv
+            g21 = dtaylor[1, 0, 1] * deriv
+            inv_t = 1.0 / t
+            for m in range(1, n_terms):
+                deriv *= (alpha - (m - 1)) * inv_t
+                plain *= inv_t
+                f0 += taylor[m, 0] * deriv
+                f1 += taylor[m, 1] * deriv
+                fa0 += taylor[m, 0] * (plain * dpm[m])
+                fa1 += taylor[m, 1] * (plain * dpm[m])
+                g10 += dtaylor[0, m, 0] * deriv
+                g11 += dtaylor[0, m, 1] * deriv
+                g20 += dtaylor[1, m, 0] * deriv
+                g21 += dtaylor[1, m, 1] * deriv
+            f[0, 0] = f0
+            f[0, 1] = f1
+            f[1, 0] = f0 * log_t + fa0
+            f[1, 1] = f1 * log_t + fa1
+            f[2, 0] = g10
+            f[2, 1] = g11
+            f[3, 0] = g20
+            f[3, 1] = g21
+        for j in range(3):
+            d0 = phi[0, 0] * dx[j, 0] + phi[0, 1] * dx[j, 1] + f[1 + j, 0]
+            d1 = phi[1, 0] * dx[j, 0] + phi[1, 1] * dx[j, 1] + f[1 + j, 1]
+            if j > 0:
+                d0 += dphi[j - 1, 0, 0] * x0 + dphi[j - 1, 0, 1] * x1
+                d1 += dphi[j - 1, 1, 0] * x0 + dphi[j - 1, 1, 1] * x1
+            dx[j, 0] = d0
+            dx[j, 1] = d1
+            out[1 + j, n + 1] = d0
+        nx0 = phi[0, 0] * x0 + phi[0, 1] * x1 + f[0, 0]
+        nx1 = phi[1, 0] * x0 + phi[1, 1] * x1 + f[0, 1]
+        x0 = nx0
+        x1 = nx1
+        out[0, n + 1] = x0
+    return out
+
+
+
+@njit(cache=CACHE)
+def _poles(a1: float, a2: float) -> tuple[complex, complex]:
+    """(slow, fast) roots of a2 s^2 + a1 s + 1, as ``discretize.resonance_poles``."""
+    root = cmath.sqrt(complex(a1 * a1 - 4.0 * a2))
+    q = -0.5 * (a1 + root)
+    return 1.0 / q, q / a2
+
+
+@njit(cache=CACHE)
+def head_sensitivity(alpha: float, a1: float, a2: float, h: float, n_head: int, xl: np.ndarray, wl: np.ndarray,
+                     xj: np.ndarray, wj: np.ndarray, panels: int, gamma1: float, psi1: float,
+                     rel_step: float) -> np.ndarray:
+    """``head_quadrature``'s terms and their derivatives: shape (4, n_head, 2), rows head, d/d(alpha, a1, a2).
+
+    The same panels and nodes as ``head_quadrature`` (whose result row 0
+    reproduces). alpha: the integrals of the derivative, with ln(k h + s) -
+    psi1 in the integrand; on interval 0's first panel (width w), where ln s is
+    singular, the series e^{A(h-s)} B = sum_j (-A)^j e^{A h} B s^j / j! is
+    integrated exactly (int_0^w s^b ln s ds = w^(b+1) (ln w / (b+1) - 1/(b+1)^2);
+    |A| w <= ~4, so the terms fall below 1e-18 within ~40). a1, a2: central
+    differences with relative step ``rel_step``, the powers (k h + s)^alpha
+    shared by the four perturbed heads.
+    """
+    sets = np.array([[a1, a2], [a1 * (1 + rel_step), a2], [a1 * (1 - rel_step), a2],
+                     [a1, a2 * (1 + rel_step)], [a1, a2 * (1 - rel_step)]])
+    n_sets = sets.shape[0]
+    poles = np.empty((n_sets, 2), dtype=np.complex128)
+    for j in range(n_sets):
+        poles[j, 0], poles[j, 1] = _poles(sets[j, 0], sets[j, 1])
+    acc = np.zeros((n_sets + 1, n_head, 2))     # heads of the five sets, then the alpha integral
+    e = np.empty((n_sets, 2))
+    width = h / panels
+    for p in range(panels):
+        for i in range(xl.shape[0]):
+            s = p * width + (xl[i] + 1.0) * width / 2.0
+            w = wl[i] * width / 2.0
+            for j in range(n_sets):
+                e[j, 0], e[j, 1] = transition_b(poles[j, 0], poles[j, 1], 1.0 / np.sqrt(sets[j, 1]),
+                                                sets[j, 0] / sets[j, 1], h - s)
+            for k in range(n_head):
+                if k == 0 and p == 0:
+                    continue
+                tk = k * h + s
+                v = w * tk**alpha
+                for j in range(n_sets):
+                    acc[j, k, 0] += v * e[j, 0]
+                    acc[j, k, 1] += v * e[j, 1]
+                lv = v * np.log(tk)
+                acc[n_sets, k, 0] += lv * e[0, 0]
+                acc[n_sets, k, 1] += lv * e[0, 1]
+    scale = (width / 2.0) ** (1.0 + alpha)
+    for i in range(xj.shape[0]):
+        s = (xj[i] + 1.0) * width / 2.0
+        for j in range(n_sets):
+            e0, e1 = transition_b(poles[j, 0], poles[j, 1], 1.0 / np.sqrt(sets[j, 1]), sets[j, 0] / sets[j, 1], h - s)
+            acc[j, 0, 0] += wj[i] * scale * e0
+            acc[j, 0, 1] += wj[i] * scale * e1
+    wn = 1.0 / np.sqrt(a2)
+    damp = a1 / a2
+    g0, g1 = transition_b(poles[0, 0], poles[0, 1], wn, damp, h)   # e^{A h} B, then (-A)^j e^{A h} B / j!
+    log_w = np.log(width)
+    for j in range(80):
+        beta1 = alpha + j + 1.0
+        c = width**beta1 * (log_w / beta1 - 1.0 / (beta1 * beta1))
+        acc[n_sets, 0, 0] += c * g0
+        acc[n_sets, 0, 1] += c * g1
+        if j > 8 and abs(c) * (abs(g0) + abs(g1)) < 1e-18 * (abs(acc[n_sets, 0, 0]) + abs(acc[n_sets, 0, 1])):
+            break
+        n0 = -(wn * g1) / (j + 1.0)                  # -A g / (j+1), A = [[0, wn], [-wn, -damp]]
+        n1 = -(-wn * g0 - damp * g1) / (j + 1.0)
+        g0 = n0
+        g1 = n1
+    out = np.empty((4, n_head, 2))
+    for k in range(n_head):
+        for c in range(2):
+            head = acc[0, k, c] / gamma1
+            out[0, k, c] = head
+            out[1, k, c] = acc[n_sets, k, c] / gamma1 - psi1 * head
+            out[2, k, c] = (acc[1, k, c] - acc[2, k, c]) / gamma1 / (2.0 * rel_step * a1)
+            out[3, k, c] = (acc[3, k, c] - acc[4, k, c]) / gamma1 / (2.0 * rel_step * a2)
+    return out
