@@ -30,11 +30,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.special import rgamma
+from scipy.special import digamma, rgamma
 
 from . import kernels
 from ._threads import single_threaded
-from .discretize import foh_matrices_batch, step_response_grid
+from .discretize import foh_matrices_batch, step_response_grid, step_response_sensitivity
 from .errors import DataError, IdentificationError
 from .global_fit import GRID_ZETAS, GlobalFit, at_floor, floor_ratio, global_fit, global_uncertainty, n_bic
 from .metrics import fit_percent, long_run_variance_factor, noise_std_estimate
@@ -214,11 +214,53 @@ def _projected_affine(y: np.ndarray, s: np.ndarray) -> tuple[float, float, np.nd
     return b, c, y - b * s - c
 
 
+def _projected_jacobian(s: np.ndarray, ds: np.ndarray, r: np.ndarray, b: float, free_offset: bool) -> np.ndarray:
+    """Exact Jacobian (rows: parameters) of the projected residual r(p) = y - C beta(p), C = [s(p)] or [s(p), 1].
+
+    Golub-Pereyra: with ds = ds/dp (rows) and the projected gain b, dr/dp_k =
+    -b ds_k + C (C'C)^-1 (b C' ds_k - e_s (ds_k . r)), e_s picking the gain:
+    the Jacobian that finite differences of the projected residual approximate,
+    from the shape's own derivatives.
+    """
+    rd = ds @ r
+    if free_offset:
+        total = float(s.sum())
+        gram = np.array([[float(s @ s), total], [total, float(s.size)]])
+        rhs = b * np.vstack((ds @ s, ds.sum(axis=1)))
+        rhs[0] -= rd
+        try:
+            coef = np.linalg.solve(gram, rhs)
+        except np.linalg.LinAlgError:
+            coef = np.zeros_like(rhs)
+        return coef[0][:, None] * s + (coef[1][:, None] - b * ds)
+    ss = float(s @ s)
+    coef = (b * (ds @ s) - rd) / ss if ss > 0 else np.zeros(ds.shape[0])
+    return coef[:, None] * s - b * ds
+
+
 def model_output(alpha: float, a1: float, a2: float, h: float, u: np.ndarray, n: int | None = None) -> np.ndarray:
     """Unit-gain exact response to the ZOH input u (first n samples)."""
     n = u.size if n is None else n
     s = step_response_grid(alpha, a1, a2, h, n)
     return superpose(s, u[:n])
+
+
+def model_output_sensitivity(alpha: float, a1: float, a2: float, h: float, u: np.ndarray,
+                             n: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``model_output`` and its derivatives in (alpha, ln a1, ln a2): (s, ds of shape (3, n)).
+
+    The step response's forward sensitivities superposed like the response
+    itself (superposition is linear): one march instead of one simulation
+    per finite-difference column. s equals ``model_output`` bit for bit.
+    """
+    n = u.size if n is None else n
+    rows = step_response_sensitivity(alpha, a1, a2, h, n)
+    rows[2] *= a1
+    rows[3] *= a2
+    out = np.empty_like(rows)
+    for k in range(4):
+        out[k] = superpose(rows[k], u[:n])
+    return out[0], out[1:]
 
 
 #: Longest first transient (samples) the starting grid scores: 4096 samples resolve 2 periods of
@@ -251,29 +293,35 @@ def layer2_resonance(t: np.ndarray, u: np.ndarray, y: np.ndarray, alpha: float, 
     """Layer 2: (a1, a2, b, info) with alpha fixed, on the masked samples at the full rate.
 
     Parameters are log(a1), log(a2); b is projected out. The exact simulator
-    runs up to the last masked sample.
+    runs up to the last masked sample; each evaluation also returns the
+    analytic Jacobian (forward sensitivities), which the trust-region solver
+    asks for at the same point, so no finite-difference simulations.
     """
     h = float(t[1] - t[0])
     n = int(np.flatnonzero(mask)[-1]) + 1
     m = mask[:n]
     ym = y[:n][m]
+    last: dict = {}
 
-    def shape(p: np.ndarray) -> np.ndarray:
-        return model_output(alpha, math.exp(p[0]), math.exp(p[1]), h, u, n)[m]
-
-    def residual(p: np.ndarray) -> np.ndarray:
-        return _projected(ym, shape(p))[1]
+    def evaluate(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        key = (float(p[0]), float(p[1]))
+        if last.get("key") != key:
+            s, ds = model_output_sensitivity(alpha, math.exp(p[0]), math.exp(p[1]), h, u, n)
+            s, ds = s[m], ds[1:, m]
+            b, r = _projected(ym, s)
+            last.update(key=key, r=r, jac=_projected_jacobian(s, ds, r, b, False).T, b=b)
+        return last["r"], last["jac"]
 
     start = time.perf_counter()
     lo = [math.log(a1) - 12, math.log(a2) - 12]
     hi = [math.log(a1) + 12, math.log(a2) + 12]
-    sol = least_squares(residual, [math.log(a1), math.log(a2)], bounds=(lo, hi), method="trf",
-                        x_scale=[1.0, 1.0], diff_step=1e-7)
+    sol = least_squares(lambda p: evaluate(p)[0], [math.log(a1), math.log(a2)], jac=lambda p: evaluate(p)[1],
+                        bounds=(lo, hi), method="trf", x_scale=[1.0, 1.0])
     a1f, a2f = math.exp(sol.x[0]), math.exp(sol.x[1])
-    b, _ = _projected(ym, shape(sol.x))
-    info = {"a1": a1f, "a2": a2f, "b": b, "samples": int(m.sum()), "nfev": int(sol.nfev),
+    evaluate(sol.x)
+    info = {"a1": a1f, "a2": a2f, "b": last["b"], "samples": int(m.sum()), "nfev": int(sol.nfev),
             "elapsed_s": time.perf_counter() - start}
-    return a1f, a2f, b, info
+    return a1f, a2f, last["b"], info
 
 
 # --------------------------------------------------------------------------- polish
@@ -281,67 +329,53 @@ def joint_polish(t: np.ndarray, u: np.ndarray, y: np.ndarray, model: CreepModel,
                  free_offset: bool = False) -> tuple[CreepModel, dict]:
     """All four parameters on the whole record (b, and the offset if free, projected out), warm-started.
 
-    Returns the polished model and an info dict with the parameter std.
+    Parameters alpha, ln a1, ln a2; Levenberg-Marquardt with the analytic
+    Jacobian of the projected residual. Returns the polished model and an
+    info dict with the parameter std.
     """
     h = float(t[1] - t[0])
 
-    def shape(p: np.ndarray) -> np.ndarray:
-        return model_output(p[0], math.exp(p[1]), math.exp(p[2]), h, u)
-
-    def residual(s: np.ndarray) -> np.ndarray:
+    def evaluate(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple]:
+        s, ds = model_output_sensitivity(p[0], math.exp(p[1]), math.exp(p[2]), h, u)
         if free_offset:
-            return _projected_affine(y, s)[2]
-        return _projected(y, s)[1]
+            b, c, r = _projected_affine(y, s)
+        else:
+            (b, r), c = _projected(y, s), 0.0
+        return r, _projected_jacobian(s, ds, r, b, free_offset), (s, ds, b, c)
 
     start = time.perf_counter()
     p0 = np.array([model.alpha, math.log(model.a1), math.log(model.a2)])
     lo = np.array([ALPHA_BOUNDS[0], p0[1] - 5, p0[2] - 5])
     hi = np.array([ALPHA_BOUNDS[1], p0[1] + 5, p0[2] + 5])
-    x, s, jac_s, nfev = _gauss_newton(shape, residual, p0, lo, hi)
-    if free_offset:
-        b, c, r = _projected_affine(y, s)
-    else:
-        (b, r), c = _projected(y, s), 0.0
+    x, r, _, (s, ds, b, c), nfev = _levenberg_marquardt(evaluate, p0, lo, hi)
     polished = CreepModel(float(x[0]), math.exp(x[1]), math.exp(x[2]), b)
     info = {"nfev": nfev, "elapsed_s": time.perf_counter() - start, "offset": c,
-            "uncertainty": _covariance_sd(jac_s, s, r, polished, free_offset)}
+            "uncertainty": _covariance_sd(ds, s, r, polished, free_offset)}
     return polished, info
 
 
-#: Forward-difference step of the polish (relative, as scipy's diff_step) and its stopping rules.
-POLISH_DIFF_STEP = 1e-7
+#: Iterations of the Levenberg-Marquardt fits (the polish starts close: a few do).
 POLISH_MAX_ITER = 30
 
 
-def _gauss_newton(shape, residual, p0: np.ndarray, lo: np.ndarray, hi: np.ndarray):
-    """Levenberg-Marquardt on the projected residual, bounded by clipping: (x, s(x), ds/dx, evaluations).
+def _levenberg_marquardt(evaluate, p0: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                         max_iter: int = POLISH_MAX_ITER) -> tuple[np.ndarray, np.ndarray, np.ndarray, object, int]:
+    """Levenberg-Marquardt bounded by clipping: (x, r(x), J(x), payload(x), evaluations).
 
-    ``shape`` maps parameters to the unit-gain output, ``residual`` an output
-    to the projected residual (gain and offset removed).
+    ``evaluate(x)`` returns (residual, Jacobian with one row per parameter, payload); the Jacobian comes
+    with every evaluation (forward sensitivities), so an accepted step needs no
+    further simulation. Stops when a step moves the parameters by less than
+    1e-10 (relative) or lowers the cost by less than 1e-12 (relative), or no
+    damping lowers it.
 
-    Replaces scipy's least_squares in the warm-started polish: three
-    parameters, a start already close, so a few Gauss-Newton steps do;
-    scipy's wrapper cost about as much as the simulations. The shape
-    derivatives of the last Jacobian are returned for the covariance (the
-    final step is below the parameters' own noise, so they need no refresh).
+    Replaces scipy's least_squares: few parameters and a start already close,
+    so a few steps do; scipy's wrapper cost about as much as the simulations.
     """
     x = np.clip(p0, lo, hi)
-    s = shape(x)
-    r = residual(s)
+    r, jac, payload = evaluate(x)
     cost, lam, nfev = float(r @ r), 0.0, 1
-    jac_s = None
-    for _ in range(POLISH_MAX_ITER):
-        steps = POLISH_DIFF_STEP * np.maximum(1.0, np.abs(x))
-        cols_r, cols_s = [], []
-        for k in range(x.size):
-            xk = x.copy()
-            xk[k] += steps[k]
-            sk = shape(xk)
-            cols_s.append((sk - s) / steps[k])
-            cols_r.append((residual(sk) - r) / steps[k])
-            nfev += 1
-        jac, jac_s = np.column_stack(cols_r), np.column_stack(cols_s)
-        a, g = jac.T @ jac, jac.T @ r
+    for _ in range(max_iter):
+        a, g = jac @ jac.T, jac @ r
         d = np.maximum(np.diag(a), 1e-300)
         while True:
             try:
@@ -349,8 +383,7 @@ def _gauss_newton(shape, residual, p0: np.ndarray, lo: np.ndarray, hi: np.ndarra
             except np.linalg.LinAlgError:
                 dx = np.zeros_like(x)
             xn = np.clip(x + dx, lo, hi)
-            sn = shape(xn)
-            rn = residual(sn)
+            rn, jn, pn = evaluate(xn)
             nfev += 1
             cn = float(rn @ rn)
             if cn <= cost or lam > 1e10:
@@ -360,22 +393,23 @@ def _gauss_newton(shape, residual, p0: np.ndarray, lo: np.ndarray, hi: np.ndarra
             break
         moved = float(np.max(np.abs(xn - x) / np.maximum(1.0, np.abs(x))))
         decrease = (cost - cn) / max(cost, 1e-300)
-        x, s, r, cost, lam = xn, sn, rn, cn, lam / 10.0
+        x, r, jac, payload, cost, lam = xn, rn, jn, pn, cn, lam / 10.0
         if moved < 1e-10 or decrease < 1e-12:
             break
-    return x, s, jac_s, nfev
+    return x, r, jac, payload, nfev
 
 
 def _covariance_sd(jac_s: np.ndarray, s: np.ndarray, r: np.ndarray, m: CreepModel,
                    free_offset: bool) -> dict[str, float]:
-    """1-sigma of (alpha, a1, a2, b) from the Gauss-Newton covariance of the full model b s(p) (+ c)."""
-    cols = [m.b * jac_s[:, k] for k in range(jac_s.shape[1])] + [s]
-    if free_offset:
-        cols.append(np.ones_like(s))
-    jac = np.column_stack(cols)
-    sigma2 = float(r @ r) / max(r.size - jac.shape[1], 1)
+    """1-sigma of (alpha, a1, a2, b) from the Gauss-Newton covariance of the full model b s(p) (+ c).
+
+    ``jac_s``: ds/d(alpha, ln a1, ln a2), one row per parameter.
+    """
+    rows = [m.b * jac_s, s[None, :]] + ([np.ones((1, s.size))] if free_offset else [])
+    jac = np.vstack(rows)
+    sigma2 = float(r @ r) / max(r.size - jac.shape[0], 1)
     try:
-        cov = sigma2 * np.linalg.inv(jac.T @ jac)
+        cov = sigma2 * np.linalg.inv(jac @ jac.T)
     except np.linalg.LinAlgError:
         return {k: float("inf") for k in ("alpha", "a1", "a2", "b")}
     sd = np.sqrt(np.abs(np.diag(cov)))

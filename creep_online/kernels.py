@@ -387,6 +387,7 @@ def state_march_sensitivity(n_samples: int, h: float, alpha: float, gamma1: floa
     (alpha, a1, a2). Beyond the head, d v^(m)/d alpha = v^(m) (ln t - psi1) +
     v(t) t^-m dP_m with P_m = prod_{i<m} (alpha - i) and psi1 = digamma(1 + alpha).
     Row 0 is ``state_march``'s S bit for bit (same operations in the same order).
+    Scalars only in the loop (small arrays there kept it twice as slow).
     """
     out = np.zeros((4, n_samples))
     n_head = head.shape[0]
@@ -396,18 +397,26 @@ def state_march_sensitivity(n_samples: int, h: float, alpha: float, gamma1: floa
     for m in range(1, n_terms):
         dpm[m] = dpm[m - 1] * (alpha - (m - 1)) + pm
         pm *= alpha - (m - 1)
-    x0 = 0.0
-    x1 = 0.0
-    dx = np.zeros((3, 2))
-    f = np.zeros((4, 2))           # f_n and its derivatives (alpha, a1, a2)
+    # derivative terms kept: term m is ~n^-m / (m (m + 1)) of term 0, so M terms (m < M) leave < 1e-14 once
+    # n >= 10^(13/M) (S itself keeps all, as state_march does)
+    thresholds = np.empty(n_terms)
+    for m in range(1, n_terms):
+        thresholds[m] = 10.0 ** (13.0 / m)
+    n_deriv = n_terms
+    p00, p01, p10, p11 = phi[0, 0], phi[0, 1], phi[1, 0], phi[1, 1]
+    q00, q01, q10, q11 = dphi[0, 0, 0], dphi[0, 0, 1], dphi[0, 1, 0], dphi[0, 1, 1]
+    r00, r01, r10, r11 = dphi[1, 0, 0], dphi[1, 0, 1], dphi[1, 1, 0], dphi[1, 1, 1]
+    x0 = x1 = 0.0
+    a0 = a1 = 0.0                  # dx/d alpha
+    b0 = b1 = 0.0                  # dx/d a1
+    c0 = c1 = 0.0                  # dx/d a2
     inv_gamma = 1.0 / gamma1
     for n in range(n_samples - 1):
         if n < n_head:
-            f[0, 0] = head[n, 0]
-            f[0, 1] = head[n, 1]
-            for j in range(3):
-                f[1 + j, 0] = dhead[j, n, 0]
-                f[1 + j, 1] = dhead[j, n, 1]
+            f0, f1 = head[n, 0], head[n, 1]
+            fa0, fa1 = dhead[0, n, 0], dhead[0, n, 1]
+            fb0, fb1 = dhead[1, n, 0], dhead[1, n, 1]
+            fc0, fc1 = dhead[2, n, 0], dhead[2, n, 1]
         else:
             t = n * h
             deriv = t**alpha * inv_gamma
@@ -415,48 +424,42 @@ def state_march_sensitivity(n_samples: int, h: float, alpha: float, gamma1: floa
             log_t = np.log(t) - psi1
             f0 = taylor[0, 0] * deriv
             f1 = taylor[0, 1] * deriv
-            fa0 = 0.0
-            fa1 = 0.0
-            g10 = dtaylor[0, 0, 0] * deriv
-            g11 = dtaylor[0, 0, 1] * deriv
-            g20 = dtaylor[1, 0, 0] * deriv
-            g21 = dtaylor[1, 0, 1] * deriv
+            ea0 = ea1 = 0.0
+            fb0 = dtaylor[0, 0, 0] * deriv
+            fb1 = dtaylor[0, 0, 1] * deriv
+            fc0 = dtaylor[1, 0, 0] * deriv
+            fc1 = dtaylor[1, 0, 1] * deriv
             inv_t = 1.0 / t
+            while n_deriv > 1 and n >= thresholds[n_deriv - 1]:
+                n_deriv -= 1
             for m in range(1, n_terms):
                 deriv *= (alpha - (m - 1)) * inv_t
-                plain *= inv_t
                 f0 += taylor[m, 0] * deriv
                 f1 += taylor[m, 1] * deriv
-                fa0 += taylor[m, 0] * (plain * dpm[m])
-                fa1 += taylor[m, 1] * (plain * dpm[m])
-                g10 += dtaylor[0, m, 0] * deriv
-                g11 += dtaylor[0, m, 1] * deriv
-                g20 += dtaylor[1, m, 0] * deriv
-                g21 += dtaylor[1, m, 1] * deriv
-            f[0, 0] = f0
-            f[0, 1] = f1
-            f[1, 0] = f0 * log_t + fa0
-            f[1, 1] = f1 * log_t + fa1
-            f[2, 0] = g10
-            f[2, 1] = g11
-            f[3, 0] = g20
-            f[3, 1] = g21
-        for j in range(3):
-            d0 = phi[0, 0] * dx[j, 0] + phi[0, 1] * dx[j, 1] + f[1 + j, 0]
-            d1 = phi[1, 0] * dx[j, 0] + phi[1, 1] * dx[j, 1] + f[1 + j, 1]
-            if j > 0:
-                d0 += dphi[j - 1, 0, 0] * x0 + dphi[j - 1, 0, 1] * x1
-                d1 += dphi[j - 1, 1, 0] * x0 + dphi[j - 1, 1, 1] * x1
-            dx[j, 0] = d0
-            dx[j, 1] = d1
-            out[1 + j, n + 1] = d0
-        nx0 = phi[0, 0] * x0 + phi[0, 1] * x1 + f[0, 0]
-        nx1 = phi[1, 0] * x0 + phi[1, 1] * x1 + f[0, 1]
-        x0 = nx0
-        x1 = nx1
+                if m < n_deriv:
+                    plain *= inv_t
+                    ea0 += taylor[m, 0] * (plain * dpm[m])
+                    ea1 += taylor[m, 1] * (plain * dpm[m])
+                    fb0 += dtaylor[0, m, 0] * deriv
+                    fb1 += dtaylor[0, m, 1] * deriv
+                    fc0 += dtaylor[1, m, 0] * deriv
+                    fc1 += dtaylor[1, m, 1] * deriv
+            fa0 = f0 * log_t + ea0
+            fa1 = f1 * log_t + ea1
+        na0 = p00 * a0 + p01 * a1 + fa0
+        na1 = p10 * a0 + p11 * a1 + fa1
+        nb0 = p00 * b0 + p01 * b1 + q00 * x0 + q01 * x1 + fb0
+        nb1 = p10 * b0 + p11 * b1 + q10 * x0 + q11 * x1 + fb1
+        nc0 = p00 * c0 + p01 * c1 + r00 * x0 + r01 * x1 + fc0
+        nc1 = p10 * c0 + p11 * c1 + r10 * x0 + r11 * x1 + fc1
+        nx0 = phi[0, 0] * x0 + phi[0, 1] * x1 + f0
+        nx1 = phi[1, 0] * x0 + phi[1, 1] * x1 + f1
+        x0, x1, a0, a1, b0, b1, c0, c1 = nx0, nx1, na0, na1, nb0, nb1, nc0, nc1
         out[0, n + 1] = x0
+        out[1, n + 1] = a0
+        out[2, n + 1] = b0
+        out[3, n + 1] = c0
     return out
-
 
 
 @njit(cache=CACHE)
@@ -468,6 +471,52 @@ def _poles(a1: float, a2: float) -> tuple[complex, complex]:
 
 
 @njit(cache=CACHE)
+def _log_singular_panel(alpha: float, slow: complex, fast: complex, wn: float, damp: float, h: float,
+                        width: float, xl: np.ndarray, wl: np.ndarray) -> tuple[float, float]:
+    """int_0^width s^alpha ln(s) e^{A(h-s)} B ds (the head's alpha derivative on its singular first panel).
+
+    On [0, w0], with |A| w0 <= 1, the series e^{A(h-s)} B = sum_j (-A)^j e^{A h} B
+    s^j / j! is integrated exactly: int_0^w0 s^b ln s ds = w0^(b+1) (ln w0 / (b+1)
+    - 1/(b+1)^2), b = alpha + j (terms below 1e-18 within ~25). Beyond w0 the
+    integrand is smooth on each of the doubling pieces [w0 2^i, w0 2^(i+1)]
+    up to ``width``: Gauss-Legendre (stiff resonances need the pieces; at most
+    ~log2(|A| width) of them).
+    """
+    norm = wn + abs(damp)                        # infinity norm of A = [[0, wn], [-wn, -damp]]
+    w0 = width
+    for _ in range(200):
+        if w0 * norm <= 1.0:
+            break
+        w0 *= 0.5
+    g0, g1 = transition_b(slow, fast, wn, damp, h)   # e^{A h} B, then (-A)^j e^{A h} B / j!
+    log_w = np.log(w0)
+    acc0 = 0.0
+    acc1 = 0.0
+    for j in range(60):
+        beta1 = alpha + j + 1.0
+        c = w0**beta1 * (log_w / beta1 - 1.0 / (beta1 * beta1))
+        acc0 += c * g0
+        acc1 += c * g1
+        if j > 4 and abs(c) * (abs(g0) + abs(g1)) <= 1e-18 * (abs(acc0) + abs(acc1)):
+            break
+        n0 = -(wn * g1) / (j + 1.0)                  # -A g / (j+1)
+        n1 = -(-wn * g0 - damp * g1) / (j + 1.0)
+        g0 = n0
+        g1 = n1
+    lo = w0
+    while lo < width * (1.0 - 1e-12):
+        hi = min(2.0 * lo, width)
+        for i in range(xl.shape[0]):
+            s = lo + (xl[i] + 1.0) * (hi - lo) / 2.0
+            v = wl[i] * (hi - lo) / 2.0 * s**alpha * np.log(s)
+            e0, e1 = transition_b(slow, fast, wn, damp, h - s)
+            acc0 += v * e0
+            acc1 += v * e1
+        lo = hi
+    return acc0, acc1
+
+
+@njit(cache=CACHE)
 def head_sensitivity(alpha: float, a1: float, a2: float, h: float, n_head: int, xl: np.ndarray, wl: np.ndarray,
                      xj: np.ndarray, wj: np.ndarray, panels: int, gamma1: float, psi1: float,
                      rel_step: float) -> np.ndarray:
@@ -475,10 +524,8 @@ def head_sensitivity(alpha: float, a1: float, a2: float, h: float, n_head: int, 
 
     The same panels and nodes as ``head_quadrature`` (whose result row 0
     reproduces). alpha: the integrals of the derivative, with ln(k h + s) -
-    psi1 in the integrand; on interval 0's first panel (width w), where ln s is
-    singular, the series e^{A(h-s)} B = sum_j (-A)^j e^{A h} B s^j / j! is
-    integrated exactly (int_0^w s^b ln s ds = w^(b+1) (ln w / (b+1) - 1/(b+1)^2);
-    |A| w <= ~4, so the terms fall below 1e-18 within ~40). a1, a2: central
+    psi1 in the integrand (``_log_singular_panel`` on interval 0's first panel,
+    where ln s is singular). a1, a2: central
     differences with relative step ``rel_step``, the powers (k h + s)^alpha
     shared by the four perturbed heads.
     """
@@ -516,21 +563,9 @@ def head_sensitivity(alpha: float, a1: float, a2: float, h: float, n_head: int, 
             e0, e1 = transition_b(poles[j, 0], poles[j, 1], 1.0 / np.sqrt(sets[j, 1]), sets[j, 0] / sets[j, 1], h - s)
             acc[j, 0, 0] += wj[i] * scale * e0
             acc[j, 0, 1] += wj[i] * scale * e1
-    wn = 1.0 / np.sqrt(a2)
-    damp = a1 / a2
-    g0, g1 = transition_b(poles[0, 0], poles[0, 1], wn, damp, h)   # e^{A h} B, then (-A)^j e^{A h} B / j!
-    log_w = np.log(width)
-    for j in range(80):
-        beta1 = alpha + j + 1.0
-        c = width**beta1 * (log_w / beta1 - 1.0 / (beta1 * beta1))
-        acc[n_sets, 0, 0] += c * g0
-        acc[n_sets, 0, 1] += c * g1
-        if j > 8 and abs(c) * (abs(g0) + abs(g1)) < 1e-18 * (abs(acc[n_sets, 0, 0]) + abs(acc[n_sets, 0, 1])):
-            break
-        n0 = -(wn * g1) / (j + 1.0)                  # -A g / (j+1), A = [[0, wn], [-wn, -damp]]
-        n1 = -(-wn * g0 - damp * g1) / (j + 1.0)
-        g0 = n0
-        g1 = n1
+    a0, a1_ = _log_singular_panel(alpha, poles[0, 0], poles[0, 1], 1.0 / np.sqrt(a2), a1 / a2, h, width, xl, wl)
+    acc[n_sets, 0, 0] += a0
+    acc[n_sets, 0, 1] += a1_
     out = np.empty((4, n_head, 2))
     for k in range(n_head):
         for c in range(2):

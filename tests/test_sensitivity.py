@@ -11,6 +11,7 @@ import math
 import numpy as np
 import pytest
 
+from creep_online.identification import creep_asymptote
 from creep_online.discretize import (head_sensitivity, head_terms, step_response_grid, step_response_sensitivity,
                                      taylor_moments, taylor_moments_sensitivity)
 
@@ -86,3 +87,19 @@ def test_parts_match_finite_differences(alpha, fn, zeta, h, n):
     for k in range(3):
         err = _best_error(dhead[k], lambda v: head_terms(v[0], v[1], v[2], h, 32), q, k)
         assert err < 1e-7, (k, err)
+
+
+def test_a_fit_step_into_a_degenerate_stiff_resonance_gives_finite_sensitivities():
+    """a2 ~ 1.7e-15 at h = 1 ms (a Levenberg-Marquardt trial step of a real fit): the fast pole ~1e13 1/s is
+    beyond the head's 64 quadrature panels, so neither S nor its finite differences in a1, a2 are accurate
+    there. The sensitivities must still be finite (the trial is then judged on its cost); the alpha derivative
+    matches finite differences, and late (t >> a1) the a1 derivative that of the creep asymptote."""
+    wn = 2 * math.pi * 3.9e6
+    alpha, a1, a2, h, n = 0.35, 2 * 1.6e5 / wn, 1 / wn**2, 1e-3, 600
+    out = step_response_sensitivity(alpha, a1, a2, h, n)
+    assert np.all(np.isfinite(out))
+    p = np.array([alpha, a1, a2])
+    assert _best_error(out[1], lambda q: step_response_grid(q[0], q[1], q[2], h, n), p, 0) < 1e-6
+    tau = np.arange(300, n) * h
+    late = _central(lambda q: creep_asymptote(tau, q[0], q[1], q[2]), p, 1, 1e-5)
+    assert np.max(np.abs(out[2, 300:] - late)) < 1e-2 * np.max(np.abs(late))
