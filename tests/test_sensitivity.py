@@ -103,3 +103,36 @@ def test_a_fit_step_into_a_degenerate_stiff_resonance_gives_finite_sensitivities
     tau = np.arange(300, n) * h
     late = _central(lambda q: creep_asymptote(tau, q[0], q[1], q[2]), p, 1, 1e-5)
     assert np.max(np.abs(out[2, 300:] - late)) < 1e-2 * np.max(np.abs(late))
+
+
+@pytest.mark.parametrize("changes", [6, 400])   # sparse superposition and the FFT path
+def test_model_output_and_projected_residual_jacobians_match_finite_differences(changes):
+    """The identification's Jacobians: d model_output / d(alpha, ln a1, ln a2), and that of the residual with
+    the gain (and the offset) projected out, against central differences of the same functions."""
+    from creep_online.identification import (_projected, _projected_affine, _projected_jacobian, model_output,
+                                             model_output_sensitivity)
+    rng = np.random.default_rng(changes)
+    h, n = 1e-3, 3000
+    u = np.repeat(rng.uniform(-1, 1, changes), n // changes + 1)[:n]
+    p = np.array([0.15, math.log(2 * 0.2 / (2 * math.pi * 40)), math.log(1 / (2 * math.pi * 40) ** 2)])
+    y = 0.8 * model_output(0.17, math.exp(p[1]) * 1.1, math.exp(p[2]) * 0.9, h, u) + 0.3
+    y += 1e-3 * rng.standard_normal(n)
+
+    def shape(q):
+        return model_output(q[0], math.exp(q[1]), math.exp(q[2]), h, u)
+
+    s, ds = model_output_sensitivity(p[0], math.exp(p[1]), math.exp(p[2]), h, u)
+    assert np.array_equal(s, shape(p))
+    for k in range(3):
+        assert _best_error(ds[k], shape, p, k) < 1e-6, k
+    for free_offset in (False, True):
+        def residual(q):
+            sq = shape(q)
+            return _projected_affine(y, sq)[2] if free_offset else _projected(y, sq)[1]
+        if free_offset:
+            b, _, r = _projected_affine(y, s)
+        else:
+            b, r = _projected(y, s)
+        jac = _projected_jacobian(s, ds, r, b, free_offset)
+        for k in range(3):
+            assert _best_error(jac[k], residual, p, k) < 1e-6, (free_offset, k)
