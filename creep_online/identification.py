@@ -331,7 +331,8 @@ def joint_polish(t: np.ndarray, u: np.ndarray, y: np.ndarray, model: CreepModel,
 
     Parameters alpha, ln a1, ln a2; Levenberg-Marquardt with the analytic
     Jacobian of the projected residual. Returns the polished model and an
-    info dict with the parameter std.
+    info dict with the parameter std and ``shape``, the polished model's
+    unit-gain output (its last simulation).
     """
     h = float(t[1] - t[0])
 
@@ -350,7 +351,7 @@ def joint_polish(t: np.ndarray, u: np.ndarray, y: np.ndarray, model: CreepModel,
     x, r, _, (s, ds, b, c), nfev = _levenberg_marquardt(evaluate, p0, lo, hi)
     polished = CreepModel(float(x[0]), math.exp(x[1]), math.exp(x[2]), b)
     info = {"nfev": nfev, "elapsed_s": time.perf_counter() - start, "offset": c,
-            "uncertainty": _covariance_sd(ds, s, r, polished, free_offset)}
+            "uncertainty": _covariance_sd(ds, s, r, polished, free_offset), "shape": s}
     return polished, info
 
 
@@ -495,29 +496,33 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
     if polish:
         model, info = joint_polish(t, u, y, model, free_offset=free_offset or not sched.piecewise)
         uncertainty = info.pop("uncertainty")
+        y_hat = model.b * info.pop("shape")        # the polish's last simulation is the final model's
         offset += info["offset"]
         y = y - info["offset"]
         stages["polish"] = {**info, **model.params()}
-    y_hat = model.b * model_output(model.alpha, model.a1, model.a2, h, u)
-    fast_residual = y - y_hat
-    if polish and not at_floor(fast_residual):
-        found = _escalate(rec.u, y_raw, h, model, fast_residual, user_offset, stages)
+    else:
+        y_hat = model.b * model_output(model.alpha, model.a1, model.a2, h, u)
+    residual = y - y_hat
+    final_noise = noise_std_estimate(residual)
+    if polish and not at_floor(residual, final_noise):
+        found = _escalate(rec.u, y_raw, h, model, residual, user_offset, stages)
         if found is not None:
             model, uncertainty = found.model, global_uncertainty(found)
             offset, u0 = (user_offset or 0.0) + found.offset, float(rec.u[0]) if found.problem.init else 0.0
             u, y = rec.u - u0, y_raw - offset
             y_hat = found.y_hat - found.offset
+            residual = y - y_hat
+            final_noise = noise_std_estimate(residual)
             if found.problem.init:
                 warnings.append("the record starts in operation (the plant moves at the first sample): its initial "
                                 f"state was estimated with {found.problem.linear_count - 1 - int(found.problem.offset)} "
                                 "free-response terms (past steps, resonance modes)")
-    final_noise = noise_std_estimate(y - y_hat)
-    inflate = math.sqrt(long_run_variance_factor(y - y_hat))
+    inflate = math.sqrt(long_run_variance_factor(residual))
     uncertainty = {k: sd * inflate for k, sd in uncertainty.items()}
     if inflate > 1.0:
         stages["uncertainty_inflation"] = {"factor": inflate}
-    ratio = floor_ratio(y - y_hat, final_noise)
-    timing = _timing(model, h, u, y - y_hat, sched, final_noise) if polish else None
+    ratio = floor_ratio(residual, final_noise)
+    timing = _timing(model, h, u, residual, sched, final_noise) if polish else None
     if timing is not None:
         stages["timing"] = {"excess_sigmas": timing.excess_sigmas, "flagged": timing.flagged,
                             "median_shift_samples": float(np.nanmedian(timing.shift))}
