@@ -363,11 +363,14 @@ def _levenberg_marquardt(evaluate, p0: np.ndarray, lo: np.ndarray, hi: np.ndarra
                          max_iter: int = POLISH_MAX_ITER) -> tuple[np.ndarray, np.ndarray, np.ndarray, object, int]:
     """Levenberg-Marquardt bounded by clipping: (x, r(x), J(x), payload(x), evaluations).
 
-    ``evaluate(x)`` returns (residual, Jacobian with one row per parameter, payload); the Jacobian comes
-    with every evaluation (forward sensitivities), so an accepted step needs no
-    further simulation. Stops when a step moves the parameters by less than
-    1e-10 (relative) or lowers the cost by less than 1e-12 (relative), or no
-    damping lowers it.
+    ``evaluate(x)`` returns (residual, Jacobian with one row per parameter,
+    payload); the Jacobian comes with every evaluation (forward
+    sensitivities), so an accepted step needs no further simulation. Stops
+    when the Gauss-Newton step from x would move the parameters by less than
+    ``CONVERGED_SIGMAS`` of their standard deviations (then x is the minimum
+    for every purpose and the step is not simulated), when a step moves them
+    by less than 1e-10 (relative) or lowers the cost by less than 1e-12
+    (relative), or when no damping lowers it.
 
     Replaces scipy's least_squares: few parameters and a start already close,
     so a few steps do; scipy's wrapper cost about as much as the simulations.
@@ -377,6 +380,8 @@ def _levenberg_marquardt(evaluate, p0: np.ndarray, lo: np.ndarray, hi: np.ndarra
     cost, lam, nfev = float(r @ r), 0.0, 1
     for _ in range(max_iter):
         a, g = jac @ jac.T, jac @ r
+        if _converged(a, g, cost, r.size):
+            break
         d = np.maximum(np.diag(a), 1e-300)
         while True:
             try:
@@ -398,6 +403,24 @@ def _levenberg_marquardt(evaluate, p0: np.ndarray, lo: np.ndarray, hi: np.ndarra
         if moved < 1e-10 or decrease < 1e-12:
             break
     return x, r, jac, payload, nfev
+
+
+#: The polish stops when its next Gauss-Newton step is below this many standard deviations (Mahalanobis).
+CONVERGED_SIGMAS = 1e-3
+
+
+def _converged(a: np.ndarray, g: np.ndarray, cost: float, m: int) -> bool:
+    """Whether the Gauss-Newton step -a^-1 g is below CONVERGED_SIGMAS standard deviations.
+
+    The step's squared length in the covariance's metric sigma^2 a^-1 is
+    g' a^-1 g / sigma^2, with sigma^2 = cost / (m - p) the residual variance.
+    """
+    try:
+        step2 = float(g @ np.linalg.solve(a, g))
+    except np.linalg.LinAlgError:
+        return False
+    sigma2 = cost / max(m - g.size, 1)
+    return math.isfinite(step2) and step2 <= CONVERGED_SIGMAS**2 * sigma2
 
 
 def _covariance_sd(jac_s: np.ndarray, s: np.ndarray, r: np.ndarray, m: CreepModel,
