@@ -126,6 +126,22 @@ def creep_asymptote(tau: np.ndarray, alpha: float, a1: float, a2: float) -> np.n
     return out
 
 
+def creep_asymptote_dalpha(tau: np.ndarray, alpha: float, a1: float, a2: float,
+                           log_tau: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(``creep_asymptote``, its derivative in alpha): d/d alpha of tau^(alpha-k) / Gamma(1+alpha-k) is the
+    term times (ln tau - digamma(1+alpha-k)). ``log_tau``: ln tau, when the caller has it."""
+    coef = (1.0, -a1, a1 * a1 - a2, -a1**3 + 2.0 * a1 * a2)
+    log_tau = np.log(tau) if log_tau is None else log_tau
+    out = np.zeros_like(tau)
+    d_out = np.zeros_like(tau)
+    for k, c in enumerate(coef):
+        if c != 0.0:
+            term = c * tau ** (alpha - k) * rgamma(1.0 + alpha - k)
+            out += term
+            d_out += term * (log_tau - digamma(1.0 + alpha - k))
+    return out, d_out
+
+
 def _coarse_bins(mask: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
     """Group the masked samples into consecutive runs of ``width``: (start, stop) indices."""
     starts, stops = [], []
@@ -144,7 +160,8 @@ def layer1_alpha(t: np.ndarray, u: np.ndarray, y: np.ndarray, t_c: float, *, a1:
 
     Samples are averaged over bins of ``step`` seconds (default: about
     LAYER1_POINTS bins), the model is evaluated at the bin centres, the gain is
-    projected out and alpha found by bounded TRF.
+    projected out and alpha found by Levenberg-Marquardt with the analytic
+    derivative (one parameter: scipy's TRF wrapper cost more than the model).
     """
     sched = schedule or input_schedule(t, u)
     h = float(t[1] - t[0])
@@ -167,23 +184,26 @@ def layer1_alpha(t: np.ndarray, u: np.ndarray, y: np.ndarray, t_c: float, *, a1:
     tau_live = np.where(live, tau, 1.0)
     sizes = np.where(live, sched.size[None, :], 0.0)
 
-    def basis(alpha: float) -> np.ndarray:
-        return np.sum(sizes * creep_asymptote(tau_live, alpha, a1, a2), axis=1)
+    log_tau = np.log(tau_live)
 
-    def residual(p: np.ndarray) -> np.ndarray:
-        phi = basis(p[0])
-        g = phi @ y_bin / (phi @ phi)
-        return y_bin - g * phi
+    def evaluate(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        value, d_value = creep_asymptote_dalpha(tau_live, p[0], a1, a2, log_tau)
+        phi, d_phi = np.sum(sizes * value, axis=1), np.sum(sizes * d_value, axis=1)
+        gain, r = _projected(y_bin, phi)
+        return r, _projected_jacobian(phi, d_phi[None, :], r, gain, False), gain
 
     start = time.perf_counter()
-    sol = least_squares(residual, [min(max(alpha0, ALPHA_BOUNDS[0] * 2), 0.9)], bounds=ALPHA_BOUNDS,
-                        method="trf", x_scale=[0.05], diff_step=1e-6)
-    alpha = float(sol.x[0])
-    phi = basis(alpha)
-    gain = float(phi @ y_bin / (phi @ phi))
+    p0 = np.array([min(max(alpha0, ALPHA_BOUNDS[0] * 2), 0.9)])
+    x, _, _, gain, nfev = _levenberg_marquardt(evaluate, p0, np.array([ALPHA_BOUNDS[0]]),
+                                               np.array([ALPHA_BOUNDS[1]]), LAYER1_MAX_ITER)
+    alpha = float(x[0])
     info = {"alpha": alpha, "gain": gain, "points": int(b0.size), "step_s": width * h,
-            "nfev": int(sol.nfev), "elapsed_s": time.perf_counter() - start}
+            "nfev": nfev, "elapsed_s": time.perf_counter() - start}
     return alpha, gain, info
+
+
+#: Levenberg-Marquardt iterations of layer 1 (one parameter, an analytic derivative).
+LAYER1_MAX_ITER = 50
 
 
 def retune_alpha(alpha0: float, y: np.ndarray, y_hat: np.ndarray, i_c: int, i_f: int, half: int) -> float:

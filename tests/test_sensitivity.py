@@ -136,3 +136,13 @@ def test_model_output_and_projected_residual_jacobians_match_finite_differences(
         jac = _projected_jacobian(s, ds, r, b, free_offset)
         for k in range(3):
             assert _best_error(jac[k], residual, p, k) < 1e-6, (free_offset, k)
+
+
+@pytest.mark.parametrize("alpha, a1, a2", [(0.21, 0.0, 0.0), (0.05, 0.02, 4e-4), (0.6, 1e-3, 2e-6), (1e-3, 0.05, 1e-3)])
+def test_layer1_creep_asymptote_derivative_matches_finite_differences(alpha, a1, a2):
+    from creep_online.identification import creep_asymptote_dalpha
+    tau = np.geomspace(0.5, 50.0, 400)
+    value, d_value = creep_asymptote_dalpha(tau, alpha, a1, a2)
+    np.testing.assert_array_equal(value, creep_asymptote(tau, alpha, a1, a2))
+    p = np.array([alpha, a1, a2])
+    assert _best_error(d_value, lambda q: creep_asymptote(tau, q[0], q[1], q[2]), p, 0) < 1e-8
