@@ -190,11 +190,12 @@ def layer1_alpha(t: np.ndarray, u: np.ndarray, y: np.ndarray, t_c: float, *, a1:
         value, d_value = creep_asymptote_dalpha(tau_live, p[0], a1, a2, log_tau)
         phi, d_phi = np.sum(sizes * value, axis=1), np.sum(sizes * d_value, axis=1)
         gain, r = _projected(y_bin, phi)
-        return r, _projected_jacobian(phi, d_phi[None, :], r, gain, False), gain
+        jac = _projected_jacobian(phi, d_phi[None, :], r, gain, False)
+        return r, jac @ jac.T, jac @ r, gain
 
     start = time.perf_counter()
     p0 = np.array([min(max(alpha0, ALPHA_BOUNDS[0] * 2), 0.9)])
-    x, _, _, gain, nfev = _levenberg_marquardt(evaluate, p0, np.array([ALPHA_BOUNDS[0]]),
+    x, _, gain, nfev = _levenberg_marquardt(evaluate, p0, np.array([ALPHA_BOUNDS[0]]),
                                                np.array([ALPHA_BOUNDS[1]]), LAYER1_MAX_ITER)
     alpha = float(x[0])
     info = {"alpha": alpha, "gain": gain, "points": int(b0.size), "step_s": width * h,
@@ -356,19 +357,20 @@ def joint_polish(t: np.ndarray, u: np.ndarray, y: np.ndarray, model: CreepModel,
     """
     h = float(t[1] - t[0])
 
-    def evaluate(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple]:
+    def evaluate(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
         s, ds = model_output_sensitivity(p[0], math.exp(p[1]), math.exp(p[2]), h, u)
         if free_offset:
             b, c, r = _projected_affine(y, s)
         else:
             (b, r), c = _projected(y, s), 0.0
-        return r, _projected_jacobian(s, ds, r, b, free_offset), (s, ds, b, c)
+        a, g = kernels.projected_normal_equations(s, ds, r, b, free_offset)
+        return r, a, g, (s, ds, b, c)
 
     start = time.perf_counter()
     p0 = np.array([model.alpha, math.log(model.a1), math.log(model.a2)])
     lo = np.array([ALPHA_BOUNDS[0], p0[1] - 5, p0[2] - 5])
     hi = np.array([ALPHA_BOUNDS[1], p0[1] + 5, p0[2] + 5])
-    x, r, _, (s, ds, b, c), nfev = _levenberg_marquardt(evaluate, p0, lo, hi)
+    x, r, (s, ds, b, c), nfev = _levenberg_marquardt(evaluate, p0, lo, hi)
     polished = CreepModel(float(x[0]), math.exp(x[1]), math.exp(x[2]), b)
     info = {"nfev": nfev, "elapsed_s": time.perf_counter() - start, "offset": c,
             "uncertainty": _covariance_sd(ds, s, r, polished, free_offset), "shape": s}
@@ -380,26 +382,25 @@ POLISH_MAX_ITER = 30
 
 
 def _levenberg_marquardt(evaluate, p0: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                         max_iter: int = POLISH_MAX_ITER) -> tuple[np.ndarray, np.ndarray, np.ndarray, object, int]:
-    """Levenberg-Marquardt bounded by clipping: (x, r(x), J(x), payload(x), evaluations).
+                         max_iter: int = POLISH_MAX_ITER) -> tuple[np.ndarray, np.ndarray, object, int]:
+    """Levenberg-Marquardt bounded by clipping: (x, r(x), payload(x), evaluations).
 
-    ``evaluate(x)`` returns (residual, Jacobian with one row per parameter,
-    payload); the Jacobian comes with every evaluation (forward
-    sensitivities), so an accepted step needs no further simulation. Stops
-    when the Gauss-Newton step from x would move the parameters by less than
-    ``CONVERGED_SIGMAS`` of their standard deviations (then x is the minimum
-    for every purpose and the step is not simulated), when a step moves them
-    by less than 1e-10 (relative) or lowers the cost by less than 1e-12
-    (relative), or when no damping lowers it.
+    ``evaluate(x)`` returns (residual r, J J', J r, payload) with J the
+    Jacobian (one row per parameter); the Jacobian comes with every
+    evaluation (forward sensitivities), so an accepted step needs no further
+    simulation. Stops when the Gauss-Newton step from x would move the
+    parameters by less than ``CONVERGED_SIGMAS`` of their standard deviations
+    (then x is the minimum for every purpose and the step is not simulated),
+    when a step moves them by less than 1e-10 (relative) or lowers the cost
+    by less than 1e-12 (relative), or when no damping lowers it.
 
     Replaces scipy's least_squares: few parameters and a start already close,
     so a few steps do; scipy's wrapper cost about as much as the simulations.
     """
     x = np.clip(p0, lo, hi)
-    r, jac, payload = evaluate(x)
+    r, a, g, payload = evaluate(x)
     cost, lam, nfev = float(r @ r), 0.0, 1
     for _ in range(max_iter):
-        a, g = jac @ jac.T, jac @ r
         if _converged(a, g, cost, r.size):
             break
         d = np.maximum(np.diag(a), 1e-300)
@@ -409,7 +410,7 @@ def _levenberg_marquardt(evaluate, p0: np.ndarray, lo: np.ndarray, hi: np.ndarra
             except np.linalg.LinAlgError:
                 dx = np.zeros_like(x)
             xn = np.clip(x + dx, lo, hi)
-            rn, jn, pn = evaluate(xn)
+            rn, an, gn, pn = evaluate(xn)
             nfev += 1
             cn = float(rn @ rn)
             if cn <= cost or lam > 1e10:
@@ -419,10 +420,10 @@ def _levenberg_marquardt(evaluate, p0: np.ndarray, lo: np.ndarray, hi: np.ndarra
             break
         moved = float(np.max(np.abs(xn - x) / np.maximum(1.0, np.abs(x))))
         decrease = (cost - cn) / max(cost, 1e-300)
-        x, r, jac, payload, cost, lam = xn, rn, jn, pn, cn, lam / 10.0
+        x, r, a, g, payload, cost, lam = xn, rn, an, gn, pn, cn, lam / 10.0
         if moved < 1e-10 or decrease < 1e-12:
             break
-    return x, r, jac, payload, nfev
+    return x, r, payload, nfev
 
 
 #: The polish stops when its next Gauss-Newton step is below this many standard deviations (Mahalanobis).

@@ -575,3 +575,57 @@ def head_sensitivity(alpha: float, a1: float, a2: float, h: float, n_head: int, 
             out[2, k, c] = (acc[1, k, c] - acc[2, k, c]) / gamma1 / (2.0 * rel_step * a1)
             out[3, k, c] = (acc[3, k, c] - acc[4, k, c]) / gamma1 / (2.0 * rel_step * a2)
     return out
+
+
+@njit(cache=CACHE)
+def projected_normal_equations(s: np.ndarray, ds: np.ndarray, r: np.ndarray, b: float,
+                               free_offset: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(J J', J r) of the projected residual's Jacobian J without forming it (two passes, no temporaries).
+
+    J's row k is c0_k s + c1_k - b ds_k (``identification._projected_jacobian``):
+    the first pass gathers s.s, sum s, ds_k.s, sum ds_k and ds_k.r, which give
+    (c0, c1) from the 2x2 (or 1x1 without the offset) projection; the second
+    accumulates J J' and J r.
+    """
+    k_rows, n = ds.shape
+    ss = 0.0
+    st = 0.0
+    sd = np.zeros(k_rows)
+    dt = np.zeros(k_rows)
+    rd = np.zeros(k_rows)
+    for i in range(n):
+        si = s[i]
+        ss += si * si
+        st += si
+        for k in range(k_rows):
+            d = ds[k, i]
+            sd[k] += d * si
+            dt[k] += d
+            rd[k] += d * r[i]
+    c0 = np.zeros(k_rows)
+    c1 = np.zeros(k_rows)
+    if free_offset:
+        det = ss * n - st * st
+        if det != 0.0:
+            for k in range(k_rows):
+                x0 = b * sd[k] - rd[k]
+                x1 = b * dt[k]
+                c0[k] = (n * x0 - st * x1) / det
+                c1[k] = (ss * x1 - st * x0) / det
+    elif ss > 0.0:
+        for k in range(k_rows):
+            c0[k] = (b * sd[k] - rd[k]) / ss
+    a = np.zeros((k_rows, k_rows))
+    g = np.zeros(k_rows)
+    row = np.empty(k_rows)
+    for i in range(n):
+        for k in range(k_rows):
+            row[k] = c0[k] * s[i] + c1[k] - b * ds[k, i]
+        for k in range(k_rows):
+            g[k] += row[k] * r[i]
+            for m in range(k, k_rows):
+                a[k, m] += row[k] * row[m]
+    for k in range(k_rows):
+        for m in range(k):
+            a[k, m] = a[m, k]
+    return a, g

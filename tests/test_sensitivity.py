@@ -11,6 +11,7 @@ import math
 import numpy as np
 import pytest
 
+from creep_online import kernels
 from creep_online.identification import creep_asymptote
 from creep_online.discretize import (head_sensitivity, head_terms, step_response_grid, step_response_sensitivity,
                                      taylor_moments, taylor_moments_sensitivity)
@@ -136,6 +137,10 @@ def test_model_output_and_projected_residual_jacobians_match_finite_differences(
         jac = _projected_jacobian(s, ds, r, b, free_offset)
         for k in range(3):
             assert _best_error(jac[k], residual, p, k) < 1e-6, (free_offset, k)
+        # the fused kernel the polish uses: the same normal equations without forming J
+        a, g = kernels.projected_normal_equations(s, ds, r, b, free_offset)
+        np.testing.assert_allclose(a, jac @ jac.T, rtol=1e-10, atol=0)
+        np.testing.assert_allclose(g, jac @ r, rtol=0, atol=1e-9 * np.max(np.abs(jac @ r)) + 1e-12 * np.sqrt(np.diag(a) * (r @ r)).max())
 
 
 @pytest.mark.parametrize("alpha, a1, a2", [(0.21, 0.0, 0.0), (0.05, 0.02, 4e-4), (0.6, 1e-3, 2e-6), (1e-3, 0.05, 1e-3)])
