@@ -41,7 +41,7 @@ from .metrics import fit_percent, long_run_variance_factor, noise_std_estimate
 from .model import IDENTIFY_ALPHA_BOUNDS as ALPHA_BOUNDS  # alpha search interval of layer 1 and the polish
 from .model import CreepModel
 from .record import SAFE_AMPLITUDE, Record, check_time_and_output
-from .simulate import fractional_integral, input_changes, superpose, uniform_step
+from .simulate import fractional_integral, input_changes, superpose, superpose_rows, uniform_step
 from .timing import TimingCheck, check_timing
 
 #: At most this many input changes count as a piecewise-constant (step) input.
@@ -267,21 +267,20 @@ def model_output(alpha: float, a1: float, a2: float, h: float, u: np.ndarray, n:
 
 
 def model_output_sensitivity(alpha: float, a1: float, a2: float, h: float, u: np.ndarray,
-                             n: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """``model_output`` and its derivatives in (alpha, ln a1, ln a2): (s, ds of shape (3, n)).
+                             n: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``model_output`` and its derivatives in (alpha, ln a1, ln a2): (s, ds of shape (3, n), step).
 
     The step response's forward sensitivities superposed like the response
     itself (superposition is linear): one march instead of one simulation
-    per finite-difference column. s equals ``model_output`` bit for bit.
+    per finite-difference column. s equals ``model_output`` bit for bit;
+    ``step`` is the unit-step response at n + 1 instants (for the timing check).
     """
     n = u.size if n is None else n
-    rows = step_response_sensitivity(alpha, a1, a2, h, n)
-    rows[2] *= a1
-    rows[3] *= a2
-    out = np.empty_like(rows)
-    for k in range(4):
-        out[k] = superpose(rows[k], u[:n])
-    return out[0], out[1:]
+    rows = step_response_sensitivity(alpha, a1, a2, h, n + 1)
+    out = superpose_rows(rows, u[:n])
+    out[2] *= a1
+    out[3] *= a2
+    return out[0], out[1:], rows[0]
 
 
 #: Longest first transient (samples) the starting grid scores: 4096 samples resolve 2 periods of
@@ -327,7 +326,7 @@ def layer2_resonance(t: np.ndarray, u: np.ndarray, y: np.ndarray, alpha: float, 
     def evaluate(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         key = (float(p[0]), float(p[1]))
         if last.get("key") != key:
-            s, ds = model_output_sensitivity(alpha, math.exp(p[0]), math.exp(p[1]), h, u, n)
+            s, ds, _ = model_output_sensitivity(alpha, math.exp(p[0]), math.exp(p[1]), h, u, n)
             s, ds = s[m], ds[1:, m]
             b, r = _projected(ym, s)
             last.update(key=key, r=r, jac=_projected_jacobian(s, ds, r, b, False).T, b=b)
@@ -352,28 +351,29 @@ def joint_polish(t: np.ndarray, u: np.ndarray, y: np.ndarray, model: CreepModel,
 
     Parameters alpha, ln a1, ln a2; Levenberg-Marquardt with the analytic
     Jacobian of the projected residual. Returns the polished model and an
-    info dict with the parameter std and ``shape``, the polished model's
-    unit-gain output (its last simulation).
+    info dict with the parameter std, ``shape``, the polished model's
+    unit-gain output (its last simulation), and ``step``, its unit-step
+    response at n + 1 instants.
     """
     h = float(t[1] - t[0])
 
     def evaluate(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
-        s, ds = model_output_sensitivity(p[0], math.exp(p[1]), math.exp(p[2]), h, u)
+        s, ds, step = model_output_sensitivity(p[0], math.exp(p[1]), math.exp(p[2]), h, u)
         if free_offset:
             b, c, r = _projected_affine(y, s)
         else:
             (b, r), c = _projected(y, s), 0.0
         a, g = kernels.projected_normal_equations(s, ds, r, b, free_offset)
-        return r, a, g, (s, ds, b, c)
+        return r, a, g, (s, ds, b, c, step)
 
     start = time.perf_counter()
     p0 = np.array([model.alpha, math.log(model.a1), math.log(model.a2)])
     lo = np.array([ALPHA_BOUNDS[0], p0[1] - 5, p0[2] - 5])
     hi = np.array([ALPHA_BOUNDS[1], p0[1] + 5, p0[2] + 5])
-    x, r, (s, ds, b, c), nfev = _levenberg_marquardt(evaluate, p0, lo, hi)
+    x, r, (s, ds, b, c, step), nfev = _levenberg_marquardt(evaluate, p0, lo, hi)
     polished = CreepModel(float(x[0]), math.exp(x[1]), math.exp(x[2]), b)
     info = {"nfev": nfev, "elapsed_s": time.perf_counter() - start, "offset": c,
-            "uncertainty": _covariance_sd(ds, s, r, polished, free_offset), "shape": s}
+            "uncertainty": _covariance_sd(ds, s, r, polished, free_offset), "shape": s, "step": step}
     return polished, info
 
 
@@ -541,12 +541,14 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
         model, info = joint_polish(t, u, y, model, free_offset=free_offset or not sched.piecewise)
         uncertainty = info.pop("uncertainty")
         y_hat = model.b * info.pop("shape")        # the polish's last simulation is the final model's
+        step = model.b * info.pop("step")
         offset += info["offset"]
         y = y - info["offset"]
         stages["polish"] = {**info, **model.params()}
     else:
         y_hat = model.b * model_output(model.alpha, model.a1, model.a2, h, u)
     residual = y - y_hat
+    found = None
     final_noise = noise_std_estimate(residual)
     if polish and not at_floor(residual, final_noise):
         found = _escalate(rec.u, y_raw, h, model, residual, user_offset, stages)
@@ -566,7 +568,10 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
     if inflate > 1.0:
         stages["uncertainty_inflation"] = {"factor": inflate}
     ratio = floor_ratio(residual, final_noise)
-    timing = _timing(model, h, u, residual, sched, final_noise) if polish else None
+    if polish and found is None:               # the polished model is final: its step response is at hand
+        timing = check_timing(step, *input_changes(u), residual, final_noise) if sched.piecewise else None
+    else:
+        timing = _timing(model, h, u, residual, sched, final_noise) if polish else None
     if timing is not None:
         stages["timing"] = {"excess_sigmas": timing.excess_sigmas, "flagged": timing.flagged,
                             "median_shift_samples": float(np.nanmedian(timing.shift))}

@@ -187,6 +187,20 @@ def superpose_steps(step_response: np.ndarray, index: np.ndarray, size: np.ndarr
 
 
 @njit(cache=CACHE)
+def superpose_steps_rows(step_responses: np.ndarray, index: np.ndarray, size: np.ndarray,
+                         n_samples: int) -> np.ndarray:
+    """``superpose_steps`` for each row of ``step_responses`` (k, >= n_samples): the same sums, one call."""
+    y = np.zeros((step_responses.shape[0], n_samples))
+    for r in range(step_responses.shape[0]):
+        for k in range(index.shape[0]):
+            i0 = index[k]
+            a = size[k]
+            for n in range(i0, n_samples):
+                y[r, n] += a * step_responses[r, n - i0]
+    return y
+
+
+@njit(cache=CACHE)
 def foh_grid_costs(z: np.ndarray, y: np.ndarray, phi: np.ndarray, g0: np.ndarray, g1: np.ndarray,
                    h: float) -> np.ndarray:
     """For each resonance k: min over b of ||y - b s_k||^2, s_k = resonance_foh(z) with (phi, g0, g1)[k]."""

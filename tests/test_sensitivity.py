@@ -122,7 +122,8 @@ def test_model_output_and_projected_residual_jacobians_match_finite_differences(
     def shape(q):
         return model_output(q[0], math.exp(q[1]), math.exp(q[2]), h, u)
 
-    s, ds = model_output_sensitivity(p[0], math.exp(p[1]), math.exp(p[2]), h, u)
+    s, ds, step = model_output_sensitivity(p[0], math.exp(p[1]), math.exp(p[2]), h, u)
+    assert np.array_equal(step, step_response_grid(p[0], math.exp(p[1]), math.exp(p[2]), h, n + 1))
     assert np.array_equal(s, shape(p))
     for k in range(3):
         assert _best_error(ds[k], shape, p, k) < 1e-6, k
