@@ -116,22 +116,24 @@ def taylor_moments_sensitivity(a1: float, a2: float, h: float,
                                terms: int = TAYLOR_TERMS) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(Phi, M, dPhi, dM): ``taylor_moments`` and their a1, a2 derivatives (leading axis 2).
 
-    Van Loan: the upper-right block of exp([[F h, E h], [0, F h]]) is the
-    derivative of exp(F h) in the direction E = dF/da_k.
+    Complex step (Al-Mohy and Higham 2010): the derivative of exp(F h) in the
+    direction E = dF/da_k is Im exp(F h + i eps E h) / eps, exact to O(eps^2)
+    with no cancellation (eps ~1e-20 relative); one batched 10 x 10 complex
+    exponential for both directions, less than half the cost of Van Loan's
+    20 x 20 block form.
     """
     f, *dfs = _augmented(a1, a2, terms)
-    size = f.shape[0]
-    dphi, dm = np.empty((2, 2, 2)), np.empty((2, terms, 2))
-    big = np.zeros((2, 2 * size, 2 * size))
+    big = np.empty((2,) + f.shape, dtype=complex)
+    steps = []
     for k, df in enumerate(dfs):
-        big[k, :size, :size] = big[k, size:, size:] = f * h
-        big[k, :size, size:] = df * h
-    ek = expm(big)                                     # both directions in one batched call
-    for k in range(2):
-        dphi[k] = ek[k, :2, size:size + 2]
-        dm[k] = ek[k, :2, size + 2:].T
+        eps = 1e-20 * max(float(np.max(np.abs(f))), 1e-300) / max(float(np.max(np.abs(df))), 1e-300)
+        big[k] = f * h + 1j * eps * (df * h)
+        steps.append(eps)
+    e = expm(big)
+    dphi = np.stack([e[k, :2, :2].imag / steps[k] for k in range(2)])
+    dm = np.stack([e[k, :2, 2:].T.imag / steps[k] for k in range(2)])
     phi, moments = taylor_moments(a1, a2, h, terms)   # the plain march's own, so that S matches it bit for bit
-    return phi, moments, dphi, dm
+    return phi, moments, np.ascontiguousarray(dphi), np.ascontiguousarray(dm)
 
 
 def head_sensitivity(alpha: float, a1: float, a2: float, h: float, n_head: int) -> tuple[np.ndarray, np.ndarray]:
