@@ -186,7 +186,7 @@ def layer1_alpha(t: np.ndarray, u: np.ndarray, y: np.ndarray, t_c: float, *, a1:
 
     log_tau = np.log(tau_live)
 
-    def evaluate(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    def evaluate(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
         value, d_value = creep_asymptote_dalpha(tau_live, p[0], a1, a2, log_tau)
         phi, d_phi = np.sum(sizes * value, axis=1), np.sum(sizes * d_value, axis=1)
         gain, r = _projected(y_bin, phi)
@@ -196,7 +196,7 @@ def layer1_alpha(t: np.ndarray, u: np.ndarray, y: np.ndarray, t_c: float, *, a1:
     start = time.perf_counter()
     p0 = np.array([min(max(alpha0, ALPHA_BOUNDS[0] * 2), 0.9)])
     x, _, gain, nfev = _levenberg_marquardt(evaluate, p0, np.array([ALPHA_BOUNDS[0]]),
-                                               np.array([ALPHA_BOUNDS[1]]), LAYER1_MAX_ITER)
+                                            np.array([ALPHA_BOUNDS[1]]), LAYER1_MAX_ITER)
     alpha = float(x[0])
     info = {"alpha": alpha, "gain": gain, "points": int(b0.size), "step_s": width * h,
             "nfev": nfev, "elapsed_s": time.perf_counter() - start}
