@@ -10,10 +10,11 @@
   FOMCON-style baseline (full-memory eq. 13 + finite-difference TRF on all four
   parameters, from the same starting point) run once in the same process.
 
-* --speed-only: warm p50 of this code and of --previous (default main; ``git archive``
-  into a temp dir, run in its own interpreter) alternating in three rounds, ratio
-  previous / ours; and the wall time of fresh ``creep-online --help`` and
-  ``creep-online identify`` (12,000 samples) processes.
+* --speed-only: warm p50/p99/max of this code and of --previous (default main; ``git
+  archive`` into a temp dir, run in its own interpreter) alternating in three rounds,
+  ratio of the p50s previous / ours, load average at the start and after each round;
+  and the wall time of fresh ``creep-online --help`` and ``creep-online identify``
+  (12,000 samples) processes.
 
 Usage: python bench/bench_identify.py [--quick] [--speed-only [--previous REF]]   (--quick: fewer repeats; the 100,000-sample
 baseline is then estimated from one eq. 13 simulation instead of run, which takes minutes)
@@ -145,7 +146,7 @@ def speed(repeats: int, full_baseline: bool) -> dict:
     return out
 
 
-#: Runs in the previous code's interpreter: warm p50 of identify on the speed records.
+#: Runs in the previous code's interpreter: warm times of identify on the speed records (one round).
 PREVIOUS_CODE = """
 import json, sys, time
 import numpy as np
@@ -163,14 +164,14 @@ for case in (LOAD_CELL, NANOPOSITIONER):
         t0 = time.perf_counter()
         identify(t, u, y)
         times.append(time.perf_counter() - t0)
-    out[case.name] = float(np.median(times))
+    out[case.name] = times
 print(json.dumps(out))
 """
 
 
-def speed_vs_previous(repeats: int, ref: str) -> dict:
-    """Warm p50 of this code and of ``ref`` (git archive, own interpreter), alternating in rounds so
-    both see the same machine load; ratio = previous / ours."""
+def speed_vs_previous(repeats: int, ref: str, rounds: int = 3) -> dict:
+    """Warm times of this code and of ``ref`` (git archive, own interpreter), alternating in rounds so
+    both see the same machine load: p50/p99/max of each, ratio = previous p50 / ours, load averages."""
     import _baseline
     path, commit = _baseline.extract(ref)
     _baseline.run_python(path, PREVIOUS_CODE, "1")           # compile its numba cache once
@@ -179,20 +180,22 @@ def speed_vs_previous(repeats: int, ref: str) -> dict:
     data = {c.name: c.run(40.0, seed=1) for c in (LOAD_CELL, NANOPOSITIONER)}
     for t, u, y, _ in data.values():
         identify(t, u, y)
-    rounds = 3
+    loads = [os.getloadavg()]
     for _ in range(rounds):
         for name, (t, u, y, _) in data.items():
             for _ in range(repeats):
                 t0 = time.perf_counter()
                 identify(t, u, y)
                 ours[name].append(time.perf_counter() - t0)
-        for name, p50 in json.loads(_baseline.run_python(path, PREVIOUS_CODE, str(repeats))).items():
-            prev[name].append(p50)
-    out = {"previous_commit": commit, "repeats_per_round": repeats, "rounds": rounds}
+        for name, times in json.loads(_baseline.run_python(path, PREVIOUS_CODE, str(repeats))).items():
+            prev[name] += times
+        loads.append(os.getloadavg())
+    out = {"previous_commit": commit, "repeats_per_round": repeats, "rounds": rounds,
+           "load_average_1_5_15min": loads}
     for name in ours:
-        mine, theirs = float(np.median(ours[name])), float(np.median(prev[name]))
-        out[name] = {"samples": int(data[name][0].size), "p50_s": mine, "previous_p50_s": theirs,
-                     "speedup": theirs / mine}
+        mine, theirs = distribution(ours[name]), distribution(prev[name])
+        out[name] = {"samples": int(data[name][0].size), "this_code_s": mine, "previous_s": theirs,
+                     "p50_s": mine["p50"], "previous_p50_s": theirs["p50"], "speedup": theirs["p50"] / mine["p50"]}
     return out
 
 
@@ -226,7 +229,7 @@ def main() -> None:
     if args.speed_only:
         report = {"bench": "identify_speed", "machine": {"cpus": os.cpu_count(), "python": platform.python_version()},
                   "warm": speed_vs_previous(5 if args.quick else 15, args.previous),
-                  "cold_cli": cold_cli(5 if args.quick else 10)}
+                  "cold_cli": cold_cli(5 if args.quick else 10), "load_average_end": os.getloadavg()}
         json.dump(report, sys.stdout, indent=2)
         sys.stdout.write("\n")
         return

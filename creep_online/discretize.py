@@ -13,7 +13,7 @@ from functools import lru_cache
 
 import numpy as np
 from scipy.linalg import expm
-from scipy.special import roots_jacobi, roots_legendre
+from scipy.special import digamma, roots_jacobi, roots_legendre
 
 from . import kernels
 
@@ -88,6 +88,80 @@ def step_response_grid(alpha: float, a1: float, a2: float, h: float, n: int) -> 
     phi, moments = taylor_moments(a1, a2, h)
     head = head_terms(alpha, a1, a2, h, min(HEAD_INTERVALS, max(n - 1, 0)))
     return kernels.state_march(n, h, alpha, math.gamma(1.0 + alpha), phi, head, moments)
+
+
+#: Relative step of the central differences of the head terms in a1 and a2 (error ~1e-10 relative).
+HEAD_DIFF_STEP = 1e-5
+
+
+def _augmented(a1: float, a2: float, terms: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(F, dF/da1, dF/da2): the resonance with its integrator chain, as in ``taylor_moments``."""
+    a, b = state_matrices(a1, a2)
+    size = 2 + terms
+    f = np.zeros((size, size))
+    f[:2, :2] = a
+    f[:2, 2] = b
+    for m in range(terms - 1):
+        f[2 + m, 3 + m] = 1.0
+    wn = 1.0 / math.sqrt(a2)
+    dwn = -0.5 * wn / a2
+    d1 = np.zeros((size, size))
+    d1[1, 1] = -1.0 / a2
+    d2 = np.zeros((size, size))
+    d2[0, 1], d2[1, 0], d2[1, 1], d2[1, 2] = dwn, -dwn, a1 / (a2 * a2), dwn
+    return f, d1, d2
+
+
+def taylor_moments_sensitivity(a1: float, a2: float, h: float,
+                               terms: int = TAYLOR_TERMS) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(Phi, M, dPhi, dM): ``taylor_moments`` and their a1, a2 derivatives (leading axis 2).
+
+    Complex step (Al-Mohy and Higham 2010): the derivative of exp(F h) in the
+    direction E = dF/da_k is Im exp(F h + i eps E h) / eps, exact to O(eps^2)
+    with no cancellation (eps ~1e-20 relative); one batched 10 x 10 complex
+    exponential for both directions, less than half the cost of Van Loan's
+    20 x 20 block form.
+    """
+    f, *dfs = _augmented(a1, a2, terms)
+    big = np.empty((2,) + f.shape, dtype=complex)
+    steps = []
+    for k, df in enumerate(dfs):
+        eps = 1e-20 * max(float(np.max(np.abs(f))), 1e-300) / max(float(np.max(np.abs(df))), 1e-300)
+        big[k] = f * h + 1j * eps * (df * h)
+        steps.append(eps)
+    e = expm(big)
+    dphi = np.stack([e[k, :2, :2].imag / steps[k] for k in range(2)])
+    dm = np.stack([e[k, :2, 2:].T.imag / steps[k] for k in range(2)])
+    phi, moments = taylor_moments(a1, a2, h, terms)   # the plain march's own, so that S matches it bit for bit
+    return phi, moments, np.ascontiguousarray(dphi), np.ascontiguousarray(dm)
+
+
+def head_sensitivity(alpha: float, a1: float, a2: float, h: float, n_head: int) -> tuple[np.ndarray, np.ndarray]:
+    """(head, dhead): ``head_terms`` and their derivatives in (alpha, a1, a2), shape (3, n_head, 2).
+
+    alpha: the integrals of the derivative; a1, a2: central differences at a
+    fixed panel count (``kernels.head_sensitivity``).
+    """
+    slow, fast = resonance_poles(a1, a2)
+    panels = int(min(64, max(1, math.ceil(abs(fast) * h / 4.0))))
+    xl, wl, xj, wj = _gauss(HEAD_NODES, float(alpha))
+    out = kernels.head_sensitivity(alpha, a1, a2, h, n_head, xl, wl, xj, wj, panels, math.gamma(1.0 + alpha),
+                                   float(digamma(1.0 + alpha)), HEAD_DIFF_STEP)
+    return out[0], out[1:]
+
+
+def step_response_sensitivity(alpha: float, a1: float, a2: float, h: float, n: int) -> np.ndarray:
+    """``step_response_grid`` and its derivatives: rows S, dS/dalpha, dS/da1, dS/da2 at k h (shape (4, n)).
+
+    Forward sensitivities of the exact march (``kernels.state_march_sensitivity``):
+    one pass instead of a simulation per parameter for a finite-difference
+    Jacobian, and exact up to the head's differences in a1, a2 (~1e-10).
+    Row 0 equals ``step_response_grid`` bit for bit.
+    """
+    phi, moments, dphi, dmoments = taylor_moments_sensitivity(a1, a2, h)
+    head, dhead = head_sensitivity(alpha, a1, a2, h, min(HEAD_INTERVALS, max(n - 1, 0)))
+    return kernels.state_march_sensitivity(n, h, alpha, math.gamma(1.0 + alpha), float(digamma(1.0 + alpha)),
+                                           phi, dphi, head, dhead, moments, dmoments)
 
 
 def foh_matrices(a1: float, a2: float, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

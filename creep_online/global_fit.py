@@ -72,7 +72,7 @@ def block_ratio(r: np.ndarray, width: int, noise: float) -> tuple[float, int]:
     return float(np.mean(means * means)) * width / noise**2, k
 
 
-def at_floor(r: np.ndarray) -> bool:
+def at_floor(r: np.ndarray, noise: float | None = None) -> bool:
     """Whether a residual looks like white noise alone.
 
     Two tests against the residual's own high-frequency level (second
@@ -80,9 +80,9 @@ def at_floor(r: np.ndarray) -> bool:
     512 samples, which a smooth misfit (the usual kind: a wrong creep, a
     missed slow mode) inflates far more than it does the rms. Each block
     statistic of white noise is a chi-square mean of k blocks (std
-    sqrt(2/k)).
+    sqrt(2/k)). ``noise``: that level, when the caller has it already.
     """
-    noise = noise_std_estimate(r)
+    noise = noise_std_estimate(r) if noise is None else noise
     if not (math.isfinite(noise) and noise > 0):
         return not np.any(r)
     if floor_ratio(r, noise) > 1.0 + FLOOR_SLACK + 2.5 / math.sqrt(max(r.size, 1)):

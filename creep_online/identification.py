@@ -30,18 +30,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.special import rgamma
+from scipy.special import digamma, rgamma
 
 from . import kernels
 from ._threads import single_threaded
-from .discretize import foh_matrices_batch, step_response_grid
+from .discretize import foh_matrices_batch, step_response_grid, step_response_sensitivity
 from .errors import DataError, IdentificationError
 from .global_fit import GRID_ZETAS, GlobalFit, at_floor, floor_ratio, global_fit, global_uncertainty, n_bic
 from .metrics import fit_percent, long_run_variance_factor, noise_std_estimate
 from .model import IDENTIFY_ALPHA_BOUNDS as ALPHA_BOUNDS  # alpha search interval of layer 1 and the polish
 from .model import CreepModel
 from .record import SAFE_AMPLITUDE, Record, check_time_and_output
-from .simulate import fractional_integral, input_changes, superpose, uniform_step
+from .simulate import fractional_integral, input_changes, superpose, superpose_rows, uniform_step
 from .timing import TimingCheck, check_timing
 
 #: At most this many input changes count as a piecewise-constant (step) input.
@@ -126,6 +126,22 @@ def creep_asymptote(tau: np.ndarray, alpha: float, a1: float, a2: float) -> np.n
     return out
 
 
+def creep_asymptote_dalpha(tau: np.ndarray, alpha: float, a1: float, a2: float,
+                           log_tau: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(``creep_asymptote``, its derivative in alpha): d/d alpha of tau^(alpha-k) / Gamma(1+alpha-k) is the
+    term times (ln tau - digamma(1+alpha-k)). ``log_tau``: ln tau, when the caller has it."""
+    coef = (1.0, -a1, a1 * a1 - a2, -a1**3 + 2.0 * a1 * a2)
+    log_tau = np.log(tau) if log_tau is None else log_tau
+    out = np.zeros_like(tau)
+    d_out = np.zeros_like(tau)
+    for k, c in enumerate(coef):
+        if c != 0.0:
+            term = c * tau ** (alpha - k) * rgamma(1.0 + alpha - k)
+            out += term
+            d_out += term * (log_tau - digamma(1.0 + alpha - k))
+    return out, d_out
+
+
 def _coarse_bins(mask: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
     """Group the masked samples into consecutive runs of ``width``: (start, stop) indices."""
     starts, stops = [], []
@@ -144,7 +160,8 @@ def layer1_alpha(t: np.ndarray, u: np.ndarray, y: np.ndarray, t_c: float, *, a1:
 
     Samples are averaged over bins of ``step`` seconds (default: about
     LAYER1_POINTS bins), the model is evaluated at the bin centres, the gain is
-    projected out and alpha found by bounded TRF.
+    projected out and alpha found by Levenberg-Marquardt with the analytic
+    derivative (one parameter: scipy's TRF wrapper cost more than the model).
     """
     sched = schedule or input_schedule(t, u)
     h = float(t[1] - t[0])
@@ -167,23 +184,27 @@ def layer1_alpha(t: np.ndarray, u: np.ndarray, y: np.ndarray, t_c: float, *, a1:
     tau_live = np.where(live, tau, 1.0)
     sizes = np.where(live, sched.size[None, :], 0.0)
 
-    def basis(alpha: float) -> np.ndarray:
-        return np.sum(sizes * creep_asymptote(tau_live, alpha, a1, a2), axis=1)
+    log_tau = np.log(tau_live)
 
-    def residual(p: np.ndarray) -> np.ndarray:
-        phi = basis(p[0])
-        g = phi @ y_bin / (phi @ phi)
-        return y_bin - g * phi
+    def evaluate(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        value, d_value = creep_asymptote_dalpha(tau_live, p[0], a1, a2, log_tau)
+        phi, d_phi = np.sum(sizes * value, axis=1), np.sum(sizes * d_value, axis=1)
+        gain, r = _projected(y_bin, phi)
+        jac = _projected_jacobian(phi, d_phi[None, :], r, gain, False)
+        return r, jac @ jac.T, jac @ r, gain
 
     start = time.perf_counter()
-    sol = least_squares(residual, [min(max(alpha0, ALPHA_BOUNDS[0] * 2), 0.9)], bounds=ALPHA_BOUNDS,
-                        method="trf", x_scale=[0.05], diff_step=1e-6)
-    alpha = float(sol.x[0])
-    phi = basis(alpha)
-    gain = float(phi @ y_bin / (phi @ phi))
+    p0 = np.array([min(max(alpha0, ALPHA_BOUNDS[0] * 2), 0.9)])
+    x, _, gain, nfev = _levenberg_marquardt(evaluate, p0, np.array([ALPHA_BOUNDS[0]]),
+                                            np.array([ALPHA_BOUNDS[1]]), LAYER1_MAX_ITER)
+    alpha = float(x[0])
     info = {"alpha": alpha, "gain": gain, "points": int(b0.size), "step_s": width * h,
-            "nfev": int(sol.nfev), "elapsed_s": time.perf_counter() - start}
+            "nfev": nfev, "elapsed_s": time.perf_counter() - start}
     return alpha, gain, info
+
+
+#: Levenberg-Marquardt iterations of layer 1 (one parameter, an analytic derivative).
+LAYER1_MAX_ITER = 50
 
 
 def retune_alpha(alpha0: float, y: np.ndarray, y_hat: np.ndarray, i_c: int, i_f: int, half: int) -> float:
@@ -214,11 +235,52 @@ def _projected_affine(y: np.ndarray, s: np.ndarray) -> tuple[float, float, np.nd
     return b, c, y - b * s - c
 
 
+def _projected_jacobian(s: np.ndarray, ds: np.ndarray, r: np.ndarray, b: float, free_offset: bool) -> np.ndarray:
+    """Exact Jacobian (rows: parameters) of the projected residual r(p) = y - C beta(p), C = [s(p)] or [s(p), 1].
+
+    Golub-Pereyra: with ds = ds/dp (rows) and the projected gain b, dr/dp_k =
+    -b ds_k + C (C'C)^-1 (b C' ds_k - e_s (ds_k . r)), e_s picking the gain:
+    the Jacobian that finite differences of the projected residual approximate,
+    from the shape's own derivatives.
+    """
+    rd = ds @ r
+    if free_offset:
+        total = float(s.sum())
+        gram = np.array([[float(s @ s), total], [total, float(s.size)]])
+        rhs = b * np.vstack((ds @ s, ds.sum(axis=1)))
+        rhs[0] -= rd
+        try:
+            coef = np.linalg.solve(gram, rhs)
+        except np.linalg.LinAlgError:
+            coef = np.zeros_like(rhs)
+        return coef[0][:, None] * s + (coef[1][:, None] - b * ds)
+    ss = float(s @ s)
+    coef = (b * (ds @ s) - rd) / ss if ss > 0 else np.zeros(ds.shape[0])
+    return coef[:, None] * s - b * ds
+
+
 def model_output(alpha: float, a1: float, a2: float, h: float, u: np.ndarray, n: int | None = None) -> np.ndarray:
     """Unit-gain exact response to the ZOH input u (first n samples)."""
     n = u.size if n is None else n
     s = step_response_grid(alpha, a1, a2, h, n)
     return superpose(s, u[:n])
+
+
+def model_output_sensitivity(alpha: float, a1: float, a2: float, h: float, u: np.ndarray,
+                             n: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``model_output`` and its derivatives in (alpha, ln a1, ln a2): (s, ds of shape (3, n), step).
+
+    The step response's forward sensitivities superposed like the response
+    itself (superposition is linear): one march instead of one simulation
+    per finite-difference column. s equals ``model_output`` bit for bit;
+    ``step`` is the unit-step response at n + 1 instants (for the timing check).
+    """
+    n = u.size if n is None else n
+    rows = step_response_sensitivity(alpha, a1, a2, h, n + 1)
+    out = superpose_rows(rows, u[:n])
+    out[2] *= a1
+    out[3] *= a2
+    return out[0], out[1:], rows[0]
 
 
 #: Longest first transient (samples) the starting grid scores: 4096 samples resolve 2 periods of
@@ -251,29 +313,35 @@ def layer2_resonance(t: np.ndarray, u: np.ndarray, y: np.ndarray, alpha: float, 
     """Layer 2: (a1, a2, b, info) with alpha fixed, on the masked samples at the full rate.
 
     Parameters are log(a1), log(a2); b is projected out. The exact simulator
-    runs up to the last masked sample.
+    runs up to the last masked sample; each evaluation also returns the
+    analytic Jacobian (forward sensitivities), which the trust-region solver
+    asks for at the same point, so no finite-difference simulations.
     """
     h = float(t[1] - t[0])
     n = int(np.flatnonzero(mask)[-1]) + 1
     m = mask[:n]
     ym = y[:n][m]
+    last: dict = {}
 
-    def shape(p: np.ndarray) -> np.ndarray:
-        return model_output(alpha, math.exp(p[0]), math.exp(p[1]), h, u, n)[m]
-
-    def residual(p: np.ndarray) -> np.ndarray:
-        return _projected(ym, shape(p))[1]
+    def evaluate(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        key = (float(p[0]), float(p[1]))
+        if last.get("key") != key:
+            s, ds, _ = model_output_sensitivity(alpha, math.exp(p[0]), math.exp(p[1]), h, u, n)
+            s, ds = s[m], ds[1:, m]
+            b, r = _projected(ym, s)
+            last.update(key=key, r=r, jac=_projected_jacobian(s, ds, r, b, False).T, b=b)
+        return last["r"], last["jac"]
 
     start = time.perf_counter()
     lo = [math.log(a1) - 12, math.log(a2) - 12]
     hi = [math.log(a1) + 12, math.log(a2) + 12]
-    sol = least_squares(residual, [math.log(a1), math.log(a2)], bounds=(lo, hi), method="trf",
-                        x_scale=[1.0, 1.0], diff_step=1e-7)
+    sol = least_squares(lambda p: evaluate(p)[0], [math.log(a1), math.log(a2)], jac=lambda p: evaluate(p)[1],
+                        bounds=(lo, hi), method="trf", x_scale=[1.0, 1.0])
     a1f, a2f = math.exp(sol.x[0]), math.exp(sol.x[1])
-    b, _ = _projected(ym, shape(sol.x))
-    info = {"a1": a1f, "a2": a2f, "b": b, "samples": int(m.sum()), "nfev": int(sol.nfev),
+    evaluate(sol.x)
+    info = {"a1": a1f, "a2": a2f, "b": last["b"], "samples": int(m.sum()), "nfev": int(sol.nfev),
             "elapsed_s": time.perf_counter() - start}
-    return a1f, a2f, b, info
+    return a1f, a2f, last["b"], info
 
 
 # --------------------------------------------------------------------------- polish
@@ -281,67 +349,60 @@ def joint_polish(t: np.ndarray, u: np.ndarray, y: np.ndarray, model: CreepModel,
                  free_offset: bool = False) -> tuple[CreepModel, dict]:
     """All four parameters on the whole record (b, and the offset if free, projected out), warm-started.
 
-    Returns the polished model and an info dict with the parameter std.
+    Parameters alpha, ln a1, ln a2; Levenberg-Marquardt with the analytic
+    Jacobian of the projected residual. Returns the polished model and an
+    info dict with the parameter std, ``shape``, the polished model's
+    unit-gain output (its last simulation), and ``step``, its unit-step
+    response at n + 1 instants.
     """
     h = float(t[1] - t[0])
 
-    def shape(p: np.ndarray) -> np.ndarray:
-        return model_output(p[0], math.exp(p[1]), math.exp(p[2]), h, u)
-
-    def residual(s: np.ndarray) -> np.ndarray:
+    def evaluate(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
+        s, ds, step = model_output_sensitivity(p[0], math.exp(p[1]), math.exp(p[2]), h, u)
         if free_offset:
-            return _projected_affine(y, s)[2]
-        return _projected(y, s)[1]
+            b, c, r = _projected_affine(y, s)
+        else:
+            (b, r), c = _projected(y, s), 0.0
+        a, g = kernels.projected_normal_equations(s, ds, r, b, free_offset)
+        return r, a, g, (s, ds, b, c, step)
 
     start = time.perf_counter()
     p0 = np.array([model.alpha, math.log(model.a1), math.log(model.a2)])
     lo = np.array([ALPHA_BOUNDS[0], p0[1] - 5, p0[2] - 5])
     hi = np.array([ALPHA_BOUNDS[1], p0[1] + 5, p0[2] + 5])
-    x, s, jac_s, nfev = _gauss_newton(shape, residual, p0, lo, hi)
-    if free_offset:
-        b, c, r = _projected_affine(y, s)
-    else:
-        (b, r), c = _projected(y, s), 0.0
+    x, r, (s, ds, b, c, step), nfev = _levenberg_marquardt(evaluate, p0, lo, hi)
     polished = CreepModel(float(x[0]), math.exp(x[1]), math.exp(x[2]), b)
     info = {"nfev": nfev, "elapsed_s": time.perf_counter() - start, "offset": c,
-            "uncertainty": _covariance_sd(jac_s, s, r, polished, free_offset)}
+            "uncertainty": _covariance_sd(ds, s, r, polished, free_offset), "shape": s, "step": step}
     return polished, info
 
 
-#: Forward-difference step of the polish (relative, as scipy's diff_step) and its stopping rules.
-POLISH_DIFF_STEP = 1e-7
+#: Iterations of the Levenberg-Marquardt fits (the polish starts close: a few do).
 POLISH_MAX_ITER = 30
 
 
-def _gauss_newton(shape, residual, p0: np.ndarray, lo: np.ndarray, hi: np.ndarray):
-    """Levenberg-Marquardt on the projected residual, bounded by clipping: (x, s(x), ds/dx, evaluations).
+def _levenberg_marquardt(evaluate, p0: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                         max_iter: int = POLISH_MAX_ITER) -> tuple[np.ndarray, np.ndarray, object, int]:
+    """Levenberg-Marquardt bounded by clipping: (x, r(x), payload(x), evaluations).
 
-    ``shape`` maps parameters to the unit-gain output, ``residual`` an output
-    to the projected residual (gain and offset removed).
+    ``evaluate(x)`` returns (residual r, J J', J r, payload) with J the
+    Jacobian (one row per parameter); the Jacobian comes with every
+    evaluation (forward sensitivities), so an accepted step needs no further
+    simulation. Stops when the Gauss-Newton step from x would move the
+    parameters by less than ``CONVERGED_SIGMAS`` of their standard deviations
+    (then x is the minimum for every purpose and the step is not simulated),
+    when a step moves them by less than 1e-10 (relative) or lowers the cost
+    by less than 1e-12 (relative), or when no damping lowers it.
 
-    Replaces scipy's least_squares in the warm-started polish: three
-    parameters, a start already close, so a few Gauss-Newton steps do;
-    scipy's wrapper cost about as much as the simulations. The shape
-    derivatives of the last Jacobian are returned for the covariance (the
-    final step is below the parameters' own noise, so they need no refresh).
+    Replaces scipy's least_squares: few parameters and a start already close,
+    so a few steps do; scipy's wrapper cost about as much as the simulations.
     """
     x = np.clip(p0, lo, hi)
-    s = shape(x)
-    r = residual(s)
+    r, a, g, payload = evaluate(x)
     cost, lam, nfev = float(r @ r), 0.0, 1
-    jac_s = None
-    for _ in range(POLISH_MAX_ITER):
-        steps = POLISH_DIFF_STEP * np.maximum(1.0, np.abs(x))
-        cols_r, cols_s = [], []
-        for k in range(x.size):
-            xk = x.copy()
-            xk[k] += steps[k]
-            sk = shape(xk)
-            cols_s.append((sk - s) / steps[k])
-            cols_r.append((residual(sk) - r) / steps[k])
-            nfev += 1
-        jac, jac_s = np.column_stack(cols_r), np.column_stack(cols_s)
-        a, g = jac.T @ jac, jac.T @ r
+    for _ in range(max_iter):
+        if _converged(a, g, cost, r.size):
+            break
         d = np.maximum(np.diag(a), 1e-300)
         while True:
             try:
@@ -349,8 +410,7 @@ def _gauss_newton(shape, residual, p0: np.ndarray, lo: np.ndarray, hi: np.ndarra
             except np.linalg.LinAlgError:
                 dx = np.zeros_like(x)
             xn = np.clip(x + dx, lo, hi)
-            sn = shape(xn)
-            rn = residual(sn)
+            rn, an, gn, pn = evaluate(xn)
             nfev += 1
             cn = float(rn @ rn)
             if cn <= cost or lam > 1e10:
@@ -360,22 +420,41 @@ def _gauss_newton(shape, residual, p0: np.ndarray, lo: np.ndarray, hi: np.ndarra
             break
         moved = float(np.max(np.abs(xn - x) / np.maximum(1.0, np.abs(x))))
         decrease = (cost - cn) / max(cost, 1e-300)
-        x, s, r, cost, lam = xn, sn, rn, cn, lam / 10.0
+        x, r, a, g, payload, cost, lam = xn, rn, an, gn, pn, cn, lam / 10.0
         if moved < 1e-10 or decrease < 1e-12:
             break
-    return x, s, jac_s, nfev
+    return x, r, payload, nfev
+
+
+#: The polish stops when its next Gauss-Newton step is below this many standard deviations (Mahalanobis).
+CONVERGED_SIGMAS = 1e-3
+
+
+def _converged(a: np.ndarray, g: np.ndarray, cost: float, m: int) -> bool:
+    """Whether the Gauss-Newton step -a^-1 g is below CONVERGED_SIGMAS standard deviations.
+
+    The step's squared length in the covariance's metric sigma^2 a^-1 is
+    g' a^-1 g / sigma^2, with sigma^2 = cost / (m - p) the residual variance.
+    """
+    try:
+        step2 = float(g @ np.linalg.solve(a, g))
+    except np.linalg.LinAlgError:
+        return False
+    sigma2 = cost / max(m - g.size, 1)
+    return math.isfinite(step2) and step2 <= CONVERGED_SIGMAS**2 * sigma2
 
 
 def _covariance_sd(jac_s: np.ndarray, s: np.ndarray, r: np.ndarray, m: CreepModel,
                    free_offset: bool) -> dict[str, float]:
-    """1-sigma of (alpha, a1, a2, b) from the Gauss-Newton covariance of the full model b s(p) (+ c)."""
-    cols = [m.b * jac_s[:, k] for k in range(jac_s.shape[1])] + [s]
-    if free_offset:
-        cols.append(np.ones_like(s))
-    jac = np.column_stack(cols)
-    sigma2 = float(r @ r) / max(r.size - jac.shape[1], 1)
+    """1-sigma of (alpha, a1, a2, b) from the Gauss-Newton covariance of the full model b s(p) (+ c).
+
+    ``jac_s``: ds/d(alpha, ln a1, ln a2), one row per parameter.
+    """
+    rows = [m.b * jac_s, s[None, :]] + ([np.ones((1, s.size))] if free_offset else [])
+    jac = np.vstack(rows)
+    sigma2 = float(r @ r) / max(r.size - jac.shape[0], 1)
     try:
-        cov = sigma2 * np.linalg.inv(jac.T @ jac)
+        cov = sigma2 * np.linalg.inv(jac @ jac.T)
     except np.linalg.LinAlgError:
         return {k: float("inf") for k in ("alpha", "a1", "a2", "b")}
     sd = np.sqrt(np.abs(np.diag(cov)))
@@ -461,29 +540,38 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
     if polish:
         model, info = joint_polish(t, u, y, model, free_offset=free_offset or not sched.piecewise)
         uncertainty = info.pop("uncertainty")
+        y_hat = model.b * info.pop("shape")        # the polish's last simulation is the final model's
+        step = model.b * info.pop("step")
         offset += info["offset"]
         y = y - info["offset"]
         stages["polish"] = {**info, **model.params()}
-    y_hat = model.b * model_output(model.alpha, model.a1, model.a2, h, u)
-    fast_residual = y - y_hat
-    if polish and not at_floor(fast_residual):
-        found = _escalate(rec.u, y_raw, h, model, fast_residual, user_offset, stages)
+    else:
+        y_hat = model.b * model_output(model.alpha, model.a1, model.a2, h, u)
+    residual = y - y_hat
+    found = None
+    final_noise = noise_std_estimate(residual)
+    if polish and not at_floor(residual, final_noise):
+        found = _escalate(rec.u, y_raw, h, model, residual, user_offset, stages)
         if found is not None:
             model, uncertainty = found.model, global_uncertainty(found)
             offset, u0 = (user_offset or 0.0) + found.offset, float(rec.u[0]) if found.problem.init else 0.0
             u, y = rec.u - u0, y_raw - offset
             y_hat = found.y_hat - found.offset
+            residual = y - y_hat
+            final_noise = noise_std_estimate(residual)
             if found.problem.init:
                 warnings.append("the record starts in operation (the plant moves at the first sample): its initial "
                                 f"state was estimated with {found.problem.linear_count - 1 - int(found.problem.offset)} "
                                 "free-response terms (past steps, resonance modes)")
-    final_noise = noise_std_estimate(y - y_hat)
-    inflate = math.sqrt(long_run_variance_factor(y - y_hat))
+    inflate = math.sqrt(long_run_variance_factor(residual))
     uncertainty = {k: sd * inflate for k, sd in uncertainty.items()}
     if inflate > 1.0:
         stages["uncertainty_inflation"] = {"factor": inflate}
-    ratio = floor_ratio(y - y_hat, final_noise)
-    timing = _timing(model, h, u, y - y_hat, sched, final_noise) if polish else None
+    ratio = floor_ratio(residual, final_noise)
+    if polish and found is None:               # the polished model is final: its step response is at hand
+        timing = check_timing(step, *input_changes(u), residual, final_noise) if sched.piecewise else None
+    else:
+        timing = _timing(model, h, u, residual, sched, final_noise) if polish else None
     if timing is not None:
         stages["timing"] = {"excess_sigmas": timing.excess_sigmas, "flagged": timing.flagged,
                             "median_shift_samples": float(np.nanmedian(timing.shift))}

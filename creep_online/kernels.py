@@ -187,6 +187,20 @@ def superpose_steps(step_response: np.ndarray, index: np.ndarray, size: np.ndarr
 
 
 @njit(cache=CACHE)
+def superpose_steps_rows(step_responses: np.ndarray, index: np.ndarray, size: np.ndarray,
+                         n_samples: int) -> np.ndarray:
+    """``superpose_steps`` for each row of ``step_responses`` (k, >= n_samples): the same sums, one call."""
+    y = np.zeros((step_responses.shape[0], n_samples))
+    for r in range(step_responses.shape[0]):
+        for k in range(index.shape[0]):
+            i0 = index[k]
+            a = size[k]
+            for n in range(i0, n_samples):
+                y[r, n] += a * step_responses[r, n - i0]
+    return y
+
+
+@njit(cache=CACHE)
 def foh_grid_costs(z: np.ndarray, y: np.ndarray, phi: np.ndarray, g0: np.ndarray, g1: np.ndarray,
                    h: float) -> np.ndarray:
     """For each resonance k: min over b of ||y - b s_k||^2, s_k = resonance_foh(z) with (phi, g0, g1)[k]."""
@@ -372,3 +386,260 @@ def foh_grid_costs_free(z: np.ndarray, y_perp: np.ndarray, q: np.ndarray, phi: n
         sol = np.linalg.solve(gs, vs)
         costs[k] = yy - np.dot(vs, sol)
     return costs
+
+
+@njit(cache=CACHE)
+def state_march_sensitivity(n_samples: int, h: float, alpha: float, gamma1: float, psi1: float, phi: np.ndarray,
+                            dphi: np.ndarray, head: np.ndarray, dhead: np.ndarray, taylor: np.ndarray,
+                            dtaylor: np.ndarray) -> np.ndarray:
+    """``state_march`` and its forward sensitivities: rows S, dS/dalpha, dS/da1, dS/da2 (shape (4, n)).
+
+    The march x_{n+1} = Phi x_n + f_n is differentiated term by term:
+    dx_{n+1} = Phi dx_n + dPhi x_n + df_n, with dPhi = 0 for alpha. ``dphi``
+    (2, 2, 2) and ``dtaylor`` (2, terms, 2) are the a1 and a2 derivatives of
+    ``phi`` and ``taylor``; ``dhead`` (3, n_head, 2) those of ``head`` for
+    (alpha, a1, a2). Beyond the head, d v^(m)/d alpha = v^(m) (ln t - psi1) +
+    v(t) t^-m dP_m with P_m = prod_{i<m} (alpha - i) and psi1 = digamma(1 + alpha).
+    Row 0 is ``state_march``'s S bit for bit (same operations in the same order).
+    Scalars only in the loop (small arrays there kept it twice as slow).
+    """
+    out = np.zeros((4, n_samples))
+    n_head = head.shape[0]
+    n_terms = taylor.shape[0]
+    dpm = np.zeros(n_terms)        # dP_m / d alpha
+    pm = 1.0
+    for m in range(1, n_terms):
+        dpm[m] = dpm[m - 1] * (alpha - (m - 1)) + pm
+        pm *= alpha - (m - 1)
+    # derivative terms kept: term m is ~n^-m / (m (m + 1)) of term 0, so M terms (m < M) leave < 1e-14 once
+    # n >= 10^(13/M) (S itself keeps all, as state_march does)
+    thresholds = np.empty(n_terms)
+    for m in range(1, n_terms):
+        thresholds[m] = 10.0 ** (13.0 / m)
+    n_deriv = n_terms
+    p00, p01, p10, p11 = phi[0, 0], phi[0, 1], phi[1, 0], phi[1, 1]
+    q00, q01, q10, q11 = dphi[0, 0, 0], dphi[0, 0, 1], dphi[0, 1, 0], dphi[0, 1, 1]
+    r00, r01, r10, r11 = dphi[1, 0, 0], dphi[1, 0, 1], dphi[1, 1, 0], dphi[1, 1, 1]
+    x0 = x1 = 0.0
+    a0 = a1 = 0.0                  # dx/d alpha
+    b0 = b1 = 0.0                  # dx/d a1
+    c0 = c1 = 0.0                  # dx/d a2
+    inv_gamma = 1.0 / gamma1
+    for n in range(n_samples - 1):
+        if n < n_head:
+            f0, f1 = head[n, 0], head[n, 1]
+            fa0, fa1 = dhead[0, n, 0], dhead[0, n, 1]
+            fb0, fb1 = dhead[1, n, 0], dhead[1, n, 1]
+            fc0, fc1 = dhead[2, n, 0], dhead[2, n, 1]
+        else:
+            t = n * h
+            deriv = t**alpha * inv_gamma
+            plain = deriv              # v(t) t^-m, for the dP_m term
+            log_t = np.log(t) - psi1
+            f0 = taylor[0, 0] * deriv
+            f1 = taylor[0, 1] * deriv
+            ea0 = ea1 = 0.0
+            fb0 = dtaylor[0, 0, 0] * deriv
+            fb1 = dtaylor[0, 0, 1] * deriv
+            fc0 = dtaylor[1, 0, 0] * deriv
+            fc1 = dtaylor[1, 0, 1] * deriv
+            inv_t = 1.0 / t
+            while n_deriv > 1 and n >= thresholds[n_deriv - 1]:
+                n_deriv -= 1
+            for m in range(1, n_terms):
+                deriv *= (alpha - (m - 1)) * inv_t
+                f0 += taylor[m, 0] * deriv
+                f1 += taylor[m, 1] * deriv
+                if m < n_deriv:
+                    plain *= inv_t
+                    ea0 += taylor[m, 0] * (plain * dpm[m])
+                    ea1 += taylor[m, 1] * (plain * dpm[m])
+                    fb0 += dtaylor[0, m, 0] * deriv
+                    fb1 += dtaylor[0, m, 1] * deriv
+                    fc0 += dtaylor[1, m, 0] * deriv
+                    fc1 += dtaylor[1, m, 1] * deriv
+            fa0 = f0 * log_t + ea0
+            fa1 = f1 * log_t + ea1
+        na0 = p00 * a0 + p01 * a1 + fa0
+        na1 = p10 * a0 + p11 * a1 + fa1
+        nb0 = p00 * b0 + p01 * b1 + q00 * x0 + q01 * x1 + fb0
+        nb1 = p10 * b0 + p11 * b1 + q10 * x0 + q11 * x1 + fb1
+        nc0 = p00 * c0 + p01 * c1 + r00 * x0 + r01 * x1 + fc0
+        nc1 = p10 * c0 + p11 * c1 + r10 * x0 + r11 * x1 + fc1
+        nx0 = phi[0, 0] * x0 + phi[0, 1] * x1 + f0
+        nx1 = phi[1, 0] * x0 + phi[1, 1] * x1 + f1
+        x0, x1, a0, a1, b0, b1, c0, c1 = nx0, nx1, na0, na1, nb0, nb1, nc0, nc1
+        out[0, n + 1] = x0
+        out[1, n + 1] = a0
+        out[2, n + 1] = b0
+        out[3, n + 1] = c0
+    return out
+
+
+@njit(cache=CACHE)
+def _poles(a1: float, a2: float) -> tuple[complex, complex]:
+    """(slow, fast) roots of a2 s^2 + a1 s + 1, as ``discretize.resonance_poles``."""
+    root = cmath.sqrt(complex(a1 * a1 - 4.0 * a2))
+    q = -0.5 * (a1 + root)
+    return 1.0 / q, q / a2
+
+
+@njit(cache=CACHE)
+def _log_singular_panel(alpha: float, slow: complex, fast: complex, wn: float, damp: float, h: float,
+                        width: float, xl: np.ndarray, wl: np.ndarray) -> tuple[float, float]:
+    """int_0^width s^alpha ln(s) e^{A(h-s)} B ds (the head's alpha derivative on its singular first panel).
+
+    On [0, w0], with |A| w0 <= 1, the series e^{A(h-s)} B = sum_j (-A)^j e^{A h} B
+    s^j / j! is integrated exactly: int_0^w0 s^b ln s ds = w0^(b+1) (ln w0 / (b+1)
+    - 1/(b+1)^2), b = alpha + j (terms below 1e-18 within ~25). Beyond w0 the
+    integrand is smooth on each of the doubling pieces [w0 2^i, w0 2^(i+1)]
+    up to ``width``: Gauss-Legendre (stiff resonances need the pieces; at most
+    ~log2(|A| width) of them).
+    """
+    norm = wn + abs(damp)                        # infinity norm of A = [[0, wn], [-wn, -damp]]
+    w0 = width
+    for _ in range(200):
+        if w0 * norm <= 1.0:
+            break
+        w0 *= 0.5
+    g0, g1 = transition_b(slow, fast, wn, damp, h)   # e^{A h} B, then (-A)^j e^{A h} B / j!
+    log_w = np.log(w0)
+    acc0 = 0.0
+    acc1 = 0.0
+    for j in range(60):
+        beta1 = alpha + j + 1.0
+        c = w0**beta1 * (log_w / beta1 - 1.0 / (beta1 * beta1))
+        acc0 += c * g0
+        acc1 += c * g1
+        if j > 4 and abs(c) * (abs(g0) + abs(g1)) <= 1e-18 * (abs(acc0) + abs(acc1)):
+            break
+        n0 = -(wn * g1) / (j + 1.0)                  # -A g / (j+1)
+        n1 = -(-wn * g0 - damp * g1) / (j + 1.0)
+        g0 = n0
+        g1 = n1
+    lo = w0
+    while lo < width * (1.0 - 1e-12):
+        hi = min(2.0 * lo, width)
+        for i in range(xl.shape[0]):
+            s = lo + (xl[i] + 1.0) * (hi - lo) / 2.0
+            v = wl[i] * (hi - lo) / 2.0 * s**alpha * np.log(s)
+            e0, e1 = transition_b(slow, fast, wn, damp, h - s)
+            acc0 += v * e0
+            acc1 += v * e1
+        lo = hi
+    return acc0, acc1
+
+
+@njit(cache=CACHE)
+def head_sensitivity(alpha: float, a1: float, a2: float, h: float, n_head: int, xl: np.ndarray, wl: np.ndarray,
+                     xj: np.ndarray, wj: np.ndarray, panels: int, gamma1: float, psi1: float,
+                     rel_step: float) -> np.ndarray:
+    """``head_quadrature``'s terms and their derivatives: shape (4, n_head, 2), rows head, d/d(alpha, a1, a2).
+
+    The same panels and nodes as ``head_quadrature`` (whose result row 0
+    reproduces). alpha: the integrals of the derivative, with ln(k h + s) -
+    psi1 in the integrand (``_log_singular_panel`` on interval 0's first panel,
+    where ln s is singular). a1, a2: central
+    differences with relative step ``rel_step``, the powers (k h + s)^alpha
+    shared by the four perturbed heads.
+    """
+    sets = np.array([[a1, a2], [a1 * (1 + rel_step), a2], [a1 * (1 - rel_step), a2],
+                     [a1, a2 * (1 + rel_step)], [a1, a2 * (1 - rel_step)]])
+    n_sets = sets.shape[0]
+    poles = np.empty((n_sets, 2), dtype=np.complex128)
+    for j in range(n_sets):
+        poles[j, 0], poles[j, 1] = _poles(sets[j, 0], sets[j, 1])
+    acc = np.zeros((n_sets + 1, n_head, 2))     # heads of the five sets, then the alpha integral
+    e = np.empty((n_sets, 2))
+    width = h / panels
+    for p in range(panels):
+        for i in range(xl.shape[0]):
+            s = p * width + (xl[i] + 1.0) * width / 2.0
+            w = wl[i] * width / 2.0
+            for j in range(n_sets):
+                e[j, 0], e[j, 1] = transition_b(poles[j, 0], poles[j, 1], 1.0 / np.sqrt(sets[j, 1]),
+                                                sets[j, 0] / sets[j, 1], h - s)
+            for k in range(n_head):
+                if k == 0 and p == 0:
+                    continue
+                tk = k * h + s
+                v = w * tk**alpha
+                for j in range(n_sets):
+                    acc[j, k, 0] += v * e[j, 0]
+                    acc[j, k, 1] += v * e[j, 1]
+                lv = v * np.log(tk)
+                acc[n_sets, k, 0] += lv * e[0, 0]
+                acc[n_sets, k, 1] += lv * e[0, 1]
+    scale = (width / 2.0) ** (1.0 + alpha)
+    for i in range(xj.shape[0]):
+        s = (xj[i] + 1.0) * width / 2.0
+        for j in range(n_sets):
+            e0, e1 = transition_b(poles[j, 0], poles[j, 1], 1.0 / np.sqrt(sets[j, 1]), sets[j, 0] / sets[j, 1], h - s)
+            acc[j, 0, 0] += wj[i] * scale * e0
+            acc[j, 0, 1] += wj[i] * scale * e1
+    a0, a1_ = _log_singular_panel(alpha, poles[0, 0], poles[0, 1], 1.0 / np.sqrt(a2), a1 / a2, h, width, xl, wl)
+    acc[n_sets, 0, 0] += a0
+    acc[n_sets, 0, 1] += a1_
+    out = np.empty((4, n_head, 2))
+    for k in range(n_head):
+        for c in range(2):
+            head = acc[0, k, c] / gamma1
+            out[0, k, c] = head
+            out[1, k, c] = acc[n_sets, k, c] / gamma1 - psi1 * head
+            out[2, k, c] = (acc[1, k, c] - acc[2, k, c]) / gamma1 / (2.0 * rel_step * a1)
+            out[3, k, c] = (acc[3, k, c] - acc[4, k, c]) / gamma1 / (2.0 * rel_step * a2)
+    return out
+
+
+@njit(cache=CACHE)
+def projected_normal_equations(s: np.ndarray, ds: np.ndarray, r: np.ndarray, b: float,
+                               free_offset: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(J J', J r) of the projected residual's Jacobian J without forming it (two passes, no temporaries).
+
+    J's row k is c0_k s + c1_k - b ds_k (``identification._projected_jacobian``):
+    the first pass gathers s.s, sum s, ds_k.s, sum ds_k and ds_k.r, which give
+    (c0, c1) from the 2x2 (or 1x1 without the offset) projection; the second
+    accumulates J J' and J r.
+    """
+    k_rows, n = ds.shape
+    ss = 0.0
+    st = 0.0
+    sd = np.zeros(k_rows)
+    dt = np.zeros(k_rows)
+    rd = np.zeros(k_rows)
+    for i in range(n):
+        si = s[i]
+        ss += si * si
+        st += si
+        for k in range(k_rows):
+            d = ds[k, i]
+            sd[k] += d * si
+            dt[k] += d
+            rd[k] += d * r[i]
+    c0 = np.zeros(k_rows)
+    c1 = np.zeros(k_rows)
+    if free_offset:
+        det = ss * n - st * st
+        if det != 0.0:
+            for k in range(k_rows):
+                x0 = b * sd[k] - rd[k]
+                x1 = b * dt[k]
+                c0[k] = (n * x0 - st * x1) / det
+                c1[k] = (ss * x1 - st * x0) / det
+    elif ss > 0.0:
+        for k in range(k_rows):
+            c0[k] = (b * sd[k] - rd[k]) / ss
+    a = np.zeros((k_rows, k_rows))
+    g = np.zeros(k_rows)
+    row = np.empty(k_rows)
+    for i in range(n):
+        for k in range(k_rows):
+            row[k] = c0[k] * s[i] + c1[k] - b * ds[k, i]
+        for k in range(k_rows):
+            g[k] += row[k] * r[i]
+            for m in range(k, k_rows):
+                a[k, m] += row[k] * row[m]
+    for k in range(k_rows):
+        for m in range(k):
+            a[k, m] = a[m, k]
+    return a, g

@@ -114,6 +114,21 @@ def superpose(step_response: np.ndarray, u: np.ndarray) -> np.ndarray:
     return causal_convolve(du, step_response)
 
 
+def superpose_rows(step_responses: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """``superpose`` of every row of ``step_responses`` (k, >= len(u)) for one input: (k, len(u)).
+
+    The input's changes are found once; each row's result equals ``superpose``'s.
+    """
+    from . import kernels
+    idx, size = _changes_cached(u)
+    n = u.shape[0]
+    if idx.size <= SPARSE_STEP_LIMIT:
+        return kernels.superpose_steps_rows(step_responses, idx, size, n)
+    du = np.zeros(n)
+    du[idx] = size
+    return np.array([causal_convolve(du, row) for row in step_responses])
+
+
 def simulate(model: CreepModel, t: np.ndarray, u: np.ndarray, method: str = "exact",
              memory: int | None = None) -> np.ndarray:
     """Output y(t) of ``model`` for the input u sampled on the uniform grid t (zero initial state)."""

@@ -50,6 +50,8 @@ PRIORITY_STARTS = 5
 #: holds EXPLORE_EXCITATION of the input's total variation (used when it is < 2/3 of the record).
 EXPLORE_SAMPLES = 6000
 EXPLORE_EXCITATION = 0.3
+#: Base-path responses remembered per record (parameter sets; ``Prepared.base_path``).
+BASE_PATH_CACHE = 8
 #: Relative tolerance (ftol, xtol) of the final polish: RSS to ~1e-7 is ample for the evidence.
 FULL_TOL = 1e-7
 #: Evaluations of the final polish on the whole record after exploring on a prefix.
@@ -147,6 +149,29 @@ class Prepared:
             self._cache[key] = fx.Superposer(self.t, x, x_pre=pre, t_pre=self.t_pre)
         return self._cache[key]
 
+    def base_path(self, inputs: tuple[tuple[InputEffect, str | None], ...], alpha: float, a1: float, a2: float,
+                  delay: float) -> np.ndarray:
+        """The base model's unit-gain responses to the input rows, delayed (uniform records), read-only.
+
+        Remembered for the last BASE_PATH_CACHE parameter sets: the fits
+        evaluate the same base parameters again and again with only an
+        effect's own parameters changed (its finite-difference Jacobian
+        columns, its starting grids), and this path (the exact simulation,
+        the delay's spline, the superposition) is most of an evaluation.
+        """
+        key = ("+".join(f"{e.name}[{variant}]" for e, variant in inputs) or "u", alpha, a1, a2, delay)
+        cache = self._cache.setdefault("base_path", {})
+        if key in cache:
+            cache[key] = cache.pop(key)          # most recently used last
+            return cache[key]
+        s = fx.delayed_grid(fx.base_step_grid(alpha, a1, a2, self.h, self.n), self.h, delay)
+        rows = self.superposer(inputs).apply(s)
+        rows.setflags(write=False)
+        cache[key] = rows
+        while len(cache) > BASE_PATH_CACHE:
+            cache.pop(next(iter(cache)))
+        return rows
+
     def input_rows(self, inputs: tuple[tuple[InputEffect, str | None], ...], u: np.ndarray,
                    before: bool = False) -> np.ndarray:
         """u and the rows the input effects add (``before``: u is the input before the record)."""
@@ -240,8 +265,7 @@ class Design:
         for e, _ in self.inputs:
             names += e.column_names()
         if data.uniform:
-            s = fx.delayed_grid(fx.base_step_grid(alpha, a1, a2, data.h, data.n), data.h, d)
-            dyn = [sup.apply(s)]
+            dyn = [data.base_path(self.inputs, alpha, a1, a2, d)]
             tau = sup.grid_tau - d
         else:
             dyn = [sup.apply(lambda tt: fx.base_step_at(alpha, a1, a2, tt - d))]
