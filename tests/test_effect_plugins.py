@@ -170,3 +170,16 @@ def test_builtins_cannot_be_removed_and_bad_plugins_fail_in_one_line():
         register_effect(object())
     with pytest.raises(ModelError, match="cannot load effect"):
         register_effect("no_such_module_xyz:Effect")
+
+
+def test_second_creep_example_is_a_valid_creep_for_any_alpha():
+    """example_params gave alpha2 = alpha + 0.35 > 1 for alpha 0.77 (the diagnosis-bands bench crashed)."""
+    import numpy as np
+    from creep_online.effects import get_effect
+    from creep_online.model import CreepModel
+    eff = get_effect("second_creep")
+    for alpha in np.linspace(0.005, 0.8, 41):
+        m = CreepModel.from_resonance(float(alpha), 50.0, 0.1, 1.0)
+        for seed in range(5):
+            p = eff.example_params(m, None, None, None, np.random.default_rng(seed))
+            assert 0.1 <= p["alpha2"] <= 0.95 and abs(p["alpha2"] - alpha) >= 0.3 - 1e-12

@@ -82,5 +82,6 @@ class SecondCreep(ParallelEffect):
     def example_params(self, model, t, u, y_base, rng) -> dict:
         alpha2 = model.alpha + rng.choice([-1, 1]) * rng.uniform(0.3, 0.4)
         if not 0.1 <= alpha2 <= 0.95:  # keep a creep (not an elastic or viscous) term, 0.3-0.4 away from alpha
-            alpha2 = model.alpha + 0.35
+            # above alpha if that stays below 0.95, else below it (alpha + 0.35 was 1.12 for alpha 0.77)
+            alpha2 = model.alpha + 0.35 if model.alpha <= 0.6 else model.alpha - 0.35
         return {"gain": model.b * rng.uniform(0.2, 0.5) * rng.choice([-1, 1]), "alpha2": alpha2}
