@@ -46,6 +46,12 @@ def taylor_moments(a1: float, a2: float, h: float, terms: int = TAYLOR_TERMS) ->
     One matrix exponential of the resonance augmented with a chain of
     integrators (Van Loan's method).
     """
+    e = expm(_integrator_chain(a1, a2, terms) * h)
+    return np.ascontiguousarray(e[:2, :2]), np.ascontiguousarray(e[:2, 2:].T)
+
+
+def _integrator_chain(a1: float, a2: float, terms: int) -> np.ndarray:
+    """The resonance (A, B) augmented with a chain of ``terms`` integrators (Van Loan's matrix)."""
     a, b = state_matrices(a1, a2)
     size = 2 + terms
     f = np.zeros((size, size))
@@ -53,8 +59,7 @@ def taylor_moments(a1: float, a2: float, h: float, terms: int = TAYLOR_TERMS) ->
     f[:2, 2] = b
     for m in range(terms - 1):
         f[2 + m, 3 + m] = 1.0
-    e = expm(f * h)
-    return np.ascontiguousarray(e[:2, :2]), np.ascontiguousarray(e[:2, 2:].T)
+    return f
 
 
 @lru_cache(maxsize=64)
@@ -96,13 +101,8 @@ HEAD_DIFF_STEP = 1e-5
 
 def _augmented(a1: float, a2: float, terms: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(F, dF/da1, dF/da2): the resonance with its integrator chain, as in ``taylor_moments``."""
-    a, b = state_matrices(a1, a2)
-    size = 2 + terms
-    f = np.zeros((size, size))
-    f[:2, :2] = a
-    f[:2, 2] = b
-    for m in range(terms - 1):
-        f[2 + m, 3 + m] = 1.0
+    f = _integrator_chain(a1, a2, terms)
+    size = f.shape[0]
     wn = 1.0 / math.sqrt(a2)
     dwn = -0.5 * wn / a2
     d1 = np.zeros((size, size))
