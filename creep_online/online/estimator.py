@@ -48,7 +48,7 @@ from .search import ResonanceSearch
 from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SOE_TOP, SoeBasis
 from . import recursive as R
 from .recursive import RecursiveTracker
-from .tracker import SEARCH_STEPS, WindowTracker
+from .tracker import WindowTracker
 from .stored_params import StoredParams
 
 PHASES = ("buffering", "searching", "tracking")
@@ -493,10 +493,8 @@ class OnlineEstimator(StoredParams):
             self._start_search()
             units -= 1
         if self._phase == "searching":
-            # a unit is SEARCH_STEPS search steps, as in the tracker's searches: at one step a 2 s buffer
-            # (a 3-5 Hz mode's settling) took longer than a 10 s stream, sample by sample at 10 kHz
             s = self._search
-            while units > 0 and not any(s.step() for _ in range(SEARCH_STEPS)):
+            while units > 0 and not s.unit():
                 units -= 1
             if s.result is None or self._longer_window_needed(s.result):
                 return

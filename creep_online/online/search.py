@@ -44,6 +44,11 @@ COARSE_ROWS = 400
 FINE_ROWS = 2000
 #: Multiply-adds per unit of work (~3 us).
 UNIT_WORK = 4000
+#: Search steps per unit of background work (``ResonanceSearch.unit``, for the start-up search and the
+#: tracker's): a unit of ~10 us like a Levenberg-Marquardt step. At one step per unit a search on 2 s at
+#: 10 kHz took ~4 s of stream sample by sample (a wrong-basin start was taken for a change meanwhile), and a
+#: slow mode's start-up search outlasted a 10 s stream.
+STEPS_PER_UNIT = 3
 #: Candidates refined from the grid.
 REFINE = 3
 #: Cost evaluations per refined candidate at most in the post-change search (``fixed_alpha``).
@@ -169,6 +174,10 @@ class ResonanceSearch:
             self.units += 1
             next(self._gen, None)
         return self.result is not None
+
+    def unit(self) -> bool:
+        """``STEPS_PER_UNIT`` steps (one unit of the caller's background work); True when the result is ready."""
+        return any(self.step() for _ in range(STEPS_PER_UNIT))
 
     def exact_cost(self, alpha: float, a1: float, a2: float) -> Generator:
         """Projected cost per row of one candidate on every row after ``lead`` (as ``result.cost``), in units.
@@ -316,23 +325,26 @@ class ResonanceSearch:
                                    cost=float(cost))
 
 
-def _same_basin(p: tuple, q: tuple) -> bool:
-    """Are two (alpha, fn, zeta) points neighbours: fn within 35 %, zeta within a factor 1.65, alpha within 10 %?
+def _same_resonance(fn: float, z: float, fn2: float, z2: float) -> bool:
+    """Neighbouring resonances: fn within 35 %, zeta within a factor 1.65 (about the grid's spacing)."""
+    return abs(math.log(fn / fn2)) <= 0.3 and abs(math.log(z / z2)) <= 0.5
 
-    The fn and zeta limits are the grid's spacing (``_distinct``); alpha's keeps
-    apart candidates that share a resonance but not the creep.
+
+def _same_basin(p: tuple, q: tuple) -> bool:
+    """Are two (alpha, fn, zeta) points neighbours: the same resonance and alpha within 10 %?
+
+    Alpha's limit keeps apart candidates that share a resonance but not the creep.
     """
-    return (abs(math.log(p[1] / q[1])) <= 0.3 and abs(math.log(p[2] / q[2])) <= 0.5
-            and abs(math.log(p[0] / q[0])) <= 0.1)
+    return _same_resonance(p[1], p[2], q[1], q[2]) and abs(math.log(p[0] / q[0])) <= 0.1
 
 
 def _distinct(found: list, count: int) -> list:
-    """The best grid points that are not neighbours of a better one (different basins)."""
+    """The best grid points whose resonance is not a neighbour of a better one's (different basins)."""
     out: list = []
     for cost, alpha, fn, z in found:
         if not math.isfinite(cost):
             break
-        if all(abs(math.log(fn / f2)) > 0.3 or abs(math.log(z / z2)) > 0.5 for _, f2, z2 in out):
+        if not any(_same_resonance(fn, z, f2, z2) for _, f2, z2 in out):
             out.append((alpha, fn, z))
         if len(out) == count:
             break

@@ -66,10 +66,6 @@ ALPHA_HOLD_S = 2.0
 WAIT = "wait"
 #: Post-change samples the resonance search waits for after a detection (s).
 RESEARCH_S = 1.0
-#: Search steps (``ResonanceSearch.step``, ~4000 multiply-adds, ~3 us) per unit of background work: a unit
-#: of ~10 us like a Levenberg-Marquardt step. At one step per unit a search on 2 s at 10 kHz took ~4 s of
-#: stream sample by sample (a wrong-basin start was taken for a change meanwhile).
-SEARCH_STEPS = 3
 #: Post-change searches at most: 1 s of samples, then twice as many while the result misfits (``_resolved``),
 #: up to the ring's half or the search's work memory (3.3 s at 10 kHz).
 RESEARCH_PASSES = 3
@@ -724,8 +720,8 @@ class WindowTracker(ParameterView):
 
     @staticmethod
     def _run_search(search: ResonanceSearch) -> Generator:
-        """A search to its result, ``SEARCH_STEPS`` steps per unit."""
-        while not any(search.step() for _ in range(SEARCH_STEPS)):
+        """A search to its result, one ``ResonanceSearch.unit`` per unit of background work."""
+        while not search.unit():
             yield
 
     def _researching(self) -> bool:
