@@ -68,15 +68,31 @@ def _errors(model, truth) -> dict:
             "zeta_rel": model.zeta / truth.zeta - 1, "b_rel": model.b / truth.b - 1}
 
 
-def run(args: argparse.Namespace) -> int:
-    from ..model import CreepModel
-    from ..online import OnlineEstimator, warm_kernels
+def hardware_extras():
+    """``open_source``, once the demo's extras (pyserial, hil_sim) import; a one-line error if they do not."""
     try:
-        from hil_sim.harness import PlantProcess
+        import hil_sim.harness  # noqa: F401
         from ..io.sources import open_source
     except ImportError as exc:
         raise CreepOnlineError(f"demo needs the hardware extras ({exc.name} missing): "
                                "pip install 'creep_online[hardware]'") from None
+    return open_source
+
+
+def start_plant(plant_args: list[str], progress: Progress, what: str):
+    """``hil_sim`` in its own process (``hil_sim.harness.PlantProcess``); a one-line error if it does not come up."""
+    from hil_sim.harness import PlantProcess
+    progress.show(f"demo: starting {what}...", force=True)
+    try:
+        return PlantProcess(plant_args)
+    except RuntimeError as exc:
+        raise CreepOnlineError(str(exc).splitlines()[0]) from None
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..model import CreepModel
+    from ..online import OnlineEstimator, warm_kernels
+    open_source = hardware_extras()
     if not args.duration > 0 or not args.rate > 0:
         raise CreepOnlineError("--duration and --rate must be > 0")
     out_dir = Path(args.report)
@@ -97,11 +113,7 @@ def run(args: argparse.Namespace) -> int:
         if value:
             plant_args += [flag, value]
     progress = Progress(not args.quiet, width=160)
-    progress.show(f"demo: starting the simulated plant (hil_sim, {args.rate:g} Hz, {args.transport})...", force=True)
-    try:
-        plant = PlantProcess(plant_args)
-    except RuntimeError as exc:
-        raise CreepOnlineError(str(exc).splitlines()[0]) from None
+    plant = start_plant(plant_args, progress, f"the simulated plant (hil_sim, {args.rate:g} Hz, {args.transport})")
     with plant:
         ready = plant.ready
         truth = CreepModel(**ready["model"])

@@ -40,12 +40,8 @@ def run_compensated(args, progress) -> dict:
     from ..online import OnlineEstimator, warm_kernels
     from ..online.compensator import CreepCompensator
     from ..online.compensator import warm_kernels as warm_compensator
-    try:
-        from hil_sim.harness import PlantProcess
-        from ..io.sources import open_source
-    except ImportError as exc:
-        raise CreepOnlineError(f"demo needs the hardware extras ({exc.name} missing): "
-                               "pip install 'creep_online[hardware]'") from None
+    from .demo import DRIFT, hardware_extras, start_plant
+    open_source = hardware_extras()
     if args.transport != "serial-binary" or args.faults or args.effects:
         raise CreepOnlineError("--compensate runs over --transport serial-binary without --faults or --effects")
     plant_args = ["--rate", repr(args.rate), "--duration", repr(args.duration), "--transport", "serial-binary",
@@ -53,13 +49,8 @@ def run_compensated(args, progress) -> dict:
     if args.params:
         plant_args += ["--params", args.params]
     if args.scenario == "drift":
-        from .demo import DRIFT
         plant_args += ["--drift", f"alpha={DRIFT[0]!r},b={DRIFT[1]!r}"]
-    progress.show(f"demo: starting the closed-loop plant (hil_sim --command-input, {args.rate:g} Hz)...", force=True)
-    try:
-        plant = PlantProcess(plant_args)
-    except RuntimeError as exc:
-        raise CreepOnlineError(str(exc).splitlines()[0]) from None
+    plant = start_plant(plant_args, progress, f"the closed-loop plant (hil_sim --command-input, {args.rate:g} Hz)")
     with plant:
         ready = plant.ready
         truth = CreepModel(**ready["model"])
