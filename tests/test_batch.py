@@ -32,6 +32,7 @@ from creep_online.fleet import COLUMNS, summarize, write_table  # noqa: E402
 from creep_online.fleet.job import run_record  # noqa: E402
 from creep_online.fleet.runner import run_on_dask  # noqa: E402
 from creep_online.fleet.summary import robust_z  # noqa: E402
+from ptyio import read_until_closed  # noqa: E402
 from creep_online.identification import identify  # noqa: E402
 from creep_online.io import load_csv  # noqa: E402
 from creep_online.io.fleet_records import find_records  # noqa: E402
@@ -263,15 +264,7 @@ def test_ctrl_c_stops_cleanly_and_keeps_the_rows_done(fleet, tmp_path):
             counts = re.findall(rb"\] (\d+)/40 records", seen)
             done = int(counts[-1]) if counts else 0
     os.killpg(proc.pid, signal.SIGINT)
-    shown = b""
-    while True:                      # what the terminal shows after Ctrl-C, until the process closes it
-        try:
-            data = os.read(master, 4096)
-        except OSError:
-            break
-        if not data:
-            break
-        shown += data
+    shown = read_until_closed(master)    # what the terminal shows after Ctrl-C, until the process closes it
     proc.wait(timeout=60)
     os.close(master)
     assert done >= 2, seen[-300:]

@@ -344,6 +344,22 @@ def test_adaptive_beats_frozen_on_drifting_random_plants():
         assert near.sum() >= 6 and np.sum(ratio[limit >= 5] >= 5) >= 2
 
 
+def _adaptive_on_drifting_plant(seed: int, seconds: float, hold_s: float, drift_s: float):
+    """Random drifting plant ``seed`` under adaptive compensation (alpha +20 %, b +10 % over ``drift_s``):
+    (the estimator after the run, alpha(t), b(t))."""
+    from creep_online.online import OnlineEstimator
+    from hil_sim.closed_loop import random_drifting_plant, run_closed_loop, staircase
+    plant, levels = random_drifting_plant(seed)
+    t = np.arange(int(seconds / H)) * H
+    r = staircase(t, levels, hold_s, t_start=0.05)
+    alpha = plant.alpha * (1 + 0.2 * t / drift_s)
+    b = plant.b * (1 + 0.1 * t / drift_s)
+    est = OnlineEstimator(H)
+    run_closed_loop(t, r, plant, "adaptive", alpha=alpha, b=b, estimator=est,
+                    compensator=CreepCompensator(H, bandwidth_hz=plant.fn / 2), block=100, seed=seed)
+    return est, alpha, b
+
+
 def test_the_change_test_stays_quiet_on_a_drifting_compensated_plant():
     """Adaptive compensation of a drifting plant (random drifting plant 2: alpha 0.17 +20 %, b +10 % over
     30 s): flat holds, then steps. The change test predicts its last second with the window's drift rates;
@@ -351,16 +367,7 @@ def test_the_change_test_stays_quiet_on_a_drifting_compensated_plant():
     rates came on, was taken for a change, the window restarted, and re-searches on flat holds took a wrong
     resonance (before the fix: events at 5.5 and 11 s, b -97 % at 12 s; creep error 3787 by the end of a 30 s
     run)."""
-    from creep_online.online import OnlineEstimator
-    from hil_sim.closed_loop import random_drifting_plant, run_closed_loop, staircase
-    plant, levels = random_drifting_plant(2)
-    t = np.arange(int(12.0 / H)) * H
-    r = staircase(t, levels, 5.0, t_start=0.05)
-    alpha = plant.alpha * (1 + 0.2 * t / 30.0)
-    b = plant.b * (1 + 0.1 * t / 30.0)
-    est = OnlineEstimator(H)
-    run_closed_loop(t, r, plant, "adaptive", alpha=alpha, b=b, estimator=est,
-                    compensator=CreepCompensator(H, bandwidth_hz=plant.fn / 2), block=100, seed=2)
+    est, alpha, b = _adaptive_on_drifting_plant(2, seconds=12.0, hold_s=5.0, drift_s=30.0)
     e = est.estimate
     print(f"events {est.events}, quality {e.quality}, alpha {e.alpha / alpha[-1] - 1:+.2%}, b {e.b / b[-1] - 1:+.2%}")
     assert est.events == [] and e.quality == "good"
@@ -372,16 +379,7 @@ def test_an_undetermined_resonance_does_not_move_in_a_flat_hold():
     the flat hold after 10 s the last second barely determines the resonance (ln a2 1-sigma 0.4), and its fit
     wanders (a2 +232 %). Judged in ln a2, the scale of its 1-sigma, that is 3 sigma, not 5.9 as exp(d) - 1:
     no change. Before: an event at 14.5 s, the window restarted and no estimate was good for 25 s."""
-    from creep_online.online import OnlineEstimator
-    from hil_sim.closed_loop import random_drifting_plant, run_closed_loop, staircase
-    plant, levels = random_drifting_plant(1008)
-    t = np.arange(int(16.0 / H)) * H
-    r = staircase(t, levels, 10.0, t_start=0.05)
-    alpha = plant.alpha * (1 + 0.2 * t / 60.0)
-    b = plant.b * (1 + 0.1 * t / 60.0)
-    est = OnlineEstimator(H)
-    run_closed_loop(t, r, plant, "adaptive", alpha=alpha, b=b, estimator=est,
-                    compensator=CreepCompensator(H, bandwidth_hz=plant.fn / 2), block=100, seed=1008)
+    est, _, _ = _adaptive_on_drifting_plant(1008, seconds=16.0, hold_s=10.0, drift_s=60.0)
     print(f"events {est.events}, quality {est.estimate.quality}")
     assert est.events == [] and est.estimate.quality == "good"
 

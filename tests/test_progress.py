@@ -11,6 +11,7 @@ import pytest
 from creep_online.commands._progress import Progress
 from creep_online.io import save_csv
 from hil_sim.experiments import LOAD_CELL
+from ptyio import read_until_closed
 
 
 @pytest.fixture(scope="module")
@@ -27,17 +28,9 @@ def _run_in_pty(args: list[str], timeout: float = 120.0) -> tuple[int, str]:
     proc = subprocess.Popen([sys.executable, "-m", "creep_online", *args], stdin=subprocess.DEVNULL,
                             stdout=slave, stderr=slave, close_fds=True)
     os.close(slave)
-    chunks, deadline = [], time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        try:
-            data = os.read(master, 4096)
-        except OSError:          # EIO: the child closed the terminal
-            break
-        if not data:
-            break
-        chunks.append(data)
+    shown = read_until_closed(master, time.monotonic() + timeout)
     os.close(master)
-    return proc.wait(timeout=10), b"".join(chunks).decode(errors="replace")
+    return proc.wait(timeout=10), shown.decode(errors="replace")
 
 
 def test_a_stage_is_drawn_in_place_and_erased_on_a_terminal():
@@ -48,15 +41,7 @@ def test_a_stage_is_drawn_in_place_and_erased_on_a_terminal():
         p.stage("fitting drift")
         time.sleep(0.6)                      # the ticker adds the elapsed time
         p.close()
-    shown = b""
-    while True:
-        try:
-            data = os.read(master, 4096)
-        except OSError:
-            break
-        if not data:
-            break
-        shown += data
+    shown = read_until_closed(master)
     os.close(master)
     text = shown.decode()
     assert text.startswith("\r") and "fitting drift" in text
