@@ -7,7 +7,7 @@ from typing import Any
 from ..io.jsonable import json_text
 from ..io.params import parse_params
 
-__all__ = ["print_json", "parse_params", "add_column_options", "research_lines"]
+__all__ = ["print_json", "parse_params", "add_column_options", "moves_text", "research_lines"]
 
 
 def add_column_options(parser) -> None:
@@ -25,6 +25,11 @@ def print_json(obj: Any) -> None:
     sys.stdout.write("\n")
 
 
+def moves_text(relative_change: dict) -> str:
+    """``a1 -12.0 %, a2 +25.0 %``: the relative moves of a change event or a re-search."""
+    return ", ".join(f"{k} {100 * v:+.1f} %" for k, v in relative_change.items())
+
+
 def research_lines(researches: list[dict]) -> list[str]:
     """One line per re-search of the resonance that replaced the estimate, and one for those that kept it.
 
@@ -35,9 +40,9 @@ def research_lines(researches: list[dict]) -> list[str]:
     lines = []
     for rs in researches:
         if rs["switched"]:
-            moves = ", ".join(f"{k} {100 * v:+.1f} %" for k, v in rs["relative_change"].items())
             lines.append(f"resonance re-searched at t = {rs['t']:.4g} s ({rs['reason']}): "
-                         f"{', '.join(rs['moved'])} moved ({moves}; likelihood ratio {rs['lr']:.3g})")
+                         f"{', '.join(rs['moved'])} moved ({moves_text(rs['relative_change'])}; "
+                         f"likelihood ratio {rs['lr']:.3g})")
     kept = [rs for rs in researches if not rs["switched"]]
     if kept:
         lines.append(f"{len(kept)} re-search(es) of the resonance kept the estimate (the data could not do better; "

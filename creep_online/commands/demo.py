@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import CreepOnlineError
 from ..model import ONLINE_REFITS as REFITS
-from ._common import print_json, research_lines
+from ._common import moves_text, print_json, research_lines
 from ._progress import Progress
 
 SCENARIOS = ("stationary", "payload", "drift")
@@ -261,7 +261,7 @@ def _print_summary(r: dict, as_json: bool) -> None:
         why = f" ({est['reason']})" if est.get("reason") else ""
         print(f"  estimate: phase {est['phase']}, quality {est['quality']}{why}")
         for ev in est.get("events", []):
-            moves = ", ".join(f"{k} {100 * v:+.1f} %" for k, v in ev["relative_change"].items())
+            moves = moves_text(ev["relative_change"])
             print(f"    change near t = {ev['t']:.2f} s, detected at {ev['detected_t']:.2f} s: "
                   f"{', '.join(ev['moved']) or 'nothing significant'} moved ({moves})")
         for line in research_lines(est.get("researches", [])):

@@ -23,7 +23,7 @@ from ..errors import CreepOnlineError, DataError, TransportError
 from ..io.csvfile import load_record
 from ..online import OnlineEstimator, warm_kernels
 from ..model import ONLINE_REFITS as REFITS
-from ._common import add_column_options, print_json, research_lines
+from ._common import add_column_options, moves_text, print_json, research_lines
 
 
 #: How a stream ended -> exit code. Every end after the first sample prints the estimate and the counters.
@@ -107,9 +107,9 @@ class Trace:
 
     def add(self, est: OnlineEstimator) -> None:
         e = est.estimate
-        events = ";".join(f"{ev['t']:.4g}:{'+'.join(ev['moved'])}" for ev in e.events)
-        switched = ";".join(f"{rs['t']:.4g}:{'+'.join(rs['moved'])}" for rs in e.researches if rs["switched"])
-        self.rows.append((e.t, e.alpha, e.a1, e.a2, e.b, e.fn_hz, e.zeta, e.quality, e.reason, events, switched))
+        switched = [rs for rs in e.researches if rs["switched"]]
+        self.rows.append((e.t, e.alpha, e.a1, e.a2, e.b, e.fn_hz, e.zeta, e.quality, e.reason, _marks(e.events),
+                          _marks(switched)))
 
     def write(self) -> None:
         if self.path is None:
@@ -119,6 +119,11 @@ class Trace:
             f.write(",".join(self.COLUMNS) + "\n")
             for row in self.rows:
                 f.write(",".join(_cell(v) for v in row) + "\n")
+
+
+def _marks(items: list[dict]) -> str:
+    """``t:moved`` of each change event or re-search, ``;``-separated (a trace cell)."""
+    return ";".join(f"{x['t']:.4g}:{'+'.join(x['moved'])}" for x in items)
 
 
 def _cell(v) -> str:
@@ -176,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"  skipped {est.skipped_nonfinite} non-finite, {est.gaps} lost, {est.alpha_updates} window fits, "
           f"outliers gated: {e.outliers} output, {e.input_outliers} input")
     for ev in e.events:
-        moves = ", ".join(f"{k} {100 * v:+.1f} %" for k, v in ev["relative_change"].items())
+        moves = moves_text(ev["relative_change"])
         print(f"  change near t = {ev['t']:.4g} s (detected {ev['detected_t']:.4g} s): "
               f"{', '.join(ev['moved']) or 'nothing significant'} moved ({moves})")
     for line in research_lines(e.researches):
