@@ -186,6 +186,59 @@ def test_rereference_equals_accumulating_with_the_new_time_origin():
     assert np.allclose(moved.sy, direct.sy, rtol=1e-8, atol=1e-11 * np.abs(direct.sy).max())
 
 
+def test_true_statistics_equal_moving_the_origin_then_scaling():
+    """The re-fit's fused kernel = rereference, the running total of the moves, symmetrize and scale."""
+    model = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
+    h, n = 1e-3, 3000
+    u = _staircase(n, 300, 6)
+    y = simulate(model, np.arange(n) * h, u)
+    tr = _tracker(model, h, window_s=1.0, drift=2)
+    _feed(tr, u, y)
+    st, S, shift = tr.st.copy(), tr.S.copy(), np.zeros((tr.q + W.ONE, 2))
+    F, fy = np.empty((tr.p, tr.p)), np.empty(tr.p)
+    fyy = W.true_statistics(tr.st, tr.S, shift, F, fy)
+    t = (n - st[W.SC_TREF]) * h
+    W.rereference(st, S, float(n))
+    g = st[W.SC_G]
+    assert np.array_equal(F, (np.triu(S) + np.triu(S, 1).T) * (1.0 / g))
+    assert np.array_equal(fy, st[tr.lay["sy"]:tr.lay["co"]] / g)
+    assert fyy == st[W.SC_SYY] / g
+    assert np.allclose(shift[:, 0], t * tr.m[:tr.q + W.ONE], rtol=1e-15, atol=0)
+    assert np.allclose(shift[:, 1], t * tr.md, rtol=1e-15, atol=0)
+
+
+def test_since_statistics_equal_the_snapshot_moved_to_the_live_origin():
+    """The change test's statistics since a snapshot = live minus the snapshot re-referenced, in one move, to
+    the live origin, although the live statistics moved twice since (the moves compose additively)."""
+    model = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
+    h, n = 1e-3, 6000
+    u = _staircase(n, 300, 7)
+    y = simulate(model, np.arange(n) * h, u)
+    tr = _tracker(model, h, window_s=1.0, drift=2)
+    F, fy = np.empty((tr.p, tr.p)), np.empty(tr.p)
+    _feed(tr, u[:2000], y[:2000])
+    W.true_statistics(tr.st, tr.S, tr._shift, F, fy)          # a move before the snapshot
+    snap = tr.st.copy(), tr.S.copy(), tr._shift.copy()
+    _feed(tr, u[2000:4000], y[2000:4000])
+    W.true_statistics(tr.st, tr.S, tr._shift, F, fy)          # two moves after it
+    _feed(tr, u[4000:], y[4000:])
+    W.true_statistics(tr.st, tr.S, tr._shift, F, fy)
+    st0, S0, shift0 = snap
+    sy0, syy0 = st0[tr.lay["sy"]:tr.lay["co"]].copy(), float(st0[W.SC_SYY])
+    R, ry = np.empty((tr.p, tr.p)), np.empty(tr.p)
+    ryy = W.since_statistics(tr.st, tr.S, S0, sy0, syy0, tr._shift, shift0, R, ry)
+    moved, S0m = st0.copy(), S0.copy()
+    W.rereference(moved, S0m, float(tr.sc[W.SC_TREF]))      # the snapshot in one move (m unchanged since)
+    g = tr.sc[W.SC_G]
+    expect = (tr.S - S0m) / g
+    scale = np.abs(tr.S).max() / g
+    assert np.allclose(R, R.T, rtol=0, atol=0)
+    assert np.allclose(R, expect, rtol=1e-9, atol=1e-11 * scale)
+    assert np.allclose(ry, (tr.sy - moved[tr.lay["sy"]:tr.lay["co"]]) / g, rtol=1e-9,
+                       atol=1e-11 * np.abs(tr.sy).max() / g)
+    assert ryy == pytest.approx((tr.sc[W.SC_SYY] - syy0) / g, rel=1e-15)
+
+
 def test_drift_columns_model_a_drifting_gain_and_alpha():
     """With the true rates the window cost of a drifting plant is far below the constant-parameter cost."""
     base = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)

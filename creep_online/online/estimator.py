@@ -644,6 +644,7 @@ def _finite(x: float, default: float = 0.0) -> float:
 
 def warm_kernels() -> None:
     """Compile (or load from numba's cache) every kernel that Python calls, so no update() pays for it."""
+    from . import refit as RF
     from . import tracker as T
     est = OnlineEstimator(1e-3, horizon_s=10.0, t_c=0.05)
     t = np.arange(3000) * 1e-3
@@ -668,5 +669,15 @@ def warm_kernels() -> None:
     W.rereference(tr.st.copy(), tr.S.copy(), float(tr.sc[W.SC_N]) + 1.0)
     W.drift_coefficients(tr.theta, *lin, tr.basis.lam, tr.basis.dx, np.empty(tr.q + W.ONE))
     W.drift_score(H, g, np.ones(n), max(n - 2, 1))
+    st, S, shift = tr.st.copy(), tr.S.copy(), tr._shift.copy()
+    W.set_estimate(tr.theta.copy(), st, tr.basis.lam, tr.basis.dx)
+    W.since_statistics(st, S, S.copy(), np.ones(tr.p), 1.0, shift, shift.copy(), np.empty_like(S), np.ones(tr.p))
+    W.true_statistics(st, S, shift, np.empty_like(S), np.empty(tr.p))
+    for drift in (1, 2):                   # every stage of the re-fit (the score and the Wald test)
+        wk = tr._wk.copy()
+        wk[RF.RF_NEFF] = 1e6
+        for _ in range(20):
+            if RF.refit_unit(st, S, shift, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx, RF.MASK_ALL, drift):
+                break
     T.WindowTracker  # noqa: B018 - imported for its kernels
     R.warm()

@@ -35,6 +35,7 @@ from typing import Generator
 
 import numpy as np
 
+from . import refit as RF
 from . import window as W
 from .search import ResonanceSearch
 from .soe import SoeBasis
@@ -132,7 +133,7 @@ def _largest_move(new: list[float], old: list[float]) -> float:
 class Fit:
     """The window's last fit: parameters, cost, 1-sigma std, and when."""
 
-    theta: np.ndarray
+    theta: np.ndarray | list[float]
     cost: float = math.inf
     neff: float = 0.0
     std: dict = field(default_factory=dict)
@@ -206,10 +207,10 @@ class WindowTracker(ParameterView):
         self.fitting = True              # False while the start-up buffer is replayed: no refits yet
         self.converged = False           # a refit has barely moved since the start: the change test may judge
         self.fit = Fit(theta=self.theta.copy())
-        self._mu = 1e-3
         self._jobs: list[Generator] = []
         self._snaps: list[tuple] = []
-        self._shift = np.zeros((self.q + W.ONE, max(self.n_rate, 1)))   # total drift-origin move (``_since``)
+        self._shift = np.zeros((self.q + W.ONE, max(self.n_rate, 1)))   # total drift-origin move (W.since_statistics)
+        self._allocate_work()
         self._theta_at: dict[int, np.ndarray] = {}
         self._last_h = np.zeros((self.theta.size, self.theta.size))   # J^T J of the last LM step
         self._last_g = np.zeros(self.theta.size)                       # and J^T r
@@ -239,6 +240,24 @@ class WindowTracker(ParameterView):
         return int(self.sc[W.SC_N])
 
     # ------------------------------------------------------------------ state arrays
+    def _allocate_work(self) -> None:
+        """The periodic jobs' work arrays, allocated once.
+
+        A re-fit or a change test runs every few hundred samples: by then the
+        interpreter's and numpy's code paths are cold, and each numpy call from
+        Python (an allocation, a copy, a mask) costs 5-40 us at 10 kHz against
+        ~1 us warm. The jobs therefore call fused kernels on these arrays. Only
+        one re-fit is queued at a time (``_schedule``), and the periodic jobs
+        run one after the other (``_next_job``), so each owns its arrays.
+        """
+        p, k, r0 = self.p, self.theta.size, 5 + self.n_free
+        self._wk = RF.allocate(p, k, r0, REFIT_STEPS, self.alpha_bounds, DRIFT_ON, DRIFT_OFF, DRIFT_MAX)
+        self._R, self._ry = np.empty((p, p)), np.empty(p)      # change test: the last second's statistics
+        self._test_cov, self._test_out = np.empty((k, k)), np.empty(3)
+        self._free_test = np.zeros(k)          # the change test frees the resonance, gain, offset
+        self._free_test[1:5] = 1.0
+        self._refit_queued = False
+
     def _fresh(self, a1l: float, a2l: float) -> tuple[np.ndarray, np.ndarray]:
         """Empty statistics and zero states for a linearization point (weight 1)."""
         st = np.zeros(self.lay["size"])
@@ -263,12 +282,7 @@ class WindowTracker(ParameterView):
 
     def _coefficients(self) -> None:
         """The model coefficients for theta, and what the gate needs to know of the estimate."""
-        W.full_coefficients(self.theta, self.a1l, self.a2l, self.basis.lam, self.basis.dx, self.m)
-        if self.n_rate > 1:
-            W.drift_coefficients(self.theta, self.a1l, self.a2l, self.basis.lam, self.basis.dx, self.md)
-        self.sc[W.SC_BABS] = abs(self.b)
-        settle = 8.0 * self.a2 / self.a1
-        self.sc[W.SC_HOLD] = min(max(20.0, 2.0 * settle / self.h), 2.0 / self.h)
+        W.set_estimate(self.theta, self.st, self.basis.lam, self.basis.dx)
 
     # ------------------------------------------------------------------ per sample
     def feed(self, u: float, y: float) -> int:
@@ -292,7 +306,8 @@ class WindowTracker(ParameterView):
     def _schedule(self) -> None:
         """Queue the jobs that are due at this sample and set the next due count."""
         n = self.n
-        if n and n % self.refit_every == 0 and self.fitting:
+        if n and n % self.refit_every == 0 and self.fitting and not self._refit_queued:
+            self._refit_queued = True      # (a backlog would only re-fit the same statistics again)
             self._jobs.append(self._refit_job())
         if self.detect and n and n % self.test_every == 0:
             self._snapshot()
@@ -342,89 +357,6 @@ class WindowTracker(ParameterView):
         while self._jobs and self.work(1 << 30):
             pass
 
-    def _true_stats(self) -> Generator:
-        """Full symmetric true-scale copy of the window statistics (one unit).
-
-        The drift columns' time origin moves to the newest sample first, so the
-        fit's alpha and b are the values now, not window averages.
-        """
-        self._rereference(float(self.sc[W.SC_N]))
-        g = self.sc[W.SC_G]
-        F = np.empty((self.p, self.p))
-        W.symmetrize(self.S, F, 1.0 / g)
-        yield
-        return F, self.sy / g, self.sc[W.SC_SYY] / g
-
-    def _rereference(self, n_new: float) -> None:
-        """Move the drift columns' time origin to sample ``n_new`` in the live statistics, and add the move
-        to ``_shift``, the running total the change test brings its snapshot up to (``_since``)."""
-        t = (n_new - float(self.sc[W.SC_TREF])) * float(self.sc[W.SC_H])
-        if self.n_rate and t != 0.0:
-            nv = self.q + W.ONE                # the map's helper coefficients v, as W.rereference reads them
-            self._shift[:, 0] += t * self.m[:nv]
-            if self.n_rate > 1:
-                self._shift[:, 1] += t * self.md
-        W.rereference(self.st, self.S, n_new)
-
-    def _since(self, S0: np.ndarray, sy0: np.ndarray, shift0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Statistics of the samples since a snapshot: live minus the snapshot moved to the live drift origin.
-
-        A move of the origin is the regressor map x -> x (I - E), E holding t v in the rate columns' rows
-        0..nv-1. Two such maps compose additively (E fills only rate columns and reads none: E_i E_j = 0), so
-        every move since the snapshot is one map with D = the sum of t v since (``_shift``), applied as
-        ``W.rereference`` applies one; only the rate rows and columns change (S is kept whole).
-        """
-        dS, dsy = self.S - S0, self.sy - sy0
-        if self.n_rate:
-            D = self._shift - shift0
-            nv, r0 = D.shape[0], self.p - self.n_rate
-            G = S0[:, :nv] @ D
-            dS[:, r0:] += G
-            dS[r0:, :] += G.T
-            dS[r0:, r0:] -= D.T @ G[:nv]
-            dsy[r0:] += D.T @ sy0[:nv]
-        return dS, dsy
-
-    def _drift_test(self, theta: np.ndarray, free: np.ndarray, cov: np.ndarray, stats: tuple, lin: tuple,
-                    cost: float) -> Generator:
-        """Switch the drift rates on (score test) or off (Wald test); returns the statistic (one unit when off).
-
-        Off: the Gauss-Newton cost reduction that freeing the rates would bring,
-        over the noise variance (``DRIFT_ON``). On: the rates' Wald statistic
-        (``DRIFT_OFF``); switching off zeroes them (the next re-fit moves alpha
-        and b back to the constant-parameter fit).
-        """
-        sigma2 = max(cost, 0.0) / max(float(self.sc[W.SC_NEFF]) - theta.size, 1.0)
-        if not sigma2 > 0.0:
-            return 0.0
-        r0 = 5 + self.n_free
-        if self.drift_on:
-            r = theta[r0:]
-            sub = cov[r0:, r0:]
-            if not np.all(np.isfinite(sub)):   # singular: the rates are undetermined
-                stat = 0.0
-            elif r.size == 1:
-                stat = r[0] * r[0] / sub[0, 0] / sigma2 if sub[0, 0] > 0.0 else 0.0
-            else:                              # the 2x2 Wald form in closed form
-                c00, c01, c11 = sub[0, 0], sub[0, 1], sub[1, 1]
-                det = c00 * c11 - c01 * c01
-                stat = (c11 * r[0] ** 2 - 2.0 * c01 * r[0] * r[1] + c00 * r[1] ** 2) / det / sigma2 \
-                    if det > 0.0 else 0.0
-            stat = float(stat) if math.isfinite(stat) else 0.0
-            plausible = abs(r[0]) < DRIFT_MAX and (r.size < 2 or abs(r[1]) < DRIFT_MAX * abs(theta[0]))
-            if stat < DRIFT_OFF or not plausible:
-                self.drift_on = False
-                theta[r0:] = 0.0
-            return stat
-        H, g = np.empty((theta.size, theta.size)), np.empty(theta.size)
-        W.lm_normal(theta, *lin, self.basis.lam, self.basis.dx, *stats, H, g)
-        yield
-        stat = W.drift_score(H, g, free, r0) / sigma2
-        yield
-        if stat > DRIFT_ON:
-            self.drift_on = True
-        return stat
-
     def _lm(self, theta: np.ndarray, free: np.ndarray, mu: float, stats: tuple, lin: tuple,
             out: np.ndarray) -> Generator:
         """One Levenberg-Marquardt step in two units (normal equations, then the trial); returns the
@@ -441,42 +373,50 @@ class WindowTracker(ParameterView):
         return mu
 
     def _refit_job(self) -> Generator:
-        lin = (self.a1l, self.a2l)
-        stats = yield from self._true_stats()
-        free = np.ones(self.theta.size)
-        if self.window_start and (self.n - self.window_start) * self.h < ALPHA_HOLD_S:
-            free[0] = 0.0                  # a short window after a change does not determine alpha
-            free[5 + self.n_free:] = 0.0   # nor any drift
-        if not self.drift_on:
-            free[5 + self.n_free:] = 0.0
-        cov = np.empty((self.theta.size, self.theta.size))
-        out = np.empty(3)
-        theta = self.theta.copy()
-        for _ in range(REFIT_STEPS):
-            self._mu = yield from self._lm(theta, free, self._mu, stats, lin, out)
-            if out[2] == 0.0 and self._mu > 1e3:
-                break
-        W.covariance(self._last_h, free, cov)
-        yield
-        span = (self.n - self.window_start) * self.h
-        if self.n_rate and free[0] != 0.0 and self.converged and span >= DRIFT_MIN_S \
-                and (self.drift_on or self.refits % DRIFT_TEST_EVERY == 0) and np.all(np.isfinite(theta)):
-            self.drift_stat = yield from self._drift_test(theta, free, cov, stats, lin, out[1])
-        yield from self._accept(theta, cov, float(out[1]), lin)
+        """A re-fit of the window (``_refit``); while it is queued no other is (``_schedule``)."""
+        try:
+            yield from self._refit()
+        finally:
+            self._refit_queued = False
 
-    def _accept(self, theta: np.ndarray, cov: np.ndarray, cost: float, lin: tuple) -> Generator:
+    def _refit(self) -> Generator:
+        """The re-fit's stages (``refit.refit_unit``, one per unit), then the result swapped in.
+
+        Alpha and the drift rates stay fixed in a short window after a change (it determines
+        neither); the drift rates are tested (``refit._drift_test``) once the window is converged and
+        spans ``DRIFT_MIN_S``: every re-fit while they are on, every ``DRIFT_TEST_EVERY``-th while off.
+        """
+        span = (self.n - self.window_start) * self.h
+        hold = bool(self.window_start) and span < ALPHA_HOLD_S
+        mask = RF.MASK_HOLD if hold else (RF.MASK_ALL if self.drift_on else RF.MASK_CONSTANT)
+        drift = 0
+        if self.n_rate and not hold and self.converged and span >= DRIFT_MIN_S:
+            drift = 2 if self.drift_on else int(self.refits % DRIFT_TEST_EVERY == 0)
+        args = (self.st, self.S, self._shift, self.theta, self._wk, self.basis.lam, self.basis.dx, mask, drift)
+        unit = RF.refit_unit
+        while not unit(*args):
+            yield
+        yield
+        yield from self._accept()
+
+    def _accept(self) -> Generator:
         """Swap a re-fit in (one unit), then its 1-sigma and what it triggers (another).
 
-        Plain floats, not numpy, on 4-element vectors: a numpy call costs ~2 us here.
+        Plain floats, not numpy: numpy calls from Python are slow here (cold code paths).
         """
-        self._bound_resonance(theta)
-        new, old = theta.tolist(), self.theta.tolist()
-        if lin != (self.a1l, self.a2l):
+        head, new, var = RF.result(self._wk)
+        if head[RF.RF_DRIFT]:
+            self.drift_stat = head[RF.RF_DRIFT_STAT]
+            if head[RF.RF_DRIFT_SWITCH]:
+                self.drift_on = head[RF.RF_DRIFT_SWITCH] > 0.0
+        cost = head[RF.RF_AFTER]
+        self._bound_resonance(new)
+        if (head[RF.RF_A1L], head[RF.RF_A2L]) != (self.a1l, self.a2l):
             return                         # re-linearized meanwhile: the next refit decides
         # a sum of squares below zero is the linearized cost breaking down far from the linearization
         # point (seen: -2.5 against 1-4, after a post-change search in a wrong basin): its sigma would be 0
         # and the quality "good"
-        negative = cost < -1e-9 * abs(float(self.sc[W.SC_SYY]) / max(float(self.sc[W.SC_G]), 1e-300))
+        negative = cost < -1e-9 * abs(head[RF.RF_FYY])
         near = (abs(math.exp(new[1]) / self.a1l - 1) <= RELINEARIZE
                 and abs(math.exp(new[2]) / self.a2l - 1) <= RELINEARIZE)
         if negative and near:
@@ -490,21 +430,21 @@ class WindowTracker(ParameterView):
             self.rejected += 1             # a failed fit is never swapped in
             self._watch(math.inf, True)
             return
+        old = self.theta.tolist()
         self.converged = self.converged or _largest_move(new, old) < 0.01
-        self.theta[:] = theta
+        self.theta[:] = new
         self._coefficients()
         self.refits += 1
         yield
-        neff = float(self.sc[W.SC_NEFF])
+        neff = head[RF.RF_NEFF]
         sigma2 = max(cost, 0.0) / max(neff - len(new), 1.0)
-        var = cov.diagonal().tolist()
         sd = [math.sqrt(abs(v) * sigma2) if math.isfinite(v) else math.inf for v in var]
         a1, a2 = math.exp(new[1]), math.exp(new[2])
         std = {"alpha": sd[0], "a1": sd[1] * a1, "a2": sd[2] * a2, "b": sd[3], "offset": sd[4]}
         for k, name in enumerate(("b_rate", "alpha_rate")[:self.n_rate]):
             v = sd[5 + self.n_free + k]
             std[name] = (v * abs(new[3]) if k == 0 else v) if self.drift_on else math.inf
-        self.fit = Fit(theta=theta, cost=cost, neff=neff, std=std, sample=self.n)
+        self.fit = Fit(theta=new, cost=cost, neff=neff, std=std, sample=self.n)
         self._watch(math.sqrt(max(cost, 0.0) / max(neff, 1.0)), False)
         if abs(a1 / self.a1l - 1) > RELINEARIZE or abs(a2 / self.a2l - 1) > RELINEARIZE:
             if not any(j.__name__ == "_relinearize_job" for j in self._jobs):
@@ -590,30 +530,25 @@ class WindowTracker(ParameterView):
         if g < g0 or self.fit.sample < n0 or lin0 != (self.a1l, self.a2l) or n0 < self.window_start \
                 or not self.converged or self._researching():
             return                         # (a misfit being re-searched is not a change of the plant)
-        dS, dsy = self._since(S0, sy0, shift0)
-        ryy = (self.sc[W.SC_SYY] - syy0) / g
+        # the drift columns stay in, at the window's rates (the snapshot moved to the live time origin):
+        # over a second the drift is not negligible (alpha +0.7 %/s at a 2e-4 noise on a 0.5 output is ~5
+        # noise levels), and without it a drifting plant's step looked like a change
+        R, ry = self._R, self._ry
+        ryy = W.since_statistics(self.st, self.S, S0, sy0, syy0, self._shift, shift0, R, ry)
         nr = self.n - n0
         lin = (self.a1l, self.a2l)
-        yield                              # (dS, g, ryy, nr, lin: one instant; the samples since wait)
-        R = np.empty_like(self.S)
-        W.symmetrize(dS, R, 1.0 / g)
-        ry = dsy / g
-        # the drift columns stay in, at the window's rates (the snapshot moved to the live time origin,
-        # ``_since``): over a second the drift is not negligible (alpha +0.7 %/s at a 2e-4 noise on a
-        # 0.5 output is ~5 noise levels), and without it a drifting plant's step looked like a change
         yield
         before = W.cost_of(self.theta, *lin, self.basis.lam, self.basis.dx, R, ry, ryy)
         theta = self.theta.copy()
-        free = np.zeros(theta.size)
-        free[1:5] = 1.0
-        out = np.empty(3)
+        free = self._free_test
+        out = self._test_out
         mu = 1e-3
         for _ in range(TEST_STEPS):
             mu = yield from self._lm(theta, free, mu, (R, ry, ryy), lin, out)
         after = out[1]
         if not (math.isfinite(after) and after > 0.0 and math.isfinite(before)):
             return
-        cov = np.empty((theta.size, theta.size))
+        cov = self._test_cov
         W.covariance(self._last_h, free, cov)
         yield
         sigma2 = after / max(nr - 4, 1)
@@ -755,7 +690,7 @@ class WindowTracker(ParameterView):
         return st[self.lay["phi"]:self.lay["phi"] + self.q].copy()
 
     # ------------------------------------------------------------------ re-search trigger
-    def _bound_resonance(self, theta: np.ndarray) -> bool:
+    def _bound_resonance(self, theta: list[float] | np.ndarray) -> bool:
         """Keep (ln a1, ln a2) within the resonances the sampling represents; True if they were outside."""
         ln_a2_min = 2.0 * math.log(self.h / (2.0 * math.pi * FN_MAX_FS))
         hit = False

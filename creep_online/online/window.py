@@ -243,6 +243,28 @@ def drift_coefficients(theta: np.ndarray, a1l: float, a2l: float, lam: np.ndarra
 
 
 @njit(cache=CACHE)
+def set_estimate(theta: np.ndarray, st: np.ndarray, lam: np.ndarray, dx: float) -> None:
+    """The prediction's coefficients m (and md with the alpha rate) for theta, and what the output gate
+    needs to know of the estimate: |b| and the settling hold after an input change (two settling
+    times, 20 samples to 2 s). One kernel: it runs after every re-fit, when Python glue is cold."""
+    sc = st[:SC_SIZE]
+    q = int(sc[SC_NQ])
+    nr = int(sc[SC_NR])
+    p = q + FREE + int(sc[SC_NM]) + nr
+    o = SC_SIZE
+    a1l, a2l = sc[SC_A1L], sc[SC_A2L]
+    full_coefficients(theta, a1l, a2l, lam, dx, st[o + p:o + 2 * p])
+    if nr > 1:
+        c0 = o + 3 * p
+        nco = 2 * q + 18 + int(sc[SC_NM])
+        drift_coefficients(theta, a1l, a2l, lam, dx, st[c0 + nco + q:c0 + nco + 2 * q + ONE])
+    sc[SC_BABS] = abs(theta[3])
+    settle = 8.0 * math.exp(theta[2]) / math.exp(theta[1])
+    h = sc[SC_H]
+    sc[SC_HOLD] = min(max(20.0, 2.0 * settle / h), 2.0 / h)
+
+
+@njit(cache=CACHE)
 def rereference(st: np.ndarray, S: np.ndarray, n_new: float) -> None:
     """Move the drift columns' time origin to sample ``n_new`` in the statistics (S, sy).
 
@@ -298,6 +320,97 @@ def rereference(st: np.ndarray, S: np.ndarray, n_new: float) -> None:
             vs[k] += V[j, k] * sy[j]
     for k in range(nr):
         sy[r0 + k] -= t * vs[k]
+
+
+@njit(cache=CACHE)
+def true_statistics(st: np.ndarray, S: np.ndarray, shift: np.ndarray, F: np.ndarray, fy: np.ndarray) -> float:
+    """The window's statistics at true scale for a re-fit, in one call: F (full symmetric), fy; returns fyy.
+
+    The drift columns' time origin moves to the newest sample first (``rereference``: alpha and b of the
+    fit are then the values now) and the move is added to ``shift`` (rows 0..Q+5, one column per rate),
+    the running total the change test brings its snapshot up to. One kernel instead of the numpy steps
+    between them: run once per re-fit, the interpreter's and numpy's code paths are cold by then and
+    those few lines cost ~80 us at 10 kHz.
+    """
+    sc = st[:SC_SIZE]
+    nr = int(sc[SC_NR])
+    n_new = sc[SC_N]
+    t = (n_new - sc[SC_TREF]) * sc[SC_H]
+    q = int(sc[SC_NQ])
+    p = q + FREE + int(sc[SC_NM]) + nr
+    o = SC_SIZE
+    if nr > 0 and t != 0.0:
+        m = st[o + p:o + 2 * p]
+        c0 = o + 3 * p
+        nco = 2 * q + 18 + int(sc[SC_NM])
+        md = st[c0 + nco + q:c0 + nco + 2 * q + ONE]
+        for i in range(q + ONE):
+            shift[i, 0] += t * m[i]
+        if nr > 1:
+            for i in range(q + ONE):
+                shift[i, 1] += t * md[i]
+    rereference(st, S, n_new)
+    g = sc[SC_G]
+    symmetrize(S, F, 1.0 / g)
+    sy = st[o + 2 * p:o + 3 * p]
+    for i in range(p):
+        fy[i] = sy[i] / g
+    return sc[SC_SYY] / g
+
+
+@njit(cache=CACHE)
+def since_statistics(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, syy0: float,
+                     shift: np.ndarray, shift0: np.ndarray, R: np.ndarray, ry: np.ndarray) -> float:
+    """Statistics of the samples since a snapshot (S0, sy0, syy0, shift0) at true scale, for the change test:
+    R (full symmetric), ry; returns ryy.
+
+    Live minus the snapshot moved to the live drift origin. A move of the origin is the regressor map
+    x -> x (I - E), E holding t v in the rate columns' rows 0..nv-1; two such maps compose additively (E
+    fills only rate columns and reads none: E_i E_j = 0), so every move since the snapshot is one map with
+    D = shift - shift0, applied as ``rereference`` applies one; only the rate rows and columns change.
+    """
+    sc = st[:SC_SIZE]
+    nr = int(sc[SC_NR])
+    q = int(sc[SC_NQ])
+    p = q + FREE + int(sc[SC_NM]) + nr
+    o = SC_SIZE
+    sy = st[o + 2 * p:o + 3 * p]
+    for i in range(p):
+        for j in range(i, p):
+            R[i, j] = S[i, j] - S0[i, j]
+        ry[i] = sy[i] - sy0[i]
+    if nr > 0:
+        nv, r0 = q + ONE, p - nr
+        D = shift - shift0
+        G = np.zeros((p, nr))            # S0[:, :nv] @ D
+        for i in range(p):
+            for j in range(nv):
+                s0 = S0[i, j]
+                for k in range(nr):
+                    G[i, k] += s0 * D[j, k]
+        for k in range(nr):              # dS[:, r0:] += G, dS[r0:, :] += G^T, dS[r0:, r0:] -= D^T G[:nv]
+            j = r0 + k
+            for i in range(j + 1):
+                v = R[i, j] + G[i, k]
+                if i >= r0:
+                    c = 0.0
+                    for l in range(nv):
+                        c += D[l, i - r0] * G[l, k]
+                    v += G[j, i - r0] - c
+                R[i, j] = v
+            c = 0.0
+            for l in range(nv):
+                c += D[l, k] * sy0[l]
+            ry[j] += c
+    g = sc[SC_G]
+    inv = 1.0 / g
+    for i in range(p):
+        for j in range(i, p):
+            v = R[i, j] * inv
+            R[i, j] = v
+            R[j, i] = v
+        ry[i] = ry[i] / g
+    return (sc[SC_SYY] - syy0) / g
 
 
 @njit(cache=CACHE)
