@@ -364,9 +364,9 @@ class OnlineEstimator(StoredParams):
             status = R.sample(du, y, tr.st, tr.P, tr.CT)
         else:
             status = W.sample(du, y, tr.st, tr.S, tr.ring)
-        if status >= 8:
-            tr._schedule()
-        if tr._jobs:
+        if status >= 8:                   # jobs queued (and the change test's snapshot taken): their first
+            tr._schedule()                # unit waits for the next sample, this call has done enough
+        elif tr._jobs:
             tr.work(self._units)
 
     def update_block(self, u: np.ndarray, y: np.ndarray) -> None:
@@ -671,8 +671,10 @@ def warm_kernels() -> None:
     W.drift_score(H, g, np.ones(n), max(n - 2, 1))
     st, S, shift = tr.st.copy(), tr.S.copy(), tr._shift.copy()
     W.set_estimate(tr.theta.copy(), st, tr.basis.lam, tr.basis.dx)
+    W.snapshot(st, S, shift, tr.theta, S.copy(), np.empty(tr.p), shift.copy(), tr.theta.copy())
     W.since_statistics(st, S, S.copy(), np.ones(tr.p), 1.0, shift, shift.copy(), np.empty_like(S), np.ones(tr.p))
     W.true_statistics(st, S, shift, np.empty_like(S), np.empty(tr.p))
+    RF.start_test(st, S, S.copy(), np.ones(tr.p), 1.0, shift, shift.copy(), tr.theta.copy(), tr._test_wk.copy())
     for drift in (1, 2):                   # every stage of the re-fit (the score and the Wald test)
         wk = tr._wk.copy()
         wk[RF.RF_NEFF] = 1e6

@@ -47,26 +47,31 @@ RF_DRIFT_MAX = 19
 RF_SIGMA2 = 20    # noise variance of the drift test
 RF_K = 21         # number of parameters
 RF_R0 = 22        # first drift-rate parameter
+RF_START_COST = 23   # window cost at the starting theta (the first normal equations')
 HEAD = 24
 
-#: Parameter masks (rows of the masks block): all free, drift rates fixed, alpha and rates fixed.
-MASK_ALL, MASK_CONSTANT, MASK_HOLD = 0, 1, 2
+#: Parameter masks (rows of the masks block): all free, drift rates fixed, alpha and rates fixed, and the
+#: change test's (the resonance, the gain and the offset).
+MASK_ALL, MASK_CONSTANT, MASK_HOLD, MASK_TEST = 0, 1, 2, 3
+MASKS = 4
 
 
 def allocate(p: int, k: int, r0: int, steps: int, alpha_bounds: tuple[float, float], drift_on: float,
              drift_off: float, drift_max: float) -> np.ndarray:
     """A fresh work array for statistics of size p and k parameters (rates from r0 on)."""
-    wk = np.zeros(HEAD + 2 * k + 3 * k * k + 2 * k + p * p + p + 3 * k)
+    wk = np.zeros(HEAD + 2 * k + 3 * k * k + 2 * k + p * p + p + MASKS * k)
     wk[RF_MU] = 1e-3
     wk[RF_LO], wk[RF_HI] = alpha_bounds
     wk[RF_STEPS] = steps
     wk[RF_DRIFT_ON], wk[RF_DRIFT_OFF], wk[RF_DRIFT_MAX] = drift_on, drift_off, drift_max
     wk[RF_K], wk[RF_R0] = k, r0
-    masks = wk[wk.size - 3 * k:].reshape(3, k)
+    masks = wk[wk.size - MASKS * k:].reshape(MASKS, k)
     masks[:] = 1.0
     masks[MASK_CONSTANT, r0:] = 0.0
     masks[MASK_HOLD, r0:] = 0.0
     masks[MASK_HOLD, 0] = 0.0
+    masks[MASK_TEST] = 0.0
+    masks[MASK_TEST, 1:5] = 1.0
     return wk
 
 
@@ -87,7 +92,7 @@ def _views(wk: np.ndarray, p: int, k: int) -> tuple:
     F = wk[o:o + p * p].reshape(p, p)
     fy = wk[o + p * p:o + p * p + p]
     o += p * p + p
-    masks = wk[o:o + 3 * k].reshape(3, k)
+    masks = wk[o:o + MASKS * k].reshape(MASKS, k)
     return theta, var, H, g, cov, H2, g2, F, fy, masks
 
 
@@ -115,6 +120,8 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
     a1l, a2l, fyy = wk[RF_A1L], wk[RF_A2L], wk[RF_FYY]
     if stage == 1:                     # J^T J, J^T r at theta
         wk[RF_COST] = W.lm_normal(theta, a1l, a2l, lam, dx, F, fy, fyy, H, g)
+        if wk[RF_STEP] == 0.0:
+            wk[RF_START_COST] = wk[RF_COST]
         wk[RF_STAGE] = 2.0
         return False
     if stage == 2:                     # the damped step
@@ -142,6 +149,24 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
         wk[RF_DRIFT_SWITCH] = 1.0
     wk[RF_STAGE] = 0.0
     return True
+
+
+@njit(cache=CACHE)
+def start_test(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, syy0: float, shift: np.ndarray,
+               shift0: np.ndarray, live: np.ndarray, wk: np.ndarray) -> None:
+    """Start the change test in its own work array: the statistics since a snapshot (S0, sy0, syy0,
+    shift0; ``window.since_statistics``), theta from the live estimate, fresh damping. ``refit_unit``
+    with ``MASK_TEST`` and no drift test then fits them from stage 1 on."""
+    p, k = S.shape[0], live.shape[0]
+    theta, var, H, g, cov, H2, g2, F, fy, masks = _views(wk, p, k)
+    wk[RF_FYY] = W.since_statistics(st, S, S0, sy0, syy0, shift, shift0, F, fy)
+    theta[:] = live
+    wk[RF_A1L], wk[RF_A2L] = st[W.SC_A1L], st[W.SC_A2L]
+    wk[RF_STEP] = 0.0
+    wk[RF_MU] = 1e-3
+    wk[RF_DRIFT] = 0.0
+    wk[RF_DRIFT_SWITCH] = 0.0
+    wk[RF_STAGE] = 1.0
 
 
 @njit(cache=CACHE)

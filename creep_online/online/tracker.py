@@ -77,6 +77,8 @@ TEST_STEPS = 4
 #: Smaller units lower the p99 of update() but stretch a replay over more samples: at 10000 the
 #: re-convergence after a change, fed sample by sample at 10 kHz, went from 3.5 to 5.5 s (median).
 UNIT_MACS = 40000
+#: Snapshot slots of the change test, reused in turn (see ``WindowTracker._allocate_work``).
+SNAP_SLOTS = 6
 #: Jobs that run before the long ones (``WindowTracker._next_job``).
 PERIODIC_JOBS = ("_refit_job", "_change_job")
 #: The drift rates enter the fit when they would lower the window cost by this many noise variances
@@ -122,6 +124,13 @@ RESEARCH_MAX_WAIT_S = 16.0
 FN_MAX_FS = 0.45
 ZETA_BOUNDS = (0.003, 3.0)
 #: theta = [alpha, ln a1, ln a2, b, offset, free-response weights..., b'/b, alpha'] (the last two with drift)
+
+
+def _median(values: list[float]) -> float:
+    """Median of a short list of floats (numpy's median costs ~50 us from cold Python)."""
+    s = sorted(values)
+    n = len(s)
+    return s[n // 2] if n % 2 else 0.5 * (s[n // 2 - 1] + s[n // 2])
 
 
 def _largest_move(new: list[float], old: list[float]) -> float:
@@ -212,8 +221,6 @@ class WindowTracker(ParameterView):
         self._shift = np.zeros((self.q + W.ONE, max(self.n_rate, 1)))   # total drift-origin move (W.since_statistics)
         self._allocate_work()
         self._theta_at: dict[int, np.ndarray] = {}
-        self._last_h = np.zeros((self.theta.size, self.theta.size))   # J^T J of the last LM step
-        self._last_g = np.zeros(self.theta.size)                       # and J^T r
         st, S = self._fresh(self.a1, self.a2)
         W.set_monitors(st[:W.SC_SIZE], self.h, gate, burst, stuck)
         self._install(st, S)
@@ -252,11 +259,13 @@ class WindowTracker(ParameterView):
         """
         p, k, r0 = self.p, self.theta.size, 5 + self.n_free
         self._wk = RF.allocate(p, k, r0, REFIT_STEPS, self.alpha_bounds, DRIFT_ON, DRIFT_OFF, DRIFT_MAX)
-        self._R, self._ry = np.empty((p, p)), np.empty(p)      # change test: the last second's statistics
-        self._test_cov, self._test_out = np.empty((k, k)), np.empty(3)
-        self._free_test = np.zeros(k)          # the change test frees the resonance, gain, offset
-        self._free_test[1:5] = 1.0
+        self._test_wk = RF.allocate(p, k, r0, TEST_STEPS, self.alpha_bounds, DRIFT_ON, DRIFT_OFF, DRIFT_MAX)
         self._refit_queued = False
+        # the change test's snapshots, in slots reused in turn: a test holds its snapshot for ~15
+        # units, ``_theta_at`` keeps the last five estimates
+        self._snap_slots = [(np.empty((p, p)), np.empty(p), np.empty_like(self._shift), np.empty(k))
+                            for _ in range(SNAP_SLOTS)]
+        self._snap_next = 0
 
     def _fresh(self, a1l: float, a2l: float) -> tuple[np.ndarray, np.ndarray]:
         """Empty statistics and zero states for a linearization point (weight 1)."""
@@ -356,21 +365,6 @@ class WindowTracker(ParameterView):
         """Run the queued jobs to completion, or until the one at the head waits for samples (block mode)."""
         while self._jobs and self.work(1 << 30):
             pass
-
-    def _lm(self, theta: np.ndarray, free: np.ndarray, mu: float, stats: tuple, lin: tuple,
-            out: np.ndarray) -> Generator:
-        """One Levenberg-Marquardt step in two units (normal equations, then the trial); returns the
-        next damping mu. J^T J at the starting point is left in ``_last_h`` (for the covariance).
-
-        ``stats`` = (F, fy, fyy) true-scale, ``lin`` = the linearization point they were built at.
-        """
-        lo, hi = self.alpha_bounds
-        lam, dx = self.basis.lam, self.basis.dx
-        cost = W.lm_normal(theta, *lin, lam, dx, *stats, self._last_h, self._last_g)
-        yield
-        mu = W.lm_trial(theta, free, mu, self._last_h, self._last_g, cost, *lin, lam, dx, *stats, lo, hi, out)
-        yield
-        return mu
 
     def _refit_job(self) -> Generator:
         """A re-fit of the window (``_refit``); while it is queued no other is (``_schedule``)."""
@@ -515,9 +509,11 @@ class WindowTracker(ParameterView):
 
     # ------------------------------------------------------------------ change detection
     def _snapshot(self) -> None:
-        self._snaps.append((self.n, self.S.copy(), self.sy.copy(), float(self.sc[W.SC_SYY]),
-                            float(self.sc[W.SC_G]), (self.a1l, self.a2l), self.theta.copy(), self._shift.copy()))
-        self._theta_at[self.n] = self.theta.copy()     # the estimate at each snapshot instant
+        S0, sy0, shift0, theta0 = self._snap_slots[self._snap_next]
+        self._snap_next = (self._snap_next + 1) % SNAP_SLOTS
+        syy0, g0 = W.snapshot(self.st, self.S, self._shift, self.theta, S0, sy0, shift0, theta0)
+        self._snaps.append((self.n, S0, sy0, syy0, g0, (self.a1l, self.a2l), theta0, shift0))
+        self._theta_at[self.n] = theta0    # the estimate at each snapshot instant
         for old in [k for k in self._theta_at if k < self.n - 4 * self.test_every]:
             del self._theta_at[old]
         if len(self._snaps) > 3:
@@ -533,40 +529,37 @@ class WindowTracker(ParameterView):
         # the drift columns stay in, at the window's rates (the snapshot moved to the live time origin):
         # over a second the drift is not negligible (alpha +0.7 %/s at a 2e-4 noise on a 0.5 output is ~5
         # noise levels), and without it a drifting plant's step looked like a change
-        R, ry = self._R, self._ry
-        ryy = W.since_statistics(self.st, self.S, S0, sy0, syy0, self._shift, shift0, R, ry)
+        wk = self._test_wk
+        RF.start_test(self.st, self.S, S0, sy0, syy0, self._shift, shift0, self.theta, wk)
         nr = self.n - n0
         lin = (self.a1l, self.a2l)
+        args = (self.st, self.S, self._shift, self.theta, wk, self.basis.lam, self.basis.dx, RF.MASK_TEST, 0)
+        unit = RF.refit_unit
         yield
-        before = W.cost_of(self.theta, *lin, self.basis.lam, self.basis.dx, R, ry, ryy)
-        theta = self.theta.copy()
-        free = self._free_test
-        out = self._test_out
-        mu = 1e-3
-        for _ in range(TEST_STEPS):
-            mu = yield from self._lm(theta, free, mu, (R, ry, ryy), lin, out)
-        after = out[1]
+        while not unit(*args):             # TEST_STEPS Levenberg-Marquardt steps, then the covariance
+            yield
+        yield
+        head, theta, var = RF.result(wk)   # plain floats from here on (cold numpy is slow)
+        before, after = head[RF.RF_START_COST], head[RF.RF_AFTER]
         if not (math.isfinite(after) and after > 0.0 and math.isfinite(before)):
             return
-        cov = self._test_cov
-        W.covariance(self._last_h, free, cov)
-        yield
+        live = self.theta[:4].tolist()
         sigma2 = after / max(nr - 4, 1)
         lr = (before - after) / sigma2
-        moves = {"a1": math.exp(theta[1] - self.theta[1]) - 1, "a2": math.exp(theta[2] - self.theta[2]) - 1,
-                 "b": theta[3] / self.theta[3] - 1 if self.theta[3] else 0.0}
+        moves = {"a1": math.exp(theta[1] - live[1]) - 1, "a2": math.exp(theta[2] - live[2]) - 1,
+                 "b": theta[3] / live[3] - 1 if live[3] else 0.0}
         # relative 1-sigma of the recent fit (ln a1, ln a2 are relative already)
-        rel_sd = {"a1": math.sqrt(abs(cov[1, 1]) * sigma2), "a2": math.sqrt(abs(cov[2, 2]) * sigma2),
-                  "b": math.sqrt(abs(cov[3, 3]) * sigma2) / max(abs(theta[3]), 1e-300)}
+        rel_sd = {"a1": math.sqrt(abs(var[1]) * sigma2), "a2": math.sqrt(abs(var[2]) * sigma2),
+                  "b": math.sqrt(abs(var[3]) * sigma2) / max(abs(theta[3]), 1e-300)}
         # significant on the scale the 1-sigma is on (ln a1, ln a2; b relative): for a large move of an
         # undetermined resonance exp(d) - 1 is far larger than d (a flat compensated hold: a2 +232 % against a
         # 40 % 1-sigma passed as 5.9 sigma, it is 3.0 in ln a2, and the window restarted on no change)
-        size = {"a1": abs(theta[1] - self.theta[1]), "a2": abs(theta[2] - self.theta[2]), "b": abs(moves["b"])}
+        size = {"a1": abs(theta[1] - live[1]), "a2": abs(theta[2] - live[2]), "b": abs(moves["b"])}
         moved = {k: v for k, v in moves.items()
                  if abs(v) > CHANGE_MOVE[k] and size[k] > CHANGE_SIGMAS * rel_sd[k]}
         # the test is calibrated against its own recent level: a drifting plant (or a model that is
         # slightly off) raises the statistic slowly and evenly, a change makes it jump
-        level = float(np.median(self._lr_recent)) if len(self._lr_recent) >= 4 else 0.0
+        level = _median(self._lr_recent) if len(self._lr_recent) >= 4 else 0.0
         self.disagreement = {"t": self.n * self.h, "lr": float(lr), "moves": {k: float(v) for k, v in moved.items()}} \
             if lr > DISAGREE_LR and moved else None
         if lr < max(CHANGE_LR, CHANGE_JUMP * level) or not moved or lin != (self.a1l, self.a2l):
