@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from creep_online.online import OnlineEstimator
+from creep_online.online import refit as RF
 from creep_online.online import tracker as T
 from creep_online.online.search import ResonanceSearch
 from creep_online.online.soe import SoeBasis
@@ -93,12 +94,12 @@ def test_resonance_bounds_keep_the_fit_representable():
     tr = est._tracker
     theta = tr.theta.copy()
     theta[1], theta[2] = math.log(2.2e-4), math.log(3.8e-11)      # seen on a drifting plant: a NaN window
-    assert tr._bound_resonance(theta)
+    assert RF.bound_resonance(theta, tr._wk)
     fn = 1 / (2 * math.pi * math.exp(0.5 * theta[2]))
     zeta = math.exp(theta[1]) / (2 * math.exp(0.5 * theta[2]))
     assert fn == pytest.approx(T.FN_MAX_FS / H) and T.ZETA_BOUNDS[0] <= zeta <= T.ZETA_BOUNDS[1] * (1 + 1e-12)
     inside = tr.theta.copy()
-    assert not tr._bound_resonance(inside) and np.array_equal(inside, tr.theta)
+    assert not RF.bound_resonance(inside, tr._wk) and np.array_equal(inside, tr.theta)
 
 
 def test_search_rows_do_not_alias_the_resonance():

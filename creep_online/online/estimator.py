@@ -678,8 +678,11 @@ def warm_kernels() -> None:
     for drift in (1, 2):                   # every stage of the re-fit (the score and the Wald test)
         wk = tr._wk.copy()
         wk[RF.RF_NEFF] = 1e6
+        wk[RF.RF_DRIFT_MIN_N] = 0.0
         for _ in range(20):
-            if RF.refit_unit(st, S, shift, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx, RF.MASK_ALL, drift):
+            if RF.refit_unit(st, S, shift, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx, 1, drift == 2, True,
+                             0):
                 break
+        RF.accept(st, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)
     T.WindowTracker  # noqa: B018 - imported for its kernels
     R.warm()

@@ -15,6 +15,7 @@ the three parameter masks).
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numpy as np
 from numba import njit
@@ -48,7 +49,16 @@ RF_SIGMA2 = 20    # noise variance of the drift test
 RF_K = 21         # number of parameters
 RF_R0 = 22        # first drift-rate parameter
 RF_START_COST = 23   # window cost at the starting theta (the first normal equations')
-HEAD = 24
+RF_MASK = 24      # the parameters this fit frees (MASK_*), chosen at its start (``_plan``)
+RF_HOLD_N = 25    # samples after a change during which alpha and the rates are held
+RF_DRIFT_MIN_N = 26   # samples the window must span before the drift test
+RF_DRIFT_EVERY = 27   # while the rates are off, the score test runs at every this-many-th re-fit
+RF_NRATE = 28     # drift columns (0-2)
+RF_LN_A2_MIN = 29     # the resonances the sampling represents: ln a2 >= this ...
+RF_LN_ZETA_LO = 30    # ... and ln zeta within these
+RF_LN_ZETA_HI = 31
+RF_RELINEARIZE = 32   # relative move of a1, a2 within which the linearized cost holds
+HEAD = 40
 
 #: Parameter masks (rows of the masks block): all free, drift rates fixed, alpha and rates fixed, and the
 #: change test's (the resonance, the gain and the offset).
@@ -56,15 +66,19 @@ MASK_ALL, MASK_CONSTANT, MASK_HOLD, MASK_TEST = 0, 1, 2, 3
 MASKS = 4
 
 
-def allocate(p: int, k: int, r0: int, steps: int, alpha_bounds: tuple[float, float], drift_on: float,
-             drift_off: float, drift_max: float) -> np.ndarray:
-    """A fresh work array for statistics of size p and k parameters (rates from r0 on)."""
+def allocate(p: int, k: int, r0: int, steps: int, policy: dict) -> np.ndarray:
+    """A fresh work array for statistics of size p and k parameters (rates from r0 on).
+
+    ``policy``: the tracker's settings the re-fit applies, by header name without ``RF_`` (alpha
+    bounds LO, HI; DRIFT_ON, DRIFT_OFF, DRIFT_MAX; HOLD_N, DRIFT_MIN_N, DRIFT_EVERY, NRATE;
+    LN_A2_MIN, LN_ZETA_LO, LN_ZETA_HI, RELINEARIZE).
+    """
     wk = np.zeros(HEAD + 2 * k + 3 * k * k + 2 * k + p * p + p + MASKS * k)
     wk[RF_MU] = 1e-3
-    wk[RF_LO], wk[RF_HI] = alpha_bounds
     wk[RF_STEPS] = steps
-    wk[RF_DRIFT_ON], wk[RF_DRIFT_OFF], wk[RF_DRIFT_MAX] = drift_on, drift_off, drift_max
     wk[RF_K], wk[RF_R0] = k, r0
+    for name, value in policy.items():
+        wk[globals()["RF_" + name]] = value
     masks = wk[wk.size - MASKS * k:].reshape(MASKS, k)
     masks[:] = 1.0
     masks[MASK_CONSTANT, r0:] = 0.0
@@ -97,26 +111,45 @@ def _views(wk: np.ndarray, p: int, k: int) -> tuple:
 
 
 @njit(cache=CACHE)
-def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarray, wk: np.ndarray,
-               lam: np.ndarray, dx: float, mask: int, drift: int) -> bool:
-    """Advance the re-fit by one stage; True when it is done (the result in ``wk``, see ``result``).
+def _plan(wk: np.ndarray, n: float, window_start: int, drift_on: bool, converged: bool, refits: int) -> None:
+    """What this re-fit frees and which drift test follows it.
 
-    ``live`` is the tracker's theta (the start); ``mask`` the parameters to free (``MASK_*``);
-    ``drift`` the drift test to run after the fit (0 none, 1 score test, 2 Wald test).
+    Alpha and the drift rates stay fixed in a short window after a change (it determines neither).
+    The drift rates are tested once the window is converged and spans DRIFT_MIN_N samples: the Wald
+    test at every re-fit while they are on, the score test at every DRIFT_EVERY-th while off.
+    """
+    span = n - window_start
+    hold = window_start > 0 and span < wk[RF_HOLD_N]
+    wk[RF_MASK] = MASK_HOLD if hold else (MASK_ALL if drift_on else MASK_CONSTANT)
+    drift = 0
+    if wk[RF_NRATE] > 0 and not hold and converged and span >= wk[RF_DRIFT_MIN_N]:
+        drift = 2 if drift_on else (1 if refits % int(wk[RF_DRIFT_EVERY]) == 0 else 0)
+    wk[RF_DRIFT] = drift
+
+
+@njit(cache=CACHE)
+def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarray, wk: np.ndarray,
+               lam: np.ndarray, dx: float, window_start: int, drift_on: bool, converged: bool,
+               refits: int) -> bool:
+    """Advance the re-fit by one stage; True when it is done (the result in ``wk``, see ``accept``).
+
+    ``live`` is the tracker's theta (the start); the tracker's state (``window_start``, ``drift_on``,
+    ``converged``, ``refits``) decides at the first stage what the fit frees and which drift test
+    follows (``_plan``).
     """
     p, k = S.shape[0], live.shape[0]
     theta, var, H, g, cov, H2, g2, F, fy, masks = _views(wk, p, k)
-    free = masks[mask]
     stage = int(wk[RF_STAGE])
     if stage == 0:                     # the statistics at true scale, frozen for the fit
+        _plan(wk, st[W.SC_N], window_start, drift_on, converged, refits)
         wk[RF_FYY] = W.true_statistics(st, S, shift, F, fy)
         theta[:] = live
         wk[RF_A1L], wk[RF_A2L] = st[W.SC_A1L], st[W.SC_A2L]
         wk[RF_STEP] = 0.0
-        wk[RF_DRIFT] = 0.0
         wk[RF_DRIFT_SWITCH] = 0.0
         wk[RF_STAGE] = 1.0
         return False
+    free = masks[int(wk[RF_MASK])]
     a1l, a2l, fyy = wk[RF_A1L], wk[RF_A2L], wk[RF_FYY]
     if stage == 1:                     # J^T J, J^T r at theta
         wk[RF_COST] = W.lm_normal(theta, a1l, a2l, lam, dx, F, fy, fyy, H, g)
@@ -138,7 +171,7 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
             var[i] = cov[i, i]
         wk[RF_NEFF] = st[W.SC_NEFF]
         wk[RF_STAGE] = 0.0
-        return _drift_test(wk, theta, cov, k, drift)
+        return _drift_test(wk, theta, cov, k, int(wk[RF_DRIFT]))
     if stage == 4:                     # score test: the normal equations at the result
         W.lm_normal(theta, a1l, a2l, lam, dx, F, fy, fyy, H2, g2)
         wk[RF_STAGE] = 5.0
@@ -164,6 +197,7 @@ def start_test(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, s
     wk[RF_A1L], wk[RF_A2L] = st[W.SC_A1L], st[W.SC_A2L]
     wk[RF_STEP] = 0.0
     wk[RF_MU] = 1e-3
+    wk[RF_MASK] = MASK_TEST
     wk[RF_DRIFT] = 0.0
     wk[RF_DRIFT_SWITCH] = 0.0
     wk[RF_STAGE] = 1.0
@@ -178,8 +212,8 @@ def _drift_test(wk: np.ndarray, theta: np.ndarray, cov: np.ndarray, k: int, drif
     more stages (the normal equations at the result, then the Gauss-Newton gain of freeing them).
     """
     if drift == 0 or (drift == 1 and not np.all(np.isfinite(theta))):
+        wk[RF_DRIFT] = 0.0
         return True
-    wk[RF_DRIFT] = drift
     sigma2 = max(wk[RF_AFTER], 0.0) / max(wk[RF_NEFF] - k, 1.0)
     wk[RF_SIGMA2] = sigma2
     wk[RF_DRIFT_STAT] = 0.0
@@ -210,8 +244,82 @@ def _drift_test(wk: np.ndarray, theta: np.ndarray, cov: np.ndarray, k: int, drif
     return True
 
 
+#: ``accept``'s verdicts: swapped in, stale (re-linearized meanwhile), rejected (non-finite, zero gain, or
+#: a negative cost far from the linearization point).
+ACCEPTED, STALE, REJECTED = 0, 1, 2
+
+#: What ``accept`` returns, as plain floats: the verdict; alpha, ln a1, ln a2, b; the window cost and its
+#: effective samples; the largest relative move of those four; the drift test run (0-2), its statistic
+#: and the rate switch (+1 on, -1 off); the variances (times sigma^2) of alpha, ln a1, ln a2, b, the
+#: offset and the two rates (0 where absent).
+Accepted = namedtuple("Accepted", "verdict alpha ln_a1 ln_a2 b cost neff move drift drift_stat drift_switch "
+                                  "var_alpha var_ln_a1 var_ln_a2 var_b var_offset var_rate0 var_rate1")
+
+
+@njit(cache=CACHE)
+def accept(st: np.ndarray, live: np.ndarray, wk: np.ndarray, lam: np.ndarray, dx: float) -> tuple:
+    """Swap a finished re-fit into the live estimate (``live``, and the prediction's coefficients in st).
+
+    Returns an ``Accepted`` of plain floats: the tracker's Python reads one tuple, no numpy.
+
+    The resonance is first kept within what the sampling represents. A fit taken at another linearization
+    point than the live one is STALE (the next re-fit decides). A sum of squares below zero is the
+    linearized cost breaking down far from the linearization point (seen: -2.5 against 1-4, after a
+    post-change search in a wrong basin: its sigma would be 0 and the quality "good"), REJECTED; near it
+    the linearized cost holds, and below zero it is the rounding of syy - 2 m.sy + m.S.m on an output far
+    above a tiny noise (a compensated plant read through a 20-bit ADC: every fit was rejected and the
+    quality never left "first window fit pending"): the output's own noise level (second differences)
+    stands in for the window cost.
+    """
+    p, k = int(st[W.SC_NQ]) + W.FREE + int(st[W.SC_NM]) + int(st[W.SC_NR]), live.shape[0]
+    theta, var, H, g, cov, H2, g2, F, fy, masks = _views(wk, p, k)
+    bound_resonance(theta, wk)
+    cost = wk[RF_AFTER]
+    verdict = ACCEPTED
+    move = 0.0
+    if wk[RF_A1L] != st[W.SC_A1L] or wk[RF_A2L] != st[W.SC_A2L]:
+        verdict = STALE
+    else:
+        negative = cost < -1e-9 * abs(wk[RF_FYY])
+        relin = wk[RF_RELINEARIZE]
+        near = abs(math.exp(theta[1]) / wk[RF_A1L] - 1) <= relin and abs(math.exp(theta[2]) / wk[RF_A2L] - 1) <= relin
+        if negative and near:
+            cost = st[W.SC_NOISE] ** 2 * st[W.SC_NEFF]
+            negative = False
+        if not np.all(np.isfinite(theta)) or theta[3] == 0.0 or not math.isfinite(cost) or negative:
+            verdict = REJECTED
+        else:
+            for i in range(4):
+                move = max(move, abs(theta[i] - live[i]) / max(abs(live[i]), 1e-300))
+            live[:] = theta
+            W.set_estimate(live, st, lam, dx)
+    r0 = int(wk[RF_R0])
+    rate0 = var[r0] if k > r0 else 0.0
+    rate1 = var[r0 + 1] if k > r0 + 1 else 0.0
+    return Accepted(verdict, theta[0], theta[1], theta[2], theta[3], cost, wk[RF_NEFF], move, wk[RF_DRIFT],
+                    wk[RF_DRIFT_STAT], wk[RF_DRIFT_SWITCH], var[0], var[1], var[2], var[3], var[4], rate0, rate1)
+
+
+@njit(cache=CACHE)
+def bound_resonance(theta: np.ndarray, wk: np.ndarray) -> bool:
+    """Keep (ln a1, ln a2) within the resonances the sampling represents (the fn and zeta bounds in the
+    header); True if they were outside. Beyond them the regressor's coefficients overflow (a fit that
+    collapsed a2 to 1e-11 left a NaN window for good)."""
+    hit = False
+    if not theta[2] >= wk[RF_LN_A2_MIN]:      # also NaN
+        theta[2] = wk[RF_LN_A2_MIN]
+        hit = True
+    ln_zeta = theta[1] - math.log(2.0) - 0.5 * theta[2]
+    lo, hi = wk[RF_LN_ZETA_LO], wk[RF_LN_ZETA_HI]
+    if not lo <= ln_zeta <= hi:
+        if math.isfinite(ln_zeta):
+            theta[1] += min(max(ln_zeta, lo), hi) - ln_zeta
+        hit = True
+    return hit
+
+
 def result(wk: np.ndarray) -> tuple[list[float], list[float], list[float]]:
-    """(header, theta, diagonal of the covariance) as plain floats, in one numpy call."""
+    """(header, theta, diagonal of the covariance) as plain floats (tests and diagnostics)."""
     k = int(wk[RF_K])
     vals = wk[:HEAD + 2 * k].tolist()
     return vals[:HEAD], vals[HEAD:HEAD + k], vals[HEAD + k:]

@@ -42,13 +42,14 @@ GRID_FREQS = 18
 COARSE_ROWS = 400
 #: Rows in the cost during refinement.
 FINE_ROWS = 2000
-#: Multiply-adds per unit of work (~3 us).
-UNIT_WORK = 4000
+#: Multiply-adds per step (~9 us).
+UNIT_WORK = 12000
 #: Search steps per unit of background work (``ResonanceSearch.unit``, for the start-up search and the
-#: tracker's): a unit of ~10 us like a Levenberg-Marquardt step. At one step per unit a search on 2 s at
-#: 10 kHz took ~4 s of stream sample by sample (a wrong-basin start was taken for a change meanwhile), and a
-#: slow mode's start-up search outlasted a 10 s stream.
-STEPS_PER_UNIT = 3
+#: tracker's): a unit of ~10 us like a Levenberg-Marquardt step. At 4000 multiply-adds per step and one
+#: step per unit a search on 2 s at 10 kHz took ~4 s of stream sample by sample (a wrong-basin start was
+#: taken for a change meanwhile), and a slow mode's start-up search outlasted a 10 s stream; three such
+#: steps per unit paid the steps' Python three times (~32 us per unit at 10 kHz), one step of 12000 once.
+STEPS_PER_UNIT = 1
 #: Candidates refined from the grid.
 REFINE = 3
 #: Cost evaluations per refined candidate at most in the post-change search (``fixed_alpha``).
@@ -110,6 +111,20 @@ def _rows(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx0: f
     x[1] = x1
 
 
+@njit(cache=True)
+def _prepare(alpha: float, a1: float, a2: float, lam: np.ndarray, dx: float, h: float, v: np.ndarray,
+             dv: np.ndarray, rc: np.ndarray, vz: np.ndarray, x: np.ndarray, acc: np.ndarray) -> tuple:
+    """A candidate's model coefficients (nodes into vz), its resonance step, zero states and sums; returns
+    the two resonance-state coefficients (one kernel: numpy glue from Python is slow in update())."""
+    kernels.model_coefficients(alpha, lam, dx, a1, a2, v, dv)
+    resonance_step(a1, a2, h, rc)
+    q = vz.shape[0]
+    vz[:] = v[:q]
+    x[:] = 0.0
+    acc[:] = 0.0
+    return v[q], v[q + 1]
+
+
 def _projected(acc: np.ndarray) -> tuple[float, float, float]:
     """(cost per row, b, c) of min ||y - b s - c||^2 from the sums, centred (no cancellation).
 
@@ -117,7 +132,7 @@ def _projected(acc: np.ndarray) -> tuple[float, float, float]:
     offset: its cost is inf (otherwise rounding can make a degenerate
     candidate look perfect).
     """
-    n, s1, s2, y1, sy, y2 = acc
+    n, s1, s2, y1, sy, y2 = acc.tolist()
     if n < 3:
         return math.inf, 0.0, 0.0
     ss = s2 - s1 * s1 / n
@@ -166,6 +181,9 @@ class ResonanceSearch:
         self._v = np.empty(basis.size + 2)
         self._dv = np.empty(basis.size + 2)
         self._rc = np.empty(6)
+        self._vz = np.empty(basis.size)     # one candidate at a time: its node coefficients, states, sums
+        self._x = np.zeros(2)
+        self._acc = np.zeros(6)
         self._gen = self._run()
 
     def step(self) -> bool:
@@ -196,19 +214,16 @@ class ResonanceSearch:
     # ------------------------------------------------------------------ pieces
     def _evaluate(self, alpha: float, a1: float, a2: float, stride: int) -> Generator:
         """Projected cost of one candidate, in units; the generator's return value is (cost, b, c)."""
-        q = self.basis.size
-        kernels.model_coefficients(alpha, self.basis.lam, self.basis.dx, a1, a2, self._v, self._dv)
-        resonance_step(a1, a2, self.basis.h, self._rc)
-        vz = self._v[:q].copy()
-        x = np.zeros(2)
-        acc = np.zeros(6)
+        vz, x, acc = self._vz, self._x, self._acc
+        vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
+                            self._rc, vz, x, acc)
         yield
         n = self.u.size
-        per_row = 6 + q / stride
+        per_row = 6 + self.basis.size / stride
         chunk = max(16, int(UNIT_WORK / per_row))
         for r0 in range(0, n, chunk):
-            _rows(self._hist, self.u, self.y, vz, self._v[q], self._v[q + 1], self._rc, x, r0,
-                  min(n, r0 + chunk), stride, self.lead, acc)
+            _rows(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, r0, min(n, r0 + chunk), stride,
+                  self.lead, acc)
             yield
         return _projected(acc)
 
@@ -242,11 +257,12 @@ class ResonanceSearch:
         successful sweep followed by a Hooke-Jeeves pattern move; the walk stops
         early in the basin of a better candidate refined before.
         """
-        p = np.log([alpha, fn, z])
-        lo = np.log([ONLINE_ALPHA_BOUNDS[0], 1e-3, 0.003])
-        hi = np.log([ONLINE_ALPHA_BOUNDS[1], 0.45 / self.basis.h, 3.0])
+        # plain floats on these 3-vectors: numpy from Python costs more than the step's kernel here
+        p = [math.log(alpha), math.log(fn), math.log(z)]
+        lo = [math.log(ONLINE_ALPHA_BOUNDS[0]), math.log(1e-3), math.log(0.003)]
+        hi = [math.log(ONLINE_ALPHA_BOUNDS[1]), math.log(0.45 / self.basis.h), math.log(3.0)]
         best = yield from self._cost_at(p, stride)
-        steps = np.array([0.5, 0.25, 0.6])
+        steps = [0.5, 0.25, 0.6]
         evals = 1
         for _ in range(6):
             improved = True
@@ -255,7 +271,7 @@ class ResonanceSearch:
                 base = p
                 for j in self._axes():
                     for sign in (1.0, -1.0):
-                        trial = p.copy()
+                        trial = list(p)
                         trial[j] = min(max(trial[j] + sign * steps[j], lo[j]), hi[j])
                         evals += 1
                         c = yield from self._cost_at(trial, stride)
@@ -266,19 +282,19 @@ class ResonanceSearch:
                     # a pattern move (Hooke-Jeeves) along the sweep's net move, doubled while it pays: the
                     # axis steps alone crawl along a curved (fn, zeta) valley (measured: 195000 units from
                     # 12 Hz down to a 3.1 Hz mode on a 2 s buffer, with it 39000)
-                    move = p - base
+                    move = [a - b for a, b in zip(p, base)]
                     while True:
-                        trial = np.clip(p + move, lo, hi)
+                        trial = [min(max(a + m, l), h) for a, m, l, h in zip(p, move, lo, hi)]
                         evals += 1
                         c = yield from self._cost_at(trial, stride)
                         if not c < best:
                             break
                         best, p = c, trial
-                        move = 2.0 * move
-                if improved and self._in_found_basin(best, *np.exp(p)):
-                    return (best, *np.exp(p))
-            steps *= 0.4
-        return (best, *np.exp(p))
+                        move = [2.0 * m for m in move]
+                if improved and self._in_found_basin(best, *map(math.exp, p)):
+                    return (best, *map(math.exp, p))
+            steps = [0.4 * v for v in steps]
+        return (best, *map(math.exp, p))
 
     def _in_found_basin(self, cost: float, alpha: float, fn: float, z: float) -> bool:
         """Has the walk reached the basin of a candidate refined before, one that fits at least as well?
@@ -294,8 +310,8 @@ class ResonanceSearch:
         """Pattern-search axes: (ln alpha, ln fn, ln zeta), alpha left out when it is fixed."""
         return range(1, 3) if self.fixed_alpha is not None else range(3)
 
-    def _cost_at(self, p: np.ndarray, stride: int) -> Generator:
-        alpha, fn, z = np.exp(p)
+    def _cost_at(self, p: list[float], stride: int) -> Generator:
+        alpha, fn, z = map(math.exp, p)
         wn = 2 * math.pi * fn
         cost, _, _ = yield from self._evaluate(alpha, 2 * z / wn, 1 / wn**2, stride)
         return cost

@@ -142,7 +142,7 @@ def _largest_move(new: list[float], old: list[float]) -> float:
 class Fit:
     """The window's last fit: parameters, cost, 1-sigma std, and when."""
 
-    theta: np.ndarray | list[float]
+    theta: np.ndarray | list[float]     # [alpha, ln a1, ln a2, b, ...]
     cost: float = math.inf
     neff: float = 0.0
     std: dict = field(default_factory=dict)
@@ -207,6 +207,7 @@ class WindowTracker(ParameterView):
         self.researches: list[dict] = []   # re-searches of the resonance (``_research_again_job``)
         self.disagreement: dict | None = None   # the last change test, if the last second disagreed
         self._misfit_since: int | None = None   # first re-fit of the current run of misfits
+        self._first_fit: int | None = None      # first re-fit of the current window (start, change, re-search)
         self._research_wait = int(RESEARCH_AFTER_S / self.h)
         self._next_research = 0            # earliest sample of the next re-search (backoff)
         self.relinearizations = 0
@@ -258,8 +259,14 @@ class WindowTracker(ParameterView):
         run one after the other (``_next_job``), so each owns its arrays.
         """
         p, k, r0 = self.p, self.theta.size, 5 + self.n_free
-        self._wk = RF.allocate(p, k, r0, REFIT_STEPS, self.alpha_bounds, DRIFT_ON, DRIFT_OFF, DRIFT_MAX)
-        self._test_wk = RF.allocate(p, k, r0, TEST_STEPS, self.alpha_bounds, DRIFT_ON, DRIFT_OFF, DRIFT_MAX)
+        policy = {"LO": self.alpha_bounds[0], "HI": self.alpha_bounds[1], "DRIFT_ON": DRIFT_ON,
+                  "DRIFT_OFF": DRIFT_OFF, "DRIFT_MAX": DRIFT_MAX, "HOLD_N": ALPHA_HOLD_S / self.h,
+                  "DRIFT_MIN_N": DRIFT_MIN_S / self.h, "DRIFT_EVERY": DRIFT_TEST_EVERY, "NRATE": self.n_rate,
+                  "LN_A2_MIN": 2.0 * math.log(self.h / (2.0 * math.pi * FN_MAX_FS)),
+                  "LN_ZETA_LO": math.log(ZETA_BOUNDS[0]), "LN_ZETA_HI": math.log(ZETA_BOUNDS[1]),
+                  "RELINEARIZE": RELINEARIZE}
+        self._wk = RF.allocate(p, k, r0, REFIT_STEPS, policy)
+        self._test_wk = RF.allocate(p, k, r0, TEST_STEPS, policy)
         self._refit_queued = False
         # the change test's snapshots, in slots reused in turn: a test holds its snapshot for ~15
         # units, ``_theta_at`` keeps the last five estimates
@@ -374,77 +381,65 @@ class WindowTracker(ParameterView):
             self._refit_queued = False
 
     def _refit(self) -> Generator:
-        """The re-fit's stages (``refit.refit_unit``, one per unit), then the result swapped in.
-
-        Alpha and the drift rates stay fixed in a short window after a change (it determines
-        neither); the drift rates are tested (``refit._drift_test``) once the window is converged and
-        spans ``DRIFT_MIN_S``: every re-fit while they are on, every ``DRIFT_TEST_EVERY``-th while off.
-        """
-        span = (self.n - self.window_start) * self.h
-        hold = bool(self.window_start) and span < ALPHA_HOLD_S
-        mask = RF.MASK_HOLD if hold else (RF.MASK_ALL if self.drift_on else RF.MASK_CONSTANT)
-        drift = 0
-        if self.n_rate and not hold and self.converged and span >= DRIFT_MIN_S:
-            drift = 2 if self.drift_on else int(self.refits % DRIFT_TEST_EVERY == 0)
-        args = (self.st, self.S, self._shift, self.theta, self._wk, self.basis.lam, self.basis.dx, mask, drift)
+        """The re-fit's stages (``refit.refit_unit``, one per unit), then the result swapped in."""
+        args = (self.st, self.S, self._shift, self.theta, self._wk, self.basis.lam, self.basis.dx,
+                self.window_start, self.drift_on, self.converged, self.refits)
         unit = RF.refit_unit
+        yield
         while not unit(*args):
             yield
         yield
         yield from self._accept()
 
     def _accept(self) -> Generator:
-        """Swap a re-fit in (one unit), then its 1-sigma and what it triggers (another).
+        """Swap a finished re-fit in (``refit.accept``, one kernel), then record it and what it triggers.
 
-        Plain floats, not numpy: numpy calls from Python are slow here (cold code paths).
+        Plain floats from one tuple: numpy from Python is slow here (cold code paths). The ``Fit``
+        with its 1-sigma dictionary is built when someone asks for it (``fit``), not in update().
         """
-        head, new, var = RF.result(self._wk)
-        if head[RF.RF_DRIFT]:
-            self.drift_stat = head[RF.RF_DRIFT_STAT]
-            if head[RF.RF_DRIFT_SWITCH]:
-                self.drift_on = head[RF.RF_DRIFT_SWITCH] > 0.0
-        cost = head[RF.RF_AFTER]
-        self._bound_resonance(new)
-        if (head[RF.RF_A1L], head[RF.RF_A2L]) != (self.a1l, self.a2l):
+        r = RF.accept(self.st, self.theta, self._wk, self.basis.lam, self.basis.dx)
+        if r.drift:
+            self.drift_stat = r.drift_stat
+            if r.drift_switch:
+                self.drift_on = r.drift_switch > 0.0
+        if r.verdict == RF.STALE:
             return                         # re-linearized meanwhile: the next refit decides
-        # a sum of squares below zero is the linearized cost breaking down far from the linearization
-        # point (seen: -2.5 against 1-4, after a post-change search in a wrong basin): its sigma would be 0
-        # and the quality "good"
-        negative = cost < -1e-9 * abs(head[RF.RF_FYY])
-        near = (abs(math.exp(new[1]) / self.a1l - 1) <= RELINEARIZE
-                and abs(math.exp(new[2]) / self.a2l - 1) <= RELINEARIZE)
-        if negative and near:
-            # near the linearization point the linearized cost holds: below zero it is the rounding of
-            # syy - 2 m.sy + m.S.m on an output far above a tiny noise (a compensated plant read through a
-            # 20-bit ADC: every fit was rejected and the quality never left "first window fit pending").
-            # The output's own noise level (second differences) stands in for the window cost.
-            cost = float(self.sc[W.SC_NOISE]) ** 2 * float(self.sc[W.SC_NEFF])
-            negative = False
-        if not all(map(math.isfinite, new)) or new[3] == 0.0 or not math.isfinite(cost) or negative:
+        if r.verdict == RF.REJECTED:
             self.rejected += 1             # a failed fit is never swapped in
             self._watch(math.inf, True)
             return
-        old = self.theta.tolist()
-        self.converged = self.converged or _largest_move(new, old) < 0.01
-        self.theta[:] = new
-        self._coefficients()
+        self.converged = self.converged or r.move < 0.01
         self.refits += 1
         yield
-        neff = head[RF.RF_NEFF]
-        sigma2 = max(cost, 0.0) / max(neff - len(new), 1.0)
-        sd = [math.sqrt(abs(v) * sigma2) if math.isfinite(v) else math.inf for v in var]
-        a1, a2 = math.exp(new[1]), math.exp(new[2])
-        std = {"alpha": sd[0], "a1": sd[1] * a1, "a2": sd[2] * a2, "b": sd[3], "offset": sd[4]}
-        for k, name in enumerate(("b_rate", "alpha_rate")[:self.n_rate]):
-            v = sd[5 + self.n_free + k]
-            std[name] = (v * abs(new[3]) if k == 0 else v) if self.drift_on else math.inf
-        self.fit = Fit(theta=new, cost=cost, neff=neff, std=std, sample=self.n)
-        self._watch(math.sqrt(max(cost, 0.0) / max(neff, 1.0)), False)
-        if abs(a1 / self.a1l - 1) > RELINEARIZE or abs(a2 / self.a2l - 1) > RELINEARIZE:
+        self._fit, self._fit_raw, self._fit_sample = None, (r, self.drift_on), self.n
+        if self._first_fit is None:
+            self._first_fit = self.n
+        self._watch(math.sqrt(max(r.cost, 0.0) / max(r.neff, 1.0)), False)
+        if abs(math.exp(r.ln_a1) / self.a1l - 1) > RELINEARIZE or abs(math.exp(r.ln_a2) / self.a2l - 1) > RELINEARIZE:
             if not any(j.__name__ == "_relinearize_job" for j in self._jobs):
                 self._jobs.append(self._relinearize_job(None))
         elif self.events:
-            self._settle_events(old)
+            self._settle_events(r.move)
+
+    @property
+    def fit(self) -> Fit:
+        """The window's last accepted fit with its 1-sigma (built on first access after a re-fit)."""
+        if self._fit is None:
+            r, drift_on = self._fit_raw
+            sigma2 = max(r.cost, 0.0) / max(r.neff - self.theta.size, 1.0)
+            var = (r.var_alpha, r.var_ln_a1, r.var_ln_a2, r.var_b, r.var_offset, r.var_rate0, r.var_rate1)
+            sd = [math.sqrt(abs(v) * sigma2) if math.isfinite(v) else math.inf for v in var]
+            a1, a2 = math.exp(r.ln_a1), math.exp(r.ln_a2)
+            std = {"alpha": sd[0], "a1": sd[1] * a1, "a2": sd[2] * a2, "b": sd[3], "offset": sd[4]}
+            for k, name in enumerate(("b_rate", "alpha_rate")[:self.n_rate]):
+                std[name] = (sd[5 + k] * abs(r.b) if k == 0 else sd[5 + k]) if drift_on else math.inf
+            self._fit = Fit(theta=[r.alpha, r.ln_a1, r.ln_a2, r.b], cost=r.cost, neff=r.neff, std=std,
+                            sample=self._fit_sample)
+        return self._fit
+
+    @fit.setter
+    def fit(self, value: Fit) -> None:
+        self._fit, self._fit_sample = value, value.sample
 
     # ------------------------------------------------------------------ relinearization (replay)
     def _ring_position(self, index: int) -> int:
@@ -523,8 +518,8 @@ class WindowTracker(ParameterView):
         """Likelihood-ratio test of the samples since the snapshot against the window's estimate."""
         n0, S0, sy0, syy0, g0, lin0, theta0, shift0 = snap
         g = float(self.sc[W.SC_G])
-        if g < g0 or self.fit.sample < n0 or lin0 != (self.a1l, self.a2l) or n0 < self.window_start \
-                or not self.converged or self._researching():
+        if g < g0 or self._fit_sample < n0 or lin0 != (self.a1l, self.a2l) or n0 < self.window_start \
+                or not self.converged or self._researching() or self._misfit_from_start():
             return                         # (a misfit being re-searched is not a change of the plant)
         # the drift columns stay in, at the window's rates (the snapshot moved to the live time origin):
         # over a second the drift is not negligible (alpha +0.7 %/s at a 2e-4 noise on a 0.5 output is ~5
@@ -533,7 +528,7 @@ class WindowTracker(ParameterView):
         RF.start_test(self.st, self.S, S0, sy0, syy0, self._shift, shift0, self.theta, wk)
         nr = self.n - n0
         lin = (self.a1l, self.a2l)
-        args = (self.st, self.S, self._shift, self.theta, wk, self.basis.lam, self.basis.dx, RF.MASK_TEST, 0)
+        args = (self.st, self.S, self._shift, self.theta, wk, self.basis.lam, self.basis.dx, 0, False, False, 0)
         unit = RF.refit_unit
         yield
         while not unit(*args):             # TEST_STEPS Levenberg-Marquardt steps, then the covariance
@@ -592,6 +587,7 @@ class WindowTracker(ParameterView):
         self._lr_recent = []
         self._snaps = []
         self._misfit_since = None
+        self._first_fit = None
         self._research_wait = int(RESEARCH_AFTER_S / self.h)
         self._jobs = [self._research_job(self.n)]
 
@@ -652,6 +648,12 @@ class WindowTracker(ParameterView):
         while not search.unit():
             yield
 
+    def _misfit_from_start(self) -> bool:
+        """Has the window misfit (``_watch``) since its first re-fit? Then its estimate was wrong, not the plant
+        changed: the re-search trigger goes first (seen: a start-up search in a wrong basin; the change test
+        ran a few samples before the trigger and reported a2 +232 % as a change at 0.5 s)."""
+        return self._misfit_since is not None and self._first_fit is not None and self._misfit_since <= self._first_fit
+
     def _researching(self) -> bool:
         """Is a search of the resonance queued (after a change, or by the re-search trigger)?"""
         return any(j.__name__ in ("_research_job", "_research_again_job") for j in self._jobs)
@@ -683,20 +685,6 @@ class WindowTracker(ParameterView):
         return st[self.lay["phi"]:self.lay["phi"] + self.q].copy()
 
     # ------------------------------------------------------------------ re-search trigger
-    def _bound_resonance(self, theta: list[float] | np.ndarray) -> bool:
-        """Keep (ln a1, ln a2) within the resonances the sampling represents; True if they were outside."""
-        ln_a2_min = 2.0 * math.log(self.h / (2.0 * math.pi * FN_MAX_FS))
-        hit = False
-        if not theta[2] >= ln_a2_min:      # also NaN
-            theta[2] = ln_a2_min
-            hit = True
-        ln_zeta = theta[1] - math.log(2.0) - 0.5 * theta[2]
-        lo, hi = math.log(ZETA_BOUNDS[0]), math.log(ZETA_BOUNDS[1])
-        if not lo <= ln_zeta <= hi:
-            theta[1] += min(max(ln_zeta, lo), hi) - ln_zeta if math.isfinite(ln_zeta) else 0.0
-            hit = True
-        return hit
-
     def _watch(self, rms: float, broken: bool) -> None:
         """After each re-fit: start a re-search once the error has sat above the noise floor (or the fit has
         been broken) for ``RESEARCH_AFTER_S`` (plain floats: runs at every re-fit)."""
@@ -765,6 +753,7 @@ class WindowTracker(ParameterView):
         self.converged = False
         self._lr_recent = []
         self.fit = Fit(theta=self.theta.copy())   # quality: "first window fit pending" until the next re-fit
+        self._first_fit = None
         self.fitting = False               # the old statistics belong to the old resonance: rebuild first
         yield
         yield from self._relinearize_job(None)
@@ -788,13 +777,14 @@ class WindowTracker(ParameterView):
         counts the samples since the last input change."""
         return self.n - self.sc[W.SC_SINCE] > since + 1
 
-    def _settle_events(self, previous: list[float]) -> None:
-        """Once the fit after a change has stopped moving, record what moved and by how much."""
+    def _settle_events(self, move: float) -> None:
+        """Once the fit after a change has stopped moving (the last re-fit's largest relative move of
+        alpha, ln a1, ln a2, b), record what moved and by how much."""
         ev = self.events[-1] if self.events else None
         if ev is None or ev["settled"]:
             return
         now = self.theta[:4].tolist()
-        if _largest_move(now, previous) < 0.002 and self.n * self.h - ev["detected_t"] > 1.0:
+        if move < 0.002 and self.n * self.h - ev["detected_t"] > 1.0:
             before = ev.pop("_before")
             change = {"alpha": now[0] / before[0] - 1, "a1": math.exp(now[1] - before[1]) - 1,
                       "a2": math.exp(now[2] - before[2]) - 1, "b": now[3] / before[3] - 1}
