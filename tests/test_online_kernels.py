@@ -152,6 +152,33 @@ def test_window_cost_and_gradient_equal_brute_force():
         assert -2 * g[j] == pytest.approx(numeric, rel=1e-4, abs=1e-6 * abs(cost))
 
 
+def test_block_normal_equations_equal_the_dense_products():
+    """The block-diagonal normal equations = the dense C^T F C, C^T (fy - F m) and the cost, with free
+    responses and both drift columns (the unit-vector block in use)."""
+    model = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
+    h, n = 1e-3, 3000
+    u = _staircase(n, 300, 8)
+    y = simulate(model, np.arange(n) * h, u) + np.random.default_rng(8).normal(0, 1e-3, n)
+    tr = _tracker(model, h, free=True, drift=2)
+    _feed(tr, u, y)
+    F = np.empty((tr.p, tr.p))
+    W.symmetrize(tr.S, F, 1.0 / tr.sc[W.SC_G])
+    fy, fyy = tr.sy / tr.sc[W.SC_G], tr.sc[W.SC_SYY] / tr.sc[W.SC_G]
+    theta = tr.theta.copy()
+    theta[0] = 0.12
+    theta[4:] = np.linspace(0.1, -0.2, theta.size - 4)
+    C = np.empty((tr.p, theta.size))
+    W.jacobian_coefficients(theta, tr.a1l, tr.a2l, tr.basis.lam, tr.basis.dx, C)
+    H, g, cost = W.normal_equations(theta, C, F, fy, fyy)
+    m = C[:, 3:] @ theta[3:]
+    scale = np.abs(C.T @ np.abs(F) @ np.abs(C)).max()
+    assert np.allclose(H, C.T @ F @ C, rtol=1e-12, atol=1e-13 * scale)
+    assert np.allclose(g, C.T @ (fy - F @ m), rtol=1e-10, atol=1e-12 * np.abs(C.T @ np.abs(fy)).max())
+    assert cost == pytest.approx(fyy - 2 * m @ fy + m @ F @ m, rel=1e-9, abs=1e-12 * fyy)
+    assert cost == pytest.approx(W.cost_of(theta, tr.a1l, tr.a2l, tr.basis.lam, tr.basis.dx, F, fy, fyy),
+                                 rel=1e-9, abs=1e-12 * fyy)
+
+
 def test_replay_reproduces_the_statistics():
     """Statistics rebuilt by replaying the ring equal those accumulated live (same linearization)."""
     model = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
