@@ -14,6 +14,8 @@ import pytest
 
 from creep_online.model import ONLINE_ALPHA_BOUNDS, CreepModel
 from creep_online.online import kernels as K
+from creep_online.online import refit as RF
+from creep_online.online import tracker as T
 from creep_online.online import window as W
 from hil_sim.varying_plant import simulate_varying
 from creep_online.online.search import ResonanceSearch
@@ -264,6 +266,42 @@ def test_since_statistics_equal_the_snapshot_moved_to_the_live_origin():
     assert np.allclose(ry, (tr.sy - moved[tr.lay["sy"]:tr.lay["co"]]) / g, rtol=1e-9,
                        atol=1e-11 * np.abs(tr.sy).max() / g)
     assert ryy == pytest.approx((tr.sc[W.SC_SYY] - syy0) / g, rel=1e-15)
+
+
+def test_refit_machine_equals_its_kernels_in_sequence():
+    """refit.refit_unit, one stage per call, = the statistics, REFIT_STEPS Levenberg-Marquardt steps and
+    the covariance called in sequence; refit.accept swaps the result in with its coefficients."""
+    model = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
+    h, n = 1e-3, 4000
+    u = _staircase(n, 300, 9)
+    y = simulate(model, np.arange(n) * h, u) + np.random.default_rng(9).normal(0, 1e-3, n)
+    tr = _tracker(CreepModel.from_resonance(0.12, 33.0, 0.25, 0.9), h, free=True, drift=2)
+    _feed(tr, u, y)
+    st, S, shift, start = tr.st.copy(), tr.S.copy(), tr._shift.copy(), tr.theta.copy()
+    lam, dx = tr.basis.lam, tr.basis.dx
+    F, fy = np.empty((tr.p, tr.p)), np.empty(tr.p)
+    fyy = W.true_statistics(st, S, shift, F, fy)
+    theta, mu, out = start.copy(), 1e-3, np.empty(3)
+    free = np.ones(theta.size)
+    free[-2:] = 0.0                                  # rates off: MASK_CONSTANT
+    H, g = np.empty((theta.size, theta.size)), np.empty(theta.size)
+    for _ in range(T.REFIT_STEPS):
+        cost = W.lm_normal(theta, tr.a1l, tr.a2l, lam, dx, F, fy, fyy, H, g)
+        mu = W.lm_trial(theta, free, mu, H, g, cost, tr.a1l, tr.a2l, lam, dx, F, fy, fyy, *tr.alpha_bounds, out)
+    cov = np.empty_like(H)
+    W.covariance(H, free, cov)
+    units = 1
+    while not RF.refit_unit(tr.st, tr.S, tr._shift, tr.theta, tr._wk, lam, dx, 0, False, False, 1):
+        units += 1
+    assert units == 2 + 2 * T.REFIT_STEPS
+    head, fitted, var = RF.result(tr._wk)
+    assert np.array_equal(fitted, theta) and np.array_equal(var, np.diag(cov))
+    assert head[RF.RF_AFTER] == out[1] and head[RF.RF_DRIFT] == 0.0
+    r = RF.accept(tr.st, tr.theta, tr._wk, lam, dx)
+    assert r.verdict == RF.ACCEPTED and np.array_equal(tr.theta, theta)
+    m = np.empty(tr.p)
+    W.full_coefficients(theta, tr.a1l, tr.a2l, lam, dx, m)
+    assert np.array_equal(tr.m, m)
 
 
 def test_drift_columns_model_a_drifting_gain_and_alpha():
