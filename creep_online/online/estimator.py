@@ -684,5 +684,6 @@ def warm_kernels() -> None:
                              0):
                 break
         RF.accept(st, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)
+        RF.test_outcome(wk, tr.theta)
     T.WindowTracker  # noqa: B018 - imported for its kernels
     R.warm()

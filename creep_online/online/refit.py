@@ -318,6 +318,22 @@ def bound_resonance(theta: np.ndarray, wk: np.ndarray) -> bool:
     return hit
 
 
+#: What ``test_outcome`` returns: the window costs of the last second at the live estimate and at the test's
+#: fit; the fit's and the live ln a1, ln a2, b; the fit's variances (times sigma^2) of ln a1, ln a2, b.
+TestOutcome = namedtuple("TestOutcome", "before after ln_a1 ln_a2 b live_ln_a1 live_ln_a2 live_b "
+                                        "var_ln_a1 var_ln_a2 var_b")
+
+
+@njit(cache=CACHE)
+def test_outcome(wk: np.ndarray, live: np.ndarray) -> tuple:
+    """A finished change test's numbers as a ``TestOutcome`` of plain floats (the tracker's Python then
+    needs no numpy)."""
+    k = live.shape[0]
+    theta, var = wk[HEAD:HEAD + k], wk[HEAD + k:HEAD + 2 * k]
+    return TestOutcome(wk[RF_START_COST], wk[RF_AFTER], theta[1], theta[2], theta[3], live[1], live[2], live[3],
+                       var[1], var[2], var[3])
+
+
 def result(wk: np.ndarray) -> tuple[list[float], list[float], list[float]]:
     """(header, theta, diagonal of the covariance) as plain floats (tests and diagnostics)."""
     k = int(wk[RF_K])

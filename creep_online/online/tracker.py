@@ -534,22 +534,20 @@ class WindowTracker(ParameterView):
         while not unit(*args):             # TEST_STEPS Levenberg-Marquardt steps, then the covariance
             yield
         yield
-        head, theta, var = RF.result(wk)   # plain floats from here on (cold numpy is slow)
-        before, after = head[RF.RF_START_COST], head[RF.RF_AFTER]
-        if not (math.isfinite(after) and after > 0.0 and math.isfinite(before)):
+        r = RF.test_outcome(wk, self.theta)   # plain floats from here on (numpy from Python is slow here)
+        if not (math.isfinite(r.after) and r.after > 0.0 and math.isfinite(r.before)):
             return
-        live = self.theta[:4].tolist()
-        sigma2 = after / max(nr - 4, 1)
-        lr = (before - after) / sigma2
-        moves = {"a1": math.exp(theta[1] - live[1]) - 1, "a2": math.exp(theta[2] - live[2]) - 1,
-                 "b": theta[3] / live[3] - 1 if live[3] else 0.0}
+        sigma2 = r.after / max(nr - 4, 1)
+        lr = (r.before - r.after) / sigma2
+        moves = {"a1": math.exp(r.ln_a1 - r.live_ln_a1) - 1, "a2": math.exp(r.ln_a2 - r.live_ln_a2) - 1,
+                 "b": r.b / r.live_b - 1 if r.live_b else 0.0}
         # relative 1-sigma of the recent fit (ln a1, ln a2 are relative already)
-        rel_sd = {"a1": math.sqrt(abs(var[1]) * sigma2), "a2": math.sqrt(abs(var[2]) * sigma2),
-                  "b": math.sqrt(abs(var[3]) * sigma2) / max(abs(theta[3]), 1e-300)}
+        rel_sd = {"a1": math.sqrt(abs(r.var_ln_a1) * sigma2), "a2": math.sqrt(abs(r.var_ln_a2) * sigma2),
+                  "b": math.sqrt(abs(r.var_b) * sigma2) / max(abs(r.b), 1e-300)}
         # significant on the scale the 1-sigma is on (ln a1, ln a2; b relative): for a large move of an
         # undetermined resonance exp(d) - 1 is far larger than d (a flat compensated hold: a2 +232 % against a
         # 40 % 1-sigma passed as 5.9 sigma, it is 3.0 in ln a2, and the window restarted on no change)
-        size = {"a1": abs(theta[1] - live[1]), "a2": abs(theta[2] - live[2]), "b": abs(moves["b"])}
+        size = {"a1": abs(r.ln_a1 - r.live_ln_a1), "a2": abs(r.ln_a2 - r.live_ln_a2), "b": abs(moves["b"])}
         moved = {k: v for k, v in moves.items()
                  if abs(v) > CHANGE_MOVE[k] and size[k] > CHANGE_SIGMAS * rel_sd[k]}
         # the test is calibrated against its own recent level: a drifting plant (or a model that is
