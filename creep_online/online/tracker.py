@@ -443,7 +443,8 @@ class WindowTracker(ParameterView):
 
     # ------------------------------------------------------------------ relinearization (replay)
     def _ring_position(self, index: int) -> int:
-        """Ring slot of the sample with this index (must be remembered)."""
+        """Ring slot of the sample with this index (must be remembered). A sample keeps its slot while it is
+        remembered (the oldest slot and index advance together), so jobs compute it once and count on."""
         size = self.ring.shape[1]
         count = int(self.sc[W.SC_RCOUNT])
         oldest = (int(self.sc[W.SC_RPOS]) - count) % size
@@ -477,12 +478,13 @@ class WindowTracker(ParameterView):
         yield
         lin = (a1, a2)
         lay_sy = slice(lay["sy"], lay["co"])
+        size, slot = self.ring.shape[1], self._ring_position(oldest) - oldest
         i = oldest
         while i < self.n:                  # the live stream keeps appending: catch up
             n = min(chunk if i - oldest >= skip else 8 * chunk, self.n - i)
             if self.detect:                # stop at the change test's snapshot instants
                 n = min(n, (i // self.test_every + 1) * self.test_every - i)
-            W.replay(self.ring, self._ring_position(i), n, max(skip - (i - oldest), 0), st, S)
+            W.replay(self.ring, (slot + i) % size, n, max(skip - (i - oldest), 0), st, S)
             i += n
             if self.detect and i % self.test_every == 0 and i - oldest > skip:
                 snaps = (snaps + [(i, S.copy(), st[lay_sy].copy(), float(st[W.SC_SYY]), float(st[W.SC_G]),
@@ -674,10 +676,11 @@ class WindowTracker(ParameterView):
         st[self.lay["phi"]:self.lay["phi"] + self.q] = self.ztail
         st[W.SC_N] = oldest
         chunk = max(16, UNIT_MACS // (10 * self.q))        # node states only: ~10 flops per node
+        size, slot = self.ring.shape[1], self._ring_position(oldest) - oldest
         i = oldest
         while i < n0:
             n = min(chunk, n0 - i)
-            W.replay(self.ring, self._ring_position(i), n, n, st, S)
+            W.replay(self.ring, (slot + i) % size, n, n, st, S)
             i += n
             yield
         return st[self.lay["phi"]:self.lay["phi"] + self.q].copy()
