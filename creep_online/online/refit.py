@@ -25,7 +25,7 @@ from . import window as W
 CACHE = True
 
 # header of the work array
-RF_STAGE = 0      # next stage (0 start, 1 normal equations, 2 trial step, 3 covariance, 4-5 drift score)
+RF_STAGE = 0      # next stage (ST_*)
 RF_STEP = 1       # Levenberg-Marquardt steps taken
 RF_MU = 2         # damping (carried from one re-fit to the next)
 RF_FYY = 3        # sum of squares of the window's output (true scale)
@@ -59,6 +59,10 @@ RF_LN_ZETA_LO = 30    # ... and ln zeta within these
 RF_LN_ZETA_HI = 31
 RF_RELINEARIZE = 32   # relative move of a1, a2 within which the linearized cost holds
 HEAD = 40
+
+#: Stages of a fit, in order: plan and move the drift origin, the statistics at true scale, normal equations
+#: and trial step (repeated), covariance (and the Wald test), the score test's normal equations and score.
+ST_START, ST_SCALE, ST_NORMAL, ST_TRIAL, ST_COVARIANCE, ST_SCORE_NORMAL, ST_SCORE = range(7)
 
 #: Parameter masks (rows of the masks block): all free, drift rates fixed, alpha and rates fixed, and the
 #: change test's (the resonance, the gain and the offset).
@@ -140,47 +144,51 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
     p, k = S.shape[0], live.shape[0]
     theta, var, H, g, cov, H2, g2, F, fy, masks = _views(wk, p, k)
     stage = int(wk[RF_STAGE])
-    if stage == 0:                     # the statistics at true scale, frozen for the fit
+    if stage == ST_START:              # what to free, then the drift origin to the newest sample
         _plan(wk, st[W.SC_N], window_start, drift_on, converged, refits)
-        wk[RF_FYY] = W.true_statistics(st, S, shift, F, fy)
+        W.move_origin(st, S, shift)
+        wk[RF_STAGE] = ST_SCALE
+        return False
+    if stage == ST_SCALE:              # the statistics at true scale, frozen for the fit
+        wk[RF_FYY] = W.scaled_statistics(st, S, F, fy)
         theta[:] = live
         wk[RF_A1L], wk[RF_A2L] = st[W.SC_A1L], st[W.SC_A2L]
         wk[RF_STEP] = 0.0
         wk[RF_DRIFT_SWITCH] = 0.0
-        wk[RF_STAGE] = 1.0
+        wk[RF_STAGE] = ST_NORMAL
         return False
     free = masks[int(wk[RF_MASK])]
     a1l, a2l, fyy = wk[RF_A1L], wk[RF_A2L], wk[RF_FYY]
-    if stage == 1:                     # J^T J, J^T r at theta
+    if stage == ST_NORMAL:             # J^T J, J^T r at theta
         wk[RF_COST] = W.lm_normal(theta, a1l, a2l, lam, dx, F, fy, fyy, H, g)
         if wk[RF_STEP] == 0.0:
             wk[RF_START_COST] = wk[RF_COST]
-        wk[RF_STAGE] = 2.0
+        wk[RF_STAGE] = ST_TRIAL
         return False
-    if stage == 2:                     # the damped step
+    if stage == ST_TRIAL:              # the damped step
         out = wk[RF_BEFORE:RF_MOVED + 1]
         wk[RF_MU] = W.lm_trial(theta, free, wk[RF_MU], H, g, wk[RF_COST], a1l, a2l, lam, dx, F, fy, fyy,
                                wk[RF_LO], wk[RF_HI], out)
         wk[RF_STEP] += 1.0
         done = wk[RF_STEP] >= wk[RF_STEPS] or (wk[RF_MOVED] == 0.0 and wk[RF_MU] > 1e3)
-        wk[RF_STAGE] = 3.0 if done else 1.0
+        wk[RF_STAGE] = ST_COVARIANCE if done else ST_NORMAL
         return False
-    if stage == 3:
+    if stage == ST_COVARIANCE:
         W.covariance(H, free, cov)
         for i in range(k):
             var[i] = cov[i, i]
         wk[RF_NEFF] = st[W.SC_NEFF]
-        wk[RF_STAGE] = 0.0
+        wk[RF_STAGE] = ST_START
         return _drift_test(wk, theta, cov, k, int(wk[RF_DRIFT]))
-    if stage == 4:                     # score test: the normal equations at the result
+    if stage == ST_SCORE_NORMAL:       # score test: the normal equations at the result
         W.lm_normal(theta, a1l, a2l, lam, dx, F, fy, fyy, H2, g2)
-        wk[RF_STAGE] = 5.0
+        wk[RF_STAGE] = ST_SCORE
         return False
     stat = W.drift_score(H2, g2, free, int(wk[RF_R0])) / wk[RF_SIGMA2]
     wk[RF_DRIFT_STAT] = stat
     if stat > wk[RF_DRIFT_ON]:
         wk[RF_DRIFT_SWITCH] = 1.0
-    wk[RF_STAGE] = 0.0
+    wk[RF_STAGE] = ST_START
     return True
 
 
@@ -189,7 +197,7 @@ def start_test(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, s
                shift0: np.ndarray, live: np.ndarray, wk: np.ndarray) -> None:
     """Start the change test in its own work array: the statistics since a snapshot (S0, sy0, syy0,
     shift0; ``window.since_statistics``), theta from the live estimate, fresh damping. ``refit_unit``
-    with ``MASK_TEST`` and no drift test then fits them from stage 1 on."""
+    then fits them from its normal equations on (``MASK_TEST``, no drift test)."""
     p, k = S.shape[0], live.shape[0]
     theta, var, H, g, cov, H2, g2, F, fy, masks = _views(wk, p, k)
     wk[RF_FYY] = W.since_statistics(st, S, S0, sy0, syy0, shift, shift0, F, fy)
@@ -200,7 +208,7 @@ def start_test(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, s
     wk[RF_MASK] = MASK_TEST
     wk[RF_DRIFT] = 0.0
     wk[RF_DRIFT_SWITCH] = 0.0
-    wk[RF_STAGE] = 1.0
+    wk[RF_STAGE] = ST_NORMAL
 
 
 @njit(cache=CACHE)
@@ -221,7 +229,7 @@ def _drift_test(wk: np.ndarray, theta: np.ndarray, cov: np.ndarray, k: int, drif
         return True
     r0 = int(wk[RF_R0])
     if drift == 1:
-        wk[RF_STAGE] = 4.0
+        wk[RF_STAGE] = ST_SCORE_NORMAL
         return False
     n = k - r0
     stat = 0.0

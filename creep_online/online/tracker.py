@@ -527,6 +527,7 @@ class WindowTracker(ParameterView):
         # over a second the drift is not negligible (alpha +0.7 %/s at a 2e-4 noise on a 0.5 output is ~5
         # noise levels), and without it a drifting plant's step looked like a change
         wk = self._test_wk
+        yield                              # (the checks above, then the statistics: two units)
         RF.start_test(self.st, self.S, S0, sy0, syy0, self._shift, shift0, self.theta, wk)
         nr = self.n - n0
         lin = (self.a1l, self.a2l)

@@ -326,12 +326,19 @@ def rereference(st: np.ndarray, S: np.ndarray, n_new: float) -> None:
 def true_statistics(st: np.ndarray, S: np.ndarray, shift: np.ndarray, F: np.ndarray, fy: np.ndarray) -> float:
     """The window's statistics at true scale for a re-fit, in one call: F (full symmetric), fy; returns fyy.
 
-    The drift columns' time origin moves to the newest sample first (``rereference``: alpha and b of the
-    fit are then the values now) and the move is added to ``shift`` (rows 0..Q+5, one column per rate),
-    the running total the change test brings its snapshot up to. One kernel instead of the numpy steps
-    between them: run once per re-fit, the interpreter's and numpy's code paths are cold by then and
-    those few lines cost ~80 us at 10 kHz.
+    ``move_origin``, then ``scaled_statistics`` (the re-fit runs them as two units of work).
     """
+    move_origin(st, S, shift)
+    return scaled_statistics(st, S, F, fy)
+
+
+@njit(cache=CACHE)
+def move_origin(st: np.ndarray, S: np.ndarray, shift: np.ndarray) -> None:
+    """Move the drift columns' time origin to the newest sample (``rereference``: alpha and b of the next
+    fit are then the values now) and add the move to ``shift`` (rows 0..Q+5, one column per rate), the
+    running total the change test brings its snapshot up to. A kernel rather than numpy steps: run once
+    per re-fit, the interpreter's and numpy's code paths are cold by then, and those few lines cost
+    ~80 us at 10 kHz."""
     sc = st[:SC_SIZE]
     nr = int(sc[SC_NR])
     n_new = sc[SC_N]
@@ -350,6 +357,15 @@ def true_statistics(st: np.ndarray, S: np.ndarray, shift: np.ndarray, F: np.ndar
             for i in range(q + ONE):
                 shift[i, 1] += t * md[i]
     rereference(st, S, n_new)
+
+
+@njit(cache=CACHE)
+def scaled_statistics(st: np.ndarray, S: np.ndarray, F: np.ndarray, fy: np.ndarray) -> float:
+    """F = S / g (full symmetric, from the upper triangle), fy = sy / g; returns fyy = syy / g."""
+    sc = st[:SC_SIZE]
+    q = int(sc[SC_NQ])
+    p = q + FREE + int(sc[SC_NM]) + int(sc[SC_NR])
+    o = SC_SIZE
     g = sc[SC_G]
     symmetrize(S, F, 1.0 / g)
     sy = st[o + 2 * p:o + 3 * p]
