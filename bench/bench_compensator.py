@@ -20,12 +20,15 @@ drifting plant, and the per-sample cost. Prints JSON; ``--out`` writes it (bench
    reaches 5x against that frozen compensator (a large alpha's drift re-weights the whole history,
    which no frozen-time inverse undoes).
 4. ``cost``: ``command()`` alone, as it was before the packed buffer (``command_before_16_args``: the
-   baseline), numba's dispatch alone with 16 and with 4 arguments (functions that do nothing), with a model
+   baseline), numba's dispatch alone with 16 and with 4 arguments (functions that do nothing), a call that only
+   computes for as long as ``command()`` takes at the median (no memory: how often the machine interrupts a call
+   of that length), with a model
    change every 0.1 s (the estimator's re-fit period) and every sample, each against an empty call timed in
    the same loop (interleaved: the same machine), thread
    CPU and wall time; calls over the 25 us budget per second of loop time, minus the empty call's
    (noise-corrected); garbage-collector passes marked; the first model's replay of the pass-through
-   history; ``OnlineEstimator.update()`` in the same run.
+   history; ``command()`` with warm caches and after an 8 MB sweep between calls (``cold_cache``: what a
+   call costs when something else ran on the core); ``OnlineEstimator.update()`` in the same run.
 """
 from __future__ import annotations
 
@@ -304,6 +307,56 @@ def _dispatch_controls(c: CreepCompensator):
     return d16, d4
 
 
+def _compute_control(target_us: float):
+    """A numba call with one argument that only computes (no memory) for about ``target_us`` at the median:
+    how often the machine interrupts a call of that length (the share of a tail that is duration, not code)."""
+    from numba import njit
+
+    @njit(cache=False)
+    def spin(k: int) -> float:
+        s = 1.0
+        for _ in range(k):
+            s = s * 0.999999 + 1e-9
+        return s
+
+    def median_us(k: int) -> float:
+        x = np.empty(5000)
+        for i in range(x.size):
+            c0 = time.thread_time_ns()
+            spin(k)
+            x[i] = time.thread_time_ns() - c0
+        return float(np.median(x)) / 1e3
+    k = 10
+    while median_us(k) < target_us and k < 10**6:
+        k = int(k * 1.2) + 1
+    return lambda r: spin(k)
+
+
+def cold_cache_case(n: int = 20_000) -> dict:
+    """``command()`` (and the previous 16-argument path) with warm caches and after an 8 MB sweep between calls
+    (outside the timed interval), which evicts what the call touches as another process on the core would:
+    CPU p50/p90/p99 (us) and the fraction over the budget."""
+    r = staircase(np.arange(n) * H, LEVELS, 0.5, t_start=0.01).tolist()
+    big = np.ones(1 << 20)
+    command_16_args(CreepCompensator(H, PLANT, bandwidth_hz=BANDWIDTH_HZ), 0.5)
+    out = {}
+    for name, call in (("command", CreepCompensator.command), ("command_before_16_args", command_16_args)):
+        for evict in (False, True):
+            comp = CreepCompensator(H, PLANT, bandwidth_hz=BANDWIDTH_HZ, u_min=-1.0, u_max=1.0)
+            x = np.empty(n)
+            for k in range(n):
+                if evict:
+                    big *= 1.0000001
+                c0 = time.thread_time_ns()
+                call(comp, r[k])
+                x[k] = time.thread_time_ns() - c0
+            x /= 1e3
+            out[f"{name}_{'evicted' if evict else 'warm'}"] = {
+                "p50": float(np.percentile(x, 50)), "p90": float(np.percentile(x, 90)),
+                "p99": float(np.percentile(x, 99)), "over_budget_fraction": float(np.mean(x > BUDGET_US))}
+    return out
+
+
 def cost_case(n: int = 200_000) -> dict:
     """command() alone, with a model change every 0.1 s (the adaptive loop) and every sample (the worst
     case), against an empty call timed in the same loop; OnlineEstimator.update() in the same run."""
@@ -316,6 +369,13 @@ def cost_case(n: int = 200_000) -> dict:
     before = CreepCompensator(H, PLANT, bandwidth_hz=BANDWIDTH_HZ, u_min=-1.0, u_max=1.0)
     command_16_args(CreepCompensator(H, PLANT, bandwidth_hz=BANDWIDTH_HZ), 0.5)   # (compile/load its dispatch)
     d16, d4 = _dispatch_controls(CreepCompensator(H, PLANT, bandwidth_hz=BANDWIDTH_HZ, u_min=-1.0, u_max=1.0))
+    probe = CreepCompensator(H, PLANT, bandwidth_hz=BANDWIDTH_HZ, u_min=-1.0, u_max=1.0)
+    x = np.empty(5000)
+    for i in range(x.size):
+        c0 = time.thread_time_ns()
+        probe.command(r[i])
+        x[i] = time.thread_time_ns() - c0
+    spin = _compute_control(float(np.median(x)) / 1e3)
     loop = CreepCompensator(H, PLANT, bandwidth_hz=BANDWIDTH_HZ, u_min=-1.0, u_max=1.0)
     every = CreepCompensator(H, PLANT, bandwidth_hz=BANDWIDTH_HZ, u_min=-1.0, u_max=1.0)
     models = (PLANT, other)
@@ -334,6 +394,7 @@ def cost_case(n: int = 200_000) -> dict:
     calls = {"empty": empty, "command": lambda k: fixed.command(r[k]),
              "command_before_16_args": lambda k: command_16_args(before, r[k]),
              "dispatch_only_16_args": lambda k: d16(r[k]), "dispatch_only_4_args": lambda k: d4(r[k]),
+             "compute_only_same_p50": lambda k: spin(r[k]),
              "set_model_every_0.1s_and_command": adaptive, "set_model_every_sample_and_command": worst}
     timed, loop_s = time_interleaved(calls, n)
     empty_summary = cost_summary(*timed["empty"], loop_s, None)
@@ -342,6 +403,7 @@ def cost_case(n: int = 200_000) -> dict:
     for name in list(calls)[1:]:
         out[name] = cost_summary(*timed[name], loop_s, empty_summary)
     out["first_set_model_after_pass_through_cpu_us"] = first_model_cost()
+    out["cold_cache"] = cold_cache_case()
     from creep_online.simulate import simulate
     u = np.clip(np.asarray(r), 0, 1) / 2.0
     y = simulate(PLANT, t, u) + 2e-4 * np.random.default_rng(0).standard_normal(n)
