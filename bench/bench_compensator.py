@@ -14,20 +14,27 @@ drifting plant, and the per-sample cost. Prints JSON; ``--out`` writes it (bench
 3. ``random`` (``random_plants``): ``hil_sim.closed_loop.random_drifting_plant(seed)`` (alpha 0.02-0.6,
    fn 100-2000 Hz, zeta 0.02-0.7, b of random sign and magnitude 0.1-10), a 6-level staircase over
    ``--random-duration`` (60 s: 10 s holds, the first left out) with alpha +20 % and b +10 % over it;
-   frozen vs adaptive per estimator setting (default, ``detect_changes=False``) and the oracle (true
-   parameters every 10 ms). Reported: the fraction reaching 5x, and the fraction where even the oracle
+   frozen vs adaptive per setting (estimator default or ``detect_changes=False``; the adaptive loop's
+   ``online.gate`` on, or off: only ``good`` estimates, the policy before the gate and the baseline measured
+   in the same run) and the oracle (true parameters every 10 ms). Reported: the fraction reaching 5x, and the fraction where even the oracle
    reaches 5x against that frozen compensator (a large alpha's drift re-weights the whole history,
    which no frozen-time inverse undoes).
-4. ``cost``: ``command()`` alone, with a model change every 0.1 s (the estimator's re-fit period) and
-   every sample, each against an empty call timed in the same loop (interleaved: the same machine), thread
+4. ``cost``: ``command()`` alone, as it was before the packed buffer (``command_before_16_args``: the
+   baseline), numba's dispatch alone with 16 and with 4 arguments (functions that do nothing), a call that only
+   computes for as long as ``command()`` takes at the median (no memory: how often the machine interrupts a call
+   of that length), with a model
+   change every 0.1 s (the estimator's re-fit period) and every sample, each against an empty call timed in
+   the same loop (interleaved: the same machine), thread
    CPU and wall time; calls over the 25 us budget per second of loop time, minus the empty call's
    (noise-corrected); garbage-collector passes marked; the first model's replay of the pass-through
-   history; ``OnlineEstimator.update()`` in the same run.
+   history; ``command()`` with warm caches and after an 8 MB sweep between calls (``cold_cache``: what a
+   call costs when something else ran on the core); ``OnlineEstimator.update()`` in the same run.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import platform
 import sys
@@ -42,6 +49,7 @@ from creep_online.model import CreepModel  # noqa: E402
 from creep_online.online import OnlineEstimator, warm_kernels  # noqa: E402
 from creep_online.online.compensator import CreepCompensator  # noqa: E402
 from creep_online.online.compensator import warm_kernels as warm_compensator  # noqa: E402
+from creep_online.online import compensator_kernels as CK  # noqa: E402
 from creep_online.metrics import creep_error  # noqa: E402
 from hil_sim.closed_loop import run_closed_loop, staircase  # noqa: E402
 
@@ -109,39 +117,51 @@ def drift_case(t, seeds) -> dict:
     return out
 
 
-#: Estimator settings compared on the random drifting plants.
-SETTINGS = {"default": {}, "no_change_test": {"detect_changes": False}}
+#: Settings compared on the random drifting plants: (estimator keyword arguments, the adaptive loop's gate).
+#: ``gate=False`` is the policy before ``online.gate``: only ``good`` estimates (the baseline, same run).
+#: ``closed_loop.drifting_comparison`` feeds its estimator with ``input_gate=0`` (the compensator's own commands);
+#: ``input_gate=20`` is the estimator's default glitch gate, as before.
+SETTINGS = {"gate": ({}, True), "gate_no_change_test": ({"detect_changes": False}, True),
+            "gate_input_gate_20": ({"input_gate": 20.0}, True), "before": ({"input_gate": 20.0}, False),
+            "before_no_change_test": ({"input_gate": 20.0, "detect_changes": False}, False)}
 
 
-def _random_one(seed: int, duration: float) -> dict:
-    """One random drifting plant: frozen and adaptive per estimator setting, and the oracle."""
+def _random_one(seed: int, duration: float, settings: tuple = tuple(SETTINGS)) -> dict:
+    """One random drifting plant: frozen (once per estimator setting: the gate does not change it) and
+    adaptive per setting, and the oracle."""
     from hil_sim.closed_loop import drifting_comparison
     t0 = time.perf_counter()
     res = drifting_comparison(seed, duration, modes=("oracle",))
     res["seed"] = seed
-    for name, kwargs in SETTINGS.items():
-        r = drifting_comparison(seed, duration, kwargs, modes=("frozen", "adaptive"))
-        res[name] = {"frozen": r["frozen"], "adaptive": r["adaptive"], "ratio": r["frozen"] / r["adaptive"],
-                     "oracle_ratio": r["frozen"] / res["oracle"]}
+    frozen: dict = {}
+    for name in settings:
+        kwargs, gate = SETTINGS[name]
+        key = json.dumps(kwargs, sort_keys=True)
+        if key not in frozen:
+            frozen[key] = drifting_comparison(seed, duration, kwargs, modes=("frozen",))["frozen"]
+        adaptive = drifting_comparison(seed, duration, kwargs, modes=("adaptive",), gate=gate)["adaptive"]
+        res[name] = {"frozen": frozen[key], "adaptive": adaptive, "ratio": frozen[key] / adaptive,
+                     "oracle_ratio": frozen[key] / res["oracle"]}
     res["run_s"] = time.perf_counter() - t0
     print(f"random plant {seed}: " + ", ".join(f"{k} {res[k]['ratio']:.1f}x (oracle {res[k]['oracle_ratio']:.1f}x)"
-                                                for k in SETTINGS), file=sys.stderr)
+                                                for k in settings), file=sys.stderr)
     return res
 
 
-def random_case(seeds: list[int], duration: float, jobs: int = 1) -> dict:
+def random_case(seeds: list[int], duration: float, jobs: int = 1, settings: tuple = tuple(SETTINGS)) -> dict:
     """Adaptive vs frozen on random drifting plants (``hil_sim.closed_loop.random_drifting_plant``): per
-    estimator setting the fraction reaching 5x, and the fraction where even the oracle (true parameters
-    every 10 ms) reaches 5x against that frozen compensator (the frozen-time inverse's limit)."""
+    setting the fraction reaching 5x, and the fraction where even the oracle (true parameters every
+    10 ms) reaches 5x against that frozen compensator (the frozen-time inverse's limit)."""
     if jobs > 1:
         from concurrent.futures import ProcessPoolExecutor
         with ProcessPoolExecutor(jobs) as pool:
-            runs = list(pool.map(_random_one, seeds, [duration] * len(seeds)))
+            runs = list(pool.map(_random_one, seeds, [duration] * len(seeds), [settings] * len(seeds)))
     else:
-        runs = [_random_one(s, duration) for s in seeds]
+        runs = [_random_one(s, duration, settings) for s in seeds]
     out = {"seeds": list(seeds), "duration_s": duration, "drift": "alpha +20 %, b +10 % over the run",
-           "runs": runs}
-    for name in SETTINGS:
+           "settings": {name: {"estimator": SETTINGS[name][0], "gate": SETTINGS[name][1]} for name in settings},
+           "load_average": list(os.getloadavg()), "runs": runs}
+    for name in settings:
         ratio = np.array([x[name]["ratio"] for x in runs])
         oracle = np.array([x[name]["oracle_ratio"] for x in runs])
         near = np.array([x[name]["adaptive"] <= 1.25 * x["oracle"] for x in runs])
@@ -247,6 +267,96 @@ def first_model_cost(passes: tuple = (1000, 10_000, 100_000)) -> dict:
     return out
 
 
+def command_16_args(c: CreepCompensator, r: float) -> float:
+    """``command()`` as it was before the packed buffer (the baseline, same run): the same checks, then the
+    kernel called with its sixteen arguments and the clip counted in Python."""
+    r = float(r)
+    if not math.isfinite(r):
+        raise ValueError(r)
+    c.samples += 1
+    if c._base is not None and c._applied:
+        c._replay_some()
+    if c._base is None or c._applied:
+        return c._pass(r)
+    u = CK.command_step(c._st, c._e, c._M, c._m, c._phi, c._gam, c._Wz, c._Ux, c._ur, r - c._offset, c._lo, c._hi,
+                        c.anti_windup, c._hy, c._hy_on, c._out)
+    c._clipped += int(c._out[1])
+    return u
+
+
+def _dispatch_controls(c: CreepCompensator):
+    """Two numba functions that do nothing, called with command_step's 16 arguments and command_packed's 4:
+    what numba's dispatch (a type check per argument) costs, without the kernel's work."""
+    from numba import njit
+
+    @njit(cache=False)
+    def nothing16(st, e, M, m, phi, gam, Wz, Ux, ur, r, lo, hi, aw, hy, hy_on, out):
+        return r
+
+    @njit(cache=False)
+    def nothing4(buf, hy, r, out):
+        return r
+
+    def d16(r: float) -> float:
+        return nothing16(c._st, c._e, c._M, c._m, c._phi, c._gam, c._Wz, c._Ux, c._ur, r, c._lo, c._hi,
+                         c.anti_windup, c._hy, c._hy_on, c._out)
+
+    def d4(r: float) -> float:
+        return nothing4(c._pack, c._hy, r, c._out)
+    d16(0.0), d4(0.0)
+    return d16, d4
+
+
+def _compute_control(target_us: float):
+    """A numba call with one argument that only computes (no memory) for about ``target_us`` at the median:
+    how often the machine interrupts a call of that length (the share of a tail that is duration, not code)."""
+    from numba import njit
+
+    @njit(cache=False)
+    def spin(k: int) -> float:
+        s = 1.0
+        for _ in range(k):
+            s = s * 0.999999 + 1e-9
+        return s
+
+    def median_us(k: int) -> float:
+        x = np.empty(5000)
+        for i in range(x.size):
+            c0 = time.thread_time_ns()
+            spin(k)
+            x[i] = time.thread_time_ns() - c0
+        return float(np.median(x)) / 1e3
+    k = 10
+    while median_us(k) < target_us and k < 10**6:
+        k = int(k * 1.2) + 1
+    return lambda r: spin(k)
+
+
+def cold_cache_case(n: int = 20_000) -> dict:
+    """``command()`` (and the previous 16-argument path) with warm caches and after an 8 MB sweep between calls
+    (outside the timed interval), which evicts what the call touches as another process on the core would:
+    CPU p50/p90/p99 (us) and the fraction over the budget."""
+    r = staircase(np.arange(n) * H, LEVELS, 0.5, t_start=0.01).tolist()
+    big = np.ones(1 << 20)
+    command_16_args(CreepCompensator(H, PLANT, bandwidth_hz=BANDWIDTH_HZ), 0.5)
+    out = {}
+    for name, call in (("command", CreepCompensator.command), ("command_before_16_args", command_16_args)):
+        for evict in (False, True):
+            comp = CreepCompensator(H, PLANT, bandwidth_hz=BANDWIDTH_HZ, u_min=-1.0, u_max=1.0)
+            x = np.empty(n)
+            for k in range(n):
+                if evict:
+                    big *= 1.0000001
+                c0 = time.thread_time_ns()
+                call(comp, r[k])
+                x[k] = time.thread_time_ns() - c0
+            x /= 1e3
+            out[f"{name}_{'evicted' if evict else 'warm'}"] = {
+                "p50": float(np.percentile(x, 50)), "p90": float(np.percentile(x, 90)),
+                "p99": float(np.percentile(x, 99)), "over_budget_fraction": float(np.mean(x > BUDGET_US))}
+    return out
+
+
 def cost_case(n: int = 200_000) -> dict:
     """command() alone, with a model change every 0.1 s (the adaptive loop) and every sample (the worst
     case), against an empty call timed in the same loop; OnlineEstimator.update() in the same run."""
@@ -256,6 +366,16 @@ def cost_case(n: int = 200_000) -> dict:
     r = staircase(t, LEVELS, 0.5, t_start=0.01).tolist()
     other = CreepModel(0.125, PLANT.a1, PLANT.a2, 2.55)
     fixed = CreepCompensator(H, PLANT, bandwidth_hz=BANDWIDTH_HZ, u_min=-1.0, u_max=1.0)
+    before = CreepCompensator(H, PLANT, bandwidth_hz=BANDWIDTH_HZ, u_min=-1.0, u_max=1.0)
+    command_16_args(CreepCompensator(H, PLANT, bandwidth_hz=BANDWIDTH_HZ), 0.5)   # (compile/load its dispatch)
+    d16, d4 = _dispatch_controls(CreepCompensator(H, PLANT, bandwidth_hz=BANDWIDTH_HZ, u_min=-1.0, u_max=1.0))
+    probe = CreepCompensator(H, PLANT, bandwidth_hz=BANDWIDTH_HZ, u_min=-1.0, u_max=1.0)
+    x = np.empty(5000)
+    for i in range(x.size):
+        c0 = time.thread_time_ns()
+        probe.command(r[i])
+        x[i] = time.thread_time_ns() - c0
+    spin = _compute_control(float(np.median(x)) / 1e3)
     loop = CreepCompensator(H, PLANT, bandwidth_hz=BANDWIDTH_HZ, u_min=-1.0, u_max=1.0)
     every = CreepCompensator(H, PLANT, bandwidth_hz=BANDWIDTH_HZ, u_min=-1.0, u_max=1.0)
     models = (PLANT, other)
@@ -271,8 +391,11 @@ def cost_case(n: int = 200_000) -> dict:
         every.set_model(models[k % 2])
         return every.command(r[k])
 
-    calls = {"empty": empty, "command": lambda k: fixed.command(r[k]), "set_model_every_0.1s_and_command": adaptive,
-             "set_model_every_sample_and_command": worst}
+    calls = {"empty": empty, "command": lambda k: fixed.command(r[k]),
+             "command_before_16_args": lambda k: command_16_args(before, r[k]),
+             "dispatch_only_16_args": lambda k: d16(r[k]), "dispatch_only_4_args": lambda k: d4(r[k]),
+             "compute_only_same_p50": lambda k: spin(r[k]),
+             "set_model_every_0.1s_and_command": adaptive, "set_model_every_sample_and_command": worst}
     timed, loop_s = time_interleaved(calls, n)
     empty_summary = cost_summary(*timed["empty"], loop_s, None)
     out = {"samples": n, "loop_s": loop_s, "budget_us": BUDGET_US, "load_average": list(os.getloadavg()),
@@ -280,6 +403,7 @@ def cost_case(n: int = 200_000) -> dict:
     for name in list(calls)[1:]:
         out[name] = cost_summary(*timed[name], loop_s, empty_summary)
     out["first_set_model_after_pass_through_cpu_us"] = first_model_cost()
+    out["cold_cache"] = cold_cache_case()
     from creep_online.simulate import simulate
     u = np.clip(np.asarray(r), 0, 1) / 2.0
     y = simulate(PLANT, t, u) + 2e-4 * np.random.default_rng(0).standard_normal(n)
@@ -310,6 +434,8 @@ def main() -> None:
     p.add_argument("--random-duration", type=float, default=60.0)
     p.add_argument("--jobs", type=int, default=1, help="processes for the random plants")
     p.add_argument("--random-key", default="random_plants", help="JSON key of the random case (e.g. a fresh seed set)")
+    p.add_argument("--settings", default=",".join(SETTINGS), help=f"random case: comma-separated subset of "
+                                                                  f"{', '.join(SETTINGS)}")
     p.add_argument("--out", default=None, help="JSON file; the cases run replace theirs, the others are kept")
     args = p.parse_args()
     cases = args.cases.split(",")
@@ -334,7 +460,8 @@ def main() -> None:
     if "drift" in cases:
         out["drift"] = drift_case(t, range(args.seeds))
     if "random" in cases:
-        out[args.random_key] = random_case(parse_seeds(args.random_seeds), args.random_duration, args.jobs)
+        out[args.random_key] = random_case(parse_seeds(args.random_seeds), args.random_duration, args.jobs,
+                                           tuple(args.settings.split(",")))
     if "cost" in cases:
         out["cost"] = cost_case()
     out["elapsed_s"] = time.perf_counter() - started

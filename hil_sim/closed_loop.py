@@ -6,9 +6,12 @@ holds, the plant (``varying_plant.PlantStream``: per-sample alpha and b)
 answers, the estimator learns from (command, noisy output), and the
 compensator takes the estimator's model according to ``mode``:
 
-``adaptive``       the estimator's current model after every block, whenever its quality is ``good``
-                   (a model the estimator itself calls changing or degraded is not applied, nor one the
-                   compensator cannot take: ``CreepCompensator.accepts``);
+``adaptive``       the estimator's current model after every block, as ``online.gate.ModelGate`` gives it:
+                   whenever the estimate determines alpha and b at the noise floor (``good``, or
+                   ``provisional`` with only the resonance undetermined: then the last determined
+                   resonance, or a rough one), never one the estimator calls changing or degraded, nor
+                   one the compensator cannot take (``CreepCompensator.accepts``); ``gate=False``: only
+                   ``good`` estimates, whole (the policy before the gate);
 ``frozen``         the first model the estimator calls ``good`` (after 10 s: whatever it has), never again
                    (the estimator is not fed after it);
 ``known``          the true initial model from the start (no estimator needed);
@@ -28,6 +31,7 @@ import numpy as np
 
 from creep_online.model import CreepModel
 from creep_online.online.compensator import CreepCompensator
+from creep_online.online.gate import ModelGate
 
 from .varying_plant import PlantStream
 
@@ -50,7 +54,7 @@ class LoopRecord:
 def run_closed_loop(t: np.ndarray, r: np.ndarray, plant: CreepModel, mode: str, *,
                     alpha: np.ndarray | None = None, b: np.ndarray | None = None, estimator=None,
                     compensator: CreepCompensator | None = None, noise: float = 2e-4, seed: int = 0,
-                    block: int = 10) -> LoopRecord:
+                    block: int = 10, gate: bool = True) -> LoopRecord:
     """One run of the loop; ``alpha``/``b`` per sample make the plant drift (default: constant)."""
     if mode not in MODES:
         raise ValueError(f"unknown mode {mode!r}; choose one of {', '.join(MODES)}")
@@ -67,6 +71,7 @@ def run_closed_loop(t: np.ndarray, r: np.ndarray, plant: CreepModel, mode: str, 
     u_all, y_clean = np.empty(n), np.empty(n)
     model_t, models = [], []
     frozen = False
+    take = _policy(mode, gate)
     for k0 in range(0, n, block):
         k1 = min(n, k0 + block)
         if mode == "oracle":
@@ -77,10 +82,8 @@ def run_closed_loop(t: np.ndarray, r: np.ndarray, plant: CreepModel, mode: str, 
         if estimator is None or mode in ("known", "oracle", "uncompensated") or frozen:
             continue                 # (frozen: the estimator's later models are never used: not fed)
         estimator.update_block(u, yc + noise * rng.standard_normal(k1 - k0))
-        m = estimator.model
+        m = take(estimator, t[k1 - 1])
         if m is None:
-            continue
-        if estimator.estimate.quality not in TRUSTED and (mode == "adaptive" or t[k1 - 1] < FROZEN_WAIT_S):
             continue
         if m != comp.current_model:
             if not comp.accepts(m):
@@ -93,10 +96,24 @@ def run_closed_loop(t: np.ndarray, r: np.ndarray, plant: CreepModel, mode: str, 
     return LoopRecord(t, r, u_all, y_clean, y, model_t, models)
 
 
-#: Estimate qualities the compensator takes a model from (``OnlineEstimate.quality``).
+#: Estimate qualities the compensator takes a whole model from (``OnlineEstimate.quality``).
 TRUSTED = ("good",)
 #: ``frozen`` waits at most this long (s) for a ``good`` estimate, then takes what there is.
 FROZEN_WAIT_S = 10.0
+
+
+def _policy(mode: str, gate: bool):
+    """f(estimator, t) -> the model the compensator may take now, or None: per mode (module docstring)."""
+    if mode == "adaptive" and gate:
+        g = ModelGate()
+        return lambda est, t: g.model(est.estimate)
+
+    def trusted(est, t: float) -> CreepModel | None:
+        m = est.model
+        if m is None or (est.estimate.quality not in TRUSTED and (mode == "adaptive" or t < FROZEN_WAIT_S)):
+            return None
+        return m
+    return trusted
 
 
 def staircase(t: np.ndarray, levels, hold_s: float, t_start: float = 0.0) -> np.ndarray:
@@ -121,12 +138,15 @@ def random_drifting_plant(seed: int) -> tuple[CreepModel, np.ndarray]:
 
 
 def drifting_comparison(seed: int, duration: float = 30.0, est_kwargs: dict | None = None,
-                        modes: tuple = ("frozen", "adaptive", "oracle"), dt: float = 1e-4) -> dict:
+                        modes: tuple = ("frozen", "adaptive", "oracle"), dt: float = 1e-4, gate: bool = True) -> dict:
     """Creep error per mode on ``random_drifting_plant(seed)`` while alpha drifts +20 % and b +10 % over the run.
 
     A 6-level staircase (holds of duration / 6, the first left out of the error: start-up), noise 2e-4,
-    the estimator fed and read every 100 samples (``OnlineEstimator(dt, **est_kwargs)``), the reference
-    filter at half the plant's natural frequency. Returns {mode: creep error max abs} plus ``plant``.
+    the estimator fed and read every 100 samples (``OnlineEstimator(dt, input_gate=0, **est_kwargs)``: it is fed
+    the compensator's own commands, which no glitch can corrupt and whose step transients jump far beyond the
+    pass-through range; ``est_kwargs`` may set it back), the reference
+    filter at half the plant's natural frequency; ``gate`` as in ``run_closed_loop``. Returns {mode: creep error
+    max abs} plus ``plant``.
     """
     from creep_online.metrics import creep_error
     from creep_online.online import OnlineEstimator
@@ -138,8 +158,10 @@ def drifting_comparison(seed: int, duration: float = 30.0, est_kwargs: dict | No
     b = plant.b * (1 + 0.1 * t / duration)
     out: dict = {"plant": plant.describe()}
     for mode in modes:
-        est = OnlineEstimator(dt, **(est_kwargs or {})) if mode in ("frozen", "adaptive") else None
+        est = OnlineEstimator(dt, **{"input_gate": 0.0, **(est_kwargs or {})}) if mode in ("frozen", "adaptive") \
+            else None
         rec = run_closed_loop(t, r, plant, mode, alpha=alpha, b=b, estimator=est,
-                              compensator=CreepCompensator(dt, bandwidth_hz=plant.fn / 2), block=100, seed=seed)
+                              compensator=CreepCompensator(dt, bandwidth_hz=plant.fn / 2), block=100, seed=seed,
+                              gate=gate)
         out[mode] = creep_error(t, r, rec.y_clean, plant.settling_time, skip_before=hold)["max_abs"]
     return out

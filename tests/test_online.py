@@ -304,6 +304,20 @@ def test_single_outlier_moves_nothing(stepping, where, value):
     assert e.quality == "good", e.reason
 
 
+def test_input_gate_zero_takes_every_input_and_determined_matches_quality(stepping):
+    """``input_gate=0``: inputs the caller computed (a compensator's commands) are never held as glitches;
+    ``determined`` holds all four parameters exactly when the quality is good."""
+    h, u, y, ref = stepping
+    u2 = u.copy()
+    u2[103_217] = 1000.0
+    est = OnlineEstimator(h, input_gate=0)
+    est.update_block(u2, y)
+    assert est.estimate.input_outliers == 0 and est.get_params()["input_gate"] == 0
+    assert ref.quality == "good" and sorted(ref.determined) == ["a1", "a2", "alpha", "b"]
+    with pytest.raises(DataError, match="input_gate"):
+        OnlineEstimator(h, input_gate=-1.0)
+
+
 def test_frozen_sensor_is_flagged_within_half_a_second(stepping):
     h, u, y, _ = stepping
     y2 = y.copy()

@@ -2,12 +2,15 @@
 
 reference -> CreepCompensator -> command frames -> pty -> hil_sim (its DAC applies
 them, ``--command-input``) -> sample frames -> pty -> OnlineEstimator -> the
-compensator takes the estimate whenever the estimator calls it ``good``.
+compensator takes the estimate whenever ``online.gate.ModelGate`` gives it one
+(alpha and b determined at the noise floor; the resonance when determined, else
+the last determined one or a rough one). The estimator is fed the commands the
+compensator computed (``input_gate=0``: their step transients are no glitches).
 
 Commands are sent ``LEAD_S`` ahead of the newest sample received, each naming
 the sample at which the DAC must apply it (the plant waits for a command that
 is late, up to a second, as a busy machine delays samples rather than losing
-them; the ledger counts what it held). Before the first good estimate the reference
+them; the ledger counts what it held). Before the first model the reference
 passes through unchanged (the estimator needs that input to find a model).
 The report adds the reference, the measured (compensated) output, the output the
 same plant gives without compensation (exact simulation, ``u = r / g`` with
@@ -60,7 +63,7 @@ def run_compensated(args, progress) -> dict:
         r = reference(t, args.period or 2.0, args.amplitude, 0.2)
         warm_kernels()
         warm_compensator()
-        est = OnlineEstimator(dt, **({} if args.refit is None else {"refit": args.refit}))
+        est = OnlineEstimator(dt, input_gate=0.0, **({} if args.refit is None else {"refit": args.refit}))
         comp = CreepCompensator(dt, bandwidth_hz=args.bandwidth or truth.fn / 2, u_min=args.u_min, u_max=args.u_max)
         src = open_source(f"serial:{plant.port}?rate={args.rate!r}&format=binary")
         dac = os.open(plant.port, os.O_WRONLY | os.O_NOCTTY | os.O_NONBLOCK)
@@ -95,7 +98,9 @@ class _Sender:
 
     def __init__(self, dac: int, comp, r: np.ndarray, lead: int, rate: float) -> None:
         self.dac, self.comp, self.r, self.lead, self.rate = dac, comp, r, lead, rate
+        from ..online.gate import ModelGate
         self.pending = bytearray()
+        self.gate = ModelGate()
         self.sent = 0
         self.commands = np.zeros(r.size)
         self.model_t: list[int] = []    # sample at which each model was taken
@@ -124,10 +129,10 @@ class _Sender:
             pass
 
     def step(self, loop, est) -> None:
-        """After each batch of samples: take a good estimate, then send the next commands."""
-        m = est.model
-        if m is not None and est.estimate.quality == "good" and m != self.comp.current_model \
-                and self.comp.accepts(m):    # (one it cannot take: the last good one is held)
+        """After each batch of samples: take the gate's model, then send the next commands."""
+        m = self.gate.model(est.estimate)
+        if m is not None and m != self.comp.current_model \
+                and self.comp.accepts(m):    # (one it cannot take: the last one is held)
             self.comp.set_model(m)
             self.model_t.append(loop.last_seq or 0)
         self.send_upto((loop.last_seq or 0) + 1 + self.lead)
@@ -160,14 +165,14 @@ def _judge(result: dict, r: np.ndarray, truth, comp, sender: _Sender, ready: dic
             "creep_error_uncompensated_simulated": {k: uncomp[k] for k in ("max_abs", "rms")},
             "ratio_rms": uncomp["rms"] / measured["rms"] if measured["rms"] > 0 else math.inf,
             "noise_std": float(ready.get("noise", 0.0)), "drift": led,
-            "note": "errors on the holds after the first good estimate, from the end of the resonance transient; "
+            "note": "errors on the holds after the first model, from the end of the resonance transient; "
                     "the compensated error is measured (it includes the sensor noise)"}
 
 
 def print_compensation(c: dict) -> None:
     """The demo summary's compensation lines."""
     m, un = c["creep_error_compensated"], c["creep_error_uncompensated_simulated"]
-    print(f"  compens.: reference filter {c['bandwidth_hz']:.0f} Hz, first good model at {c['first_model_t']:.2f} s, "
+    print(f"  compens.: reference filter {c['bandwidth_hz']:.0f} Hz, first model at {c['first_model_t']:.2f} s, "
           f"{c['model_changes']} model updates, {c['clipped']} clipped commands")
     print(f"    creep error (measured, with noise)    : max {m['max_abs']:.2e}, rms {m['rms']:.2e}")
     print(f"    uncompensated (same plant, simulated) : max {un['max_abs']:.2e}, rms {un['rms']:.2e} "

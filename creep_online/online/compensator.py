@@ -137,9 +137,10 @@ class CreepCompensator(StoredParams):
         self._hy = np.zeros(4)
         self._hy_on = False
         self._out = np.zeros(3)
+        self._pack: np.ndarray | None = None
         self._applied: deque[float] = deque(maxlen=MAX_REPLAY)   # pass-through commands not yet replayed
         self.samples = 0
-        self.clipped = 0
+        self._clipped = 0
         self.model_changes = 0
         if self.bandwidth_hz is not None:
             self._build(1.0 / (2.0 * math.pi * float(self.bandwidth_hz)))
@@ -151,13 +152,20 @@ class CreepCompensator(StoredParams):
         """The model-independent discretisation (one matrix exponential per node) and zero states."""
         e, M, m, phi, gam, pz, P, pr, Ax, ax, C, d = node_discretization(self._basis.lam, tau, float(self.dt))
         self._tau = tau
-        self._e, self._M, self._m, self._phi, self._gam = e, M, m, phi, gam
         self._avg = (pz, P, pr, Ax, ax, C, d)
         q = self._basis.size
-        self._st = np.zeros(3 + 3 * q)
-        self._Wz = np.zeros((3, q))
-        self._Ux = np.zeros(3)
-        self._spare = (np.zeros((3, q)), np.zeros(3))   # the next model's coefficients, swapped in if taken
+        # one buffer holds what command() reads (CK.command_packed: 4 arguments to dispatch, not 16);
+        # the arrays below are views into it, so the replay and command_block see the same numbers
+        pack = np.zeros(CK.pack_slices(q)["size"][0])
+        views = {name: pack[a:b].reshape(shape) for name, (a, b, shape) in CK.pack_slices(q).items()
+                 if name != "size"}
+        for name, value in (("e", e), ("M", M), ("m", m), ("phi", phi), ("gam", gam)):
+            views[name][...] = value
+        pack[[CK.P_Q, CK.P_LO, CK.P_HI, CK.P_AW]] = (q, self._lo, self._hi, float(self.anti_windup))
+        self._pack = pack
+        self._st, self._e, self._M, self._m = views["st"], views["e"], views["M"], views["m"]
+        self._phi, self._gam, self._Wz, self._Ux = views["phi"], views["gam"], views["Wz"], views["Ux"]
+        self._spare = (np.zeros((3, q)), np.zeros(3))   # a candidate model's coefficients, copied in if taken
         self._ur = 0.0
         # the states' steady response to r = (-1)^n (model-independent): filter x, nodes z (3, K)
         x = np.linalg.solve(-np.eye(3) - phi, gam)
@@ -191,8 +199,9 @@ class CreepCompensator(StoredParams):
                              f"{base.zeta:.3g} with its {1 / (2 * math.pi * self._tau):.4g} Hz reference filter: the "
                              "anti-windup and replay recursion would be unstable (a sampled zero of the inverse beyond "
                              "-1: an overdamped resonance far above the filter's corner); check with accepts()")
-        self._spare = (self._Wz, self._Ux)
-        self._ur, self._Wz, self._Ux = ur, Wz, Ux
+        self._Wz[...] = Wz
+        self._Ux[...] = Ux
+        self._ur = ur
         old_hy = self._current.effects.get("hysteresis") if isinstance(self._current, ExtendedModel) else None
         if hysteresis != old_hy:
             self._hy_on = hysteresis is not None
@@ -202,10 +211,13 @@ class CreepCompensator(StoredParams):
         if self._base is not None and base.b != self._base.b:
             self._st *= base.b / self._base.b     # the gain scales the output of the whole history
         self._current, self._base, self._offset = model, base, offset
+        pack = self._pack
+        pack[CK.P_UR], pack[CK.P_HY], pack[CK.P_OFF] = ur, float(self._hy_on), offset
         return self
 
     def _coefficients(self, base: CreepModel) -> tuple[float, np.ndarray, np.ndarray]:
-        """(ur, Wz, Ux): the output coefficients of the command for ``base`` (K powers), in the spare buffers."""
+        """(ur, Wz, Ux): the output coefficients of the command for ``base`` (K powers), in the spare buffers
+        (``set_model`` copies them in once the model is accepted)."""
         pz, P, pr, Ax, ax, C, d = self._avg
         Wz, Ux = self._spare
         ur = float(CK.output_coefficients(base.alpha, base.a1, base.a2, base.b, self._tau, self._basis.lam,
@@ -259,11 +271,7 @@ class CreepCompensator(StoredParams):
             self._replay_some()
         if self._base is None or self._applied:
             return self._pass(r)
-        u = CK.command_step(self._st, self._e, self._M, self._m, self._phi, self._gam, self._Wz, self._Ux,
-                            self._ur, r - self._offset, self._lo, self._hi, self.anti_windup, self._hy,
-                            self._hy_on, self._out)
-        self.clipped += int(self._out[1])
-        return u
+        return CK.command_packed(self._pack, self._hy, r, self._out)
 
     def command_block(self, r: np.ndarray) -> np.ndarray:
         """Commands for a block of references with the current model (same numbers as ``command`` in a loop)."""
@@ -278,11 +286,16 @@ class CreepCompensator(StoredParams):
         if i == r.size:
             return u
         r_eff = np.empty(r.size - i)
-        self.clipped += CK.command_block(self._st, self._e, self._M, self._m, self._phi, self._gam, self._Wz,
+        self._clipped += CK.command_block(self._st, self._e, self._M, self._m, self._phi, self._gam, self._Wz,
                                          self._Ux, self._ur, r[i:] - self._offset, self._lo, self._hi,
                                          self.anti_windup, self._hy, self._hy_on, u[i:], r_eff)
         self.samples += r.size - i
         return u
+
+    @property
+    def clipped(self) -> int:
+        """Commands clipped to [u_min, u_max] so far (pass-through, ``command`` and ``command_block``)."""
+        return self._clipped + (0 if self._pack is None else int(self._pack[CK.P_CLIPS]))
 
     @property
     def shaped_reference(self) -> float:
@@ -293,7 +306,7 @@ class CreepCompensator(StoredParams):
     def _pass(self, r: float) -> float:
         """r through (clipped), remembered for the replay."""
         u = min(max(r, self._lo), self._hi)
-        self.clipped += int(u != r)
+        self._clipped += int(u != r)
         self._applied.append(u)          # (a full deque forgets the oldest: O(1))
         return u
 

@@ -61,9 +61,11 @@ BUFFER_SAMPLES = 1 << 17
 MAX_HISTORY = 1 << 16
 #: Relative 1-sigma limits for "determined" parameters (half the accuracy goals).
 DETERMINED = {"alpha": 0.01, "b": 0.015, "a1": 0.025, "a2": 0.025}
+#: alpha within this relative distance of an end of ``alpha_bounds`` is held by the bound, not determined.
+BOUND_TOL = 1e-3
 #: Live error (window rms) above this multiple of the noise floor is "degraded".
 FLOOR_RATIO = 2.0
-#: An input sample further than this many input ranges from the last accepted one is a glitch.
+#: Default ``input_gate``: an input further than this many input ranges from the last accepted one is a glitch.
 INPUT_GATE = 20.0
 #: Drift columns with ``track_drift``: 1 the gain's rate, 2 the gain's and alpha's.
 DRIFT_COLUMNS = 2
@@ -81,6 +83,12 @@ class OnlineEstimate:
     ``rate_uncertainty`` their 1-sigma (empty while they are 0).
     ``researches`` lists the re-searches of the resonance the tracker ran
     (why, the likelihood ratio, whether it switched and what moved).
+    ``determined`` names the parameters the data determine now (relative
+    1-sigma within ``DETERMINED``), and is empty unless the window is at the
+    noise floor with no change, degradation or long constant input pending:
+    ``quality`` is ``good`` exactly when it holds all four. A ``provisional``
+    estimate with alpha and b in it has a trustworthy creep part and an
+    undetermined resonance (``online.gate``: what a compensator may take).
     """
 
     alpha: float
@@ -111,6 +119,7 @@ class OnlineEstimate:
     alpha_rate: float = 0.0
     rate_uncertainty: dict = field(default_factory=dict)
     researches: list = field(default_factory=list)
+    determined: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         """JSON-ready dict."""
@@ -134,6 +143,10 @@ class OnlineEstimator(StoredParams):
     t_c_max:        upper limit of the automatic search window (s); the tracker refines slower resonances.
     outlier_gate:   innovation gate in robust scales (0 disables the gate).
     burst_s:        longest run of gated outputs treated as outliers (s); longer is a shift.
+    input_gate:     an input sample further than this many input ranges (seen so far) from the last
+                    accepted one is held as a glitch for up to ``burst_s`` (0 disables: inputs the
+                    caller computed itself, e.g. a compensator's commands, whose step transients
+                    legitimately jump far beyond what came before).
     detect_changes: run the change test (likelihood ratio every 0.5 s).
     work_units:     background units per update() (None: max(1, floor(dt / 100 us))).
     track_drift:    model a linear drift of b and alpha inside the window (two more linear parameters);
@@ -148,7 +161,8 @@ class OnlineEstimator(StoredParams):
                  t_c: float | None = None, alpha0: float | None = None,
                  horizon_s: float = DEFAULT_HORIZON_S, soe_dx: float = DEFAULT_DX,
                  alpha_bounds: tuple[float, float] = ONLINE_ALPHA_BOUNDS, t_c_max: float = 2.0,
-                 outlier_gate: float = 8.0, burst_s: float = 0.002, detect_changes: bool = True,
+                 outlier_gate: float = 8.0, burst_s: float = 0.002, input_gate: float = INPUT_GATE,
+                 detect_changes: bool = True,
                  work_units: int | None = None, track_drift: bool = True, refit: str = "window") -> None:
         self.dt = dt
         self.window_s = window_s
@@ -161,6 +175,7 @@ class OnlineEstimator(StoredParams):
         self.t_c_max = t_c_max
         self.outlier_gate = outlier_gate
         self.burst_s = burst_s
+        self.input_gate = input_gate
         self.detect_changes = detect_changes
         self.work_units = work_units
         self.track_drift = track_drift
@@ -195,6 +210,9 @@ class OnlineEstimator(StoredParams):
             raise DataError(f"alpha_bounds must satisfy 0 < lo < hi < 1, got {self.alpha_bounds!r}")
         if not isinstance(self.outlier_gate, (int, float)) or not self.outlier_gate >= 0:
             raise DataError(f"outlier_gate must be >= 0 (0 disables it), got {self.outlier_gate!r}")
+        if isinstance(self.input_gate, bool) or not isinstance(self.input_gate, (int, float)) \
+                or not self.input_gate >= 0:
+            raise DataError(f"input_gate must be >= 0 (0 disables it), got {self.input_gate!r}")
         if self.work_units is not None and not (isinstance(self.work_units, int) and self.work_units >= 1):
             raise DataError(f"work_units must be a positive integer or None, got {self.work_units!r}")
         if not isinstance(self.track_drift, bool):
@@ -299,7 +317,7 @@ class OnlineEstimator(StoredParams):
     @property
     def estimate(self) -> OnlineEstimate:
         tr = self._tracker
-        quality, reason = self._quality()
+        quality, reason, determined = self._assess()
         if tr is None:
             return OnlineEstimate(alpha=0.0, a1=0.0, a2=0.0, b=0.0, phase=self._phase, quality=quality,
                                   reason=reason, t=self.samples * self._h, samples=self.samples,
@@ -320,7 +338,7 @@ class OnlineEstimator(StoredParams):
             shifts=int(tr.sc[W.SC_SHIFTS]), relinearizations=tr.relinearizations,
             input_outliers=self.input_outliers, events=self.events, b_rate=_finite(tr.b_rate),
             alpha_rate=_finite(tr.alpha_rate), rate_uncertainty=rate_std,
-            researches=[dict(r) for r in tr.researches])
+            researches=[dict(r) for r in tr.researches], determined=determined)
 
     def predict_one(self, u: float) -> float | None:
         """Model output at the next sample if u is applied now (no state change); None without a model."""
@@ -426,7 +444,7 @@ class OnlineEstimator(StoredParams):
             self._u_lo = self._u_hi = u
             self._u_last = u
         rng = self._u_hi - self._u_lo
-        if rng > 0 and abs(u - self._u_last) > INPUT_GATE * rng:
+        if rng > 0 and self.input_gate > 0 and abs(u - self._u_last) > self.input_gate * rng:
             self._u_run += 1
             if self._u_run <= self._burst:
                 self.input_outliers += 1
@@ -581,8 +599,33 @@ class OnlineEstimator(StoredParams):
             return 0.0
         return math.sqrt(max(tr.fit.cost, 0.0) / tr.fit.neff)
 
-    def _quality(self) -> tuple[str, str]:
-        """(quality, reason): good only at the noise floor with every parameter determined."""
+    def _assess(self) -> tuple[str, str, list[str]]:
+        """(quality, reason, determined): good only at the noise floor with every parameter determined.
+
+        ``determined`` lists the parameters within their ``DETERMINED`` limit once every other check has
+        passed (empty before): the estimate's creep part can be trusted while its resonance is not.
+        """
+        quality, reason = self._checks()
+        if quality:
+            return quality, reason, []
+        tr = self._tracker
+        values = {"alpha": tr.alpha, "b": tr.b, "a1": tr.a1, "a2": tr.a2}
+        rel = {name: tr.fit.std.get(name, math.inf) / max(abs(values[name]), 1e-300) for name in DETERMINED}
+        lo, hi = (float(v) for v in self.alpha_bounds)
+        pinned = not lo * (1 + BOUND_TOL) < tr.alpha < hi * (1 - BOUND_TOL)
+        determined = [name for name, limit in DETERMINED.items()
+                      if rel[name] < limit and not (name == "alpha" and pinned)]
+        for name in DETERMINED:
+            if name == "alpha" and pinned:
+                return "provisional", \
+                    f"alpha at its bound {tr.alpha:.4g}: the search interval holds it, not the data", determined
+            if name not in determined:
+                return "provisional", f"{name} not yet determined by the data ({100 * rel[name]:.2g} % 1-sigma)", \
+                    determined
+        return "good", "", determined
+
+    def _checks(self) -> tuple[str, str]:
+        """(quality, reason) from every check but the parameters' determination; ("", "") if all pass."""
         tr = self._tracker
         if tr is None:
             return "none", ("waiting for the input to move" if self._first_change is None
@@ -612,12 +655,7 @@ class OnlineEstimator(StoredParams):
         ratio = self._residual() / floor if floor > 0 else math.inf
         if ratio > FLOOR_RATIO:
             return "degraded", f"window error {ratio:.1f}x the noise floor: the model misses part of the data"
-        values = {"alpha": tr.alpha, "b": tr.b, "a1": tr.a1, "a2": tr.a2}
-        for name, limit in DETERMINED.items():
-            rel = tr.fit.std.get(name, math.inf) / max(abs(values[name]), 1e-300)
-            if not rel < limit:
-                return "provisional", f"{name} not yet determined by the data ({100 * rel:.2g} % 1-sigma)"
-        return "good", ""
+        return "", ""
 
 
 def _number(x, name: str) -> float:

@@ -97,7 +97,7 @@ def _plot_compensation(plt, out: Path, r: dict) -> str | None:
     ax = axes[1]
     ax.plot(t[::step], (y_unc - ref)[::step], lw=0.8, color="tab:red", label="uncompensated")
     ax.plot(t[::step], (y_comp - ref)[::step], lw=0.8, color="tab:blue", label="compensated")
-    ax.axvline(c["first_model_t"], color="0.6", lw=0.8, label="first good estimate")
+    ax.axvline(c["first_model_t"], color="0.6", lw=0.8, label="first model")
     ax.set_yscale("symlog", linthresh=1e-3)
     ax.set(xlabel="plant time (s)", ylabel="output - reference", title="Creep error over time")
     ax.legend(fontsize=8)
@@ -157,7 +157,7 @@ def _compensation_html(r: dict) -> str:
     if not c:
         return ""
     m, un = c["creep_error_compensated"], c["creep_error_uncompensated_simulated"]
-    return (f"<h2>Creep compensation</h2><p>Reference filter {c['bandwidth_hz']:.0f} Hz, first good estimate at "
+    return (f"<h2>Creep compensation</h2><p>Reference filter {c['bandwidth_hz']:.0f} Hz, first model at "
             f"{c['first_model_t']:.2f} s, {c['model_changes']} model updates, {c['clipped']} clipped commands. "
             f"Creep error after the resonance transient, holds after the first estimate: compensated (measured) "
             f"max {m['max_abs']:.2e}, rms {m['rms']:.2e}; uncompensated (simulated) max {un['max_abs']:.2e}, "
