@@ -304,6 +304,36 @@ def test_refit_machine_equals_its_kernels_in_sequence():
     assert np.array_equal(tr.m, m)
 
 
+@pytest.mark.parametrize("free_rates", [False, True])
+def test_the_change_test_fits_a_drift_the_window_does_not(free_rates):
+    """Before the window fits drift (rates off), the change test fits the drift rates itself: a plant whose
+    alpha and gain drift (+5 %/s, +2.5 %/s) is then a drift, at the noise floor, not a resonance and gain
+    "change" (without them: a1 and b moves beyond CHANGE_MOVE, the seen false event of plant 1010)."""
+    base = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
+    h, n, noise = 1e-3, 3000, 1e-4
+    t = np.arange(n) * h
+    u = _staircase(n, 400, 5)
+    y = simulate_varying(t, u, 0.1 * (1 + 0.05 * t), base.a1, base.a2, 1 + 0.025 * t)
+    y += np.random.default_rng(1).normal(0, noise, n)
+    tr = _tracker(base, h, drift=2)
+    _feed(tr, u[:1000], y[:1000])
+    S0, sy0, shift0, theta0 = np.empty_like(tr.S), np.empty(tr.p), np.empty_like(tr._shift), np.empty(tr.theta.size)
+    syy0, _ = W.snapshot(tr.st, tr.S, tr._shift, tr.theta, S0, sy0, shift0, theta0)
+    _feed(tr, u[1000:], y[1000:])
+    RF.start_test(tr.st, tr.S, S0, sy0, syy0, tr._shift, shift0, tr.theta, tr._test_wk, free_rates)
+    while not RF.refit_unit(tr.st, tr.S, tr._shift, tr.theta, tr._test_wk, tr.basis.lam, tr.basis.dx, 0, False,
+                            False, 0):
+        pass
+    r = RF.test_outcome(tr._test_wk, tr.theta)
+    moves = {"a1": math.exp(r.ln_a1 - r.live_ln_a1) - 1, "a2": math.exp(r.ln_a2 - r.live_ln_a2) - 1,
+             "b": r.b / r.live_b - 1}
+    if free_rates:
+        assert all(abs(v) < 0.005 for v in moves.values()), moves
+        assert r.after < 1.5 * (n - 1000) * noise**2
+    else:
+        assert any(abs(moves[k]) > T.CHANGE_MOVE[k] for k in moves), moves
+
+
 def test_drift_columns_model_a_drifting_gain_and_alpha():
     """With the true rates the window cost of a drifting plant is far below the constant-parameter cost."""
     base = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)

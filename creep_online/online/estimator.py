@@ -714,7 +714,8 @@ def warm_kernels() -> None:
     W.true_statistics(st, S, shift, np.empty_like(S), np.empty(tr.p))
     W.move_origin(st, S, shift)
     W.scaled_statistics(st, S, np.empty_like(S), np.empty(tr.p))
-    RF.start_test(st, S, S.copy(), np.ones(tr.p), 1.0, shift, shift.copy(), tr.theta.copy(), tr._test_wk.copy())
+    RF.start_test(st, S, S.copy(), np.ones(tr.p), 1.0, shift, shift.copy(), tr.theta.copy(), tr._test_wk.copy(),
+                  True)
     for drift in (1, 2):                   # every stage of the re-fit (the score and the Wald test)
         wk = tr._wk.copy()
         wk[RF.RF_NEFF] = 1e6

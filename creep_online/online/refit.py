@@ -64,10 +64,10 @@ HEAD = 40
 #: and trial step (repeated), covariance (and the Wald test), the score test's normal equations and score.
 ST_START, ST_SCALE, ST_NORMAL, ST_TRIAL, ST_COVARIANCE, ST_SCORE_NORMAL, ST_SCORE = range(7)
 
-#: Parameter masks (rows of the masks block): all free, drift rates fixed, alpha and rates fixed, and the
-#: change test's (the resonance, the gain and the offset).
-MASK_ALL, MASK_CONSTANT, MASK_HOLD, MASK_TEST = 0, 1, 2, 3
-MASKS = 4
+#: Parameter masks (rows of the masks block): all free, drift rates fixed, alpha and rates fixed, the
+#: change test's (the resonance, the gain and the offset), and the change test's with the drift rates.
+MASK_ALL, MASK_CONSTANT, MASK_HOLD, MASK_TEST, MASK_TEST_RATES = 0, 1, 2, 3, 4
+MASKS = 5
 
 
 def allocate(p: int, k: int, r0: int, steps: int, policy: dict) -> np.ndarray:
@@ -90,6 +90,8 @@ def allocate(p: int, k: int, r0: int, steps: int, policy: dict) -> np.ndarray:
     masks[MASK_HOLD, 0] = 0.0
     masks[MASK_TEST] = 0.0
     masks[MASK_TEST, 1:5] = 1.0
+    masks[MASK_TEST_RATES] = masks[MASK_TEST]
+    masks[MASK_TEST_RATES, r0:] = 1.0
     return wk
 
 
@@ -194,10 +196,16 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
 
 @njit(cache=CACHE)
 def start_test(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, syy0: float, shift: np.ndarray,
-               shift0: np.ndarray, live: np.ndarray, wk: np.ndarray) -> None:
+               shift0: np.ndarray, live: np.ndarray, wk: np.ndarray, free_rates: bool) -> None:
     """Start the change test in its own work array: the statistics since a snapshot (S0, sy0, syy0,
     shift0; ``window.since_statistics``), theta from the live estimate, fresh damping. ``refit_unit``
-    then fits them from its normal equations on (``MASK_TEST``, no drift test)."""
+    then fits them from its normal equations on (``MASK_TEST``, no drift test).
+
+    ``free_rates``: the window has drift columns but does not fit them yet (they wait for a converged
+    window spanning DRIFT_MIN_S): the test fits the drift itself. Otherwise a drifting plant's last
+    second is fitted by moving the resonance (seen: a flat compensated hold drifting ~4 noise levels
+    per second read a1 +35 %, a2 -26 %, statistic 731: a change restarted the window at 1.5 s).
+    """
     p, k = S.shape[0], live.shape[0]
     theta, var, H, g, cov, H2, g2, F, fy, masks = _views(wk, p, k)
     wk[RF_FYY] = W.since_statistics(st, S, S0, sy0, syy0, shift, shift0, F, fy)
@@ -205,7 +213,7 @@ def start_test(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, s
     wk[RF_A1L], wk[RF_A2L] = st[W.SC_A1L], st[W.SC_A2L]
     wk[RF_STEP] = 0.0
     wk[RF_MU] = 1e-3
-    wk[RF_MASK] = MASK_TEST
+    wk[RF_MASK] = MASK_TEST_RATES if free_rates else MASK_TEST
     wk[RF_DRIFT] = 0.0
     wk[RF_DRIFT_SWITCH] = 0.0
     wk[RF_STAGE] = ST_NORMAL

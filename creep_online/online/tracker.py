@@ -528,7 +528,8 @@ class WindowTracker(ParameterView):
         # noise levels), and without it a drifting plant's step looked like a change
         wk = self._test_wk
         yield                              # (the checks above, then the statistics: two units)
-        RF.start_test(self.st, self.S, S0, sy0, syy0, self._shift, shift0, self.theta, wk)
+        RF.start_test(self.st, self.S, S0, sy0, syy0, self._shift, shift0, self.theta, wk,
+                      self.n_rate > 0 and not self.drift_on)
         nr = self.n - n0
         lin = (self.a1l, self.a2l)
         args = (self.st, self.S, self._shift, self.theta, wk, self.basis.lam, self.basis.dx, 0, False, False, 0)
