@@ -108,14 +108,18 @@ def base_step_at(alpha: float, a1: float, a2: float, tau: np.ndarray) -> np.ndar
 
 
 def delayed_grid(s: np.ndarray, h: float, delay: float) -> np.ndarray:
-    """S(k h - delay) from S on the grid k h (S = 0 before 0), by cubic interpolation."""
+    """S(k h - delay) from S on the grid k h (S = 0 before 0), by cubic interpolation.
+
+    ``s`` may hold several responses as rows (e.g. a response and its parameter
+    derivatives: the spline is linear in the data, so it delays derivatives too).
+    """
     if delay <= 0.0:
         return s
-    n = s.size
+    n = s.shape[-1]
     tk = np.arange(n) * h - delay
-    out = np.zeros(n)
+    out = np.zeros(s.shape)
     ok = tk > 0
-    out[ok] = CubicSpline(np.arange(n) * h, s)(tk[ok])
+    out[..., ok] = CubicSpline(np.arange(n) * h, s, axis=-1)(tk[ok])
     return out
 
 
@@ -166,11 +170,15 @@ class Superposer:
         return np.arange(self.n) * self.h
 
     def apply(self, step: np.ndarray | StepFn) -> np.ndarray:
-        """Rows of outputs for a step response given on the grid (uniform) or as a function of tau."""
+        """Rows of outputs for a step response given on the grid (uniform) or as a function of tau.
+
+        Uniform records also take several step responses on the grid at once
+        (shape (k, n)) and give (k, rows, n): one superposition per response.
+        """
         if self.uniform:
             s = step(self.grid_tau) if callable(step) else np.asarray(step, dtype=float)
-            fs = rfft(s, self.nfft)
-            return irfft(self.spectra * fs[None, :], self.nfft, axis=1)[:, : self.n]
+            fs = rfft(s, self.nfft, axis=-1)
+            return irfft(self.spectra * fs[..., None, :], self.nfft, axis=-1)[..., : self.n]
         if not callable(step):
             raise ValueError("non-uniform records need the step response as a function of time")
         if self.change.size == 0:
