@@ -107,7 +107,8 @@ def test_projected_jacobian_of_a_small_separable_problem(rank_deficient):
     d0 = -t * np.exp(-p[0] * t)
     ders = [(np.array([0, 3]), np.array([d0, 2.0 * d0]).T) if rank_deficient else (np.array([0]), d0[:, None]),
             (np.array([1]), (-t * np.exp(-p[1] * t))[:, None])]
-    jac = projected_jacobian(a, coef, r, ders)
+    jac = projected_jacobian(a, np.array([d @ coef[c] for c, d in ders]),
+                             np.array([np.zeros(a.shape[1]) + np.bincount(c, d.T @ r, a.shape[1]) for c, d in ders]))
     for k in range(2):
         up, down = p.copy(), p.copy()
         up[k] += 1e-6

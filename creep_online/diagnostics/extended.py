@@ -180,14 +180,15 @@ class Prepared:
 
     def base_path_sensitivity(self, inputs: tuple[tuple[InputEffect, str | None], ...], alpha: float, a1: float,
                               a2: float, delay: float) -> np.ndarray:
-        """``base_path``'s derivatives in (alpha, a1, a2), shape (3, rows, n) (uniform records).
+        """Derivatives of the delayed base step response in (alpha, a1, a2), shape (3, n) (uniform records).
 
         The exact march's forward sensitivities (one pass, ~2.4 plain marches),
-        delayed by the same spline and superposed on the same input rows as
-        the path (both are linear in the step response).
+        delayed by the same spline as the path (linear in the response);
+        superposed on the input rows (``superposer(inputs).apply`` or
+        ``.products``) they are ``base_path``'s derivatives.
         """
         ds = step_response_sensitivity(alpha, a1, a2, self.h, self.n)[1:]
-        return self.superposer(inputs).apply(fx.delayed_grid(ds, self.h, delay))
+        return fx.delayed_grid(ds, self.h, delay)
 
     def input_rows(self, inputs: tuple[tuple[InputEffect, str | None], ...], u: np.ndarray,
                    before: bool = False) -> np.ndarray:
@@ -361,10 +362,9 @@ class Design:
         """
         theta = np.asarray(theta, dtype=float)
         coef, _, wres = self.project(theta)
-        wphi = self._weighted_columns(theta)
-        derivatives = self._base_derivatives(theta)
+        moved, pulled = self._base_products(theta, coef, wres)
         jac = np.empty((wres.size, theta.size))
-        jac[:, :3] = projected_jacobian(wphi, coef, wres, derivatives)
+        jac[:, :3] = projected_jacobian(self._weighted_columns(theta), moved, pulled)
         for k in range(3, theta.size):
             jac[:, k] = self._difference(theta, k, wres)
         return jac
@@ -376,18 +376,33 @@ class Design:
             self._weighted = (theta.tobytes(), phi if self.data.weights is None else phi * self.data.weights[:, None])
         return self._weighted[1]
 
-    def _base_derivatives(self, theta: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-        """dA/d(alpha, log10 fn, log10 zeta) of the weighted design: (column indices, derivative columns) each."""
+    def _base_products(self, theta: np.ndarray, coef: np.ndarray, wres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(D_k c, D_k^T r) for D_k = d(weighted design)/d(alpha, log10 fn, log10 zeta): shapes (3, n), (3, p).
+
+        Only the base path's columns (the first, one per input row) depend on
+        these parameters. Without an output filter the products come straight
+        from the superposer (two inverse FFTs per parameter whatever the
+        number of input rows); an output filter gets the columns themselves.
+        """
         data = self.data
         p, alpha, a1, a2, d = self._base(theta)
-        drows = data.base_path_sensitivity(self.inputs, alpha, a1, a2, d)      # (alpha, a1, a2) x rows x n
         ln10 = math.log(10.0)
-        dcols = np.stack([drows[0], -ln10 * (a1 * drows[1] + 2.0 * a2 * drows[2]), ln10 * a1 * drows[1]])
-        for e in self.stages[Stage.OUTPUT_FILTER]:
-            dcols = e.filter_columns(data.t, dcols, p)
-        cols = np.arange(dcols.shape[1])                                       # the base path's columns come first
-        w = 1.0 if data.weights is None else data.weights[:, None]
-        return [(cols, dcols[k].T * w) for k in range(3)]
+        chain = np.array([[1.0, 0.0, 0.0], [0.0, -ln10 * a1, -2.0 * ln10 * a2], [0.0, ln10 * a1, 0.0]])
+        steps = chain @ data.base_path_sensitivity(self.inputs, alpha, a1, a2, d)
+        sup = data.superposer(self.inputs)
+        rows = sup.rows
+        w = data.weights
+        v = wres if w is None else wres * w
+        if self.stages[Stage.OUTPUT_FILTER]:
+            dcols = sup.apply(steps)                                        # (3, rows, n)
+            for e in self.stages[Stage.OUTPUT_FILTER]:
+                dcols = e.filter_columns(data.t, dcols, p)
+            moved, pulled_rows = np.einsum("krn,r->kn", dcols, coef[:rows]), dcols @ v
+        else:
+            moved, pulled_rows = sup.products(steps, coef[:rows], v)
+        pulled = np.zeros((3, coef.size))
+        pulled[:, :rows] = pulled_rows
+        return (moved if w is None else moved * w), pulled
 
     def _difference(self, theta: np.ndarray, k: int, r0: np.ndarray) -> np.ndarray:
         """Forward difference of the residual in parameter k (scipy's 2-point step, kept inside the bounds)."""

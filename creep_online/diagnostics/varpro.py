@@ -23,25 +23,20 @@ import numpy as np
 RCOND = 1e-10
 
 
-def projected_jacobian(a: np.ndarray, coef: np.ndarray, r: np.ndarray,
-                       derivatives: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
-    """Jacobian (n, len(derivatives)) of r = y - A A^+ y from dA per nonlinear parameter.
+def projected_jacobian(a: np.ndarray, moved: np.ndarray, pulled: np.ndarray) -> np.ndarray:
+    """Jacobian (n, m) of r = y - A A^+ y for m nonlinear parameters, from D_k = dA/dtheta_k.
 
-    ``a``: the (weighted) design (n, p); ``coef``: its least-squares
-    coefficients; ``r``: the (weighted) residual; ``derivatives[k]`` = (indices
-    of the columns that depend on parameter k, their derivatives (n, len(indices)),
-    weighted like ``a``).
+    ``a``: the (weighted) design (n, p); ``moved[k]`` = D_k c (c: the fit's
+    coefficients), shape (m, n); ``pulled[k]`` = D_k^T r (r: the weighted
+    residual), shape (m, p). Only these products of the D_k enter, so a caller
+    may form them without the derivative columns themselves.
     """
     scale = np.linalg.norm(a, axis=0)
     scale[scale == 0] = 1.0
     u, sv, vt = np.linalg.svd(a / scale, full_matrices=False)
     keep = sv > RCOND * (sv[0] if sv.size else 0.0)
     u, sv, vt = u[:, keep], sv[keep], vt[keep]
-    jac = np.empty((a.shape[0], len(derivatives)))
-    for k, (cols, d) in enumerate(derivatives):
-        moved = d @ coef[cols]                       # D_k c
-        moved -= u @ (u.T @ moved)                   # P D_k c
-        g = np.zeros(a.shape[1])
-        g[cols] = (d.T @ r) / scale[cols]            # S^-1 D_k^T r (A = U diag(sv) V^T S)
-        jac[:, k] = -(moved + u @ ((vt @ g) / sv))
-    return jac
+    moved = np.atleast_2d(moved)
+    projected = moved - (moved @ u) @ u.T                           # P D_k c
+    back = ((np.atleast_2d(pulled) / scale) @ vt.T / sv) @ u.T       # (A^+)^T D_k^T r, A = U diag(sv) V^T S
+    return -(projected + back).T

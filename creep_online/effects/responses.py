@@ -188,3 +188,17 @@ class Superposer:
         pos = tau > 0
         s[pos] = step(tau[pos])
         return self.dx[:, self.change] @ s
+
+    def products(self, steps: np.ndarray, weights: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For step responses S_k on the grid (uniform): (sum_i w_i apply(S_k)_i, apply(S_k) @ v) per k.
+
+        Shapes (k, n) and (k, rows): what a Jacobian needs of the columns
+        ``apply`` would give (their weighted sum and their products with a
+        residual) without forming them, two inverse FFTs per response instead
+        of one per row: the rows' spectra are summed first, and
+        apply(S)_i . v = dx_i . q with q the cross-correlation of v and S.
+        """
+        fs = rfft(np.atleast_2d(steps), self.nfft, axis=-1)
+        summed = irfft((weights @ self.spectra) * fs, self.nfft, axis=-1)[:, : self.n]
+        q = irfft(rfft(v, self.nfft) * np.conj(fs), self.nfft, axis=-1)[:, : self.n]
+        return summed, q @ self.dx.T
