@@ -5,8 +5,9 @@ Base parameters (alpha, log10 fn, log10 zeta) are differentiated exactly
 differences with step 1e-5 agree to ~1e-8 relative (their truncation error,
 which falls as step^2 down to ~1e-9), so 1e-6 leaves a factor 100 and still
 catches any wrong chain-rule factor or a missing term of the projection (the
-Kaufman term alone is off by 4e-3..0.6 here). The effects' own parameters
-keep forward differences (step 1e-7, as scipy's ``diff_step``): 1e-3.
+Kaufman term alone is off by 4e-3..0.6 here); so is a delay's (a spline's
+slope). The effects' other parameters keep forward differences (step 1e-7,
+as scipy's ``diff_step``): 1e-3.
 """
 from __future__ import annotations
 
@@ -30,12 +31,13 @@ DESIGNS = [
     ("periodic_disturbance", ("periodic_disturbance",)),
     ("drift", ("drift", "nonlinear_gain")),
     ("delay", ("hysteresis", "leakage", "delay")),    # rows, filter and delay at once
+    ("second_mode", ("second_mode", "delay")),        # a delayed parallel path: the delay by differences
 ]
 
 
 def _central(design: ext.Design, theta: np.ndarray, k: int) -> np.ndarray:
     up, down = theta.copy(), theta.copy()
-    h = STEP * max(1.0, abs(theta[k]))
+    h = STEP * min(1.0, design.hi[k] - design.lo[k]) * max(1.0, abs(theta[k]))   # a delay's range is 40 samples
     up[k] += h
     down[k] -= h
     return (design.residual(up) - design.residual(down)) / (2 * h)
@@ -61,7 +63,22 @@ def test_design_jacobian_matches_central_differences(kind, effects):
     assert jac.shape == (ds.t.size, theta.size)
     for k, name in enumerate(design.names):
         err = _relative(jac[:, k], _central(design, theta, k))
-        assert err < (BASE_RTOL if k < 3 else EFFECT_RTOL), (name, err)
+        assert err < (BASE_RTOL if k in design.exact else EFFECT_RTOL), (name, err)
+    assert design.exact[:3] == [0, 1, 2]
+
+
+def test_delay_is_differentiated_exactly_unless_a_parallel_path_is_delayed_too():
+    ds = hidden_dataset("delay", 3, n=3000)
+    data = ext.prepare(ds.t, ds.u, ds.y)
+    assert ext.Design(data, ("delay",)).exact == [0, 1, 2, 3]
+    assert ext.Design(data, ("second_mode", "delay")).exact == [0, 1, 2]
+    design = ext.Design(data, ("delay",))
+    theta = np.array([0.3, np.log10(60.0), np.log10(0.2), 0.0])     # the delay switched off: its lower bound
+    jac = design.jacobian(theta)
+    up = theta.copy()
+    up[3] += 1e-6
+    forward = (design.residual(up) - design.residual(theta)) / 1e-6
+    assert _relative(jac[:, 3], forward) < EFFECT_RTOL
 
 
 def test_weighted_design_jacobian_matches_central_differences():

@@ -187,8 +187,12 @@ class Prepared:
         superposed on the input rows (``superposer(inputs).apply`` or
         ``.products``) they are ``base_path``'s derivatives.
         """
-        ds = step_response_sensitivity(alpha, a1, a2, self.h, self.n)[1:]
-        return fx.delayed_grid(ds, self.h, delay)
+        ds = step_response_sensitivity(alpha, a1, a2, self.h, self.n)
+        return fx.delayed_grid(ds[1:], self.h, delay)
+
+    def base_path_slope(self, alpha: float, a1: float, a2: float, delay: float) -> np.ndarray:
+        """The delayed base step response's derivative in the delay, shape (n,) (uniform records)."""
+        return fx.delayed_grid_slope(fx.base_step_grid(alpha, a1, a2, self.h, self.n), self.h, delay)
 
     def input_rows(self, inputs: tuple[tuple[InputEffect, str | None], ...], u: np.ndarray,
                    before: bool = False) -> np.ndarray:
@@ -252,8 +256,11 @@ class Design:
         self.specs = [ParamSpec("alpha", *ALPHA_BOUNDS),
                       ParamSpec("log10_fn", math.log10(fmin), math.log10(2.0 * fmax)),
                       ParamSpec("log10_zeta", math.log10(ZETA_BOUNDS[0]), math.log10(ZETA_BOUNDS[1]))]
+        owners: list[str] = []
         for e in self.effects:
-            self.specs += get_effect(e).nonlinear_params(data)
+            more = get_effect(e).nonlinear_params(data)
+            self.specs += more
+            owners += [e] * len(more)
         self.names = [s.name for s in self.specs]
         self.lo = np.array([s.lo for s in self.specs])
         self.hi = np.array([s.hi for s in self.specs])
@@ -262,6 +269,10 @@ class Design:
         self.variants = {e.name: (variants or {}).get(e.name, e.variants[0] if e.variants else None)
                          for e in ordered}
         self.inputs = tuple((e, self.variants[e.name]) for e in self.stages[Stage.INPUT])
+        # differentiated exactly: the base parameters, and a delay's when no parallel path (whose own step
+        # response would need its time derivative) is delayed with the base path
+        delays = [3 + i for i, e in enumerate(owners) if get_effect(e).stage == Stage.DELAY]
+        self.exact = [0, 1, 2] + (delays if not self.stages[Stage.PARALLEL] else [])
         self.col_names: list[str] = []
         self.nfev = 0
         self._solved: dict[bytes, tuple] = {}    # theta -> (coefficients, output, weighted residual), recent ones
@@ -364,9 +375,10 @@ class Design:
         coef, _, wres = self.project(theta)
         moved, pulled = self._base_products(theta, coef, wres)
         jac = np.empty((wres.size, theta.size))
-        jac[:, :3] = projected_jacobian(self._weighted_columns(theta), moved, pulled)
-        for k in range(3, theta.size):
-            jac[:, k] = self._difference(theta, k, wres)
+        jac[:, self.exact] = projected_jacobian(self._weighted_columns(theta), moved, pulled)
+        for k in range(theta.size):
+            if k not in self.exact:
+                jac[:, k] = self._difference(theta, k, wres)
         return jac
 
     def _weighted_columns(self, theta: np.ndarray) -> np.ndarray:
@@ -377,7 +389,7 @@ class Design:
         return self._weighted[1]
 
     def _base_products(self, theta: np.ndarray, coef: np.ndarray, wres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(D_k c, D_k^T r) for D_k = d(weighted design)/d(alpha, log10 fn, log10 zeta): shapes (3, n), (3, p).
+        """(D_k c, D_k^T r) for D_k = d(weighted design)/d(theta_k), k in ``exact``: shapes (m, n), (m, p).
 
         Only the base path's columns (the first, one per input row) depend on
         these parameters. Without an output filter the products come straight
@@ -389,6 +401,9 @@ class Design:
         ln10 = math.log(10.0)
         chain = np.array([[1.0, 0.0, 0.0], [0.0, -ln10 * a1, -2.0 * ln10 * a2], [0.0, ln10 * a1, 0.0]])
         steps = chain @ data.base_path_sensitivity(self.inputs, alpha, a1, a2, d)
+        if len(self.exact) > 3:
+            slope = data.base_path_slope(alpha, a1, a2, d)
+            steps = np.vstack([steps] + [self._delay_rate(theta, k) * slope for k in self.exact[3:]])
         sup = data.superposer(self.inputs)
         rows = sup.rows
         w = data.weights
@@ -400,9 +415,18 @@ class Design:
             moved, pulled_rows = np.einsum("krn,r->kn", dcols, coef[:rows]), dcols @ v
         else:
             moved, pulled_rows = sup.products(steps, coef[:rows], v)
-        pulled = np.zeros((3, coef.size))
+        pulled = np.zeros((len(self.exact), coef.size))
         pulled[:, :rows] = pulled_rows
         return (moved if w is None else moved * w), pulled
+
+    def _delay_rate(self, theta: np.ndarray, k: int) -> float:
+        """d(total delay)/d(theta_k) (a forward difference of the delay hooks: exact for a delay linear in theta_k)."""
+        step = DIFF_STEP * max(1.0, abs(theta[k]))
+        if theta[k] + step > self.hi[k]:
+            step = -step
+        moved = theta.copy()
+        moved[k] += step
+        return (self._base(moved)[4] - self._base(theta)[4]) / (moved[k] - theta[k])
 
     def _difference(self, theta: np.ndarray, k: int, r0: np.ndarray) -> np.ndarray:
         """Forward difference of the residual in parameter k (scipy's 2-point step, kept inside the bounds)."""

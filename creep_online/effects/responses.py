@@ -123,6 +123,16 @@ def delayed_grid(s: np.ndarray, h: float, delay: float) -> np.ndarray:
     return out
 
 
+def delayed_grid_slope(s: np.ndarray, h: float, delay: float) -> np.ndarray:
+    """d/d(delay) of ``delayed_grid(s, h, delay)``: -S'(k h - delay) from the same cubic spline (0 before 0)."""
+    n = s.shape[-1]
+    tk = np.arange(n) * h - max(delay, 0.0)
+    out = np.zeros(s.shape)
+    ok = tk > 0
+    out[..., ok] = -CubicSpline(np.arange(n) * h, s, axis=-1)(tk[ok], 1)
+    return out
+
+
 # --------------------------------------------------------------------------- superposition
 class Superposer:
     """Zero-order-hold superposition y = sum_k dx_k S(t - t_k) for fixed input rows.
