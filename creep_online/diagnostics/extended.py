@@ -28,7 +28,7 @@ from scipy.linalg import lstsq as scipy_lstsq
 from scipy.optimize import least_squares
 
 from .. import effects as fx
-from ..effects import FitView, InputEffect, ParamSpec, Stage, check_effect_names, effect_names, get_effect
+from ..effects import FitView, InputEffect, ParallelEffect, ParamSpec, Stage, check_effect_names, effect_names, get_effect
 from ..discretize import step_response_sensitivity
 from ..errors import DataError, ModelError
 from ..metrics import fit_percent, noise_std_estimate, rms
@@ -58,6 +58,8 @@ DIFF_STEP = 1e-7
 SOLVED_CACHE = 8
 #: Base-path responses remembered per record (parameter sets; ``Prepared.base_path``).
 BASE_PATH_CACHE = 8
+#: Parallel-effect paths remembered per record (``Prepared.parallel_path``).
+PARALLEL_PATH_CACHE = 16
 #: Relative tolerance (ftol, xtol) of the final polish: RSS to ~1e-7 is ample for the evidence.
 FULL_TOL = 1e-7
 #: Evaluations of the final polish on the whole record after exploring on a prefix.
@@ -178,6 +180,32 @@ class Prepared:
             cache.pop(next(iter(cache)))
         return rows
 
+    def parallel_path(self, effect: ParallelEffect, theta: dict[str, float], own: tuple[float, ...], delay: float,
+                      tau: np.ndarray | None) -> np.ndarray:
+        """A parallel effect's unit-gain path on the plain input, delayed, read-only (row of shape (1, n)).
+
+        (The forward model feeds parallel paths the input before the input
+        effects.) Remembered like ``base_path``, by the base parameters, the
+        effect's own ``own`` and the delay: a fit with two effects varies one
+        effect's parameters with the other's fixed (its finite-difference
+        columns, the starting grids), and a second mode's step response (complex
+        exponentials) costs more than the rest of an evaluation. ``tau``: the
+        grid times minus the delay (uniform records), None otherwise.
+        """
+        key = (effect.name, theta["alpha"], theta["log10_fn"], theta["log10_zeta"], own, delay)
+        cache = self._cache.setdefault("parallel_path", {})
+        if key in cache:
+            cache[key] = cache.pop(key)
+            return cache[key]
+        step = effect.unit_step(theta)
+        shifted = (lambda tt: step(tt - delay))
+        rows = self.superposer().apply(shifted(tau + delay) if tau is not None else shifted)
+        rows.setflags(write=False)
+        cache[key] = rows
+        while len(cache) > PARALLEL_PATH_CACHE:
+            cache.pop(next(iter(cache)))
+        return rows
+
     def base_path_sensitivity(self, inputs: tuple[tuple[InputEffect, str | None], ...], alpha: float, a1: float,
                               a2: float, delay: float) -> np.ndarray:
         """Derivatives of the delayed base step response in (alpha, a1, a2), shape (3, n) (uniform records).
@@ -261,6 +289,7 @@ class Design:
             more = get_effect(e).nonlinear_params(data)
             self.specs += more
             owners += [e] * len(more)
+        self.own = {e: [s.name for s, o in zip(self.specs[3:], owners) if o == e] for e in self.effects}
         self.names = [s.name for s in self.specs]
         self.lo = np.array([s.lo for s in self.specs])
         self.hi = np.array([s.hi for s in self.specs])
@@ -306,11 +335,9 @@ class Design:
         else:
             dyn = [sup.apply(lambda tt: fx.base_step_at(alpha, a1, a2, tt - d))]
             tau = None
-        usup = data.superposer()  # parallel paths are fitted on the plain input (the forward model feeds them v)
         for e in self.stages[Stage.PARALLEL]:
-            step = e.unit_step(p)
-            shifted = (lambda tt, step=step: step(tt - d))
-            dyn.append(usup.apply(shifted(tau + d) if tau is not None else shifted))
+            own = tuple(p[name] for name in self.own[e.name])
+            dyn.append(data.parallel_path(e, p, own, d, tau))
             names.append(e.gain_column)
         cols = np.vstack(dyn)
         for e in self.stages[Stage.OUTPUT_FILTER]:
