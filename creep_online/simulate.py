@@ -126,7 +126,9 @@ def superpose_rows(step_responses: np.ndarray, u: np.ndarray) -> np.ndarray:
         return kernels.superpose_steps_rows(step_responses, idx, size, n)
     du = np.zeros(n)
     du[idx] = size
-    return np.array([causal_convolve(du, row) for row in step_responses])
+    kernels_ = step_responses[:, :n]
+    m = fast_length(n + kernels_.shape[1] - 1)     # as causal_convolve: the input's spectrum once for all rows
+    return np.fft.irfft(np.fft.rfft(du, m)[None, :] * np.fft.rfft(kernels_, m, axis=1), m, axis=1)[:, :n]
 
 
 def simulate(model: CreepModel, t: np.ndarray, u: np.ndarray, method: str = "exact",

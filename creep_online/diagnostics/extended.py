@@ -28,12 +28,14 @@ from scipy.linalg import lstsq as scipy_lstsq
 from scipy.optimize import least_squares
 
 from .. import effects as fx
-from ..effects import FitView, InputEffect, ParamSpec, Stage, check_effect_names, effect_names, get_effect
+from ..effects import FitView, InputEffect, ParallelEffect, ParamSpec, Stage, check_effect_names, effect_names, get_effect
+from ..discretize import step_response_sensitivity
 from ..errors import DataError, ModelError
 from ..metrics import fit_percent, noise_std_estimate, rms
 from ..model import EXTENDED_FIT_ALPHA_BOUNDS as ALPHA_BOUNDS
 from ..model import CreepModel, ExtendedModel, with_effects
 from ..record import check_amplitudes, check_time_and_output
+from .varpro import projected_jacobian
 
 #: Time stamps whose step varies by less than this (relative) are snapped to a uniform grid.
 SNAP_RTOL = 1e-2
@@ -50,8 +52,14 @@ PRIORITY_STARTS = 5
 #: holds EXPLORE_EXCITATION of the input's total variation (used when it is < 2/3 of the record).
 EXPLORE_SAMPLES = 6000
 EXPLORE_EXCITATION = 0.3
+#: Relative step of the finite differences (the effects' own parameters; every parameter on non-uniform records).
+DIFF_STEP = 1e-7
+#: Solutions remembered per design (``Design.project``).
+SOLVED_CACHE = 8
 #: Base-path responses remembered per record (parameter sets; ``Prepared.base_path``).
 BASE_PATH_CACHE = 8
+#: Parallel-effect paths remembered per record (``Prepared.parallel_path``).
+PARALLEL_PATH_CACHE = 16
 #: Relative tolerance (ftol, xtol) of the final polish: RSS to ~1e-7 is ample for the evidence.
 FULL_TOL = 1e-7
 #: Evaluations of the final polish on the whole record after exploring on a prefix.
@@ -172,6 +180,48 @@ class Prepared:
             cache.pop(next(iter(cache)))
         return rows
 
+    def parallel_path(self, effect: ParallelEffect, theta: dict[str, float], own: tuple[float, ...], delay: float,
+                      tau: np.ndarray | None) -> np.ndarray:
+        """A parallel effect's unit-gain path on the plain input, delayed, read-only (row of shape (1, n)).
+
+        (The forward model feeds parallel paths the input before the input
+        effects.) Remembered like ``base_path``, by the base parameters, the
+        effect's own ``own`` and the delay: a fit with two effects varies one
+        effect's parameters with the other's fixed (its finite-difference
+        columns, the starting grids), and a second mode's step response (complex
+        exponentials) costs more than the rest of an evaluation. ``tau``: the
+        grid times minus the delay (uniform records), None otherwise.
+        """
+        key = (effect.name, theta["alpha"], theta["log10_fn"], theta["log10_zeta"], own, delay)
+        cache = self._cache.setdefault("parallel_path", {})
+        if key in cache:
+            cache[key] = cache.pop(key)
+            return cache[key]
+        step = effect.unit_step(theta)
+        shifted = (lambda tt: step(tt - delay))
+        rows = self.superposer().apply(shifted(tau + delay) if tau is not None else shifted)
+        rows.setflags(write=False)
+        cache[key] = rows
+        while len(cache) > PARALLEL_PATH_CACHE:
+            cache.pop(next(iter(cache)))
+        return rows
+
+    def base_path_sensitivity(self, inputs: tuple[tuple[InputEffect, str | None], ...], alpha: float, a1: float,
+                              a2: float, delay: float) -> np.ndarray:
+        """Derivatives of the delayed base step response in (alpha, a1, a2), shape (3, n) (uniform records).
+
+        The exact march's forward sensitivities (one pass, ~2.4 plain marches),
+        delayed by the same spline as the path (linear in the response);
+        superposed on the input rows (``superposer(inputs).apply`` or
+        ``.products``) they are ``base_path``'s derivatives.
+        """
+        ds = step_response_sensitivity(alpha, a1, a2, self.h, self.n)
+        return fx.delayed_grid(ds[1:], self.h, delay)
+
+    def base_path_slope(self, alpha: float, a1: float, a2: float, delay: float) -> np.ndarray:
+        """The delayed base step response's derivative in the delay, shape (n,) (uniform records)."""
+        return fx.delayed_grid_slope(fx.base_step_grid(alpha, a1, a2, self.h, self.n), self.h, delay)
+
     def input_rows(self, inputs: tuple[tuple[InputEffect, str | None], ...], u: np.ndarray,
                    before: bool = False) -> np.ndarray:
         """u and the rows the input effects add (``before``: u is the input before the record)."""
@@ -234,8 +284,12 @@ class Design:
         self.specs = [ParamSpec("alpha", *ALPHA_BOUNDS),
                       ParamSpec("log10_fn", math.log10(fmin), math.log10(2.0 * fmax)),
                       ParamSpec("log10_zeta", math.log10(ZETA_BOUNDS[0]), math.log10(ZETA_BOUNDS[1]))]
+        owners: list[str] = []
         for e in self.effects:
-            self.specs += get_effect(e).nonlinear_params(data)
+            more = get_effect(e).nonlinear_params(data)
+            self.specs += more
+            owners += [e] * len(more)
+        self.own = {e: [s.name for s, o in zip(self.specs[3:], owners) if o == e] for e in self.effects}
         self.names = [s.name for s in self.specs]
         self.lo = np.array([s.lo for s in self.specs])
         self.hi = np.array([s.hi for s in self.specs])
@@ -244,15 +298,20 @@ class Design:
         self.variants = {e.name: (variants or {}).get(e.name, e.variants[0] if e.variants else None)
                          for e in ordered}
         self.inputs = tuple((e, self.variants[e.name]) for e in self.stages[Stage.INPUT])
+        # differentiated exactly: the base parameters, and a delay's when no parallel path (whose own step
+        # response would need its time derivative) is delayed with the base path
+        delays = [3 + i for i, e in enumerate(owners) if get_effect(e).stage == Stage.DELAY]
+        self.exact = [0, 1, 2] + (delays if not self.stages[Stage.PARALLEL] else [])
         self.col_names: list[str] = []
         self.nfev = 0
+        self._solved: dict[bytes, tuple] = {}    # theta -> (coefficients, output, weighted residual), recent ones
+        self._weighted: tuple[bytes, np.ndarray] | None = None   # (theta, weighted design) of the last evaluation
 
     def index(self, name: str) -> int:
         return self.names.index(name)
 
-    def columns(self, theta: np.ndarray) -> np.ndarray:
-        """Design matrix (n, p): dynamic paths (delayed, filtered) then offset and additive columns."""
-        data = self.data
+    def _base(self, theta: np.ndarray) -> tuple[dict[str, float], float, float, float, float]:
+        """(theta by name, alpha, a1, a2, delay): the base model's parameters and the total delay."""
         p = dict(zip(self.names, theta))
         alpha, fn, zeta = p["alpha"], 10 ** p["log10_fn"], 10 ** p["log10_zeta"]
         wn = 2 * math.pi * fn
@@ -260,6 +319,12 @@ class Design:
         d = 0.0
         for e in self.stages[Stage.DELAY]:
             d = d + e.fitted_delay(p)
+        return p, alpha, a1, a2, d
+
+    def columns(self, theta: np.ndarray) -> np.ndarray:
+        """Design matrix (n, p): dynamic paths (delayed, filtered) then offset and additive columns."""
+        data = self.data
+        p, alpha, a1, a2, d = self._base(theta)
         sup = data.superposer(self.inputs)
         names: list[str] = ["b"]
         for e, _ in self.inputs:
@@ -270,11 +335,9 @@ class Design:
         else:
             dyn = [sup.apply(lambda tt: fx.base_step_at(alpha, a1, a2, tt - d))]
             tau = None
-        usup = data.superposer()  # parallel paths are fitted on the plain input (the forward model feeds them v)
         for e in self.stages[Stage.PARALLEL]:
-            step = e.unit_step(p)
-            shifted = (lambda tt, step=step: step(tt - d))
-            dyn.append(usup.apply(shifted(tau + d) if tau is not None else shifted))
+            own = tuple(p[name] for name in self.own[e.name])
+            dyn.append(data.parallel_path(e, p, own, d, tau))
             names.append(e.gain_column)
         cols = np.vstack(dyn)
         for e in self.stages[Stage.OUTPUT_FILTER]:
@@ -289,7 +352,16 @@ class Design:
         return np.vstack([cols, np.array(static)]).T
 
     def project(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(coefficients, model output, weighted residual) with the linear parameters solved exactly."""
+        """(coefficients, model output, weighted residual) with the linear parameters solved exactly (read-only).
+
+        The last SOLVED_CACHE solutions are remembered: the fits ask again for
+        points they have evaluated (a polish's start and end, the ranking of
+        polished starts, the result), ~20 % of all requests.
+        """
+        key = np.asarray(theta, dtype=float).tobytes()
+        if key in self._solved:
+            self._solved[key] = self._solved.pop(key)      # most recently used last
+            return self._solved[key]
         self.nfev += 1
         phi = self.columns(theta)
         data = self.data
@@ -299,7 +371,98 @@ class Design:
         coef = scipy_lstsq(wphi / scale, data.wy, cond=1e-10, lapack_driver="gelsy", check_finite=False)[0]
         coef = coef / scale
         y_hat = phi @ coef
-        return coef, y_hat, data.wy - wphi @ coef
+        wres = data.wy - wphi @ coef
+        for a in (coef, y_hat, wres):
+            a.setflags(write=False)
+        self._weighted = (key, wphi)
+        self._solved[key] = (coef, y_hat, wres)
+        while len(self._solved) > SOLVED_CACHE:
+            self._solved.pop(next(iter(self._solved)))
+        return coef, y_hat, wres
+
+    @property
+    def analytic(self) -> bool:
+        """True when ``jacobian`` differentiates the base parameters exactly (uniform records)."""
+        return self.data.uniform
+
+    def jacobian(self, theta: np.ndarray) -> np.ndarray:
+        """d(weighted residual)/d(theta): exact (variable projection) in the base parameters, finite
+        differences in the effects' own.
+
+        The base path's derivatives in (alpha, a1, a2) come from the exact
+        march's forward sensitivities (``discretize.step_response_sensitivity``,
+        as identify's Jacobian), delayed and superposed like the path itself
+        (both linear) and filtered by the output-filter effects (linear too);
+        ``varpro.projected_jacobian`` turns them into the projected residual's.
+        An effect's parameter costs one more evaluation (forward difference,
+        step as scipy's ``diff_step=1e-7``), mostly with the base path
+        remembered. Uniform records only (``analytic``).
+        """
+        theta = np.asarray(theta, dtype=float)
+        coef, _, wres = self.project(theta)
+        moved, pulled = self._base_products(theta, coef, wres)
+        jac = np.empty((wres.size, theta.size))
+        jac[:, self.exact] = projected_jacobian(self._weighted_columns(theta), moved, pulled)
+        for k in range(theta.size):
+            if k not in self.exact:
+                jac[:, k] = self._difference(theta, k, wres)
+        return jac
+
+    def _weighted_columns(self, theta: np.ndarray) -> np.ndarray:
+        """The weighted design at theta: the last evaluation's (scipy asks for jac(x) after fun(x)) or anew."""
+        if self._weighted is None or self._weighted[0] != theta.tobytes():
+            phi = self.columns(theta)
+            self._weighted = (theta.tobytes(), phi if self.data.weights is None else phi * self.data.weights[:, None])
+        return self._weighted[1]
+
+    def _base_products(self, theta: np.ndarray, coef: np.ndarray, wres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(D_k c, D_k^T r) for D_k = d(weighted design)/d(theta_k), k in ``exact``: shapes (m, n), (m, p).
+
+        Only the base path's columns (the first, one per input row) depend on
+        these parameters. Without an output filter the products come straight
+        from the superposer (two inverse FFTs per parameter whatever the
+        number of input rows); an output filter gets the columns themselves.
+        """
+        data = self.data
+        p, alpha, a1, a2, d = self._base(theta)
+        ln10 = math.log(10.0)
+        chain = np.array([[1.0, 0.0, 0.0], [0.0, -ln10 * a1, -2.0 * ln10 * a2], [0.0, ln10 * a1, 0.0]])
+        steps = chain @ data.base_path_sensitivity(self.inputs, alpha, a1, a2, d)
+        if len(self.exact) > 3:
+            slope = data.base_path_slope(alpha, a1, a2, d)
+            steps = np.vstack([steps] + [self._delay_rate(theta, k) * slope for k in self.exact[3:]])
+        sup = data.superposer(self.inputs)
+        rows = sup.rows
+        w = data.weights
+        v = wres if w is None else wres * w
+        if self.stages[Stage.OUTPUT_FILTER]:
+            dcols = sup.apply(steps)                                        # (3, rows, n)
+            for e in self.stages[Stage.OUTPUT_FILTER]:
+                dcols = e.filter_columns(data.t, dcols, p)
+            moved, pulled_rows = np.einsum("krn,r->kn", dcols, coef[:rows]), dcols @ v
+        else:
+            moved, pulled_rows = sup.products(steps, coef[:rows], v)
+        pulled = np.zeros((len(self.exact), coef.size))
+        pulled[:, :rows] = pulled_rows
+        return (moved if w is None else moved * w), pulled
+
+    def _delay_rate(self, theta: np.ndarray, k: int) -> float:
+        """d(total delay)/d(theta_k) (a forward difference of the delay hooks: exact for a delay linear in theta_k)."""
+        step = DIFF_STEP * max(1.0, abs(theta[k]))
+        if theta[k] + step > self.hi[k]:
+            step = -step
+        moved = theta.copy()
+        moved[k] += step
+        return (self._base(moved)[4] - self._base(theta)[4]) / (moved[k] - theta[k])
+
+    def _difference(self, theta: np.ndarray, k: int, r0: np.ndarray) -> np.ndarray:
+        """Forward difference of the residual in parameter k (scipy's 2-point step, kept inside the bounds)."""
+        step = DIFF_STEP * (1.0 if theta[k] >= 0 else -1.0) * max(1.0, abs(theta[k]))
+        if not self.lo[k] <= theta[k] + step <= self.hi[k]:
+            step = -step
+        moved = theta.copy()
+        moved[k] += step
+        return (self.residual(moved) - r0) / (moved[k] - theta[k])
 
     def residual(self, theta: np.ndarray) -> np.ndarray:
         return self.project(theta)[2]
@@ -345,7 +508,7 @@ class ExtendedFit:
 
 def _result(design: Design, theta: np.ndarray) -> ExtendedFit:
     data = design.data
-    coef, y_hat, wres = design.project(theta)
+    coef, y_hat, wres = (a.copy() for a in design.project(theta))
     p = dict(zip(design.names, theta))
     c = dict(zip(design.col_names, coef))
     b = c["b"]
@@ -369,9 +532,10 @@ def _optimise(design: Design, theta0: np.ndarray, max_nfev: int = MAX_NFEV, tol:
     x0 = np.clip(theta0, design.lo, design.hi)
     span = design.hi - design.lo
     x0 = np.minimum(np.maximum(x0, design.lo + 1e-9 * span), design.hi - 1e-9 * span)
+    jac = {"jac": design.jacobian} if design.analytic else {"diff_step": DIFF_STEP}
     try:
         sol = least_squares(design.residual, x0, bounds=(design.lo, design.hi), method="trf",
-                            x_scale="jac", max_nfev=max_nfev, diff_step=1e-7, ftol=tol, xtol=tol)
+                            x_scale="jac", max_nfev=max_nfev, ftol=tol, xtol=tol, **jac)
     except (ValueError, np.linalg.LinAlgError, ModelError):
         return x0
     return sol.x if design.cost(sol.x) <= design.cost(x0) else x0
@@ -576,6 +740,7 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     chosen = list(groups.values())[:SHORT_STARTS] + [th for _, th in ranked(explore, prio)[:PRIORITY_STARTS]]
     if warm is not None:
         chosen += [_merge(explore, th, warm) for th in list(groups.values())[:2]]
+    chosen = list({th.tobytes(): th for th in chosen}.values())    # a priority start may repeat a grid start
     short = [_optimise(explore, th, SHORT_NFEV, 1e-6) for th in chosen]
     finalists = [th for _, th in ranked(explore, short)[:n_starts]] + [_null_start(design, base)]
     if warm is not None:

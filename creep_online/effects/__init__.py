@@ -39,7 +39,7 @@ from .periodic_disturbance import periodic_columns
 # so that importing the model (and the CLI's --help) stays light.
 _LAZY = {"simulate_with_effects": "forward", "leakage_filter": "leakage", **{name: "responses" for name in (
     "MAX_PAIRS", "MULTIGRID_POINTS", "MULTIGRID_RATIO", "StepFn", "Superposer", "base_step_at", "base_step_grid",
-    "creep_step", "delayed_grid", "is_uniform", "resonance_step")}}
+    "creep_step", "delayed_grid", "delayed_grid_slope", "is_uniform", "resonance_step")}}
 
 __getattr__ = lazy_attributes(__name__, _LAZY)
 
@@ -56,5 +56,5 @@ __all__ = [
     "HYSTERESIS_THRESHOLDS", "INITIAL_STATES", "play_operators", "hysteresis_input", "loop_width", "last_direction",
     "polynomial_input", "leakage_filter", "periodic_columns",
     "MAX_PAIRS", "MULTIGRID_POINTS", "MULTIGRID_RATIO", "StepFn", "Superposer", "is_uniform", "creep_step",
-    "resonance_step", "base_step_grid", "base_step_at", "delayed_grid",
+    "resonance_step", "base_step_grid", "base_step_at", "delayed_grid", "delayed_grid_slope",
 ]

@@ -108,14 +108,28 @@ def base_step_at(alpha: float, a1: float, a2: float, tau: np.ndarray) -> np.ndar
 
 
 def delayed_grid(s: np.ndarray, h: float, delay: float) -> np.ndarray:
-    """S(k h - delay) from S on the grid k h (S = 0 before 0), by cubic interpolation."""
+    """S(k h - delay) from S on the grid k h (S = 0 before 0), by cubic interpolation.
+
+    ``s`` may hold several responses as rows (e.g. a response and its parameter
+    derivatives: the spline is linear in the data, so it delays derivatives too).
+    """
     if delay <= 0.0:
         return s
-    n = s.size
+    n = s.shape[-1]
     tk = np.arange(n) * h - delay
-    out = np.zeros(n)
+    out = np.zeros(s.shape)
     ok = tk > 0
-    out[ok] = CubicSpline(np.arange(n) * h, s)(tk[ok])
+    out[..., ok] = CubicSpline(np.arange(n) * h, s, axis=-1)(tk[ok])
+    return out
+
+
+def delayed_grid_slope(s: np.ndarray, h: float, delay: float) -> np.ndarray:
+    """d/d(delay) of ``delayed_grid(s, h, delay)``: -S'(k h - delay) from the same cubic spline (0 before 0)."""
+    n = s.shape[-1]
+    tk = np.arange(n) * h - max(delay, 0.0)
+    out = np.zeros(s.shape)
+    ok = tk > 0
+    out[..., ok] = -CubicSpline(np.arange(n) * h, s, axis=-1)(tk[ok], 1)
     return out
 
 
@@ -166,11 +180,15 @@ class Superposer:
         return np.arange(self.n) * self.h
 
     def apply(self, step: np.ndarray | StepFn) -> np.ndarray:
-        """Rows of outputs for a step response given on the grid (uniform) or as a function of tau."""
+        """Rows of outputs for a step response given on the grid (uniform) or as a function of tau.
+
+        Uniform records also take several step responses on the grid at once
+        (shape (k, n)) and give (k, rows, n): one superposition per response.
+        """
         if self.uniform:
             s = step(self.grid_tau) if callable(step) else np.asarray(step, dtype=float)
-            fs = rfft(s, self.nfft)
-            return irfft(self.spectra * fs[None, :], self.nfft, axis=1)[:, : self.n]
+            fs = rfft(s, self.nfft, axis=-1)
+            return irfft(self.spectra * fs[..., None, :], self.nfft, axis=-1)[..., : self.n]
         if not callable(step):
             raise ValueError("non-uniform records need the step response as a function of time")
         if self.change.size == 0:
@@ -180,3 +198,17 @@ class Superposer:
         pos = tau > 0
         s[pos] = step(tau[pos])
         return self.dx[:, self.change] @ s
+
+    def products(self, steps: np.ndarray, weights: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For step responses S_k on the grid (uniform): (sum_i w_i apply(S_k)_i, apply(S_k) @ v) per k.
+
+        Shapes (k, n) and (k, rows): what a Jacobian needs of the columns
+        ``apply`` would give (their weighted sum and their products with a
+        residual) without forming them, two inverse FFTs per response instead
+        of one per row: the rows' spectra are summed first, and
+        apply(S)_i . v = dx_i . q with q the cross-correlation of v and S.
+        """
+        fs = rfft(np.atleast_2d(steps), self.nfft, axis=-1)
+        summed = irfft((weights @ self.spectra) * fs, self.nfft, axis=-1)[:, : self.n]
+        q = irfft(rfft(v, self.nfft) * np.conj(fs), self.nfft, axis=-1)[:, : self.n]
+        return summed, q @ self.dx.T
