@@ -293,7 +293,7 @@ def test_refit_machine_equals_its_kernels_in_sequence():
     units = 1
     while not RF.refit_unit(tr.st, tr.S, tr._shift, tr.theta, tr._wk, lam, dx, 0, False, False, 1):
         units += 1
-    assert units == 3 + 2 * T.REFIT_STEPS
+    assert units == 3 + T.REFIT_STEPS
     head, fitted, var = RF.result(tr._wk)
     assert np.array_equal(fitted, theta) and np.array_equal(var, np.diag(cov))
     assert head[RF.RF_AFTER] == out[1] and head[RF.RF_DRIFT] == 0.0

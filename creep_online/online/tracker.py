@@ -385,7 +385,6 @@ class WindowTracker(ParameterView):
         args = (self.st, self.S, self._shift, self.theta, self._wk, self.basis.lam, self.basis.dx,
                 self.window_start, self.drift_on, self.converged, self.refits)
         unit = RF.refit_unit
-        yield
         while not unit(*args):
             yield
         yield
