@@ -10,14 +10,16 @@ resumable jobs, one small unit per ``work()`` call:
   with drift columns, the rates b'/b and alpha'); the drift columns' time
   origin moves to the newest sample first, so alpha and b are the values now.
   The rates are fitted only while a score test (on) / Wald test (off) says
-  the data show drift (``DRIFT_ON``, ``DRIFT_OFF``);
+  the data show drift (``DRIFT_ON``, ``DRIFT_OFF``). The fit itself is a numba
+  state machine, one kernel call per unit (``refit.py``);
 * **relinearize** when a1 or a2 moved more than ``RELINEARIZE`` from the point
   the resonance states were computed at: the remembered samples are replayed
   into fresh statistics (the nodes fast-forwarded, the resonance states
   started a settling time early), then swapped in whole;
 * **change test** every ``test_every`` samples: the statistics of the last
   second are the difference of two snapshots (exact for exponential
-  forgetting); a fit on them against the window's estimate is a
+  forgetting); a fit on them against the window's estimate (on the same
+  state machine; with the drift rates while the window does not fit them) is a
   likelihood-ratio test. A significant, physically large move that is also
   a jump against the recent tests' level restarts the window at the change
   (the event names the parameters and their moves);
