@@ -266,9 +266,11 @@ ACCEPTED, STALE, REJECTED = 0, 1, 2
 #: What ``accept`` returns, as plain floats: the verdict; alpha, ln a1, ln a2, b; the window cost and its
 #: effective samples; the largest relative move of those four; the drift test run (0-2), its statistic
 #: and the rate switch (+1 on, -1 off); the variances (times sigma^2) of alpha, ln a1, ln a2, b, the
-#: offset and the two rates (0 where absent).
+#: offset and the two rates (0 where absent); the sample count, the output's noise level and whether a1 or a2
+#: moved beyond RELINEARIZE from the linearization point (what the tracker's Python would read from numpy).
 Accepted = namedtuple("Accepted", "verdict alpha ln_a1 ln_a2 b cost neff move drift drift_stat drift_switch "
-                                  "var_alpha var_ln_a1 var_ln_a2 var_b var_offset var_rate0 var_rate1")
+                                  "var_alpha var_ln_a1 var_ln_a2 var_b var_offset var_rate0 var_rate1 "
+                                  "n noise relinearize")
 
 
 @njit(cache=CACHE)
@@ -311,8 +313,11 @@ def accept(st: np.ndarray, live: np.ndarray, wk: np.ndarray, lam: np.ndarray, dx
     r0 = int(wk[RF_R0])
     rate0 = var[r0] if k > r0 else 0.0
     rate1 = var[r0 + 1] if k > r0 + 1 else 0.0
+    relin = wk[RF_RELINEARIZE]
+    far = abs(math.exp(theta[1]) / st[W.SC_A1L] - 1) > relin or abs(math.exp(theta[2]) / st[W.SC_A2L] - 1) > relin
     return Accepted(verdict, theta[0], theta[1], theta[2], theta[3], cost, wk[RF_NEFF], move, wk[RF_DRIFT],
-                    wk[RF_DRIFT_STAT], wk[RF_DRIFT_SWITCH], var[0], var[1], var[2], var[3], var[4], rate0, rate1)
+                    wk[RF_DRIFT_STAT], wk[RF_DRIFT_SWITCH], var[0], var[1], var[2], var[3], var[4], rate0, rate1,
+                    int(st[W.SC_N]), st[W.SC_NOISE], far)
 
 
 @njit(cache=CACHE)

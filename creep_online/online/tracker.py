@@ -407,16 +407,16 @@ class WindowTracker(ParameterView):
             return                         # re-linearized meanwhile: the next refit decides
         if r.verdict == RF.REJECTED:
             self.rejected += 1             # a failed fit is never swapped in
-            self._watch(math.inf, True)
+            self._watch(math.inf, True, r.n, r.noise)
             return
         self.converged = self.converged or r.move < 0.01
         self.refits += 1
         yield
-        self._fit, self._fit_raw, self._fit_sample = None, (r, self.drift_on), self.n
+        self._fit, self._fit_raw, self._fit_sample = None, (r, self.drift_on), r.n
         if self._first_fit is None:
-            self._first_fit = self.n
-        self._watch(math.sqrt(max(r.cost, 0.0) / max(r.neff, 1.0)), False)
-        if abs(math.exp(r.ln_a1) / self.a1l - 1) > RELINEARIZE or abs(math.exp(r.ln_a2) / self.a2l - 1) > RELINEARIZE:
+            self._first_fit = r.n
+        self._watch(math.sqrt(max(r.cost, 0.0) / max(r.neff, 1.0)), False, r.n, r.noise)
+        if r.relinearize:
             if not any(j.__name__ == "_relinearize_job" for j in self._jobs):
                 self._jobs.append(self._relinearize_job(None))
         elif self.events:
@@ -689,16 +689,15 @@ class WindowTracker(ParameterView):
         return st[self.lay["phi"]:self.lay["phi"] + self.q].copy()
 
     # ------------------------------------------------------------------ re-search trigger
-    def _watch(self, rms: float, broken: bool) -> None:
-        """After each re-fit: start a re-search once the error has sat above the noise floor (or the fit has
-        been broken) for ``RESEARCH_AFTER_S`` (plain floats: runs at every re-fit)."""
+    def _watch(self, rms: float, broken: bool, n: int, floor: float) -> None:
+        """After each re-fit (at sample n; the output's noise level ``floor``): start a re-search once the error
+        has sat above the noise floor (or the fit has been broken) for ``RESEARCH_AFTER_S`` (plain floats:
+        runs at every re-fit)."""
         if not self.fitting or self._researching():
             return
-        floor = float(self.sc[W.SC_NOISE])
         if not (broken or (floor > 0.0 and rms > RESEARCH_RATIO * floor)):
             self._misfit_since = None
             return
-        n = self.n
         if self._misfit_since is None:
             self._misfit_since = n
         span = int(RESEARCH_AFTER_S / self.h)
