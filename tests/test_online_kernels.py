@@ -198,18 +198,24 @@ def test_replay_reproduces_the_statistics():
     assert np.allclose(tr.sy, fresh.sy, rtol=1e-9, atol=1e-12 * np.abs(fresh.sy).max())
 
 
-def test_rereference_equals_accumulating_with_the_new_time_origin():
-    """Moving the drift columns' time origin in the statistics = accumulating with that origin (m fixed)."""
+def _drift_window(seed: int, tref: float | None = None) -> tuple[WindowTracker, int, float]:
+    """A 1 s window with both drift columns fed 3 s of a staircase (its drift origin at ``tref`` if given)."""
     model = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
     h, n = 1e-3, 3000
-    u = _staircase(n, 300, 4)
+    u = _staircase(n, 300, seed)
     y = simulate(model, np.arange(n) * h, u)
-    moved = _tracker(model, h, window_s=1.0, drift=2)
-    _feed(moved, u, y)
+    tr = _tracker(model, h, window_s=1.0, drift=2)
+    if tref is not None:
+        tr.sc[W.SC_TREF] = tref
+    _feed(tr, u, y)
+    return tr, n, h
+
+
+def test_rereference_equals_accumulating_with_the_new_time_origin():
+    """Moving the drift columns' time origin in the statistics = accumulating with that origin (m fixed)."""
+    moved, n, _ = _drift_window(4)
     W.rereference(moved.st, moved.S, float(n))
-    direct = _tracker(model, h, window_s=1.0, drift=2)
-    direct.sc[W.SC_TREF] = n
-    _feed(direct, u, y)
+    direct, _, _ = _drift_window(4, tref=n)
     assert moved.sc[W.SC_TREF] == n
     assert np.allclose(moved.S, direct.S, rtol=1e-8, atol=1e-11 * np.abs(direct.S).max())
     assert np.allclose(moved.sy, direct.sy, rtol=1e-8, atol=1e-11 * np.abs(direct.sy).max())
@@ -217,12 +223,7 @@ def test_rereference_equals_accumulating_with_the_new_time_origin():
 
 def test_true_statistics_equal_moving_the_origin_then_scaling():
     """The re-fit's fused kernel = rereference, the running total of the moves, symmetrize and scale."""
-    model = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
-    h, n = 1e-3, 3000
-    u = _staircase(n, 300, 6)
-    y = simulate(model, np.arange(n) * h, u)
-    tr = _tracker(model, h, window_s=1.0, drift=2)
-    _feed(tr, u, y)
+    tr, n, h = _drift_window(6)
     st, S, shift = tr.st.copy(), tr.S.copy(), np.zeros((tr.q + W.ONE, 2))
     F, fy = np.empty((tr.p, tr.p)), np.empty(tr.p)
     fyy = W.true_statistics(tr.st, tr.S, shift, F, fy)
