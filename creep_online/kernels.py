@@ -643,3 +643,58 @@ def projected_normal_equations(s: np.ndarray, ds: np.ndarray, r: np.ndarray, b: 
         for m in range(k):
             a[k, m] = a[m, k]
     return a, g
+
+
+#: Taylor degree of ``expm_small`` after scaling to 1-norm <= 1/2: truncation < 0.5^17 / 17! ~ 2e-20.
+EXPM_DEGREE = 16
+
+
+@njit(cache=CACHE)
+def _matmul_into(out: np.ndarray, x: np.ndarray, y: np.ndarray) -> None:
+    """out = x @ y for small square matrices (real or complex) without allocating."""
+    n = x.shape[0]
+    for i in range(n):
+        for j in range(n):
+            acc = x[i, 0] * y[0, j]
+            for k in range(1, n):
+                acc += x[i, k] * y[k, j]
+            out[i, j] = acc
+
+
+@njit(cache=CACHE)
+def expm_small(x: np.ndarray) -> np.ndarray:
+    """e^x of a small square matrix (real, or complex for the complex step): scaling and squaring with a
+    degree-16 Taylor polynomial (Horner).
+
+    scipy.linalg.expm costs ~0.1-0.2 ms per 10 x 10 call in Python overhead; this costs a few
+    microseconds. The scaling is chosen from the real part's 1-norm only, so a complex-step
+    perturbation ~1e-20 never changes the algorithm's branch and the imaginary part stays the
+    exact derivative.
+    """
+    n = x.shape[0]
+    norm = 0.0
+    for j in range(n):
+        col = 0.0
+        for i in range(n):
+            col += abs(x[i, j].real)
+        norm = max(norm, col)
+    squarings = 0
+    while norm > 0.5 and squarings < 1000:
+        norm *= 0.5
+        squarings += 1
+    scale = 0.5**squarings
+    xs = x * scale
+    out = np.zeros_like(xs)
+    tmp = np.zeros_like(xs)
+    for i in range(n):
+        out[i, i] = 1.0
+    for m in range(EXPM_DEGREE, 0, -1):      # out = I + xs / m * out, from the highest term down
+        _matmul_into(tmp, xs, out)
+        for i in range(n):
+            for j in range(n):
+                out[i, j] = tmp[i, j] / m
+            out[i, i] += 1.0
+    for _ in range(squarings):
+        _matmul_into(tmp, out, out)
+        out[:, :] = tmp
+    return out
