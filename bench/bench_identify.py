@@ -12,7 +12,8 @@
 
 * --speed-only: warm p50/p99/max of this code and of --previous (default main; ``git
   archive`` into a temp dir, run in its own interpreter) alternating in three rounds,
-  ratio of the p50s previous / ours, load average at the start and after each round;
+  ratio of the p50s previous / ours, load average at the start and after each round; the ms per
+  identify spent in the Van Loan exponentials (discretize.taylor_moments[_sensitivity]) in both;
   and the wall time of fresh ``creep-online --help`` and ``creep-online identify``
   (12,000 samples) processes.
 
@@ -199,6 +200,50 @@ def speed_vs_previous(repeats: int, ref: str, rounds: int = 3) -> dict:
     return out
 
 
+#: Runs in either code's interpreter: ms per warm identify spent in the Van Loan exponentials
+#: (``discretize.taylor_moments_sensitivity``, and ``taylor_moments`` outside it), and the calls.
+PARTS_CODE = """
+import json, sys, time
+from creep_online import discretize as d
+from creep_online import identification as ident
+from hil_sim.experiments import LOAD_CELL, NANOPOSITIONER
+out = {}
+for case in (LOAD_CELL, NANOPOSITIONER):
+    t, u, y, _ = case.run(40.0, seed=1)
+    ident.identify(t, u, y)
+    acc = {"s": 0.0, "calls": 0, "depth": 0}
+    def timed(f):
+        def wrapper(*a, **k):
+            t0 = time.perf_counter(); acc["depth"] += 1
+            try:
+                return f(*a, **k)
+            finally:
+                acc["depth"] -= 1
+                if acc["depth"] == 0:
+                    acc["s"] += time.perf_counter() - t0; acc["calls"] += 1
+        return wrapper
+    plain, sens = d.taylor_moments, d.taylor_moments_sensitivity
+    d.taylor_moments, d.taylor_moments_sensitivity = timed(plain), timed(sens)
+    reps = int(sys.argv[1])
+    for _ in range(reps):
+        ident.identify(t, u, y)
+    d.taylor_moments, d.taylor_moments_sensitivity = plain, sens
+    out[case.name] = {"exponentials_ms_per_identify": acc["s"] / reps * 1e3, "calls_per_identify": acc["calls"] / reps}
+print(json.dumps(out))
+"""
+
+
+def exponential_parts(repeats: int, ref: str) -> dict:
+    """Time per warm identify inside the Van Loan exponentials, this code and ``ref`` (each in its own
+    interpreter): the saving where it happens, less exposed to machine load than the whole identify."""
+    import _baseline
+    path, commit = _baseline.extract(ref)
+    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    return {"previous_commit": commit, "load_average_start": os.getloadavg(),
+            "this_code": json.loads(_baseline.run_python(here, PARTS_CODE, str(repeats))),
+            "previous": json.loads(_baseline.run_python(path, PARTS_CODE, str(repeats)))}
+
+
 def cold_cli(repeats: int) -> dict:
     """Wall time of fresh ``creep-online`` processes: --help, and identify of 12,000 samples (numba cache warm)."""
     import subprocess
@@ -229,6 +274,7 @@ def main() -> None:
     if args.speed_only:
         report = {"bench": "identify_speed", "machine": {"cpus": os.cpu_count(), "python": platform.python_version()},
                   "warm": speed_vs_previous(5 if args.quick else 15, args.previous),
+                  "exponentials": exponential_parts(5 if args.quick else 10, args.previous),
                   "cold_cli": cold_cli(5 if args.quick else 10), "load_average_end": os.getloadavg()}
         json.dump(report, sys.stdout, indent=2)
         sys.stdout.write("\n")

@@ -26,10 +26,18 @@ def noise_floor_fit(y: np.ndarray, noise_std: float) -> float:
 
 
 def noise_std_estimate(y: np.ndarray) -> float:
-    """Robust white-noise std from second differences (MAD), blind to smooth signal content."""
-    y = np.asarray(y, dtype=float)
+    """Robust white-noise std from second differences (MAD), blind to smooth signal content.
+
+    Compiled (``kernels.second_difference_mad``, imported here so that importing
+    this module stays free of numba) for finite y; numpy otherwise, for its
+    NaN semantics.
+    """
+    y = np.ascontiguousarray(y, dtype=float)
     if y.size < 4:
         return float("nan")
+    if np.isfinite(y).all():
+        from . import kernels
+        return float(1.4826 * kernels.second_difference_mad(y))
     d2 = np.diff(y, 2) / np.sqrt(6.0)
     return float(1.4826 * np.median(np.abs(d2 - np.median(d2))))
 
