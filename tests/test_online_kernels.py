@@ -221,12 +221,14 @@ def test_rereference_equals_accumulating_with_the_new_time_origin():
     assert np.allclose(moved.sy, direct.sy, rtol=1e-8, atol=1e-11 * np.abs(direct.sy).max())
 
 
-def test_true_statistics_equal_moving_the_origin_then_scaling():
-    """The re-fit's fused kernel = rereference, the running total of the moves, symmetrize and scale."""
+def test_refit_statistics_equal_moving_the_origin_then_scaling():
+    """The re-fit's statistics kernels (move_origin, scaled_statistics) = rereference, the running total of the
+    moves, symmetrize and scale."""
     tr, n, h = _drift_window(6)
     st, S, shift = tr.st.copy(), tr.S.copy(), np.zeros((tr.q + W.ONE, 2))
     F, fy = np.empty((tr.p, tr.p)), np.empty(tr.p)
-    fyy = W.true_statistics(tr.st, tr.S, shift, F, fy)
+    W.move_origin(tr.st, tr.S, shift)
+    fyy = W.scaled_statistics(tr.st, tr.S, F, fy)
     t = (n - st[W.SC_TREF]) * h
     W.rereference(st, S, float(n))
     g = st[W.SC_G]
@@ -245,14 +247,13 @@ def test_since_statistics_equal_the_snapshot_moved_to_the_live_origin():
     u = _staircase(n, 300, 7)
     y = simulate(model, np.arange(n) * h, u)
     tr = _tracker(model, h, window_s=1.0, drift=2)
-    F, fy = np.empty((tr.p, tr.p)), np.empty(tr.p)
     _feed(tr, u[:2000], y[:2000])
-    W.true_statistics(tr.st, tr.S, tr._shift, F, fy)          # a move before the snapshot
+    W.move_origin(tr.st, tr.S, tr._shift)                     # a move before the snapshot
     snap = tr.st.copy(), tr.S.copy(), tr._shift.copy()
     _feed(tr, u[2000:4000], y[2000:4000])
-    W.true_statistics(tr.st, tr.S, tr._shift, F, fy)          # two moves after it
+    W.move_origin(tr.st, tr.S, tr._shift)                     # two moves after it
     _feed(tr, u[4000:], y[4000:])
-    W.true_statistics(tr.st, tr.S, tr._shift, F, fy)
+    W.move_origin(tr.st, tr.S, tr._shift)
     st0, S0, shift0 = snap
     sy0, syy0 = st0[tr.lay["sy"]:tr.lay["co"]].copy(), float(st0[W.SC_SYY])
     R, ry = np.empty((tr.p, tr.p)), np.empty(tr.p)
@@ -281,7 +282,8 @@ def test_refit_machine_equals_its_kernels_in_sequence():
     st, S, shift, start = tr.st.copy(), tr.S.copy(), tr._shift.copy(), tr.theta.copy()
     lam, dx = tr.basis.lam, tr.basis.dx
     F, fy = np.empty((tr.p, tr.p)), np.empty(tr.p)
-    fyy = W.true_statistics(st, S, shift, F, fy)
+    W.move_origin(st, S, shift)
+    fyy = W.scaled_statistics(st, S, F, fy)
     theta, mu, out = start.copy(), 1e-3, np.empty(3)
     free = np.ones(theta.size)
     free[-2:] = 0.0                                  # rates off: MASK_CONSTANT

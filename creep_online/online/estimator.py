@@ -512,7 +512,7 @@ class OnlineEstimator(StoredParams):
             units -= 1
         if self._phase == "searching":
             s = self._search
-            while units > 0 and not s.unit():
+            while units > 0 and not s.step():
                 units -= 1
             if s.result is None or self._longer_window_needed(s.result):
                 return
@@ -711,7 +711,6 @@ def warm_kernels() -> None:
     W.set_estimate(tr.theta.copy(), st, tr.basis.lam, tr.basis.dx)
     W.snapshot(st, S, shift, tr.theta, S.copy(), np.empty(tr.p), shift.copy(), tr.theta.copy())
     W.since_statistics(st, S, S.copy(), np.ones(tr.p), 1.0, shift, shift.copy(), np.empty_like(S), np.ones(tr.p))
-    W.true_statistics(st, S, shift, np.empty_like(S), np.empty(tr.p))
     W.move_origin(st, S, shift)
     W.scaled_statistics(st, S, np.empty_like(S), np.empty(tr.p))
     RF.start_test(st, S, S.copy(), np.ones(tr.p), 1.0, shift, shift.copy(), tr.theta.copy(), tr._test_wk.copy(),

@@ -288,7 +288,7 @@ def accept(st: np.ndarray, live: np.ndarray, wk: np.ndarray, lam: np.ndarray, dx
     quality never left "first window fit pending"): the output's own noise level (second differences)
     stands in for the window cost.
     """
-    p, k = int(st[W.SC_NQ]) + W.FREE + int(st[W.SC_NM]) + int(st[W.SC_NR]), live.shape[0]
+    p, k = W.parts(st)[1], live.shape[0]
     theta, var, H, g, cov, H2, g2, F, fy, masks = _views(wk, p, k)
     bound_resonance(theta, wk)
     cost = wk[RF_AFTER]

@@ -42,14 +42,13 @@ GRID_FREQS = 18
 COARSE_ROWS = 400
 #: Rows in the cost during refinement.
 FINE_ROWS = 2000
-#: Multiply-adds per step (~9 us).
+#: Multiply-adds per step (~9 us), one step per unit of the caller's background work (``ResonanceSearch.step``,
+#: for the start-up search and the tracker's): a unit of ~10 us like a Levenberg-Marquardt step. At 4000
+#: multiply-adds per step and one step per unit a search on 2 s at 10 kHz took ~4 s of stream sample by
+#: sample (a wrong-basin start was taken for a change meanwhile), and a slow mode's start-up search
+#: outlasted a 10 s stream; three such steps per unit paid the steps' Python three times (~32 us per unit
+#: at 10 kHz), one step of 12000 once.
 UNIT_WORK = 12000
-#: Search steps per unit of background work (``ResonanceSearch.unit``, for the start-up search and the
-#: tracker's): a unit of ~10 us like a Levenberg-Marquardt step. At 4000 multiply-adds per step and one
-#: step per unit a search on 2 s at 10 kHz took ~4 s of stream sample by sample (a wrong-basin start was
-#: taken for a change meanwhile), and a slow mode's start-up search outlasted a 10 s stream; three such
-#: steps per unit paid the steps' Python three times (~32 us per unit at 10 kHz), one step of 12000 once.
-STEPS_PER_UNIT = 1
 #: Candidates refined from the grid.
 REFINE = 3
 #: Cost evaluations per refined candidate at most in the post-change search (``fixed_alpha``).
@@ -192,10 +191,6 @@ class ResonanceSearch:
             self.units += 1
             next(self._gen, None)
         return self.result is not None
-
-    def unit(self) -> bool:
-        """``STEPS_PER_UNIT`` steps (one unit of the caller's background work); True when the result is ready."""
-        return any(self.step() for _ in range(STEPS_PER_UNIT))
 
     def exact_cost(self, alpha: float, a1: float, a2: float) -> Generator:
         """Projected cost per row of one candidate on every row after ``lead`` (as ``result.cost``), in units.

@@ -647,8 +647,8 @@ class WindowTracker(ParameterView):
 
     @staticmethod
     def _run_search(search: ResonanceSearch) -> Generator:
-        """A search to its result, one ``ResonanceSearch.unit`` per unit of background work."""
-        while not search.unit():
+        """A search to its result, one ``ResonanceSearch.step`` per unit of background work."""
+        while not search.step():
             yield
 
     def _misfit_from_start(self) -> bool:

@@ -242,22 +242,28 @@ def drift_coefficients(theta: np.ndarray, a1l: float, a2l: float, lam: np.ndarra
         md[i] = b * dk[i]
 
 
+@njit(cache=CACHE, inline="always")
+def parts(st: np.ndarray) -> tuple:
+    """(Q, P, m, sy, md) of a state array (``layout``), read from its header: the node count, the
+    regressor's length, the model coefficients, the statistics' sy and the alpha-derivative md."""
+    q = int(st[SC_NQ])
+    p = q + FREE + int(st[SC_NM]) + int(st[SC_NR])
+    o = SC_SIZE
+    c0 = o + 3 * p + 2 * q + 18 + int(st[SC_NM])        # co, then ztail (Q), then md
+    return q, p, st[o + p:o + 2 * p], st[o + 2 * p:o + 3 * p], st[c0 + q:c0 + 2 * q + ONE]
+
+
 @njit(cache=CACHE)
 def set_estimate(theta: np.ndarray, st: np.ndarray, lam: np.ndarray, dx: float) -> None:
     """The prediction's coefficients m (and md with the alpha rate) for theta, and what the output gate
     needs to know of the estimate: |b| and the settling hold after an input change (two settling
     times, 20 samples to 2 s). One kernel: it runs after every re-fit, when Python glue is cold."""
     sc = st[:SC_SIZE]
-    q = int(sc[SC_NQ])
-    nr = int(sc[SC_NR])
-    p = q + FREE + int(sc[SC_NM]) + nr
-    o = SC_SIZE
+    q, p, m, sy, md = parts(st)
     a1l, a2l = sc[SC_A1L], sc[SC_A2L]
-    full_coefficients(theta, a1l, a2l, lam, dx, st[o + p:o + 2 * p])
-    if nr > 1:
-        c0 = o + 3 * p
-        nco = 2 * q + 18 + int(sc[SC_NM])
-        drift_coefficients(theta, a1l, a2l, lam, dx, st[c0 + nco + q:c0 + nco + 2 * q + ONE])
+    full_coefficients(theta, a1l, a2l, lam, dx, m)
+    if int(sc[SC_NR]) > 1:
+        drift_coefficients(theta, a1l, a2l, lam, dx, md)
     sc[SC_BABS] = abs(theta[3])
     settle = 8.0 * math.exp(theta[2]) / math.exp(theta[1])
     h = sc[SC_H]
@@ -280,14 +286,7 @@ def rereference(st: np.ndarray, S: np.ndarray, n_new: float) -> None:
     sc[SC_TREF] = n_new
     if nr == 0 or t == 0.0:
         return
-    q = int(sc[SC_NQ])
-    p = q + FREE + int(sc[SC_NM]) + nr
-    o = SC_SIZE
-    m = st[o + p:o + 2 * p]
-    sy = st[o + 2 * p:o + 3 * p]
-    c0 = o + 3 * p
-    nco = 2 * q + 18 + int(sc[SC_NM])
-    md = st[c0 + nco + q:c0 + nco + 2 * q + ONE]
+    q, p, m, sy, md = parts(st)
     nv = q + ONE
     V = np.zeros((nv, nr))
     V[:, 0] = m[:nv]
@@ -323,16 +322,6 @@ def rereference(st: np.ndarray, S: np.ndarray, n_new: float) -> None:
 
 
 @njit(cache=CACHE)
-def true_statistics(st: np.ndarray, S: np.ndarray, shift: np.ndarray, F: np.ndarray, fy: np.ndarray) -> float:
-    """The window's statistics at true scale for a re-fit, in one call: F (full symmetric), fy; returns fyy.
-
-    ``move_origin``, then ``scaled_statistics`` (the re-fit runs them as two units of work).
-    """
-    move_origin(st, S, shift)
-    return scaled_statistics(st, S, F, fy)
-
-
-@njit(cache=CACHE)
 def move_origin(st: np.ndarray, S: np.ndarray, shift: np.ndarray) -> None:
     """Move the drift columns' time origin to the newest sample (``rereference``: alpha and b of the next
     fit are then the values now) and add the move to ``shift`` (rows 0..Q+5, one column per rate), the
@@ -343,14 +332,8 @@ def move_origin(st: np.ndarray, S: np.ndarray, shift: np.ndarray) -> None:
     nr = int(sc[SC_NR])
     n_new = sc[SC_N]
     t = (n_new - sc[SC_TREF]) * sc[SC_H]
-    q = int(sc[SC_NQ])
-    p = q + FREE + int(sc[SC_NM]) + nr
-    o = SC_SIZE
     if nr > 0 and t != 0.0:
-        m = st[o + p:o + 2 * p]
-        c0 = o + 3 * p
-        nco = 2 * q + 18 + int(sc[SC_NM])
-        md = st[c0 + nco + q:c0 + nco + 2 * q + ONE]
+        q, p, m, sy, md = parts(st)
         for i in range(q + ONE):
             shift[i, 0] += t * m[i]
         if nr > 1:
@@ -363,12 +346,9 @@ def move_origin(st: np.ndarray, S: np.ndarray, shift: np.ndarray) -> None:
 def scaled_statistics(st: np.ndarray, S: np.ndarray, F: np.ndarray, fy: np.ndarray) -> float:
     """F = S / g (full symmetric, from the upper triangle), fy = sy / g; returns fyy = syy / g."""
     sc = st[:SC_SIZE]
-    q = int(sc[SC_NQ])
-    p = q + FREE + int(sc[SC_NM]) + int(sc[SC_NR])
-    o = SC_SIZE
+    q, p, m, sy, md = parts(st)
     g = sc[SC_G]
     symmetrize(S, F, 1.0 / g)
-    sy = st[o + 2 * p:o + 3 * p]
     for i in range(p):
         fy[i] = sy[i] / g
     return sc[SC_SYY] / g
@@ -382,11 +362,9 @@ def snapshot(st: np.ndarray, S: np.ndarray, shift: np.ndarray, theta: np.ndarray
     Runs on the per-sample path every ``test_every`` samples: four numpy copies from Python cost
     ~50 us there (cold code), this ~3 us."""
     sc = st[:SC_SIZE]
-    q = int(sc[SC_NQ])
-    p = q + FREE + int(sc[SC_NM]) + int(sc[SC_NR])
-    o = SC_SIZE
+    q, p, m, sy, md = parts(st)
     S0[:, :] = S
-    sy0[:] = st[o + 2 * p:o + 3 * p]
+    sy0[:] = sy
     shift0[:, :] = shift
     theta0[:] = theta
     return sc[SC_SYY], sc[SC_G]
@@ -405,10 +383,7 @@ def since_statistics(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndar
     """
     sc = st[:SC_SIZE]
     nr = int(sc[SC_NR])
-    q = int(sc[SC_NQ])
-    p = q + FREE + int(sc[SC_NM]) + nr
-    o = SC_SIZE
-    sy = st[o + 2 * p:o + 3 * p]
+    q, p, m, sy, md = parts(st)
     for i in range(p):
         for j in range(i, p):
             R[i, j] = S[i, j] - S0[i, j]
