@@ -271,8 +271,9 @@ def test_since_statistics_equal_the_snapshot_moved_to_the_live_origin():
 
 
 def test_refit_machine_equals_its_kernels_in_sequence():
-    """refit.refit_unit, one stage per call, = the statistics, REFIT_STEPS Levenberg-Marquardt steps and
-    the covariance called in sequence; refit.accept swaps the result in with its coefficients."""
+    """refit.refit_unit, one stage or slice per call, = the statistics, REFIT_STEPS Levenberg-Marquardt steps
+    and the covariance called in sequence, bit for bit (the slices sum in the same order); refit.accept swaps
+    the result in with its coefficients."""
     model = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
     h, n = 1e-3, 4000
     u = _staircase(n, 300, 9)
@@ -293,10 +294,16 @@ def test_refit_machine_equals_its_kernels_in_sequence():
         mu = W.lm_trial(theta, free, mu, H, g, cost, tr.a1l, tr.a2l, lam, dx, F, fy, fyy, *tr.alpha_bounds, out)
     cov = np.empty_like(H)
     W.covariance(H, free, cov)
+    RF.begin(tr.st, tr._wk, 0, False, False, 1)
     units = 1
-    while not RF.refit_unit(tr.st, tr.S, tr._shift, tr.theta, tr._wk, lam, dx, 0, False, False, 1):
+    while not RF.refit_unit(tr.st, tr.S, tr._shift, tr.theta, tr._wk, lam, dx):
         units += 1
-    assert units == 3 + T.REFIT_STEPS
+    normal_slices = -(-tr.p // int(tr._wk[RF.RF_NORMAL_ROWS]))
+    cost_slices = -(-tr.p // int(tr._wk[RF.RF_COST_ROWS]))
+    assert normal_slices > 1                          # the slices are exercised
+    # drift origin, scaling (2); per step the model coefficients, the Jacobian's, the rows, the solve, the
+    # trial's coefficients, its cost; the covariance's factor and inverse
+    assert units == 3 + T.REFIT_STEPS * (2 + normal_slices + 2 + cost_slices) + 2
     head, fitted, var = RF.result(tr._wk)
     assert np.array_equal(fitted, theta) and np.array_equal(var, np.diag(cov))
     assert head[RF.RF_AFTER] == out[1] and head[RF.RF_DRIFT] == 0.0
@@ -324,9 +331,7 @@ def test_the_change_test_fits_a_drift_the_window_does_not(free_rates):
     syy0, _ = W.snapshot(tr.st, tr.S, tr._shift, tr.theta, S0, sy0, shift0, theta0)
     _feed(tr, u[1000:], y[1000:])
     RF.start_test(tr.st, tr.S, S0, sy0, syy0, tr._shift, shift0, tr.theta, tr._test_wk, free_rates)
-    while not RF.refit_unit(tr.st, tr.S, tr._shift, tr.theta, tr._test_wk, tr.basis.lam, tr.basis.dx, 0, False,
-                            False, 0):
-        pass
+    RF.run(tr.st, tr.S, tr._shift, tr.theta, tr._test_wk, tr.basis.lam, tr.basis.dx)
     r = RF.test_outcome(tr._test_wk, tr.theta)
     moves = {"a1": math.exp(r.ln_a1 - r.live_ln_a1) - 1, "a2": math.exp(r.ln_a2 - r.live_ln_a2) - 1,
              "b": r.b / r.live_b - 1}

@@ -43,6 +43,7 @@ import numpy as np
 
 from ..errors import DataError
 from ..model import ONLINE_ALPHA_BOUNDS, ONLINE_REFITS, CreepModel
+from . import refit as RF
 from . import window as W
 from .search import ResonanceSearch
 from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SOE_TOP, SoeBasis
@@ -380,8 +381,13 @@ class OnlineEstimator(StoredParams):
         # tr.feed() inlined: one Python call less on the per-sample path
         if self._recursive:
             status = R.sample(du, y, tr.st, tr.P, tr.CT)
-        else:
+        elif tr.machine is None:
             status = W.sample(du, y, tr.st, tr.S, tr.ring)
+        else:                             # a re-fit or change test under way: its slices run in the kernel
+            status = RF.sample_work(du, y, tr.st, tr.S, tr.ring, tr._ctx, tr.machine, self._units)
+            if status >= RF.MACHINE_DONE:
+                tr.machine = None         # (its job reads the result at the next sample)
+                status -= RF.MACHINE_DONE
         if status >= 8:                   # jobs queued (and the change test's snapshot taken): their first
             tr._schedule()                # unit waits for the next sample, this call has done enough
         elif tr._jobs:
@@ -682,7 +688,6 @@ def _finite(x: float, default: float = 0.0) -> float:
 
 def warm_kernels() -> None:
     """Compile (or load from numba's cache) every kernel that Python calls, so no update() pays for it."""
-    from . import refit as RF
     from . import tracker as T
     est = OnlineEstimator(1e-3, horizon_s=10.0, t_c=0.05)
     t = np.arange(3000) * 1e-3
@@ -719,11 +724,11 @@ def warm_kernels() -> None:
         wk = tr._wk.copy()
         wk[RF.RF_NEFF] = 1e6
         wk[RF.RF_DRIFT_MIN_N] = 0.0
-        for _ in range(20):
-            if RF.refit_unit(st, S, shift, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx, 1, drift == 2, True,
-                             0):
-                break
+        RF.begin(st, wk, 1, drift == 2, True, 0)
+        RF.run(st, S, shift, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)
         RF.accept(st, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)
         RF.test_outcome(wk, tr.theta)
+    RF.begin(tr.st, tr._wk, 1, False, True, 0)      # (this estimator is thrown away)
+    RF.sample_work(0.0, 0.0, tr.st, tr.S, tr.ring, tr._ctx, T.MACHINE_REFIT, 1)
     T.WindowTracker  # noqa: B018 - imported for its kernels
     R.warm()

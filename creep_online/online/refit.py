@@ -1,16 +1,18 @@
-"""The window tracker's re-fit as a numba state machine: one kernel call per unit of background work.
+"""The window tracker's re-fit as a numba state machine that the per-sample kernel advances.
 
 A re-fit (the window's statistics, Levenberg-Marquardt steps, the covariance, the drift test) runs
 about ten times a second at 10 kHz. As a Python generator with numpy glue between its kernels it
 cost 20-110 us per unit: by the time a re-fit runs, the interpreter's and numpy's code paths are
 cold, and each line of glue (an array copy, a mask, a scalar read from an array) costs far more than
-its warm microsecond. Here the whole re-fit lives in one flat work array (``allocate``) and
-``refit_unit`` advances it by one stage per call; the tracker's Python starts it and reads the
-result once (``result``).
+its warm microsecond. Here the whole re-fit lives in one flat work array (``allocate``);
+``refit_unit`` advances it by one slice of about a microsecond (``SLICE_MACS``), and in a control
+loop the per-sample kernel itself runs the slices (``sample_work``): no Python between them. The
+tracker's Python starts a re-fit (``begin``) or a change test (``start_test``) and reads the result
+once (``accept``, ``test_outcome``).
 
 Work array: a header of scalars (``RF_*``), then theta, the covariance's diagonal, and the arrays
 of the fit (statistics F, fy; J^T J and J^T r; the covariance; the drift test's normal equations;
-the three parameter masks).
+the parameter masks; the slices' intermediate results).
 """
 from __future__ import annotations
 
@@ -20,6 +22,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
+from . import kernels
 from . import window as W
 
 CACHE = True
@@ -58,13 +61,26 @@ RF_LN_A2_MIN = 29     # the resonances the sampling represents: ln a2 >= this ..
 RF_LN_ZETA_LO = 30    # ... and ln zeta within these
 RF_LN_ZETA_HI = 31
 RF_RELINEARIZE = 32   # relative move of a1, a2 within which the linearized cost holds
+RF_ROW = 33       # next row of the stage that runs over the statistics' rows in slices
+RF_PARTIAL = 34   # the trial cost's sum over the rows done so far
+RF_SCORING = 35   # 1 while the normal equations are the score test's (at the result, into H2, g2)
+RF_NORMAL_ROWS = 36   # rows of the normal equations per slice (``SLICE_MACS``)
+RF_COST_ROWS = 37     # rows of the trial cost per slice
 HEAD = 40
 
-#: Stages of a fit, in order: plan and move the drift origin, the statistics at true scale, Levenberg-
-#: Marquardt steps (normal equations and trial, ~10 us together: one unit each, so that a re-fit's work
-#: lands on fewer than 1 % of the samples at 10 kHz and the p99 of update() is a sample's own cost),
-#: covariance (and the Wald test), the score test's normal equations and score.
-ST_START, ST_SCALE, ST_STEP, ST_COVARIANCE, ST_SCORE_NORMAL, ST_SCORE = range(6)
+#: Multiply-adds per slice of a re-fit (about a microsecond): the per-sample kernel runs one slice per
+#: sample while a re-fit or a change test is under way (``sample_work``), so a 10 kHz control loop sees
+#: ~1-2 us more on ~2 % of its samples, not 7-45 us on ~1 % of them.
+SLICE_MACS = 4000
+
+#: Stages of a fit, in order: (idle until ``begin`` or ``start_test``), move the drift origin, the
+#: statistics at true scale (two slices); per Levenberg-Marquardt step the model coefficients, the
+#: Jacobian's, the normal equations' rows in slices and their assembly, the damped step, the trial's
+#: coefficients, the trial's cost in slices and the verdict; then the covariance's factor, its inverse
+#: (and the Wald test), and for the score test the normal equations again at the result and the score.
+#: Each call does one stage or slice: about a microsecond of work (``SLICE_MACS``).
+(ST_IDLE, ST_START, ST_SCALE, ST_JACOBIAN, ST_ASSEMBLE, ST_ROWS, ST_SOLVE, ST_TRIAL_POINT, ST_TRIAL,
+ ST_COVARIANCE, ST_INVERSE, ST_SCORE) = range(12)
 
 #: Parameter masks (rows of the masks block): all free, drift rates fixed, alpha and rates fixed, the
 #: change test's (the resonance, the gain and the offset), and the change test's with the drift rates.
@@ -79,13 +95,17 @@ def allocate(p: int, k: int, r0: int, steps: int, policy: dict) -> np.ndarray:
     bounds LO, HI; DRIFT_ON, DRIFT_OFF, DRIFT_MAX; HOLD_N, DRIFT_MIN_N, DRIFT_EVERY, NRATE;
     LN_A2_MIN, LN_ZETA_LO, LN_ZETA_HI, RELINEARIZE).
     """
-    wk = np.zeros(HEAD + 2 * k + 3 * k * k + 2 * k + p * p + p + MASKS * k)
+    wk = np.zeros(HEAD + 2 * k + 3 * k * k + 2 * k + p * p + p + MASKS * k + _scratch_size(p, k))
     wk[RF_MU] = 1e-3
     wk[RF_STEPS] = steps
     wk[RF_K], wk[RF_R0] = k, r0
+    mq = p - (k - 4)
+    wk[RF_NORMAL_ROWS] = max(1, SLICE_MACS // (4 * mq + p))
+    wk[RF_COST_ROWS] = max(1, SLICE_MACS // p)
     for name, value in policy.items():
         wk[globals()["RF_" + name]] = value
-    masks = wk[wk.size - MASKS * k:].reshape(MASKS, k)
+    o = HEAD + 2 * k + 3 * k * k + 2 * k + p * p + p       # the masks follow F and fy (``_views``)
+    masks = wk[o:o + MASKS * k].reshape(MASKS, k)
     masks[:] = 1.0
     masks[MASK_CONSTANT, r0:] = 0.0
     masks[MASK_HOLD, r0:] = 0.0
@@ -118,6 +138,41 @@ def _views(wk: np.ndarray, p: int, k: int) -> tuple:
     return theta, var, H, g, cov, H2, g2, F, fy, masks
 
 
+def _scratch_size(p: int, k: int) -> int:
+    """C (p x k), A^T (4 x mq), m, F A (p x 4), F m, the trial theta (k) and its coefficients (p), the
+    model coefficients and their alpha-derivative (p each, Q + 2 used), the covariance's factor (k x k)
+    and scaling (k)."""
+    return p * k + 4 * (p - (k - 4)) + p + 4 * p + p + k + p + 2 * p + k * k + k
+
+
+@njit(cache=CACHE)
+def _scratch(wk: np.ndarray, p: int, k: int, q: int) -> tuple:
+    """C, At, m, FA, fm, trial, mt, v, dv, L, d: the slices' intermediate results, after the masks."""
+    o = HEAD + 2 * k + 3 * k * k + 2 * k + p * p + p + MASKS * k
+    mq = p - (k - 4)
+    C = wk[o:o + p * k].reshape(p, k)
+    o += p * k
+    At = wk[o:o + 4 * mq].reshape(4, mq)
+    o += 4 * mq
+    m = wk[o:o + p]
+    FA = wk[o + p:o + 5 * p].reshape(p, 4)
+    fm = wk[o + 5 * p:o + 6 * p]
+    o += 6 * p
+    trial, mt = wk[o:o + k], wk[o + k:o + k + p]
+    o += k + p
+    v, dv = wk[o:o + q + 2], wk[o + p:o + p + q + 2]
+    o += 2 * p
+    return C, At, m, FA, fm, trial, mt, v, dv, wk[o:o + k * k].reshape(k, k), wk[o + k * k:o + k * k + k]
+
+
+@njit(cache=CACHE)
+def begin(st: np.ndarray, wk: np.ndarray, window_start: int, drift_on: bool, converged: bool, refits: int) -> None:
+    """Start a re-fit of the window: what it frees and which drift test follows (``_plan``); the
+    tracker's state decides. ``refit_unit`` (or ``sample_work``) then runs it."""
+    _plan(wk, st[W.SC_N], window_start, drift_on, converged, refits)
+    wk[RF_STAGE] = ST_START
+
+
 @njit(cache=CACHE)
 def _plan(wk: np.ndarray, n: float, window_start: int, drift_on: bool, converged: bool, refits: int) -> None:
     """What this re-fit frees and which drift test follows it.
@@ -137,60 +192,197 @@ def _plan(wk: np.ndarray, n: float, window_start: int, drift_on: bool, converged
 
 @njit(cache=CACHE)
 def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarray, wk: np.ndarray,
-               lam: np.ndarray, dx: float, window_start: int, drift_on: bool, converged: bool,
-               refits: int) -> bool:
-    """Advance the re-fit by one stage; True when it is done (the result in ``wk``, see ``accept``).
+               lam: np.ndarray, dx: float) -> bool:
+    """Advance the re-fit (or change test) by one stage or slice; True when it is done (the result in
+    ``wk``, see ``accept``) or idle.
 
-    ``live`` is the tracker's theta (the start); the tracker's state (``window_start``, ``drift_on``,
-    ``converged``, ``refits``) decides at the first stage what the fit frees and which drift test
-    follows (``_plan``).
+    ``live`` is the tracker's theta (the start). The stages' arithmetic is that of ``window.lm_normal``,
+    ``window.lm_trial`` and ``window.covariance``, cut into slices of ~``SLICE_MACS`` multiply-adds.
     """
-    p, k = S.shape[0], live.shape[0]
+    p, k, q = S.shape[0], live.shape[0], lam.shape[0]
     theta, var, H, g, cov, H2, g2, F, fy, masks = _views(wk, p, k)
+    C, At, m, FA, fm, trial, mt, v, dv, L, d = _scratch(wk, p, k, q)
     stage = int(wk[RF_STAGE])
-    if stage == ST_START:              # what to free, then the drift origin to the newest sample
-        _plan(wk, st[W.SC_N], window_start, drift_on, converged, refits)
+    if stage == ST_IDLE:
+        return True
+    if stage == ST_START:              # the drift origin to the newest sample
         W.move_origin(st, S, shift)
+        wk[RF_ROW] = 0.0
         wk[RF_STAGE] = ST_SCALE
         return False
-    if stage == ST_SCALE:              # the statistics at true scale, frozen for the fit
-        wk[RF_FYY] = W.scaled_statistics(st, S, F, fy)
+    if stage == ST_SCALE:              # the statistics at true scale, frozen for the fit (two slices: the
+        i0 = int(wk[RF_ROW])           # first rows hold half of the upper triangle)
+        i1 = p - int(p / math.sqrt(2.0)) if i0 == 0 else p
+        wk[RF_FYY] = W.scaled_rows(st, S, F, fy, i0, i1)
+        wk[RF_ROW] = i1
+        if i1 < p:
+            return False
         theta[:] = live
         wk[RF_A1L], wk[RF_A2L] = st[W.SC_A1L], st[W.SC_A2L]
         wk[RF_STEP] = 0.0
         wk[RF_DRIFT_SWITCH] = 0.0
-        wk[RF_STAGE] = ST_STEP
+        wk[RF_SCORING] = 0.0
+        wk[RF_STAGE] = ST_JACOBIAN
         return False
     free = masks[int(wk[RF_MASK])]
     a1l, a2l, fyy = wk[RF_A1L], wk[RF_A2L], wk[RF_FYY]
-    if stage == ST_STEP:               # J^T J, J^T r at theta, then the damped step
-        wk[RF_COST] = W.lm_normal(theta, a1l, a2l, lam, dx, F, fy, fyy, H, g)
+    if stage == ST_JACOBIAN:           # the model coefficients at theta
+        kernels.model_coefficients(theta[0], lam, dx, math.exp(theta[1]), math.exp(theta[2]), v, dv)
+        wk[RF_STAGE] = ST_ASSEMBLE
+        return False
+    if stage == ST_ASSEMBLE:           # J's coefficients
+        W.jacobian_assemble(theta, a1l, a2l, lam, dx, v, dv, C)
+        W.normal_prepare(theta, C, At, m)
+        wk[RF_ROW] = 0.0
+        wk[RF_STAGE] = ST_ROWS
+        return False
+    if stage == ST_ROWS:               # a slice of the normal equations' rows; the last one assembles them
+        i0 = int(wk[RF_ROW])
+        i1 = min(i0 + int(wk[RF_NORMAL_ROWS]), p)
+        W.normal_rows(F, At, m, FA, fm, i0, i1)
+        wk[RF_ROW] = i1
+        if i1 < p:
+            return False
+        if wk[RF_SCORING] != 0.0:      # the score test's normal equations, at the result
+            W.normal_finish(At, m, FA, fm, F, fy, fyy, H2, g2)
+            wk[RF_STAGE] = ST_SCORE
+            return False
+        wk[RF_COST] = W.normal_finish(At, m, FA, fm, F, fy, fyy, H, g)
         if wk[RF_STEP] == 0.0:
             wk[RF_START_COST] = wk[RF_COST]
-        out = wk[RF_BEFORE:RF_MOVED + 1]
-        wk[RF_MU] = W.lm_trial(theta, free, wk[RF_MU], H, g, wk[RF_COST], a1l, a2l, lam, dx, F, fy, fyy,
-                               wk[RF_LO], wk[RF_HI], out)
-        wk[RF_STEP] += 1.0
-        done = wk[RF_STEP] >= wk[RF_STEPS] or (wk[RF_MOVED] == 0.0 and wk[RF_MU] > 1e3)
-        wk[RF_STAGE] = ST_COVARIANCE if done else ST_STEP
+        wk[RF_STAGE] = ST_SOLVE
         return False
-    if stage == ST_COVARIANCE:
-        W.covariance(H, free, cov)
+    out = wk[RF_BEFORE:RF_MOVED + 1]
+    if stage == ST_SOLVE:              # the damped step
+        ok, mu = W.trial_point(theta, free, wk[RF_MU], H, g, wk[RF_COST], wk[RF_LO], wk[RF_HI], trial, out)
+        if not ok:
+            wk[RF_MU] = mu
+            return _step_done(wk)
+        wk[RF_STAGE] = ST_TRIAL_POINT
+        return False
+    if stage == ST_TRIAL_POINT:        # the trial's coefficients
+        W.full_coefficients(trial, a1l, a2l, lam, dx, mt)
+        wk[RF_ROW] = 0.0
+        wk[RF_PARTIAL] = fyy
+        wk[RF_STAGE] = ST_TRIAL
+        return False
+    if stage == ST_TRIAL:              # a slice of the trial's cost; the last one decides
+        i0 = int(wk[RF_ROW])
+        i1 = min(i0 + int(wk[RF_COST_ROWS]), p)
+        wk[RF_PARTIAL] = W.cost_rows(F, fy, mt, i0, i1, wk[RF_PARTIAL])
+        wk[RF_ROW] = i1
+        if i1 < p:
+            return False
+        wk[RF_MU] = W.trial_verdict(theta, trial, wk[RF_PARTIAL], wk[RF_COST], wk[RF_MU], out)
+        return _step_done(wk)
+    if stage == ST_COVARIANCE:         # the factor, then the inverse
+        wk[RF_ROW] = 1.0 if W.covariance_factor(H, free, L, d) else 0.0
+        wk[RF_STAGE] = ST_INVERSE
+        return False
+    if stage == ST_INVERSE:
+        W.covariance_inverse(L, d, wk[RF_ROW] != 0.0, cov)
         for i in range(k):
             var[i] = cov[i, i]
         wk[RF_NEFF] = st[W.SC_NEFF]
-        wk[RF_STAGE] = ST_START
-        return _drift_test(wk, theta, cov, k, int(wk[RF_DRIFT]))
-    if stage == ST_SCORE_NORMAL:       # score test: the normal equations at the result
-        W.lm_normal(theta, a1l, a2l, lam, dx, F, fy, fyy, H2, g2)
-        wk[RF_STAGE] = ST_SCORE
+        wk[RF_STAGE] = ST_IDLE
+        if _drift_test(wk, theta, cov, k, int(wk[RF_DRIFT])):
+            return True
+        wk[RF_SCORING] = 1.0           # the score test: the normal equations at the result, then the score
+        wk[RF_STAGE] = ST_JACOBIAN
         return False
     stat = W.drift_score(H2, g2, free, int(wk[RF_R0])) / wk[RF_SIGMA2]
     wk[RF_DRIFT_STAT] = stat
     if stat > wk[RF_DRIFT_ON]:
         wk[RF_DRIFT_SWITCH] = 1.0
-    wk[RF_STAGE] = ST_START
+    wk[RF_STAGE] = ST_IDLE
     return True
+
+
+@njit(cache=CACHE)
+def _step_done(wk: np.ndarray) -> bool:
+    """A Levenberg-Marquardt step ended: the next step, or the covariance after the last (not done yet)."""
+    wk[RF_STEP] += 1.0
+    done = wk[RF_STEP] >= wk[RF_STEPS] or (wk[RF_MOVED] == 0.0 and wk[RF_MU] > 1e3)
+    wk[RF_STAGE] = ST_COVARIANCE if done else ST_JACOBIAN
+    return False
+
+
+@njit(cache=CACHE)
+def run(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarray, wk: np.ndarray, lam: np.ndarray,
+        dx: float) -> None:
+    """The rest of a re-fit or change test in one call (block mode, where no sample waits for it)."""
+    while not refit_unit(st, S, shift, live, wk, lam, dx):
+        pass
+
+
+#: ``sample_work``'s status flag: the re-fit or change test it advanced is done (added to ``window.sample``'s).
+MACHINE_DONE = 16
+
+
+# header of the context array (``context``): what ``sample_work`` needs besides the sample's arrays
+CX_K = 0          # parameters (theta's length)
+CX_SHIFT = 1      # rows and columns of the drift-origin total (``window.move_origin``)
+CX_Q = 3          # SOE nodes (lam's length)
+CX_DX = 4         # the SOE grid's log step
+CX_WORKS = 5      # number of work arrays, then (offset, size) of each
+CX_MAX_WORKS = 2
+CX_HEAD = CX_WORKS + 1 + 2 * CX_MAX_WORKS
+
+
+def context(theta: np.ndarray, shift: np.ndarray, lam: np.ndarray, dx: float,
+            works: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[np.ndarray]]:
+    """One array holding the live theta, the drift-origin total, the SOE nodes and the work arrays, so that
+    the per-sample kernel takes one argument for all of them (each array argument costs ~0.25 us of
+    numba's dispatch on every call). Returns it and views of theta, shift and the works (copies of the
+    values given), which the tracker then uses in their place."""
+    k, q = theta.size, lam.size
+    head = np.zeros(CX_HEAD)
+    head[CX_K], head[CX_SHIFT], head[CX_SHIFT + 1], head[CX_Q], head[CX_DX] = k, *shift.shape, q, dx
+    head[CX_WORKS] = len(works)
+    o = CX_HEAD + k + shift.size + q
+    for i, w in enumerate(works):
+        head[CX_WORKS + 1 + 2 * i], head[CX_WORKS + 2 + 2 * i] = o, w.size
+        o += w.size
+    ctx = np.concatenate([head, theta, shift.ravel(), lam] + list(works))
+    views = [ctx[int(head[CX_WORKS + 1 + 2 * i]):int(head[CX_WORKS + 1 + 2 * i]) + w.size]
+             for i, w in enumerate(works)]
+    o = CX_HEAD
+    return ctx, ctx[o:o + k], ctx[o + k:o + k + shift.size].reshape(shift.shape), views
+
+
+@njit(cache=CACHE)
+def _unpack(ctx: np.ndarray, which: int) -> tuple:
+    """theta, shift, lam, dx and work array ``which`` from a context array (``context``)."""
+    k, rows, cols, q = int(ctx[CX_K]), int(ctx[CX_SHIFT]), int(ctx[CX_SHIFT + 1]), int(ctx[CX_Q])
+    o = CX_HEAD
+    theta = ctx[o:o + k]
+    shift = ctx[o + k:o + k + rows * cols].reshape(rows, cols)
+    o += k + rows * cols
+    lam = ctx[o:o + q]
+    w0, n = int(ctx[CX_WORKS + 1 + 2 * which]), int(ctx[CX_WORKS + 2 + 2 * which])
+    return theta, shift, lam, ctx[CX_DX], ctx[w0:w0 + n]
+
+
+#: ``sample_work``'s status flag: the re-fit or change test it advanced is done (added to ``window.sample``'s).
+MACHINE_DONE = 16
+
+
+@njit(cache=CACHE)
+def sample_work(u: float, y: float, st: np.ndarray, S: np.ndarray, ring: np.ndarray, ctx: np.ndarray,
+                which: int, slices: int) -> int:
+    """One sample (``window.sample``), then ``slices`` slices of the re-fit or change test under way in the
+    context's work array ``which`` (``context``); its status plus ``MACHINE_DONE`` when that finished.
+
+    Why here and not in Python between samples: a re-fit runs every ~0.1 s, so by then the
+    interpreter's code paths are cold, and a call from Python per slice cost more than the slice.
+    Inside the per-sample call each slice adds one to a few microseconds to ~2 % of the samples.
+    """
+    status = W.sample(u, y, st, S, ring)
+    theta, shift, lam, dx, wk = _unpack(ctx, which)
+    for _ in range(slices):
+        if refit_unit(st, S, shift, theta, wk, lam, dx):
+            return status + MACHINE_DONE
+    return status
 
 
 @njit(cache=CACHE)
@@ -198,7 +390,7 @@ def start_test(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, s
                shift0: np.ndarray, live: np.ndarray, wk: np.ndarray, free_rates: bool) -> None:
     """Start the change test in its own work array: the statistics since a snapshot (S0, sy0, syy0,
     shift0; ``window.since_statistics``), theta from the live estimate, fresh damping. ``refit_unit``
-    then fits them from its normal equations on (``MASK_TEST``, no drift test).
+    (or ``sample_work``) then fits them from the Jacobian on (``MASK_TEST``, no drift test).
 
     ``free_rates``: the window has drift columns but does not fit them yet (they wait for a converged
     window spanning DRIFT_MIN_S): the test fits the drift itself. Otherwise a drifting plant's last
@@ -215,7 +407,8 @@ def start_test(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, s
     wk[RF_MASK] = MASK_TEST_RATES if free_rates else MASK_TEST
     wk[RF_DRIFT] = 0.0
     wk[RF_DRIFT_SWITCH] = 0.0
-    wk[RF_STAGE] = ST_STEP
+    wk[RF_SCORING] = 0.0
+    wk[RF_STAGE] = ST_JACOBIAN
 
 
 @njit(cache=CACHE)
@@ -236,8 +429,7 @@ def _drift_test(wk: np.ndarray, theta: np.ndarray, cov: np.ndarray, k: int, drif
         return True
     r0 = int(wk[RF_R0])
     if drift == 1:
-        wk[RF_STAGE] = ST_SCORE_NORMAL
-        return False
+        return False                   # the score test follows (``refit_unit``)
     n = k - r0
     stat = 0.0
     if not np.all(np.isfinite(cov[r0:, r0:])):

@@ -67,6 +67,10 @@ DISAGREE_LR = 20.0
 ALPHA_HOLD_S = 2.0
 #: What a job yields while it waits for samples to arrive (the unit is not spent on it).
 WAIT = "wait"
+#: What a job yields while its re-fit or change test runs in ``machine`` (advanced by the per-sample
+#: kernel, ``refit.sample_work``; in block mode by ``finish``).
+MACHINE = "machine"
+MACHINE_REFIT, MACHINE_TEST = 0, 1      # the work arrays in the tracker's context (``refit.context``)
 #: Post-change samples the resonance search waits for after a detection (s).
 RESEARCH_S = 1.0
 #: Post-change searches at most: 1 s of samples, then twice as many while the result misfits (``_resolved``),
@@ -220,6 +224,9 @@ class WindowTracker(ParameterView):
         self.converged = False           # a refit has barely moved since the start: the change test may judge
         self.fit = Fit(theta=self.theta.copy())
         self._jobs: list[Generator] = []
+        #: the re-fit or change test under way (``refit.sample_work`` advances it): its index among the
+        #: context's work arrays (``MACHINE_REFIT``, ``MACHINE_TEST``), or None
+        self.machine: int | None = None
         self._snaps: list[tuple] = []
         self._shift = np.zeros((self.q + W.ONE, max(self.n_rate, 1)))   # total drift-origin move (W.since_statistics)
         self._allocate_work()
@@ -267,8 +274,11 @@ class WindowTracker(ParameterView):
                   "LN_A2_MIN": 2.0 * math.log(self.h / (2.0 * math.pi * FN_MAX_FS)),
                   "LN_ZETA_LO": math.log(ZETA_BOUNDS[0]), "LN_ZETA_HI": math.log(ZETA_BOUNDS[1]),
                   "RELINEARIZE": RELINEARIZE}
-        self._wk = RF.allocate(p, k, r0, REFIT_STEPS, policy)
-        self._test_wk = RF.allocate(p, k, r0, TEST_STEPS, policy)
+        works = [RF.allocate(p, k, r0, REFIT_STEPS, policy), RF.allocate(p, k, r0, TEST_STEPS, policy)]
+        # one array for what the per-sample kernel's slices need (``refit.context``): theta, the shift and
+        # the work arrays become views into it
+        self._ctx, self.theta, self._shift, (self._wk, self._test_wk) = RF.context(
+            self.theta, self._shift, self.basis.lam, self.basis.dx, works)
         self._refit_queued = False
         # the change test's snapshots, in slots reused in turn: a test holds its snapshot for ~15
         # units, ``_theta_at`` keeps the last five estimates
@@ -303,9 +313,16 @@ class WindowTracker(ParameterView):
         W.set_estimate(self.theta, self.st, self.basis.lam, self.basis.dx)
 
     # ------------------------------------------------------------------ per sample
-    def feed(self, u: float, y: float) -> int:
-        """One sample (u as applied, y measured; NaN y = missing). Returns the kernel's status."""
-        status = W.sample(u, y, self.st, self.S, self.ring)
+    def feed(self, u: float, y: float, slices: int = 1) -> int:
+        """One sample (u as applied, y measured; NaN y = missing), and ``slices`` slices of the re-fit or
+        change test under way. Returns the kernel's status (``window.sample``'s)."""
+        if self.machine is None:
+            status = W.sample(u, y, self.st, self.S, self.ring)
+        else:
+            status = RF.sample_work(u, y, self.st, self.S, self.ring, self._ctx, self.machine, slices)
+            if status >= RF.MACHINE_DONE:
+                self.machine = None
+                status -= RF.MACHINE_DONE
         if status >= 8:
             self._schedule()
         return status
@@ -347,6 +364,8 @@ class WindowTracker(ParameterView):
         Returns False when the job at the head waits for more samples (nothing to do now).
         """
         while units > 0 and self._jobs:
+            if self.machine is not None:
+                return False               # the per-sample kernel runs it (``feed``), or ``finish``
             units -= 1
             job = self._next_job()
             step = next(job, StopIteration)
@@ -372,8 +391,19 @@ class WindowTracker(ParameterView):
 
     def finish(self) -> None:
         """Run the queued jobs to completion, or until the one at the head waits for samples (block mode)."""
-        while self._jobs and self.work(1 << 30):
-            pass
+        while self._jobs:
+            if self.machine is not None:
+                wk = (self._wk, self._test_wk)[self.machine]
+                RF.run(self.st, self.S, self._shift, self.theta, wk, self.basis.lam, self.basis.dx)
+                self.machine = None
+            elif not self.work(1 << 30) and self.machine is None:
+                break
+
+    def _run_machine(self, which: int) -> Generator:
+        """Hand a started re-fit (``MACHINE_REFIT``) or change test (``MACHINE_TEST``) to the per-sample
+        kernel; resumes when it is done."""
+        self.machine = which
+        yield MACHINE
 
     def _refit_job(self) -> Generator:
         """A re-fit of the window (``_refit``); while it is queued no other is (``_schedule``)."""
@@ -383,13 +413,9 @@ class WindowTracker(ParameterView):
             self._refit_queued = False
 
     def _refit(self) -> Generator:
-        """The re-fit's stages (``refit.refit_unit``, one per unit), then the result swapped in."""
-        args = (self.st, self.S, self._shift, self.theta, self._wk, self.basis.lam, self.basis.dx,
-                self.window_start, self.drift_on, self.converged, self.refits)
-        unit = RF.refit_unit
-        while not unit(*args):
-            yield
-        yield
+        """The re-fit (``refit.begin``, then its slices in the per-sample kernel), then the result swapped in."""
+        RF.begin(self.st, self._wk, self.window_start, self.drift_on, self.converged, self.refits)
+        yield from self._run_machine(MACHINE_REFIT)
         yield from self._accept()
 
     def _accept(self) -> Generator:
@@ -533,12 +559,7 @@ class WindowTracker(ParameterView):
                       self.n_rate > 0 and not self.drift_on)
         nr = self.n - n0
         lin = (self.a1l, self.a2l)
-        args = (self.st, self.S, self._shift, self.theta, wk, self.basis.lam, self.basis.dx, 0, False, False, 0)
-        unit = RF.refit_unit
-        yield
-        while not unit(*args):             # TEST_STEPS Levenberg-Marquardt steps, then the covariance
-            yield
-        yield
+        yield from self._run_machine(MACHINE_TEST)   # TEST_STEPS Levenberg-Marquardt steps, then the covariance
         r = RF.test_outcome(wk, self.theta)   # plain floats from here on (numpy from Python is slow here)
         if not (math.isfinite(r.after) and r.after > 0.0 and math.isfinite(r.before)):
             return
@@ -592,6 +613,7 @@ class WindowTracker(ParameterView):
         self._misfit_since = None
         self._first_fit = None
         self._research_wait = int(RESEARCH_AFTER_S / self.h)
+        self.machine = None
         self._jobs = [self._research_job(self.n)]
 
     def _research_job(self, n_detect: int) -> Generator:

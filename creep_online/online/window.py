@@ -292,25 +292,21 @@ def rereference(st: np.ndarray, S: np.ndarray, n_new: float) -> None:
     V[:, 0] = m[:nv]
     if nr > 1:
         V[:, 1] = md
-    G = np.zeros((p, nr))            # full(S) @ V, from the upper triangle
-    for i in range(p):
-        for j in range(nv):
-            sij = S[i, j] if i <= j else S[j, i]
-            for k in range(nr):
-                G[i, k] += sij * V[j, k]
+    Gt = np.empty((nr, p))           # (full(S) @ V)^T, from the upper triangle
+    _upper_times(S, V, Gt)
     vg = np.zeros((nr, nr))
     for k in range(nr):
         for l in range(nr):
             for j in range(nv):
-                vg[k, l] += V[j, k] * G[j, l]
+                vg[k, l] += V[j, k] * Gt[l, j]
     r0 = p - nr
     for l in range(nr):
         j = r0 + l
         for i in range(j + 1):
-            v = S[i, j] - t * G[i, l]
+            v = S[i, j] - t * Gt[l, i]
             if i >= r0:
                 k = i - r0
-                v += -t * G[j, k] + t * t * vg[k, l]
+                v += -t * Gt[k, j] + t * t * vg[k, l]
             S[i, j] = v
             S[j, i] = v                  # the statistics are kept whole (see _accumulate)
     vs = np.zeros(nr)
@@ -319,6 +315,35 @@ def rereference(st: np.ndarray, S: np.ndarray, n_new: float) -> None:
             vs[k] += V[j, k] * sy[j]
     for k in range(nr):
         sy[r0 + k] -= t * vs[k]
+
+
+@njit(cache=CACHE)
+def _upper_times(S: np.ndarray, V: np.ndarray, Gt: np.ndarray) -> None:
+    """Gt = (full(S)[:, :n] @ V)^T (n = rows of V, one or two columns) from S's upper triangle; each
+    sum over j in ascending order.
+
+    One pass over S with the sums in local variables: written as ``G[i, k] += ...`` in the innermost
+    loop, the compiler kept them in memory (the arrays might alias) and the 51 x 48 x 2 product took
+    ~18 us, more than a whole Levenberg-Marquardt step; this takes ~2 us."""
+    n, nr = V.shape
+    p = Gt.shape[1]
+    two = nr > 1
+    for i in range(p):
+        t0 = 0.0
+        t1 = 0.0
+        for j in range(min(i, n)):       # below the diagonal: S[j, i]
+            sij = S[j, i]
+            t0 += sij * V[j, 0]
+            if two:
+                t1 += sij * V[j, 1]
+        for j in range(i, n):
+            sij = S[i, j]
+            t0 += sij * V[j, 0]
+            if two:
+                t1 += sij * V[j, 1]
+        Gt[0, i] = t0
+        if two:
+            Gt[1, i] = t1
 
 
 @njit(cache=CACHE)
@@ -345,11 +370,17 @@ def move_origin(st: np.ndarray, S: np.ndarray, shift: np.ndarray) -> None:
 @njit(cache=CACHE)
 def scaled_statistics(st: np.ndarray, S: np.ndarray, F: np.ndarray, fy: np.ndarray) -> float:
     """F = S / g (full symmetric, from the upper triangle), fy = sy / g; returns fyy = syy / g."""
+    return scaled_rows(st, S, F, fy, 0, S.shape[0])
+
+
+@njit(cache=CACHE)
+def scaled_rows(st: np.ndarray, S: np.ndarray, F: np.ndarray, fy: np.ndarray, i0: int, i1: int) -> float:
+    """Rows i0..i1 of ``scaled_statistics`` (and the columns they mirror); returns fyy."""
     sc = st[:SC_SIZE]
     q, p, m, sy, md = parts(st)
     g = sc[SC_G]
-    symmetrize(S, F, 1.0 / g)
-    for i in range(p):
+    symmetrize_rows(S, F, 1.0 / g, i0, i1)
+    for i in range(i0, i1):
         fy[i] = sy[i] / g
     return sc[SC_SYY] / g
 
@@ -391,12 +422,14 @@ def since_statistics(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndar
     if nr > 0:
         nv, r0 = q + ONE, p - nr
         D = shift - shift0
-        G = np.zeros((p, nr))            # S0[:, :nv] @ D
+        G = np.empty((p, nr))            # S0[:, :nv] @ D (sums in locals: see ``_upper_times``)
         for i in range(p):
-            for j in range(nv):
-                s0 = S0[i, j]
-                for k in range(nr):
-                    G[i, k] += s0 * D[j, k]
+            S0i = S0[i]
+            for k in range(nr):
+                t = 0.0
+                for j in range(nv):
+                    t += S0i[j] * D[j, k]
+                G[i, k] = t
         for k in range(nr):              # dS[:, r0:] += G, dS[r0:, :] += G^T, dS[r0:, r0:] -= D^T G[:nv]
             j = r0 + k
             for i in range(j + 1):
@@ -741,8 +774,14 @@ def block(u: np.ndarray, y: np.ndarray, st: np.ndarray, S: np.ndarray, ring: np.
 @njit(cache=CACHE)
 def symmetrize(S: np.ndarray, out: np.ndarray, scale: float) -> None:
     """out = scale * (full symmetric matrix whose upper triangle is S)."""
+    symmetrize_rows(S, out, scale, 0, S.shape[0])
+
+
+@njit(cache=CACHE)
+def symmetrize_rows(S: np.ndarray, out: np.ndarray, scale: float, i0: int, i1: int) -> None:
+    """Rows i0..i1 of ``symmetrize``'s upper triangle, and their mirror below the diagonal."""
     p = S.shape[0]
-    for i in range(p):
+    for i in range(i0, i1):
         for j in range(i, p):
             v = S[i, j] * scale
             out[i, j] = v
@@ -756,8 +795,23 @@ def cost_of(theta: np.ndarray, a1l: float, a2l: float, lam: np.ndarray, dx: floa
     p = fy.shape[0]
     m = np.empty(p)
     full_coefficients(theta, a1l, a2l, lam, dx, m)
-    fm = np.dot(F, m)
-    return fyy - 2.0 * np.dot(m, fy) + np.dot(m, fm)
+    return cost_rows(F, fy, m, 0, p, fyy)
+
+
+@njit(cache=CACHE, fastmath=FAST)
+def cost_rows(F: np.ndarray, fy: np.ndarray, m: np.ndarray, i0: int, i1: int, partial: float) -> float:
+    """``partial`` plus rows i0..i1 of the window cost's sum m_i ((F m)_i - 2 fy_i): started at fyy and
+    run over all rows, the cost at coefficients m. In row slices, it is the same sum in the same order
+    (the re-fit spreads it over samples, ``refit.refit_unit``)."""
+    p = fy.shape[0]
+    c = partial
+    for i in range(i0, i1):
+        Fi = F[i]
+        t = 0.0
+        for j in range(p):
+            t += Fi[j] * m[j]
+        c += m[i] * (t - 2.0 * fy[i])
+    return c
 
 
 @njit(cache=CACHE)
@@ -801,15 +855,24 @@ def jacobian_coefficients(theta: np.ndarray, a1l: float, a2l: float, lam: np.nda
                           C: np.ndarray) -> None:
     """Columns of C: d(phi . m)/d theta_j as coefficient vectors over phi (analytic)."""
     q = lam.shape[0]
+    v = np.empty(q + 2)
+    dv = np.empty(q + 2)
+    model_coefficients(theta[0], lam, dx, math.exp(theta[1]), math.exp(theta[2]), v, dv)
+    jacobian_assemble(theta, a1l, a2l, lam, dx, v, dv, C)
+
+
+@njit(cache=CACHE)
+def jacobian_assemble(theta: np.ndarray, a1l: float, a2l: float, lam: np.ndarray, dx: float, v: np.ndarray,
+                      dv: np.ndarray, C: np.ndarray) -> None:
+    """The second half of ``jacobian_coefficients``: C from the model coefficients v and dv/dalpha at theta
+    (``kernels.model_coefficients``) and their resonance derivatives."""
+    q = lam.shape[0]
     n = C.shape[1]
     a1 = math.exp(theta[1])
     a2 = math.exp(theta[2])
     b = theta[3]
-    v = np.empty(q + 2)
-    dv = np.empty(q + 2)
     va1 = np.empty(q + 2)
     va2 = np.empty(q + 2)
-    model_coefficients(theta[0], lam, dx, a1, a2, v, dv)
     _resonance_derivatives(theta[0], lam, dx, a1, a2, va1, va2)
     C[:, :] = 0.0
     d1 = a1 - a1l
@@ -841,21 +904,44 @@ def normal_equations(theta: np.ndarray, C: np.ndarray, F: np.ndarray, fy: np.nda
     drift rates are unit vectors on the rest. With F split the same way, J^T J = [[A^T F11 A, A^T F12],
     [F21 A, F22]]: about a third of the multiply-adds of the dense C^T F C, and no BLAS call (whose
     set-up dominated at these sizes). The model coefficients are m = C[:, 3:] theta[3:].
+
+    Three parts (``normal_prepare``, ``normal_rows``, ``normal_finish``) that the re-fit runs as
+    separate slices of background work; here in one call.
     """
     p, k = C.shape
+    At = np.empty((4, p - (k - 4)))
+    m = np.empty(p)
+    FA = np.empty((p, 4))
+    fm = np.empty(p)
+    H = np.empty((k, k))
+    g = np.empty(k)
+    normal_prepare(theta, C, At, m)
+    normal_rows(F, At, m, FA, fm, 0, p)
+    cost = normal_finish(At, m, FA, fm, F, fy, fyy, H, g)
+    return H, g, cost
+
+
+@njit(cache=CACHE)
+def normal_prepare(theta: np.ndarray, C: np.ndarray, At: np.ndarray, m: np.ndarray) -> None:
+    """A^T (the model block of C, contiguous: the row loops vectorize) and the model coefficients m."""
+    p, k = C.shape
     mq = p - (k - 4)                   # rows of the model part (Q + 6)
-    At = np.empty((4, mq))             # A^T, contiguous: the row loops below vectorize
     for j in range(mq):
         for c in range(4):
             At[c, j] = C[j, c]
-    m = np.empty(p)
     for i in range(mq):
         m[i] = At[3, i] * theta[3]
     for i in range(mq, p):
         m[i] = theta[4 + i - mq]
-    FA = np.empty((p, 4))              # F[:, :mq] A
-    fm = np.empty(p)                   # F m
-    for i in range(p):
+
+
+@njit(cache=CACHE, fastmath=FAST)
+def normal_rows(F: np.ndarray, At: np.ndarray, m: np.ndarray, FA: np.ndarray, fm: np.ndarray,
+                i0: int, i1: int) -> None:
+    """Rows i0..i1 of F[:, :mq] A and of F m (the O(P^2) part of the normal equations)."""
+    mq = At.shape[1]
+    p = m.shape[0]
+    for i in range(i0, i1):
         Fi = F[i]
         for c in range(4):
             t = 0.0
@@ -866,11 +952,18 @@ def normal_equations(theta: np.ndarray, C: np.ndarray, F: np.ndarray, fy: np.nda
         for j in range(p):
             t += Fi[j] * m[j]
         fm[i] = t
+
+
+@njit(cache=CACHE, fastmath=FAST)
+def normal_finish(At: np.ndarray, m: np.ndarray, FA: np.ndarray, fm: np.ndarray, F: np.ndarray,
+                  fy: np.ndarray, fyy: float, H: np.ndarray, g: np.ndarray) -> float:
+    """J^T J into H, J^T r into g from the rows; returns the window cost."""
+    mq = At.shape[1]
+    p = m.shape[0]
+    k = H.shape[0]
     cost = fyy
     for i in range(p):
         cost += m[i] * (fm[i] - 2.0 * fy[i])
-    H = np.empty((k, k))
-    g = np.empty(k)
     for a in range(4):
         for c in range(4):
             t = 0.0
@@ -888,7 +981,7 @@ def normal_equations(theta: np.ndarray, C: np.ndarray, F: np.ndarray, fy: np.nda
         for c in range(4, k):
             H[a, c] = F[mq + a - 4, mq + c - 4]
         g[a] = fy[mq + a - 4] - fm[mq + a - 4]
-    return H, g, cost
+    return cost
 
 
 @njit(cache=CACHE)
@@ -898,8 +991,20 @@ def lm_trial(theta: np.ndarray, free: np.ndarray, mu: float, H: np.ndarray, g: n
     """The damped Gauss-Newton step; theta updated in place if the window cost drops.
 
     ``free[j]`` = 1 lets parameter j move. ``out`` = [cost before, cost
-    after, accepted]. Returns the next damping ``mu``.
+    after, accepted]. Returns the next damping ``mu``. Three parts (``trial_point``, the trial's cost,
+    ``trial_verdict``) that the re-fit runs as separate slices of background work; here in one call.
     """
+    trial = np.empty(theta.shape[0])
+    ok, mu_fail = trial_point(theta, free, mu, H, g, cost, lo, hi, trial, out)
+    if not ok:
+        return mu_fail
+    return trial_verdict(theta, trial, cost_of(trial, a1l, a2l, lam, dx, F, fy, fyy), cost, mu, out)
+
+
+@njit(cache=CACHE)
+def trial_point(theta: np.ndarray, free: np.ndarray, mu: float, H: np.ndarray, g: np.ndarray, cost: float,
+                lo: float, hi: float, trial: np.ndarray, out: np.ndarray) -> tuple:
+    """The damped Gauss-Newton step from theta into ``trial``; returns (solved, the damping if not)."""
     n = theta.shape[0]
     A = H.copy()
     r = g.copy()
@@ -918,27 +1023,33 @@ def lm_trial(theta: np.ndarray, free: np.ndarray, mu: float, H: np.ndarray, g: n
     out[0] = cost
     out[1] = cost
     out[2] = 0.0
+    failed = min(mu * 10.0, 1e8)
     d = np.sqrt(np.abs(np.diag(A))) + 1e-300
     An = A / np.outer(d, d)
     rhs = r / d
     if not (np.all(np.isfinite(An)) and np.all(np.isfinite(rhs))):
-        return min(mu * 10.0, 1e8)
+        return False, failed
     L = np.empty((n, n))
     if not _cholesky(An, L):
-        return min(mu * 10.0, 1e8)
+        return False, failed
     step = np.empty(n)
     _cholesky_solve(L, rhs, step)
     step /= d
     if not np.all(np.isfinite(step)):
-        return min(mu * 10.0, 1e8)
-    trial = theta.copy()
+        return False, failed
     for i in range(n):
         s = step[i]
         if i == 1 or i == 2:
             s = min(max(s, -0.3), 0.3)
         trial[i] = theta[i] + s
     trial[0] = min(max(trial[0], lo), hi)
-    c_new = cost_of(trial, a1l, a2l, lam, dx, F, fy, fyy)
+    return True, mu
+
+
+@njit(cache=CACHE)
+def trial_verdict(theta: np.ndarray, trial: np.ndarray, c_new: float, cost: float, mu: float,
+                  out: np.ndarray) -> float:
+    """Take the trial if the window cost dropped; returns the next damping."""
     if c_new == c_new and c_new < cost:
         theta[:] = trial
         out[1] = c_new
@@ -965,19 +1076,37 @@ def lm_normal(theta: np.ndarray, a1l: float, a2l: float, lam: np.ndarray, dx: fl
 def covariance(H: np.ndarray, free: np.ndarray, cov: np.ndarray) -> None:
     """inv(J^T J) over the free parameters (unscaled: times sigma^2); inf where it is singular."""
     n = H.shape[0]
+    L = np.empty((n, n))
+    d = np.empty(n)
+    ok = covariance_factor(H, free, L, d)
+    covariance_inverse(L, d, ok, cov)
+
+
+@njit(cache=CACHE)
+def covariance_factor(H: np.ndarray, free: np.ndarray, L: np.ndarray, d: np.ndarray) -> bool:
+    """The first half of ``covariance``: the Cholesky factor L of J^T J over the free parameters, scaled to
+    a unit diagonal by d; False where it is singular."""
+    n = H.shape[0]
     A = H.copy()
     for i in range(n):
         if free[i] == 0.0:
             A[i, :] = 0.0
             A[:, i] = 0.0
             A[i, i] = 1.0
-    d = np.sqrt(np.abs(np.diag(A))) + 1e-300
+    d[:] = np.sqrt(np.abs(np.diag(A))) + 1e-300
     An = A / np.outer(d, d)
-    cov[:, :] = np.inf
     if not np.all(np.isfinite(An)):
-        return
-    L = np.empty((n, n))
-    if not _cholesky(An, L):
+        return False
+    return _cholesky(An, L)
+
+
+@njit(cache=CACHE)
+def covariance_inverse(L: np.ndarray, d: np.ndarray, ok: bool, cov: np.ndarray) -> None:
+    """The second half of ``covariance``: the inverse from the factor (all inf if it failed or the
+    matrix is too ill-conditioned for its inverse to mean anything)."""
+    n = L.shape[0]
+    cov[:, :] = np.inf
+    if not ok:
         return
     inv = np.empty((n, n))
     e = np.zeros(n)
