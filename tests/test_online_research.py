@@ -148,7 +148,8 @@ def test_a_research_reaches_the_stream_json_text_and_trace(wrong_basin_record, t
     with open(trace, newline="") as f:
         rows = list(csv.DictReader(f))
     assert rows[0]["researches"] == "" and rows[-1]["researches"].startswith(f"{switched[0]['t']:.4g}:")
-    assert main(["stream", "--source", f"csv:{path}", "--block"]) == 0
+    # the same feed (block mode in the trace's 10 ms chunks: where a waiting job resumes depends on them)
+    assert main(["stream", "--source", f"csv:{path}", "--block", "--trace", str(tmp_path / "again.csv")]) == 0
     text = capsys.readouterr().out
     assert f"resonance re-searched at t = {switched[0]['t']:.4g} s" in text and "likelihood ratio" in text
 

@@ -104,6 +104,11 @@ DRIFT_TEST_EVERY = 5
 DRIFT_MAX = 0.02
 #: Re-search trigger: the window's rms error above this multiple of the noise floor ...
 RESEARCH_RATIO = 1.5
+#: (a run of misfits ends only when the error falls below this multiple: between the two a misfit run
+#: goes on, so one re-fit dipping below RESEARCH_RATIO does not reset it; seen: a start-up search in a
+#: wrong basin hovered at 1.4-1.6x, a dip to 1.39x restarted the run and the change test reported the
+#: wrong estimate as a plant change, a2 +2000 %, before the re-search could start)
+MISFIT_CLEAR_RATIO = 1.25
 #: ... for this long (s), or a broken fit (non-finite cost), starts a search of the resonance on the
 #: recent samples with the live estimate as a candidate.
 RESEARCH_AFTER_S = 1.0
@@ -718,7 +723,8 @@ class WindowTracker(ParameterView):
         if not self.fitting or self._researching():
             return
         if not (broken or (floor > 0.0 and rms > RESEARCH_RATIO * floor)):
-            self._misfit_since = None
+            if not (floor > 0.0 and rms > MISFIT_CLEAR_RATIO * floor):
+                self._misfit_since = None
             return
         if self._misfit_since is None:
             self._misfit_since = n
