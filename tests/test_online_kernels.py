@@ -294,16 +294,16 @@ def test_refit_machine_equals_its_kernels_in_sequence():
         mu = W.lm_trial(theta, free, mu, H, g, cost, tr.a1l, tr.a2l, lam, dx, F, fy, fyy, *tr.alpha_bounds, out)
     cov = np.empty_like(H)
     W.covariance(H, free, cov)
-    RF.begin(tr.st, tr._wk, 0, False, False, 1)
+    RF.begin(tr.st, tr.S, tr._shift, tr._wk, 0, False, False, 1)      # (with the drift-origin move)
     units = 1
     while not RF.refit_unit(tr.st, tr.S, tr._shift, tr.theta, tr._wk, lam, dx):
         units += 1
     normal_slices = -(-tr.p // int(tr._wk[RF.RF_NORMAL_ROWS]))
     cost_slices = -(-tr.p // int(tr._wk[RF.RF_COST_ROWS]))
     assert normal_slices > 1                          # the slices are exercised
-    # drift origin, scaling (2); per step the model coefficients, the Jacobian's, the rows, the solve, the
-    # trial's coefficients, its cost; the covariance's factor and inverse
-    assert units == 3 + T.REFIT_STEPS * (2 + normal_slices + 2 + cost_slices) + 2
+    # scaling (2); per step the model coefficients, the Jacobian's, the rows, the solve, the trial's
+    # coefficients, its cost; the covariance's factor and inverse
+    assert units == 2 + T.REFIT_STEPS * (2 + normal_slices + 2 + cost_slices) + 2
     head, fitted, var = RF.result(tr._wk)
     assert np.array_equal(fitted, theta) and np.array_equal(var, np.diag(cov))
     assert head[RF.RF_AFTER] == out[1] and head[RF.RF_DRIFT] == 0.0

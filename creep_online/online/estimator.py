@@ -724,11 +724,11 @@ def warm_kernels() -> None:
         wk = tr._wk.copy()
         wk[RF.RF_NEFF] = 1e6
         wk[RF.RF_DRIFT_MIN_N] = 0.0
-        RF.begin(st, wk, 1, drift == 2, True, 0)
+        RF.begin(st, S, shift, wk, 1, drift == 2, True, 0)
         RF.run(st, S, shift, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)
         RF.accept(st, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)
         RF.test_outcome(wk, tr.theta)
-    RF.begin(tr.st, tr._wk, 1, False, True, 0)      # (this estimator is thrown away)
+    RF.begin(tr.st, tr.S, tr._shift, tr._wk, 1, False, True, 0)      # (this estimator is thrown away)
     RF.sample_work(0.0, 0.0, tr.st, tr.S, tr.ring, tr._ctx, T.MACHINE_REFIT, 1)
     T.WindowTracker  # noqa: B018 - imported for its kernels
     R.warm()

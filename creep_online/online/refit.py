@@ -73,14 +73,14 @@ HEAD = 40
 #: ~1-2 us more on ~2 % of its samples, not 7-45 us on ~1 % of them.
 SLICE_MACS = 4000
 
-#: Stages of a fit, in order: (idle until ``begin`` or ``start_test``), move the drift origin, the
-#: statistics at true scale (two slices); per Levenberg-Marquardt step the model coefficients, the
+#: Stages of a fit, in order: (idle until ``begin``, which also moves the drift origin, or
+#: ``start_test``), the statistics at true scale (two slices); per Levenberg-Marquardt step the model coefficients, the
 #: Jacobian's, the normal equations' rows in slices and their assembly, the damped step, the trial's
 #: coefficients, the trial's cost in slices and the verdict; then the covariance's factor, its inverse
 #: (and the Wald test), and for the score test the normal equations again at the result and the score.
 #: Each call does one stage or slice: about a microsecond of work (``SLICE_MACS``).
-(ST_IDLE, ST_START, ST_SCALE, ST_JACOBIAN, ST_ASSEMBLE, ST_ROWS, ST_SOLVE, ST_TRIAL_POINT, ST_TRIAL,
- ST_COVARIANCE, ST_INVERSE, ST_SCORE) = range(12)
+(ST_IDLE, ST_SCALE, ST_JACOBIAN, ST_ASSEMBLE, ST_ROWS, ST_SOLVE, ST_TRIAL_POINT, ST_TRIAL,
+ ST_COVARIANCE, ST_INVERSE, ST_SCORE) = range(11)
 
 #: Parameter masks (rows of the masks block): all free, drift rates fixed, alpha and rates fixed, the
 #: change test's (the resonance, the gain and the offset), and the change test's with the drift rates.
@@ -166,11 +166,15 @@ def _scratch(wk: np.ndarray, p: int, k: int, q: int) -> tuple:
 
 
 @njit(cache=CACHE)
-def begin(st: np.ndarray, wk: np.ndarray, window_start: int, drift_on: bool, converged: bool, refits: int) -> None:
-    """Start a re-fit of the window: what it frees and which drift test follows (``_plan``); the
-    tracker's state decides. ``refit_unit`` (or ``sample_work``) then runs it."""
+def begin(st: np.ndarray, S: np.ndarray, shift: np.ndarray, wk: np.ndarray, window_start: int, drift_on: bool,
+          converged: bool, refits: int) -> None:
+    """Start a re-fit of the window: what it frees and which drift test follows (``_plan``; the tracker's
+    state decides), and the drift origin to the newest sample (``window.move_origin``: alpha and b of the
+    fit are then the values now). ``refit_unit`` (or ``sample_work``) then runs it."""
     _plan(wk, st[W.SC_N], window_start, drift_on, converged, refits)
-    wk[RF_STAGE] = ST_START
+    W.move_origin(st, S, shift)
+    wk[RF_ROW] = 0.0
+    wk[RF_STAGE] = ST_SCALE
 
 
 @njit(cache=CACHE)
@@ -205,11 +209,6 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
     stage = int(wk[RF_STAGE])
     if stage == ST_IDLE:
         return True
-    if stage == ST_START:              # the drift origin to the newest sample
-        W.move_origin(st, S, shift)
-        wk[RF_ROW] = 0.0
-        wk[RF_STAGE] = ST_SCALE
-        return False
     if stage == ST_SCALE:              # the statistics at true scale, frozen for the fit (two slices: the
         i0 = int(wk[RF_ROW])           # first rows hold half of the upper triangle)
         i1 = p - int(p / math.sqrt(2.0)) if i0 == 0 else p

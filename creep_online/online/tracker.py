@@ -348,7 +348,12 @@ class WindowTracker(ParameterView):
         n = self.n
         if n and n % self.refit_every == 0 and self.fitting and not self._refit_queued:
             self._refit_queued = True      # (a backlog would only re-fit the same statistics again)
-            self._jobs.append(self._refit_job())
+            # started here if nothing runs before it: this sample runs Python anyway, and a cold visit
+            # to the interpreter costs more than the work (the next sample would have paid ~20 us)
+            started = self.machine is None and not any(j.__name__ in PERIODIC_JOBS for j in self._jobs)
+            if started:
+                self._begin_refit()
+            self._jobs.append(self._refit_job(started))
         if self.detect and n and n % self.test_every == 0:
             self._snapshot()
             if len(self._snaps) > 2:
@@ -410,24 +415,30 @@ class WindowTracker(ParameterView):
         self.machine = which
         yield MACHINE
 
-    def _refit_job(self) -> Generator:
-        """A re-fit of the window (``_refit``); while it is queued no other is (``_schedule``)."""
+    def _refit_job(self, started: bool = False) -> Generator:
+        """A re-fit of the window: ``_begin_refit`` (unless ``started`` already at the due sample), its slices in
+        the per-sample kernel, then the result swapped in (``_accept``); while it is queued no other is
+        (``_schedule``)."""
         try:
-            yield from self._refit()
+            if not started:
+                self._begin_refit()
+                yield MACHINE
+            self._accept()
         finally:
             self._refit_queued = False
 
-    def _refit(self) -> Generator:
-        """The re-fit (``refit.begin``, then its slices in the per-sample kernel), then the result swapped in."""
-        RF.begin(self.st, self._wk, self.window_start, self.drift_on, self.converged, self.refits)
-        yield from self._run_machine(MACHINE_REFIT)
-        yield from self._accept()
+    def _begin_refit(self) -> None:
+        """Start a re-fit (``refit.begin``) and hand it to the per-sample kernel."""
+        RF.begin(self.st, self.S, self._shift, self._wk, self.window_start, self.drift_on, self.converged,
+                 self.refits)
+        self.machine = MACHINE_REFIT
 
-    def _accept(self) -> Generator:
+    def _accept(self) -> None:
         """Swap a finished re-fit in (``refit.accept``, one kernel), then record it and what it triggers.
 
         Plain floats from one tuple: numpy from Python is slow here (cold code paths). The ``Fit``
         with its 1-sigma dictionary is built when someone asks for it (``fit``), not in update().
+        One unit: each visit to cold Python costs ~10-20 us of its own, so fewer, longer visits.
         """
         r = RF.accept(self.st, self.theta, self._wk, self.basis.lam, self.basis.dx)
         if r.drift:
@@ -442,7 +453,6 @@ class WindowTracker(ParameterView):
             return
         self.converged = self.converged or r.move < 0.01
         self.refits += 1
-        yield
         self._fit, self._fit_raw, self._fit_sample = None, (r, self.drift_on), r.n
         if self._first_fit is None:
             self._first_fit = r.n
@@ -559,7 +569,7 @@ class WindowTracker(ParameterView):
         # over a second the drift is not negligible (alpha +0.7 %/s at a 2e-4 noise on a 0.5 output is ~5
         # noise levels), and without it a drifting plant's step looked like a change
         wk = self._test_wk
-        yield                              # (the checks above, then the statistics: two units)
+        # (the checks above and the statistics: one unit, one visit to cold Python)
         RF.start_test(self.st, self.S, S0, sy0, syy0, self._shift, shift0, self.theta, wk,
                       self.n_rate > 0 and not self.drift_on)
         nr = self.n - n0
@@ -570,6 +580,13 @@ class WindowTracker(ParameterView):
             return
         sigma2 = r.after / max(nr - 4, 1)
         lr = (r.before - r.after) / sigma2
+        # the test is calibrated against its own recent level: a drifting plant (or a model that is
+        # slightly off) raises the statistic slowly and evenly, a change makes it jump
+        level = _median(self._lr_recent) if len(self._lr_recent) >= 4 else 0.0
+        if lr <= DISAGREE_LR and lr < max(CHANGE_LR, CHANGE_JUMP * level):
+            self.disagreement = None       # the common case, without the dictionaries below (cold Python)
+            self._lr_recent = (self._lr_recent + [lr])[-CHANGE_HISTORY:]
+            return
         moves = {"a1": math.exp(r.ln_a1 - r.live_ln_a1) - 1, "a2": math.exp(r.ln_a2 - r.live_ln_a2) - 1,
                  "b": r.b / r.live_b - 1 if r.live_b else 0.0}
         # relative 1-sigma of the recent fit (ln a1, ln a2 are relative already)
@@ -581,9 +598,6 @@ class WindowTracker(ParameterView):
         size = {"a1": abs(r.ln_a1 - r.live_ln_a1), "a2": abs(r.ln_a2 - r.live_ln_a2), "b": abs(moves["b"])}
         moved = {k: v for k, v in moves.items()
                  if abs(v) > CHANGE_MOVE[k] and size[k] > CHANGE_SIGMAS * rel_sd[k]}
-        # the test is calibrated against its own recent level: a drifting plant (or a model that is
-        # slightly off) raises the statistic slowly and evenly, a change makes it jump
-        level = _median(self._lr_recent) if len(self._lr_recent) >= 4 else 0.0
         self.disagreement = {"t": self.n * self.h, "lr": float(lr), "moves": {k: float(v) for k, v in moved.items()}} \
             if lr > DISAGREE_LR and moved else None
         if lr < max(CHANGE_LR, CHANGE_JUMP * level) or not moved or lin != (self.a1l, self.a2l):
