@@ -722,23 +722,3 @@ def expm_directional(x: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray,
         eps = 1e-20 * size / max(np.max(np.abs(directions[k])), 1e-300)
         out[k] = expm_small(x + 1j * eps * directions[k]).imag / eps
     return e, out
-
-
-@njit(cache=CACHE)
-def second_difference_mad(y: np.ndarray) -> float:
-    """Median absolute deviation of the second differences of y / sqrt(6) (``metrics.noise_std_estimate``).
-
-    The same value as ``np.median(abs(d2 - np.median(d2)))`` with d2 =
-    ``np.diff(y, 2) / sqrt(6)`` (same operations per element; the medians are
-    exact selections) in one buffer and one pass per stage: numpy's version
-    cost ~4 ms per 100,000 samples, twice per identify. Finite y only.
-    """
-    n = y.size - 2
-    d2 = np.empty(n)
-    root6 = np.sqrt(6.0)
-    for i in range(n):
-        d2[i] = ((y[i + 2] - y[i + 1]) - (y[i + 1] - y[i])) / root6
-    centre = np.median(d2)
-    for i in range(n):
-        d2[i] = abs(d2[i] - centre)
-    return np.median(d2)
