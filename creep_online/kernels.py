@@ -203,27 +203,40 @@ def superpose_steps_rows(step_responses: np.ndarray, index: np.ndarray, size: np
 @njit(cache=CACHE)
 def foh_grid_costs(z: np.ndarray, y: np.ndarray, phi: np.ndarray, g0: np.ndarray, g1: np.ndarray,
                    h: float) -> np.ndarray:
-    """For each resonance k: min over b of ||y - b s_k||^2, s_k = resonance_foh(z) with (phi, g0, g1)[k]."""
+    """For each resonance k: min over b of ||y - b s_k||^2, s_k = resonance_foh(z) with (phi, g0, g1)[k].
+
+    All grid points march together, the grid innermost: the points are
+    independent, so that loop runs in SIMD lanes (one point per sample
+    outermost was a serial chain of dependent multiply-adds). Each point's
+    arithmetic is ``resonance_foh``'s, in the same order.
+    """
     n_grid = phi.shape[0]
     n = z.shape[0]
     yy = 0.0
     for i in range(n):
         yy += y[i] * y[i]
+    p00, p01 = phi[:, 0, 0].copy(), phi[:, 0, 1].copy()
+    p10, p11 = phi[:, 1, 0].copy(), phi[:, 1, 1].copy()
+    c0, c1 = g0[:, 0].copy(), g0[:, 1].copy()
+    d0, d1 = g1[:, 0].copy(), g1[:, 1].copy()
+    x0 = np.zeros(n_grid)
+    x1 = np.zeros(n_grid)
+    ss = np.zeros(n_grid)
+    sy = np.zeros(n_grid)
+    for i in range(n - 1):
+        zi = z[i]
+        slope = (z[i + 1] - zi) / h
+        yi = y[i + 1]
+        for k in range(n_grid):
+            nx0 = p00[k] * x0[k] + p01[k] * x1[k] + c0[k] * zi + d0[k] * slope
+            nx1 = p10[k] * x0[k] + p11[k] * x1[k] + c1[k] * zi + d1[k] * slope
+            x0[k] = nx0
+            x1[k] = nx1
+            ss[k] += nx0 * nx0
+            sy[k] += nx0 * yi
     costs = np.empty(n_grid)
     for k in range(n_grid):
-        x0 = 0.0
-        x1 = 0.0
-        ss = 0.0
-        sy = 0.0
-        for i in range(n - 1):
-            slope = (z[i + 1] - z[i]) / h
-            nx0 = phi[k, 0, 0] * x0 + phi[k, 0, 1] * x1 + g0[k, 0] * z[i] + g1[k, 0] * slope
-            nx1 = phi[k, 1, 0] * x0 + phi[k, 1, 1] * x1 + g0[k, 1] * z[i] + g1[k, 1] * slope
-            x0 = nx0
-            x1 = nx1
-            ss += x0 * x0
-            sy += x0 * y[i + 1]
-        costs[k] = yy - sy * sy / ss if ss > 0.0 else yy
+        costs[k] = yy - sy[k] * sy[k] / ss[k] if ss[k] > 0.0 else yy
     return costs
 
 
