@@ -612,50 +612,63 @@ def projected_normal_equations(s: np.ndarray, ds: np.ndarray, r: np.ndarray, b: 
     J's row k is c0_k s + c1_k - b ds_k (``identification._projected_jacobian``):
     the first pass gathers s.s, sum s, ds_k.s, sum ds_k and ds_k.r, which give
     (c0, c1) from the 2x2 (or 1x1 without the offset) projection; the second
-    accumulates J J' and J r.
+    accumulates J J' and J r. Three parameters (ds of shape (3, n)), spelled
+    out in scalars: the loops over rows with small arrays cost 4x more.
     """
-    k_rows, n = ds.shape
-    ss = 0.0
-    st = 0.0
-    sd = np.zeros(k_rows)
-    dt = np.zeros(k_rows)
-    rd = np.zeros(k_rows)
+    n = ds.shape[1]
+    ss = st = 0.0
+    sd0 = sd1 = sd2 = dt0 = dt1 = dt2 = rd0 = rd1 = rd2 = 0.0
     for i in range(n):
         si = s[i]
+        ri = r[i]
+        d0, d1, d2 = ds[0, i], ds[1, i], ds[2, i]
         ss += si * si
         st += si
-        for k in range(k_rows):
-            d = ds[k, i]
-            sd[k] += d * si
-            dt[k] += d
-            rd[k] += d * r[i]
-    c0 = np.zeros(k_rows)
-    c1 = np.zeros(k_rows)
+        sd0 += d0 * si
+        sd1 += d1 * si
+        sd2 += d2 * si
+        dt0 += d0
+        dt1 += d1
+        dt2 += d2
+        rd0 += d0 * ri
+        rd1 += d1 * ri
+        rd2 += d2 * ri
+    sd = np.array([sd0, sd1, sd2])
+    dt = np.array([dt0, dt1, dt2])
+    rd = np.array([rd0, rd1, rd2])
+    c0 = np.zeros(3)
+    c1 = np.zeros(3)
     if free_offset:
         det = ss * n - st * st
         if det != 0.0:
-            for k in range(k_rows):
+            for k in range(3):
                 x0 = b * sd[k] - rd[k]
                 x1 = b * dt[k]
                 c0[k] = (n * x0 - st * x1) / det
                 c1[k] = (ss * x1 - st * x0) / det
     elif ss > 0.0:
-        for k in range(k_rows):
+        for k in range(3):
             c0[k] = (b * sd[k] - rd[k]) / ss
-    a = np.zeros((k_rows, k_rows))
-    g = np.zeros(k_rows)
-    row = np.empty(k_rows)
+    e0, e1, e2 = c0[0], c0[1], c0[2]
+    f0, f1, f2 = c1[0], c1[1], c1[2]
+    a00 = a01 = a02 = a11 = a12 = a22 = g0 = g1 = g2 = 0.0
     for i in range(n):
-        for k in range(k_rows):
-            row[k] = c0[k] * s[i] + c1[k] - b * ds[k, i]
-        for k in range(k_rows):
-            g[k] += row[k] * r[i]
-            for m in range(k, k_rows):
-                a[k, m] += row[k] * row[m]
-    for k in range(k_rows):
-        for m in range(k):
-            a[k, m] = a[m, k]
-    return a, g
+        si = s[i]
+        ri = r[i]
+        j0 = e0 * si + f0 - b * ds[0, i]
+        j1 = e1 * si + f1 - b * ds[1, i]
+        j2 = e2 * si + f2 - b * ds[2, i]
+        g0 += j0 * ri
+        g1 += j1 * ri
+        g2 += j2 * ri
+        a00 += j0 * j0
+        a01 += j0 * j1
+        a02 += j0 * j2
+        a11 += j1 * j1
+        a12 += j1 * j2
+        a22 += j2 * j2
+    a = np.array([[a00, a01, a02], [a01, a11, a12], [a02, a12, a22]])
+    return a, np.array([g0, g1, g2])
 
 
 #: Taylor degree of ``expm_small`` after scaling to 1-norm <= 1/2: truncation < 0.5^17 / 17! ~ 2e-20.
