@@ -29,7 +29,6 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
 from scipy.special import digamma, rgamma
 
 from . import kernels
@@ -43,6 +42,7 @@ from .model import CreepModel
 from .record import SAFE_AMPLITUDE, Record, check_time_and_output
 from .simulate import fractional_integral, input_changes, superpose, superpose_rows, uniform_step
 from .timing import TimingCheck, check_timing
+from .trf_small import trf
 
 #: At most this many input changes count as a piecewise-constant (step) input.
 MAX_STEP_FRACTION = 0.05
@@ -314,8 +314,9 @@ def layer2_resonance(t: np.ndarray, u: np.ndarray, y: np.ndarray, alpha: float, 
 
     Parameters are log(a1), log(a2); b is projected out. The exact simulator
     runs up to the last masked sample; each evaluation also returns the
-    analytic Jacobian (forward sensitivities), which the trust-region solver
-    asks for at the same point, so no finite-difference simulations.
+    analytic Jacobian (forward sensitivities), so no finite-difference
+    simulations. The trust-region solver is scipy's TRF iteration without its
+    wrappers (``trf_small.trf``, the same steps up to round-off).
     """
     h = float(t[1] - t[0])
     n = int(np.flatnonzero(mask)[-1]) + 1
@@ -335,11 +336,10 @@ def layer2_resonance(t: np.ndarray, u: np.ndarray, y: np.ndarray, alpha: float, 
     start = time.perf_counter()
     lo = [math.log(a1) - 12, math.log(a2) - 12]
     hi = [math.log(a1) + 12, math.log(a2) + 12]
-    sol = least_squares(lambda p: evaluate(p)[0], [math.log(a1), math.log(a2)], jac=lambda p: evaluate(p)[1],
-                        bounds=(lo, hi), method="trf", x_scale=[1.0, 1.0])
-    a1f, a2f = math.exp(sol.x[0]), math.exp(sol.x[1])
-    evaluate(sol.x)
-    info = {"a1": a1f, "a2": a2f, "b": last["b"], "samples": int(m.sum()), "nfev": int(sol.nfev),
+    x, nfev, _ = trf(evaluate, [math.log(a1), math.log(a2)], lo, hi)
+    a1f, a2f = math.exp(x[0]), math.exp(x[1])
+    evaluate(x)
+    info = {"a1": a1f, "a2": a2f, "b": last["b"], "samples": int(m.sum()), "nfev": nfev,
             "elapsed_s": time.perf_counter() - start}
     return a1f, a2f, last["b"], info
 
