@@ -751,16 +751,19 @@ def _retune(t, u, y, h, sched, t_c, alpha, a1, a2, stages) -> float:
     if i_f - i_c < 4 * half:
         return alpha
     creep = sched.since_change > t_c
+    y_creep = y[creep]
 
-    def creep_error(a: float) -> tuple[float, np.ndarray]:
+    def creep_error(a: float) -> tuple[float, float, np.ndarray]:
+        """(error, gain, unit-gain output): the creep regime's samples gathered once per simulation."""
         yh = model_output(a, a1, a2, h, u)
-        g = float(yh[creep] @ y[creep] / (yh[creep] @ yh[creep]))
-        r = y[creep] - g * yh[creep]
-        return float(r @ r), g * yh
+        yh_creep = yh[creep]
+        g = float(yh_creep @ y_creep / (yh_creep @ yh_creep))
+        r = y_creep - g * yh_creep
+        return float(r @ r), g, yh
 
-    err0, yh0 = creep_error(alpha)
-    new = float(np.clip(retune_alpha(alpha, y, yh0, i_c, i_f, half), *ALPHA_BOUNDS))
-    err1, _ = creep_error(new)
+    err0, g0, yh0 = creep_error(alpha)
+    new = float(np.clip(retune_alpha(alpha, y, g0 * yh0, i_c, i_f, half), *ALPHA_BOUNDS))
+    err1, _, _ = creep_error(new)
     keep = err1 < err0
     stages["retune"] = {"alpha_before": alpha, "alpha_eq12": new, "kept": bool(keep)}
     return new if keep else alpha

@@ -87,18 +87,22 @@ def causal_convolve(x: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     return np.fft.irfft(np.fft.rfft(x, m) * np.fft.rfft(k, m), m)[:n]
 
 
-#: The last input and its changes: fits simulate the same input dozens of times, and comparing
-#: it with a copy is cheaper than a diff + nonzero over it (a copy, so in-place edits are seen).
-_LAST_CHANGES: list = [None, None]
+#: The last inputs and their changes: fits simulate the same input dozens of times (identify alternates
+#: between a record's input and its first samples), and comparing it with a copy is cheaper than a
+#: diff + nonzero over it (a copy, so in-place edits are seen). Most recent first.
+_LAST_CHANGES: list = []
+_CACHED_INPUTS = 2
 
 
 def _changes_cached(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """input_changes(u), reused when u equals the previous call's input."""
-    copy, changes = _LAST_CHANGES
-    if copy is not None and copy.shape == u.shape and np.array_equal(copy, u):
-        return changes
+    """input_changes(u), reused when u equals one of the last inputs seen."""
+    for k, (copy, changes) in enumerate(_LAST_CHANGES):
+        if copy.shape == u.shape and np.array_equal(copy, u):
+            _LAST_CHANGES.insert(0, _LAST_CHANGES.pop(k))
+            return changes
     changes = input_changes(u)
-    _LAST_CHANGES[:] = [np.array(u, dtype=float), changes]
+    _LAST_CHANGES.insert(0, (np.array(u, dtype=float), changes))
+    del _LAST_CHANGES[_CACHED_INPUTS:]
     return changes
 
 
