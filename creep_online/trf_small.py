@@ -10,9 +10,8 @@ augmented Jacobian; the step chosen among the trust-region step, its reflection 
 the bound and the scaled gradient), following scipy's ``trf_bounds`` step for step,
 with the n-vectors in Python floats and only the m-sized products in numpy. It
 agrees with least_squares up to round-off (``tests/test_trf_small.py``: the same
-evaluations and minimum on random bounded problems; the SVD is scipy's, since
-numpy's LAPACK rounds differently and a degenerate record then ended elsewhere on
-its flat direction), so layer 2 keeps scipy's behaviour where the data leave a
+evaluations and minimum on random bounded problems; the SVD is scipy's own LAPACK
+call, ``_svd``), so layer 2 keeps scipy's behaviour where the data leave a
 parameter undetermined (the earlier Levenberg-Marquardt replacement wandered
 further along that direction).
 """
@@ -22,7 +21,7 @@ import math
 from typing import Callable
 
 import numpy as np
-from scipy.linalg import svd
+from scipy.linalg import LinAlgError, get_lapack_funcs
 
 EPS = float(np.finfo(float).eps)
 
@@ -58,7 +57,7 @@ def trf(evaluate: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], x0, lb,
         diag_h = [gi * dvi for gi, dvi in zip(g, dv)]
         g_h = [di * gi for di, gi in zip(d, g)]
         j_h = jac * np.array(d)
-        u_svd, s, vt = svd(np.vstack((j_h, np.diag(np.sqrt(diag_h)))), full_matrices=False)  # scipy's LAPACK, as trf
+        u_svd, s, vt = _svd(np.vstack((j_h, np.diag(np.sqrt(diag_h)))))
         uf = (u_svd[:m].T @ f).tolist()
         s, vmat = s.tolist(), vt.T.tolist()
         theta = max(0.995, 1 - g_norm)
@@ -86,6 +85,19 @@ def trf(evaluate: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], x0, lb,
             x, f, jac, cost = x_new, f_new, jac_new, cost_new
             g = (jac.T @ f).tolist()
     return np.array(x), nfev, 0 if status is None else status
+
+
+def _svd(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """scipy.linalg.svd(a, full_matrices=False), as trf calls it, without its wrappers (~25 us a call):
+    the same LAPACK routine (gesdd) with the same optimal work size, so the same factors bit for bit.
+    scipy's SVD, not numpy's: their LAPACKs round differently, and a degenerate record then ended
+    elsewhere on its flat direction."""
+    gesdd, gesdd_lwork = get_lapack_funcs(("gesdd", "gesdd_lwork"), (a,), ilp64="preferred")
+    work, info = gesdd_lwork(a.shape[0], a.shape[1], compute_uv=1, full_matrices=0)
+    u, s, vt, info = gesdd(a, compute_uv=1, lwork=int(work.real), full_matrices=0)
+    if info != 0:
+        raise LinAlgError(f"SVD did not converge (gesdd info {info})")
+    return u, s, vt
 
 
 def _norm(v) -> float:

@@ -69,3 +69,14 @@ def test_an_unidentifiable_parameter_stops_where_scipy_stops():
     x_ref, nfev_ref, status_ref = _scipy(evaluate, np.array([0.5, 1.0]), lb, ub)
     assert (nfev, status) == (nfev_ref, status_ref)
     np.testing.assert_allclose(x, x_ref, rtol=1e-9)
+
+
+def test_the_svd_is_scipys_bit_for_bit():
+    from scipy.linalg import svd
+
+    from creep_online.trf_small import _svd
+    rng = np.random.default_rng(0)
+    for shape in ((4, 2), (600, 2), (37, 3)):
+        a = rng.standard_normal(shape)
+        for got, want in zip(_svd(a), svd(a, full_matrices=False)):
+            assert np.array_equal(got, want)
