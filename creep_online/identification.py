@@ -1,7 +1,8 @@
 """Batch identification: the paper's two layers, made fast.
 
 The scheme of Tashakori et al. (Actuators 2024, 13, 534), output-error least
-squares with trust-region-reflective steps (``least_squares(method="trf")``):
+squares with trust-region-reflective steps (scipy's ``least_squares(method="trf")``
+iteration; layer 2 runs it without scipy's wrappers, ``trf_small``):
 
 * **Layer 1 (creep)**: alpha from the creep regime (samples more than ``t_c``
   after the last input change), on a coarser step (bin averages). Long after a
