@@ -41,7 +41,7 @@ from .metrics import fit_percent, long_run_variance_factor, noise_std_estimate
 from .model import IDENTIFY_ALPHA_BOUNDS as ALPHA_BOUNDS  # alpha search interval of layer 1 and the polish
 from .model import CreepModel
 from .record import SAFE_AMPLITUDE, Record, check_time_and_output
-from .simulate import fractional_integral, input_changes, superpose, superpose_rows, uniform_step
+from .simulate import fractional_integral, increments, input_changes, superpose, superpose_rows, uniform_step
 from .timing import TimingCheck, check_timing
 from .trf_small import trf
 
@@ -98,7 +98,7 @@ class InputSchedule:
 
 def input_schedule(t: np.ndarray, u: np.ndarray) -> InputSchedule:
     """Find the input changes (u[-1] taken as 0) and the holds between them."""
-    du = np.diff(u, prepend=0.0)
+    du = increments(u)
     scale = max(float(np.max(np.abs(u))), 1e-300)
     idx = np.flatnonzero(np.abs(du) > 1e-12 * scale)
     n = t.size

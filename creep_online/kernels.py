@@ -764,3 +764,15 @@ def expm_directional(x: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray,
         eps = 1e-20 * size / max(np.max(np.abs(directions[k])), 1e-300)
         out[k] = expm_small(x + 1j * eps * directions[k]).imag / eps
     return e, out
+
+
+@njit(cache=CACHE)
+def second_differences(y: np.ndarray) -> np.ndarray:
+    """``np.diff(y, 2) / sqrt(6)`` bit for bit (the same two subtractions and the division per element)
+    in one pass and one buffer: numpy's two passes and temporaries cost ~1 ms per 100,000 samples."""
+    n = y.size - 2
+    out = np.empty(max(n, 0))
+    root6 = np.sqrt(6.0)
+    for i in range(n):
+        out[i] = ((y[i + 2] - y[i + 1]) - (y[i + 1] - y[i])) / root6
+    return out
