@@ -45,7 +45,7 @@ from hil_sim.experiments import LOAD_CELL, NANOPOSITIONER, RECOVERY_CASES  # noq
 
 def distribution(samples: list[float]) -> dict[str, float]:
     a = np.asarray(samples)
-    return {"p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)),
+    return {"min": float(a.min()), "p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)),
             "max": float(a.max()), "n": int(a.size)}
 
 

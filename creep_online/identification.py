@@ -1,7 +1,8 @@
 """Batch identification: the paper's two layers, made fast.
 
 The scheme of Tashakori et al. (Actuators 2024, 13, 534), output-error least
-squares with trust-region-reflective steps (``least_squares(method="trf")``):
+squares with trust-region-reflective steps (scipy's ``least_squares(method="trf")``
+iteration; layer 2 runs it without scipy's wrappers, ``trf_small``):
 
 * **Layer 1 (creep)**: alpha from the creep regime (samples more than ``t_c``
   after the last input change), on a coarser step (bin averages). Long after a
@@ -29,7 +30,6 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
 from scipy.special import digamma, rgamma
 
 from . import kernels
@@ -41,8 +41,9 @@ from .metrics import fit_percent, long_run_variance_factor, noise_std_estimate
 from .model import IDENTIFY_ALPHA_BOUNDS as ALPHA_BOUNDS  # alpha search interval of layer 1 and the polish
 from .model import CreepModel
 from .record import SAFE_AMPLITUDE, Record, check_time_and_output
-from .simulate import fractional_integral, input_changes, superpose, superpose_rows, uniform_step
+from .simulate import fractional_integral, increments, input_changes, superpose, superpose_rows, uniform_step
 from .timing import TimingCheck, check_timing
+from .trf_small import trf
 
 #: At most this many input changes count as a piecewise-constant (step) input.
 MAX_STEP_FRACTION = 0.05
@@ -97,7 +98,7 @@ class InputSchedule:
 
 def input_schedule(t: np.ndarray, u: np.ndarray) -> InputSchedule:
     """Find the input changes (u[-1] taken as 0) and the holds between them."""
-    du = np.diff(u, prepend=0.0)
+    du = increments(u)
     scale = max(float(np.max(np.abs(u))), 1e-300)
     idx = np.flatnonzero(np.abs(du) > 1e-12 * scale)
     n = t.size
@@ -314,8 +315,9 @@ def layer2_resonance(t: np.ndarray, u: np.ndarray, y: np.ndarray, alpha: float, 
 
     Parameters are log(a1), log(a2); b is projected out. The exact simulator
     runs up to the last masked sample; each evaluation also returns the
-    analytic Jacobian (forward sensitivities), which the trust-region solver
-    asks for at the same point, so no finite-difference simulations.
+    analytic Jacobian (forward sensitivities), so no finite-difference
+    simulations. The trust-region solver is scipy's TRF iteration without its
+    wrappers (``trf_small.trf``, the same steps up to round-off).
     """
     h = float(t[1] - t[0])
     n = int(np.flatnonzero(mask)[-1]) + 1
@@ -335,11 +337,10 @@ def layer2_resonance(t: np.ndarray, u: np.ndarray, y: np.ndarray, alpha: float, 
     start = time.perf_counter()
     lo = [math.log(a1) - 12, math.log(a2) - 12]
     hi = [math.log(a1) + 12, math.log(a2) + 12]
-    sol = least_squares(lambda p: evaluate(p)[0], [math.log(a1), math.log(a2)], jac=lambda p: evaluate(p)[1],
-                        bounds=(lo, hi), method="trf", x_scale=[1.0, 1.0])
-    a1f, a2f = math.exp(sol.x[0]), math.exp(sol.x[1])
-    evaluate(sol.x)
-    info = {"a1": a1f, "a2": a2f, "b": last["b"], "samples": int(m.sum()), "nfev": int(sol.nfev),
+    x, nfev, _ = trf(evaluate, [math.log(a1), math.log(a2)], lo, hi)
+    a1f, a2f = math.exp(x[0]), math.exp(x[1])
+    evaluate(x)
+    info = {"a1": a1f, "a2": a2f, "b": last["b"], "samples": int(m.sum()), "nfev": nfev,
             "elapsed_s": time.perf_counter() - start}
     return a1f, a2f, last["b"], info
 
@@ -751,16 +752,19 @@ def _retune(t, u, y, h, sched, t_c, alpha, a1, a2, stages) -> float:
     if i_f - i_c < 4 * half:
         return alpha
     creep = sched.since_change > t_c
+    y_creep = y[creep]
 
-    def creep_error(a: float) -> tuple[float, np.ndarray]:
+    def creep_error(a: float) -> tuple[float, float, np.ndarray]:
+        """(error, gain, unit-gain output): the creep regime's samples gathered once per simulation."""
         yh = model_output(a, a1, a2, h, u)
-        g = float(yh[creep] @ y[creep] / (yh[creep] @ yh[creep]))
-        r = y[creep] - g * yh[creep]
-        return float(r @ r), g * yh
+        yh_creep = yh[creep]
+        g = float(yh_creep @ y_creep / (yh_creep @ yh_creep))
+        r = y_creep - g * yh_creep
+        return float(r @ r), g, yh
 
-    err0, yh0 = creep_error(alpha)
-    new = float(np.clip(retune_alpha(alpha, y, yh0, i_c, i_f, half), *ALPHA_BOUNDS))
-    err1, _ = creep_error(new)
+    err0, g0, yh0 = creep_error(alpha)
+    new = float(np.clip(retune_alpha(alpha, y, g0 * yh0, i_c, i_f, half), *ALPHA_BOUNDS))
+    err1, _, _ = creep_error(new)
     keep = err1 < err0
     stages["retune"] = {"alpha_before": alpha, "alpha_eq12": new, "kept": bool(keep)}
     return new if keep else alpha

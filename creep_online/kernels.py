@@ -134,6 +134,20 @@ def resonance_foh(z: np.ndarray, phi: np.ndarray, g0: np.ndarray, g1: np.ndarray
 
 
 @njit(cache=CACHE)
+def taylor_thresholds(n_terms: int) -> np.ndarray:
+    """Sample index from which Taylor term m of the march's forcing is dropped: 10^(13/m).
+
+    Term m of sum_m taylor[m] v^(m)(t_n) is ~n^-m / (m (m + 1)) of term 0, so the
+    terms m >= M together stay below 1e-14 of it once n >= 10^(13/M): 8 terms
+    on the first 72 samples, 4 from 1,778, 3 from 21,544, 2 from 3.2e6.
+    """
+    out = np.full(n_terms, np.inf)
+    for m in range(1, n_terms):
+        out[m] = 10.0 ** (13.0 / m)
+    return out
+
+
+@njit(cache=CACHE)
 def state_march(n_samples: int, h: float, alpha: float, gamma1: float, phi: np.ndarray,
                 head: np.ndarray, taylor: np.ndarray) -> np.ndarray:
     """Exact unit-step response S[n] = S(n h) of the whole model (gain 1).
@@ -144,11 +158,15 @@ def state_march(n_samples: int, h: float, alpha: float, gamma1: float, phi: np.n
     ``head[n]`` (precomputed by quadrature) for the first len(head) intervals and
     the Taylor series sum_m taylor[m] v^(m)(t_n) beyond, where
     taylor[m] = int_0^h e^{A(h-s)} B s^m / m! ds and
-    v^(m)(t) = v(t) prod_{i<m} (alpha - i) / t.
+    v^(m)(t) = v(t) prod_{i<m} (alpha - i) / t; its terms below 1e-14 of the
+    first are dropped (``taylor_thresholds``). t^alpha is exp(alpha ln t), as in
+    ``state_march_sensitivity``, which needs ln t anyway (a pow cost as much as
+    both; the two differ by ~1e-15 relative).
     """
     s = np.zeros(n_samples)
     n_head = head.shape[0]
     n_terms = taylor.shape[0]
+    thresholds = taylor_thresholds(n_terms)
     x0 = 0.0
     x1 = 0.0
     inv_gamma = 1.0 / gamma1
@@ -157,8 +175,10 @@ def state_march(n_samples: int, h: float, alpha: float, gamma1: float, phi: np.n
             f0 = head[n, 0]
             f1 = head[n, 1]
         else:
+            while n_terms > 1 and n >= thresholds[n_terms - 1]:
+                n_terms -= 1
             t = n * h
-            deriv = t**alpha * inv_gamma
+            deriv = np.exp(alpha * np.log(t)) * inv_gamma
             f0 = taylor[0, 0] * deriv
             f1 = taylor[0, 1] * deriv
             inv_t = 1.0 / t
@@ -203,27 +223,40 @@ def superpose_steps_rows(step_responses: np.ndarray, index: np.ndarray, size: np
 @njit(cache=CACHE)
 def foh_grid_costs(z: np.ndarray, y: np.ndarray, phi: np.ndarray, g0: np.ndarray, g1: np.ndarray,
                    h: float) -> np.ndarray:
-    """For each resonance k: min over b of ||y - b s_k||^2, s_k = resonance_foh(z) with (phi, g0, g1)[k]."""
+    """For each resonance k: min over b of ||y - b s_k||^2, s_k = resonance_foh(z) with (phi, g0, g1)[k].
+
+    All grid points march together, the grid innermost: the points are
+    independent, so that loop runs in SIMD lanes (one point per sample
+    outermost was a serial chain of dependent multiply-adds). Each point's
+    arithmetic is ``resonance_foh``'s, in the same order.
+    """
     n_grid = phi.shape[0]
     n = z.shape[0]
     yy = 0.0
     for i in range(n):
         yy += y[i] * y[i]
+    p00, p01 = phi[:, 0, 0].copy(), phi[:, 0, 1].copy()
+    p10, p11 = phi[:, 1, 0].copy(), phi[:, 1, 1].copy()
+    c0, c1 = g0[:, 0].copy(), g0[:, 1].copy()
+    d0, d1 = g1[:, 0].copy(), g1[:, 1].copy()
+    x0 = np.zeros(n_grid)
+    x1 = np.zeros(n_grid)
+    ss = np.zeros(n_grid)
+    sy = np.zeros(n_grid)
+    for i in range(n - 1):
+        zi = z[i]
+        slope = (z[i + 1] - zi) / h
+        yi = y[i + 1]
+        for k in range(n_grid):
+            nx0 = p00[k] * x0[k] + p01[k] * x1[k] + c0[k] * zi + d0[k] * slope
+            nx1 = p10[k] * x0[k] + p11[k] * x1[k] + c1[k] * zi + d1[k] * slope
+            x0[k] = nx0
+            x1[k] = nx1
+            ss[k] += nx0 * nx0
+            sy[k] += nx0 * yi
     costs = np.empty(n_grid)
     for k in range(n_grid):
-        x0 = 0.0
-        x1 = 0.0
-        ss = 0.0
-        sy = 0.0
-        for i in range(n - 1):
-            slope = (z[i + 1] - z[i]) / h
-            nx0 = phi[k, 0, 0] * x0 + phi[k, 0, 1] * x1 + g0[k, 0] * z[i] + g1[k, 0] * slope
-            nx1 = phi[k, 1, 0] * x0 + phi[k, 1, 1] * x1 + g0[k, 1] * z[i] + g1[k, 1] * slope
-            x0 = nx0
-            x1 = nx1
-            ss += x0 * x0
-            sy += x0 * y[i + 1]
-        costs[k] = yy - sy * sy / ss if ss > 0.0 else yy
+        costs[k] = yy - sy[k] * sy[k] / ss[k] if ss[k] > 0.0 else yy
     return costs
 
 
@@ -400,7 +433,8 @@ def state_march_sensitivity(n_samples: int, h: float, alpha: float, gamma1: floa
     ``phi`` and ``taylor``; ``dhead`` (3, n_head, 2) those of ``head`` for
     (alpha, a1, a2). Beyond the head, d v^(m)/d alpha = v^(m) (ln t - psi1) +
     v(t) t^-m dP_m with P_m = prod_{i<m} (alpha - i) and psi1 = digamma(1 + alpha).
-    Row 0 is ``state_march``'s S bit for bit (same operations in the same order).
+    Row 0 is ``state_march``'s S bit for bit (same operations in the same order,
+    the same Taylor terms kept).
     Scalars only in the loop (small arrays there kept it twice as slow).
     """
     out = np.zeros((4, n_samples))
@@ -411,12 +445,7 @@ def state_march_sensitivity(n_samples: int, h: float, alpha: float, gamma1: floa
     for m in range(1, n_terms):
         dpm[m] = dpm[m - 1] * (alpha - (m - 1)) + pm
         pm *= alpha - (m - 1)
-    # derivative terms kept: term m is ~n^-m / (m (m + 1)) of term 0, so M terms (m < M) leave < 1e-14 once
-    # n >= 10^(13/M) (S itself keeps all, as state_march does)
-    thresholds = np.empty(n_terms)
-    for m in range(1, n_terms):
-        thresholds[m] = 10.0 ** (13.0 / m)
-    n_deriv = n_terms
+    thresholds = taylor_thresholds(n_terms)      # the terms kept, as state_march keeps them
     p00, p01, p10, p11 = phi[0, 0], phi[0, 1], phi[1, 0], phi[1, 1]
     q00, q01, q10, q11 = dphi[0, 0, 0], dphi[0, 0, 1], dphi[0, 1, 0], dphi[0, 1, 1]
     r00, r01, r10, r11 = dphi[1, 0, 0], dphi[1, 0, 1], dphi[1, 1, 0], dphi[1, 1, 1]
@@ -433,9 +462,10 @@ def state_march_sensitivity(n_samples: int, h: float, alpha: float, gamma1: floa
             fc0, fc1 = dhead[2, n, 0], dhead[2, n, 1]
         else:
             t = n * h
-            deriv = t**alpha * inv_gamma
+            ln_t = np.log(t)
+            deriv = np.exp(alpha * ln_t) * inv_gamma
             plain = deriv              # v(t) t^-m, for the dP_m term
-            log_t = np.log(t) - psi1
+            log_t = ln_t - psi1
             f0 = taylor[0, 0] * deriv
             f1 = taylor[0, 1] * deriv
             ea0 = ea1 = 0.0
@@ -444,20 +474,19 @@ def state_march_sensitivity(n_samples: int, h: float, alpha: float, gamma1: floa
             fc0 = dtaylor[1, 0, 0] * deriv
             fc1 = dtaylor[1, 0, 1] * deriv
             inv_t = 1.0 / t
-            while n_deriv > 1 and n >= thresholds[n_deriv - 1]:
-                n_deriv -= 1
+            while n_terms > 1 and n >= thresholds[n_terms - 1]:
+                n_terms -= 1
             for m in range(1, n_terms):
                 deriv *= (alpha - (m - 1)) * inv_t
                 f0 += taylor[m, 0] * deriv
                 f1 += taylor[m, 1] * deriv
-                if m < n_deriv:
-                    plain *= inv_t
-                    ea0 += taylor[m, 0] * (plain * dpm[m])
-                    ea1 += taylor[m, 1] * (plain * dpm[m])
-                    fb0 += dtaylor[0, m, 0] * deriv
-                    fb1 += dtaylor[0, m, 1] * deriv
-                    fc0 += dtaylor[1, m, 0] * deriv
-                    fc1 += dtaylor[1, m, 1] * deriv
+                plain *= inv_t
+                ea0 += taylor[m, 0] * (plain * dpm[m])
+                ea1 += taylor[m, 1] * (plain * dpm[m])
+                fb0 += dtaylor[0, m, 0] * deriv
+                fb1 += dtaylor[0, m, 1] * deriv
+                fc0 += dtaylor[1, m, 0] * deriv
+                fc1 += dtaylor[1, m, 1] * deriv
             fa0 = f0 * log_t + ea0
             fa1 = f1 * log_t + ea1
         na0 = p00 * a0 + p01 * a1 + fa0
@@ -599,50 +628,63 @@ def projected_normal_equations(s: np.ndarray, ds: np.ndarray, r: np.ndarray, b: 
     J's row k is c0_k s + c1_k - b ds_k (``identification._projected_jacobian``):
     the first pass gathers s.s, sum s, ds_k.s, sum ds_k and ds_k.r, which give
     (c0, c1) from the 2x2 (or 1x1 without the offset) projection; the second
-    accumulates J J' and J r.
+    accumulates J J' and J r. Three parameters (ds of shape (3, n)), spelled
+    out in scalars: the loops over rows with small arrays cost 4x more.
     """
-    k_rows, n = ds.shape
-    ss = 0.0
-    st = 0.0
-    sd = np.zeros(k_rows)
-    dt = np.zeros(k_rows)
-    rd = np.zeros(k_rows)
+    n = ds.shape[1]
+    ss = st = 0.0
+    sd0 = sd1 = sd2 = dt0 = dt1 = dt2 = rd0 = rd1 = rd2 = 0.0
     for i in range(n):
         si = s[i]
+        ri = r[i]
+        d0, d1, d2 = ds[0, i], ds[1, i], ds[2, i]
         ss += si * si
         st += si
-        for k in range(k_rows):
-            d = ds[k, i]
-            sd[k] += d * si
-            dt[k] += d
-            rd[k] += d * r[i]
-    c0 = np.zeros(k_rows)
-    c1 = np.zeros(k_rows)
+        sd0 += d0 * si
+        sd1 += d1 * si
+        sd2 += d2 * si
+        dt0 += d0
+        dt1 += d1
+        dt2 += d2
+        rd0 += d0 * ri
+        rd1 += d1 * ri
+        rd2 += d2 * ri
+    sd = np.array([sd0, sd1, sd2])
+    dt = np.array([dt0, dt1, dt2])
+    rd = np.array([rd0, rd1, rd2])
+    c0 = np.zeros(3)
+    c1 = np.zeros(3)
     if free_offset:
         det = ss * n - st * st
         if det != 0.0:
-            for k in range(k_rows):
+            for k in range(3):
                 x0 = b * sd[k] - rd[k]
                 x1 = b * dt[k]
                 c0[k] = (n * x0 - st * x1) / det
                 c1[k] = (ss * x1 - st * x0) / det
     elif ss > 0.0:
-        for k in range(k_rows):
+        for k in range(3):
             c0[k] = (b * sd[k] - rd[k]) / ss
-    a = np.zeros((k_rows, k_rows))
-    g = np.zeros(k_rows)
-    row = np.empty(k_rows)
+    e0, e1, e2 = c0[0], c0[1], c0[2]
+    f0, f1, f2 = c1[0], c1[1], c1[2]
+    a00 = a01 = a02 = a11 = a12 = a22 = g0 = g1 = g2 = 0.0
     for i in range(n):
-        for k in range(k_rows):
-            row[k] = c0[k] * s[i] + c1[k] - b * ds[k, i]
-        for k in range(k_rows):
-            g[k] += row[k] * r[i]
-            for m in range(k, k_rows):
-                a[k, m] += row[k] * row[m]
-    for k in range(k_rows):
-        for m in range(k):
-            a[k, m] = a[m, k]
-    return a, g
+        si = s[i]
+        ri = r[i]
+        j0 = e0 * si + f0 - b * ds[0, i]
+        j1 = e1 * si + f1 - b * ds[1, i]
+        j2 = e2 * si + f2 - b * ds[2, i]
+        g0 += j0 * ri
+        g1 += j1 * ri
+        g2 += j2 * ri
+        a00 += j0 * j0
+        a01 += j0 * j1
+        a02 += j0 * j2
+        a11 += j1 * j1
+        a12 += j1 * j2
+        a22 += j2 * j2
+    a = np.array([[a00, a01, a02], [a01, a11, a12], [a02, a12, a22]])
+    return a, np.array([g0, g1, g2])
 
 
 #: Taylor degree of ``expm_small`` after scaling to 1-norm <= 1/2: truncation < 0.5^17 / 17! ~ 2e-20.
@@ -725,20 +767,12 @@ def expm_directional(x: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray,
 
 
 @njit(cache=CACHE)
-def second_difference_mad(y: np.ndarray) -> float:
-    """Median absolute deviation of the second differences of y / sqrt(6) (``metrics.noise_std_estimate``).
-
-    The same value as ``np.median(abs(d2 - np.median(d2)))`` with d2 =
-    ``np.diff(y, 2) / sqrt(6)`` (same operations per element; the medians are
-    exact selections) in one buffer and one pass per stage: numpy's version
-    cost ~4 ms per 100,000 samples, twice per identify. Finite y only.
-    """
+def second_differences(y: np.ndarray) -> np.ndarray:
+    """``np.diff(y, 2) / sqrt(6)`` bit for bit (the same two subtractions and the division per element)
+    in one pass and one buffer: numpy's two passes and temporaries cost ~1 ms per 100,000 samples."""
     n = y.size - 2
-    d2 = np.empty(n)
+    out = np.empty(max(n, 0))
     root6 = np.sqrt(6.0)
     for i in range(n):
-        d2[i] = ((y[i + 2] - y[i + 1]) - (y[i + 1] - y[i])) / root6
-    centre = np.median(d2)
-    for i in range(n):
-        d2[i] = abs(d2[i] - centre)
-    return np.median(d2)
+        out[i] = ((y[i + 2] - y[i + 1]) - (y[i + 1] - y[i])) / root6
+    return out

@@ -52,9 +52,20 @@ def uniform_step(t: np.ndarray, rtol: float = UNIFORM_RTOL) -> float:
     return float(h)
 
 
+def increments(u: np.ndarray) -> np.ndarray:
+    """u[k] - u[k-1] with u[-1] taken as 0: ``np.diff(u, prepend=0.0)`` bit for bit, without the
+    concatenated copy of u (that path cost ~1 ms per 100,000 samples against ~0.05 ms)."""
+    u = np.asarray(u, dtype=float)
+    du = np.empty_like(u)
+    if u.size:
+        du[0] = u[0] - 0.0
+        np.subtract(u[1:], u[:-1], out=du[1:])
+    return du
+
+
 def input_changes(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(indices, sizes) of the non-zero increments of u, with u[-1] taken as 0."""
-    du = np.diff(np.asarray(u, dtype=float), prepend=0.0)
+    du = increments(u)
     idx = np.flatnonzero(du)
     return idx.astype(np.int64), du[idx]
 
@@ -87,18 +98,22 @@ def causal_convolve(x: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     return np.fft.irfft(np.fft.rfft(x, m) * np.fft.rfft(k, m), m)[:n]
 
 
-#: The last input and its changes: fits simulate the same input dozens of times, and comparing
-#: it with a copy is cheaper than a diff + nonzero over it (a copy, so in-place edits are seen).
-_LAST_CHANGES: list = [None, None]
+#: The last inputs and their changes: fits simulate the same input dozens of times (identify alternates
+#: between a record's input and its first samples), and comparing it with a copy is cheaper than a
+#: diff + nonzero over it (a copy, so in-place edits are seen). Most recent first.
+_LAST_CHANGES: list = []
+_CACHED_INPUTS = 2
 
 
 def _changes_cached(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """input_changes(u), reused when u equals the previous call's input."""
-    copy, changes = _LAST_CHANGES
-    if copy is not None and copy.shape == u.shape and np.array_equal(copy, u):
-        return changes
+    """input_changes(u), reused when u equals one of the last inputs seen."""
+    for k, (copy, changes) in enumerate(_LAST_CHANGES):
+        if copy.shape == u.shape and np.array_equal(copy, u):
+            _LAST_CHANGES.insert(0, _LAST_CHANGES.pop(k))
+            return changes
     changes = input_changes(u)
-    _LAST_CHANGES[:] = [np.array(u, dtype=float), changes]
+    _LAST_CHANGES.insert(0, (np.array(u, dtype=float), changes))
+    del _LAST_CHANGES[_CACHED_INPUTS:]
     return changes
 
 

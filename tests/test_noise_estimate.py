@@ -29,3 +29,11 @@ def test_non_finite_and_short_inputs_keep_numpy_semantics():
     assert np.isnan(noise_std_estimate(y)) and np.isnan(_reference(y))
     assert np.isnan(noise_std_estimate(np.ones(3)))
     assert noise_std_estimate([0.0, 1.0, 4.0, 9.0, 16.0]) == _reference(np.array([0.0, 1.0, 4.0, 9.0, 16.0]))
+
+
+def test_increments_equal_numpys_diff_with_prepend():
+    from creep_online.simulate import increments
+    rng = np.random.default_rng(3)
+    for u in (rng.standard_normal(1001), np.array([-0.0, 1.0, np.nan, np.inf, 2.0]), np.array([5.0]), np.array([])):
+        assert np.array_equal(increments(u), np.diff(u, prepend=0.0), equal_nan=True)
+        assert np.array_equal(np.signbit(increments(u)), np.signbit(np.diff(u, prepend=0.0)))
