@@ -314,6 +314,38 @@ def test_refit_machine_equals_its_kernels_in_sequence():
     assert np.array_equal(tr.m, m)
 
 
+@pytest.mark.parametrize("slices", [1, 3])
+def test_the_per_sample_kernel_runs_the_refit_machine_to_the_same_result(slices):
+    """refit.sample_work (a sample, then slices of the re-fit, with theta, shift, nodes and work arrays taken
+    from the context array) = refit.run on the same state, bit for bit, and reports the end with
+    MACHINE_DONE after exactly the machine's number of slices. Outputs missing (NaN) on the samples fed
+    meanwhile, so that the statistics the fit reads stay those at its start."""
+    model = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
+    h, n = 1e-3, 4000
+    u = _staircase(n, 300, 4)
+    y = simulate(model, np.arange(n) * h, u) + np.random.default_rng(4).normal(0, 1e-3, n)
+    tr = _tracker(CreepModel.from_resonance(0.12, 33.0, 0.25, 0.9), h, free=True, drift=2)
+    _feed(tr, u, y)
+    lam, dx = tr.basis.lam, tr.basis.dx
+    st, S, shift, theta, wk = tr.st.copy(), tr.S.copy(), tr._shift.copy(), tr.theta.copy(), tr._wk.copy()
+    RF.begin(st, S, shift, wk, 0, False, False, 1)
+    expected = 0
+    probe = wk.copy()
+    while not RF.refit_unit(st.copy(), S.copy(), shift.copy(), theta.copy(), probe, lam, dx):
+        expected += 1
+    RF.run(st, S, shift, theta, wk, lam, dx)
+    RF.begin(tr.st, tr.S, tr._shift, tr._wk, 0, False, False, 1)
+    calls = 0
+    while True:
+        calls += 1
+        status = RF.sample_work(0.5, math.nan, tr.st, tr.S, tr.ring, tr._ctx, T.MACHINE_REFIT, slices)
+        if status >= RF.MACHINE_DONE:
+            break
+    assert status - RF.MACHINE_DONE == 1                 # the sample itself: output missing
+    assert calls == -(-(expected + 1) // slices)          # the last call's slice reports the end
+    assert np.array_equal(tr._wk, wk) and np.array_equal(tr.theta, theta)
+
+
 @pytest.mark.parametrize("free_rates", [False, True])
 def test_the_change_test_fits_a_drift_the_window_does_not(free_rates):
     """Before the window fits drift (rates off), the change test fits the drift rates itself: a plant whose

@@ -409,12 +409,6 @@ class WindowTracker(ParameterView):
             elif not self.work(1 << 30) and self.machine is None:
                 break
 
-    def _run_machine(self, which: int) -> Generator:
-        """Hand a started re-fit (``MACHINE_REFIT``) or change test (``MACHINE_TEST``) to the per-sample
-        kernel; resumes when it is done."""
-        self.machine = which
-        yield MACHINE
-
     def _refit_job(self, started: bool = False) -> Generator:
         """A re-fit of the window: ``_begin_refit`` (unless ``started`` already at the due sample), its slices in
         the per-sample kernel, then the result swapped in (``_accept``); while it is queued no other is
@@ -574,7 +568,8 @@ class WindowTracker(ParameterView):
                       self.n_rate > 0 and not self.drift_on)
         nr = self.n - n0
         lin = (self.a1l, self.a2l)
-        yield from self._run_machine(MACHINE_TEST)   # TEST_STEPS Levenberg-Marquardt steps, then the covariance
+        self.machine = MACHINE_TEST        # TEST_STEPS Levenberg-Marquardt steps, then the covariance, in the
+        yield MACHINE                      # per-sample kernel
         r = RF.test_outcome(wk, self.theta)   # plain floats from here on (numpy from Python is slow here)
         if not (math.isfinite(r.after) and r.after > 0.0 and math.isfinite(r.before)):
             return
