@@ -302,6 +302,10 @@ class Design:
         # response would need its time derivative) is delayed with the base path
         delays = [3 + i for i, e in enumerate(owners) if get_effect(e).stage == Stage.DELAY]
         self.exact = [0, 1, 2] + (delays if not self.stages[Stage.PARALLEL] else [])
+        # and a parallel path's own parameters when its effect gives the step response's derivatives
+        self.parallel_exact = {e.name: [self.index(n) for n in self.own[e.name]]
+                               for e in self.stages[Stage.PARALLEL] if _differentiable(e)}
+        self.exact += [k for idx in self.parallel_exact.values() for k in idx]
         self.col_names: list[str] = []
         self.nfev = 0
         self._solved: dict[bytes, tuple] = {}    # theta -> (coefficients, output, weighted residual), recent ones
@@ -386,21 +390,22 @@ class Design:
         return self.data.uniform
 
     def jacobian(self, theta: np.ndarray) -> np.ndarray:
-        """d(weighted residual)/d(theta): exact (variable projection) in the base parameters, finite
-        differences in the effects' own.
+        """d(weighted residual)/d(theta): exact (variable projection) in the base parameters, a delay and
+        the parallel paths' own parameters (``exact``), finite differences in the other effects' own.
 
         The base path's derivatives in (alpha, a1, a2) come from the exact
         march's forward sensitivities (``discretize.step_response_sensitivity``,
         as identify's Jacobian), delayed and superposed like the path itself
         (both linear) and filtered by the output-filter effects (linear too);
         ``varpro.projected_jacobian`` turns them into the projected residual's.
-        An effect's parameter costs one more evaluation (forward difference,
+        A parallel path's come from its effect's ``unit_step_derivatives``
+        (superposed on the plain input). Any other effect parameter costs one more evaluation (forward difference,
         step as scipy's ``diff_step=1e-7``), mostly with the base path
         remembered. Uniform records only (``analytic``).
         """
         theta = np.asarray(theta, dtype=float)
         coef, _, wres = self.project(theta)
-        moved, pulled = self._base_products(theta, coef, wres)
+        moved, pulled = self._exact_products(theta, coef, wres)
         jac = np.empty((wres.size, theta.size))
         jac[:, self.exact] = projected_jacobian(self._weighted_columns(theta), moved, pulled)
         for k in range(theta.size):
@@ -415,36 +420,56 @@ class Design:
             self._weighted = (theta.tobytes(), phi if self.data.weights is None else phi * self.data.weights[:, None])
         return self._weighted[1]
 
-    def _base_products(self, theta: np.ndarray, coef: np.ndarray, wres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _exact_products(self, theta: np.ndarray, coef: np.ndarray, wres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(D_k c, D_k^T r) for D_k = d(weighted design)/d(theta_k), k in ``exact``: shapes (m, n), (m, p).
 
-        Only the base path's columns (the first, one per input row) depend on
-        these parameters. Without an output filter the products come straight
-        from the superposer (two inverse FFTs per parameter whatever the
-        number of input rows); an output filter gets the columns themselves.
+        The base parameters (and a delay) move only the base path's columns
+        (the first, one per input row); a parallel effect's own parameters
+        only its path's column (its gain's). Each group's products come from
+        its superposer (``_superposed``) with the step responses' derivatives.
         """
         data = self.data
         p, alpha, a1, a2, d = self._base(theta)
         ln10 = math.log(10.0)
         chain = np.array([[1.0, 0.0, 0.0], [0.0, -ln10 * a1, -2.0 * ln10 * a2], [0.0, ln10 * a1, 0.0]])
         steps = chain @ data.base_path_sensitivity(self.inputs, alpha, a1, a2, d)
-        if len(self.exact) > 3:
+        if len(self.exact) > 3 and not self.stages[Stage.PARALLEL]:
             slope = data.base_path_slope(alpha, a1, a2, d)
             steps = np.vstack([steps] + [self._delay_rate(theta, k) * slope for k in self.exact[3:]])
         sup = data.superposer(self.inputs)
         rows = sup.rows
         w = data.weights
         v = wres if w is None else wres * w
-        if self.stages[Stage.OUTPUT_FILTER]:
-            dcols = sup.apply(steps)                                        # (3, rows, n)
-            for e in self.stages[Stage.OUTPUT_FILTER]:
-                dcols = e.filter_columns(data.t, dcols, p)
-            moved, pulled_rows = np.einsum("krn,r->kn", dcols, coef[:rows]), dcols @ v
-        else:
-            moved, pulled_rows = sup.products(steps, coef[:rows], v)
+        moved, pulled_rows = self._superposed(sup, steps, coef[:rows], v, p)
         pulled = np.zeros((len(self.exact), coef.size))
-        pulled[:, :rows] = pulled_rows
+        pulled[: len(steps), :rows] = pulled_rows
+        parts, k = [moved], len(steps)
+        for j, e in enumerate(self.stages[Stage.PARALLEL]):
+            if e.name not in self.parallel_exact:
+                continue
+            col = rows + j                          # the path's column: after the base path's rows, in stage order
+            dsteps = np.atleast_2d(e.unit_step_derivatives(p)(sup.grid_tau - d))
+            m, q = self._superposed(data.superposer(), dsteps, coef[col:col + 1], v, p)
+            parts.append(m)
+            pulled[k:k + len(dsteps), col] = q[:, 0]
+            k += len(dsteps)
+        moved = np.vstack(parts)
         return (moved if w is None else moved * w), pulled
+
+    def _superposed(self, sup: fx.Superposer, steps: np.ndarray, weights: np.ndarray, v: np.ndarray,
+                    p: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
+        """(sum_i weights_i D_i, D_i . v) for the columns D the step responses ``steps`` give on sup's rows.
+
+        Without an output filter straight from the superposer (two inverse FFTs
+        per response whatever the number of input rows); an output filter
+        (linear) gets the columns themselves, filtered.
+        """
+        if not self.stages[Stage.OUTPUT_FILTER]:
+            return sup.products(steps, weights, v)
+        dcols = sup.apply(steps)                                        # (k, rows, n)
+        for e in self.stages[Stage.OUTPUT_FILTER]:
+            dcols = e.filter_columns(self.data.t, dcols, p)
+        return np.einsum("krn,r->kn", dcols, weights), dcols @ v
 
     def _delay_rate(self, theta: np.ndarray, k: int) -> float:
         """d(total delay)/d(theta_k) (a forward difference of the delay hooks: exact for a delay linear in theta_k)."""
@@ -504,6 +529,11 @@ class ExtendedFit:
         return {"effects": list(self.effects), **self.model.describe(), "offset": self.offset,
                 "effect_params": self.effect_params, "fit_percent": self.fit_percent,
                 "residual_rms": self.residual_rms, "n_params": self.n_params}
+
+
+def _differentiable(effect: ParallelEffect) -> bool:
+    """True when a parallel effect overrides ``unit_step_derivatives`` (its path is then differentiated exactly)."""
+    return type(effect).unit_step_derivatives is not ParallelEffect.unit_step_derivatives
 
 
 def _result(design: Design, theta: np.ndarray) -> ExtendedFit:
