@@ -160,3 +160,18 @@ def test_creep_step_derivative_matches_central_differences(alpha):
     central = (creep_step(alpha + h, tau) - creep_step(alpha - h, tau)) / (2 * h)
     assert _relative(creep_step_derivative(alpha, tau), central) < BASE_RTOL
 
+
+@pytest.mark.parametrize("rows, k", [(1, 3), (4, 2)])
+def test_superposer_products_equal_the_columns_products(rows, k):
+    """Both ways of Superposer.products (a correlation per input row, or per response) against apply()."""
+    from creep_online.effects.responses import Superposer
+    rng = np.random.default_rng(3)
+    n = 500
+    x = np.cumsum(rng.standard_normal((rows, n)) * (rng.uniform(size=(rows, n)) < 0.05), axis=1)
+    sup = Superposer(np.arange(n) * 1e-3, x)
+    steps = rng.standard_normal((k, n)).cumsum(axis=1)
+    w, v = rng.standard_normal(rows), rng.standard_normal(n)
+    summed, pulled = sup.products(steps, w, v)
+    cols = sup.apply(steps)                                        # (k, rows, n)
+    assert np.allclose(summed, np.einsum("krn,r->kn", cols, w), rtol=0, atol=1e-10 * np.abs(cols).max())
+    assert np.allclose(pulled, cols @ v, rtol=1e-10)

@@ -276,11 +276,18 @@ class Superposer:
 
         Shapes (k, n) and (k, rows): what a Jacobian needs of the columns
         ``apply`` would give (their weighted sum and their products with a
-        residual) without forming them, two inverse FFTs per response instead
-        of one per row: the rows' spectra are summed first, and
-        apply(S)_i . v = dx_i . q with q the cross-correlation of v and S.
+        residual) without forming them, one inverse FFT per response for the
+        sums (the rows' spectra are summed first) and, for the products,
+        apply(S)_i . v = S . c_i with c_i the cross-correlation of dx_i and v:
+        one inverse FFT per row (or, with more rows than responses,
+        dx_i . q_k with q_k the cross-correlation of v and S_k: one per response).
         """
-        fs = rfft(np.atleast_2d(steps), self.nfft, axis=-1)
+        steps = np.atleast_2d(steps)
+        fs = rfft(steps, self.nfft, axis=-1)
         summed = irfft((weights @ self.spectra) * fs, self.nfft, axis=-1)[:, : self.n]
-        q = irfft(rfft(v, self.nfft) * np.conj(fs), self.nfft, axis=-1)[:, : self.n]
+        fv = rfft(v, self.nfft)
+        if self.rows < steps.shape[0]:
+            c = irfft(np.conj(self.spectra) * fv, self.nfft, axis=-1)[:, : self.n]
+            return summed, steps @ c.T
+        q = irfft(fv * np.conj(fs), self.nfft, axis=-1)[:, : self.n]
         return summed, q @ self.dx.T
