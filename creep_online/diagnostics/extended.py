@@ -172,13 +172,33 @@ class Prepared:
         if key in cache:
             cache[key] = cache.pop(key)          # most recently used last
             return cache[key]
-        s = fx.delayed_grid(fx.base_step_grid(alpha, a1, a2, self.h, self.n), self.h, delay)
+        s = fx.delayed_grid(self.step_grid(alpha, a1, a2), self.h, delay)
         rows = self.superposer(inputs).apply(s)
         rows.setflags(write=False)
         cache[key] = rows
         while len(cache) > BASE_PATH_CACHE:
             cache.pop(next(iter(cache)))
         return rows
+
+    def step_grid(self, alpha: float, a1: float, a2: float) -> np.ndarray:
+        """The base model's undelayed unit-step response on the grid (uniform records), read-only.
+
+        Remembered for the last BASE_PATH_CACHE parameter sets apart from
+        ``base_path``: a delay's grid starts, its Jacobian columns (the
+        spline's slope) and a combination's grid vary the delay with the base
+        parameters fixed, and each would march the same response again.
+        """
+        key = (alpha, a1, a2)
+        cache = self._cache.setdefault("step_grid", {})
+        if key in cache:
+            cache[key] = cache.pop(key)
+            return cache[key]
+        s = fx.base_step_grid(alpha, a1, a2, self.h, self.n)
+        s.setflags(write=False)
+        cache[key] = s
+        while len(cache) > BASE_PATH_CACHE:
+            cache.pop(next(iter(cache)))
+        return s
 
     def parallel_path(self, effect: ParallelEffect, theta: dict[str, float], own: tuple[float, ...], delay: float,
                       tau: np.ndarray | None) -> np.ndarray:
@@ -220,7 +240,7 @@ class Prepared:
 
     def base_path_slope(self, alpha: float, a1: float, a2: float, delay: float) -> np.ndarray:
         """The delayed base step response's derivative in the delay, shape (n,) (uniform records)."""
-        return fx.delayed_grid_slope(fx.base_step_grid(alpha, a1, a2, self.h, self.n), self.h, delay)
+        return fx.delayed_grid_slope(self.step_grid(alpha, a1, a2), self.h, delay)
 
     def input_rows(self, inputs: tuple[tuple[InputEffect, str | None], ...], u: np.ndarray,
                    before: bool = False) -> np.ndarray:
