@@ -46,6 +46,12 @@ MAX_NFEV = 40
 #: Extended fits: this many grid starts get a short polish of SHORT_NFEV evaluations first.
 SHORT_STARTS = 4
 SHORT_NFEV = 8
+#: ... and stops once a step lowers the cost by less than SHORT_FTOL (relative; xtol SHORT_XTOL): the short
+#: polish only ranks the starts for the final one. Replayed on 708 recorded short polishes (22 records) this
+#: saves ~26 % of their evaluations (a converged or stalled start's last ones), and the best start kept is
+#: within 6e-4 of the cost of the best one then (the final polish takes it from there).
+SHORT_FTOL = 1e-3
+SHORT_XTOL = 1e-6
 #: ... and this many priority starts (spectral peaks, swapped modes) too.
 PRIORITY_STARTS = 5
 #: Long records explore starting points on a prefix of at least EXPLORE_SAMPLES samples that also
@@ -578,14 +584,15 @@ def base_theta(model: CreepModel) -> np.ndarray:
     return np.array([model.alpha, math.log10(model.fn), math.log10(model.zeta)])
 
 
-def _optimise(design: Design, theta0: np.ndarray, max_nfev: int = MAX_NFEV, tol: float = 1e-8) -> np.ndarray:
+def _optimise(design: Design, theta0: np.ndarray, max_nfev: int = MAX_NFEV, tol: float = 1e-8,
+              ftol: float | None = None) -> np.ndarray:
     x0 = np.clip(theta0, design.lo, design.hi)
     span = design.hi - design.lo
     x0 = np.minimum(np.maximum(x0, design.lo + 1e-9 * span), design.hi - 1e-9 * span)
     jac = {"jac": design.jacobian} if design.analytic else {"diff_step": DIFF_STEP}
     try:
         sol = least_squares(design.residual, x0, bounds=(design.lo, design.hi), method="trf",
-                            x_scale="jac", max_nfev=max_nfev, ftol=tol, xtol=tol, **jac)
+                            x_scale="jac", max_nfev=max_nfev, ftol=tol if ftol is None else ftol, xtol=tol, **jac)
     except (ValueError, np.linalg.LinAlgError, ModelError):
         return x0
     return sol.x if design.cost(sol.x) <= design.cost(x0) else x0
@@ -791,7 +798,7 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     if warm is not None:
         chosen += [_merge(explore, th, warm) for th in list(groups.values())[:2]]
     chosen = list({th.tobytes(): th for th in chosen}.values())    # a priority start may repeat a grid start
-    short = [_optimise(explore, th, SHORT_NFEV, 1e-6) for th in chosen]
+    short = [_optimise(explore, th, SHORT_NFEV, SHORT_XTOL, SHORT_FTOL) for th in chosen]
     finalists = [th for _, th in ranked(explore, short)[:n_starts]] + [_null_start(design, base)]
     if warm is not None:
         finalists.append(_merge(design, _null_start(design, base), warm))
