@@ -68,8 +68,10 @@ BASE_PATH_CACHE = 8
 PARALLEL_PATH_CACHE = 16
 #: Relative tolerance (ftol, xtol) of the final polish: RSS to ~1e-7 is ample for the evidence.
 FULL_TOL = 1e-7
-#: Evaluations of the final polish on the whole record after exploring on a prefix.
+#: Evaluations of the final polish on the whole record after exploring on a prefix ...
 FULL_NFEV = 8
+#: ... which stops once a step gains less than FULL_FTOL of the cost (evidence N ln(RSS ratio) to ~N x 1e-5).
+FULL_FTOL = 1e-5
 #: An extended fit that explains most of the base misfit (residual below RESTART_EXPLAINED of the
 #: base's) but stays above RESTART_ABOVE_FLOOR times its own noise estimate is restarted from a grid
 #: over the base parameters (alpha, fn, zeta) with the effect's fitted parameters kept: a strong
@@ -653,7 +655,7 @@ def fit_base(data: Prepared, start: CreepModel | None = None, max_nfev: int = MA
     for i in order[:2]:
         th = _optimise(explore, starts[i], max_nfev)
         if explore is not design:
-            th = _optimise(design, th, FULL_NFEV, FULL_TOL)
+            th = _optimise(design, th, FULL_NFEV, FULL_TOL, FULL_FTOL)
         polished.append((design.cost(th), th))
     polished.sort(key=lambda ct: ct[0])
     fit = _result(design, polished[0][1])
@@ -813,7 +815,8 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
                         finalists.append(v)
     best, best_cost = None, np.inf
     for _, th in ranked(design, finalists)[:n_starts if explore is design else 1]:
-        th = _optimise(design, th, max_nfev if explore is design else FULL_NFEV, FULL_TOL)
+        th = (_optimise(design, th, max_nfev, FULL_TOL) if explore is design
+              else _optimise(design, th, FULL_NFEV, FULL_TOL, FULL_FTOL))
         c = design.cost(th)
         if c < best_cost:
             best, best_cost = th, c
@@ -849,7 +852,7 @@ def _restart_base(design: Design, explore: Design, best: np.ndarray, max_nfev: i
     for i in np.argsort(costs)[:2]:
         th = _optimise(explore, starts[i], max_nfev)
         if explore is not design:
-            th = _optimise(design, th, FULL_NFEV, FULL_TOL)
+            th = _optimise(design, th, FULL_NFEV, FULL_TOL, FULL_FTOL)
         c = design.cost(th)
         if c < out_cost:
             out, out_cost = th, c
