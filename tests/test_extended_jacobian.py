@@ -175,3 +175,25 @@ def test_superposer_products_equal_the_columns_products(rows, k):
     cols = sup.apply(steps)                                        # (k, rows, n)
     assert np.allclose(summed, np.einsum("krn,r->kn", cols, w), rtol=0, atol=1e-10 * np.abs(cols).max())
     assert np.allclose(pulled, cols @ v, rtol=1e-10)
+
+
+def test_parallel_effect_without_derivatives_keeps_differences():
+    """A plug-in parallel effect without ``unit_step_derivatives`` (the contract's default) is differenced."""
+    from creep_online.effects import ParallelEffect, register_effect, unregister_effect
+    from creep_online.effects.second_mode import SecondMode
+
+    class PlainMode(SecondMode):
+        name = "plain_mode_test"
+        unit_step_derivatives = ParallelEffect.unit_step_derivatives
+
+    register_effect(PlainMode)
+    try:
+        ds = hidden_dataset("second_mode", 1, n=3000)
+        design = ext.Design(ext.prepare(ds.t, ds.u, ds.y), ("plain_mode_test",))
+        assert design.exact == [0, 1, 2]
+        theta = _theta(design, 0)
+        jac = design.jacobian(theta)
+        for k in range(theta.size):
+            assert _relative(jac[:, k], _central(design, theta, k)) < (BASE_RTOL if k < 3 else EFFECT_RTOL)
+    finally:
+        unregister_effect("plain_mode_test")
