@@ -145,8 +145,9 @@ def test_resonance_step_derivatives_match_central_differences(fn, zeta):
     tau = np.arange(-5, 3000) * 1e-3
     der = resonance_step_derivatives(fn, zeta, tau)
     lf, lz = np.log10(fn), np.log10(zeta)
-    central = [(resonance_step(10 ** (lf + STEP), zeta, tau) - resonance_step(10 ** (lf - STEP), zeta, tau)) / (2 * STEP),
-               (resonance_step(fn, 10 ** (lz + STEP), tau) - resonance_step(fn, 10 ** (lz - STEP), tau)) / (2 * STEP)]
+    up_f, down_f = resonance_step(10 ** (lf + STEP), zeta, tau), resonance_step(10 ** (lf - STEP), zeta, tau)
+    up_z, down_z = resonance_step(fn, 10 ** (lz + STEP), tau), resonance_step(fn, 10 ** (lz - STEP), tau)
+    central = [(up_f - down_f) / (2 * STEP), (up_z - down_z) / (2 * STEP)]
     for k in range(2):
         assert _relative(der[k], central[k]) < BASE_RTOL
     assert not der[:, :6].any()                                     # nothing before the step

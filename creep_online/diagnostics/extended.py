@@ -46,14 +46,14 @@ MAX_NFEV = 40
 #: Extended fits: this many grid starts get a short polish of SHORT_NFEV evaluations first.
 SHORT_STARTS = 4
 SHORT_NFEV = 8
-#: ... and stops once a step lowers the cost by less than SHORT_FTOL (relative; xtol SHORT_XTOL): the short
+#: ... and this many priority starts (spectral peaks, swapped modes) too.
+PRIORITY_STARTS = 5
+#: A short polish stops once a step lowers the cost by less than SHORT_FTOL (relative; xtol SHORT_XTOL): the short
 #: polish only ranks the starts for the final one. Replayed on 708 recorded short polishes (22 records) this
 #: saves ~26 % of their evaluations (a converged or stalled start's last ones), and the best start kept is
 #: within 6e-4 of the cost of the best one then (the final polish takes it from there).
 SHORT_FTOL = 1e-3
 SHORT_XTOL = 1e-6
-#: ... and this many priority starts (spectral peaks, swapped modes) too.
-PRIORITY_STARTS = 5
 #: Long records explore starting points on a prefix of at least EXPLORE_SAMPLES samples that also
 #: holds EXPLORE_EXCITATION of the input's total variation (used when it is < 2/3 of the record).
 EXPLORE_SAMPLES = 6000
@@ -427,9 +427,10 @@ class Design:
         (both linear) and filtered by the output-filter effects (linear too);
         ``varpro.projected_jacobian`` turns them into the projected residual's.
         A parallel path's come from its effect's ``unit_step_derivatives``
-        (superposed on the plain input). Any other effect parameter costs one more evaluation (forward difference,
-        step as scipy's ``diff_step=1e-7``), mostly with the base path
-        remembered. Uniform records only (``analytic``).
+        (superposed on the plain input). Any other effect parameter costs one
+        more evaluation (forward difference, step as scipy's
+        ``diff_step=1e-7``), mostly with the base path remembered. Uniform
+        records only (``analytic``).
         """
         theta = np.asarray(theta, dtype=float)
         coef, _, wres = self.project(theta)

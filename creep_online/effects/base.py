@@ -236,9 +236,10 @@ class ParallelEffect(Effect):
         """Optional: d(unit_step)/d(own nonlinear parameters) as a function of tau, rows in ``nonlinear_params``
         order, shape (k, len(tau)).
 
-        The extended fit's Jacobian then takes this path exactly instead of
-        one more evaluation per parameter (finite differences); None (the
-        default) keeps the differences.
+        Override it to have the extended fit's Jacobian take this path
+        exactly instead of one more evaluation per parameter (finite
+        differences); not overridden (this default), the fit keeps the
+        differences.
         """
         return None
 
