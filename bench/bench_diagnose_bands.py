@@ -12,7 +12,8 @@ noise, the verdicts (a confusion row) and the seconds per diagnosis.
 Prints one JSON document (``--out`` also writes it). The plants are drawn here,
 not taken from the tests. Usage::
 
-    PYTHONPATH=. python bench/bench_diagnose_bands.py --records 10 [--effects leakage,drift] [--out F]
+    PYTHONPATH=. python bench/bench_diagnose_bands.py --records 10 [--first-seed 0] [--effects leakage,drift] [--out F]
+    PYTHONPATH=. python bench/bench_diagnose_bands.py --merge A.json B.json --out F    # runs over consecutive seeds
 """
 from __future__ import annotations
 
@@ -94,34 +95,62 @@ def cell(rows: list[dict]) -> dict:
             "seconds_p50": float(np.median([r["seconds"] for r in rows]))}
 
 
+def table_of(rows: dict) -> dict:
+    """The table (cells by effect and band, ``none`` for the clean records) from the rows by key."""
+    table: dict = {"none": cell(rows["none|clean"])}
+    for key, r in rows.items():
+        if key != "none|clean":
+            effect, band = key.split("|")
+            table.setdefault(effect, {})[band] = cell(r)
+    return table
+
+
+def merge(paths: list[str]) -> dict:
+    """One document from several runs over consecutive seeds (e.g. two processes, --first-seed 0 and 10)."""
+    docs = sorted((json.load(open(p)) for p in paths), key=lambda d: d["first_seed"])
+    rows = {key: [r for d in docs for r in d["rows"][key]] for key in docs[0]["rows"]}
+    return {**docs[0], "records_per_cell": sum(d["records_per_cell"] for d in docs), "table": table_of(rows),
+            "merged_runs": [{k: d[k] for k in ("first_seed", "records_per_cell", "load_average", "elapsed_s")}
+                            for d in docs],
+            "load_average": [d["load_average"] for d in docs], "elapsed_s": max(d["elapsed_s"] for d in docs),
+            "rows": rows}
+
+
 def main() -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--records", type=int, default=100, help="records per effect and band (the issue: >= 100)")
     ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--effects", default=None, help="comma-separated subset of the catalogue (default: all)")
+    ap.add_argument("--merge", nargs="+", default=None, metavar="JSON",
+                    help="merge the outputs of runs over consecutive seeds instead of running")
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
-    effects = args.effects.split(",") if args.effects else list(effect_names())
-    seeds = range(args.first_seed, args.first_seed + args.records)
-    started = time.perf_counter()
-    table: dict = {"none": cell([run_one(None, (1.0, 1.0), s) for s in seeds])}
-    rows: dict = {}
-    for effect in effects:
-        for band, limits in BANDS.items():
-            rows[(effect, band)] = [run_one(effect, limits, s) for s in seeds]
-            table.setdefault(effect, {})[band] = cell(rows[(effect, band)])
-            print(f"[bands] {effect} {band}: {table[effect][band]['named_first']:.2f} named, "
-                  f"{table[effect][band]['at_floor']} at floor", file=sys.stderr, flush=True)
-    doc = {"bench": "diagnose_bands", "records_per_cell": args.records, "first_seed": args.first_seed,
-           "bands": BANDS, "floor_factor": FLOOR, "samples": N, "fs_hz": 1 / H, "table": table,
-           "load_average": list(os.getloadavg()), "elapsed_s": time.perf_counter() - started,
-           "rows": {f"{e}|{b}": r for (e, b), r in rows.items()}}
+    if args.merge:
+        doc = merge(args.merge)
+    else:
+        doc = run(args.effects.split(",") if args.effects else list(effect_names()), args.first_seed, args.records)
     text = json.dumps(doc, indent=1, default=float)
     print(text)
     if args.out:
         with open(args.out, "w") as f:
             f.write(text + "\n")
     return doc
+
+
+def run(effects: list[str], first_seed: int, records: int) -> dict:
+    """Every effect and band (and clean records) for seeds first_seed .. first_seed + records - 1."""
+    seeds = range(first_seed, first_seed + records)
+    started = time.perf_counter()
+    rows: dict = {"none|clean": [run_one(None, (1.0, 1.0), s) for s in seeds]}
+    for effect in effects:
+        for band, limits in BANDS.items():
+            rows[f"{effect}|{band}"] = r = [run_one(effect, limits, s) for s in seeds]
+            c = cell(r)
+            print(f"[bands] {effect} {band}: {c['named_first']:.2f} named, {c['at_floor']} at floor",
+                  file=sys.stderr, flush=True)
+    return {"bench": "diagnose_bands", "records_per_cell": records, "first_seed": first_seed,
+            "bands": BANDS, "floor_factor": FLOOR, "samples": N, "fs_hz": 1 / H, "table": table_of(rows),
+            "load_average": list(os.getloadavg()), "elapsed_s": time.perf_counter() - started, "rows": rows}
 
 
 if __name__ == "__main__":

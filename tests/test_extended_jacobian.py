@@ -6,8 +6,10 @@ differences with step 1e-5 agree to ~1e-8 relative (their truncation error,
 which falls as step^2 down to ~1e-9), so 1e-6 leaves a factor 100 and still
 catches any wrong chain-rule factor or a missing term of the projection (the
 Kaufman term alone is off by 4e-3..0.6 here); so is a delay's (a spline's
-slope). The effects' other parameters keep forward differences (step 1e-7,
-as scipy's ``diff_step``): 1e-3.
+slope), and so are a parallel path's own parameters (the effect's
+``unit_step_derivatives``: a second mode's in fn and zeta, a second creep's
+exponent). The effects' other parameters keep forward differences (step
+1e-7, as scipy's ``diff_step``): 1e-3.
 """
 from __future__ import annotations
 
@@ -28,6 +30,9 @@ DESIGNS = [
     ("hysteresis", ("hysteresis",)),                  # input rows
     ("leakage", ("leakage",)),                        # output filter
     ("second_mode", ("second_mode",)),                # parallel path
+    ("second_creep", ("second_creep",)),              # parallel path (exponent)
+    ("second_mode", ("second_mode", "second_creep")),  # two parallel paths
+    ("leakage", ("second_mode", "leakage")),          # a parallel path, output-filtered
     ("periodic_disturbance", ("periodic_disturbance",)),
     ("drift", ("drift", "nonlinear_gain")),
     ("delay", ("hysteresis", "leakage", "delay")),    # rows, filter and delay at once
@@ -71,7 +76,7 @@ def test_delay_is_differentiated_exactly_unless_a_parallel_path_is_delayed_too()
     ds = hidden_dataset("delay", 3, n=3000)
     data = ext.prepare(ds.t, ds.u, ds.y)
     assert ext.Design(data, ("delay",)).exact == [0, 1, 2, 3]
-    assert ext.Design(data, ("second_mode", "delay")).exact == [0, 1, 2]
+    assert ext.Design(data, ("second_mode", "delay")).exact == [0, 1, 2, 3, 4]     # the mode's, not the delay
     design = ext.Design(data, ("delay",))
     theta = np.array([0.3, np.log10(60.0), np.log10(0.2), 0.0])     # the delay switched off: its lower bound
     jac = design.jacobian(theta)
@@ -131,3 +136,65 @@ def test_projected_jacobian_of_a_small_separable_problem(rank_deficient):
         up[k] += 1e-6
         down[k] -= 1e-6
         assert _relative(jac[:, k], (residual(up) - residual(down)) / 2e-6) < 1e-7
+
+
+@pytest.mark.parametrize("fn, zeta", [(60.0, 0.05), (30.0, 1.0), (30.0, 1.0 + 1e-7), (10.0, 3.0), (400.0, 0.7)])
+def test_resonance_step_derivatives_match_central_differences(fn, zeta):
+    """Light to heavy damping, repeated poles included (the self-convolution's series branch)."""
+    from creep_online.effects.responses import resonance_step, resonance_step_derivatives
+    tau = np.arange(-5, 3000) * 1e-3
+    der = resonance_step_derivatives(fn, zeta, tau)
+    lf, lz = np.log10(fn), np.log10(zeta)
+    up_f, down_f = resonance_step(10 ** (lf + STEP), zeta, tau), resonance_step(10 ** (lf - STEP), zeta, tau)
+    up_z, down_z = resonance_step(fn, 10 ** (lz + STEP), tau), resonance_step(fn, 10 ** (lz - STEP), tau)
+    central = [(up_f - down_f) / (2 * STEP), (up_z - down_z) / (2 * STEP)]
+    for k in range(2):
+        assert _relative(der[k], central[k]) < BASE_RTOL
+    assert not der[:, :6].any()                                     # nothing before the step
+
+
+@pytest.mark.parametrize("alpha", [0.01, 0.4, 1.0])
+def test_creep_step_derivative_matches_central_differences(alpha):
+    from creep_online.effects.responses import creep_step, creep_step_derivative
+    tau = np.arange(-5, 3000) * 1e-3
+    h = 1e-6
+    central = (creep_step(alpha + h, tau) - creep_step(alpha - h, tau)) / (2 * h)
+    assert _relative(creep_step_derivative(alpha, tau), central) < BASE_RTOL
+
+
+@pytest.mark.parametrize("rows, k", [(1, 3), (4, 2)])
+def test_superposer_products_equal_the_columns_products(rows, k):
+    """Both ways of Superposer.products (a correlation per input row, or per response) against apply()."""
+    from creep_online.effects.responses import Superposer
+    rng = np.random.default_rng(3)
+    n = 500
+    x = np.cumsum(rng.standard_normal((rows, n)) * (rng.uniform(size=(rows, n)) < 0.05), axis=1)
+    sup = Superposer(np.arange(n) * 1e-3, x)
+    steps = rng.standard_normal((k, n)).cumsum(axis=1)
+    w, v = rng.standard_normal(rows), rng.standard_normal(n)
+    summed, pulled = sup.products(steps, w, v)
+    cols = sup.apply(steps)                                        # (k, rows, n)
+    assert np.allclose(summed, np.einsum("krn,r->kn", cols, w), rtol=0, atol=1e-10 * np.abs(cols).max())
+    assert np.allclose(pulled, cols @ v, rtol=1e-10)
+
+
+def test_parallel_effect_without_derivatives_keeps_differences():
+    """A plug-in parallel effect without ``unit_step_derivatives`` (the contract's default) is differenced."""
+    from creep_online.effects import ParallelEffect, register_effect, unregister_effect
+    from creep_online.effects.second_mode import SecondMode
+
+    class PlainMode(SecondMode):
+        name = "plain_mode_test"
+        unit_step_derivatives = ParallelEffect.unit_step_derivatives
+
+    register_effect(PlainMode)
+    try:
+        ds = hidden_dataset("second_mode", 1, n=3000)
+        design = ext.Design(ext.prepare(ds.t, ds.u, ds.y), ("plain_mode_test",))
+        assert design.exact == [0, 1, 2]
+        theta = _theta(design, 0)
+        jac = design.jacobian(theta)
+        for k in range(theta.size):
+            assert _relative(jac[:, k], _central(design, theta, k)) < (BASE_RTOL if k < 3 else EFFECT_RTOL)
+    finally:
+        unregister_effect("plain_mode_test")

@@ -13,7 +13,8 @@ stage               what the effect does                                     hoo
 ``input``           transforms the input before every linear path            ``transform_input``,
                     (hysteresis, nonlinear gain)                             ``design_rows``
 ``parallel``        a linear path beside the base model, with a gain         ``parallel_step``,
-                    (second mode, second creep)                              ``unit_step``
+                    (second mode, second creep)                              ``unit_step`` (optional:
+                                                                             ``unit_step_derivatives``)
 ``delay``           delays every linear path                                 ``delay_s``, ``fitted_delay``
 ``output_filter``   filters the sum of the linear paths (leakage)            ``filter_output``,
                                                                              ``filter_columns``
@@ -230,6 +231,17 @@ class ParallelEffect(Effect):
     @abstractmethod
     def unit_step(self, theta: dict[str, float]) -> StepFn:
         """The path's unit-gain step response for nonlinear parameters ``theta``."""
+
+    def unit_step_derivatives(self, theta: dict[str, float]) -> Callable[[np.ndarray], np.ndarray] | None:
+        """Optional: d(unit_step)/d(own nonlinear parameters) as a function of tau, rows in ``nonlinear_params``
+        order, shape (k, len(tau)).
+
+        Override it to have the extended fit's Jacobian take this path
+        exactly instead of one more evaluation per parameter (finite
+        differences); not overridden (this default), the fit keeps the
+        differences.
+        """
+        return None
 
     @property
     def gain_column(self) -> str:

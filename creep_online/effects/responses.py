@@ -17,6 +17,7 @@ from typing import Callable
 import numpy as np
 from scipy.fft import irfft, next_fast_len, rfft
 from scipy.interpolate import CubicSpline
+from scipy.special import digamma
 
 from ..discretize import resonance_poles, step_response_grid
 from ..errors import DataError
@@ -55,18 +56,89 @@ def resonance_step(fn_hz: float, zeta: float, tau: np.ndarray) -> np.ndarray:
     is accurate for repeated and stiff poles.
     """
     tau = np.maximum(np.asarray(tau, dtype=float), 0.0)
-    wn = 2.0 * math.pi * fn_hz
-    a1, a2 = 2.0 * zeta / wn, 1.0 / wn**2
-    p1, p2 = resonance_poles(a1, a2)  # slow, fast
-    d = p2 - p1
+    p1, d, live, e1, ratio = _two_pole_terms(fn_hz, zeta, tau)
     # S = 1 - e^{p1 t} + p1 e^{p1 t} (e^{d t} - 1)/d  (limit-safe form of the two-pole formula)
-    x = d * tau
+    out = np.ones(tau.shape)
+    out[live] = (1.0 - e1 + p1 * e1 * ratio).real
+    return out
+
+
+#: Where Re(p1) tau is below this the transient is < 1e-304: a step response is 1 there, its derivatives 0
+#: (not evaluated: complex exponentials that underflow to subnormals cost ~10x more than ordinary ones).
+DECAYED = -700.0
+
+
+def _two_pole_terms(fn_hz: float, zeta: float, tau: np.ndarray) -> tuple[complex, complex, np.ndarray, np.ndarray,
+                                                                          np.ndarray]:
+    """(p1, d, live, e^{p1 tau}, (e^{d tau} - 1)/d) of 1/(1 + a1 s + a2 s^2), the last two where ``live``.
+
+    p1 is the slow pole, d = p2 - p1; ``live``: the samples whose transient has
+    not decayed below 1e-304 (``DECAYED``). tau >= 0.
+    """
+    wn = 2.0 * math.pi * fn_hz
+    p1, p2 = resonance_poles(2.0 * zeta / wn, 1.0 / wn**2)  # slow, fast
+    d = p2 - p1
+    live = p1.real * tau > DECAYED
+    tl = tau[live]
+    x = d * tl
+    x = np.maximum(x.real, DECAYED) + 1j * x.imag            # e^x below 1e-304 (stiff poles) is 0 to rounding
     small = np.abs(x) < 1e-6
-    ratio = np.empty(tau.shape, dtype=complex)
+    ratio = np.empty(tl.shape, dtype=complex)
     ratio[~small] = np.expm1(x[~small]) / d
-    ratio[small] = tau[small] * (1.0 + x[small] / 2.0)
-    e1 = np.exp(p1 * tau)
-    return (1.0 - e1 + p1 * e1 * ratio).real
+    ratio[small] = tl[small] * (1.0 + x[small] / 2.0)
+    return p1, d, live, np.exp(p1 * tl), ratio
+
+
+def creep_step_derivative(alpha: float, tau: np.ndarray) -> np.ndarray:
+    """d/d(alpha) of ``creep_step``: S (ln tau - psi(1 + alpha)) (0 for tau <= 0; psi: digamma)."""
+    tau = np.asarray(tau, dtype=float)
+    out = np.zeros(tau.shape)
+    pos = tau > 0
+    out[pos] = creep_step(alpha, tau[pos]) * (np.log(tau[pos]) - digamma(1.0 + alpha))
+    return out
+
+
+def resonance_step_derivatives(fn_hz: float, zeta: float, tau: np.ndarray) -> np.ndarray:
+    """d/d(log10 fn) and d/d(log10 zeta) of ``resonance_step``, shape (2, len(tau)) (0 for tau <= 0).
+
+    S depends on wn only through wn tau, so dS/d(log10 fn) = ln10 tau g(tau)
+    with g = S' the impulse response. In the damping, dS/d(a1) = -(g * g)(tau)
+    (dG/da1 = -s G^2), a1 = 2 zeta / wn; the self-convolution in closed form is
+    wn^4 e^{p1 tau} tau^3 psi(x), x = (p2 - p1) tau, psi below (finite for
+    repeated poles). Why: the extended fit's Jacobian in a second mode's
+    parameters without two more evaluations per step (finite differences).
+    """
+    tau = np.maximum(np.asarray(tau, dtype=float), 0.0)
+    wn = 2.0 * math.pi * fn_hz
+    p1, d, live, e1, ratio = _two_pole_terms(fn_hz, zeta, tau)
+    tl = tau[live]
+    impulse = wn**2 * (e1 * ratio).real
+    self_conv = wn**4 * (e1 * tl**3 * _self_convolution_factor(d * tl)).real
+    ln10 = math.log(10.0)
+    out = np.zeros((2, tau.size))
+    out[0, live] = ln10 * tl * impulse
+    out[1, live] = -ln10 * zeta * (2.0 / wn) * self_conv
+    return out
+
+
+#: Below this |x| the self-convolution factor is summed as its series (the closed form cancels).
+_SERIES_BELOW = 0.1
+_SERIES = np.array([(m - 2) / math.factorial(m) for m in range(3, 14)])
+
+
+def _self_convolution_factor(x: np.ndarray) -> np.ndarray:
+    """psi(x) = (x (1 + e^x) + 2 (1 - e^x)) / x^3 = sum_{m>=3} (m - 2)/m! x^(m-3) (complex x, Re x <= 0)."""
+    out = np.empty(x.shape, dtype=complex)
+    small = np.abs(x) < _SERIES_BELOW
+    xs = x[small]
+    acc = np.zeros(xs.shape, dtype=complex)
+    for c in _SERIES[::-1]:
+        acc = acc * xs + c
+    out[small] = acc
+    xl = x[~small]
+    em1 = np.expm1(np.maximum(xl.real, DECAYED) + 1j * xl.imag)
+    out[~small] = (2.0 * xl + (xl - 2.0) * em1) / xl**3
+    return out
 
 
 def base_step_grid(alpha: float, a1: float, a2: float, h: float, n: int) -> np.ndarray:
@@ -204,11 +276,18 @@ class Superposer:
 
         Shapes (k, n) and (k, rows): what a Jacobian needs of the columns
         ``apply`` would give (their weighted sum and their products with a
-        residual) without forming them, two inverse FFTs per response instead
-        of one per row: the rows' spectra are summed first, and
-        apply(S)_i . v = dx_i . q with q the cross-correlation of v and S.
+        residual) without forming them, one inverse FFT per response for the
+        sums (the rows' spectra are summed first) and, for the products,
+        apply(S)_i . v = S . c_i with c_i the cross-correlation of dx_i and v:
+        one inverse FFT per row (or, with more rows than responses,
+        dx_i . q_k with q_k the cross-correlation of v and S_k: one per response).
         """
-        fs = rfft(np.atleast_2d(steps), self.nfft, axis=-1)
+        steps = np.atleast_2d(steps)
+        fs = rfft(steps, self.nfft, axis=-1)
         summed = irfft((weights @ self.spectra) * fs, self.nfft, axis=-1)[:, : self.n]
-        q = irfft(rfft(v, self.nfft) * np.conj(fs), self.nfft, axis=-1)[:, : self.n]
+        fv = rfft(v, self.nfft)
+        if self.rows < steps.shape[0]:
+            c = irfft(np.conj(self.spectra) * fv, self.nfft, axis=-1)[:, : self.n]
+            return summed, steps @ c.T
+        q = irfft(fv * np.conj(fs), self.nfft, axis=-1)[:, : self.n]
         return summed, q @ self.dx.T

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..errors import ModelError
 from .base import FitView, OutputCompensator, ParallelEffect, ParamSpec, StepFn
-from .responses import creep_step
+from .responses import creep_step, creep_step_derivative
 
 ALPHA2 = "second_creep.alpha2"
 
@@ -53,6 +53,10 @@ class SecondCreep(ParallelEffect):
     def unit_step(self, theta: dict[str, float]) -> StepFn:
         alpha2 = theta[ALPHA2]
         return lambda tau: creep_step(alpha2, tau)
+
+    def unit_step_derivatives(self, theta: dict[str, float]) -> StepFn:
+        alpha2 = theta[ALPHA2]
+        return lambda tau: creep_step_derivative(alpha2, tau)[None, :]
 
     def nonlinear_params(self, data) -> list[ParamSpec]:
         return [ParamSpec(ALPHA2, 1e-3, 1.0)]

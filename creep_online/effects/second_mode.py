@@ -13,7 +13,7 @@ import numpy as np
 from scipy.signal import cont2discrete
 
 from .base import FitView, OutputCompensator, ParallelEffect, ParamSpec, StepFn
-from .responses import resonance_step
+from .responses import resonance_step, resonance_step_derivatives
 
 FN = "second_mode.log10_fn"
 ZETA = "second_mode.log10_zeta"
@@ -52,6 +52,10 @@ class SecondMode(ParallelEffect):
     def unit_step(self, theta: dict[str, float]) -> StepFn:
         fn, z = 10 ** theta[FN], 10 ** theta[ZETA]
         return lambda tau: resonance_step(fn, z, tau)
+
+    def unit_step_derivatives(self, theta: dict[str, float]) -> StepFn:
+        fn, z = 10 ** theta[FN], 10 ** theta[ZETA]
+        return lambda tau: resonance_step_derivatives(fn, z, tau)
 
     def nonlinear_params(self, data) -> list[ParamSpec]:
         hi = math.log10(0.5 * data.fs) if data.uniform else math.log10(1.0 / data.h)
