@@ -270,16 +270,23 @@ def test_since_statistics_equal_the_snapshot_moved_to_the_live_origin():
     assert ryy == pytest.approx((tr.sc[W.SC_SYY] - syy0) / g, rel=1e-15)
 
 
+def _fed_drifting_tracker(seed: int) -> WindowTracker:
+    """A tracker with free responses and both drift columns, 4 s of a noisy staircase into a plant near its
+    estimate (the re-fit machine's test bed)."""
+    model = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
+    h, n = 1e-3, 4000
+    u = _staircase(n, 300, seed)
+    y = simulate(model, np.arange(n) * h, u) + np.random.default_rng(seed).normal(0, 1e-3, n)
+    tr = _tracker(CreepModel.from_resonance(0.12, 33.0, 0.25, 0.9), h, free=True, drift=2)
+    _feed(tr, u, y)
+    return tr
+
+
 def test_refit_machine_equals_its_kernels_in_sequence():
     """refit.refit_unit, one stage or slice per call, = the statistics, REFIT_STEPS Levenberg-Marquardt steps
     and the covariance called in sequence, bit for bit (the slices sum in the same order); refit.accept swaps
     the result in with its coefficients."""
-    model = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
-    h, n = 1e-3, 4000
-    u = _staircase(n, 300, 9)
-    y = simulate(model, np.arange(n) * h, u) + np.random.default_rng(9).normal(0, 1e-3, n)
-    tr = _tracker(CreepModel.from_resonance(0.12, 33.0, 0.25, 0.9), h, free=True, drift=2)
-    _feed(tr, u, y)
+    tr = _fed_drifting_tracker(9)
     st, S, shift, start = tr.st.copy(), tr.S.copy(), tr._shift.copy(), tr.theta.copy()
     lam, dx = tr.basis.lam, tr.basis.dx
     F, fy = np.empty((tr.p, tr.p)), np.empty(tr.p)
@@ -320,12 +327,7 @@ def test_the_per_sample_kernel_runs_the_refit_machine_to_the_same_result(slices)
     from the context array) = refit.run on the same state, bit for bit, and reports the end with
     MACHINE_DONE after exactly the machine's number of slices. Outputs missing (NaN) on the samples fed
     meanwhile, so that the statistics the fit reads stay those at its start."""
-    model = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
-    h, n = 1e-3, 4000
-    u = _staircase(n, 300, 4)
-    y = simulate(model, np.arange(n) * h, u) + np.random.default_rng(4).normal(0, 1e-3, n)
-    tr = _tracker(CreepModel.from_resonance(0.12, 33.0, 0.25, 0.9), h, free=True, drift=2)
-    _feed(tr, u, y)
+    tr = _fed_drifting_tracker(4)
     lam, dx = tr.basis.lam, tr.basis.dx
     st, S, shift, theta, wk = tr.st.copy(), tr.S.copy(), tr._shift.copy(), tr.theta.copy(), tr._wk.copy()
     RF.begin(st, S, shift, wk, 0, False, False, 1)
