@@ -314,7 +314,7 @@ def test_refit_machine_equals_its_kernels_in_sequence():
     head, fitted, var = RF.result(tr._wk)
     assert np.array_equal(fitted, theta) and np.array_equal(var, np.diag(cov))
     assert head[RF.RF_AFTER] == out[1] and head[RF.RF_DRIFT] == 0.0
-    r = RF.accept(tr.st, tr.theta, tr._wk, lam, dx)
+    r = RF.Accepted._make(RF.accept(tr.st, tr.theta, tr._wk, lam, dx))
     assert r.verdict == RF.ACCEPTED and np.array_equal(tr.theta, theta)
     m = np.empty(tr.p)
     W.full_coefficients(theta, tr.a1l, tr.a2l, lam, dx, m)
@@ -366,7 +366,7 @@ def test_the_change_test_fits_a_drift_the_window_does_not(free_rates):
     _feed(tr, u[1000:], y[1000:])
     RF.start_test(tr.st, tr.S, S0, sy0, syy0, tr._shift, shift0, tr.theta, tr._test_wk, free_rates)
     RF.run(tr.st, tr.S, tr._shift, tr.theta, tr._test_wk, tr.basis.lam, tr.basis.dx)
-    r = RF.test_outcome(tr._test_wk, tr.theta)
+    r = RF.TestOutcome._make(RF.test_outcome(tr._test_wk, tr.theta))
     moves = {"a1": math.exp(r.ln_a1 - r.live_ln_a1) - 1, "a2": math.exp(r.ln_a2 - r.live_ln_a2) - 1,
              "b": r.b / r.live_b - 1}
     if free_rates:

@@ -459,6 +459,8 @@ ACCEPTED, STALE, REJECTED = 0, 1, 2
 #: and the rate switch (+1 on, -1 off); the variances (times sigma^2) of alpha, ln a1, ln a2, b, the
 #: offset and the two rates (0 where absent); the sample count, the output's noise level and whether a1 or a2
 #: moved beyond RELINEARIZE from the linearization point (what the tracker's Python would read from numpy).
+#: ``accept`` returns these as a plain tuple (``Accepted._make`` names them): numba boxes a namedtuple at
+#: about twice a tuple's cost, ~40 against ~15-20 us with the caches cold, as they are after a re-fit.
 Accepted = namedtuple("Accepted", "verdict alpha ln_a1 ln_a2 b cost neff move drift drift_stat drift_switch "
                                   "var_alpha var_ln_a1 var_ln_a2 var_b var_offset var_rate0 var_rate1 "
                                   "n noise relinearize")
@@ -468,7 +470,7 @@ Accepted = namedtuple("Accepted", "verdict alpha ln_a1 ln_a2 b cost neff move dr
 def accept(st: np.ndarray, live: np.ndarray, wk: np.ndarray, lam: np.ndarray, dx: float) -> tuple:
     """Swap a finished re-fit into the live estimate (``live``, and the prediction's coefficients in st).
 
-    Returns an ``Accepted`` of plain floats: the tracker's Python reads one tuple, no numpy.
+    Returns ``Accepted``'s fields as a plain tuple of floats: the tracker's Python reads one tuple, no numpy.
 
     The resonance is first kept within what the sampling represents. A fit taken at another linearization
     point than the live one is STALE (the next re-fit decides). A sum of squares below zero is the
@@ -506,9 +508,9 @@ def accept(st: np.ndarray, live: np.ndarray, wk: np.ndarray, lam: np.ndarray, dx
     rate1 = var[r0 + 1] if k > r0 + 1 else 0.0
     relin = wk[RF_RELINEARIZE]
     far = abs(math.exp(theta[1]) / st[W.SC_A1L] - 1) > relin or abs(math.exp(theta[2]) / st[W.SC_A2L] - 1) > relin
-    return Accepted(verdict, theta[0], theta[1], theta[2], theta[3], cost, wk[RF_NEFF], move, wk[RF_DRIFT],
-                    wk[RF_DRIFT_STAT], wk[RF_DRIFT_SWITCH], var[0], var[1], var[2], var[3], var[4], rate0, rate1,
-                    int(st[W.SC_N]), st[W.SC_NOISE], far)
+    return (verdict, theta[0], theta[1], theta[2], theta[3], cost, wk[RF_NEFF], move, wk[RF_DRIFT],
+            wk[RF_DRIFT_STAT], wk[RF_DRIFT_SWITCH], var[0], var[1], var[2], var[3], var[4], rate0, rate1,
+            int(st[W.SC_N]), st[W.SC_NOISE], far)
 
 
 @njit(cache=CACHE)
@@ -530,19 +532,20 @@ def bound_resonance(theta: np.ndarray, wk: np.ndarray) -> bool:
 
 
 #: What ``test_outcome`` returns: the window costs of the last second at the live estimate and at the test's
-#: fit; the fit's and the live ln a1, ln a2, b; the fit's variances (times sigma^2) of ln a1, ln a2, b.
+#: fit; the fit's and the live ln a1, ln a2, b; the fit's variances (times sigma^2) of ln a1, ln a2, b
+#: (a plain tuple, as ``accept``'s).
 TestOutcome = namedtuple("TestOutcome", "before after ln_a1 ln_a2 b live_ln_a1 live_ln_a2 live_b "
                                         "var_ln_a1 var_ln_a2 var_b")
 
 
 @njit(cache=CACHE)
 def test_outcome(wk: np.ndarray, live: np.ndarray) -> tuple:
-    """A finished change test's numbers as a ``TestOutcome`` of plain floats (the tracker's Python then
-    needs no numpy)."""
+    """A finished change test's numbers, ``TestOutcome``'s fields as a plain tuple of floats (the tracker's
+    Python then needs no numpy)."""
     k = live.shape[0]
     theta, var = wk[HEAD:HEAD + k], wk[HEAD + k:HEAD + 2 * k]
-    return TestOutcome(wk[RF_START_COST], wk[RF_AFTER], theta[1], theta[2], theta[3], live[1], live[2], live[3],
-                       var[1], var[2], var[3])
+    return (wk[RF_START_COST], wk[RF_AFTER], theta[1], theta[2], theta[3], live[1], live[2], live[3],
+            var[1], var[2], var[3])
 
 
 def result(wk: np.ndarray) -> tuple[list[float], list[float], list[float]]:

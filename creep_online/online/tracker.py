@@ -434,34 +434,36 @@ class WindowTracker(ParameterView):
         with its 1-sigma dictionary is built when someone asks for it (``fit``), not in update().
         One unit: each visit to cold Python costs ~10-20 us of its own, so fewer, longer visits.
         """
-        r = RF.accept(self.st, self.theta, self._wk, self.basis.lam, self.basis.dx)
-        if r.drift:
-            self.drift_stat = r.drift_stat
-            if r.drift_switch:
-                self.drift_on = r.drift_switch > 0.0
-        if r.verdict == RF.STALE:
+        raw = RF.accept(self.st, self.theta, self._wk, self.basis.lam, self.basis.dx)
+        (verdict, _, _, _, _, cost, neff, move, drift, drift_stat, drift_switch, *_, n, noise, relinearize) = raw
+        if drift:
+            self.drift_stat = drift_stat
+            if drift_switch:
+                self.drift_on = drift_switch > 0.0
+        if verdict == RF.STALE:
             return                         # re-linearized meanwhile: the next refit decides
-        if r.verdict == RF.REJECTED:
+        if verdict == RF.REJECTED:
             self.rejected += 1             # a failed fit is never swapped in
-            self._watch(math.inf, True, r.n, r.noise)
+            self._watch(math.inf, True, n, noise)
             return
-        self.converged = self.converged or r.move < 0.01
+        self.converged = self.converged or move < 0.01
         self.refits += 1
-        self._fit, self._fit_raw, self._fit_sample = None, (r, self.drift_on), r.n
+        self._fit, self._fit_raw, self._fit_sample = None, (raw, self.drift_on), n
         if self._first_fit is None:
-            self._first_fit = r.n
-        self._watch(math.sqrt(max(r.cost, 0.0) / max(r.neff, 1.0)), False, r.n, r.noise)
-        if r.relinearize:
+            self._first_fit = n
+        self._watch(math.sqrt(max(cost, 0.0) / max(neff, 1.0)), False, n, noise)
+        if relinearize:
             if not any(j.__name__ == "_relinearize_job" for j in self._jobs):
                 self._jobs.append(self._relinearize_job(None))
         elif self.events:
-            self._settle_events(r.move)
+            self._settle_events(move)
 
     @property
     def fit(self) -> Fit:
         """The window's last accepted fit with its 1-sigma (built on first access after a re-fit)."""
         if self._fit is None:
-            r, drift_on = self._fit_raw
+            raw, drift_on = self._fit_raw
+            r = RF.Accepted._make(raw)
             sigma2 = max(r.cost, 0.0) / max(r.neff - self.theta.size, 1.0)
             var = (r.var_alpha, r.var_ln_a1, r.var_ln_a2, r.var_b, r.var_offset, r.var_rate0, r.var_rate1)
             sd = [math.sqrt(abs(v) * sigma2) if math.isfinite(v) else math.inf for v in var]
@@ -570,7 +572,8 @@ class WindowTracker(ParameterView):
         lin = (self.a1l, self.a2l)
         self.machine = MACHINE_TEST        # TEST_STEPS Levenberg-Marquardt steps, then the covariance, in the
         yield MACHINE                      # per-sample kernel
-        r = RF.test_outcome(wk, self.theta)   # plain floats from here on (numpy from Python is slow here)
+        # plain floats from here on (numpy from Python is slow here)
+        r = RF.TestOutcome._make(RF.test_outcome(wk, self.theta))
         if not (math.isfinite(r.after) and r.after > 0.0 and math.isfinite(r.before)):
             return
         sigma2 = r.after / max(nr - 4, 1)
