@@ -66,6 +66,7 @@ RF_PARTIAL = 34   # the trial cost's sum over the rows done so far
 RF_SCORING = 35   # 1 while the normal equations are the score test's (at the result, into H2, g2)
 RF_NORMAL_ROWS = 36   # rows of the normal equations per slice (``SLICE_MACS``)
 RF_COST_ROWS = 37     # rows of the trial cost per slice
+RF_FACTORED = 38      # 1 if the covariance's Cholesky factor exists (its inverse's stage reads it)
 HEAD = 40
 
 #: Multiply-adds per slice of a re-fit (about a microsecond): the per-sample kernel runs one slice per
@@ -95,7 +96,7 @@ def allocate(p: int, k: int, r0: int, steps: int, policy: dict) -> np.ndarray:
     bounds LO, HI; DRIFT_ON, DRIFT_OFF, DRIFT_MAX; HOLD_N, DRIFT_MIN_N, DRIFT_EVERY, NRATE;
     LN_A2_MIN, LN_ZETA_LO, LN_ZETA_HI, RELINEARIZE).
     """
-    wk = np.zeros(HEAD + 2 * k + 3 * k * k + 2 * k + p * p + p + MASKS * k + _scratch_size(p, k))
+    wk = np.zeros(_masks_at(p, k) + MASKS * k + _scratch_size(p, k))
     wk[RF_MU] = 1e-3
     wk[RF_STEPS] = steps
     wk[RF_K], wk[RF_R0] = k, r0
@@ -104,7 +105,7 @@ def allocate(p: int, k: int, r0: int, steps: int, policy: dict) -> np.ndarray:
     wk[RF_COST_ROWS] = max(1, SLICE_MACS // p)
     for name, value in policy.items():
         wk[globals()["RF_" + name]] = value
-    o = HEAD + 2 * k + 3 * k * k + 2 * k + p * p + p       # the masks follow F and fy (``_views``)
+    o = _masks_at(p, k)
     masks = wk[o:o + MASKS * k].reshape(MASKS, k)
     masks[:] = 1.0
     masks[MASK_CONSTANT, r0:] = 0.0
@@ -115,6 +116,12 @@ def allocate(p: int, k: int, r0: int, steps: int, policy: dict) -> np.ndarray:
     masks[MASK_TEST_RATES] = masks[MASK_TEST]
     masks[MASK_TEST_RATES, r0:] = 1.0
     return wk
+
+
+@njit(cache=CACHE)
+def _masks_at(p: int, k: int) -> int:
+    """Offset of the masks in the work array: after the header, theta, var, H, cov, H2, g, g2, F and fy."""
+    return HEAD + 2 * k + 3 * k * k + 2 * k + p * p + p
 
 
 @njit(cache=CACHE)
@@ -133,7 +140,7 @@ def _views(wk: np.ndarray, p: int, k: int) -> tuple:
     o += 2 * k
     F = wk[o:o + p * p].reshape(p, p)
     fy = wk[o + p * p:o + p * p + p]
-    o += p * p + p
+    o = _masks_at(p, k)
     masks = wk[o:o + MASKS * k].reshape(MASKS, k)
     return theta, var, H, g, cov, H2, g2, F, fy, masks
 
@@ -148,7 +155,7 @@ def _scratch_size(p: int, k: int) -> int:
 @njit(cache=CACHE)
 def _scratch(wk: np.ndarray, p: int, k: int, q: int) -> tuple:
     """C, At, m, FA, fm, trial, mt, v, dv, L, d: the slices' intermediate results, after the masks."""
-    o = HEAD + 2 * k + 3 * k * k + 2 * k + p * p + p + MASKS * k
+    o = _masks_at(p, k) + MASKS * k
     mq = p - (k - 4)
     C = wk[o:o + p * k].reshape(p, k)
     o += p * k
@@ -275,11 +282,11 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
         wk[RF_MU] = W.trial_verdict(theta, trial, wk[RF_PARTIAL], wk[RF_COST], wk[RF_MU], out)
         return _step_done(wk)
     if stage == ST_COVARIANCE:         # the factor, then the inverse
-        wk[RF_ROW] = 1.0 if W.covariance_factor(H, free, L, d) else 0.0
+        wk[RF_FACTORED] = 1.0 if W.covariance_factor(H, free, L, d) else 0.0
         wk[RF_STAGE] = ST_INVERSE
         return False
     if stage == ST_INVERSE:
-        W.covariance_inverse(L, d, wk[RF_ROW] != 0.0, cov)
+        W.covariance_inverse(L, d, wk[RF_FACTORED] != 0.0, cov)
         for i in range(k):
             var[i] = cov[i, i]
         wk[RF_NEFF] = st[W.SC_NEFF]
@@ -314,10 +321,6 @@ def run(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarray, wk: 
         pass
 
 
-#: ``sample_work``'s status flag: the re-fit or change test it advanced is done (added to ``window.sample``'s).
-MACHINE_DONE = 16
-
-
 # header of the context array (``context``): what ``sample_work`` needs besides the sample's arrays
 CX_K = 0          # parameters (theta's length)
 CX_SHIFT = 1      # rows and columns of the drift-origin total (``window.move_origin``)
@@ -334,6 +337,8 @@ def context(theta: np.ndarray, shift: np.ndarray, lam: np.ndarray, dx: float,
     the per-sample kernel takes one argument for all of them (each array argument costs ~0.25 us of
     numba's dispatch on every call). Returns it and views of theta, shift and the works (copies of the
     values given), which the tracker then uses in their place."""
+    if len(works) > CX_MAX_WORKS:
+        raise ValueError(f"refit.context: at most {CX_MAX_WORKS} work arrays, got {len(works)}")
     k, q = theta.size, lam.size
     head = np.zeros(CX_HEAD)
     head[CX_K], head[CX_SHIFT], head[CX_SHIFT + 1], head[CX_Q], head[CX_DX] = k, *shift.shape, q, dx

@@ -11,7 +11,8 @@ resumable jobs, one small unit per ``work()`` call:
   origin moves to the newest sample first, so alpha and b are the values now.
   The rates are fitted only while a score test (on) / Wald test (off) says
   the data show drift (``DRIFT_ON``, ``DRIFT_OFF``). The fit itself is a numba
-  state machine, one kernel call per unit (``refit.py``);
+  state machine that the per-sample kernel advances in ~1 us slices
+  (``refit.py``, ``refit.sample_work``);
 * **relinearize** when a1 or a2 moved more than ``RELINEARIZE`` from the point
   the resonance states were computed at: the remembered samples are replayed
   into fresh statistics (the nodes fast-forwarded, the resonance states
