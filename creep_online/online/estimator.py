@@ -697,37 +697,20 @@ def warm_kernels() -> None:
         est.update(1.0, 0.5)
     est.predict_one(1.0)
     tr = est._tracker
-    n = tr.theta.size
-    F = np.eye(tr.p)
-    fy = np.ones(tr.p)
-    lin = (tr.a1l, tr.a2l)
-    H, g = np.empty((n, n)), np.empty(n)
-    cost = W.lm_normal(tr.theta, *lin, tr.basis.lam, tr.basis.dx, F, fy, 1.0, H, g)
-    W.lm_trial(tr.theta.copy(), np.ones(n), 1e-3, H, g, cost, *lin, tr.basis.lam, tr.basis.dx, F, fy, 1.0,
-               0.01, 0.9, np.empty(3))
-    W.covariance(H, np.ones(n), np.empty((n, n)))
-    W.cost_of(tr.theta, *lin, tr.basis.lam, tr.basis.dx, F, fy, 1.0)
-    W.symmetrize(tr.S, F, 1.0)
+    # what the tracker's Python calls; the re-fit's stages (their kernels compiled into the machine's) run
+    # once, through begin, run and accept, and once through the per-sample kernel
     W.replay(tr.ring, 0, 4, 1, tr.st.copy(), tr.S.copy())
-    W.rereference(tr.st.copy(), tr.S.copy(), float(tr.sc[W.SC_N]) + 1.0)
-    W.drift_coefficients(tr.theta, *lin, tr.basis.lam, tr.basis.dx, np.empty(tr.q + W.ONE))
-    W.drift_score(H, g, np.ones(n), max(n - 2, 1))
+    W.drift_coefficients(tr.theta, tr.a1l, tr.a2l, tr.basis.lam, tr.basis.dx, np.empty(tr.q + W.ONE))
     st, S, shift = tr.st.copy(), tr.S.copy(), tr._shift.copy()
     W.set_estimate(tr.theta.copy(), st, tr.basis.lam, tr.basis.dx)
     W.snapshot(st, S, shift, tr.theta, S.copy(), np.empty(tr.p), shift.copy(), tr.theta.copy())
-    W.since_statistics(st, S, S.copy(), np.ones(tr.p), 1.0, shift, shift.copy(), np.empty_like(S), np.ones(tr.p))
-    W.move_origin(st, S, shift)
-    W.scaled_statistics(st, S, np.empty_like(S), np.empty(tr.p))
     RF.start_test(st, S, S.copy(), np.ones(tr.p), 1.0, shift, shift.copy(), tr.theta.copy(), tr._test_wk.copy(),
                   True)
-    for drift in (1, 2):                   # every stage of the re-fit (the score and the Wald test)
-        wk = tr._wk.copy()
-        wk[RF.RF_NEFF] = 1e6
-        wk[RF.RF_DRIFT_MIN_N] = 0.0
-        RF.begin(st, S, shift, wk, 1, drift == 2, True, 0)
-        RF.run(st, S, shift, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)
-        RF.accept(st, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)
-        RF.test_outcome(wk, tr.theta)
+    wk = tr._wk.copy()
+    RF.begin(st, S, shift, wk, 1, False, True, 0)
+    RF.run(st, S, shift, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)
+    RF.accept(st, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)
+    RF.test_outcome(wk, tr.theta)
     RF.begin(tr.st, tr.S, tr._shift, tr._wk, 1, False, True, 0)      # (this estimator is thrown away)
     RF.sample_work(0.0, 0.0, tr.st, tr.S, tr.ring, tr._ctx, T.MACHINE_REFIT, 1)
     T.WindowTracker  # noqa: B018 - imported for its kernels
