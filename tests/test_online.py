@@ -160,22 +160,48 @@ def test_a_change_is_followed_sample_by_sample(family, seed):
     assert any(abs(v["t"] - sc.change_time) < 1.0 and v["settled"] for v in e.events), e.events
 
 
+def _reconvergence_s(est: OnlineEstimator, sc, single: bool) -> float:
+    """Feed the record in 0.1 s chunks; seconds from the change until the estimate enters the tolerances
+    for good (inf if it ends outside)."""
+    chunk = int(0.1 / sc.h)
+    back_within = math.inf
+    for k0 in range(0, sc.u.size, chunk):
+        u, y = sc.u[k0:k0 + chunk], sc.y[k0:k0 + chunk]
+        if single:
+            for a, b in zip(u.tolist(), y.tolist()):
+                est.update(a, b)
+        else:
+            est.update_block(u, y)
+        t = min(k0 + chunk, sc.u.size) * sc.h
+        inside = _within(est.estimate, sc.truth_at(min(k0 + chunk, sc.u.size) - 1))
+        if t > sc.change_time and inside and math.isinf(back_within):
+            back_within = t
+        elif not inside:
+            back_within = math.inf
+    return back_within - sc.change_time
+
+
+@pytest.mark.parametrize("family, seed", [("payload", 10), ("stiffness", 0)])
+def test_the_search_after_a_change_uses_the_step_that_revealed_it(family, seed):
+    """Sample by sample, re-convergence within 2.5 s.
+
+    payload 10: the mass changes 0.3 s before a large step, the change test sees it 0.4 s after the step,
+    and the next two steps are small. Searched on the samples after the detection, the resonance came out
+    at the noise floor in a wrong basin and re-convergence took 4.2 s; searched from the input's last
+    move it takes ~1.5 s. stiffness 0: the gain changes too, which shows during a hold at any instant, so
+    the window restarts at the detection (from the last move it never re-converged).
+    """
+    sc = scenarios.make(family, seed)
+    est = OnlineEstimator(sc.h)
+    assert _reconvergence_s(est, sc, single=True) <= 2.5, (sc.params, est.estimate.events)
+
+
 @pytest.mark.parametrize("family, seed", [("payload", 0), ("payload", 1), ("stiffness", 0)])
 def test_abrupt_change_is_detected_named_and_followed(family, seed):
     sc = scenarios.make(family, seed)
     est = OnlineEstimator(sc.h)
-    chunk = int(0.1 / sc.h)
-    back_within = None
-    for k0 in range(0, sc.u.size, chunk):
-        est.update_block(sc.u[k0:k0 + chunk], sc.y[k0:k0 + chunk])
-        t = min(k0 + chunk, sc.u.size) * sc.h
-        if t > sc.change_time and back_within is None and _within(est.estimate, sc.final_truth):
-            back_within = t
-        elif back_within is not None and not _within(est.estimate, sc.final_truth):
-            back_within = None
+    assert _reconvergence_s(est, sc, single=False) <= 3.0, (sc.params, _errors(est.estimate, sc.final_truth))
     e = est.estimate
-    assert _within(e, sc.final_truth), (sc.params, _errors(e, sc.final_truth))
-    assert back_within is not None and back_within - sc.change_time <= 3.0
     ev = [v for v in e.events if abs(v["t"] - sc.change_time) < 1.0]
     assert ev, e.events
     moved = set(ev[0]["moved"])

@@ -72,10 +72,14 @@ WAIT = "wait"
 #: kernel, ``refit.sample_work``; in block mode by ``finish``).
 MACHINE = "machine"
 MACHINE_REFIT, MACHINE_TEST = 0, 1      # the work arrays in the tracker's context (``refit.context``)
-#: Post-change samples the resonance search waits for after a detection (s).
-RESEARCH_S = 1.0
-#: Post-change searches at most: 1 s of samples, then twice as many while the result misfits (``_resolved``),
-#: up to the ring's half or the search's work memory (3.3 s at 10 kHz).
+#: Post-change samples the resonance search waits for (s; at least one settling time of the old
+#: resonance). They count from the input's last move inside the change test's window
+#: (``_post_change_start``): 0.5 s holds one step's transients and its creep. (At 1 s, counted from the
+#: detection, re-convergence after a payload or stiffness change took 2.4 / 4.0 s median / p90 sample by
+#: sample; from the last move 2.0 / 3.2 s, and at 0.5 s 1.6 / 2.2 s.)
+RESEARCH_S = 0.5
+#: Post-change searches at most: RESEARCH_S of samples, then twice as many while the result misfits
+#: (``_resolved``), up to the ring's half or the search's work memory (3.3 s at 10 kHz).
 RESEARCH_PASSES = 3
 #: Levenberg-Marquardt steps per window re-fit and per change test.
 REFIT_STEPS = 2
@@ -603,7 +607,7 @@ class WindowTracker(ParameterView):
             self._lr_recent = (self._lr_recent + [float(lr)])[-CHANGE_HISTORY:]
             return
         self.theta[0] = theta0[0]          # alpha as it was before the change (the refits chased it since)
-        self._restart_window(n0, S0, sy0, syy0)
+        self._restart_window(n0, "b" in moved)
         last = self.events[-1] if self.events else None
         if last is not None and not last["settled"]:
             # the same change seen again from a cleaner window: one event, restarted later
@@ -614,7 +618,7 @@ class WindowTracker(ParameterView):
                             "relative_change": {k: float(v) for k, v in moves.items()}, "lr": float(lr),
                             "settled": False, "restarts": 1, "_before": theta0[:4].copy()})
 
-    def _restart_window(self, n0: int, S0: np.ndarray, sy0: np.ndarray, syy0: float) -> None:
+    def _restart_window(self, n0: int, gain_moved: bool) -> None:
         """A change happened between sample n0 and now: the window restarts after it.
 
         The old window's refits are void. The parameters stay until the
@@ -622,7 +626,7 @@ class WindowTracker(ParameterView):
         (``_research_job``); the test's own fit is linearized around the old
         resonance and unreliable for a large move.
         """
-        self.window_start = self.n
+        self.window_start = self.n if gain_moved else self._post_change_start(n0)
         self.converged = False
         self.theta[5 + self.n_free:] = 0.0     # drift rates start afresh with the new window
         self.drift_on = False
@@ -632,20 +636,39 @@ class WindowTracker(ParameterView):
         self._first_fit = None
         self._research_wait = int(RESEARCH_AFTER_S / self.h)
         self.machine = None
-        self._jobs = [self._research_job(self.n)]
+        self._jobs = [self._research_job(self.window_start)]
 
-    def _research_job(self, n_detect: int) -> Generator:
+    def _post_change_start(self, n0: int) -> int:
+        """The first sample known to follow a change of the resonance that the test saw between n0 and now.
+
+        A change of a1, a2 alone shows only in the transients an input move excites: when the input moved
+        inside the test's window, its last move came after the change, and the samples from it on are
+        post-change; otherwise only the samples after the detection are. (Seen: a payload change 0.3 s
+        before a large step, detected 0.4 s after it; the search on the samples after the detection held
+        two small steps, fitted them at the noise floor in a wrong basin, and re-convergence waited 3.5 s
+        for the next large step.) A gain change also moves the output during a hold, at any instant of
+        the window: the caller then restarts at the detection (a stiffness change 0.2 s after the last
+        step, restarted there, was fitted as one model across the jump and never re-converged).
+        """
+        moved = self.n - 1 - int(self.sc[W.SC_SINCE])      # the input's last change
+        return moved - 1 if moved - 1 > n0 else self.n
+
+    def _research_job(self, n_from: int) -> Generator:
         """Wait for post-change samples, search the resonance on them (alpha held), rebuild the window there.
 
-        Samples after the detection are all post-change (the change was seen
-        before it): the search gets ``RESEARCH_S`` seconds of them (longer if
-        the input has not moved), starting from the exact node state.
+        Samples from ``n_from`` on are all post-change (``_post_change_start``): the search gets
+        ``RESEARCH_S`` seconds of them (longer if the input has not moved), starting from the exact node
+        state; before an input move inside the test's window, the hold before it settles the resonance
+        states (the search's lead).
         """
         self.fitting = False
-        wait = int(RESEARCH_S / self.h)
-        while self.n < n_detect + wait or (not self._input_moved(n_detect) and self.n < n_detect + 3 * wait):
+        n_detect = self.n
+        settle = int(16.0 * self.a2 / self.a1 / self.h)      # two (old) settling times
+        wait = max(int(RESEARCH_S / self.h), settle // 2)      # at least one settling time
+        while self.n < n_from + wait or (not self._input_moved(n_from) and self.n < n_from + 3 * wait):
             yield WAIT
-        n0 = max(n_detect, int(self.sc[W.SC_RSTART]))
+        oldest = int(self.sc[W.SC_RSTART])
+        n0 = max(n_from - settle if n_from < n_detect else n_from, oldest)
         zeta0 = yield from self._nodes_at(n0)
         cap = min(self.ring.shape[1] // 2, 1 << 15 if self.work_memory is None else self.work_memory.shape[0])
         search: ResonanceSearch | None = None
@@ -658,8 +681,7 @@ class WindowTracker(ParameterView):
                 starts = [c[1:] for c in search.candidates]
             u, y = yield from self._ring_segment(n0, min(self.n, n0 + cap))
             seg = u.size
-            settle = int(16.0 * self.a2 / self.a1 / self.h)      # two (old) settling times
-            lead = min(settle, u.size // 4)
+            lead = n_from - n0 if n_from < n_detect else min(settle, u.size // 4)
             # the live estimate competes with the grid: the window re-fits often follow a change
             # before the test confirms it, and the grid's best basin can be a wrong one
             search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, fixed_alpha=self.alpha,
@@ -682,7 +704,7 @@ class WindowTracker(ParameterView):
             yield
         # re-fits wait for the replay from the change: until it is swapped in, the live statistics
         # still hold the pre-change window, and a fit of them would report a second change
-        yield from self._relinearize_job(n0)
+        yield from self._relinearize_job(max(n_from, oldest))
         self.fitting = True
 
     @staticmethod
