@@ -34,8 +34,10 @@ What it does:
    after ``change_time`` (re-convergence; inf if never) and from the start
    (convergence), the scatter over the last 3 s (median over runs of the std
    of each relative error), and the fraction of runs reporting quality
-   "good" while outside ("dishonest good"), and the seconds of the trajectory that read "good" while
-   outside (``good_while_outside_s``: one point per 0.1 s chunk).
+   "good" while outside ("dishonest good"), the seconds of the trajectory that read "good" while
+   outside (``good_while_outside_s``: one point per 0.1 s chunk), and the change events reported
+   where no change happened (``false_change_events``: every event in the families without a
+   change; with one, the events more than 1.5 s before or 3 s after it).
 
 Lengths and rates (hil_sim.scenarios): 12-16 s at 10 kHz (strong_creep also at
 1-2 kHz), payload and stiffness 16 s at 10 kHz, drift 60 s at 2 kHz,
@@ -95,7 +97,8 @@ def run_estimator(u: np.ndarray, y: np.ndarray, h: float, mode: str, kwargs: dic
             for p in PARAMS:
                 traj[p].append(float(getattr(e, p)))
         e = est.estimate
-        out.update(quality=e.quality, phase=e.phase, final={p: float(getattr(e, p)) for p in PARAMS})
+        out.update(quality=e.quality, phase=e.phase, final={p: float(getattr(e, p)) for p in PARAMS},
+                   events=[float(v["t"]) for v in getattr(e, "events", [])])
     except Exception as exc:  # the estimator under test may fail in any way: that is a result
         out["error"] = f"{type(exc).__name__}: {exc}"
     out["elapsed_s"] = time.perf_counter() - start
@@ -203,8 +206,13 @@ def run_metrics(res: dict, tr: dict) -> dict:
                scatter={p: float(np.std(errs[p][last])) for p in PARAMS},
                dishonest_good=res["quality"] == "good" and not all(within.values()),
                good_while_outside_s=_good_while_outside(res["traj"].get("quality"), inside, t))
+    events = res.get("events") or []
     if tr["change_time"] is not None:
         row["reconvergence_s"] = settle_time(t, inside, tr["change_time"])
+        # a detection names the test window the change fell in: up to a second before it
+        row["false_events"] = sum(not -1.5 <= v - tr["change_time"] <= 3.0 for v in events)
+    else:
+        row["false_events"] = len(events)
     return row
 
 
@@ -246,6 +254,8 @@ def family_metrics(rows: list[dict]) -> dict:
            "dishonest_good": sum(r["dishonest_good"] for r in ok) / n,
            "good_while_outside_s": _good_outside_summary([r.get("good_while_outside_s") for r in ok], n),
            "quality": {q: sum(r["quality"] == q for r in ok) for q in sorted({r["quality"] for r in ok})},
+           "false_change_events": {"runs_with_any": sum(r.get("false_events", 0) > 0 for r in ok) / n,
+                                   "total": sum(r.get("false_events", 0) for r in ok)},
            "failure_messages": sorted({r["error"] for r in rows if r["error"] is not None})}
     if any("reconvergence_s" in r for r in ok):
         times = [r["reconvergence_s"] for r in ok]
