@@ -802,7 +802,8 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
         chosen += [_merge(explore, th, warm) for th in list(groups.values())[:2]]
     chosen = list({th.tobytes(): th for th in chosen}.values())    # a priority start may repeat a grid start
     short = [_optimise(explore, th, SHORT_NFEV, SHORT_XTOL, SHORT_FTOL) for th in chosen]
-    finalists = [th for _, th in ranked(explore, short)[:n_starts]] + [_null_start(design, base)]
+    finalists = [th for _, th in ranked(explore, short)[:n_starts]]
+    finalists += _polished_starts(design, finalists) + [_null_start(design, base)]
     if warm is not None:
         finalists.append(_merge(design, _null_start(design, base), warm))
     if explore is not design:  # some parameters are sharper on the whole record (a line's frequency)
@@ -857,6 +858,16 @@ def _restart_base(design: Design, explore: Design, best: np.ndarray, max_nfev: i
         c = design.cost(th)
         if c < out_cost:
             out, out_cost = th, c
+    return out
+
+
+def _polished_starts(design: Design, polished: list[np.ndarray]) -> list[np.ndarray]:
+    """The effects' further starts from short-polished ones (``Effect.polished_starts``), inside the bounds."""
+    out = []
+    for th in polished:
+        for e in design.effects:
+            own = [design.index(n) for n in design.own[e]]
+            out += [np.clip(v, design.lo, design.hi) for v in get_effect(e).polished_starts(th, own, design.data)]
     return out
 
 

@@ -168,6 +168,15 @@ class Effect(ABC):
         """
         return []
 
+    def polished_starts(self, theta: np.ndarray, own: list[int], data) -> list[np.ndarray]:
+        """Further starts derived from a short-polished start ``theta`` (own parameters at indices ``own``).
+
+        For minima a polish cannot walk to from there (a mode's image across
+        the Nyquist frequency); the final polish takes the best of them and
+        the other finalists. Default: none.
+        """
+        return []
+
     def full_record_values(self, peaks: list[float]) -> dict[str, list[float]]:
         """Values of own parameters to retry on the whole record after exploring on a prefix."""
         return {}
