@@ -286,3 +286,17 @@ def test_a_second_mode_between_nyquist_and_the_sampling_rate_is_fitted_there(see
     fit = fit_extended(data, ("second_mode",), fit_base(data))
     assert fit.residual_rms < 1.1 * noise
     assert fit.effect_params["second_mode"]["fn_hz"] == pytest.approx(791.5, rel=0.01)
+
+
+def test_a_strong_second_creep_is_not_left_on_the_wrong_creep_path():
+    """A strong second creep (base residual ~90x the noise; bench diagnose_bands second_creep 10-100x seed 0:
+    this plant and path): the fit had put the resonance on the alpha2 path (exponents exchanged, fn at its
+    bound) and stopped at 10.8x the noise; the restart also searches with the two exponents exchanged."""
+    model = CreepModel.from_resonance(0.7826, 43.79, 0.0274, -1.812)
+    t, u, y, noise = _record_with(model, "second_creep", {"gain": -0.844, "alpha2": 0.3998}, 92.0, 0)
+    d = diagnose((t, u, y), candidates=("second_creep", "second_mode", "delay"), combine=False)
+    assert d.verdict == "second_creep"
+    fit = d.candidates[0].fit
+    assert fit.residual_rms < 1.1 * noise
+    assert abs(fit.model.alpha - 0.7826) < 0.01 and abs(fit.effect_params["second_creep"]["alpha2"] - 0.3998) < 0.01
+    assert fit.model.fn == pytest.approx(43.79, rel=0.01)
