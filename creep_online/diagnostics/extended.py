@@ -77,6 +77,7 @@ FULL_FTOL = 1e-5
 #: over the base parameters (alpha, fn, zeta) with the effect's fitted parameters kept: a strong
 #: effect pulls the base fit (and so the warm start) into a wrong resonance. (A wrong candidate
 #: explains little and is not restarted: the diagnosis pays for the restart only where it can help.)
+#: A base fit with a parameter on its bound restarts every extended fit above the floor (``_on_a_bound``).
 RESTART_ABOVE_FLOOR = 1.2
 RESTART_EXPLAINED = 0.5
 #: The restart grid: alpha values and damping values (fn: the record's frequency-response peaks and two defaults).
@@ -824,11 +825,22 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
             best, best_cost = th, c
     fit = _result(design, best)
     if RESTART_ABOVE_FLOOR * noise_std_estimate(fit.residual) < fit.residual_rms \
-            < RESTART_EXPLAINED * base.residual_rms:
+            and (fit.residual_rms < RESTART_EXPLAINED * base.residual_rms or _on_a_bound(design, base.theta[:3])):
         th = _restart_base(design, explore, best, max_nfev)
         if design.cost(th) < best_cost:
             fit = _result(design, th)
     return fit
+
+
+def _on_a_bound(design: Design, base: np.ndarray) -> bool:
+    """True when a base parameter (alpha, fn, zeta) sits on its bound: a base fit a strong effect distorted.
+
+    (Strong leakage pushed alpha to 0.001 and zeta to 20, a creep cancelled by
+    the high-pass: warm-started there, even the leakage fit explained nothing
+    and stopped at 23x the noise; bench leakage 10-100x seed 23.)
+    """
+    span = design.hi[:3] - design.lo[:3]
+    return bool(np.any(np.minimum(base - design.lo[:3], design.hi[:3] - base) < 1e-6 * span))
 
 
 def _restart_base(design: Design, explore: Design, best: np.ndarray, max_nfev: int) -> np.ndarray:
