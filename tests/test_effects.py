@@ -159,3 +159,26 @@ def test_unknown_effect_is_a_one_line_error(case):
     model, t, u, _ = case
     with pytest.raises(ModelError, match="unknown effect"):
         simulate_with_effects(model, t, u, {"backlash": {}})
+
+
+def test_second_mode_image_across_nyquist_has_the_same_sampled_poles():
+    """The image start of a mode (``SecondMode.polished_starts``, the unscaled one) has the same discrete-time
+    poles exp(s h) as the mode itself (independent reference: the roots of 1 + 2 zeta s / wn + s^2 / wn^2)."""
+    from types import SimpleNamespace
+
+    from creep_online.effects.second_mode import IMAGE_STEPS, SecondMode
+
+    fs = 1000.0
+    data = SimpleNamespace(uniform=True, fs=fs)
+
+    def sampled_poles(fn, zeta):
+        wn = 2 * np.pi * fn
+        s = np.roots([1 / wn**2, 2 * zeta / wn, 1.0])
+        return np.sort_complex(np.exp(s / fs))
+
+    for fn, zeta in ((230.0, 0.19), (791.5, 0.0555), (120.0, 0.02)):
+        theta = np.array([0.3, 2.0, -1.0, np.log10(fn), np.log10(zeta)])
+        image = SecondMode().polished_starts(theta, [3, 4], data)[IMAGE_STEPS.index(1.0)]
+        f2, z2 = 10 ** image[3], 10 ** image[4]
+        assert abs(f2 - fn) > 1.0
+        np.testing.assert_allclose(sampled_poles(f2, z2), sampled_poles(fn, zeta), rtol=0, atol=1e-12)

@@ -77,6 +77,7 @@ FULL_FTOL = 1e-5
 #: over the base parameters (alpha, fn, zeta) with the effect's fitted parameters kept: a strong
 #: effect pulls the base fit (and so the warm start) into a wrong resonance. (A wrong candidate
 #: explains little and is not restarted: the diagnosis pays for the restart only where it can help.)
+#: A base fit with a parameter on its bound restarts every extended fit above the floor (``_on_a_bound``).
 RESTART_ABOVE_FLOOR = 1.2
 RESTART_EXPLAINED = 0.5
 #: The restart grid: alpha values and damping values (fn: the record's frequency-response peaks and two defaults).
@@ -802,7 +803,8 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
         chosen += [_merge(explore, th, warm) for th in list(groups.values())[:2]]
     chosen = list({th.tobytes(): th for th in chosen}.values())    # a priority start may repeat a grid start
     short = [_optimise(explore, th, SHORT_NFEV, SHORT_XTOL, SHORT_FTOL) for th in chosen]
-    finalists = [th for _, th in ranked(explore, short)[:n_starts]] + [_null_start(design, base)]
+    finalists = [th for _, th in ranked(explore, short)[:n_starts]]
+    finalists += _polished_starts(design, finalists) + [_null_start(design, base)]
     if warm is not None:
         finalists.append(_merge(design, _null_start(design, base), warm))
     if explore is not design:  # some parameters are sharper on the whole record (a line's frequency)
@@ -823,11 +825,22 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
             best, best_cost = th, c
     fit = _result(design, best)
     if RESTART_ABOVE_FLOOR * noise_std_estimate(fit.residual) < fit.residual_rms \
-            < RESTART_EXPLAINED * base.residual_rms:
+            and (fit.residual_rms < RESTART_EXPLAINED * base.residual_rms or _on_a_bound(design, base.theta[:3])):
         th = _restart_base(design, explore, best, max_nfev)
         if design.cost(th) < best_cost:
             fit = _result(design, th)
     return fit
+
+
+def _on_a_bound(design: Design, base: np.ndarray) -> bool:
+    """True when a base parameter (alpha, fn, zeta) sits on its bound: a base fit a strong effect distorted.
+
+    (Strong leakage pushed alpha to 0.001 and zeta to 20, a creep cancelled by
+    the high-pass: warm-started there, even the leakage fit explained nothing
+    and stopped at 23x the noise; bench leakage 10-100x seed 23.)
+    """
+    span = design.hi[:3] - design.lo[:3]
+    return bool(np.any(np.minimum(base - design.lo[:3], design.hi[:3] - base) < 1e-6 * span))
 
 
 def _restart_base(design: Design, explore: Design, best: np.ndarray, max_nfev: int) -> np.ndarray:
@@ -836,13 +849,17 @@ def _restart_base(design: Design, explore: Design, best: np.ndarray, max_nfev: i
     Global convergence of an extended fit: the warm starts come from the base
     fit, which a strong effect distorts (e.g. strong leakage drives the base
     damping to its bound); with the effect's parameters already near their
-    values, the base parameters are searched again.
+    values, the base parameters are searched again. An effect that mirrors a
+    base parameter (``Effect.swapped``) is also searched with the two
+    exchanged: a strong second creep had put the resonance on the wrong
+    creep path and stopped at 10.8x the noise (bench second_creep 10-100x, seed 0).
     """
     data = design.data
     fmax = 10 ** design.hi[1] / 2.0
     fns = _frf_peaks(data) + [fmax / 10.0, fmax / 100.0]
-    starts = [np.concatenate([[a, math.log10(fn), math.log10(z)], best[3:]])
-              for a in RESTART_ALPHAS + (float(best[0]),) for fn in fns for z in RESTART_ZETAS]
+    kept = [best] + _swapped(design, best)
+    starts = [np.concatenate([[a, math.log10(fn), math.log10(z)], th[3:]])
+              for th in kept for a in RESTART_ALPHAS + (float(th[0]),) for fn in fns for z in RESTART_ZETAS]
     costs = []
     for th in starts:
         try:
@@ -857,6 +874,26 @@ def _restart_base(design: Design, explore: Design, best: np.ndarray, max_nfev: i
         c = design.cost(th)
         if c < out_cost:
             out, out_cost = th, c
+    return out
+
+
+def _polished_starts(design: Design, polished: list[np.ndarray]) -> list[np.ndarray]:
+    """The effects' further starts from short-polished ones (``Effect.polished_starts``), inside the bounds."""
+    out = []
+    for th in polished:
+        for e in design.effects:
+            own = [design.index(n) for n in design.own[e]]
+            out += [np.clip(v, design.lo, design.hi) for v in get_effect(e).polished_starts(th, own, design.data)]
+    return out
+
+
+def _swapped(design: Design, theta: np.ndarray) -> list[np.ndarray]:
+    """``theta`` with each effect's parameters exchanged with the base parameters they mirror (if any)."""
+    out = []
+    for e in design.effects:
+        v = get_effect(e).swapped(theta, [design.index(n) for n in design.own[e]])
+        if v is not None:
+            out.append(np.clip(v, design.lo, design.hi))
     return out
 
 

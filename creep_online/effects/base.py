@@ -168,6 +168,26 @@ class Effect(ABC):
         """
         return []
 
+    def swapped(self, theta: np.ndarray, own: list[int]) -> np.ndarray | None:
+        """``theta`` with this effect's parameters (at indices ``own``) exchanged with the base's they mirror.
+
+        For a parallel path of the base path's own kind (a second creep
+        exponent beside alpha, a second mode beside the first): an extended
+        fit can settle with the two paths' roles exchanged, a local minimum
+        the restart of the base parameters leaves only from the exchanged
+        values. None (default): nothing to exchange.
+        """
+        return None
+
+    def polished_starts(self, theta: np.ndarray, own: list[int], data) -> list[np.ndarray]:
+        """Further starts derived from a short-polished start ``theta`` (own parameters at indices ``own``).
+
+        For minima a polish cannot walk to from there (a mode's image across
+        the Nyquist frequency); the final polish takes the best of them and
+        the other finalists. Default: none.
+        """
+        return []
+
     def full_record_values(self, peaks: list[float]) -> dict[str, list[float]]:
         """Values of own parameters to retry on the whole record after exploring on a prefix."""
         return {}

@@ -73,6 +73,12 @@ class SecondCreep(ParallelEffect):
             out.append(v)
         return out
 
+    def swapped(self, theta: np.ndarray, own: list[int]) -> np.ndarray | None:
+        """alpha and alpha2 exchanged (a fit that put the resonance on the wrong creep path leaves from there)."""
+        out = np.array(theta, dtype=float)
+        out[0], out[own[0]] = theta[own[0]], theta[0]
+        return out
+
     def fitted_params(self, fit: FitView) -> dict:
         return {"gain": fit.coef[self.gain_column], "alpha2": fit.theta[ALPHA2]}
 

@@ -17,6 +17,8 @@ from .responses import resonance_step, resonance_step_derivatives
 
 FN = "second_mode.log10_fn"
 ZETA = "second_mode.log10_zeta"
+#: Relative steps of the damped frequency around a mode's image across Nyquist (``polished_starts``).
+IMAGE_STEPS = (0.97, 0.985, 1.0, 1.015, 1.03)
 
 
 class _ModeCompensator(OutputCompensator):
@@ -58,7 +60,11 @@ class SecondMode(ParallelEffect):
         return lambda tau: resonance_step_derivatives(fn, z, tau)
 
     def nonlinear_params(self, data) -> list[ParamSpec]:
-        hi = math.log10(0.5 * data.fs) if data.uniform else math.log10(1.0 / data.h)
+        # up to the sampling rate, as the base mode: a mode between Nyquist and fs rings at its alias
+        # fs - fn in the samples, and a step's response still tells the two apart (they differ in
+        # damping and in the first samples after the step); capped at Nyquist, such a mode was fitted
+        # at its alias and stopped at 1.4-2.5x the noise (bench seeds second_mode 15, 2, 3)
+        hi = math.log10(data.fs) if data.uniform else math.log10(1.0 / data.h)
         lo = math.log10(1.0 / (data.t[-1] - data.t[0]))
         return [ParamSpec(FN, lo, hi), ParamSpec(ZETA, -3.0, 0.5)]
 
@@ -76,6 +82,30 @@ class SecondMode(ParallelEffect):
             th = np.concatenate([base[:3], np.zeros(2)])
             th[3], th[4] = base[1], base[2]
             th[1], th[2] = base[1] + math.log10(factor), math.log10(0.2)
+            starts.append(th)
+        return starts
+
+    def polished_starts(self, theta: np.ndarray, own: list[int], data) -> list[np.ndarray]:
+        """The mode's image across Nyquist: same decay rate, damped frequency fs - f_d (a few per cent either way).
+
+        Sampled at fs, a mode at f_d rings like one at fs - f_d; a fit that
+        found the alias (wrong damping and gain, above the noise) cannot walk
+        to the image through the bad fits between. The image's frequency is
+        only as good as the alias fit's, so it is tried at 1.5 % steps (the
+        basin of a mode with zeta 0.05 is about +-1.5 % wide).
+        """
+        if not data.uniform:
+            return []
+        fn, zeta = 10 ** theta[own[0]], 10 ** theta[own[1]]
+        if zeta >= 1.0:
+            return []
+        sigma = 2 * math.pi * fn * zeta
+        wd = 2 * math.pi * (data.fs - fn * math.sqrt(1.0 - zeta * zeta))
+        starts = []
+        for k in IMAGE_STEPS:
+            wn = math.hypot(k * wd, sigma)
+            th = np.array(theta, dtype=float)
+            th[own[0]], th[own[1]] = math.log10(wn / (2 * math.pi)), math.log10(sigma / wn)
             starts.append(th)
         return starts
 
