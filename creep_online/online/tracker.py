@@ -510,7 +510,7 @@ class WindowTracker(ParameterView):
         # they are not trusted before two settling times
         skip = begin - oldest
         if oldest > 0:
-            skip = max(skip, int(16.0 * a2 / a1 / self.h))
+            skip = max(skip, self._settling_samples(a1, a2))
         phi[:self.q] = self.ztail
         phi[self.q + W.FREE:self.q + W.FREE + self.n_free] = \
             np.exp(-np.asarray(FREE_RATES[:self.n_free]) * self.h * oldest)
@@ -630,7 +630,7 @@ class WindowTracker(ParameterView):
         (``_research_job``); the test's own fit is linearized around the old
         resonance and unreliable for a large move.
         """
-        self.window_start = self.n if gain_moved else self._post_change_start(n0)
+        self.window_start = self._post_change_start(n0, gain_moved)
         self.converged = False
         self.theta[5 + self.n_free:] = 0.0     # drift rates start afresh with the new window
         self.drift_on = False
@@ -642,8 +642,12 @@ class WindowTracker(ParameterView):
         self.machine = None
         self._jobs = [self._research_job(self.window_start)]
 
-    def _post_change_start(self, n0: int) -> int:
-        """The first sample known to follow a change of the resonance that the test saw between n0 and now.
+    def _settling_samples(self, a1: float, a2: float) -> int:
+        """Two settling times of the resonance (a1, a2), in samples: 16 a2 / a1 = 8 / (zeta wn)."""
+        return int(16.0 * a2 / a1 / self.h)
+
+    def _post_change_start(self, n0: int, gain_moved: bool) -> int:
+        """The first sample known to follow a change that the test saw between n0 and now.
 
         A change of a1, a2 alone shows only in the transients an input move excites: when the input moved
         inside the test's window, its last move came after the change, and the samples from it on are
@@ -651,11 +655,11 @@ class WindowTracker(ParameterView):
         before a large step, detected 0.4 s after it; the search on the samples after the detection held
         two small steps, fitted them at the noise floor in a wrong basin, and re-convergence waited 3.5 s
         for the next large step.) A gain change also moves the output during a hold, at any instant of
-        the window: the caller then restarts at the detection (a stiffness change 0.2 s after the last
-        step, restarted there, was fitted as one model across the jump and never re-converged).
+        the window, so then only the samples after the detection are (a stiffness change 0.2 s after the
+        last step, restarted there, was fitted as one model across the jump and never re-converged).
         """
         moved = self.n - 1 - int(self.sc[W.SC_SINCE])      # the input's last change
-        return moved - 1 if moved - 1 > n0 else self.n
+        return moved - 1 if moved - 1 > n0 and not gain_moved else self.n
 
     def _research_job(self, n_from: int) -> Generator:
         """Wait for post-change samples, search the resonance on them (alpha held), rebuild the window there.
@@ -667,7 +671,7 @@ class WindowTracker(ParameterView):
         """
         self.fitting = False
         n_detect = self.n
-        settle = int(16.0 * self.a2 / self.a1 / self.h)      # two (old) settling times
+        settle = self._settling_samples(self.a1, self.a2)      # of the old resonance
         wait = max(int(RESEARCH_S / self.h), settle // 2)      # at least one settling time
         while self.n < n_from + wait or (not self._input_moved(n_from) and self.n < n_from + 3 * wait):
             yield WAIT
@@ -785,7 +789,7 @@ class WindowTracker(ParameterView):
         n0 = max(self.window_start, int(self.sc[W.SC_RSTART]), n1 - cap)
         zeta0 = yield from self._nodes_at(n0)
         u, y = yield from self._ring_segment(n0, n1)
-        lead = min(int(16.0 * self.a2 / self.a1 / self.h), u.size // 4)   # two settling times
+        lead = min(self._settling_samples(self.a1, self.a2), u.size // 4)
         # after a change alpha was determined before it (creep does not jump): the resonance only, 7x cheaper
         search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, work=self.work_memory,
                                  fixed_alpha=self.alpha if self.window_start else None, alphas=(self.alpha,),
