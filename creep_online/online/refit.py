@@ -75,7 +75,7 @@ HEAD = 40
 SLICE_MACS = 4000
 
 #: Stages of a fit, in order: (idle until ``begin``, which also moves the drift origin, or
-#: ``start_test``), the statistics at true scale (two slices); per Levenberg-Marquardt step the model coefficients, the
+#: ``start_test``), the statistics at true scale (one slice); per Levenberg-Marquardt step the model coefficients, the
 #: Jacobian's, the normal equations' rows in slices and their assembly, the damped step, the trial's
 #: coefficients, the trial's cost in slices and the verdict; then the covariance's factor, its inverse
 #: (and the Wald test), and for the score test the normal equations again at the result and the score.
@@ -216,13 +216,12 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
     stage = int(wk[RF_STAGE])
     if stage == ST_IDLE:
         return True
-    if stage == ST_SCALE:              # the statistics at true scale, frozen for the fit (two slices: the
-        i0 = int(wk[RF_ROW])           # first rows hold half of the upper triangle)
-        i1 = p - int(p / math.sqrt(2.0)) if i0 == 0 else p
-        wk[RF_FYY] = W.scaled_rows(st, S, F, fy, i0, i1)
-        wk[RF_ROW] = i1
-        if i1 < p:
-            return False
+    if stage == ST_SCALE:              # the statistics at true scale, frozen for the fit, in ONE slice: under
+        # sample_work a sample lands between two slices, and rows scaled a sample apart (this stage was two
+        # slices) gave a window cost that grew with the stream (demo: 1.0x -> 1.85x the noise floor in 16 s,
+        # then a wrong re-search) while theta stayed right. The effective samples belong to the same instant.
+        wk[RF_FYY] = W.scaled_statistics(st, S, F, fy)
+        wk[RF_NEFF] = st[W.SC_NEFF]
         theta[:] = live
         wk[RF_A1L], wk[RF_A2L] = st[W.SC_A1L], st[W.SC_A2L]
         wk[RF_STEP] = 0.0
@@ -289,7 +288,6 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
         W.covariance_inverse(L, d, wk[RF_FACTORED] != 0.0, cov)
         for i in range(k):
             var[i] = cov[i, i]
-        wk[RF_NEFF] = st[W.SC_NEFF]
         wk[RF_STAGE] = ST_IDLE
         if _drift_test(wk, theta, cov, k, int(wk[RF_DRIFT])):
             return True
@@ -404,6 +402,7 @@ def start_test(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, s
     p, k = S.shape[0], live.shape[0]
     theta, var, H, g, cov, H2, g2, F, fy, masks = _views(wk, p, k)
     wk[RF_FYY] = W.since_statistics(st, S, S0, sy0, syy0, shift, shift0, F, fy)
+    wk[RF_NEFF] = st[W.SC_NEFF]
     theta[:] = live
     wk[RF_A1L], wk[RF_A2L] = st[W.SC_A1L], st[W.SC_A2L]
     wk[RF_STEP] = 0.0
