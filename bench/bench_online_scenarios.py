@@ -98,7 +98,8 @@ def run_estimator(u: np.ndarray, y: np.ndarray, h: float, mode: str, kwargs: dic
                 traj[p].append(float(getattr(e, p)))
         e = est.estimate
         out.update(quality=e.quality, phase=e.phase, final={p: float(getattr(e, p)) for p in PARAMS},
-                   events=[float(v["t"]) for v in getattr(e, "events", [])])
+                   events=[float(v["t"]) for v in getattr(e, "events", [])],
+                   floor_ratio=float(e.residual_rms / e.noise_rms) if e.noise_rms > 0 else None)
     except Exception as exc:  # the estimator under test may fail in any way: that is a result
         out["error"] = f"{type(exc).__name__}: {exc}"
     out["elapsed_s"] = time.perf_counter() - start
@@ -134,9 +135,16 @@ def worker_main(argv: list[str]) -> None:
 
 
 # --------------------------------------------------------------------------- scenarios and truth
-def generate(families: list[str], plants: int, folder: Path, offset: int = 0) -> dict[str, dict]:
-    """Make and save the scenarios; keep for each only the truth at the chunk ends (the metrics' needs)."""
+def generate(families: list[str], plants: int, folder: Path, offset: int = 0,
+             snr_db: float | None = None) -> dict[str, dict]:
+    """Make and save the scenarios; keep for each only the truth at the chunk ends (the metrics' needs).
+
+    ``snr_db``: the output's SNR instead of the scenarios' own ``SNR_DB`` (a 20-bit capacitive sensor
+    reads 80-90 dB: numerical errors the 40 dB default hides show there)."""
+    from hil_sim import scenarios
     from hil_sim.scenarios import make
+    if snr_db is not None:
+        scenarios.SNR_DB = float(snr_db)
     truth = {}
     for fam in families:
         for seed in range(offset, offset + plants):
@@ -191,7 +199,8 @@ def settle_time(t: np.ndarray, inside: np.ndarray, t0: float) -> float:
 
 def run_metrics(res: dict, tr: dict) -> dict:
     """Per-run numbers: final errors and within-flags, (re)convergence times, end scatter, honesty."""
-    row = {"seed": tr["seed"], "error": res["error"], "quality": res["quality"]}
+    row = {"seed": tr["seed"], "error": res["error"], "quality": res["quality"],
+           "floor_ratio": res.get("floor_ratio")}
     if res["error"] is not None:
         return row
     final = {p: abs(float(e)) for p, e in rel_errors(res["final"], tr["final"]).items()}
@@ -232,6 +241,12 @@ def _dist(x: list[float]) -> dict:
     return {"median": float(np.median(x)), "p90": float(np.percentile(x, 90, method="higher"))}
 
 
+def _floor_ratios(ratios: list) -> dict | None:
+    """The final window error over the noise floor (median, p90, max over the runs; None for old revisions)."""
+    x = [v for v in ratios if v is not None]
+    return {**_dist(x), "max": float(max(x))} if x else None
+
+
 def _good_outside_summary(seconds: list, n: int) -> dict | None:
     """Over the runs: the share that read "good" while outside at any time, and the seconds (median, p90, max)."""
     x = [v for v in seconds if v is not None]
@@ -256,6 +271,7 @@ def family_metrics(rows: list[dict]) -> dict:
            "quality": {q: sum(r["quality"] == q for r in ok) for q in sorted({r["quality"] for r in ok})},
            "false_change_events": {"runs_with_any": sum(r.get("false_events", 0) > 0 for r in ok) / n,
                                    "total": sum(r.get("false_events", 0) for r in ok)},
+           "final_floor_ratio": _floor_ratios([r.get("floor_ratio") for r in ok]),
            "failure_messages": sorted({r["error"] for r in rows if r["error"] is not None})}
     if any("reconvergence_s" in r for r in ok):
         times = [r["reconvergence_s"] for r in ok]
@@ -293,6 +309,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--baseline", default="773e268", help="git revision of the baseline estimator, or 'none'")
     ap.add_argument("--mode", choices=("block", "single"), default="block")
     ap.add_argument("--kwargs", default="{}", help="JSON dict passed to OnlineEstimator(dt, **kwargs)")
+    ap.add_argument("--snr-db", type=float, default=None,
+                    help="output SNR in dB (default: hil_sim.scenarios.SNR_DB, 40)")
     ap.add_argument("--refit", choices=("window", "recursive"), default=None,
                     help="Remark 3's strategy of the current estimator (default: the estimator's default)")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "online_scenarios.json"))
@@ -321,7 +339,7 @@ def main(argv: list[str] | None = None) -> dict:
     with tempfile.TemporaryDirectory(prefix="online_scenarios_") as tmp:
         work = Path(tmp)
         (work / "scenarios").mkdir()
-        truth = generate(families, args.plants, work / "scenarios", args.seed_offset)
+        truth = generate(families, args.plants, work / "scenarios", args.seed_offset, args.snr_db)
         files = sorted((work / "scenarios").glob("*.npz"))
         gen_s = time.perf_counter() - start
         base = None if args.baseline == "none" else start_baseline(args.baseline, files, args.mode, kwargs, work)
@@ -329,7 +347,7 @@ def main(argv: list[str] | None = None) -> dict:
         current = run_files(files, args.mode, current_kwargs)
         run_s = time.perf_counter() - start - gen_s
         doc = {"config": {"plants": args.plants, "seed_offset": args.seed_offset, "families": families, "mode": args.mode,
-                          "kwargs": current_kwargs,
+                          "kwargs": current_kwargs, "snr_db": args.snr_db or 40.0,
                           "tolerances": TOL, "traj_dt_s": TRAJ_DT, "scatter_s": SCATTER_S},
                "current": {"revision": git_head(), "families": summarize(current, truth),
                            "run_s": run_s}}
