@@ -28,8 +28,9 @@ def _resonance(fn: float, zeta: float) -> tuple[float, float]:
     return 2 * zeta / wn, 1 / wn**2
 
 
-def _quiet_start_record(alpha: float, fn: float, zeta: float, b: float, seed: int, seconds: float = 8.0):
-    """Small steps (0-0.1) every 0.3 s from 0.1 s, then steps to +-1 every 0.5 s from 2.5 s; noise 0.01 b.
+def _quiet_start_record(alpha: float, fn: float, zeta: float, b: float, seed: int, seconds: float = 8.0,
+                        noise: float = 0.01):
+    """Small steps (0-0.1) every 0.3 s from 0.1 s, then steps to +-1 every 0.5 s from 2.5 s; noise ``noise`` b.
 
     The start-up search sees the resonance only through the small steps, near the noise.
     """
@@ -40,7 +41,7 @@ def _quiet_start_record(alpha: float, fn: float, zeta: float, b: float, seed: in
     u = np.where(t >= 0.1, small[((t - 0.1) / 0.3).astype(int) % 64], 0.0)
     u = np.where(t >= 2.5, big[((t - 2.5) / 0.5).astype(int) % 64], u)
     a1, a2 = _resonance(fn, zeta)
-    y = simulate_tv(H, u, alpha, a1, a2, b) + rng.normal(0.0, 0.01 * abs(b), t.size)
+    y = simulate_tv(H, u, alpha, a1, a2, b) + rng.normal(0.0, noise * abs(b), t.size)
     return u, y, {"alpha": alpha, "a1": a1, "a2": a2, "b": b}
 
 
@@ -204,3 +205,77 @@ def test_a_slow_mode_quiet_start_converges_sample_by_sample():
     err = _errors(est, truth)
     assert all(err[k] <= TOL[k] for k in TOL), (err, est.estimate.quality, est.estimate.reason)
 
+
+
+def _drain(gen):
+    """Run a unit generator to its return value."""
+    try:
+        while True:
+            next(gen)
+    except StopIteration as stop:
+        return stop.value
+
+
+def _ringing_segment(seed: int = 0, noise: float = 1e-3):
+    """A unit-gain model from rest under steps, plus a free ringing of its own resonance (an unknown state at
+    the segment's start), an offset and white noise; returns the model, t, u, y, the free response's rate and
+    frequency, and the noise."""
+    from creep_online.model import CreepModel
+    from creep_online.simulate import simulate
+    rng = np.random.default_rng(seed)
+    a1, a2 = _resonance(6.0, 0.03)
+    model = CreepModel(0.05, a1, a2, 1.0)
+    t = np.arange(12000) * H
+    u = np.where(t >= 0.05, 1.0, 0.0) + np.where(t >= 0.6, -0.7, 0.0)
+    s = simulate(model, t, u)
+    sigma, omega = -a1 / (2 * a2), math.sqrt(1 / a2 - (a1 / (2 * a2)) ** 2)
+    free = np.exp(sigma * t) * (0.8 * np.cos(omega * t) - 0.5 * np.sin(omega * t))
+    y = 1.7 * s + 0.3 + free + rng.normal(0.0, noise, t.size)
+    return model, t, u, y, s, sigma, omega
+
+
+def test_judged_cost_is_least_squares_with_the_free_responses():
+    """search.judged_cost = min over gain, offset and the resonance's two free responses of the mean squared
+    error, against numpy's least squares on the exact simulator's output and the closed-form homogeneous
+    solutions exp(sigma t) cos(omega t), exp(sigma t) sin(omega t) (the same span as the sampled ones)."""
+    model, t, u, y, s, sigma, omega = _ringing_segment()
+    basis = SoeBasis.build(H, horizon_s=3600.0)
+    for lead in (0, 3000):
+        search = ResonanceSearch(basis, u, y, lead=lead)
+        _drain(search._history())
+        judged = _drain(search.judged_cost(model.alpha, model.a1, model.a2))
+        X = np.column_stack([s, np.ones_like(t), np.exp(sigma * t) * np.cos(omega * t),
+                             np.exp(sigma * t) * np.sin(omega * t)])[lead:]
+        coef, *_ = np.linalg.lstsq(X, y[lead:], rcond=None)
+        reference = np.mean((y[lead:] - X @ coef) ** 2)
+        assert judged == pytest.approx(reference, rel=1e-3)
+
+
+def test_judged_cost_reaches_the_noise_floor_where_the_rest_start_cannot():
+    """With a ringing resonance state at the segment's start the search's own cost (state at rest, 0.3 s
+    lead against a 0.9 s decay) misses the true model by orders of magnitude; the judged cost finds the
+    noise (a re-search once switched from a right estimate to alpha -95 % on such a comparison)."""
+    model, t, u, y, s, sigma, omega = _ringing_segment(noise=1e-3)
+    search = ResonanceSearch(SoeBasis.build(H, horizon_s=3600.0), u, y, lead=3000)
+    _drain(search._history())
+    rest, _, _ = _drain(search.exact_cost(model.alpha, model.a1, model.a2))
+    judged = _drain(search.judged_cost(model.alpha, model.a1, model.a2))
+    assert judged == pytest.approx(1e-6, rel=0.05)
+    assert rest > 100 * judged
+
+
+def test_a_high_snr_slow_mode_stays_at_the_noise_floor_sample_by_sample():
+    """A 5.5 Hz mode with zeta 0.025 at a noise of 1e-4 of the gain (80 dB), sample by sample: the estimate
+    ends within the tolerances at the noise floor and reads "good". Two things broke it: the re-search
+    judged candidates with the resonance at rest at its segment's start (the ringing dominated every cost;
+    it switched from a right estimate to alpha -95 %), and the window sat at 2-3x the floor because the
+    first-order expansion 0.3 % from the linearization point is itself a misfit at this SNR
+    (``tracker.RELINEARIZE_FINE``; this record: "degraded" at 2.45x the floor, alpha 0.28 % off, before it;
+    seeds 0-11 of this plant: 1.0-1.22x after, three of them 1.7-2.45x before)."""
+    u, y, truth = _quiet_start_record(0.04, 5.5, 0.025, -6.5, seed=5, seconds=8.0, noise=1e-4)
+    est = _run(u, y, single=True)
+    e = est.estimate
+    err = _errors(est, truth)
+    assert all(err[k] <= TOL[k] for k in TOL), (err, e.quality, e.reason)
+    assert e.quality == "good", e.reason
+    assert e.residual_rms < 1.25 * e.noise_rms

@@ -111,6 +111,77 @@ def _rows(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx0: f
 
 
 @njit(cache=True)
+def _rows_free(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx0: float, vx1: float,
+               rc: np.ndarray, x: np.ndarray, f: np.ndarray, r0: int, r1: int, lead: int, G: np.ndarray) -> None:
+    """``_rows`` (every row) with the resonance's free responses as two more regressors.
+
+    ``f`` carries two homogeneous resonance states (started at the unit vectors at row 0); their outputs
+    ``g1``, ``g2`` (through the same coefficients as the forced state) are what an unknown resonance state
+    at the segment's start adds. G accumulates the Gram matrix of [s, 1, g1, g2, y] over rows k >= lead
+    with a finite y (``_free_cost`` projects it).
+    """
+    q = vz.shape[0]
+    x0, x1 = x[0], x[1]
+    for k in range(r0, r1):
+        if k >= lead and y[k] == y[k]:
+            s = vx0 * x0 + vx1 * x1
+            for i in range(q):
+                s += hist[k, i] * vz[i]
+            z0 = s
+            z2 = vx0 * f[0] + vx1 * f[1]
+            z3 = vx0 * f[2] + vx1 * f[3]
+            z4 = y[k]
+            row = (z0, 1.0, z2, z3, z4)
+            for a in range(5):
+                ra = row[a]
+                for b in range(a, 5):
+                    G[a, b] += ra * row[b]
+        n0 = rc[0] * x0 + rc[1] * x1 + rc[4] * u[k]
+        x1 = rc[2] * x0 + rc[3] * x1 + rc[5] * u[k]
+        x0 = n0
+        for j in (0, 2):
+            a0 = rc[0] * f[j] + rc[1] * f[j + 1]
+            f[j + 1] = rc[2] * f[j] + rc[3] * f[j + 1]
+            f[j] = a0
+    x[0] = x0
+    x[1] = x1
+
+
+@njit(cache=True)
+def _free_cost(G: np.ndarray) -> float:
+    """Cost per row of min ||y - b s - c - d1 g1 - d2 g2||^2 from the Gram matrix of ``_rows_free``.
+
+    Centred (the offset projected first, as in ``_projected``), then a Cholesky elimination of s, g1, g2 in
+    turn; a regressor whose remaining variance is below 1e-10 of its own (a free response that died within
+    the lead, or one the others already span) is left out. inf when s itself is degenerate.
+    """
+    n = G[1, 1]
+    if n < 6:
+        return math.inf
+    mean = (G[0, 1], 0.0, G[1, 2], G[1, 3], G[1, 4])     # the sums of s, -, g1, g2, y (upper triangle)
+    idx = (0, 2, 3, 4)                  # s, g1, g2, y
+    C = np.empty((4, 4))
+    for a in range(4):
+        for b in range(a, 4):
+            i, j = idx[a], idx[b]
+            C[a, b] = G[i, j] - mean[i] * mean[j] / n
+            C[b, a] = C[a, b]
+    if not (C[0, 0] > 1e-9 * G[0, 0] and math.isfinite(C[0, 0])):
+        return math.inf
+    for p in range(3):                  # eliminate regressor p from the rest (Schur complements)
+        d = C[p, p]
+        own = G[idx[p], idx[p]]
+        if not d > 1e-10 * own:
+            continue
+        for a in range(p + 1, 4):
+            fa = C[a, p] / d
+            for b in range(p + 1, 4):
+                C[a, b] -= fa * C[p, b]
+    cost = C[3, 3]
+    return max(cost, 0.0) / n if math.isfinite(cost) else math.inf
+
+
+@njit(cache=True)
 def _prepare(alpha: float, a1: float, a2: float, lam: np.ndarray, dx: float, h: float, v: np.ndarray,
              dv: np.ndarray, rc: np.ndarray, vz: np.ndarray, x: np.ndarray, acc: np.ndarray) -> tuple:
     """A candidate's model coefficients (nodes into vz), its resonance step, zero states and sums; returns
@@ -199,6 +270,29 @@ class ResonanceSearch:
         (the live estimate) judged on equal terms with the search's result.
         """
         return self._evaluate(alpha, a1, a2, 1)
+
+    def judged_cost(self, alpha: float, a1: float, a2: float) -> Generator:
+        """Cost per row of one candidate on every row after ``lead`` with the resonance state at the segment's
+        start unknown (its two free responses projected out with the gain and the offset), in units.
+
+        What a switch is decided on: the search's own cost starts the resonance at rest, and where the mode
+        rings for longer than the lead (5.5 Hz, zeta 0.025: 1.2 s against a 0.5 s lead after big steps) that
+        start dominates every candidate's cost (the true model's was 1e6 noise variances per row) and a
+        wrong candidate won by chance. The generator's return value is the cost.
+        """
+        vz, x = self._vz, self._x
+        vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
+                            self._rc, vz, x, self._acc)
+        f = np.array([1.0, 0.0, 0.0, 1.0])
+        G = np.zeros((5, 5))
+        yield
+        n = self.u.size
+        chunk = max(16, int(UNIT_WORK / (self.basis.size + 30)))
+        for r0 in range(0, n, chunk):
+            _rows_free(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, f, r0, min(n, r0 + chunk),
+                       self.lead, G)
+            yield
+        return _free_cost(G)
 
     def run(self) -> SearchResult:
         """To completion (block mode)."""
