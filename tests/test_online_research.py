@@ -235,20 +235,25 @@ def _ringing_segment(seed: int = 0, noise: float = 1e-3):
 
 
 def test_judged_cost_is_least_squares_with_the_free_responses():
-    """search.judged_cost = min over gain, offset and the resonance's two free responses of the mean squared
-    error, against numpy's least squares on the exact simulator's output and the closed-form homogeneous
-    solutions exp(sigma t) cos(omega t), exp(sigma t) sin(omega t) (the same span as the sampled ones)."""
+    """search.judged_cost = min over gain, offset, the resonance's two free responses and the given decays of
+    the mean squared error, against numpy's least squares on the exact simulator's output, the closed-form
+    homogeneous solutions exp(sigma t) cos(omega t), exp(sigma t) sin(omega t) (the same span as the sampled
+    ones) and exp(-mu t)."""
     model, t, u, y, s, sigma, omega = _ringing_segment()
+    y = y + 0.4 * np.exp(-5.0 * t)                  # an earlier input's fading memory (a stream in operation)
     basis = SoeBasis.build(H, horizon_s=3600.0)
-    for lead in (0, 3000):
-        search = ResonanceSearch(basis, u, y, lead=lead)
-        _drain(search._history())
-        judged = _drain(search.judged_cost(model.alpha, model.a1, model.a2))
-        X = np.column_stack([s, np.ones_like(t), np.exp(sigma * t) * np.cos(omega * t),
-                             np.exp(sigma * t) * np.sin(omega * t)])[lead:]
-        coef, *_ = np.linalg.lstsq(X, y[lead:], rcond=None)
-        reference = np.mean((y[lead:] - X @ coef) ** 2)
-        assert judged == pytest.approx(reference, rel=1e-3)
+    for decays in ((), (1.0, 5.0)):
+        for lead in (0, 3000):
+            search = ResonanceSearch(basis, u, y, lead=lead)
+            _drain(search._history())
+            judged = _drain(search.judged_cost(model.alpha, model.a1, model.a2, decays))
+            X = np.column_stack([s, np.ones_like(t), np.exp(sigma * t) * np.cos(omega * t),
+                                 np.exp(sigma * t) * np.sin(omega * t)] + [np.exp(-mu * t) for mu in decays])[lead:]
+            coef, *_ = np.linalg.lstsq(X, y[lead:], rcond=None)
+            reference = np.mean((y[lead:] - X @ coef) ** 2)
+            assert judged == pytest.approx(reference, rel=1e-3)
+            if decays:
+                assert judged == pytest.approx(1e-6, rel=0.05)     # the noise: nothing left unexplained
 
 
 def test_judged_cost_reaches_the_noise_floor_where_the_rest_start_cannot():

@@ -112,29 +112,36 @@ def _rows(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx0: f
 
 @njit(cache=True)
 def _rows_free(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx0: float, vx1: float,
-               rc: np.ndarray, x: np.ndarray, f: np.ndarray, r0: int, r1: int, lead: int, G: np.ndarray) -> None:
-    """``_rows`` (every row) with the resonance's free responses as two more regressors.
+               rc: np.ndarray, x: np.ndarray, f: np.ndarray, decay: np.ndarray, e: np.ndarray, r0: int, r1: int,
+               lead: int, G: np.ndarray) -> None:
+    """``_rows`` (every row) with the unknown start as more regressors: the resonance's free responses and
+    the decays ``e`` (the fading memory of an input before the stream).
 
     ``f`` carries two homogeneous resonance states (started at the unit vectors at row 0); their outputs
     ``g1``, ``g2`` (through the same coefficients as the forced state) are what an unknown resonance state
-    at the segment's start adds. G accumulates the Gram matrix of [s, 1, g1, g2, y] over rows k >= lead
-    with a finite y (``_free_cost`` projects it).
+    at the segment's start adds. ``e`` carries exp(-mu_j t) (times ``decay`` per row). G accumulates the
+    Gram matrix of [s, 1, g1, g2, e..., y] over rows k >= lead with a finite y (``_free_cost``).
     """
     q = vz.shape[0]
+    m = e.shape[0]
+    p = 5 + m
+    row = np.empty(p)
     x0, x1 = x[0], x[1]
     for k in range(r0, r1):
         if k >= lead and y[k] == y[k]:
             s = vx0 * x0 + vx1 * x1
             for i in range(q):
                 s += hist[k, i] * vz[i]
-            z0 = s
-            z2 = vx0 * f[0] + vx1 * f[1]
-            z3 = vx0 * f[2] + vx1 * f[3]
-            z4 = y[k]
-            row = (z0, 1.0, z2, z3, z4)
-            for a in range(5):
+            row[0] = s
+            row[1] = 1.0
+            row[2] = vx0 * f[0] + vx1 * f[1]
+            row[3] = vx0 * f[2] + vx1 * f[3]
+            for j in range(m):
+                row[4 + j] = e[j]
+            row[p - 1] = y[k]
+            for a in range(p):
                 ra = row[a]
-                for b in range(a, 5):
+                for b in range(a, p):
                     G[a, b] += ra * row[b]
         n0 = rc[0] * x0 + rc[1] * x1 + rc[4] * u[k]
         x1 = rc[2] * x0 + rc[3] * x1 + rc[5] * u[k]
@@ -143,41 +150,50 @@ def _rows_free(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, v
             a0 = rc[0] * f[j] + rc[1] * f[j + 1]
             f[j + 1] = rc[2] * f[j] + rc[3] * f[j + 1]
             f[j] = a0
+        for j in range(m):
+            e[j] *= decay[j]
     x[0] = x0
     x[1] = x1
 
 
 @njit(cache=True)
 def _free_cost(G: np.ndarray) -> float:
-    """Cost per row of min ||y - b s - c - d1 g1 - d2 g2||^2 from the Gram matrix of ``_rows_free``.
+    """Cost per row of min ||y - b s - c - sum d_j r_j||^2 from the Gram matrix of ``_rows_free`` (upper
+    triangle; columns s, 1, the other regressors r_j, y).
 
-    Centred (the offset projected first, as in ``_projected``), then a Cholesky elimination of s, g1, g2 in
-    turn; a regressor whose remaining variance is below 1e-10 of its own (a free response that died within
-    the lead, or one the others already span) is left out. inf when s itself is degenerate.
+    Centred (the offset projected first, as in ``_projected``), then the regressors eliminated in turn
+    (Schur complements); one whose remaining variance is below 1e-10 of its own (a free response that
+    died within the lead, a slow decay the offset already spans) is left out. inf when s itself is
+    degenerate.
     """
+    p = G.shape[0]
     n = G[1, 1]
-    if n < 6:
+    if n < p + 1:
         return math.inf
-    mean = (G[0, 1], 0.0, G[1, 2], G[1, 3], G[1, 4])     # the sums of s, -, g1, g2, y (upper triangle)
-    idx = (0, 2, 3, 4)                  # s, g1, g2, y
-    C = np.empty((4, 4))
-    for a in range(4):
-        for b in range(a, 4):
+    idx = np.empty(p - 1, dtype=np.int64)      # every column but the constant
+    idx[0] = 0
+    for a in range(1, p - 1):
+        idx[a] = a + 1
+    k = p - 1
+    C = np.empty((k, k))
+    for a in range(k):
+        for b in range(a, k):
             i, j = idx[a], idx[b]
-            C[a, b] = G[i, j] - mean[i] * mean[j] / n
+            si = G[0, 1] if i == 0 else G[1, i]      # the sums (row of the constant, upper triangle)
+            sj = G[0, 1] if j == 0 else G[1, j]
+            C[a, b] = G[i, j] - si * sj / n
             C[b, a] = C[a, b]
     if not (C[0, 0] > 1e-9 * G[0, 0] and math.isfinite(C[0, 0])):
         return math.inf
-    for p in range(3):                  # eliminate regressor p from the rest (Schur complements)
-        d = C[p, p]
-        own = G[idx[p], idx[p]]
-        if not d > 1e-10 * own:
+    for c in range(k - 1):              # eliminate regressor c from the rest
+        d = C[c, c]
+        if not d > 1e-10 * G[idx[c], idx[c]]:
             continue
-        for a in range(p + 1, 4):
-            fa = C[a, p] / d
-            for b in range(p + 1, 4):
-                C[a, b] -= fa * C[p, b]
-    cost = C[3, 3]
+        for a in range(c + 1, k):
+            fa = C[a, c] / d
+            for b in range(c + 1, k):
+                C[a, b] -= fa * C[c, b]
+    cost = C[k - 1, k - 1]
     return max(cost, 0.0) / n if math.isfinite(cost) else math.inf
 
 
@@ -271,25 +287,29 @@ class ResonanceSearch:
         """
         return self._evaluate(alpha, a1, a2, 1)
 
-    def judged_cost(self, alpha: float, a1: float, a2: float) -> Generator:
+    def judged_cost(self, alpha: float, a1: float, a2: float, decays: tuple = ()) -> Generator:
         """Cost per row of one candidate on every row after ``lead`` with the resonance state at the segment's
         start unknown (its two free responses projected out with the gain and the offset), in units.
 
         What a switch is decided on: the search's own cost starts the resonance at rest, and where the mode
         rings for longer than the lead (5.5 Hz, zeta 0.025: 1.2 s against a 0.5 s lead after big steps) that
         start dominates every candidate's cost (the true model's was 1e6 noise variances per row) and a
-        wrong candidate won by chance. The generator's return value is the cost.
+        wrong candidate won by chance. ``decays`` (1/s): exp(-mu t) regressors for the fading memory of an
+        input before the stream (the tracker's free responses, when the stream started in operation).
+        The generator's return value is the cost.
         """
         vz, x = self._vz, self._x
         vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
                             self._rc, vz, x, self._acc)
         f = np.array([1.0, 0.0, 0.0, 1.0])
-        G = np.zeros((5, 5))
+        rates = np.asarray(decays, dtype=float)
+        decay, e = np.exp(-rates * self.basis.h), np.ones(rates.size)
+        G = np.zeros((5 + rates.size, 5 + rates.size))
         yield
         n = self.u.size
-        chunk = max(16, int(UNIT_WORK / (self.basis.size + 30)))
+        chunk = max(16, int(UNIT_WORK / (self.basis.size + 30 + 6 * rates.size)))
         for r0 in range(0, n, chunk):
-            _rows_free(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, f, r0, min(n, r0 + chunk),
+            _rows_free(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, f, decay, e, r0, min(n, r0 + chunk),
                        self.lead, G)
             yield
         return _free_cost(G)

@@ -223,6 +223,8 @@ class WindowTracker(ParameterView):
         self.h = basis.h
         self.q = basis.size
         self.n_free = len(FREE_RATES) if free else 0
+        #: the free responses' rates, also what a search's judge projects out (``ResonanceSearch.judged_cost``)
+        self._free_decays = tuple(FREE_RATES[:self.n_free])
         self.n_rate = int(drift)         # drift columns: 0 none, 1 gain rate, 2 gain and alpha rates
         self.lay = W.layout(self.q, self.n_free, self.n_rate)
         self.p = self.lay["p"]
@@ -492,7 +494,7 @@ class WindowTracker(ParameterView):
     def _fine_relinearization_due(self, rms: float, noise: float, n: int) -> bool:
         """Replay at the estimate although it is within RELINEARIZE of the point? When the converged window
         misfits and a1 or a2 is more than RELINEARIZE_FINE from the point (``RELINEARIZE_FINE``); the
-        re-search trigger waits meanwhile (a misfit the replay removes is not a wrong basin)."""
+        re-search trigger skips that re-fit (a misfit the replay removes is not a wrong basin)."""
         if not (self.converged and self.fitting and n >= self._next_fine and noise > 0.0
                 and rms > MISFIT_CLEAR_RATIO * noise):
             if noise > 0.0 and rms <= MISFIT_CLEAR_RATIO * noise:
@@ -738,12 +740,16 @@ class WindowTracker(ParameterView):
             if self._resolved(search) or u.size >= cap or lead < settle:
                 break
         r = search.result
-        # the search's result replaces the estimate only when clearly better on the segment (as a re-search):
-        # where every candidate fits at the noise floor (one small step) the re-fits do better from the estimate
-        c_live, _, _ = yield from search.exact_cost(self.alpha, self.a1, self.a2)
-        rows = int(np.count_nonzero(np.isfinite(search.y[search.lead:])))
-        better = r is not None and r.cost > 0.0 and not rows * math.log(c_live / r.cost) <= RESEARCH_LR
-        if better and math.isfinite(r.cost) and r.a1 > 0 and r.a2 > 0 and r.b != 0:
+        # the search's result replaces the estimate only when clearly better on the segment (as a re-search,
+        # both judged with the resonance state at the segment's start unknown): where every candidate fits at
+        # the noise floor (one small step) the re-fits do better from the estimate
+        better = False
+        if r is not None and math.isfinite(r.cost) and r.a1 > 0 and r.a2 > 0 and r.b != 0:
+            c_live = yield from search.judged_cost(self.alpha, self.a1, self.a2, self._free_decays)
+            c_new = yield from search.judged_cost(r.alpha, r.a1, r.a2, self._free_decays)
+            rows = int(np.count_nonzero(np.isfinite(search.y[search.lead:])))
+            better = _likelihood_ratio(rows, c_live, c_new) > RESEARCH_LR
+        if better:
             self.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
             self._coefficients()
             yield
@@ -836,8 +842,8 @@ class WindowTracker(ParameterView):
         r = search.result
         live = (self.alpha, self.a1, self.a2)
         # both judged with the resonance state at the segment's start unknown (``judged_cost``)
-        c_live = yield from search.judged_cost(*live)
-        c_new = yield from search.judged_cost(r.alpha, r.a1, r.a2)
+        c_live = yield from search.judged_cost(*live, self._free_decays)
+        c_new = yield from search.judged_cost(r.alpha, r.a1, r.a2, self._free_decays)
         rows = int(np.count_nonzero(np.isfinite(y[search.lead:])))
         lr = _likelihood_ratio(rows, c_live, c_new)
         change = {"alpha": r.alpha / live[0] - 1, "a1": r.a1 / live[1] - 1, "a2": r.a2 / live[2] - 1,
