@@ -105,15 +105,26 @@ def table_of(rows: dict) -> dict:
     return table
 
 
+def _runs(doc: dict) -> list[dict]:
+    """The runs a document holds: its own, or those it was merged from."""
+    return doc.get("merged_runs") or [{k: doc[k] for k in ("first_seed", "records_per_cell", "load_average",
+                                                          "elapsed_s")}]
+
+
 def merge(paths: list[str]) -> dict:
-    """One document from several runs over consecutive seeds (e.g. two processes, --first-seed 0 and 10)."""
+    """One document from runs over consecutive seeds (e.g. two processes, --first-seed 0 and 10); a document
+    that is itself a merge counts as the runs it holds. Seeds must follow on without gap or overlap."""
     docs = sorted((json.load(open(p)) for p in paths), key=lambda d: d["first_seed"])
     rows = {key: [r for d in docs for r in d["rows"][key]] for key in docs[0]["rows"]}
-    return {**docs[0], "records_per_cell": sum(d["records_per_cell"] for d in docs), "table": table_of(rows),
-            "merged_runs": [{k: d[k] for k in ("first_seed", "records_per_cell", "load_average", "elapsed_s")}
-                            for d in docs],
-            "load_average": [d["load_average"] for d in docs], "elapsed_s": max(d["elapsed_s"] for d in docs),
-            "rows": rows}
+    first, total = docs[0]["first_seed"], sum(d["records_per_cell"] for d in docs)
+    for key, r in rows.items():
+        if [x["seed"] for x in r] != list(range(first, first + total)):
+            raise SystemExit(f"merge: cell {key} holds seeds {[x['seed'] for x in r]}, "
+                             f"not {first}..{first + total - 1}")
+    runs = sorted((run for d in docs for run in _runs(d)), key=lambda run: run["first_seed"])
+    return {**docs[0], "records_per_cell": total, "table": table_of(rows), "merged_runs": runs,
+            "load_average": [run["load_average"] for run in runs], "elapsed_s": max(run["elapsed_s"] for run in runs),
+            "elapsed_s_sum": sum(run["elapsed_s"] for run in runs), "rows": rows}
 
 
 def main() -> dict:

@@ -867,7 +867,16 @@ def _restart_base(design: Design, explore: Design, best: np.ndarray, max_nfev: i
         except (ValueError, ModelError, np.linalg.LinAlgError):
             costs.append(np.inf)
     out, out_cost = best, design.cost(best)
-    for i in np.argsort(costs)[:2]:
+    picks = [int(i) for i in np.argsort(costs)[:2]]
+    per = len(starts) // len(kept)
+    for j in range(1, len(kept)):
+        # each exchanged set gets its own polish: ranked with the rest, the grid around the fit it left
+        # always costs less (second_creep 10-100x seed 95: the best exchanged start ranked 12th of 144,
+        # unpolished; polished, it reaches 1.0x the noise from 22.6x)
+        g = j * per + int(np.argmin(costs[j * per:(j + 1) * per]))
+        if g not in picks:
+            picks.append(g)
+    for i in picks:
         th = _optimise(explore, starts[i], max_nfev)
         if explore is not design:
             th = _optimise(design, th, FULL_NFEV, FULL_TOL, FULL_FTOL)
