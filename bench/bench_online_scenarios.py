@@ -142,13 +142,12 @@ def generate(families: list[str], plants: int, folder: Path, offset: int = 0,
     ``snr_db``: the output's SNR instead of the scenarios' own ``SNR_DB`` (a 20-bit capacitive sensor
     reads 80-90 dB: numerical errors the 40 dB default hides show there)."""
     from hil_sim import scenarios
-    from hil_sim.scenarios import make
     if snr_db is not None:
         scenarios.SNR_DB = float(snr_db)
     truth = {}
     for fam in families:
         for seed in range(offset, offset + plants):
-            scen = make(fam, seed)
+            scen = scenarios.make(fam, seed)
             name = f"{fam}_{seed:03d}.npz"
             scen.save(folder / name)
             step = chunk_size(scen.h)
@@ -328,6 +327,7 @@ def git_head() -> str:
 def main(argv: list[str] | None = None) -> dict:
     """Generate, run current and baseline side by side, summarize, print and write the JSON."""
     sys.path.insert(0, str(ROOT))
+    from hil_sim import scenarios
     from hil_sim.scenarios import FAMILIES
     args = parse_args(argv)
     families = args.families.split(",") if args.families else list(FAMILIES)
@@ -347,7 +347,7 @@ def main(argv: list[str] | None = None) -> dict:
         current = run_files(files, args.mode, current_kwargs)
         run_s = time.perf_counter() - start - gen_s
         doc = {"config": {"plants": args.plants, "seed_offset": args.seed_offset, "families": families, "mode": args.mode,
-                          "kwargs": current_kwargs, "snr_db": args.snr_db or 40.0,
+                          "kwargs": current_kwargs, "snr_db": scenarios.SNR_DB,
                           "tolerances": TOL, "traj_dt_s": TRAJ_DT, "scatter_s": SCATTER_S},
                "current": {"revision": git_head(), "families": summarize(current, truth),
                            "run_s": run_s}}

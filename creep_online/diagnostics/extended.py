@@ -332,7 +332,7 @@ class Design:
         delays = [3 + i for i, e in enumerate(owners) if get_effect(e).stage == Stage.DELAY]
         self.exact = [0, 1, 2] + (delays if not self.stages[Stage.PARALLEL] else [])
         # and a parallel path's own parameters when its effect gives the step response's derivatives
-        self.parallel_exact = {e.name: [self.index(n) for n in self.own[e.name]]
+        self.parallel_exact = {e.name: self.own_indices(e.name)
                                for e in self.stages[Stage.PARALLEL] if _differentiable(e)}
         self.exact += [k for idx in self.parallel_exact.values() for k in idx]
         self.col_names: list[str] = []
@@ -342,6 +342,10 @@ class Design:
 
     def index(self, name: str) -> int:
         return self.names.index(name)
+
+    def own_indices(self, effect: str) -> list[int]:
+        """Positions in theta of an effect's own parameters."""
+        return [self.index(n) for n in self.own[effect]]
 
     def _base(self, theta: np.ndarray) -> tuple[dict[str, float], float, float, float, float]:
         """(theta by name, alpha, a1, a2, delay): the base model's parameters and the total delay."""
@@ -891,8 +895,8 @@ def _polished_starts(design: Design, polished: list[np.ndarray]) -> list[np.ndar
     out = []
     for th in polished:
         for e in design.effects:
-            own = [design.index(n) for n in design.own[e]]
-            out += [np.clip(v, design.lo, design.hi) for v in get_effect(e).polished_starts(th, own, design.data)]
+            out += [np.clip(v, design.lo, design.hi)
+                    for v in get_effect(e).polished_starts(th, design.own_indices(e), design.data)]
     return out
 
 
@@ -900,7 +904,7 @@ def _swapped(design: Design, theta: np.ndarray) -> list[np.ndarray]:
     """``theta`` with each effect's parameters exchanged with the base parameters they mirror (if any)."""
     out = []
     for e in design.effects:
-        v = get_effect(e).swapped(theta, [design.index(n) for n in design.own[e]])
+        v = get_effect(e).swapped(theta, design.own_indices(e))
         if v is not None:
             out.append(np.clip(v, design.lo, design.hi))
     return out

@@ -314,6 +314,10 @@ class ResonanceSearch:
             yield
         return _free_cost(G)
 
+    def judged_rows(self) -> int:
+        """The rows ``judged_cost`` (and ``exact_cost``) sum over: after ``lead``, with a finite output."""
+        return int(np.count_nonzero(np.isfinite(self.y[self.lead:])))
+
     def run(self) -> SearchResult:
         """To completion (block mode)."""
         while not self.step():

@@ -495,10 +495,10 @@ class WindowTracker(ParameterView):
         """Replay at the estimate although it is within RELINEARIZE of the point? When the converged window
         misfits and a1 or a2 is more than RELINEARIZE_FINE from the point (``RELINEARIZE_FINE``); the
         re-search trigger skips that re-fit (a misfit the replay removes is not a wrong basin)."""
-        if not (self.converged and self.fitting and n >= self._next_fine and noise > 0.0
-                and rms > MISFIT_CLEAR_RATIO * noise):
-            if noise > 0.0 and rms <= MISFIT_CLEAR_RATIO * noise:
-                self._fine_wait = int(FINE_WAIT_S / self.h)
+        if noise > 0.0 and rms <= MISFIT_CLEAR_RATIO * noise:     # at the floor: the backoff starts over
+            self._fine_wait = int(FINE_WAIT_S / self.h)
+            return False
+        if not (self.converged and self.fitting and n >= self._next_fine and noise > 0.0):
             return False
         if max(abs(self.a1 / self.a1l - 1.0), abs(self.a2 / self.a2l - 1.0)) <= RELINEARIZE_FINE:
             return False
@@ -747,8 +747,7 @@ class WindowTracker(ParameterView):
         if r is not None and math.isfinite(r.cost) and r.a1 > 0 and r.a2 > 0 and r.b != 0:
             c_live = yield from search.judged_cost(self.alpha, self.a1, self.a2, self._free_decays)
             c_new = yield from search.judged_cost(r.alpha, r.a1, r.a2, self._free_decays)
-            rows = int(np.count_nonzero(np.isfinite(search.y[search.lead:])))
-            better = _likelihood_ratio(rows, c_live, c_new) > RESEARCH_LR
+            better = _likelihood_ratio(search.judged_rows(), c_live, c_new) > RESEARCH_LR
         if better:
             self.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
             self._coefficients()
@@ -844,8 +843,7 @@ class WindowTracker(ParameterView):
         # both judged with the resonance state at the segment's start unknown (``judged_cost``)
         c_live = yield from search.judged_cost(*live, self._free_decays)
         c_new = yield from search.judged_cost(r.alpha, r.a1, r.a2, self._free_decays)
-        rows = int(np.count_nonzero(np.isfinite(y[search.lead:])))
-        lr = _likelihood_ratio(rows, c_live, c_new)
+        lr = _likelihood_ratio(search.judged_rows(), c_live, c_new)
         change = {"alpha": r.alpha / live[0] - 1, "a1": r.a1 / live[1] - 1, "a2": r.a2 / live[2] - 1,
                   "b": r.b / self.b - 1 if self.b else 0.0}
         moved = sorted(k for k in ("a1", "a2") if abs(change[k]) > CHANGE_MOVE[k])

@@ -370,17 +370,11 @@ def move_origin(st: np.ndarray, S: np.ndarray, shift: np.ndarray) -> None:
 @njit(cache=CACHE)
 def scaled_statistics(st: np.ndarray, S: np.ndarray, F: np.ndarray, fy: np.ndarray) -> float:
     """F = S / g (full symmetric, from the upper triangle), fy = sy / g; returns fyy = syy / g."""
-    return scaled_rows(st, S, F, fy, 0, S.shape[0])
-
-
-@njit(cache=CACHE)
-def scaled_rows(st: np.ndarray, S: np.ndarray, F: np.ndarray, fy: np.ndarray, i0: int, i1: int) -> float:
-    """Rows i0..i1 of ``scaled_statistics`` (and the columns they mirror); returns fyy."""
     sc = st[:SC_SIZE]
     q, p, m, sy, md = parts(st)
     g = sc[SC_G]
-    symmetrize_rows(S, F, 1.0 / g, i0, i1)
-    for i in range(i0, i1):
+    symmetrize(S, F, 1.0 / g)
+    for i in range(p):
         fy[i] = sy[i] / g
     return sc[SC_SYY] / g
 
@@ -774,14 +768,8 @@ def block(u: np.ndarray, y: np.ndarray, st: np.ndarray, S: np.ndarray, ring: np.
 @njit(cache=CACHE)
 def symmetrize(S: np.ndarray, out: np.ndarray, scale: float) -> None:
     """out = scale * (full symmetric matrix whose upper triangle is S)."""
-    symmetrize_rows(S, out, scale, 0, S.shape[0])
-
-
-@njit(cache=CACHE)
-def symmetrize_rows(S: np.ndarray, out: np.ndarray, scale: float, i0: int, i1: int) -> None:
-    """Rows i0..i1 of ``symmetrize``'s upper triangle, and their mirror below the diagonal."""
     p = S.shape[0]
-    for i in range(i0, i1):
+    for i in range(p):
         for j in range(i, p):
             v = S[i, j] * scale
             out[i, j] = v
