@@ -198,6 +198,47 @@ def test_replay_reproduces_the_statistics():
     assert np.allclose(tr.sy, fresh.sy, rtol=1e-9, atol=1e-12 * np.abs(fresh.sy).max())
 
 
+
+@pytest.mark.parametrize("window_s, drift, skip", [(None, 0, 0), (1.0, 2, 100), (0.01, 2, 0)])
+def test_blocked_replay_equals_one_rank_one_update_per_sample(window_s, drift, skip):
+    """``replay`` (rows gathered in blocks, one matrix product each) = ``replay_direct`` (the live kernel's
+    rank-one update per sample): with the drift columns, missing outputs (NaN, skipped), a skipped start,
+    replays cut at arbitrary lengths, and a window short enough (10 ms at 1 kHz) that the weight passes
+    1e100 and the statistics are rescaled inside a block."""
+    model = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
+    h, n = 1e-3, 3000
+    u = _staircase(n, 300, 5)
+    y = simulate(model, np.arange(n) * h, u) + 1e-3 * np.random.default_rng(1).normal(size=n)
+    y[[7, 8, 40, 41, 42, 1500]] = np.nan
+    tr = _tracker(model, h, window_s=window_s, drift=drift)
+    _feed(tr, u, y)
+    st0, S0 = tr._fresh(tr.a1l, tr.a2l)
+    st0[tr.lay["m"]:tr.lay["sy"]] = tr.m          # the drift columns' coefficients of the estimate
+    st0[tr.lay["md"]:] = tr.md
+    start = tr._ring_position(0)
+    blocked, direct = (st0.copy(), S0.copy()), (st0.copy(), S0.copy())
+    scratch = W.replay_scratch(tr.p)
+    done = 0
+    for length in (1, 31, 33, 500, 1, 977, n):     # cut anywhere, as the jobs' units do
+        length = min(length, n - done)
+        if length <= 0:
+            break
+        pos = (start + done) % tr.ring.shape[1]
+        W.replay(tr.ring, pos, length, max(skip - done, 0), *blocked, *scratch)
+        W.replay_direct(tr.ring, pos, length, max(skip - done, 0), *direct)
+        done += length
+    (stb, Sb), (std, Sd) = blocked, direct
+    assert stb[W.SC_N] == std[W.SC_N] == n
+    for k in (W.SC_G, W.SC_NEFF, W.SC_SYY):
+        assert stb[k] == pytest.approx(std[k], rel=1e-12)
+    lay = tr.lay
+    assert np.allclose(stb[lay["phi"]:lay["m"]], std[lay["phi"]:lay["m"]], rtol=0, atol=0)
+    assert np.allclose(Sb, Sd, rtol=1e-11, atol=1e-13 * np.abs(Sd).max())
+    assert np.allclose(stb[lay["sy"]:lay["co"]], std[lay["sy"]:lay["co"]], rtol=1e-11,
+                       atol=1e-13 * np.abs(std[lay["sy"]:lay["co"]]).max())
+    if window_s == 0.01:
+        assert std[W.SC_G] < 1e100        # rescaled on the way (unrescaled: exp(0.1 n) ~ 1e130)
+
 def _drift_window(seed: int, tref: float | None = None) -> tuple[WindowTracker, int, float]:
     """A 1 s window with both drift columns fed 3 s of a staircase (its drift origin at ``tref`` if given)."""
     model = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)

@@ -63,8 +63,12 @@ def _errors(est: OnlineEstimator, truth: dict) -> dict:
 
 @pytest.fixture(scope="module")
 def wrong_basin_record():
-    # alpha 0.3, 8 Hz, zeta 0.05: from the small steps the start-up search lands in a wrong basin
-    return _quiet_start_record(0.3, 8.0, 0.05, 1.0, seed=1)
+    # alpha 0.4, 10 Hz, zeta 0.05: from the small steps the start-up search lands in a wrong basin that the
+    # re-fits do not leave. (alpha 0.3, 8 Hz, seed 1 was the record here until the change test stopped judging
+    # a walking estimate, ``WindowTracker._settled_before``: its false change events had restored the start's
+    # alpha 0.95 each time, and without them the re-fits walk out of that basin alone. Of 24 records scanned,
+    # plants 0.25-0.5, 5-12 Hz, seeds 1-4, this is the one whose re-fits stay in a wrong basin.)
+    return _quiet_start_record(0.4, 10.0, 0.05, 1.0, seed=3)
 
 
 @pytest.mark.parametrize("single", [False, True], ids=["block", "single"])

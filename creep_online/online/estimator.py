@@ -575,7 +575,7 @@ class OnlineEstimator(StoredParams):
     def _catch_up(self, units: int) -> None:
         """Feed the buffer into the new tracker, a few samples per unit, then go live (gate open)."""
         tr = self._tracker
-        per_unit = tr.replay_chunk
+        per_unit = tr.feed_chunk
         status = np.empty(per_unit, dtype=np.int64)
         while units > 0 and self._replayed < self._nbuf:
             units -= 1
@@ -699,7 +699,7 @@ def warm_kernels() -> None:
     tr = est._tracker
     # what the tracker's Python calls; the re-fit's stages (their kernels compiled into the machine's) run
     # once, through begin, run and accept, and once through the per-sample kernel
-    W.replay(tr.ring, 0, 4, 1, tr.st.copy(), tr.S.copy())
+    W.replay(tr.ring, 0, 4, 1, tr.st.copy(), tr.S.copy(), *W.replay_scratch(tr.p))
     W.drift_coefficients(tr.theta, tr.a1l, tr.a2l, tr.basis.lam, tr.basis.dx, np.empty(tr.q + W.ONE))
     st, S, shift = tr.st.copy(), tr.S.copy(), tr._shift.copy()
     W.set_estimate(tr.theta.copy(), st, tr.basis.lam, tr.basis.dx)

@@ -492,7 +492,7 @@ class RecursiveTracker(ParameterView):
         self.detect = detect
         self.forget = 1.0 if window_s is None else 1.0 - h / window_s
         #: samples per unit when the estimator replays its start-up buffer into the tracker (~6 us)
-        self.replay_chunk = max(4, 6000 // (2 * self.p * (5 + self.n_free)))
+        self.feed_chunk = max(4, 6000 // (2 * self.p * (5 + self.n_free)))
         self.fitting = True
         self.drift_on = False
         self.events: list[dict] = []

@@ -228,8 +228,11 @@ class WindowTracker(ParameterView):
         self.n_rate = int(drift)         # drift columns: 0 none, 1 gain rate, 2 gain and alpha rates
         self.lay = W.layout(self.q, self.n_free, self.n_rate)
         self.p = self.lay["p"]
-        #: samples per light unit of a replay (each costs the P^2 statistics update and the states)
-        self.replay_chunk = max(2, UNIT_MACS // (self.p * self.p + 4 * self.q))
+        #: samples per light unit of a replay (each costs the P^2 statistics update, which runs as blocked
+        #: matrix products at about twice the rate of the per-sample update, and the states)
+        self.replay_chunk = max(2, UNIT_MACS // (self.p * self.p // 2 + 4 * self.q))
+        #: samples per unit fed live (``feed_block``: a rank-one update each, with the gate and the prediction)
+        self.feed_chunk = max(2, UNIT_MACS // (self.p * self.p + 4 * self.q))
         self.alpha_bounds = alpha_bounds
         self.refit_every = refit_every
         self.test_every = test_every
@@ -320,6 +323,7 @@ class WindowTracker(ParameterView):
         self._snap_slots = [(np.empty((p, p)), np.empty(p), np.empty_like(self._shift), np.empty(k))
                             for _ in range(SNAP_SLOTS)]
         self._snap_next = 0
+        self._replay_work = W.replay_scratch(p)     # (a replay's unit leaves nothing in it: shared by the jobs)
 
     def _fresh(self, a1l: float, a2l: float) -> tuple[np.ndarray, np.ndarray]:
         """Empty statistics and zero states for a linearization point (weight 1)."""
@@ -570,7 +574,7 @@ class WindowTracker(ParameterView):
             n = min(chunk if i - oldest >= skip else 8 * chunk, self.n - i)
             if self.detect:                # stop at the change test's snapshot instants
                 n = min(n, (i // self.test_every + 1) * self.test_every - i)
-            W.replay(self.ring, (slot + i) % size, n, max(skip - (i - oldest), 0), st, S)
+            W.replay(self.ring, (slot + i) % size, n, max(skip - (i - oldest), 0), st, S, *self._replay_work)
             i += n
             if self.detect and i % self.test_every == 0 and i - oldest > skip:
                 snaps = (snaps + [(i, S.copy(), st[lay_sy].copy(), float(st[W.SC_SYY]), float(st[W.SC_G]),
@@ -607,7 +611,8 @@ class WindowTracker(ParameterView):
         n0, S0, sy0, syy0, g0, lin0, theta0, shift0 = snap
         g = float(self.sc[W.SC_G])
         if g < g0 or self._fit_sample < n0 or lin0 != (self.a1l, self.a2l) or n0 < self.window_start \
-                or not self.converged or self._researching() or self._misfit_from_start():
+                or not self.converged or self._researching() or self._misfit_from_start() \
+                or not self._settled_before(n0, theta0):
             return                         # (a misfit being re-searched is not a change of the plant)
         # the drift columns stay in, at the window's rates (the snapshot moved to the live time origin):
         # over a second the drift is not negligible (alpha +0.7 %/s at a 2e-4 noise on a 0.5 output is ~5
@@ -660,6 +665,30 @@ class WindowTracker(ParameterView):
         self.events.append({"t": n0 * self.h, "detected_t": self.n * self.h, "moved": sorted(moved),
                             "relative_change": {k: float(v) for k, v in moves.items()}, "lr": float(lr),
                             "settled": False, "restarts": 1, "_before": theta0[:4].copy()})
+
+    def _settled_before(self, n0: int, theta0: np.ndarray) -> bool:
+        """Was the window's estimate settled over the second before the tested one? A change is judged
+        against an estimate that stood: the estimate at the previous snapshot instant and at ``n0`` must
+        not differ by a move that would itself count as a change (``CHANGE_MOVE``, alpha
+        ``RESEARCH_ALPHA_MOVE``). Within the window only: after a restart the post-change estimate is
+        judged from its own snapshots on.
+
+        (Seen: a start-up search in a wrong basin, alpha 0.95 at its bound and 32 Hz for an 8 Hz plant;
+        the re-fits walked toward the plant, each replay at the new point, and the change test on the
+        second after the walk reported a change, a1, a2 and b moved, restarted the window with alpha
+        restored to 0.95 and never recovered. It had been masked by slower replays, whose snapshots
+        were not ready in time.)
+        """
+        n_prev = n0 - self.test_every
+        if n_prev < self.window_start:
+            return self.window_start > 0       # a restarted window: its first seconds are tested
+        prev = self._theta_at.get(n_prev)
+        if prev is None:
+            return False
+        return abs(theta0[0] / prev[0] - 1.0) <= RESEARCH_ALPHA_MOVE \
+            and abs(math.exp(theta0[1] - prev[1]) - 1.0) <= CHANGE_MOVE["a1"] \
+            and abs(math.exp(theta0[2] - prev[2]) - 1.0) <= CHANGE_MOVE["a2"] \
+            and abs(theta0[3] / prev[3] - 1.0) <= CHANGE_MOVE["b"] if prev[3] else False
 
     def _restart_window(self, n0: int, gain_moved: bool) -> None:
         """A change happened between sample n0 and now: the window restarts after it.
@@ -795,7 +824,7 @@ class WindowTracker(ParameterView):
         i = oldest
         while i < n0:
             n = min(chunk, n0 - i)
-            W.replay(self.ring, (slot + i) % size, n, n, st, S)
+            W.replay(self.ring, (slot + i) % size, n, n, st, S, *self._replay_work)
             i += n
             yield
         return st[self.lay["phi"]:self.lay["phi"] + self.q].copy()
