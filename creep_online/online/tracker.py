@@ -611,8 +611,7 @@ class WindowTracker(ParameterView):
         n0, S0, sy0, syy0, g0, lin0, theta0, shift0 = snap
         g = float(self.sc[W.SC_G])
         if g < g0 or self._fit_sample < n0 or lin0 != (self.a1l, self.a2l) or n0 < self.window_start \
-                or not self.converged or self._researching() or self._misfit_from_start() \
-                or not self._settled_before(n0, theta0):
+                or not self.converged or self._researching() or self._misfit_from_start():
             return                         # (a misfit being re-searched is not a change of the plant)
         # the drift columns stay in, at the window's rates (the snapshot moved to the live time origin):
         # over a second the drift is not negligible (alpha +0.7 %/s at a 2e-4 noise on a 0.5 output is ~5
@@ -654,7 +653,8 @@ class WindowTracker(ParameterView):
         if lr < max(CHANGE_LR, CHANGE_JUMP * level) or not moved or lin != (self.a1l, self.a2l):
             self._lr_recent = (self._lr_recent + [float(lr)])[-CHANGE_HISTORY:]
             return
-        self.theta[0] = theta0[0]          # alpha as it was before the change (the refits chased it since)
+        if self._settled_before(n0, theta0):
+            self.theta[0] = theta0[0]      # alpha as it was before the change (the refits chased it since)
         self._restart_window(n0, "b" in moved)
         last = self.events[-1] if self.events else None
         if last is not None and not last["settled"]:
@@ -667,17 +667,19 @@ class WindowTracker(ParameterView):
                             "settled": False, "restarts": 1, "_before": theta0[:4].copy()})
 
     def _settled_before(self, n0: int, theta0: np.ndarray) -> bool:
-        """Was the window's estimate settled over the second before the tested one? A change is judged
-        against an estimate that stood: the estimate at the previous snapshot instant and at ``n0`` must
-        not differ by a move that would itself count as a change (``CHANGE_MOVE``, alpha
-        ``RESEARCH_ALPHA_MOVE``). Within the window only: after a restart the post-change estimate is
-        judged from its own snapshots on.
+        """Was the window's estimate settled over the second before the tested one? Only then is its alpha the
+        plant's before a declared change, and restored (creep does not jump with a payload or a stiffness);
+        otherwise the live alpha stays. Settled: the estimate at the previous snapshot instant and at ``n0``
+        do not differ by a move that would itself count as a change (``CHANGE_MOVE``, alpha
+        ``RESEARCH_ALPHA_MOVE``); in the start-up window both must exist; after a restart the post-change
+        estimate counts from its first snapshot on.
 
-        (Seen: a start-up search in a wrong basin, alpha 0.95 at its bound and 32 Hz for an 8 Hz plant;
-        the re-fits walked toward the plant, each replay at the new point, and the change test on the
-        second after the walk reported a change, a1, a2 and b moved, restarted the window with alpha
-        restored to 0.95 and never recovered. It had been masked by slower replays, whose snapshots
-        were not ready in time.)
+        (Seen: a start-up search in a wrong basin, alpha 0.95 at its bound and 32 Hz for an 8 Hz plant; the
+        re-fits walked toward the plant and the change test on the second after the walk declared a change
+        (right: it corrects a wrong start), but restored alpha 0.95, and the post-change search at that alpha
+        never recovered: alpha +200 % at the end. It had been masked by slower replays, whose snapshots were
+        not ready in time. Tried first: no declaration at all on such a second. Close unmodelled modes then
+        lost start-up corrections (a2 -99.5 % for 6 s until a later change).)
         """
         n_prev = n0 - self.test_every
         if n_prev < self.window_start:
@@ -819,7 +821,7 @@ class WindowTracker(ParameterView):
         st, S = self._fresh(self.a1l, self.a2l)       # node states only (no statistics)
         st[self.lay["phi"]:self.lay["phi"] + self.q] = self.ztail
         st[W.SC_N] = oldest
-        chunk = max(16, UNIT_MACS // (10 * self.q))        # node states only: ~10 flops per node
+        chunk = max(16, UNIT_MACS // (4 * self.q))         # states only: ~0.04 us per sample at Q = 42
         size, slot = self.ring.shape[1], self._ring_position(oldest) - oldest
         i = oldest
         while i < n0:
