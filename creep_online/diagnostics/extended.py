@@ -21,7 +21,9 @@ Python API: :func:`prepare` a record once, :func:`fit_base`, then
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 from scipy.linalg import lstsq as scipy_lstsq
@@ -177,17 +179,8 @@ class Prepared:
         the delay's spline, the superposition) is most of an evaluation.
         """
         key = ("+".join(f"{e.name}[{variant}]" for e, variant in inputs) or "u", alpha, a1, a2, delay)
-        cache = self._cache.setdefault("base_path", {})
-        if key in cache:
-            cache[key] = cache.pop(key)          # most recently used last
-            return cache[key]
-        s = fx.delayed_grid(self.step_grid(alpha, a1, a2), self.h, delay)
-        rows = self.superposer(inputs).apply(s)
-        rows.setflags(write=False)
-        cache[key] = rows
-        while len(cache) > BASE_PATH_CACHE:
-            cache.pop(next(iter(cache)))
-        return rows
+        return _remembered(self._cache.setdefault("base_path", {}), key, BASE_PATH_CACHE, lambda: self.superposer(
+            inputs).apply(fx.delayed_grid(self.step_grid(alpha, a1, a2), self.h, delay)))
 
     def step_grid(self, alpha: float, a1: float, a2: float) -> np.ndarray:
         """The base model's undelayed unit-step response on the grid (uniform records), read-only.
@@ -197,17 +190,8 @@ class Prepared:
         spline's slope) and a combination's grid vary the delay with the base
         parameters fixed, and each would march the same response again.
         """
-        key = (alpha, a1, a2)
-        cache = self._cache.setdefault("step_grid", {})
-        if key in cache:
-            cache[key] = cache.pop(key)
-            return cache[key]
-        s = fx.base_step_grid(alpha, a1, a2, self.h, self.n)
-        s.setflags(write=False)
-        cache[key] = s
-        while len(cache) > BASE_PATH_CACHE:
-            cache.pop(next(iter(cache)))
-        return s
+        return _remembered(self._cache.setdefault("step_grid", {}), (alpha, a1, a2), BASE_PATH_CACHE,
+                           lambda: fx.base_step_grid(alpha, a1, a2, self.h, self.n))
 
     def parallel_path(self, effect: ParallelEffect, theta: dict[str, float], own: tuple[float, ...], delay: float,
                       tau: np.ndarray | None) -> np.ndarray:
@@ -222,18 +206,12 @@ class Prepared:
         grid times minus the delay (uniform records), None otherwise.
         """
         key = (effect.name, theta["alpha"], theta["log10_fn"], theta["log10_zeta"], own, delay)
-        cache = self._cache.setdefault("parallel_path", {})
-        if key in cache:
-            cache[key] = cache.pop(key)
-            return cache[key]
-        step = effect.unit_step(theta)
-        shifted = (lambda tt: step(tt - delay))
-        rows = self.superposer().apply(shifted(tau + delay) if tau is not None else shifted)
-        rows.setflags(write=False)
-        cache[key] = rows
-        while len(cache) > PARALLEL_PATH_CACHE:
-            cache.pop(next(iter(cache)))
-        return rows
+
+        def make() -> np.ndarray:
+            step = effect.unit_step(theta)
+            shifted = (lambda tt: step(tt - delay))
+            return self.superposer().apply(shifted(tau + delay) if tau is not None else shifted)
+        return _remembered(self._cache.setdefault("parallel_path", {}), key, PARALLEL_PATH_CACHE, make)
 
     def base_path_sensitivity(self, inputs: tuple[tuple[InputEffect, str | None], ...], alpha: float, a1: float,
                               a2: float, delay: float) -> np.ndarray:
@@ -255,6 +233,33 @@ class Prepared:
                    before: bool = False) -> np.ndarray:
         """u and the rows the input effects add (``before``: u is the input before the record)."""
         return np.vstack([u[None, :]] + [e.design_rows(self, u, variant, before) for e, variant in inputs])
+
+
+#: Guards the remembered responses of every ``Prepared`` (the candidate fits of ``diagnose`` may run on
+#: threads, ``diagnostics/pool.py``): held only to look up, insert and evict, never while computing.
+_CACHE_LOCK = threading.Lock()
+
+
+def _remembered(cache: dict, key: tuple, size: int, make: Callable[[], np.ndarray]) -> np.ndarray:
+    """``cache[key]``, or ``make()`` remembered (read-only) with the least recently used entries beyond ``size`` evicted.
+
+    Exact reuse only: a remembered array is bit for bit what ``make()`` gives
+    again, so hits, misses and evictions (which depend on what other threads
+    evaluate meanwhile) never change a result. Two threads missing the same
+    key both compute it; the later insert wins, with equal values.
+    """
+    with _CACHE_LOCK:
+        if key in cache:
+            value = cache.pop(key)
+            cache[key] = value                   # most recently used last
+            return value
+    value = make()
+    value.setflags(write=False)
+    with _CACHE_LOCK:
+        cache[key] = value
+        while len(cache) > size:
+            cache.pop(next(iter(cache)))
+    return value
 
 
 def prepare(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, source: str = "<array>",
