@@ -186,6 +186,7 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
         u_pre = 0.0  # a constant non-zero input is a step from rest at t[0] (as Record.validate reads it)
         pre_notes.append(f"constant input {u[0]:g}: read as a step from 0 at t = {t[0]:g} s")
     candidates = effect_names() if candidates is None else tuple(candidates)
+    n_workers = resolve_workers(workers)
     for name in candidates:
         ext.check_effects([name])
     data = ext.prepare(t, u, y, source=source, u_pre=u_pre, t_pre=t_pre)
@@ -229,8 +230,7 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
         else:
             skipped[name] = why
     # the candidate fits are independent: on several cores at once (pool.py), results in the serial order
-    fits = ordered_map(lambda job: ext.fit_extended(data, (job[1],), base, max_nfev=max_nfev), todo,
-                       resolve_workers(workers),
+    fits = ordered_map(lambda job: ext.fit_extended(data, (job[1],), base, max_nfev=max_nfev), todo, n_workers,
                        before=lambda _k, job: report(f"[{job[0]}/{len(candidates)}] fitting the base model + {job[1]}"))
     for (_, name), fit in zip(todo, fits):
         ev, lr, pv, dk = evidence(base, fit, data.n)
@@ -252,7 +252,7 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
     if combine and len(sig) >= 2:
         pair = (sig[0].effect, sig[1].effect)
         report(f"fitting the two best together: {pair[0]} + {pair[1]}")
-        fit = ext.fit_extended(data, pair, base, max_nfev=max_nfev, warm=sig[0].fit)
+        fit = ext.fit_extended(data, pair, base, max_nfev=max_nfev, warm=sig[0].fit, workers=n_workers)
         ev, lr, pv, dk = evidence(base, fit, data.n)
         ev1 = evidence(sig[0].fit, fit, data.n)[0]
         combo = Candidate("+".join(pair), ev, lr, pv, dk, bool(ev1 > EVIDENCE_THRESHOLD), fit,

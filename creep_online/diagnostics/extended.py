@@ -37,6 +37,7 @@ from ..metrics import fit_percent, noise_std_estimate, rms
 from ..model import EXTENDED_FIT_ALPHA_BOUNDS as ALPHA_BOUNDS
 from ..model import CreepModel, ExtendedModel, with_effects
 from ..record import check_amplitudes, check_time_and_output
+from .pool import ordered_map
 from .varpro import projected_jacobian
 
 #: Time stamps whose step varies by less than this (relative) are snapped to a uniform grid.
@@ -344,6 +345,10 @@ class Design:
         self.nfev = 0
         self._solved: dict[bytes, tuple] = {}    # theta -> (coefficients, output, weighted residual), recent ones
         self._weighted: tuple[bytes, np.ndarray] | None = None   # (theta, weighted design) of the last evaluation
+
+    def copy(self) -> "Design":
+        """The same design with its own (empty) solution cache and evaluation counter (for another thread)."""
+        return Design(self.data, self.effects, self.harmonics, self.variants)
 
     def index(self, name: str) -> int:
         return self.names.index(name)
@@ -766,7 +771,7 @@ def _choose_variants(data: Prepared, effects: tuple[str, ...], base: ExtendedFit
 
 def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, base: ExtendedFit | None = None,
                  harmonics: int = 1, max_nfev: int = MAX_NFEV, n_starts: int = 2,
-                 warm: ExtendedFit | None = None) -> ExtendedFit:
+                 warm: ExtendedFit | None = None, workers: int = 1) -> ExtendedFit:
     """Fit the base model extended by ``effects``, warm-started from ``base`` (fitted if not given).
 
     The effects' nonlinear parameters start from a grid (residual-spectrum
@@ -774,7 +779,9 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     (each with its best base variant) get a short joint polish, and the
     ``n_starts`` best of those a full one (bounded least squares). ``warm``
     (e.g. the fit of one of the effects alone) seeds further starts with its
-    values, so a combination is never worse than that fit.
+    values, so a combination is never worse than that fit. ``workers`` > 1
+    runs the short polishes of a long record on that many threads (the
+    result does not depend on it, ``_short_polishes``).
     """
     if isinstance(effects, str):
         effects = tuple(e.strip() for e in effects.split(",") if e.strip())
@@ -811,7 +818,7 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     if warm is not None:
         chosen += [_merge(explore, th, warm) for th in list(groups.values())[:2]]
     chosen = list({th.tobytes(): th for th in chosen}.values())    # a priority start may repeat a grid start
-    short = [_optimise(explore, th, SHORT_NFEV, SHORT_XTOL, SHORT_FTOL) for th in chosen]
+    short = _short_polishes(explore, design, chosen, workers)
     finalists = [th for _, th in ranked(explore, short)[:n_starts]]
     finalists += _polished_starts(design, finalists) + [_null_start(design, base)]
     if warm is not None:
@@ -839,6 +846,23 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
         if design.cost(th) < best_cost:
             fit = _result(design, th)
     return fit
+
+
+def _short_polishes(explore: Design, design: Design, chosen: list[np.ndarray], workers: int) -> list[np.ndarray]:
+    """The short polishes of the chosen starts on the exploration window, in order; on ``workers`` threads if > 1.
+
+    In parallel each polish runs on its own copy of the exploration design
+    (a design's solution cache and counter are not shared between threads);
+    a copy only misses the solutions the shared one remembered, which are
+    exact reuse, so every polish ends where the serial one does. Only when
+    the window is not the record itself: the record's design counts the
+    evaluations the fit reports (``ExtendedFit.nfev``), and that count must
+    not depend on the threads.
+    """
+    if workers <= 1 or explore is design or len(chosen) <= 1:
+        return [_optimise(explore, th, SHORT_NFEV, SHORT_XTOL, SHORT_FTOL) for th in chosen]
+    return list(ordered_map(lambda th: _optimise(explore.copy(), th, SHORT_NFEV, SHORT_XTOL, SHORT_FTOL),
+                            chosen, workers))
 
 
 def _on_a_bound(design: Design, base: np.ndarray) -> bool:
