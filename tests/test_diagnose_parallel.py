@@ -14,7 +14,8 @@ import os
 import pytest
 
 from creep_online.diagnostics import diagnose
-from creep_online.diagnostics.pool import WORKERS_ENV, default_workers, ordered_map, resolve_workers
+from creep_online.diagnostics.pool import (MAX_WORKERS, WORKERS_ENV, available_cores, default_workers, ordered_map,
+                                          resolve_workers)
 from creep_online.errors import CreepOnlineError
 from hil_sim.hidden_effects import hidden_dataset
 
@@ -69,4 +70,6 @@ def test_workers_resolution(monkeypatch):
     with pytest.raises(CreepOnlineError, match=WORKERS_ENV):
         default_workers()
     monkeypatch.delenv(WORKERS_ENV)
-    assert 1 <= default_workers() <= max(1, os.cpu_count() or 1)
+    # the cores this process may use (one core: serial, no threads), at most MAX_WORKERS
+    assert default_workers() == min(available_cores(), MAX_WORKERS)
+    assert 1 <= available_cores() <= max(1, os.cpu_count() or 1)
