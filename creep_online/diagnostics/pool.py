@@ -2,11 +2,15 @@
 
 ``diagnose`` fits one extension of the base model per catalogue effect
 (eight); the fits share nothing but the prepared record and its remembered
-responses (exact reuse only, ``extended.Prepared``), so they can run at once.
-Most of a fit's time is spent where the GIL is released (scipy's FFTs, LAPACK,
-BLAS, the numba kernels, which are compiled ``nogil``), so threads of one
-process are enough: no copies of the record, no worker start-up, and the
-caches stay shared.
+responses (exact reuse only, ``extended.Prepared``), so they can run at once
+(and so can the short polishes of the combination fit, ``extended._short_polishes``).
+About half of a fit's CPU time runs without the GIL (scipy's FFTs, BLAS,
+numpy's loops, the numba kernels, compiled ``nogil``); the rest holds it
+(Python, scipy's f2py LAPACK wrappers such as ``lstsq``, ``lfilter``), so two
+threads overlap ~1.5x rather than 2x. Worker processes (fork) measured about
+the same (1.87-1.94 s against 2.0-2.1 s on two 30,000-sample records) and were
+not taken: they fork a process that has threads, start with cold caches and do
+not exist on Windows (docs/diagnostics.md, Speed).
 
 Determinism: every fit is a pure function of the record, the base fit and the
 effect; a remembered response is bit for bit what a recomputation gives, and
