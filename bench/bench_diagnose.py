@@ -8,8 +8,11 @@ Prints one JSON document:
   archive``, its own interpreter, alternating with this code's runs so both see
   the same load) and the ratio, with the load average at the start and after
   each round, and the CPU seconds of both (``time.process_time``: less
-  sensitive than the wall time to the other jobs of a shared machine); and an ablation in the same process (the same fits with every
-  evaluation on the whole record, no exploration window).
+  sensitive than the wall time to the other jobs of a shared machine; with
+  the candidate fits on threads it counts every thread of the process);
+  ``serial``: this code with ``workers=1`` on the same records in the same
+  rounds (the threads' share of the gain); and an ablation in the same process
+  (the same fits with every evaluation on the whole record, no exploration window).
 * ``detection``: for each catalogue effect (and clean data) and >= 3 seeds,
   the rank of the correct effect, the verdict, fit% and residual/noise before
   and after adding the top effect.
@@ -34,6 +37,7 @@ import numpy as np  # noqa: E402
 
 from creep_online.diagnostics import diagnose  # noqa: E402
 from creep_online.diagnostics import extended as ext  # noqa: E402
+from creep_online.diagnostics.pool import default_workers  # noqa: E402
 from creep_online.effects import EFFECTS  # noqa: E402
 from hil_sim.hidden_effects import hidden_dataset  # noqa: E402
 
@@ -82,6 +86,7 @@ def timing(records: int, repeats: int, previous: str | None = "main") -> dict:
     diagnose((warm.t, warm.u, warm.y))      # imports, numba cache (as the previous code's worker does)
     worker, commit = _previous_worker(previous) if previous else (None, None)
     runs, cpu, verdicts, prev_runs, prev_cpu, prev_verdicts, loads = [], [], [], [], [], [], [os.getloadavg()]
+    serial_runs, serial_cpu, serial_same = [], [], []
     for _ in range(repeats):   # record by record, this code then the previous one: both see the same load
         for k, ds in zip(kinds, data):
             t0, c0 = time.perf_counter(), time.process_time()
@@ -89,6 +94,13 @@ def timing(records: int, repeats: int, previous: str | None = "main") -> dict:
             runs.append(time.perf_counter() - t0)
             cpu.append(time.process_time() - c0)
             verdicts.append({"hidden": k or "none", "verdict": d.verdict, "seconds": runs[-1], "cpu_seconds": cpu[-1]})
+            t0, c0 = time.perf_counter(), time.process_time()
+            s = diagnose((ds.t, ds.u, ds.y), workers=1)
+            serial_runs.append(time.perf_counter() - t0)
+            serial_cpu.append(time.process_time() - c0)
+            serial_same.append([(c.effect, c.evidence, c.fit.rss) for c in s.candidates]
+                               == [(c.effect, c.evidence, c.fit.rss) for c in d.candidates])
+            verdicts[-1].update(serial_seconds=serial_runs[-1], serial_cpu_seconds=serial_cpu[-1])
             if worker is not None:
                 worker.stdin.write((k or "none") + "\n")
                 worker.stdin.flush()
@@ -115,7 +127,10 @@ def timing(records: int, repeats: int, previous: str | None = "main") -> dict:
     ours = dist(runs)
     base = dist(base_runs)
     same = [r for r, v in zip(runs, verdicts) if v["hidden"] in [k or "none" for k in kinds[:2]]]
-    out = {"samples": 30_000, "candidates": len(EFFECTS), "seconds": ours, "cpu_seconds": dist(cpu),
+    out = {"samples": 30_000, "candidates": len(EFFECTS), "workers": default_workers(), "seconds": ours,
+           "cpu_seconds": dist(cpu),
+           "serial": {"seconds": dist(serial_runs), "cpu_seconds": dist(serial_cpu),
+                      "same_candidates_bit_for_bit": all(serial_same)},
            "per_record": verdicts,
            "baseline_full_record_seconds": base,
            "speedup_vs_baseline_p50": base["p50"] / float(np.percentile(same, 50)),

@@ -24,7 +24,7 @@ from numba import njit
 CACHE = True
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def gl_weights(order: float, n: int) -> np.ndarray:
     """Grunwald-Letnikov weights w_j = (-1)^j C(order, j), j = 0..n-1.
 
@@ -40,7 +40,7 @@ def gl_weights(order: float, n: int) -> np.ndarray:
     return w
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def paper_weights(alpha: float, a1: float, a2: float, h: float, n: int) -> np.ndarray:
     """Combined eq. 13 weights W_j = sum_k a_k h^-eta_k w_j(eta_k).
 
@@ -59,7 +59,7 @@ def paper_weights(alpha: float, a1: float, a2: float, h: float, n: int) -> np.nd
     return out
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def gl_paper(u: np.ndarray, h: float, alpha: float, a1: float, a2: float, memory: int) -> np.ndarray:
     """Eq. 13: y1[n] = (u[n] - sum_{j=1..min(n, L)} W_j y1[n-j]) / D, y1[0] = 0 (gain 1).
 
@@ -80,7 +80,7 @@ def gl_paper(u: np.ndarray, h: float, alpha: float, a1: float, a2: float, memory
     return y
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def zoh_integral_weights(alpha: float, h: float, gamma1: float, n: int) -> np.ndarray:
     """Exact fractional-integral weights for a zero-order-held input.
 
@@ -98,7 +98,7 @@ def zoh_integral_weights(alpha: float, h: float, gamma1: float, n: int) -> np.nd
     return c
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def fractional_integral_zoh(u: np.ndarray, c: np.ndarray) -> np.ndarray:
     """z[n] = sum_{j=1..min(n, L)} c_j u[n-j]: direct (truncated if len(c) < N) convolution."""
     n_samples = u.shape[0]
@@ -113,7 +113,7 @@ def fractional_integral_zoh(u: np.ndarray, c: np.ndarray) -> np.ndarray:
     return z
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def resonance_foh(z: np.ndarray, phi: np.ndarray, g0: np.ndarray, g1: np.ndarray, h: float) -> np.ndarray:
     """Exact response of 1/(1 + a1 s + a2 s^2) to the piecewise-linear interpolant of z.
 
@@ -133,7 +133,7 @@ def resonance_foh(z: np.ndarray, phi: np.ndarray, g0: np.ndarray, g1: np.ndarray
     return y
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def taylor_thresholds(n_terms: int) -> np.ndarray:
     """Sample index from which Taylor term m of the march's forcing is dropped: 10^(13/m).
 
@@ -147,7 +147,7 @@ def taylor_thresholds(n_terms: int) -> np.ndarray:
     return out
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def state_march(n_samples: int, h: float, alpha: float, gamma1: float, phi: np.ndarray,
                 head: np.ndarray, taylor: np.ndarray) -> np.ndarray:
     """Exact unit-step response S[n] = S(n h) of the whole model (gain 1).
@@ -194,7 +194,7 @@ def state_march(n_samples: int, h: float, alpha: float, gamma1: float, phi: np.n
     return s
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def superpose_steps(step_response: np.ndarray, index: np.ndarray, size: np.ndarray, n_samples: int) -> np.ndarray:
     """y[n] = sum_k size_k S[n - index_k] for n >= index_k: a sparse ZOH convolution."""
     y = np.zeros(n_samples)
@@ -206,7 +206,7 @@ def superpose_steps(step_response: np.ndarray, index: np.ndarray, size: np.ndarr
     return y
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def superpose_steps_rows(step_responses: np.ndarray, index: np.ndarray, size: np.ndarray,
                          n_samples: int) -> np.ndarray:
     """``superpose_steps`` for each row of ``step_responses`` (k, >= n_samples): the same sums, one call."""
@@ -220,7 +220,7 @@ def superpose_steps_rows(step_responses: np.ndarray, index: np.ndarray, size: np
     return y
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def foh_grid_costs(z: np.ndarray, y: np.ndarray, phi: np.ndarray, g0: np.ndarray, g1: np.ndarray,
                    h: float) -> np.ndarray:
     """For each resonance k: min over b of ||y - b s_k||^2, s_k = resonance_foh(z) with (phi, g0, g1)[k].
@@ -260,7 +260,7 @@ def foh_grid_costs(z: np.ndarray, y: np.ndarray, phi: np.ndarray, g0: np.ndarray
     return costs
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def transition_b(slow: complex, fast: complex, wn: float, damp: float, tau: float) -> tuple[float, float]:
     """e^{A tau} B for the balanced resonance A = [[0, wn], [-wn, -damp]], B = [0, wn].
 
@@ -279,7 +279,7 @@ def transition_b(slow: complex, fast: complex, wn: float, damp: float, tau: floa
     return (r * (wn * wn)).real, (e1 * wn + r * (-damp * wn - slow * wn)).real
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def head_quadrature(alpha: float, slow: complex, fast: complex, wn: float, damp: float, h: float,
                     n_head: int, xl: np.ndarray, wl: np.ndarray, xj: np.ndarray, wj: np.ndarray,
                     panels: int, gamma1: float) -> np.ndarray:
@@ -313,7 +313,7 @@ def head_quadrature(alpha: float, slow: complex, fast: complex, wn: float, damp:
     return out
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def foh_grid_costs_projected(z: np.ndarray, y_perp: np.ndarray, q: np.ndarray, phi: np.ndarray, g0: np.ndarray,
                              g1: np.ndarray, h: float) -> np.ndarray:
     """``foh_grid_costs`` with fixed nuisance columns projected out.
@@ -354,7 +354,7 @@ def foh_grid_costs_projected(z: np.ndarray, y_perp: np.ndarray, q: np.ndarray, p
     return costs
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def foh_grid_costs_free(z: np.ndarray, y_perp: np.ndarray, q: np.ndarray, phi: np.ndarray, g0: np.ndarray,
                         g1: np.ndarray, h: float) -> np.ndarray:
     """``foh_grid_costs_projected`` with the resonance's two free modes also fitted per grid point.
@@ -421,7 +421,7 @@ def foh_grid_costs_free(z: np.ndarray, y_perp: np.ndarray, q: np.ndarray, phi: n
     return costs
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def state_march_sensitivity(n_samples: int, h: float, alpha: float, gamma1: float, psi1: float, phi: np.ndarray,
                             dphi: np.ndarray, head: np.ndarray, dhead: np.ndarray, taylor: np.ndarray,
                             dtaylor: np.ndarray) -> np.ndarray:
@@ -505,7 +505,7 @@ def state_march_sensitivity(n_samples: int, h: float, alpha: float, gamma1: floa
     return out
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def _poles(a1: float, a2: float) -> tuple[complex, complex]:
     """(slow, fast) roots of a2 s^2 + a1 s + 1, as ``discretize.resonance_poles``."""
     root = cmath.sqrt(complex(a1 * a1 - 4.0 * a2))
@@ -513,7 +513,7 @@ def _poles(a1: float, a2: float) -> tuple[complex, complex]:
     return 1.0 / q, q / a2
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def _log_singular_panel(alpha: float, slow: complex, fast: complex, wn: float, damp: float, h: float,
                         width: float, xl: np.ndarray, wl: np.ndarray) -> tuple[float, float]:
     """int_0^width s^alpha ln(s) e^{A(h-s)} B ds (the head's alpha derivative on its singular first panel).
@@ -559,7 +559,7 @@ def _log_singular_panel(alpha: float, slow: complex, fast: complex, wn: float, d
     return acc0, acc1
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def head_sensitivity(alpha: float, a1: float, a2: float, h: float, n_head: int, xl: np.ndarray, wl: np.ndarray,
                      xj: np.ndarray, wj: np.ndarray, panels: int, gamma1: float, psi1: float,
                      rel_step: float) -> np.ndarray:
@@ -620,7 +620,7 @@ def head_sensitivity(alpha: float, a1: float, a2: float, h: float, n_head: int, 
     return out
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def projected_normal_equations(s: np.ndarray, ds: np.ndarray, r: np.ndarray, b: float,
                                free_offset: bool) -> tuple[np.ndarray, np.ndarray]:
     """(J J', J r) of the projected residual's Jacobian J without forming it (two passes, no temporaries).
@@ -691,7 +691,7 @@ def projected_normal_equations(s: np.ndarray, ds: np.ndarray, r: np.ndarray, b: 
 EXPM_DEGREE = 16
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def _matmul_into(out: np.ndarray, x: np.ndarray, y: np.ndarray) -> None:
     """out = x @ y for small square matrices (real or complex) without allocating.
 
@@ -709,7 +709,7 @@ def _matmul_into(out: np.ndarray, x: np.ndarray, y: np.ndarray) -> None:
                 out[i, j] += xik * y[k, j]
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def expm_small(x: np.ndarray) -> np.ndarray:
     """e^x of a small square matrix (real, or complex for the complex step): scaling and squaring with a
     degree-16 Taylor polynomial (Horner).
@@ -748,7 +748,7 @@ def expm_small(x: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def expm_directional(x: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(e^x, D) with D[k] the derivative of e^x in the direction directions[k], by the complex step.
 
@@ -766,7 +766,7 @@ def expm_directional(x: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray,
     return e, out
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def second_differences(y: np.ndarray) -> np.ndarray:
     """``np.diff(y, 2) / sqrt(6)`` bit for bit (the same two subtractions and the division per element)
     in one pass and one buffer: numpy's two passes and temporaries cost ~1 ms per 100,000 samples."""

@@ -25,6 +25,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "and swapped in whole; an existing DIR may hold only an earlier report)")
     p.add_argument("--effects", default=None,
                    help="comma-separated candidates to try (default: the whole catalogue)")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="threads for the candidate fits (default: the available cores, or "
+                        "$CREEP_ONLINE_DIAGNOSE_WORKERS; 1 = one after the other); the result does not depend on it")
     p.set_defaults(func=run)
 
 
@@ -37,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     with for_command(args.json) as progress:
         progress.stage(f"diagnose {args.data}: loading")
         inp = load_for_diagnosis(args.data, args.u_column, args.y_column)
-        result = diagnose(inp.record, candidates=candidates, u_pre=inp.u_pre, t_pre=inp.t_pre,
+        result = diagnose(inp.record, candidates=candidates, u_pre=inp.u_pre, t_pre=inp.t_pre, workers=args.workers,
                           progress=lambda stage: progress.stage(f"diagnose {args.data}: {stage}"))
     result.warnings[:0] = inp.notes
     report_path = None

@@ -31,6 +31,7 @@ from ..record import Record
 from . import extended as ext
 from .compare import error_metrics
 from .locate import locate
+from .pool import ordered_map, resolve_workers
 from .residuals import autocorrelation, cross_correlation, parameter_uncertainty
 
 #: BIC drop an effect needs to be called significant.
@@ -162,7 +163,8 @@ def _start_from_identify(data: ext.Prepared, warnings: list[str]):
 
 def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_identify: bool = True,
              u_pre: float | None = None, t_pre: float | None = None, combine: bool = True,
-             max_nfev: int = ext.MAX_NFEV, progress: Callable[[str], None] | None = None) -> Diagnosis:
+             max_nfev: int = ext.MAX_NFEV, progress: Callable[[str], None] | None = None,
+             workers: int | None = None) -> Diagnosis:
     """Compare, locate, explain: fit the base model, every candidate effect, rank them, give the verdict.
 
     ``record_or_t_u_y`` is a ``Record`` or a ``(t, u, y)`` tuple. ``u_pre`` /
@@ -172,6 +174,9 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
     ``candidates``: the effects to try (default: every registered one,
     ``creep_online.effects.effect_names()``). ``progress`` is called with the
     name of each stage as it starts (the CLI shows it on a terminal).
+    ``workers``: threads for the candidate fits (default: the available
+    cores, or ``CREEP_ONLINE_DIAGNOSE_WORKERS``; 1 = one after the other in
+    this thread); the results do not depend on it (``pool.py``).
     """
     start = time.perf_counter()
     report = progress or (lambda _stage: None)
@@ -181,6 +186,7 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
         u_pre = 0.0  # a constant non-zero input is a step from rest at t[0] (as Record.validate reads it)
         pre_notes.append(f"constant input {u[0]:g}: read as a step from 0 at t = {t[0]:g} s")
     candidates = effect_names() if candidates is None else tuple(candidates)
+    n_workers = resolve_workers(workers)
     for name in candidates:
         ext.check_effects([name])
     data = ext.prepare(t, u, y, source=source, u_pre=u_pre, t_pre=t_pre)
@@ -216,13 +222,17 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
     if exact:
         warnings.append(f"the base model reproduces the data to {base.residual_rms / float(np.std(data.y)):.1e} "
                         "of their spread (noise-free data?): nothing is missing")
+    todo: list[tuple[int, str]] = []
     for i, name in enumerate(candidates, 1):
         why = applicable(data, name)
-        if why is not None:
+        if why is None:
+            todo.append((i, name))
+        else:
             skipped[name] = why
-            continue
-        report(f"[{i}/{len(candidates)}] fitting the base model + {name}")
-        fit = ext.fit_extended(data, (name,), base, max_nfev=max_nfev)
+    # the candidate fits are independent: on several cores at once (pool.py), results in the serial order
+    fits = ordered_map(lambda job: ext.fit_extended(data, (job[1],), base, max_nfev=max_nfev), todo, n_workers,
+                       before=lambda _k, job: report(f"[{job[0]}/{len(candidates)}] fitting the base model + {job[1]}"))
+    for (_, name), fit in zip(todo, fits):
         ev, lr, pv, dk = evidence(base, fit, data.n)
         sig = (not exact and ev > EVIDENCE_THRESHOLD
                and fit.residual_rms < (1.0 - MIN_RMS_DROP) * base.residual_rms)
@@ -242,7 +252,7 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
     if combine and len(sig) >= 2:
         pair = (sig[0].effect, sig[1].effect)
         report(f"fitting the two best together: {pair[0]} + {pair[1]}")
-        fit = ext.fit_extended(data, pair, base, max_nfev=max_nfev, warm=sig[0].fit)
+        fit = ext.fit_extended(data, pair, base, max_nfev=max_nfev, warm=sig[0].fit, workers=n_workers)
         ev, lr, pv, dk = evidence(base, fit, data.n)
         ev1 = evidence(sig[0].fit, fit, data.n)[0]
         combo = Candidate("+".join(pair), ev, lr, pv, dk, bool(ev1 > EVIDENCE_THRESHOLD), fit,

@@ -21,7 +21,9 @@ Python API: :func:`prepare` a record once, :func:`fit_base`, then
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 from scipy.linalg import lstsq as scipy_lstsq
@@ -35,6 +37,7 @@ from ..metrics import fit_percent, noise_std_estimate, rms
 from ..model import EXTENDED_FIT_ALPHA_BOUNDS as ALPHA_BOUNDS
 from ..model import CreepModel, ExtendedModel, with_effects
 from ..record import check_amplitudes, check_time_and_output
+from .pool import ordered_map
 from .varpro import projected_jacobian
 
 #: Time stamps whose step varies by less than this (relative) are snapped to a uniform grid.
@@ -177,17 +180,8 @@ class Prepared:
         the delay's spline, the superposition) is most of an evaluation.
         """
         key = ("+".join(f"{e.name}[{variant}]" for e, variant in inputs) or "u", alpha, a1, a2, delay)
-        cache = self._cache.setdefault("base_path", {})
-        if key in cache:
-            cache[key] = cache.pop(key)          # most recently used last
-            return cache[key]
-        s = fx.delayed_grid(self.step_grid(alpha, a1, a2), self.h, delay)
-        rows = self.superposer(inputs).apply(s)
-        rows.setflags(write=False)
-        cache[key] = rows
-        while len(cache) > BASE_PATH_CACHE:
-            cache.pop(next(iter(cache)))
-        return rows
+        return _remembered(self._cache.setdefault("base_path", {}), key, BASE_PATH_CACHE, lambda: self.superposer(
+            inputs).apply(fx.delayed_grid(self.step_grid(alpha, a1, a2), self.h, delay)))
 
     def step_grid(self, alpha: float, a1: float, a2: float) -> np.ndarray:
         """The base model's undelayed unit-step response on the grid (uniform records), read-only.
@@ -197,17 +191,8 @@ class Prepared:
         spline's slope) and a combination's grid vary the delay with the base
         parameters fixed, and each would march the same response again.
         """
-        key = (alpha, a1, a2)
-        cache = self._cache.setdefault("step_grid", {})
-        if key in cache:
-            cache[key] = cache.pop(key)
-            return cache[key]
-        s = fx.base_step_grid(alpha, a1, a2, self.h, self.n)
-        s.setflags(write=False)
-        cache[key] = s
-        while len(cache) > BASE_PATH_CACHE:
-            cache.pop(next(iter(cache)))
-        return s
+        return _remembered(self._cache.setdefault("step_grid", {}), (alpha, a1, a2), BASE_PATH_CACHE,
+                           lambda: fx.base_step_grid(alpha, a1, a2, self.h, self.n))
 
     def parallel_path(self, effect: ParallelEffect, theta: dict[str, float], own: tuple[float, ...], delay: float,
                       tau: np.ndarray | None) -> np.ndarray:
@@ -222,18 +207,12 @@ class Prepared:
         grid times minus the delay (uniform records), None otherwise.
         """
         key = (effect.name, theta["alpha"], theta["log10_fn"], theta["log10_zeta"], own, delay)
-        cache = self._cache.setdefault("parallel_path", {})
-        if key in cache:
-            cache[key] = cache.pop(key)
-            return cache[key]
-        step = effect.unit_step(theta)
-        shifted = (lambda tt: step(tt - delay))
-        rows = self.superposer().apply(shifted(tau + delay) if tau is not None else shifted)
-        rows.setflags(write=False)
-        cache[key] = rows
-        while len(cache) > PARALLEL_PATH_CACHE:
-            cache.pop(next(iter(cache)))
-        return rows
+
+        def make() -> np.ndarray:
+            step = effect.unit_step(theta)
+            shifted = (lambda tt: step(tt - delay))
+            return self.superposer().apply(shifted(tau + delay) if tau is not None else shifted)
+        return _remembered(self._cache.setdefault("parallel_path", {}), key, PARALLEL_PATH_CACHE, make)
 
     def base_path_sensitivity(self, inputs: tuple[tuple[InputEffect, str | None], ...], alpha: float, a1: float,
                               a2: float, delay: float) -> np.ndarray:
@@ -255,6 +234,33 @@ class Prepared:
                    before: bool = False) -> np.ndarray:
         """u and the rows the input effects add (``before``: u is the input before the record)."""
         return np.vstack([u[None, :]] + [e.design_rows(self, u, variant, before) for e, variant in inputs])
+
+
+#: Guards the remembered responses of every ``Prepared`` (the candidate fits of ``diagnose`` may run on
+#: threads, ``diagnostics/pool.py``): held only to look up, insert and evict, never while computing.
+_CACHE_LOCK = threading.Lock()
+
+
+def _remembered(cache: dict, key: tuple, size: int, make: Callable[[], np.ndarray]) -> np.ndarray:
+    """``cache[key]``, or ``make()`` remembered (read-only) with the least recently used entries beyond ``size`` evicted.
+
+    Exact reuse only: a remembered array is bit for bit what ``make()`` gives
+    again, so hits, misses and evictions (which depend on what other threads
+    evaluate meanwhile) never change a result. Two threads missing the same
+    key both compute it; the later insert wins, with equal values.
+    """
+    with _CACHE_LOCK:
+        if key in cache:
+            value = cache.pop(key)
+            cache[key] = value                   # most recently used last
+            return value
+    value = make()
+    value.setflags(write=False)
+    with _CACHE_LOCK:
+        cache[key] = value
+        while len(cache) > size:
+            cache.pop(next(iter(cache)))
+    return value
 
 
 def prepare(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, source: str = "<array>",
@@ -339,6 +345,10 @@ class Design:
         self.nfev = 0
         self._solved: dict[bytes, tuple] = {}    # theta -> (coefficients, output, weighted residual), recent ones
         self._weighted: tuple[bytes, np.ndarray] | None = None   # (theta, weighted design) of the last evaluation
+
+    def copy(self) -> "Design":
+        """The same design with its own (empty) solution cache and evaluation counter (for another thread)."""
+        return Design(self.data, self.effects, self.harmonics, self.variants)
 
     def index(self, name: str) -> int:
         return self.names.index(name)
@@ -761,7 +771,7 @@ def _choose_variants(data: Prepared, effects: tuple[str, ...], base: ExtendedFit
 
 def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, base: ExtendedFit | None = None,
                  harmonics: int = 1, max_nfev: int = MAX_NFEV, n_starts: int = 2,
-                 warm: ExtendedFit | None = None) -> ExtendedFit:
+                 warm: ExtendedFit | None = None, workers: int = 1) -> ExtendedFit:
     """Fit the base model extended by ``effects``, warm-started from ``base`` (fitted if not given).
 
     The effects' nonlinear parameters start from a grid (residual-spectrum
@@ -769,7 +779,9 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     (each with its best base variant) get a short joint polish, and the
     ``n_starts`` best of those a full one (bounded least squares). ``warm``
     (e.g. the fit of one of the effects alone) seeds further starts with its
-    values, so a combination is never worse than that fit.
+    values, so a combination is never worse than that fit. ``workers`` > 1
+    runs the short polishes of a long record on that many threads (the
+    result does not depend on it, ``_short_polishes``).
     """
     if isinstance(effects, str):
         effects = tuple(e.strip() for e in effects.split(",") if e.strip())
@@ -806,7 +818,7 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     if warm is not None:
         chosen += [_merge(explore, th, warm) for th in list(groups.values())[:2]]
     chosen = list({th.tobytes(): th for th in chosen}.values())    # a priority start may repeat a grid start
-    short = [_optimise(explore, th, SHORT_NFEV, SHORT_XTOL, SHORT_FTOL) for th in chosen]
+    short = _short_polishes(explore, design, chosen, workers)
     finalists = [th for _, th in ranked(explore, short)[:n_starts]]
     finalists += _polished_starts(design, finalists) + [_null_start(design, base)]
     if warm is not None:
@@ -834,6 +846,23 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
         if design.cost(th) < best_cost:
             fit = _result(design, th)
     return fit
+
+
+def _short_polishes(explore: Design, design: Design, chosen: list[np.ndarray], workers: int) -> list[np.ndarray]:
+    """The short polishes of the chosen starts on the exploration window, in order; on ``workers`` threads if > 1.
+
+    In parallel each polish runs on its own copy of the exploration design
+    (a design's solution cache and counter are not shared between threads);
+    a copy only misses the solutions the shared one remembered, which are
+    exact reuse, so every polish ends where the serial one does. Only when
+    the window is not the record itself: the record's design counts the
+    evaluations the fit reports (``ExtendedFit.nfev``), and that count must
+    not depend on the threads.
+    """
+    if workers <= 1 or explore is design or len(chosen) <= 1:
+        return [_optimise(explore, th, SHORT_NFEV, SHORT_XTOL, SHORT_FTOL) for th in chosen]
+    return list(ordered_map(lambda th: _optimise(explore.copy(), th, SHORT_NFEV, SHORT_XTOL, SHORT_FTOL),
+                            chosen, workers))
 
 
 def _on_a_bound(design: Design, base: np.ndarray) -> bool:

@@ -55,7 +55,8 @@ def _fill(row: dict[str, Any], job: RecordJob, diagnose_it: bool, options: dict[
     row.update({k: None if v is None else float(v) for k, v in values.items()}, samples=len(rec))
     notes.extend(res.warnings)
     if diagnose_it:
-        row["verdict"] = diagnose(rec).verdict
+        # one thread: the batch already runs one worker process per core (and times this thread's CPU)
+        row["verdict"] = diagnose(rec, workers=1).verdict
 
 
 def warm_up() -> float:
