@@ -45,6 +45,12 @@ from .soe import SoeBasis
 
 #: Relative move of a1 or a2 from the linearization point that triggers a replay.
 RELINEARIZE = 0.04
+#: A replay that a converged window's re-fit triggers (a1 or a2 beyond RELINEARIZE, or the fine one) waits for
+#: the change test due next (at most ``test_every`` and its slices): a settled window running off is what a change looks
+#: like, and when the test declares one the window restarts and the replay is void. (Measured on the latency
+#: stream: before each of its two changes a whole-ring replay, 68000-94000 samples, 27-37 ms of CPU and
+#: 2500-3500 units over 5 us, ran and was dropped or overwritten by the restart half a second later.)
+REPLAY_AFTER_TEST = True
 #: ... and, while the window misfits (error above MISFIT_CLEAR_RATIO x the noise floor) with a converged
 #: estimate, this smaller one: at a high SNR the expansion's second-order term is itself the misfit on a
 #: lightly damped mode (5.5 Hz, zeta 0.025, 80 dB: a2 0.27 % from the point held the window at 2-2.8x the
@@ -491,7 +497,10 @@ class WindowTracker(ParameterView):
             self._watch(rms, False, n, noise)
         if relinearize or fine:
             if not any(j.__name__ == "_relinearize_job" for j in self._jobs):
-                self._jobs.append(self._relinearize_job(None))
+                # a settled window whose resonance runs off is what a change looks like: the test due next
+                # decides first, and a declared change drops the replay with the old window
+                self._jobs.append(self._relinearize_job(None, after_test=REPLAY_AFTER_TEST and self.converged
+                                                        and self.detect))
         elif self.events:
             self._settle_events(move)
 
@@ -540,8 +549,16 @@ class WindowTracker(ParameterView):
         oldest = (int(self.sc[W.SC_RPOS]) - count) % size
         return (oldest + index - int(self.sc[W.SC_RSTART])) % size
 
-    def _relinearize_job(self, start: int | None) -> Generator:
-        """Replay the remembered samples (from ``start``, default the oldest) for the current resonance."""
+    def _relinearize_job(self, start: int | None, after_test: bool = False) -> Generator:
+        """Replay the remembered samples (from ``start``, default the oldest) for the current resonance.
+
+        ``after_test``: first wait for the change test due next to finish (``REPLAY_AFTER_TEST``).
+        """
+        if after_test:
+            due = (self.n // self.test_every + 1) * self.test_every
+            while self.n <= due or self.machine == MACHINE_TEST \
+                    or any(j.__name__ == "_change_job" for j in self._jobs):
+                yield WAIT
         a1, a2 = self.a1, self.a2
         st, S = self._fresh(a1, a2)
         lay = self.lay
