@@ -99,6 +99,8 @@ def run_estimator(u: np.ndarray, y: np.ndarray, h: float, mode: str, kwargs: dic
         e = est.estimate
         out.update(quality=e.quality, phase=e.phase, final={p: float(getattr(e, p)) for p in PARAMS},
                    events=[float(v["t"]) for v in getattr(e, "events", [])],
+                   unsettled_events=[float(v["t"]) for v in getattr(e, "events", [])
+                                     if v.get("estimate_settled") is False],
                    floor_ratio=float(e.residual_rms / e.noise_rms) if e.noise_rms > 0 else None)
     except Exception as exc:  # the estimator under test may fail in any way: that is a result
         out["error"] = f"{type(exc).__name__}: {exc}"
@@ -219,8 +221,11 @@ def run_metrics(res: dict, tr: dict) -> dict:
         row["reconvergence_s"] = settle_time(t, inside, tr["change_time"])
         # a detection names the test window the change fell in: up to a second before it
         row["false_events"] = sum(not -1.5 <= v - tr["change_time"] <= 3.0 for v in events)
+        row["false_events_unsettled"] = sum(not -1.5 <= v - tr["change_time"] <= 3.0
+                                            for v in res.get("unsettled_events") or [])
     else:
         row["false_events"] = len(events)
+        row["false_events_unsettled"] = len(res.get("unsettled_events") or [])
     return row
 
 
@@ -269,7 +274,10 @@ def family_metrics(rows: list[dict]) -> dict:
            "good_while_outside_s": _good_outside_summary([r.get("good_while_outside_s") for r in ok], n),
            "quality": {q: sum(r["quality"] == q for r in ok) for q in sorted({r["quality"] for r in ok})},
            "false_change_events": {"runs_with_any": sum(r.get("false_events", 0) > 0 for r in ok) / n,
-                                   "total": sum(r.get("false_events", 0) for r in ok)},
+                                   "total": sum(r.get("false_events", 0) for r in ok),
+                                   # of them, declared against an estimate that had not settled
+                                   # (``estimate_settled`` False: a start-up estimate corrected)
+                                   "estimate_not_settled": sum(r.get("false_events_unsettled", 0) for r in ok)},
            "final_floor_ratio": _floor_ratios([r.get("floor_ratio") for r in ok]),
            "failure_messages": sorted({r["error"] for r in rows if r["error"] is not None})}
     if any("reconvergence_s" in r for r in ok):

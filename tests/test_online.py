@@ -196,6 +196,26 @@ def test_a_replay_triggered_by_a_change_waits_for_the_test_and_is_dropped(family
     assert outcome[True][0] == outcome[False][0] and outcome[True][0], outcome
     assert outcome[True][1] < outcome[False][1], outcome
 
+
+def test_a_start_up_correction_is_reported_as_such():
+    """close_modes 7 (three modes, the start-up estimate a2 +650 %): the change test corrects the start at
+    2.5 s. The estimate it was judged against had not settled, so the event says so (``estimate_settled``
+    False), alpha is not restored from that estimate, and the quality reads "provisional", not "changing",
+    while it settles; the text summary says it may correct the estimate rather than the plant."""
+    from creep_online.commands._common import unsettled_note
+
+    sc = scenarios.make("close_modes", 7)
+    est = OnlineEstimator(sc.h)
+    k = int(2.7 / sc.h)
+    est.update_block(sc.u[:k], sc.y[:k])
+    ev = est.estimate.events
+    assert len(ev) == 1 and ev[0]["estimate_settled"] is False and not ev[0]["settled"], ev
+    assert est.estimate.quality == "provisional" and "estimate corrected" in est.estimate.reason
+    assert "may correct the estimate" in unsettled_note(ev[0])
+    est.update_block(sc.u[k:], sc.y[k:])
+    truth = sc.final_truth
+    assert _within(est.estimate, truth), _errors(est.estimate, truth)
+
 def _reconvergence_s(est: OnlineEstimator, sc, single: bool) -> float:
     """Feed the record in 0.1 s chunks; seconds from the change until the estimate enters the tolerances
     for good (inf if it ends outside)."""
@@ -251,6 +271,7 @@ def test_abrupt_change_is_detected_named_and_followed(family, seed):
     ev = [v for v in e.events if abs(v["t"] - sc.change_time) < 1.0]
     assert ev, e.events
     moved = set(ev[0]["moved"])
+    assert ev[0]["estimate_settled"] is True       # judged against an estimate that stood: a plant change
     truly = {k for k in ("a1", "a2", "b") if abs(sc.final_truth[k] / sc.truth_at(0)[k] - 1) > 0.1}
     assert truly <= moved | {"b"} and moved <= truly | {"alpha", "b"}
 

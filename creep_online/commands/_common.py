@@ -30,6 +30,14 @@ def moves_text(relative_change: dict) -> str:
     return ", ".join(f"{k} {100 * v:+.1f} %" for k, v in relative_change.items())
 
 
+def unsettled_note(event: dict) -> str:
+    """What a change event judged against a still-moving estimate says (``estimate_settled`` False): it may
+    correct the estimate (a start-up estimate converging) rather than report a change of the plant."""
+    if event.get("estimate_settled") is False:
+        return "; the estimate had not settled before it: may correct the estimate, not the plant"
+    return ""
+
+
 def research_lines(researches: list[dict]) -> list[str]:
     """One line per re-search of the resonance that replaced the estimate, and one for those that kept it.
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import CreepOnlineError
 from ..model import ONLINE_REFITS as REFITS
-from ._common import moves_text, print_json, research_lines
+from ._common import moves_text, print_json, research_lines, unsettled_note
 from ._progress import Progress
 
 SCENARIOS = ("stationary", "payload", "drift")
@@ -263,7 +263,7 @@ def _print_summary(r: dict, as_json: bool) -> None:
         for ev in est.get("events", []):
             moves = moves_text(ev["relative_change"])
             print(f"    change near t = {ev['t']:.2f} s, detected at {ev['detected_t']:.2f} s: "
-                  f"{', '.join(ev['moved']) or 'nothing significant'} moved ({moves})")
+                  f"{', '.join(ev['moved']) or 'nothing significant'} moved ({moves}){unsettled_note(ev)}")
         for line in research_lines(est.get("researches", [])):
             print(f"    {line}")
         print(f"    alpha {m['alpha']:.5f}  (true {t['alpha']:.5f}, error {e['alpha_abs']:+.2e})")

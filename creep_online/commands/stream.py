@@ -23,7 +23,7 @@ from ..errors import CreepOnlineError, DataError, TransportError
 from ..io.csvfile import load_record
 from ..online import OnlineEstimator, warm_kernels
 from ..model import ONLINE_REFITS as REFITS
-from ._common import add_column_options, moves_text, print_json, research_lines
+from ._common import add_column_options, moves_text, print_json, research_lines, unsettled_note
 
 
 #: How a stream ended -> exit code. Every end after the first sample prints the estimate and the counters.
@@ -183,7 +183,7 @@ def run(args: argparse.Namespace) -> int:
     for ev in e.events:
         moves = moves_text(ev["relative_change"])
         print(f"  change near t = {ev['t']:.4g} s (detected {ev['detected_t']:.4g} s): "
-              f"{', '.join(ev['moved']) or 'nothing significant'} moved ({moves})")
+              f"{', '.join(ev['moved']) or 'nothing significant'} moved ({moves}){unsettled_note(ev)}")
     for line in research_lines(e.researches):
         print(f"  {line}")
     if "throughput_sps" in extra:

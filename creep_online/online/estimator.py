@@ -643,6 +643,9 @@ class OnlineEstimator(StoredParams):
         now = self.samples * self._h
         if tr.events and (not tr.events[-1]["settled"] or now - tr.events[-1]["detected_t"] < 1.5):
             ev = tr.events[-1]
+            if ev.get("estimate_settled") is False:
+                return "provisional", (f"estimate corrected at t={ev['t']:.3g} s ({', '.join(ev['moved'])} moved; "
+                                       "it had not settled: a change of the estimate, maybe not of the plant)")
             return "changing", f"change detected at t={ev['t']:.3g} s ({', '.join(ev['moved'])} moved)"
         dis = tr.disagreement
         if dis is not None and now - dis["t"] < 1.5:

@@ -637,6 +637,7 @@ class RecursiveTracker(ParameterView):
         snap = self.st[self.lay["snap"]:self.lay["prior"]]
         self.events.append({"t": float(self.r[R_ALARMN]) * self.h, "detected_t": self.n * self.h, "moved": [],
                             "relative_change": {}, "lr": g, "settled": False, "restarts": 1,
+                            "estimate_settled": None,     # (not judged here: see tracker._settled_before)
                             "_before": snap[:4].copy(), "_last_t": self.n * self.h})
 
     def _settle_events(self, previous: list[float]) -> None:

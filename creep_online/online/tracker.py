@@ -670,7 +670,8 @@ class WindowTracker(ParameterView):
         if lr < max(CHANGE_LR, CHANGE_JUMP * level) or not moved or lin != (self.a1l, self.a2l):
             self._lr_recent = (self._lr_recent + [float(lr)])[-CHANGE_HISTORY:]
             return
-        if self._settled_before(n0, theta0):
+        settled = bool(self._settled_before(n0, theta0))
+        if settled:
             self.theta[0] = theta0[0]      # alpha as it was before the change (the refits chased it since)
         self._restart_window(n0, "b" in moved)
         last = self.events[-1] if self.events else None
@@ -681,7 +682,10 @@ class WindowTracker(ParameterView):
             return
         self.events.append({"t": n0 * self.h, "detected_t": self.n * self.h, "moved": sorted(moved),
                             "relative_change": {k: float(v) for k, v in moves.items()}, "lr": float(lr),
-                            "settled": False, "restarts": 1, "_before": theta0[:4].copy()})
+                            "settled": False, "restarts": 1, "_before": theta0[:4].copy(),
+                            # False: the estimate it was judged against was still moving (a start-up
+                            # estimate converging): the event may correct the estimate, not the plant
+                            "estimate_settled": settled})
 
     def _settled_before(self, n0: int, theta0: np.ndarray) -> bool:
         """Was the window's estimate settled over the second before the tested one? Only then is its alpha the
