@@ -342,7 +342,7 @@ def test_refit_machine_equals_its_kernels_in_sequence():
         mu = W.lm_trial(theta, free, mu, H, g, cost, tr.a1l, tr.a2l, lam, dx, F, fy, fyy, *tr.alpha_bounds, out)
     cov = np.empty_like(H)
     W.covariance(H, free, cov)
-    RF.begin(tr.st, tr.S, tr._shift, tr._wk, 0, False, False, 1)      # (with the drift-origin move)
+    RF.begin(tr.st, tr.S, tr._shift, tr._wk, 0, False, False, 1, True)      # (with the drift-origin move)
     units = 1
     while not RF.refit_unit(tr.st, tr.S, tr._shift, tr.theta, tr._wk, lam, dx):
         units += 1
@@ -375,7 +375,7 @@ def test_the_per_sample_kernel_runs_the_refit_machine_to_the_same_result(slices,
     lam, dx = tr.basis.lam, tr.basis.dx
     rng = np.random.default_rng(1)
     ys = [math.nan if outputs == "missing" else 0.8 + 1e-3 * rng.standard_normal() for _ in range(2000)]
-    RF.begin(tr.st, tr.S, tr._shift, tr._wk, 0, False, False, 1)
+    RF.begin(tr.st, tr.S, tr._shift, tr._wk, 0, False, False, 1, True)
     # the reference: the same first sample (sample_work takes it before the first slice), then the machine
     st, S, shift, theta, wk, ring = (a.copy() for a in (tr.st, tr.S, tr._shift, tr.theta, tr._wk, tr.ring))
     W.sample(0.5, ys[0], st, S, ring)

@@ -710,11 +710,11 @@ def warm_kernels() -> None:
     RF.start_test(st, S, S.copy(), np.ones(tr.p), 1.0, shift, shift.copy(), tr.theta.copy(), tr._test_wk.copy(),
                   True)
     wk = tr._wk.copy()
-    RF.begin(st, S, shift, wk, 1, False, True, 0)
+    RF.begin(st, S, shift, wk, 1, False, True, 0, True)
     RF.run(st, S, shift, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)
     RF.accept(st, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)
     RF.test_outcome(wk, tr.theta)
-    RF.begin(tr.st, tr.S, tr._shift, tr._wk, 1, False, True, 0)      # (this estimator is thrown away)
+    RF.begin(tr.st, tr.S, tr._shift, tr._wk, 1, False, True, 0, True)      # (this estimator is thrown away)
     RF.sample_work(0.0, 0.0, tr.st, tr.S, tr.ring, tr._ctx, T.MACHINE_REFIT, 1)
     T.WindowTracker  # noqa: B018 - imported for its kernels
     R.warm()

@@ -174,18 +174,20 @@ def _scratch(wk: np.ndarray, p: int, k: int, q: int) -> tuple:
 
 @njit(cache=CACHE)
 def begin(st: np.ndarray, S: np.ndarray, shift: np.ndarray, wk: np.ndarray, window_start: int, drift_on: bool,
-          converged: bool, refits: int) -> None:
+          converged: bool, refits: int, hold_alpha: bool) -> None:
     """Start a re-fit of the window: what it frees and which drift test follows (``_plan``; the tracker's
     state decides), and the drift origin to the newest sample (``window.move_origin``: alpha and b of the
-    fit are then the values now). ``refit_unit`` (or ``sample_work``) then runs it."""
-    _plan(wk, st[W.SC_N], window_start, drift_on, converged, refits)
+    fit are then the values now). ``refit_unit`` (or ``sample_work``) then runs it. ``hold_alpha``: the window
+    restarted after a plant change (alpha held for HOLD_N samples), not after a corrected start."""
+    _plan(wk, st[W.SC_N], window_start, drift_on, converged, refits, hold_alpha)
     W.move_origin(st, S, shift)
     wk[RF_ROW] = 0.0
     wk[RF_STAGE] = ST_SCALE
 
 
 @njit(cache=CACHE)
-def _plan(wk: np.ndarray, n: float, window_start: int, drift_on: bool, converged: bool, refits: int) -> None:
+def _plan(wk: np.ndarray, n: float, window_start: int, drift_on: bool, converged: bool, refits: int,
+          hold_alpha: bool) -> None:
     """What this re-fit frees and which drift test follows it.
 
     Alpha and the drift rates stay fixed in a short window after a change (it determines neither).
@@ -193,7 +195,7 @@ def _plan(wk: np.ndarray, n: float, window_start: int, drift_on: bool, converged
     test at every re-fit while they are on, the score test at every DRIFT_EVERY-th while off.
     """
     span = n - window_start
-    hold = window_start > 0 and span < wk[RF_HOLD_N]
+    hold = hold_alpha and window_start > 0 and span < wk[RF_HOLD_N]
     wk[RF_MASK] = MASK_HOLD if hold else (MASK_ALL if drift_on else MASK_CONSTANT)
     drift = 0
     if wk[RF_NRATE] > 0 and not hold and converged and span >= wk[RF_DRIFT_MIN_N]:

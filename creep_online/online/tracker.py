@@ -264,6 +264,9 @@ class WindowTracker(ParameterView):
         self.refits = 0
         self.rejected = 0                # refits discarded (non-finite or zero gain)
         self.window_start = 0            # first sample in the statistics (moved by a detected change)
+        #: alpha is the plant's (held after a change) unless the last restart corrected a start-up estimate
+        #: that had not settled (``_settled_before``): then the search and the re-fits free it
+        self._alpha_known = True
         self.fitting = True              # False while the start-up buffer is replayed: no refits yet
         self.converged = False           # a refit has barely moved since the start: the change test may judge
         self.fit = Fit(theta=self.theta.copy())
@@ -464,7 +467,7 @@ class WindowTracker(ParameterView):
     def _begin_refit(self) -> None:
         """Start a re-fit (``refit.begin``) and hand it to the per-sample kernel."""
         RF.begin(self.st, self.S, self._shift, self._wk, self.window_start, self.drift_on, self.converged,
-                 self.refits)
+                 self.refits, self._alpha_known)
         self.machine = MACHINE_REFIT
 
     def _accept(self) -> None:
@@ -673,7 +676,7 @@ class WindowTracker(ParameterView):
         settled = bool(self._settled_before(n0, theta0))
         if settled:
             self.theta[0] = theta0[0]      # alpha as it was before the change (the refits chased it since)
-        self._restart_window(n0, "b" in moved)
+        self._restart_window(n0, "b" in moved, alpha_known=settled)
         last = self.events[-1] if self.events else None
         if last is not None and not last["settled"]:
             # the same change seen again from a cleaner window: one event, restarted later
@@ -713,15 +716,17 @@ class WindowTracker(ParameterView):
             and abs(math.exp(theta0[2] - prev[2]) - 1.0) <= CHANGE_MOVE["a2"] \
             and abs(theta0[3] / prev[3] - 1.0) <= CHANGE_MOVE["b"] if prev[3] else False
 
-    def _restart_window(self, n0: int, gain_moved: bool) -> None:
+    def _restart_window(self, n0: int, gain_moved: bool, alpha_known: bool = True) -> None:
         """A change happened between sample n0 and now: the window restarts after it.
 
         The old window's refits are void. The parameters stay until the
         resonance has been searched afresh on post-change samples only
         (``_research_job``); the test's own fit is linearized around the old
-        resonance and unreliable for a large move.
+        resonance and unreliable for a large move. ``alpha_known`` False (a start-up estimate corrected,
+        ``_settled_before``): alpha is searched too and not held afterwards.
         """
         self.window_start = self._post_change_start(n0, gain_moved)
+        self._alpha_known = alpha_known
         self.converged = False
         self.theta[5 + self.n_free:] = 0.0     # drift rates start afresh with the new window
         self.drift_on = False
@@ -783,7 +788,9 @@ class WindowTracker(ParameterView):
             lead = n_from - n0 if n_from < n_detect else min(settle, u.size // 4)
             # the live estimate competes with the grid: the window re-fits often follow a change
             # before the test confirms it, and the grid's best basin can be a wrong one
-            search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, fixed_alpha=self.alpha,
+            search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead,
+                                     fixed_alpha=self.alpha if self._alpha_known else None,
+                                     alphas=() if self._alpha_known else (self.alpha,),
                                      work=self.work_memory, extra=((self.alpha, self.a1, self.a2),),
                                      starts=starts)
             yield
@@ -801,7 +808,8 @@ class WindowTracker(ParameterView):
             c_new = yield from search.judged_cost(r.alpha, r.a1, r.a2, self._free_decays)
             better = _likelihood_ratio(search.judged_rows(), c_live, c_new) > RESEARCH_LR
         if better:
-            self.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
+            self.theta[0 if not self._alpha_known else 1:4] = \
+                (r.alpha, math.log(r.a1), math.log(r.a2), r.b)[0 if not self._alpha_known else 1:]
             self._coefficients()
             yield
         # re-fits wait for the replay from the change: until it is swapped in, the live statistics
@@ -886,7 +894,7 @@ class WindowTracker(ParameterView):
         lead = min(self._settling_samples(self.a1, self.a2), u.size // 4)
         # after a change alpha was determined before it (creep does not jump): the resonance only, 7x cheaper
         search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, work=self.work_memory,
-                                 fixed_alpha=self.alpha if self.window_start else None, alphas=(self.alpha,),
+                                 fixed_alpha=self.alpha if self.window_start and self._alpha_known else None, alphas=(self.alpha,),
                                  extra=((self.alpha, self.a1, self.a2),))
         yield
         yield from self._run_search(search)
