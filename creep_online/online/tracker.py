@@ -693,7 +693,8 @@ class WindowTracker(ParameterView):
     def _settled_before(self, n0: int, theta0: np.ndarray) -> bool:
         """Was the window's estimate settled over the second before the tested one? Only then is its alpha the
         plant's before a declared change, and restored (creep does not jump with a payload or a stiffness);
-        otherwise the live alpha stays. Settled: the estimate at the previous snapshot instant and at ``n0``
+        otherwise the restart searches alpha with the resonance and does not hold it (``_restart_window``'s
+        ``alpha_known``): neither the unsettled estimate's alpha nor the live one is the plant's. Settled: the estimate at the previous snapshot instant and at ``n0``
         do not differ by a move that would itself count as a change (``CHANGE_MOVE``, alpha
         ``RESEARCH_ALPHA_MOVE``); in the start-up window both must exist; after a restart the post-change
         estimate counts from its first snapshot on.
@@ -703,7 +704,8 @@ class WindowTracker(ParameterView):
         (right: it corrects a wrong start), but restored alpha 0.95, and the post-change search at that alpha
         never recovered: alpha +200 % at the end. It had been masked by slower replays, whose snapshots were
         not ready in time. Tried first: no declaration at all on such a second. Close unmodelled modes then
-        lost start-up corrections (a2 -99.5 % for 6 s until a later change).)
+        lost start-up corrections (a2 -99.5 % for 6 s until a later change). Then: the live alpha kept, fixed
+        for the search and held; quiet start alpha 0.35, 7 Hz, seed 6 ended at alpha -5.5 %.)
         """
         n_prev = n0 - self.test_every
         if n_prev < self.window_start:
