@@ -791,8 +791,7 @@ class WindowTracker(ParameterView):
             # the live estimate competes with the grid: the window re-fits often follow a change
             # before the test confirms it, and the grid's best basin can be a wrong one
             search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead,
-                                     fixed_alpha=self.alpha if self._alpha_known else None,
-                                     alphas=() if self._alpha_known else (self.alpha,),
+                                     fixed_alpha=self.alpha,
                                      work=self.work_memory, extra=((self.alpha, self.a1, self.a2),),
                                      starts=starts)
             yield
@@ -810,8 +809,7 @@ class WindowTracker(ParameterView):
             c_new = yield from search.judged_cost(r.alpha, r.a1, r.a2, self._free_decays)
             better = _likelihood_ratio(search.judged_rows(), c_live, c_new) > RESEARCH_LR
         if better:
-            self.theta[0 if not self._alpha_known else 1:4] = \
-                (r.alpha, math.log(r.a1), math.log(r.a2), r.b)[0 if not self._alpha_known else 1:]
+            self.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
             self._coefficients()
             yield
         # re-fits wait for the replay from the change: until it is swapped in, the live statistics
