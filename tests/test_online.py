@@ -200,7 +200,7 @@ def test_a_replay_triggered_by_a_change_waits_for_the_test_and_is_dropped(family
 def test_a_start_up_correction_is_reported_as_such():
     """close_modes 7 (three modes, the start-up estimate a2 +650 %): the change test corrects the start at
     2.5 s. The estimate it was judged against had not settled, so the event says so (``estimate_settled``
-    False), alpha is searched again rather than restored or held, and the quality reads "provisional", not "changing",
+    False), alpha is neither restored from it nor held, and the quality reads "provisional", not "changing",
     while it settles; the text summary says it may correct the estimate rather than the plant."""
     from creep_online.commands._common import unsettled_note
 

@@ -295,10 +295,10 @@ def test_a_high_snr_slow_mode_stays_at_the_noise_floor_sample_by_sample():
 
 
 @pytest.mark.parametrize("single", [False, True], ids=["block", "single"])
-def test_a_corrected_start_searches_alpha_again(single):
+def test_a_corrected_start_frees_alpha_at_once(single):
     """alpha 0.35, 7 Hz, zeta 0.02, seed 6: the start-up estimate is wrong and still moving when the change test
-    corrects it (1.5 s; ``estimate_settled`` False sample by sample). The restart searches alpha with the
-    resonance and does not hold it: kept fixed at the live value, alpha ended -5.5 % off sample by sample."""
+    corrects it (1.5 s; ``estimate_settled`` False sample by sample). The restart does not hold alpha after
+    the post-change search: held, as after a plant change, it ended -5.5 % off sample by sample."""
     u, y, truth = _quiet_start_record(0.35, 7.0, 0.02, 1.0, seed=6)
     est = _run(u, y, single)
     err = _errors(est, truth)

@@ -265,7 +265,7 @@ class WindowTracker(ParameterView):
         self.rejected = 0                # refits discarded (non-finite or zero gain)
         self.window_start = 0            # first sample in the statistics (moved by a detected change)
         #: alpha is the plant's (held after a change) unless the last restart corrected a start-up estimate
-        #: that had not settled (``_settled_before``): then the search and the re-fits free it
+        #: that had not settled (``_settled_before``): then the re-fits and re-searches free it at once
         self._alpha_known = True
         self.fitting = True              # False while the start-up buffer is replayed: no refits yet
         self.converged = False           # a refit has barely moved since the start: the change test may judge
@@ -693,9 +693,9 @@ class WindowTracker(ParameterView):
     def _settled_before(self, n0: int, theta0: np.ndarray) -> bool:
         """Was the window's estimate settled over the second before the tested one? Only then is its alpha the
         plant's before a declared change, and restored (creep does not jump with a payload or a stiffness);
-        otherwise the restart searches alpha with the resonance and does not hold it (``_restart_window``'s
-        ``alpha_known``): neither the unsettled estimate's alpha nor the live one is the plant's. Settled: the estimate at the previous snapshot instant and at ``n0``
-        do not differ by a move that would itself count as a change (``CHANGE_MOVE``, alpha
+        otherwise the live alpha stays for the resonance search but is not held afterwards
+        (``_restart_window``'s ``alpha_known``): neither the unsettled estimate's alpha nor the live one is
+        known to be the plant's. Settled: the estimate at the previous snapshot instant and at ``n0`` do not differ by a move that would itself count as a change (``CHANGE_MOVE``, alpha
         ``RESEARCH_ALPHA_MOVE``); in the start-up window both must exist; after a restart the post-change
         estimate counts from its first snapshot on.
 
@@ -704,8 +704,9 @@ class WindowTracker(ParameterView):
         (right: it corrects a wrong start), but restored alpha 0.95, and the post-change search at that alpha
         never recovered: alpha +200 % at the end. It had been masked by slower replays, whose snapshots were
         not ready in time. Tried first: no declaration at all on such a second. Close unmodelled modes then
-        lost start-up corrections (a2 -99.5 % for 6 s until a later change). Then: the live alpha kept, fixed
-        for the search and held; quiet start alpha 0.35, 7 Hz, seed 6 ended at alpha -5.5 %.)
+        lost start-up corrections (a2 -99.5 % for 6 s until a later change). Then: the live alpha kept and
+        held; quiet start alpha 0.35, 7 Hz, seed 6 ended at alpha -5.5 %. Then: alpha searched too; on the
+        short post-correction segment fresh stiffness 1007 went to a wrong basin, a2 -99.9 % for 7 s.)
         """
         n_prev = n0 - self.test_every
         if n_prev < self.window_start:
@@ -725,7 +726,7 @@ class WindowTracker(ParameterView):
         resonance has been searched afresh on post-change samples only
         (``_research_job``); the test's own fit is linearized around the old
         resonance and unreliable for a large move. ``alpha_known`` False (a start-up estimate corrected,
-        ``_settled_before``): alpha is searched too and not held afterwards.
+        ``_settled_before``): alpha is not held afterwards, and later re-searches free it.
         """
         self.window_start = self._post_change_start(n0, gain_moved)
         self._alpha_known = alpha_known
