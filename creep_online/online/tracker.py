@@ -695,8 +695,8 @@ class WindowTracker(ParameterView):
         plant's before a declared change, and restored (creep does not jump with a payload or a stiffness);
         otherwise the live alpha stays for the resonance search but is not held afterwards
         (``_restart_window``'s ``alpha_known``): neither the unsettled estimate's alpha nor the live one is
-        known to be the plant's. Settled: the estimate at the previous snapshot instant and at ``n0`` do not differ by a move that would itself count as a change (``CHANGE_MOVE``, alpha
-        ``RESEARCH_ALPHA_MOVE``); in the start-up window both must exist; after a restart the post-change
+        known to be the plant's. Settled: the estimate at the previous snapshot instant and at ``n0`` do not
+        differ by a move that would itself count as a change (``CHANGE_MOVE``, alpha ``RESEARCH_ALPHA_MOVE``); in the start-up window both must exist; after a restart the post-change
         estimate counts from its first snapshot on.
 
         (Seen: a start-up search in a wrong basin, alpha 0.95 at its bound and 32 Hz for an 8 Hz plant; the
