@@ -696,8 +696,9 @@ class WindowTracker(ParameterView):
         otherwise the live alpha stays for the resonance search but is not held afterwards
         (``_restart_window``'s ``alpha_known``): neither the unsettled estimate's alpha nor the live one is
         known to be the plant's. Settled: the estimate at the previous snapshot instant and at ``n0`` do not
-        differ by a move that would itself count as a change (``CHANGE_MOVE``, alpha ``RESEARCH_ALPHA_MOVE``); in the start-up window both must exist; after a restart the post-change
-        estimate counts from its first snapshot on.
+        differ by a move that would itself count as a change (``CHANGE_MOVE``, alpha ``RESEARCH_ALPHA_MOVE``);
+        in the start-up window both must exist; after a restart the post-change estimate counts from its first
+        snapshot on.
 
         (Seen: a start-up search in a wrong basin, alpha 0.95 at its bound and 32 Hz for an 8 Hz plant; the
         re-fits walked toward the plant and the change test on the second after the walk declared a change
@@ -895,7 +896,8 @@ class WindowTracker(ParameterView):
         lead = min(self._settling_samples(self.a1, self.a2), u.size // 4)
         # after a change alpha was determined before it (creep does not jump): the resonance only, 7x cheaper
         search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, work=self.work_memory,
-                                 fixed_alpha=self.alpha if self.window_start and self._alpha_known else None, alphas=(self.alpha,),
+                                 fixed_alpha=self.alpha if self.window_start and self._alpha_known else None,
+                                 alphas=(self.alpha,),
                                  extra=((self.alpha, self.a1, self.a2),))
         yield
         yield from self._run_search(search)
