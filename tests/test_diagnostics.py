@@ -182,7 +182,7 @@ def test_loader_merges_repeated_times_and_reads_a_creep_log(tmp_path):
     p = tmp_path / "creep.csv"
     t = np.array([0.001, 0.001, 0.002, 0.004, 0.008] + list(np.geomspace(0.016, 10, 40)))
     y = np.sqrt(t)
-    p.write_text("t,u,y\n" + "\n".join(f"{a},5,{b}" for a, b in zip(t, y)))
+    p.write_text("t,u,y\n" + "\n".join(f"{a},5,{b}" for a, b in zip(t, y)) + "\n")
     inp = load_for_diagnosis(p)
     assert len(inp.record) == t.size - 1
     assert inp.u_pre == 0.0 and inp.t_pre == 0.0
