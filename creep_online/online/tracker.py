@@ -393,7 +393,7 @@ class WindowTracker(ParameterView):
             self._refit_queued = True      # (a backlog would only re-fit the same statistics again)
             # started here if nothing runs before it: this sample runs Python anyway, and a cold visit
             # to the interpreter costs more than the work (the next sample would have paid ~20 us)
-            started = self.machine is None and not any(j.__name__ in PERIODIC_JOBS for j in self._jobs)
+            started = self.machine is None and not self._queued(*PERIODIC_JOBS)
             if started:
                 self._begin_refit()
             self._jobs.append(self._refit_job(started))
@@ -410,6 +410,10 @@ class WindowTracker(ParameterView):
     @property
     def busy(self) -> bool:
         return bool(self._jobs)
+
+    def _queued(self, *names: str) -> bool:
+        """Is a job of one of these kinds (generator function names) queued?"""
+        return any(j.__name__ in names for j in self._jobs)
 
     def work(self, units: int = 1) -> bool:
         """Run up to ``units`` units of the queued jobs in order (each unit a few microseconds).
@@ -499,7 +503,7 @@ class WindowTracker(ParameterView):
         if not fine:
             self._watch(rms, False, n, noise)
         if relinearize or fine:
-            if not any(j.__name__ == "_relinearize_job" for j in self._jobs):
+            if not self._queued("_relinearize_job"):
                 # a settled window whose resonance runs off is what a change looks like: the test due next
                 # decides first, and a declared change drops the replay with the old window
                 self._jobs.append(self._relinearize_job(None, after_test=REPLAY_AFTER_TEST and self.converged
@@ -559,8 +563,7 @@ class WindowTracker(ParameterView):
         """
         if after_test:
             due = (self.n // self.test_every + 1) * self.test_every
-            while self.n <= due or self.machine == MACHINE_TEST \
-                    or any(j.__name__ == "_change_job" for j in self._jobs):
+            while self.n <= due or self.machine == MACHINE_TEST or self._queued("_change_job"):
                 yield WAIT
         a1, a2 = self.a1, self.a2
         st, S = self._fresh(a1, a2)
@@ -713,12 +716,12 @@ class WindowTracker(ParameterView):
         if n_prev < self.window_start:
             return self.window_start > 0       # a restarted window: its first seconds are tested
         prev = self._theta_at.get(n_prev)
-        if prev is None:
+        if prev is None or not prev[3]:
             return False
-        return abs(theta0[0] / prev[0] - 1.0) <= RESEARCH_ALPHA_MOVE \
-            and abs(math.exp(theta0[1] - prev[1]) - 1.0) <= CHANGE_MOVE["a1"] \
-            and abs(math.exp(theta0[2] - prev[2]) - 1.0) <= CHANGE_MOVE["a2"] \
-            and abs(theta0[3] / prev[3] - 1.0) <= CHANGE_MOVE["b"] if prev[3] else False
+        return (abs(theta0[0] / prev[0] - 1.0) <= RESEARCH_ALPHA_MOVE
+                and abs(math.exp(theta0[1] - prev[1]) - 1.0) <= CHANGE_MOVE["a1"]
+                and abs(math.exp(theta0[2] - prev[2]) - 1.0) <= CHANGE_MOVE["a2"]
+                and abs(theta0[3] / prev[3] - 1.0) <= CHANGE_MOVE["b"])
 
     def _restart_window(self, n0: int, gain_moved: bool, alpha_known: bool = True) -> None:
         """A change happened between sample n0 and now: the window restarts after it.
@@ -792,8 +795,7 @@ class WindowTracker(ParameterView):
             lead = n_from - n0 if n_from < n_detect else min(settle, u.size // 4)
             # the live estimate competes with the grid: the window re-fits often follow a change
             # before the test confirms it, and the grid's best basin can be a wrong one
-            search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead,
-                                     fixed_alpha=self.alpha,
+            search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, fixed_alpha=self.alpha,
                                      work=self.work_memory, extra=((self.alpha, self.a1, self.a2),),
                                      starts=starts)
             yield
@@ -833,7 +835,7 @@ class WindowTracker(ParameterView):
 
     def _researching(self) -> bool:
         """Is a search of the resonance queued (after a change, or by the re-search trigger)?"""
-        return any(j.__name__ in ("_research_job", "_research_again_job") for j in self._jobs)
+        return self._queued("_research_job", "_research_again_job")
 
     def _resolved(self, search: ResonanceSearch) -> bool:
         """Does the post-change search's result fit its samples near the noise floor? If not, the segment
