@@ -179,7 +179,7 @@ def test_a_change_is_followed_sample_by_sample(family, seed):
 
 
 
-@pytest.mark.parametrize("family, seed", [("payload", 4), ("stiffness", 0)])
+@pytest.mark.parametrize("family, seed", [("payload", 8), ("stiffness", 0)])
 def test_a_replay_triggered_by_a_change_waits_for_the_test_and_is_dropped(family, seed, monkeypatch):
     """A settled window whose resonance runs off after a change triggers a replay of the whole ring; it waits
     for the change test due next (``tracker.REPLAY_AFTER_TEST``), which declares the change, and the restart
@@ -195,6 +195,25 @@ def test_a_replay_triggered_by_a_change_waits_for_the_test_and_is_dropped(family
         outcome[wait] = ([round(v["t"], 3) for v in e.events], est._tracker.relinearizations)
     assert outcome[True][0] == outcome[False][0] and outcome[True][0], outcome
     assert outcome[True][1] < outcome[False][1], outcome
+
+
+def test_a_calm_window_is_refitted_less_often_and_a_change_restores_the_pace():
+    """Re-fits that move nothing double their period up to the change test's (``tracker.CALM_MOVE``): two per
+    second on a settled window instead of ten; after a stiffness change the re-fits run every
+    ``update_every_s`` again until the window is calm, and the estimate ends within the tolerances."""
+    sc = scenarios.make("stiffness", 2)
+    est = OnlineEstimator(sc.h)
+    per_s = int(round(1.0 / sc.h))
+    counts = []
+    for k in range(0, sc.u.size, per_s):
+        before = est._tracker.refits if est._tracker is not None else 0
+        est.update_block(sc.u[k:k + per_s], sc.y[k:k + per_s])
+        counts.append(est._tracker.refits - before)
+    change = int(sc.change_time)
+    assert max(counts[3:change]) <= 3, counts          # calm: every 0.5 s (10 per second at the base pace)
+    assert max(counts[change:change + 4]) >= 6, counts  # after the change: back to every 0.1 s
+    assert max(counts[-3:]) <= 3, counts                # calm again
+    assert _within(est.estimate, sc.final_truth), _errors(est.estimate, sc.final_truth)
 
 
 def test_a_start_up_correction_is_reported_as_such():

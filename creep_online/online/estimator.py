@@ -135,7 +135,8 @@ class OnlineEstimator(StoredParams):
 
     dt:             sampling step (s).
     window_s:       time constant (s) of the exponential forgetting (None: keep everything).
-    update_every_s: period (s) of the window re-fit of all four parameters.
+    update_every_s: period (s) of the window re-fit of all four parameters (doubled while re-fits move
+                    nothing, up to the change test's 0.5 s; any move, misfit or change restores it).
     t_c:            search window after the first input change (s); None: from the data.
     alpha0:         optional hint: an extra starting candidate for the search (None: none needed).
     horizon_s:      memory horizon of the SOE fractional integral (s).
