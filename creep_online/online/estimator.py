@@ -24,9 +24,10 @@ Phases (``OnlineEstimate.phase``):
     (``estimate.b_rate``, ``alpha_rate``); alpha and b are then the values now.
 
 Work per ``update()``: one sample of O(P^2) statistics (~1 us) plus at most
-``work_units`` units of background work (a few us each). The default unit count
-is ``max(1, floor(dt / 100 us))``: one unit at 10 kHz, 10 at 1 kHz, 50 at
-200 Hz, i.e. at most ~5 % of the sample period at low rates.
+``work_units`` units of background work (up to ~15 us each: a unit's Python
+costs ~3 us, so few large units keep the calls over 5 us rare). The default
+unit count is ``max(1, floor(dt / 100 us))``: one unit at 10 kHz, 10 at 1 kHz,
+50 at 200 Hz, i.e. at most ~15 % of the sample period.
 
 Robustness: an output whose innovation exceeds ``outlier_gate`` robust scales
 is not used (a run longer than ``burst_s`` is accepted: a shift is a change, not

@@ -42,13 +42,14 @@ GRID_FREQS = 18
 COARSE_ROWS = 400
 #: Rows in the cost during refinement.
 FINE_ROWS = 2000
-#: Multiply-adds per step (~9 us), one step per unit of the caller's background work (``ResonanceSearch.step``,
-#: for the start-up search and the tracker's): a unit of ~10 us like a Levenberg-Marquardt step. At 4000
-#: multiply-adds per step and one step per unit a search on 2 s at 10 kHz took ~4 s of stream sample by
-#: sample (a wrong-basin start was taken for a change meanwhile), and a slow mode's start-up search
-#: outlasted a 10 s stream; three such steps per unit paid the steps' Python three times (~32 us per unit
-#: at 10 kHz), one step of 12000 once.
-UNIT_WORK = 12000
+#: Multiply-adds per step (~13 us with its Python), one step per unit of the caller's background work
+#: (``ResonanceSearch.step``, for the start-up search and the tracker's). At 4000 multiply-adds per step
+#: and one step per unit a search on 2 s at 10 kHz took ~4 s of stream sample by sample (a wrong-basin
+#: start was taken for a change meanwhile), and a slow mode's start-up search outlasted a 10 s stream;
+#: three such steps per unit paid the steps' Python three times (~32 us per unit at 10 kHz), one step of
+#: 12000 once. At 12000 the steps after a change were ~4400 calls of update() over 5 us per 100 s of the
+#: latency stream (its p99 is the 10000th slowest call), at 24000 ~2100 calls of 15 us mean.
+UNIT_WORK = 24000
 #: Candidates refined from the grid.
 REFINE = 3
 #: Cost evaluations per refined candidate at most in the post-change search (``fixed_alpha``).

@@ -109,10 +109,13 @@ TEST_STEPS = 4
 #: latency stream: settled re-fits moved 1e-5-6e-4; at 10 per second their starts, accepts and slices
 #: were ~4300 of the 16000 calls over 5 us.)
 CALM_MOVE = 1e-3
-#: Multiply-adds in one unit of background work (~6 us here): about 15 replayed samples (P^2 each).
-#: Smaller units lower the p99 of update() but stretch a replay over more samples: at 10000 the
-#: re-convergence after a change, fed sample by sample at 10 kHz, went from 3.5 to 5.5 s (median).
-UNIT_MACS = 40000
+#: Multiply-adds in one unit of background work (~13 us here with its Python): about 50 replayed samples
+#: (blocked, P^2 / 2 each). The p99 of update() counts the calls over 5 us, and a unit's Python costs
+#: ~3 us wherever the unit's work is: fewer, larger units (up to the 25 us a call may take) lower it.
+#: At 40000 the replays after the latency stream's changes were ~1700 calls over 5 us, at 80000 ~950.
+#: Smaller units also stretch a replay over more samples: at 10000 the re-convergence after a change,
+#: fed sample by sample at 10 kHz, went from 3.5 to 5.5 s (median).
+UNIT_MACS = 80000
 #: Snapshot slots of the change test, reused in turn (see ``WindowTracker._allocate_work``).
 SNAP_SLOTS = 6
 #: Jobs that run before the long ones (``WindowTracker._next_job``).
