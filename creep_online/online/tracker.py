@@ -835,26 +835,32 @@ class WindowTracker(ParameterView):
                                      starts=starts)
             yield
             yield from self._run_search(search)
+            # each pass's result is reported as soon as it is clearly better than the live estimate; a
+            # longer pass may still replace it (at 80 dB the first pass's own cost, the resonance at rest
+            # at the segment's start, sat at 1.5-2x the floor with the right resonance, and the estimate
+            # waited ~1.6 s for the third)
+            yield from self._take_if_better(search)
             # (with a shortened lead the misfit may be the unknown resonance state at the segment's start)
             if self._resolved(search) or u.size >= cap or lead < settle:
                 break
-        r = search.result
-        # the search's result replaces the estimate only when clearly better on the segment (as a re-search,
-        # both judged with the resonance state at the segment's start unknown): where every candidate fits at
-        # the noise floor (one small step) the re-fits do better from the estimate
-        better = False
-        if r is not None and math.isfinite(r.cost) and r.a1 > 0 and r.a2 > 0 and r.b != 0:
-            c_live = yield from search.judged_cost(self.alpha, self.a1, self.a2, self._free_decays)
-            c_new = yield from search.judged_cost(r.alpha, r.a1, r.a2, self._free_decays)
-            better = _likelihood_ratio(search.judged_rows(), c_live, c_new) > RESEARCH_LR
-        if better:
-            self.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
-            self._coefficients()
-            yield
         # re-fits wait for the replay from the change: until it is swapped in, the live statistics
         # still hold the pre-change window, and a fit of them would report a second change
         yield from self._relinearize_job(max(n_from, oldest))
         self.fitting = True
+
+    def _take_if_better(self, search: ResonanceSearch) -> Generator:
+        """The post-change search's result replaces the estimate when clearly better on its segment (both judged
+        with the resonance state at the segment's start unknown, as a re-search): where every candidate fits at
+        the noise floor (one small step) the re-fits do better from the estimate."""
+        r = search.result
+        if r is None or not (math.isfinite(r.cost) and r.a1 > 0 and r.a2 > 0 and r.b != 0):
+            return
+        c_live = yield from search.judged_cost(self.alpha, self.a1, self.a2, self._free_decays)
+        c_new = yield from search.judged_cost(r.alpha, r.a1, r.a2, self._free_decays)
+        if _likelihood_ratio(search.judged_rows(), c_live, c_new) > RESEARCH_LR:
+            self.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
+            self._coefficients()
+            yield
 
     @staticmethod
     def _run_search(search: ResonanceSearch) -> Generator:
