@@ -33,10 +33,11 @@ def test_demo_runs_without_a_tty_and_writes_a_report(tmp_path):
 
 def test_demo_json_summary(tmp_path):
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    proc = subprocess.run([sys.executable, "-m", "creep_online", "demo", "--duration", "1.5", "--quiet", "--json",
+    proc = subprocess.run([sys.executable, "-m", "creep_online", "demo", "--duration", "1.5", "--json",
                            "--transport", "serial-ascii", "--report", str(tmp_path / "r")],
                           capture_output=True, text=True, env=env, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     out = json.loads(proc.stdout)
+    assert "demo:" not in proc.stderr                 # --json: no live progress, even without --quiet
     assert out["samples_received"] == 15000 and out["source_stats"]["missing"] == 0
     assert set(out["latency_us"]) == {"p50", "p99", "max"}

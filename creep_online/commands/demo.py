@@ -56,7 +56,7 @@ def register(subparsers) -> None:
     p.add_argument("--faults", default="", help="fault injection, e.g. drop=5,bitflip=5,garbage=5,reorder=3")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--report", default="creep_online_report", help="report folder (default ./creep_online_report)")
-    p.add_argument("--json", action="store_true", help="print the summary as JSON instead of text")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON instead of text (no live progress)")
     p.add_argument("--quiet", action="store_true", help="no live progress")
     p.set_defaults(func=run)
 
@@ -112,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
     for flag, value in (("--params", args.params), ("--effects", args.effects), ("--faults", args.faults)):
         if value:
             plant_args += [flag, value]
-    progress = Progress(not args.quiet, width=160)
+    progress = Progress(_live(args), width=160)
     plant = start_plant(plant_args, progress, f"the simulated plant (hil_sim, {args.rate:g} Hz, {args.transport})")
     with plant:
         ready = plant.ready
@@ -145,10 +145,16 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _live(args: argparse.Namespace) -> bool:
+    """Show the live line? Not with ``--quiet`` or ``--json`` (a script reads the JSON; issue 9 item 6). On a
+    non-terminal otherwise it is one plain line every few seconds: the demo is watched, in CI logs too."""
+    return not (args.quiet or args.json)
+
+
 def _run_compensated(args: argparse.Namespace, out_dir: Path) -> int:
     """``--compensate``: the closed loop (``demo_compensate``), then the usual summary and report."""
     from .demo_compensate import print_compensation, run_compensated
-    result = run_compensated(args, Progress(not args.quiet))
+    result = run_compensated(args, Progress(_live(args)))
     from ..reports.demo_report import write_report
     result["report"] = write_report(out_dir, result)
     _print_summary(result, args.json)
