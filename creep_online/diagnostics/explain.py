@@ -31,6 +31,7 @@ from ..record import Record
 from . import extended as ext
 from .basis import verdict_basis
 from .compare import error_metrics
+from .holds import EFFECTS as PHYSICS_EFFECTS
 from .holds import physics_check
 from .locate import locate
 from .pool import ordered_map, resolve_workers
@@ -267,7 +268,7 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
         combo = Candidate("+".join(pair), ev, lr, pv, dk, bool(ev1 > EVIDENCE_THRESHOLD), fit,
                           f"evidence over {sig[0].effect} alone: {ev1:.3g}")
     report("hold physics: leakage, second creep or drift")
-    physics = _physics(data, base)
+    physics = _physics(data, base, tuple(c.fit for c in ranked if c.effect in PHYSICS_EFFECTS))
     result = Diagnosis(source, base, noise, ranked, skipped, where, analysis, combo, warnings, 0.0, data, physics)
     if result.verdict_basis["decided_by"] == "bic_over_physics":
         warnings.append(result.verdict_basis["text"])
@@ -275,9 +276,9 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
     return result
 
 
-def _physics(data: ext.Prepared, base: ext.ExtendedFit) -> dict:
+def _physics(data: ext.Prepared, base: ext.ExtendedFit, fits: tuple) -> dict:
     """The hold physics check (holds.py); a record it cannot read gives its reason, never stops the diagnosis."""
     try:
-        return physics_check(data, base)
+        return physics_check(data, base, fits)
     except (CreepOnlineError, ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
         return {"applicable": False, "verdict": "inconclusive", "reason": f"check failed ({exc})", "evidence": {}}

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..effects import simulate_with_effects
 from ..effects.responses import creep_step
 from .locate import input_changes, piecewise_constant
 
@@ -111,14 +112,14 @@ def _hold_spans(t: np.ndarray, u: np.ndarray, settle: float, starts_with_step: b
     return spans
 
 
-def hold_blocks(data, base, settle: float) -> HoldBlocks | str:
-    """The hold blocks of a prepared record and its base fit, or the reason there are too few to tell."""
+def hold_blocks(data, model, settle: float) -> HoldBlocks | str:
+    """The hold blocks of a prepared record, ringing of ``model`` removed, or the reason there are too few to tell."""
     t, u, y = data.t, data.u, data.y
     if not piecewise_constant(u):
         return "the input is not a staircase: no holds to watch"
     tk, du = _changes(t, u, data.u_pre, data.t_pre)
-    fast = base.y_hat - base.offset - base.model.b * _creep_at(t, tk, du, base.model.alpha)
-    w_all = y - fast
+    path = simulate_with_effects(model, t, u, {}, u_pre=data.u_pre, t_pre=data.t_pre)
+    w_all = y - (path - model.b * _creep_at(t, tk, du, model.alpha))    # the model's fast part removed
     iy_all = np.concatenate(([0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * np.diff(t))))
     wt_all = np.ones(t.size) if data.weights is None else np.asarray(data.weights, dtype=float)
     rows: dict[str, list] = {k: [] for k in ("w", "t", "iy", "wt", "hold")}
@@ -243,16 +244,22 @@ def _sentence(effect: str, p: dict) -> str:
     return "one creep law explains how the output moves during holds"
 
 
-def physics_check(data, base) -> dict:
+def physics_check(data, base, fits: tuple = ()) -> dict:
     """Which of leakage, second creep or drift the holds point to, why, and how firmly (JSON-ready).
+
+    The resonance whose ringing is removed is that of the best-fitting of
+    ``base`` and ``fits`` (the extended fits): a strong effect drags the base
+    fit's resonance off (e.g. damping on its bound), and its ringing would then
+    pass for motion.
 
     ``verdict`` is one of ``EFFECTS``, ``none`` (one creep law explains the
     holds) or ``inconclusive`` (``reason`` says why); ``evidence`` holds each
     effect's BIC drop over one creep law on the hold blocks, ``margin`` the
     winner's lead over the runner-up, ``params`` each motion's fitted numbers.
     """
-    settle = min(base.model.settling_time, 0.25 * (data.t[-1] - data.t[0]))
-    blocks = hold_blocks(data, base, settle)
+    model = min((base, *fits), key=lambda f: f.rss).model
+    settle = min(model.settling_time, 0.25 * (data.t[-1] - data.t[0]))
+    blocks = hold_blocks(data, model, settle)
     if isinstance(blocks, str):
         return {"applicable": False, "verdict": "inconclusive", "reason": blocks, "evidence": {}}
     fits = motions(blocks)
