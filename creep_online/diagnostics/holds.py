@@ -59,6 +59,8 @@ BLOCKS_PER_HOLD = 16
 MIN_BLOCKS, MIN_HOLDS = 3, 3
 #: Settling skipped after each change: the base resonance's settling time, at most this share of the hold.
 SETTLE_SHARE = 0.5
+#: A hold counts only if it lasts this many settling times of the resonance.
+MIN_HOLD_SETTLES = 0.5
 
 
 @dataclass
@@ -104,9 +106,10 @@ def _hold_spans(t: np.ndarray, u: np.ndarray, settle: float, starts_with_step: b
     bounds = np.concatenate(([0], idx, [t.size]))
     spans = []
     for j, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
-        if b - a < 2:
-            continue
-        skip = 0.0 if (j == 0 and not starts_with_step) else min(settle, SETTLE_SHARE * (t[b - 1] - t[a]))
+        first_rest = j == 0 and not starts_with_step
+        if b - a < 2 or (not first_rest and t[b - 1] - t[a] < MIN_HOLD_SETTLES * settle):
+            continue        # shorter than half the ringing's settling: its motion is not told from ringing
+        skip = 0.0 if first_rest else min(settle, SETTLE_SHARE * (t[b - 1] - t[a]))
         first = a + int(np.searchsorted(t[a:b], t[a] + skip))
         spans.append((first, b))
     return spans
