@@ -5,10 +5,11 @@ check (``holds.py``) looks only at how the output moves during settled holds
 and only tells leakage, second creep and drift apart. When the two disagree,
 the **BIC ranking wins**: it uses the whole record (transients too) and the full
 extended models, the hold check a part of the record and linearised motions.
-Measured on the bands bench (docs/diagnostics.md, "Hold physics"): the BIC
-verdict names the hidden effect in every record, the hold check in fewer
-(many inconclusive), so no rule that lets the hold check overturn the BIC
-verdict can improve the verdicts there; a disagreement is reported as a warning.
+Measured (bench/bench_diagnose_physics.py, the bands bench's records of these
+three effects, seeds 0-29 per band): the BIC verdict named the hidden effect in
+270 of 270, the hold check confirmed it in 216, was inconclusive in 54 and
+disagreed in none; letting the check overturn a BIC lead below 10 changed no
+verdict. A disagreement is reported (``decided_by``, a warning), never hidden.
 """
 from __future__ import annotations
 

@@ -18,28 +18,34 @@ and second-mode errors live, are left out); its samples are averaged into
 blocks, and the four motions above, in integral form (leakage exactly:
 ``y = y_creep - (1/tau) int (y - y0) dt``), are fitted to all blocks at once by
 linear least squares with one offset, profiled over grids of the exponents (and
-of the leakage zero) and polished. The output is taken after removing the base
-fit's fast part (its resonance around its creep), so that ringing does not
-pass for motion. Each effect's evidence is its BIC drop over one creep law on
-these blocks, counting blocks as independent only as far as the best motion's
-residual is uncorrelated from block to block (``effective_blocks``). A hold's
-level and its motion both count: the levels carry the long memory a second
-creep and a leakage leave (within-hold motion alone, tried first, found
-second creep at 3-10x the noise in none of the records tried). The check names an effect when it beats one creep law and
-both other effects by ``EVIDENCE``; ``none`` when nothing beats one creep law and
-the holds are enough to tell; ``inconclusive`` otherwise (holds too few or short,
-or two effects explain the holds about equally well).
+of the leakage zero) and polished. The output is taken after removing the fast
+part (resonance around creep) of the best-fitting model, so that ringing does
+not pass for motion. Each effect's evidence is its BIC drop over one creep law
+on these blocks, counting blocks as independent only as far as the best
+motion's residual is uncorrelated from block to block (``effective_blocks``).
+A hold's level and its motion both count: the levels carry the long memory a
+second creep and a leakage leave (within-hold motion alone, tried first, read
+the second creep records tried at 3-10x the noise as ``none``). The check names
+an effect when it beats one creep law and both other effects by ``EVIDENCE``;
+``none`` when nothing beats one creep law by that much; ``inconclusive``
+otherwise (no staircase, holds too few or short, or two effects explain the
+holds about equally well). Measured in docs/diagnostics.md ("Hold physics").
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..effects import simulate_with_effects
 from ..effects.responses import creep_step
 from .locate import input_changes, piecewise_constant
+
+if TYPE_CHECKING:
+    from ..model import CreepModel
+    from .extended import ExtendedFit, Prepared
 
 #: The effects this check tells apart (catalogue names).
 EFFECTS = ("leakage", "second_creep", "drift")
@@ -57,7 +63,7 @@ ZERO_GRID = np.linspace(-0.5, 1.5, 21)
 BLOCKS_PER_HOLD = 16
 #: A hold counts with at least this many blocks; the check needs this many counting holds.
 MIN_BLOCKS, MIN_HOLDS = 3, 3
-#: Settling skipped after each change: the base resonance's settling time, at most this share of the hold.
+#: Settling skipped after each change: the resonance's settling time, at most this share of the hold.
 SETTLE_SHARE = 0.5
 #: A hold counts only if it lasts this many settling times of the resonance.
 MIN_HOLD_SETTLES = 0.5
@@ -67,7 +73,7 @@ MIN_HOLD_SETTLES = 0.5
 class HoldBlocks:
     """Block means of the settled hold samples (rows: blocks, holds one after the other)."""
 
-    w: np.ndarray            # output with the base fit's fast part removed
+    w: np.ndarray            # output with the model's fast part (ringing) removed
     t: np.ndarray            # time
     iy: np.ndarray           # running integral of the output (leakage: y' = -(y - y0)/tau)
     zlog: np.ndarray         # log of (t_block - t_change), per change (for creep columns)
@@ -115,7 +121,7 @@ def _hold_spans(t: np.ndarray, u: np.ndarray, settle: float, starts_with_step: b
     return spans
 
 
-def hold_blocks(data, model, settle: float) -> HoldBlocks | str:
+def hold_blocks(data: Prepared, model: CreepModel, settle: float) -> HoldBlocks | str:
     """The hold blocks of a prepared record, ringing of ``model`` removed, or the reason there are too few to tell."""
     t, u, y = data.t, data.u, data.y
     if not piecewise_constant(u):
@@ -217,7 +223,7 @@ def motions(blocks: HoldBlocks) -> dict[str, dict]:
 
 
 def _profile(fn, grid: list[tuple], bounds: list[tuple[float, float]], name: str, blocks: HoldBlocks) -> dict:
-    """The grid's best point of ``fn`` (-> (rss, coef)) polished by bounded Nelder-Mead; rss, k, params."""
+    """The grid's best point of ``fn`` (-> rss, coef, residual) polished by bounded Nelder-Mead; rss, k, params."""
     from scipy.optimize import minimize
     start = np.array(min(grid, key=lambda p: fn(p)[0]), dtype=float)
     res = minimize(lambda p: fn(p)[0], start, method="Nelder-Mead", bounds=bounds,
@@ -247,7 +253,18 @@ def _sentence(effect: str, p: dict) -> str:
     return "one creep law explains how the output moves during holds"
 
 
-def physics_check(data, base, fits: tuple = ()) -> dict:
+def _decide(ev: dict[str, float], ranked: list[str], margin: float, top_params: dict) -> tuple[str, str]:
+    """(verdict, reason): the top effect if it beats one creep law and the runner-up by EVIDENCE."""
+    top, runner = ranked[0], ranked[1]
+    if ev[top] < EVIDENCE:
+        return "none", f"no effect beats one creep law by {EVIDENCE:g} (best {top} {ev[top]:.3g})"
+    if margin < EVIDENCE:
+        return "inconclusive", (f"{top} and {runner} explain the holds about equally well "
+                                f"({ev[top]:.3g} vs {ev[runner]:.3g})")
+    return top, _sentence(top, top_params)
+
+
+def physics_check(data: Prepared, base: ExtendedFit, fits: tuple[ExtendedFit, ...] = ()) -> dict:
     """Which of leakage, second creep or drift the holds point to, why, and how firmly (JSON-ready).
 
     The resonance whose ringing is removed is that of the best-fitting of
@@ -265,25 +282,18 @@ def physics_check(data, base, fits: tuple = ()) -> dict:
     blocks = hold_blocks(data, model, settle)
     if isinstance(blocks, str):
         return {"applicable": False, "verdict": "inconclusive", "reason": blocks, "evidence": {}}
-    fits = motions(blocks)
-    best = min(EFFECTS, key=lambda e: fits[e]["rss"])
-    n = effective_blocks(blocks, fits[best]["residual"])
+    moved = motions(blocks)
+    best = min(EFFECTS, key=lambda e: moved[e]["rss"])
+    n = effective_blocks(blocks, moved[best]["residual"])
 
     def bic(f: dict) -> float:
         return n * math.log(max(f["rss"], 1e-300)) + f["k"] * math.log(n)
 
-    ev = {e: bic(fits["none"]) - bic(fits[e]) for e in EFFECTS}
+    ev = {e: bic(moved["none"]) - bic(moved[e]) for e in EFFECTS}
     ranked = sorted(EFFECTS, key=lambda e: -ev[e])
-    top, runner = ranked[0], ranked[1]
-    margin = ev[top] - max(ev[runner], 0.0)
-    if ev[top] < EVIDENCE:
-        verdict, reason = "none", f"no effect beats one creep law by {EVIDENCE:g} (best {top} {ev[top]:.3g})"
-    elif margin < EVIDENCE:
-        verdict, reason = "inconclusive", (f"{top} and {runner} explain the holds about equally well "
-                                           f"({ev[top]:.3g} vs {ev[runner]:.3g})")
-    else:
-        verdict, reason = top, _sentence(top, fits[top]["params"])
+    margin = ev[ranked[0]] - max(ev[ranked[1]], 0.0)
+    verdict, reason = _decide(ev, ranked, margin, moved[ranked[0]]["params"])
     return {"applicable": True, "verdict": verdict, "reason": reason, "evidence": ev, "margin": margin,
             "ranked": ranked, "holds": blocks.holds, "hold_seconds": blocks.seconds, "blocks": int(blocks.w.size),
-            "settle_s": settle, "effective_blocks": n, "params": {e: fits[e]["params"] for e in ("none", *EFFECTS)},
-            "explanations": {e: _sentence(e, fits[e]["params"]) for e in EFFECTS if ev[e] > 0}}
+            "settle_s": settle, "effective_blocks": n, "params": {e: moved[e]["params"] for e in ("none", *EFFECTS)},
+            "explanations": {e: _sentence(e, moved[e]["params"]) for e in EFFECTS if ev[e] > 0}}
