@@ -73,3 +73,13 @@ def test_polymer_creep_needs_a_second_power_law():
     lo, hi = sorted([fit.model.alpha, fit.effect_params["second_creep"]["alpha2"]])
     assert lo < 0.7 and hi > 0.8  # short-time slope ~0.6, terminal flow ~1
     assert fit.residual_rms < 0.3 * d.base.residual_rms
+
+
+def test_polymer_creep_one_hold_leaves_the_physics_inconclusive_and_the_bic_decides():
+    """A creep test is a single hold: whether the extra motion follows the input (second creep) or ignores it
+    (drift) cannot be seen in one hold, so the hold physics says so and the verdict rests on the BIC ranking."""
+    d = _diagnose("pe-melt-creep-reptate/pe_cm3_creep_10Pa.csv")
+    assert d.verdict == "second_creep"
+    assert d.physics["verdict"] == "inconclusive" and "too few" in d.physics["reason"]
+    basis = d.to_dict()["verdict_basis"]
+    assert basis["decided_by"] == "bic_ranking" and basis["agrees"] is None

@@ -87,6 +87,14 @@ def format_table(result) -> str:
     lines.append("")
     lines.append(f"verdict: {result.verdict}" + ("" if result.verdict == "none" else
                  "  (* = significant: BIC drop > 10 and RMS drop > 2 %)"))
+    lines.append(f"decided by: {result.verdict_basis['text']}")
+    ph = result.physics
+    if ph.get("evidence"):
+        ev = ", ".join(f"{k} {v:.4g}" for k, v in ph["evidence"].items())
+        lines.append(f"hold physics: {ph['verdict']} ({ph['holds']} holds, {ph['hold_seconds']:.3g} s settled; "
+                     f"BIC drop over one creep law: {ev}): {ph['reason']}")
+    elif ph:
+        lines.append(f"hold physics: {ph.get('verdict')} ({ph.get('reason')})")
     for w in result.warnings:
         lines.append(f"note: {w}")
     return "\n".join(lines)

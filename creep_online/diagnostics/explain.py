@@ -29,7 +29,10 @@ from ..io.jsonable import jsonable
 from ..metrics import noise_std_estimate
 from ..record import Record
 from . import extended as ext
+from .basis import verdict_basis
 from .compare import error_metrics
+from .holds import EFFECTS as PHYSICS_EFFECTS
+from .holds import physics_check
 from .locate import locate
 from .pool import ordered_map, resolve_workers
 from .residuals import autocorrelation, cross_correlation, parameter_uncertainty
@@ -81,6 +84,7 @@ class Diagnosis:
     warnings: list[str] = field(default_factory=list)
     elapsed_s: float = 0.0
     data: ext.Prepared | None = field(default=None, repr=False)
+    physics: dict = field(default_factory=dict)   # holds.physics_check: leakage / second creep / drift by hold physics
 
     @property
     def verdict(self) -> str:
@@ -91,6 +95,11 @@ class Diagnosis:
     def best(self) -> ext.ExtendedFit:
         """The extended fit of the verdict (the base fit when the verdict is none)."""
         return self.candidates[0].fit if self.verdict != "none" else self.base
+
+    @property
+    def verdict_basis(self) -> dict:
+        """Which evidence decided the verdict (basis.verdict_basis): BIC alone, confirmed, or against the physics."""
+        return verdict_basis(self.verdict, {c.effect: c.evidence for c in self.candidates}, self.physics)
 
     def to_dict(self) -> dict:
         b = self.base
@@ -105,6 +114,7 @@ class Diagnosis:
             "skipped": self.skipped, "location": jsonable(self.location),
             "residual_analysis": jsonable(self.residual_analysis),
             "warnings": self.warnings, "elapsed_s": self.elapsed_s, "source": self.source,
+            "physics_check": jsonable(self.physics), "verdict_basis": jsonable(self.verdict_basis),
         }
 
 
@@ -257,5 +267,18 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
         ev1 = evidence(sig[0].fit, fit, data.n)[0]
         combo = Candidate("+".join(pair), ev, lr, pv, dk, bool(ev1 > EVIDENCE_THRESHOLD), fit,
                           f"evidence over {sig[0].effect} alone: {ev1:.3g}")
-    return Diagnosis(source, base, noise, ranked, skipped, where, analysis, combo, warnings,
-                     time.perf_counter() - start, data)
+    report("hold physics: leakage, second creep or drift")
+    physics = _physics(data, base, tuple(c.fit for c in ranked if c.effect in PHYSICS_EFFECTS))
+    result = Diagnosis(source, base, noise, ranked, skipped, where, analysis, combo, warnings, 0.0, data, physics)
+    if result.verdict_basis["decided_by"] == "bic_over_physics":
+        warnings.append(result.verdict_basis["text"])
+    result.elapsed_s = time.perf_counter() - start
+    return result
+
+
+def _physics(data: ext.Prepared, base: ext.ExtendedFit, fits: tuple) -> dict:
+    """The hold physics check (holds.py); a record it cannot read gives its reason, never stops the diagnosis."""
+    try:
+        return physics_check(data, base, fits)
+    except (CreepOnlineError, ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        return {"applicable": False, "verdict": "inconclusive", "reason": f"check failed ({exc})", "evidence": {}}

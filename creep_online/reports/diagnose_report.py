@@ -167,6 +167,8 @@ td,th{{border:1px solid #ccc;padding:3px 6px;font-size:90%}} img{{max-width:100%
 <h1>Model discrepancy: {html.escape(result.source)}</h1>
 <p><b>Verdict: {result.verdict}</b>. Base model {html.escape(str(b.model))}, offset {_num(b.offset)}.
 Fit {_num(b.fit_percent)} %, residual RMS {_num(b.residual_rms)}, noise floor ~{_num(result.noise_rms)}.</p>
+<p>Decided by: {html.escape(result.verdict_basis["text"])}. Hold physics (leakage / second creep / drift):
+{html.escape(str(result.physics.get("verdict")))} ({html.escape(str(result.physics.get("reason")))}).</p>
 <h2>Where the base model fails</h2><ul>{findings}</ul>
 <h2>Which effect explains it</h2>
 <table><tr><th>rank</th><th>effect</th><th>evidence (BIC drop)</th><th>significant</th><th>fit % before</th>
