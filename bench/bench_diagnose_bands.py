@@ -148,10 +148,15 @@ def main() -> dict:
         doc = merge(args.merge)
     else:
         doc = run(args.effects.split(",") if args.effects else list(effect_names()), args.first_seed, args.records)
+    return emit(doc, args.out)
+
+
+def emit(doc: dict, out: str | None) -> dict:
+    """Print the document as JSON (and write it to ``out``)."""
     text = json.dumps(doc, indent=1, default=float)
     print(text)
-    if args.out:
-        with open(args.out, "w") as f:
+    if out:
+        with open(out, "w") as f:
             f.write(text + "\n")
     return doc
 

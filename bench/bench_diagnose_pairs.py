@@ -37,7 +37,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(__file__))
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
-from bench_diagnose_bands import BANDS, FLOOR, H, N, draw_record, merge  # noqa: E402
+from bench_diagnose_bands import BANDS, FLOOR, H, N, draw_record, emit, merge  # noqa: E402
 from creep_online.diagnostics import diagnose  # noqa: E402
 from creep_online.diagnostics.extended import fit_base, fit_extended, prepare  # noqa: E402
 from creep_online.effects import effect_names, simulate_with_effects  # noqa: E402
@@ -174,12 +174,7 @@ def main() -> dict:
     else:
         pairs = [tuple(p.split("+")) for p in args.pairs.split(",")] if args.pairs else list(PAIRS)
         doc = run(pairs, args.bands.split(","), args.first_seed, args.records)
-    text = json.dumps(doc, indent=1, default=float)
-    print(text)
-    if args.out:
-        with open(args.out, "w") as f:
-            f.write(text + "\n")
-    return doc
+    return emit(doc, args.out)
 
 
 if __name__ == "__main__":
