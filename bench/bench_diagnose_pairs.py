@@ -39,6 +39,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from bench_diagnose_bands import BANDS, FLOOR, H, N, draw_record, emit, merge  # noqa: E402
 from creep_online.diagnostics import diagnose  # noqa: E402
+from creep_online.diagnostics.explain import evidence  # noqa: E402
 from creep_online.diagnostics.extended import fit_base, fit_extended, prepare  # noqa: E402
 from creep_online.effects import effect_names, simulate_with_effects  # noqa: E402
 from creep_online.model import CreepModel  # noqa: E402
@@ -74,7 +75,33 @@ def _compact(params: dict) -> dict:
     return out
 
 
-def run_one(pair: tuple[str, str], band: tuple[float, float], seed: int) -> dict:
+def forward_selection(d, noise: float) -> dict:
+    """Ablation (``--forward``; not what ``diagnose`` does): keep the best single effect and fit it together with
+    every other significant candidate in turn (warm from its own fit); then keep the partner that won and fit it
+    with every other candidate but the first in the same way. The pair with the largest BIC evidence of each round
+    is reported (``pair`` after the first, ``pair_swap`` over both). ``diagnose`` instead pairs the two best
+    *single* fits, which ranks the second effect by how well it explains the record alone."""
+    sig = [c for c in d.candidates if c.significant]
+    if len(sig) < 2:
+        return {"pair": None, "pair_swap": None}
+    tried: dict = {}
+
+    def round_(keep, others) -> tuple:
+        for c in others:
+            fit = fit_extended(d.data, (keep.effect, c.effect), d.base, warm=keep.fit)
+            tried[(keep.effect, c.effect)] = (evidence(d.base, fit, d.data.n)[0], fit.residual_rms / noise)
+        return max((k for k in tried if k[0] == keep.effect), key=lambda k: tried[k][0])
+
+    first = round_(sig[0], sig[1:])
+    partner = next(c for c in sig if c.effect == first[1])
+    round_(partner, [c for c in sig if c.effect not in first])
+    best = max(tried, key=lambda k: tried[k][0])
+    return {"pair": list(first), "over_noise": tried[first][1], "pair_swap": list(best),
+            "over_noise_swap": tried[best][1], "fits": len(tried),
+            "tried": {"+".join(k): round(v[1], 3) for k, v in tried.items()}}
+
+
+def run_one(pair: tuple[str, str], band: tuple[float, float], seed: int, forward: bool = False) -> dict:
     rec = make_pair_record(pair, band, seed)
     noise = rec["noise"]
     t0 = time.perf_counter()
@@ -103,6 +130,13 @@ def run_one(pair: tuple[str, str], band: tuple[float, float], seed: int) -> dict
         warm = min(singles.values(), key=lambda c: c.fit.rss).fit
         fit = fit_extended(d.data, pair, d.base, warm=warm)
         row["hidden_pair_fitted_over_noise"] = fit.residual_rms / noise
+    if forward:
+        t1 = time.perf_counter()
+        f = row["forward"] = forward_selection(d, noise)
+        for tag in ("", "_swap"):
+            f["right" + tag] = f["pair" + tag] is not None and set(f["pair" + tag]) == set(pair)
+            f["at_floor" + tag] = bool(f["right" + tag] and f["over_noise" + tag] <= FLOOR)
+        f["seconds"] = time.perf_counter() - t1
     return row
 
 
@@ -116,20 +150,25 @@ def cell(rows: list[dict]) -> dict:
     n = len(rows)
     overs = [r["combination_over_noise"] for r in ok if r["combination_right"]]
     weaker = [min(r["alone_over_noise"].values()) for r in ok]
-    return {"records": n, "errors": n - len(ok),
-            "both_named": _count(ok, n, lambda r: r["both_named"]),
-            "combination_right": _count(ok, n, lambda r: r["combination_right"]),
-            "at_floor": _count(ok, n, lambda r: r["at_floor"]),
-            "verdict_in_pair": _count(ok, n, lambda r: r["verdict_in_pair"]),
-            "named_first": dict(Counter(r["top_two"][0] if r["top_two"] else "none" for r in ok).most_common()),
-            "combination_over_noise_max": max(overs) if overs else None,
-            "weaker_alone_over_noise_min": min(weaker) if weaker else None,
-            "named_when_wrong": dict(Counter("+".join(r["top_two"]) or "none" for r in ok
-                                             if not r["both_named"]).most_common()),
-            "worst": sorted(({"seed": r["seed"], "top_two": r["top_two"], "combination": r["combination"],
-                              "combination_over_noise": r["combination_over_noise"]}
-                             for r in ok if not r["at_floor"]), key=lambda w: w["seed"]),
-            "seconds_p50": float(np.median([r["seconds"] for r in rows]))}
+    out = {"records": n, "errors": n - len(ok),
+           "both_named": _count(ok, n, lambda r: r["both_named"]),
+           "combination_right": _count(ok, n, lambda r: r["combination_right"]),
+           "at_floor": _count(ok, n, lambda r: r["at_floor"]),
+           "verdict_in_pair": _count(ok, n, lambda r: r["verdict_in_pair"]),
+           "named_first": dict(Counter(r["top_two"][0] if r["top_two"] else "none" for r in ok).most_common()),
+           "combination_over_noise_max": max(overs) if overs else None,
+           "weaker_alone_over_noise_min": min(weaker) if weaker else None,
+           "named_when_wrong": dict(Counter("+".join(r["top_two"]) or "none" for r in ok
+                                            if not r["both_named"]).most_common()),
+           "missed": sorted(({"seed": r["seed"], "top_two": r["top_two"], "combination": r["combination"],
+                             "combination_over_noise": r["combination_over_noise"]}
+                            for r in ok if not r["at_floor"]), key=lambda w: w["seed"]),
+           "seconds_p50": float(np.median([r["seconds"] for r in rows]))}
+    fw = [r for r in ok if "forward" in r]
+    if fw:
+        for key in ("right", "at_floor", "right_swap", "at_floor_swap"):
+            out["forward_" + key] = _count(fw, len(fw), lambda r, k=key: r["forward"][k])
+    return out
 
 
 def table_of(rows: dict) -> dict:
@@ -140,13 +179,14 @@ def table_of(rows: dict) -> dict:
     return table
 
 
-def run(pairs: list[tuple[str, str]], bands: list[str], first_seed: int, records: int) -> dict:
+def run(pairs: list[tuple[str, str]], bands: list[str], first_seed: int, records: int,
+        forward: bool = False) -> dict:
     seeds = range(first_seed, first_seed + records)
     started = time.perf_counter()
     rows: dict = {}
     for pair in pairs:
         for band in bands:
-            rows[f"{'+'.join(pair)}|{band}"] = r = [run_one(pair, BANDS[band], s) for s in seeds]
+            rows[f"{'+'.join(pair)}|{band}"] = r = [run_one(pair, BANDS[band], s, forward) for s in seeds]
             c = cell(r)
             print(f"[pairs] {'+'.join(pair)} {band}: both named {c['both_named']['n']}/{records}, combination "
                   f"{c['combination_right']['n']}, at floor {c['at_floor']['n']}", file=sys.stderr, flush=True)
@@ -165,6 +205,8 @@ def main() -> dict:
     ap.add_argument("--bands", default=",".join(DEFAULT_BANDS), help=f"comma-separated, of {', '.join(BANDS)}")
     ap.add_argument("--merge", nargs="+", default=None, metavar="JSON",
                     help="merge the outputs of runs over consecutive seeds instead of running")
+    ap.add_argument("--forward", action="store_true",
+                    help="ablation: also forward-select the second effect given the first (forward_selection)")
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
     if args.merge:
@@ -173,7 +215,7 @@ def main() -> dict:
         doc["command"] = [c for part in parts for c in (part if isinstance(part, list) else [part])]
     else:
         pairs = [tuple(p.split("+")) for p in args.pairs.split(",")] if args.pairs else list(PAIRS)
-        doc = run(pairs, args.bands.split(","), args.first_seed, args.records)
+        doc = run(pairs, args.bands.split(","), args.first_seed, args.records, args.forward)
     return emit(doc, args.out)
 
 
