@@ -75,13 +75,18 @@ def _compact(params: dict) -> dict:
     return out
 
 
-def forward_selection(d, noise: float) -> dict:
+def forward_selection(d, noise: float, partners: str = "significant") -> dict:
     """Ablation (``--forward``; not what ``diagnose`` does): keep the best single effect and fit it together with
     every other significant candidate in turn (warm from its own fit); then keep the partner that won and fit it
     with every other candidate but the first in the same way. The pair with the largest BIC evidence of each round
     is reported (``pair`` after the first, ``pair_swap`` over both). ``diagnose`` instead pairs the two best
-    *single* fits, which ranks the second effect by how well it explains the record alone."""
+    *single* fits, which ranks the second effect by how well it explains the record alone. ``partners``:
+    ``significant`` (the candidates significant alone) or ``all`` (every applicable candidate)."""
     sig = [c for c in d.candidates if c.significant]
+    if not sig:
+        return {"pair": None, "pair_swap": None}
+    if partners == "all":
+        sig = sig[:1] + [c for c in d.candidates if c is not sig[0]]
     if len(sig) < 2:
         return {"pair": None, "pair_swap": None}
     tried: dict = {}
@@ -101,7 +106,7 @@ def forward_selection(d, noise: float) -> dict:
             "tried": {"+".join(k): round(v[1], 3) for k, v in tried.items()}}
 
 
-def run_one(pair: tuple[str, str], band: tuple[float, float], seed: int, forward: bool = False) -> dict:
+def run_one(pair: tuple[str, str], band: tuple[float, float], seed: int, forward: str | None = None) -> dict:
     rec = make_pair_record(pair, band, seed)
     noise = rec["noise"]
     t0 = time.perf_counter()
@@ -132,7 +137,7 @@ def run_one(pair: tuple[str, str], band: tuple[float, float], seed: int, forward
         row["hidden_pair_fitted_over_noise"] = fit.residual_rms / noise
     if forward:
         t1 = time.perf_counter()
-        f = row["forward"] = forward_selection(d, noise)
+        f = row["forward"] = forward_selection(d, noise, forward)
         for tag in ("", "_swap"):
             f["right" + tag] = f["pair" + tag] is not None and set(f["pair" + tag]) == set(pair)
             f["at_floor" + tag] = bool(f["right" + tag] and f["over_noise" + tag] <= FLOOR)
@@ -180,7 +185,7 @@ def table_of(rows: dict) -> dict:
 
 
 def run(pairs: list[tuple[str, str]], bands: list[str], first_seed: int, records: int,
-        forward: bool = False) -> dict:
+        forward: str | None = None) -> dict:
     seeds = range(first_seed, first_seed + records)
     started = time.perf_counter()
     rows: dict = {}
@@ -207,6 +212,8 @@ def main() -> dict:
                     help="merge the outputs of runs over consecutive seeds instead of running")
     ap.add_argument("--forward", action="store_true",
                     help="ablation: also forward-select the second effect given the first (forward_selection)")
+    ap.add_argument("--partners", choices=("significant", "all"), default="significant",
+                    help="with --forward: the partners tried (the candidates significant alone, or all)")
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
     if args.merge:
@@ -215,7 +222,8 @@ def main() -> dict:
         doc["command"] = [c for part in parts for c in (part if isinstance(part, list) else [part])]
     else:
         pairs = [tuple(p.split("+")) for p in args.pairs.split(",")] if args.pairs else list(PAIRS)
-        doc = run(pairs, args.bands.split(","), args.first_seed, args.records, args.forward)
+        doc = run(pairs, args.bands.split(","), args.first_seed, args.records,
+                  args.partners if args.forward else None)
     return emit(doc, args.out)
 
 
