@@ -18,7 +18,7 @@ table per pair and band (counts and fractions, what was named when wrong) and
 every record. Usage::
 
     PYTHONPATH=. python bench/bench_diagnose_pairs.py --records 30 [--first-seed 0] [--pairs hysteresis+drift]
-        [--bands 3-10x,10-100x] [--out F]
+        [--bands 3-10x,10-100x] [--forward [--partners all]] [--out F]
     PYTHONPATH=. python bench/bench_diagnose_pairs.py --merge A.json B.json --out F   # consecutive seeds
 """
 from __future__ import annotations
