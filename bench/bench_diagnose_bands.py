@@ -47,26 +47,33 @@ def _log_uniform(rng: np.random.Generator, lo: float, hi: float) -> float:
     return math.exp(rng.uniform(math.log(lo), math.log(hi)))
 
 
-def make_record(effect: str | None, band: tuple[float, float], seed: int) -> dict:
-    """One randomized record: t, u, y, the noise std, the drawn ratio and plant."""
-    key = list(effect_names()).index(effect) + 1 if effect else 0
-    rng = np.random.default_rng([seed, 91, key, int(10 * band[0])])
+def draw_record(rng: np.random.Generator, effects: tuple[str, ...], band: tuple[float, float]) -> dict:
+    """A randomized record hiding ``effects`` (none: clean), each at its ``example_params``, from ``rng``:
+    t, u, y, the noise std, the drawn ratio, plant and effect parameters (``bench_diagnose_pairs`` too)."""
     t, u = staircase(N, H, rng, hold_s=(0.2, 1.0))
     m = CreepModel.from_resonance(_log_uniform(rng, 0.005, 0.8), _log_uniform(rng, 5.0, 200.0),
                                   _log_uniform(rng, 0.02, 1.0), rng.uniform(0.5, 2.0) * rng.choice([-1.0, 1.0]))
-    if effect == "second_mode" and m.zeta > 0.15:     # a second mode shows against a resonant first one
+    if "second_mode" in effects and m.zeta > 0.15:    # a second mode shows against a resonant first one
         m = CreepModel.from_resonance(m.alpha, m.fn, 0.5 * m.zeta, m.b)
     y = simulate_with_effects(m, t, u)
     ratio = _log_uniform(rng, *band)
-    if effect is None:
+    params: dict = {}
+    if not effects:
         noise = 0.01 * float(np.std(y))
         ratio = 1.0
     else:
-        y = simulate_with_effects(m, t, u, {effect: get_effect(effect).example_params(m, t, u, y, rng)})
+        params = {e: get_effect(e).example_params(m, t, u, y, rng) for e in effects}
+        y = simulate_with_effects(m, t, u, params)
         misfit = fit_base(prepare(t, u, y)).residual_rms      # the base model's best fit, noise-free
         noise = misfit / math.sqrt(ratio ** 2 - 1.0)          # so that with noise it misses by ratio x noise
     return {"t": t, "u": u, "y": y + noise * rng.standard_normal(N), "noise": noise, "ratio": ratio,
-            "plant": {"alpha": m.alpha, "fn": m.fn, "zeta": m.zeta, "b": m.b}}
+            "plant": {"alpha": m.alpha, "fn": m.fn, "zeta": m.zeta, "b": m.b}, "params": params}
+
+
+def make_record(effect: str | None, band: tuple[float, float], seed: int) -> dict:
+    """One randomized record: t, u, y, the noise std, the drawn ratio and plant."""
+    key = list(effect_names()).index(effect) + 1 if effect else 0
+    return draw_record(np.random.default_rng([seed, 91, key, int(10 * band[0])]), (effect,) if effect else (), band)
 
 
 def run_one(effect: str | None, band: tuple[float, float], seed: int) -> dict:
@@ -111,9 +118,10 @@ def _runs(doc: dict) -> list[dict]:
                                                           "elapsed_s")}]
 
 
-def merge(paths: list[str]) -> dict:
+def merge(paths: list[str], table=table_of) -> dict:
     """One document from runs over consecutive seeds (e.g. two processes, --first-seed 0 and 10); a document
-    that is itself a merge counts as the runs it holds. Seeds must follow on without gap or overlap."""
+    that is itself a merge counts as the runs it holds. Seeds must follow on without gap or overlap.
+    ``table`` makes the table from the rows by key (``bench_diagnose_pairs`` passes its own)."""
     docs = sorted((json.load(open(p)) for p in paths), key=lambda d: d["first_seed"])
     rows = {key: [r for d in docs for r in d["rows"][key]] for key in docs[0]["rows"]}
     first, total = docs[0]["first_seed"], sum(d["records_per_cell"] for d in docs)
@@ -122,7 +130,7 @@ def merge(paths: list[str]) -> dict:
             raise SystemExit(f"merge: cell {key} holds seeds {[x['seed'] for x in r]}, "
                              f"not {first}..{first + total - 1}")
     runs = sorted((run for d in docs for run in _runs(d)), key=lambda run: run["first_seed"])
-    return {**docs[0], "records_per_cell": total, "table": table_of(rows), "merged_runs": runs,
+    return {**docs[0], "records_per_cell": total, "table": table(rows), "merged_runs": runs,
             "load_average": [run["load_average"] for run in runs], "elapsed_s": max(run["elapsed_s"] for run in runs),
             "elapsed_s_sum": sum(run["elapsed_s"] for run in runs), "rows": rows}
 
@@ -140,10 +148,15 @@ def main() -> dict:
         doc = merge(args.merge)
     else:
         doc = run(args.effects.split(",") if args.effects else list(effect_names()), args.first_seed, args.records)
+    return emit(doc, args.out)
+
+
+def emit(doc: dict, out: str | None) -> dict:
+    """Print the document as JSON (and write it to ``out``)."""
     text = json.dumps(doc, indent=1, default=float)
     print(text)
-    if args.out:
-        with open(args.out, "w") as f:
+    if out:
+        with open(out, "w") as f:
             f.write(text + "\n")
     return doc
 

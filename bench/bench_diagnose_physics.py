@@ -15,7 +15,6 @@ check's verdicts.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -24,7 +23,7 @@ from collections import Counter
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 sys.path.insert(0, os.path.dirname(__file__))
 
-from bench_diagnose_bands import BANDS, make_record  # noqa: E402
+from bench_diagnose_bands import BANDS, emit, make_record  # noqa: E402
 from creep_online.diagnostics import diagnose  # noqa: E402
 from creep_online.diagnostics.holds import EFFECTS  # noqa: E402
 
@@ -82,12 +81,7 @@ def main() -> dict:
     doc = {"bench": "diagnose_physics", "records_per_cell": args.records, "first_seed": args.first_seed,
            "bands": BANDS, "overturn_lead": OVERTURN_LEAD, "table": table, "load_average": list(os.getloadavg()),
            "elapsed_s": time.perf_counter() - started, "rows": rows}
-    text = json.dumps(doc, indent=1, default=float)
-    print(text)
-    if args.out:
-        with open(args.out, "w") as f:
-            f.write(text + "\n")
-    return doc
+    return emit(doc, args.out)
 
 
 if __name__ == "__main__":

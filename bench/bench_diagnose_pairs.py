@@ -1,0 +1,231 @@
+"""Diagnosis of two effects at once (issue 9 item 2): randomized records hiding a pair of catalogue effects.
+
+The records are ``bench_diagnose_bands``' (same plants, staircase, noise rule:
+``draw_record``) with two effects hidden at once, each at its own
+``example_params`` strength drawn from the record's generator; the white noise
+is scaled so that the base model's best fit misses the noise-free output by
+``ratio`` times the noise (``ratio`` log-uniform in the band). Per record:
+whether the two significant effects ranked first are the hidden pair (and in
+which order), whether ``Diagnosis.combination`` is the hidden pair and reaches
+1.3x the noise, the verdict, and how strong each effect is alone (the base
+model's misfit of the record with that effect only, noise-free, over the
+noise). Where the combination is not the hidden pair at the floor, the hidden
+pair is also fitted directly (``extended.fit_extended``, warm from the better
+of its two single fits) to tell a search failure from a ranking one.
+
+Prints one JSON document (``--out`` also writes it) with the command line, a
+table per pair and band (counts and fractions, what was named when wrong) and
+every record. Usage::
+
+    PYTHONPATH=. python bench/bench_diagnose_pairs.py --records 30 [--first-seed 0] [--pairs hysteresis+drift]
+        [--bands 3-10x,10-100x] [--forward [--partners all]] [--out F]
+    PYTHONPATH=. python bench/bench_diagnose_pairs.py --merge A.json B.json --out F   # consecutive seeds
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import shlex
+import sys
+import time
+from collections import Counter
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(__file__))
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+
+from bench_diagnose_bands import BANDS, FLOOR, H, N, draw_record, emit, merge  # noqa: E402
+from creep_online.diagnostics import diagnose  # noqa: E402
+from creep_online.diagnostics.explain import evidence  # noqa: E402
+from creep_online.diagnostics.extended import fit_base, fit_extended, prepare  # noqa: E402
+from creep_online.effects import effect_names, simulate_with_effects  # noqa: E402
+from creep_online.model import CreepModel  # noqa: E402
+
+#: Pairs a piezo user meets (docs/diagnostics.md, "Two effects at once", says why each).
+PAIRS = (("hysteresis", "drift"), ("hysteresis", "second_creep"), ("leakage", "drift"),
+         ("second_mode", "hysteresis"), ("delay", "drift"), ("nonlinear_gain", "leakage"))
+#: Bands measured by default: with two effects the weaker one needs room above the noise.
+DEFAULT_BANDS = ("3-10x", "10-100x")
+
+
+def make_pair_record(pair: tuple[str, str], band: tuple[float, float], seed: int) -> dict:
+    """One randomized record hiding both effects of ``pair``; plus each effect's strength alone."""
+    keys = [list(effect_names()).index(e) + 1 for e in pair]
+    rec = draw_record(np.random.default_rng([seed, 92, *keys, int(10 * band[0])]), pair, band)
+    p = rec["plant"]
+    m = CreepModel.from_resonance(p["alpha"], p["fn"], p["zeta"], p["b"])
+    t, u = np.arange(N) * H, rec["u"]
+    rec["alone_over_noise"] = {e: fit_base(prepare(t, u, simulate_with_effects(m, t, u, {e: rec["params"][e]})))
+                               .residual_rms / rec["noise"] for e in pair}
+    return rec
+
+
+def _compact(params: dict) -> dict:
+    """Effect parameters for the JSON: hysteresis' 30 play weights as their sum and decay scale."""
+    out = {}
+    for name, q in params.items():
+        if name == "hysteresis":
+            r, w = np.asarray(q["r"]), np.asarray(q["w"])
+            q = {"w_sum": float(w.sum()), "decay_of_range": float((r[0] - r[1]) / math.log(w[1] / w[0])
+                                                                   / (2.0 * r[-1]))}
+        out[name] = {k: float(v) for k, v in q.items()}
+    return out
+
+
+def forward_selection(d, noise: float, partners: str = "significant") -> dict:
+    """Ablation (``--forward``; not what ``diagnose`` does): keep the best single effect and fit it together with
+    every other significant candidate in turn (warm from its own fit); then keep the partner that won and fit it
+    with every other candidate but the first in the same way. The pair with the largest BIC evidence of each round
+    is reported (``pair`` after the first, ``pair_swap`` over both). ``diagnose`` instead pairs the two best
+    *single* fits, which ranks the second effect by how well it explains the record alone. ``partners``:
+    ``significant`` (the candidates significant alone) or ``all`` (every applicable candidate)."""
+    sig = [c for c in d.candidates if c.significant]
+    if not sig:
+        return {"pair": None, "pair_swap": None}
+    if partners == "all":
+        sig = sig[:1] + [c for c in d.candidates if c is not sig[0]]
+    if len(sig) < 2:
+        return {"pair": None, "pair_swap": None}
+    tried: dict = {}
+
+    def round_(keep, others) -> tuple:
+        for c in others:
+            fit = fit_extended(d.data, (keep.effect, c.effect), d.base, warm=keep.fit)
+            tried[(keep.effect, c.effect)] = (evidence(d.base, fit, d.data.n)[0], fit.residual_rms / noise)
+        return max((k for k in tried if k[0] == keep.effect), key=lambda k: tried[k][0])
+
+    first = round_(sig[0], sig[1:])
+    partner = next(c for c in sig if c.effect == first[1])
+    round_(partner, [c for c in sig if c.effect not in first])
+    best = max(tried, key=lambda k: tried[k][0])
+    return {"pair": list(first), "over_noise": tried[first][1], "pair_swap": list(best),
+            "over_noise_swap": tried[best][1], "fits": len(tried),
+            "tried": {"+".join(k): round(v[1], 3) for k, v in tried.items()}}
+
+
+def run_one(pair: tuple[str, str], band: tuple[float, float], seed: int, forward: str | None = None) -> dict:
+    rec = make_pair_record(pair, band, seed)
+    noise = rec["noise"]
+    t0 = time.perf_counter()
+    try:
+        d = diagnose((rec["t"], rec["u"], rec["y"]))
+    except Exception as exc:     # a failure is a result of the table
+        return {"seed": seed, "error": f"{type(exc).__name__}: {exc}", "seconds": time.perf_counter() - t0}
+    seconds = time.perf_counter() - t0
+    top = [c.effect for c in d.candidates if c.significant][:2]
+    combo = d.combination
+    combo_effects = list(combo.fit.effects) if combo is not None else None
+    right = combo_effects is not None and set(combo_effects) == set(pair)
+    over = combo.fit.residual_rms / noise if combo is not None else None
+    singles = {c.effect: c for c in d.candidates if c.effect in pair}
+    row = {"seed": seed, "ratio": rec["ratio"], "plant": rec["plant"], "params": _compact(rec["params"]),
+           "alone_over_noise": rec["alone_over_noise"], "verdict": d.verdict, "top_two": top,
+           "both_named": set(top) == set(pair), "verdict_in_pair": d.verdict in pair,
+           "combination": combo_effects, "combination_right": right, "combination_over_noise": over,
+           "combination_significant": bool(combo.significant) if combo is not None else None,
+           "at_floor": bool(right and over <= FLOOR),
+           "singles_over_noise": {e: c.fit.residual_rms / noise for e, c in singles.items()},
+           "hidden_ranks": {e: [c.effect for c in d.candidates].index(e) + 1 for e in singles},
+           "ranking": [[c.effect, round(c.evidence, 1), c.significant] for c in d.candidates[:4]],
+           "base_over_noise": d.base.residual_rms / noise, "seconds": seconds}
+    if not row["at_floor"] and len(singles) == 2:
+        warm = min(singles.values(), key=lambda c: c.fit.rss).fit
+        fit = fit_extended(d.data, pair, d.base, warm=warm)
+        row["hidden_pair_fitted_over_noise"] = fit.residual_rms / noise
+    if forward:
+        t1 = time.perf_counter()
+        f = row["forward"] = forward_selection(d, noise, forward)
+        for tag in ("", "_swap"):
+            f["right" + tag] = f["pair" + tag] is not None and set(f["pair" + tag]) == set(pair)
+            f["at_floor" + tag] = bool(f["right" + tag] and f["over_noise" + tag] <= FLOOR)
+        f["seconds"] = time.perf_counter() - t1
+    return row
+
+
+def _count(rows: list[dict], n: int, pred) -> dict:
+    k = sum(1 for r in rows if pred(r))
+    return {"n": k, "of": n, "fraction": k / n if n else None}
+
+
+def cell(rows: list[dict]) -> dict:
+    ok = [r for r in rows if "error" not in r]
+    n = len(rows)
+    overs = [r["combination_over_noise"] for r in ok if r["combination_right"]]
+    weaker = [min(r["alone_over_noise"].values()) for r in ok]
+    out = {"records": n, "errors": n - len(ok),
+           "both_named": _count(ok, n, lambda r: r["both_named"]),
+           "combination_right": _count(ok, n, lambda r: r["combination_right"]),
+           "at_floor": _count(ok, n, lambda r: r["at_floor"]),
+           "verdict_in_pair": _count(ok, n, lambda r: r["verdict_in_pair"]),
+           "named_first": dict(Counter(r["top_two"][0] if r["top_two"] else "none" for r in ok).most_common()),
+           "combination_over_noise_max": max(overs) if overs else None,
+           "weaker_alone_over_noise_min": min(weaker) if weaker else None,
+           "named_when_wrong": dict(Counter("+".join(r["top_two"]) or "none" for r in ok
+                                            if not r["both_named"]).most_common()),
+           "missed": sorted(({"seed": r["seed"], "top_two": r["top_two"], "combination": r["combination"],
+                             "combination_over_noise": r["combination_over_noise"]}
+                            for r in ok if not r["at_floor"]), key=lambda w: w["seed"]),
+           "seconds_p50": float(np.median([r["seconds"] for r in rows]))}
+    fw = [r for r in ok if "forward" in r]
+    if fw:
+        for key in ("right", "at_floor", "right_swap", "at_floor_swap"):
+            out["forward_" + key] = _count(fw, len(fw), lambda r, k=key: r["forward"][k])
+    return out
+
+
+def table_of(rows: dict) -> dict:
+    table: dict = {}
+    for key, r in rows.items():
+        pair, band = key.split("|")
+        table.setdefault(pair, {})[band] = cell(r)
+    return table
+
+
+def run(pairs: list[tuple[str, str]], bands: list[str], first_seed: int, records: int,
+        forward: str | None = None) -> dict:
+    seeds = range(first_seed, first_seed + records)
+    started = time.perf_counter()
+    rows: dict = {}
+    for pair in pairs:
+        for band in bands:
+            rows[f"{'+'.join(pair)}|{band}"] = r = [run_one(pair, BANDS[band], s, forward) for s in seeds]
+            c = cell(r)
+            print(f"[pairs] {'+'.join(pair)} {band}: both named {c['both_named']['n']}/{records}, combination "
+                  f"{c['combination_right']['n']}, at floor {c['at_floor']['n']}", file=sys.stderr, flush=True)
+    return {"bench": "diagnose_pairs", "command": "python " + shlex.join(sys.argv), "records_per_cell": records,
+            "first_seed": first_seed, "pairs": ["+".join(p) for p in pairs],
+            "bands": {b: BANDS[b] for b in bands}, "floor_factor": FLOOR, "samples": N, "fs_hz": 1 / H,
+            "table": table_of(rows), "load_average": list(os.getloadavg()),
+            "elapsed_s": time.perf_counter() - started, "rows": rows}
+
+
+def main() -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--records", type=int, default=30, help="records per pair and band (the issue's goal: >= 100)")
+    ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--pairs", default=None, help="comma-separated a+b pairs (default: PAIRS)")
+    ap.add_argument("--bands", default=",".join(DEFAULT_BANDS), help=f"comma-separated, of {', '.join(BANDS)}")
+    ap.add_argument("--merge", nargs="+", default=None, metavar="JSON",
+                    help="merge the outputs of runs over consecutive seeds instead of running")
+    ap.add_argument("--forward", action="store_true",
+                    help="ablation: also forward-select the second effect given the first (forward_selection)")
+    ap.add_argument("--partners", choices=("significant", "all"), default="significant",
+                    help="with --forward: the partners tried (the candidates significant alone, or all)")
+    ap.add_argument("--out", default=None)
+    args = ap.parse_args()
+    if args.merge:
+        doc = merge(args.merge, table_of)
+        parts = [json.load(open(p)).get("command") for p in args.merge]
+        doc["command"] = [c for part in parts for c in (part if isinstance(part, list) else [part])]
+    else:
+        pairs = [tuple(p.split("+")) for p in args.pairs.split(",")] if args.pairs else list(PAIRS)
+        doc = run(pairs, args.bands.split(","), args.first_seed, args.records,
+                  args.partners if args.forward else None)
+    return emit(doc, args.out)
+
+
+if __name__ == "__main__":
+    main()
