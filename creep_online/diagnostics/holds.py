@@ -59,8 +59,13 @@ A_LO = 1e-3
 ALPHAS = np.unique(np.concatenate([np.geomspace(0.002, 0.1, 10), np.linspace(0.12, 1.0, 23)]))
 #: Grid of the leakage zero y0 over the output range widened by half of it on each side.
 ZERO_GRID = np.linspace(-0.5, 1.5, 21)
-#: Blocks each hold's settled part is averaged into (fewer in short holds).
+#: Blocks each hold's settled part is averaged into (fewer in short holds) ...
 BLOCKS_PER_HOLD = 16
+#: ... and fewer in records with many holds, so that all holds together give at most about this many: the
+#: polish evaluates the creep columns (changes x blocks) ~800 times, and on 30,000 samples with ~120 holds at
+#: 16 blocks each the check took 0.67 of diagnose's 3.1 s. The bands bench's records (6000 samples, at
+#: most ~25 holds) stay below it and keep 16 per hold.
+MAX_BLOCKS = 480
 #: A hold counts with at least this many blocks; the check needs this many counting holds.
 MIN_BLOCKS, MIN_HOLDS = 3, 3
 #: Settling skipped after each change: the resonance's settling time, at most this share of the hold.
@@ -133,9 +138,11 @@ def hold_blocks(data: Prepared, model: CreepModel, settle: float) -> HoldBlocks 
     wt_all = np.ones(t.size) if data.weights is None else np.asarray(data.weights, dtype=float)
     rows: dict[str, list] = {k: [] for k in ("w", "t", "iy", "wt", "hold")}
     seconds, holds = 0.0, 0
-    for first, stop in _hold_spans(t, u, settle, data.u_pre is not None):
+    spans = _hold_spans(t, u, settle, data.u_pre is not None)
+    per_hold = max(MIN_BLOCKS, min(BLOCKS_PER_HOLD, MAX_BLOCKS // max(len(spans), 1)))
+    for first, stop in spans:
         m = stop - first
-        nb = min(BLOCKS_PER_HOLD, m // 2)
+        nb = min(per_hold, m // 2)
         if nb < MIN_BLOCKS:
             continue
         blk = np.arange(m) * nb // m
