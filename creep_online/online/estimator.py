@@ -264,6 +264,8 @@ class OnlineEstimator(StoredParams):
         self._tracker: WindowTracker | RecursiveTracker | None = None
         self._recursive = self.refit == "recursive"
         self._catchup = 0
+        # the window trackers for a stream from rest and one taken in operation, built now (``WindowTracker.start``)
+        self._spares = {} if self._recursive else {free: self._window_tracker(free) for free in (False, True)}
         return self
 
     def freeze(self) -> None:
@@ -552,6 +554,18 @@ class OnlineEstimator(StoredParams):
         self._phase = "buffering"
         return True
 
+    def _window_tracker(self, free: bool) -> WindowTracker:
+        """A window tracker with this estimator's settings, linearized at a placeholder resonance (fs / 20,
+        zeta 0.5) until ``WindowTracker.start`` gives it the start-up search's estimate."""
+        lo, hi = (float(v) for v in self.alpha_bounds)
+        wn = 2.0 * math.pi / (20.0 * self._h)
+        theta = np.array([0.5 * (lo + hi), math.log(1.0 / wn), math.log(1.0 / wn ** 2), 1.0, 0.0])
+        return WindowTracker(
+            self.basis, theta, window_s=self.window_s, free=free, ring=self._ring, work=self._hist_work,
+            gate=0.0, burst=self._burst, stuck=max(10, int(round(0.05 / self._h))), alpha_bounds=(lo, hi),
+            refit_every=self._refit_every, test_every=self._test_every, detect=bool(self.detect_changes),
+            drift=DRIFT_COLUMNS if self.track_drift else 0)
+
     def _start_tracker(self, res) -> None:
         theta = np.array([res.alpha, math.log(res.a1), math.log(res.a2), res.b, res.c])
         lo, hi = (float(v) for v in self.alpha_bounds)
@@ -562,11 +576,9 @@ class OnlineEstimator(StoredParams):
                 stuck=max(10, int(round(0.05 / self._h))), alpha_bounds=(lo, hi), refit_every=self._refit_every,
                 detect=bool(self.detect_changes), scale=res.b * (self._u_hi - self._u_lo))
         else:
-            self._tracker = WindowTracker(
-                self.basis, theta, window_s=self.window_s, free=bool(self._u_ref), ring=self._ring, work=self._hist_work,
-                gate=0.0, burst=self._burst, stuck=max(10, int(round(0.05 / self._h))), alpha_bounds=(lo, hi),
-                refit_every=self._refit_every, test_every=self._test_every, detect=bool(self.detect_changes),
-                drift=DRIFT_COLUMNS if self.track_drift else 0)
+            self._tracker = self._spares[bool(self._u_ref)]
+            self._spares = {}
+            self._tracker.start(theta)
         if self.frozen:
             self._tracker.sc[W.SC_ACC] = 0.0
         self._tracker.fitting = False
