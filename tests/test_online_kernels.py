@@ -510,3 +510,32 @@ def test_small_cholesky_covariance_equals_numpy_inverse_and_refuses_singular():
     cov = np.empty((4, 4))
     W.covariance(singular, np.ones(4), cov)
     assert np.all(np.isinf(cov))
+
+
+@pytest.mark.parametrize("free, drift", [(False, 0), (True, 2)])
+def test_a_tracker_built_ahead_and_started_equals_one_built_at_the_estimate(free, drift):
+    """``OnlineEstimator`` builds its trackers before the stream at a placeholder resonance and calls
+    ``WindowTracker.start(theta)`` when the start-up search ends: the state, statistics, context and
+    schedule must be those of a tracker built at theta directly, and so must what it does with samples."""
+    h = 1e-4
+    basis = SoeBasis.build(h, top=SOE_TOP)
+    theta = np.array([0.3, math.log(2.0e-4), math.log(4.0e-7), 1.7, 0.01])
+    placeholder = np.array([0.45, math.log(h * 3.2), math.log((h * 3.2) ** 2), 1.0, 0.0])
+
+    def build(th: np.ndarray) -> WindowTracker:
+        return WindowTracker(basis, th, window_s=10.0, free=free, ring=np.zeros((2, 1 << 12)), gate=0.0, burst=3,
+                             stuck=10**9, alpha_bounds=ONLINE_ALPHA_BOUNDS, refit_every=50, test_every=5000,
+                             detect=True, drift=drift)
+
+    direct, ahead = build(theta), build(placeholder)
+    ahead.start(theta)
+    np.testing.assert_array_equal(ahead.st, direct.st)
+    np.testing.assert_array_equal(ahead.S, direct.S)
+    np.testing.assert_array_equal(ahead._ctx, direct._ctx)
+    rng = np.random.default_rng(4)
+    u = np.repeat(rng.uniform(-1, 1, 20), 100)
+    y = simulate(CreepModel(0.3, 2.0e-4, 4.0e-7, 1.7), np.arange(u.size) * h, u) + rng.normal(0, 1e-3, u.size)
+    np.testing.assert_array_equal(_feed(ahead, u, y), _feed(direct, u, y))
+    ahead.finish()
+    direct.finish()
+    np.testing.assert_array_equal(ahead.theta, direct.theta)
