@@ -260,8 +260,7 @@ class WindowTracker(ParameterView):
         self._lr_recent: list[float] = []   # statistics of the last change tests (no change found)
         self.drift_on = False            # the rates are fitted (switched by the score and Wald tests)
         self.drift_stat = 0.0            # the last test statistic (score when off, Wald when on)
-        self.theta = np.zeros(5 + self.n_free + self.n_rate)
-        self.theta[:len(theta)] = theta
+        self.theta = np.zeros(5 + self.n_free + self.n_rate)     # (its values: ``start``)
         self.forget = 1.0 if window_s is None else math.exp(-self.h / window_s)
         self.ring = ring                 # (2, H) history, owned by the caller (pre-faulted)
         self.work_memory = work          # (N, Q) scratch for the post-change search (pre-faulted)
@@ -283,7 +282,6 @@ class WindowTracker(ParameterView):
         self._alpha_known = True
         self.fitting = True              # False while the start-up buffer is replayed: no refits yet
         self.converged = False           # a refit has barely moved since the start: the change test may judge
-        self.fit = Fit(theta=self.theta.copy())
         self._jobs: list[Generator] = []
         #: the re-fit or change test under way (``refit.sample_work`` advances it): its index among the
         #: context's work arrays (``MACHINE_REFIT``, ``MACHINE_TEST``), or None
@@ -436,8 +434,12 @@ class WindowTracker(ParameterView):
         """The sample at which the per-sample kernel calls back (``_schedule``): the next re-fit or change test."""
         due = self._next_refit
         if self.detect:
-            due = min(due, (self.n // self.test_every + 1) * self.test_every)
+            due = min(due, self._test_after(self.n))
         self.sc[W.SC_DUE] = due
+
+    def _test_after(self, n: int) -> int:
+        """The first change-test (snapshot) instant after sample n."""
+        return (n // self.test_every + 1) * self.test_every
 
     def _pace_refits(self, calm: bool) -> None:
         """After a re-fit: double the period while the window is calm, else back to ``refit_every`` (``CALM_MOVE``)."""
@@ -606,7 +608,7 @@ class WindowTracker(ParameterView):
         ``after_test``: first wait for the change test due next to finish (``REPLAY_AFTER_TEST``).
         """
         if after_test:
-            due = (self.n // self.test_every + 1) * self.test_every
+            due = self._test_after(self.n)
             while self.n <= due or self.machine == MACHINE_TEST or self._queued("_change_job"):
                 yield WAIT
         a1, a2 = self.a1, self.a2
@@ -640,7 +642,7 @@ class WindowTracker(ParameterView):
         while i < self.n:                  # the live stream keeps appending: catch up
             n = min(chunk if i - oldest >= skip else 8 * chunk, self.n - i)
             if self.detect:                # stop at the change test's snapshot instants
-                n = min(n, (i // self.test_every + 1) * self.test_every - i)
+                n = min(n, self._test_after(i) - i)
             W.replay(self.ring, (slot + i) % size, n, max(skip - (i - oldest), 0), st, S, *self._replay_work)
             i += n
             if self.detect and i % self.test_every == 0 and i - oldest > skip:
