@@ -206,6 +206,12 @@ class Effect(ABC):
         """None if the record can reveal this effect; else the reason it cannot."""
         return None
 
+    def contradiction(self, params: dict, data) -> str | None:
+        """None if the fitted ``params`` agree with this effect's physics on this record; else why they do not
+        (e.g. a "disturbance" locked to a periodic input). ``diagnose`` never calls a contradicted fit
+        significant, alone or in a pair."""
+        return None
+
     @abstractmethod
     def signature(self, params: dict, fit, base, where: dict, data) -> str:
         """The effect's fingerprint in the base residual, in words with the number that carries it."""

@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from .base import AdditiveEffect, FitView, OutputCompensator, ParamSpec
+from .input_lines import harmonic_of_input
 
 F = "periodic_disturbance.f"
 
@@ -84,6 +85,15 @@ class PeriodicDisturbance(AdditiveEffect):
 
     def applicable(self, data) -> str | None:
         return None if data.uniform else "needs uniform sampling for its frequency search"
+
+    def contradiction(self, params: dict, data) -> str | None:
+        if not data.uniform:
+            return None
+        locked = harmonic_of_input(float(params.get("f_hz", float("nan"))), data.t, data.u)
+        if locked is None:
+            return None
+        return (f"line at {params['f_hz']:.5g} Hz = {locked[0]} x the input's {locked[1]:.4g} Hz: locked to the "
+                "input, so an input effect, not a disturbance")
 
     def signature(self, params: dict, fit, base, where: dict, data) -> str:
         amp = params.get("amplitude", float("nan"))

@@ -13,6 +13,7 @@ import numpy as np
 from scipy.signal import cont2discrete
 
 from .base import FitView, OutputCompensator, ParallelEffect, ParamSpec, StepFn
+from .input_lines import harmonic_of_input
 from .responses import resonance_step, resonance_step_derivatives
 
 FN = "second_mode.log10_fn"
@@ -114,6 +115,16 @@ class SecondMode(ParallelEffect):
 
     def compensator(self, dt: float, params: dict) -> OutputCompensator:
         return _ModeCompensator(dt, params)
+
+    def contradiction(self, params: dict, data) -> str | None:
+        if not data.uniform:
+            return None
+        fn, zeta = float(params.get("fn_hz", float("nan"))), float(params.get("zeta", float("nan")))
+        locked = harmonic_of_input(fn, data.t, data.u)
+        if locked is None or 2.0 * zeta * fn * (data.t[-1] - data.t[0]) >= 1.0:
+            return None              # off the input's lines, or wider than the record's resolution: a mode
+        return (f"resonance at {fn:.5g} Hz (zeta {zeta:.2g}, narrower than the record resolves) = {locked[0]} x "
+                f"the input's {locked[1]:.4g} Hz: a line locked to the input, not a mode")
 
     def signature(self, params: dict, fit, base, where: dict, data) -> str:
         fn = params.get("fn_hz", float("nan"))
