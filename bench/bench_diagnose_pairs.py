@@ -5,9 +5,11 @@ The records are ``bench_diagnose_bands``' (same plants, staircase, noise rule:
 ``example_params`` strength drawn from the record's generator; the white noise
 is scaled so that the base model's best fit misses the noise-free output by
 ``ratio`` times the noise (``ratio`` log-uniform in the band). Per record:
-whether the two significant effects ranked first are the hidden pair (and in
-which order), whether ``Diagnosis.combination`` is the hidden pair and reaches
-1.3x the noise, the verdict, and how strong each effect is alone (the base
+whether ``Diagnosis.combination`` (the pair search, ``diagnostics/pairs.py``)
+is the hidden pair, significant over the best single effect (``both_named``)
+and within 1.3x the noise (``at_floor``), the verdict, whether the two best
+single fits are the pair (``top_two_right``: how the combination was chosen
+before the pair search), and how strong each effect is alone (the base
 model's misfit of the record with that effect only, noise-free, over the
 noise). Where the combination is not the hidden pair at the floor, the hidden
 pair is also fitted directly (``extended.fit_extended``, warm from the better
@@ -123,7 +125,8 @@ def run_one(pair: tuple[str, str], band: tuple[float, float], seed: int, forward
     singles = {c.effect: c for c in d.candidates if c.effect in pair}
     row = {"seed": seed, "ratio": rec["ratio"], "plant": rec["plant"], "params": _compact(rec["params"]),
            "alone_over_noise": rec["alone_over_noise"], "verdict": d.verdict, "top_two": top,
-           "both_named": set(top) == set(pair), "verdict_in_pair": d.verdict in pair,
+           "both_named": bool(right and combo.significant), "top_two_right": set(top) == set(pair),
+           "verdict_in_pair": d.verdict in pair, "pairs_tried": len(d.pairs_tried),
            "combination": combo_effects, "combination_right": right, "combination_over_noise": over,
            "combination_significant": bool(combo.significant) if combo is not None else None,
            "at_floor": bool(right and over <= FLOOR),
@@ -160,10 +163,11 @@ def cell(rows: list[dict]) -> dict:
            "combination_right": _count(ok, n, lambda r: r["combination_right"]),
            "at_floor": _count(ok, n, lambda r: r["at_floor"]),
            "verdict_in_pair": _count(ok, n, lambda r: r["verdict_in_pair"]),
-           "named_first": dict(Counter(r["top_two"][0] if r["top_two"] else "none" for r in ok).most_common()),
+           "top_two_right": _count(ok, n, lambda r: r.get("top_two_right", r["both_named"])),
+           "named_first": dict(Counter(r["verdict"] for r in ok).most_common()),
            "combination_over_noise_max": max(overs) if overs else None,
            "weaker_alone_over_noise_min": min(weaker) if weaker else None,
-           "named_when_wrong": dict(Counter("+".join(r["top_two"]) or "none" for r in ok
+           "named_when_wrong": dict(Counter("+".join(r["combination"] or ["none"]) for r in ok
                                             if not r["both_named"]).most_common()),
            "missed": sorted(({"seed": r["seed"], "top_two": r["top_two"], "combination": r["combination"],
                              "combination_over_noise": r["combination_over_noise"]}

@@ -77,12 +77,13 @@ def format_table(result) -> str:
     for i, c in enumerate(result.candidates, 1):
         mark = "*" if c.significant else " "
         lines.append(f"  {i:<4} {c.effect:<21}{mark} {c.evidence:>10.4g} {b.fit_percent:>11.2f} "
-                     f"{c.fit.fit_percent:>10.2f} {b.residual_rms:>11.4g} {c.fit.residual_rms:>11.4g}  {c.signature}")
+                     f"{c.fit.fit_percent:>10.2f} {b.residual_rms:>11.4g} {c.fit.residual_rms:>11.4g}  "
+                     + (f"not significant: {c.contradiction}" if c.contradiction else c.signature))
     for name, why in result.skipped.items():
         lines.append(f"  -    {name:<22} {'skipped':>10}  ({why})")
     if result.combination is not None:
         c = result.combination
-        lines.append(f"  both {c.effect:<22} {c.evidence:>10.4g} {b.fit_percent:>11.2f} {c.fit.fit_percent:>10.2f} "
+        lines.append(f"  pair {c.effect:<22} {c.evidence:>10.4g} {b.fit_percent:>11.2f} {c.fit.fit_percent:>10.2f} "
                      f"{b.residual_rms:>11.4g} {c.fit.residual_rms:>11.4g}  {c.signature}")
     lines.append("")
     lines.append(f"verdict: {result.verdict}" + ("" if result.verdict == "none" else

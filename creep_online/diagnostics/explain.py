@@ -9,19 +9,20 @@ the drop of the Bayesian information criterion,
 which is also the likelihood-ratio statistic ``N ln(RSS_base/RSS_effect)``
 (chi-square with dk degrees of freedom under "no effect") minus the BIC
 penalty. An effect counts as *significant* when its evidence exceeds
-``EVIDENCE_THRESHOLD`` (Kass-Raftery "very strong" is 10) and it lowers the
-residual RMS by at least ``MIN_RMS_DROP``. The verdict is the best
-significant effect, or ``none``.
+``EVIDENCE_THRESHOLD`` (Kass-Raftery "very strong" is 10), it lowers the
+residual RMS by at least ``MIN_RMS_DROP`` and its fitted parameters do not
+contradict its physics (``Effect.contradiction``: e.g. a "disturbance" line on
+a harmonic of a periodic input; such fits rank after the others). The
+verdict is the best significant effect, or ``none``; two effects at once are
+searched by ``pairs.choose_pair``.
 """
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
-from scipy.stats import chi2
 
 from ..effects import effect_names, get_effect
 from ..errors import CreepOnlineError, DataError
@@ -30,15 +31,15 @@ from ..metrics import noise_std_estimate
 from ..record import Record
 from . import extended as ext
 from .basis import verdict_basis
+from .bic import EVIDENCE_THRESHOLD, evidence
 from .compare import error_metrics
 from .holds import EFFECTS as PHYSICS_EFFECTS
 from .holds import physics_check
 from .locate import locate
+from .pairs import choose_pair, contradicts
 from .pool import ordered_map, resolve_workers
 from .residuals import autocorrelation, cross_correlation, parameter_uncertainty
 
-#: BIC drop an effect needs to be called significant.
-EVIDENCE_THRESHOLD = 10.0
 #: ... and the relative drop of the residual RMS it must achieve.
 MIN_RMS_DROP = 0.02
 #: Base residual RMS, relative to the output's spread, below which the model already
@@ -59,13 +60,15 @@ class Candidate:
     significant: bool
     fit: ext.ExtendedFit
     signature: str = ""
+    contradiction: str = ""    # why the fitted parameters contradict the effect's physics ("" if they do not)
 
     def to_dict(self) -> dict:
         return {"effect": self.effect, "evidence": self.evidence, "significant": self.significant,
                 "fit_percent_after": self.fit.fit_percent, "residual_rms_after": self.fit.residual_rms,
                 "params": jsonable(self.fit.effect_params.get(self.effect, self.fit.effect_params)),
                 "lr_statistic": self.lr_statistic, "lr_pvalue": self.lr_pvalue,
-                "extra_params": self.extra_params, "signature": self.signature}
+                "extra_params": self.extra_params, "signature": self.signature,
+                "contradiction": self.contradiction or None}
 
 
 @dataclass
@@ -85,21 +88,45 @@ class Diagnosis:
     elapsed_s: float = 0.0
     data: ext.Prepared | None = field(default=None, repr=False)
     physics: dict = field(default_factory=dict)   # holds.physics_check: leakage / second creep / drift by hold physics
+    pairs_tried: dict = field(default_factory=dict)  # pairs.choose_pair: "a+b" -> (BIC drop over the base, residual RMS)
 
     @property
     def verdict(self) -> str:
+        """The missing effect: the best significant single effect, unless it is a stand-in for a pair.
+
+        When the combination beats the best single fit (``significant``) without
+        containing it, that single effect only imitated the two (a second creep
+        for leakage + drift): the verdict is then the pair's stronger effect.
+        """
         top = self.candidates[0] if self.candidates else None
-        return top.effect if top is not None and top.significant else "none"
+        if top is None or not top.significant:
+            return "none"
+        if self.standing_in:
+            return self.combination.effect.split("+")[0]
+        return top.effect
+
+    @property
+    def standing_in(self) -> bool:
+        """True when the best single effect is not in the combination that beats it."""
+        c = self.combination
+        return bool(c is not None and c.significant and self.candidates[0].effect not in c.fit.effects)
 
     @property
     def best(self) -> ext.ExtendedFit:
         """The extended fit of the verdict (the base fit when the verdict is none)."""
-        return self.candidates[0].fit if self.verdict != "none" else self.base
+        v = self.verdict
+        return next(c.fit for c in self.candidates if c.effect == v) if v != "none" else self.base
 
     @property
     def verdict_basis(self) -> dict:
         """Which evidence decided the verdict (basis.verdict_basis): BIC alone, confirmed, or against the physics."""
-        return verdict_basis(self.verdict, {c.effect: c.evidence for c in self.candidates}, self.physics)
+        out = verdict_basis(self.verdict, {c.effect: c.evidence for c in self.candidates}, self.physics)
+        if self.standing_in:
+            a, b = self.combination.effect.split("+")
+            out["stand_in"] = top = self.candidates[0].effect
+            out["text"] = (f"pair search: {top} alone imitated {a} + {b}, which beat it "
+                           f"({self.combination.signature}); " + out["text"])
+        return out
 
     def to_dict(self) -> dict:
         b = self.base
@@ -110,7 +137,9 @@ class Diagnosis:
             "base_model": {**b.model.describe(), "offset": b.offset},
             "combination": None if self.combination is None else {
                 "effects": list(self.combination.fit.effects), **self.combination.to_dict(),
-                "params": jsonable(self.combination.fit.effect_params)},
+                "params": jsonable(self.combination.fit.effect_params),
+                "pairs_tried": [{"effects": k.split("+"), "evidence": v[0], "residual_rms": v[1]}
+                                for k, v in self.pairs_tried.items()]},
             "skipped": self.skipped, "location": jsonable(self.location),
             "residual_analysis": jsonable(self.residual_analysis),
             "warnings": self.warnings, "elapsed_s": self.elapsed_s, "source": self.source,
@@ -122,15 +151,6 @@ class Diagnosis:
 def applicable(data: ext.Prepared, effect: str) -> str | None:
     """None if the data can reveal ``effect``; else the reason it cannot (the effect's own rule)."""
     return get_effect(effect).applicable(data)
-
-
-# --------------------------------------------------------------------------- evidence
-def evidence(base: ext.ExtendedFit, fit: ext.ExtendedFit, n: int) -> tuple[float, float, float, int]:
-    """(BIC drop, LR statistic, LR p-value, extra parameters) of ``fit`` against ``base``."""
-    dk = max(fit.n_params - base.n_params, 1)
-    rss0, rss1 = max(base.rss, 1e-300), max(min(fit.rss, base.rss), 1e-300)
-    lr = n * math.log(rss0 / rss1)
-    return lr - dk * math.log(n), lr, float(chi2.sf(lr, dk)), dk
 
 
 def signature(effect: str, fit: ext.ExtendedFit, base: ext.ExtendedFit, where: dict, data: ext.Prepared) -> str:
@@ -244,10 +264,12 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
                        before=lambda _k, job: report(f"[{job[0]}/{len(candidates)}] fitting the base model + {job[1]}"))
     for (_, name), fit in zip(todo, fits):
         ev, lr, pv, dk = evidence(base, fit, data.n)
-        sig = (not exact and ev > EVIDENCE_THRESHOLD
+        against = contradicts(fit, data)
+        sig = (not exact and against is None and ev > EVIDENCE_THRESHOLD
                and fit.residual_rms < (1.0 - MIN_RMS_DROP) * base.residual_rms)
-        ranked.append(Candidate(name, ev, lr, pv, dk, bool(sig), fit, signature(name, fit, base, where, data)))
-    ranked.sort(key=lambda c: -c.evidence)
+        ranked.append(Candidate(name, ev, lr, pv, dk, bool(sig), fit, signature(name, fit, base, where, data),
+                                against or ""))
+    ranked.sort(key=lambda c: (bool(c.contradiction), -c.evidence))  # a contradicted fit ranks after the others
     if ranked and ranked[0].significant:
         # high-frequency misfit (ringing, a hum) inflates the difference-based noise estimate: re-estimate
         # on the residual of the model that explains it, and keep the smaller
@@ -257,23 +279,35 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
     if len(sig_top) == 2 and sig_top[0].evidence - sig_top[1].evidence < EVIDENCE_THRESHOLD:
         warnings.append(f"{sig_top[0].effect} and {sig_top[1].effect} explain the data about equally well "
                         f"(evidence {sig_top[0].evidence:.4g} vs {sig_top[1].evidence:.4g}): the verdict is not firm")
-    combo = None
-    sig = [c for c in ranked if c.significant]
-    if combine and len(sig) >= 2:
-        pair = (sig[0].effect, sig[1].effect)
-        report(f"fitting the two best together: {pair[0]} + {pair[1]}")
-        fit = ext.fit_extended(data, pair, base, max_nfev=max_nfev, warm=sig[0].fit, workers=n_workers)
-        ev, lr, pv, dk = evidence(base, fit, data.n)
-        ev1 = evidence(sig[0].fit, fit, data.n)[0]
-        combo = Candidate("+".join(pair), ev, lr, pv, dk, bool(ev1 > EVIDENCE_THRESHOLD), fit,
-                          f"evidence over {sig[0].effect} alone: {ev1:.3g}")
+    combo, tried = _combination(data, base, ranked, noise, max_nfev, n_workers, report) if combine else (None, {})
     report("hold physics: leakage, second creep or drift")
     physics = _physics(data, base, tuple(c.fit for c in ranked if c.effect in PHYSICS_EFFECTS))
-    result = Diagnosis(source, base, noise, ranked, skipped, where, analysis, combo, warnings, 0.0, data, physics)
+    result = Diagnosis(source, base, noise, ranked, skipped, where, analysis, combo, warnings, 0.0, data, physics,
+                       tried)
+    if result.standing_in:
+        warnings.append(f"{ranked[0].effect} ranks first alone but the pair {combo.effect} beats it "
+                        f"({combo.signature}): the verdict is {result.verdict}")
     if result.verdict_basis["decided_by"] == "bic_over_physics":
         warnings.append(result.verdict_basis["text"])
     result.elapsed_s = time.perf_counter() - start
     return result
+
+
+def _combination(data: ext.Prepared, base: ext.ExtendedFit, ranked: list[Candidate], noise: float, max_nfev: int,
+                 workers: int, report: Callable[[str], None]) -> tuple[Candidate | None, dict]:
+    """The best pair of effects (pairs.choose_pair) as a candidate, significant when it beats the best single
+    fit; and the pairs tried ("a+b" -> (evidence, residual RMS))."""
+    choice = choose_pair(data, base, [(c.effect, c.fit, c.significant) for c in ranked], noise,
+                         max_nfev=max_nfev, workers=workers, report=report)
+    if choice is None:
+        return None, {}
+    ev, lr, pv, dk = evidence(base, choice.fit, data.n)
+    ev1 = evidence(ranked[0].fit, choice.fit, data.n)[0]
+    how = (f"the best of {len(choice.tried)} pairs, each effect chosen given the other" if choice.searched
+           else "the two best single effects")
+    combo = Candidate("+".join(choice.effects), ev, lr, pv, dk, bool(ev1 > EVIDENCE_THRESHOLD), choice.fit,
+                      f"evidence over {ranked[0].effect} alone: {ev1:.3g}; {how}")
+    return combo, {"+".join(k): v for k, v in choice.tried.items()}
 
 
 def _physics(data: ext.Prepared, base: ext.ExtendedFit, fits: tuple) -> dict:

@@ -154,7 +154,7 @@ def _html(result, figs: list[tuple[str, str]]) -> str:
     combo = ""
     if result.combination is not None:
         c = result.combination
-        combo = (f"<p>Both top effects together ({c.effect}): fit {_num(c.fit.fit_percent)} %, residual RMS "
+        combo = (f"<p>Two effects together ({c.effect}): fit {_num(c.fit.fit_percent)} %, residual RMS "
                  f"{_num(c.fit.residual_rms)}; {html.escape(c.signature)}.</p>")
     ra = result.residual_analysis
     ac, xc = ra.get("autocorrelation", {}), ra.get("cross_correlation", {})

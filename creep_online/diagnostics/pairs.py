@@ -1,0 +1,119 @@
+"""Two effects at once: the second effect chosen given the first, then the first re-chosen given the second.
+
+Ranking single fits does not find a pair: with two effects in a record every
+single candidate absorbs part of both, and the flexible ones (a second mode
+as a slow overdamped path, a second creep, hysteresis) outrank the real
+partner (bench ``bench_diagnose_pairs.py``: the two best single fits were the
+hidden pair in 75 of 360 records). So the pair is searched by forward
+selection on the evidence *given* what is already in the model:
+
+1. keep the best single effect and fit it together with every other
+   applicable candidate, significant alone or not (a delay is often not
+   significant alone next to a strong drift), each warm from the kept
+   effect's own fit; the partner with the largest BIC drop wins;
+2. keep that partner and re-choose the first the same way (the best single
+   effect is often a stand-in for the pair: a second creep for leakage + drift);
+3. the pair with the largest BIC drop over both rounds is the combination
+   if it explains the record to the noise floor (``SEARCH_ABOVE``); if no
+   pair does, the record holds more than two effects or one the catalogue
+   lacks, and a pair without the best single effect is no safer a guess than
+   one with it: the best pair of the first round (with it) is kept.
+
+A pair whose fitted parameters contradict one of its effects
+(``Effect.contradiction``, e.g. a "disturbance" on a harmonic of a periodic
+input) is never chosen.
+
+The search runs only when the best single fit leaves the residual above
+``SEARCH_ABOVE`` times the noise: a record one effect explains to the noise
+floor has no second effect to find, and the search costs 2(k-1) pair fits
+for k candidates. Below it the combination is the two best significant
+single fits, as before.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+from ..effects import get_effect
+from . import extended as ext
+from .bic import evidence
+from .pool import ordered_map
+
+#: Best single fit's residual RMS over the noise above which a partner is searched. The single-effect
+#: records of ``bench_diagnose_bands.py`` end at 0.98-1.06x the noise (2400 records, 4 above 1.1x).
+SEARCH_ABOVE = 1.08
+
+
+@dataclass
+class PairChoice:
+    """The chosen pair, its joint fit, and every pair fitted on the way (effects -> (evidence, residual RMS))."""
+
+    effects: tuple[str, str]
+    fit: ext.ExtendedFit
+    searched: bool
+    tried: dict[tuple[str, str], tuple[float, float]] = field(default_factory=dict)
+
+
+def choose_pair(data: ext.Prepared, base: ext.ExtendedFit, singles: list[tuple[str, ext.ExtendedFit, bool]],
+                noise: float, *, max_nfev: int = ext.MAX_NFEV, workers: int = 1,
+                report: Callable[[str], None] | None = None) -> PairChoice | None:
+    """The best pair of effects for the record, or None when fewer than two effects can be paired.
+
+    ``singles``: (effect, its single fit, significant) for every applicable
+    candidate, best first. Without a significant single effect there is
+    nothing to pair. The pair's effects are ordered by their single fits.
+    """
+    report = report or (lambda _stage: None)
+    significant = [s for s in singles if s[2]]
+    if not significant or len(singles) < 2:
+        return None
+    first = significant[0]
+    if first[1].residual_rms <= SEARCH_ABOVE * noise:
+        if len(significant) < 2:
+            return None
+        pair = (first[0], significant[1][0])
+        report(f"fitting the two best together: {pair[0]} + {pair[1]}")
+        fit = ext.fit_extended(data, pair, base, max_nfev=max_nfev, warm=first[1], workers=workers)
+        return PairChoice(pair, fit, False, {pair: _weigh(base, fit, data.n)})
+    fits: dict[tuple[str, str], ext.ExtendedFit] = {}
+    partner = _round(data, base, first, singles, fits, max_nfev, workers, report)
+    kept = next(s for s in singles if s[0] == partner)
+    _round(data, base, kept, [s for s in singles if s[0] != first[0]], fits, max_nfev, workers, report)
+    scores = {k: _weigh(base, f, data.n) for k, f in fits.items()}
+    sound = [k for k in fits if contradicts(fits[k], data) is None]
+    if not sound:
+        return None
+    best = max(sound, key=lambda k: scores[k][0])
+    with_first = [k for k in sound if first[0] in k]
+    if fits[best].residual_rms > SEARCH_ABOVE * noise and with_first:
+        best = max(with_first, key=lambda k: scores[k][0])   # no pair explains it all: keep the clearest effect
+    order = [s[0] for s in singles]
+    effects = tuple(sorted(best, key=order.index))
+    return PairChoice(effects, fits[best], True, scores)
+
+
+def _round(data: ext.Prepared, base: ext.ExtendedFit, kept: tuple, singles: list, fits: dict,
+           max_nfev: int, workers: int, report: Callable[[str], None]) -> str:
+    """Fit ``kept`` with every other effect of ``singles`` (warm from ``kept``'s own fit); the best partner."""
+    others = [s[0] for s in singles if s[0] != kept[0] and (kept[0], s[0]) not in fits and (s[0], kept[0]) not in fits]
+    done = ordered_map(lambda e: ext.fit_extended(data, (kept[0], e), base, max_nfev=max_nfev, warm=kept[1]),
+                       others, workers, before=lambda _i, e: report(f"pair search: {kept[0]} + {e}"))
+    for e, fit in zip(others, done):
+        fits[(kept[0], e)] = fit
+    mine = [k for k in fits if kept[0] in k and contradicts(fits[k], data) is None] or [k for k in fits if kept[0] in k]
+    best = max(mine, key=lambda k: evidence(base, fits[k], data.n)[0])
+    return best[1] if best[0] == kept[0] else best[0]
+
+
+def contradicts(fit: ext.ExtendedFit, data: ext.Prepared) -> str | None:
+    """Why the fitted parameters contradict one of the fit's effects on this record (``Effect.contradiction``)."""
+    for name in fit.effects:
+        why = get_effect(name).contradiction(fit.effect_params.get(name, {}), data)
+        if why:
+            return f"{name}: {why}"
+    return None
+
+
+def _weigh(base: ext.ExtendedFit, fit: ext.ExtendedFit, n: int) -> tuple[float, float]:
+    """(BIC drop over the base, residual RMS) of one pair fit."""
+    return evidence(base, fit, n)[0], fit.residual_rms
