@@ -36,6 +36,7 @@ from .window import resonance_step
 GRID_ALPHA = (0.008, 0.025, 0.07, 0.17, 0.35, 0.6)
 #: Damping ratios of the grid.
 GRID_ZETA = (0.015, 0.05, 0.15, 0.4, 1.0)
+_GRID_ZETAS = np.array(GRID_ZETA)
 #: Natural frequencies of the grid (log-spaced from the buffer length to 0.3 fs).
 GRID_FREQS = 18
 #: Rows in the cost of a grid point (the rest are skipped by a stride).
@@ -216,6 +217,23 @@ def _prepare(alpha: float, a1: float, a2: float, lam: np.ndarray, dx: float, h: 
     return v[q], v[q + 1]
 
 
+def grid_frequencies(f_lo: float, f_hi: float) -> np.ndarray:
+    """``np.geomspace(f_lo, f_hi, GRID_FREQS)`` bit for bit, in three numpy calls.
+
+    The same operations as numpy's own (log10 of the ends, the linspace between them, ``power(10, .)``,
+    the ends put back), with numpy's log10 and power: their SIMD loops differ from ``math``'s in the last
+    bit. ``np.geomspace`` itself runs ~100 lines of numpy's Python: 60-130 us cold inside update(),
+    once per creep exponent of the grid before.
+    """
+    ls, le = float(np.log10(f_lo)), float(np.log10(f_hi))
+    step = (le - ls) / (GRID_FREQS - 1)
+    y = [i * step + ls for i in range(GRID_FREQS - 1)] + [le]
+    freqs = np.power(10.0, y)
+    freqs[0] = f_lo
+    freqs[-1] = f_hi
+    return freqs
+
+
 def _projected(acc: np.ndarray) -> tuple[float, float, float]:
     """(cost per row, b, c) of min ||y - b s - c||^2 from the sums, centred (no cancellation).
 
@@ -275,6 +293,8 @@ class ResonanceSearch:
         self._vz = np.empty(basis.size)     # one candidate at a time: its node coefficients, states, sums
         self._x = np.zeros(2)
         self._acc = np.zeros(6)
+        #: the grid's frequencies, computed here: this unit has no other work (none with ``starts``)
+        self._freqs = self._grid_frequencies() if starts is None else None
         self._gen = self._run()
 
     def step(self) -> bool:
@@ -353,20 +373,28 @@ class ResonanceSearch:
             kernels.node_history(self.u[i0:i1], self.basis.decay, self.basis.gain, zeta, self._hist[i0:i1])
             yield
 
-    def _grid(self, stride: int) -> Generator:
+    def _grid_frequencies(self) -> np.ndarray:
+        """The grid's natural frequencies: log-spaced from one over the cost's span to 0.3 fs."""
         h = self.basis.h
         span = max(self.u.size - self.lead, 2) * h
         f_hi = 0.3 / h
         f_lo = min(max(1.0 / span, 1e-3), f_hi / 16)
+        return grid_frequencies(f_lo, f_hi)
+
+    def _grid(self, stride: int) -> Generator:
+        """Every grid point's projected cost, in units; returns the starts (alpha, fn, zeta) of the REFINE best
+        points in distinct basins (``_distinct_picks``)."""
         found = []
+        costs = np.empty(len(self.alphas) * GRID_FREQS * len(GRID_ZETA))
         for alpha in self.alphas:
-            for fn in np.geomspace(f_lo, f_hi, GRID_FREQS):
+            for fn in self._freqs:
                 wn = 2 * math.pi * fn
                 for z in GRID_ZETA:
                     a1, a2 = 2 * z / wn, 1 / wn**2
                     cost, _, _ = yield from self._evaluate(alpha, a1, a2, stride)
-                    found.append((cost, alpha, fn, z))
-        return found
+                    costs[len(found)] = cost
+                    found.append((alpha, fn, z))
+        return [found[i] for i in _distinct_picks(costs, self._freqs, _GRID_ZETAS, REFINE).tolist()]
 
     def _refine(self, alpha: float, fn: float, z: float, stride: int) -> Generator:
         """Pattern search in (ln alpha, ln fn, ln zeta) from a start; returns (cost, alpha, fn, zeta).
@@ -452,14 +480,11 @@ class ResonanceSearch:
         coarse = max(1, n // COARSE_ROWS)
         fine = max(1, n // FINE_ROWS)
         if self.starts is None:
-            found = yield from self._grid(coarse)
-            found.sort(key=lambda r: r[0])
-            starts = _distinct(found, REFINE)
+            kept = yield from self._grid(coarse)     # (distinct resonances: no two in one basin)
         else:
-            starts = list(self.starts)
-        for alpha, a1, a2 in self.extra:
-            starts.append((alpha, 1 / (2 * math.pi * math.sqrt(a2)), a1 / (2 * math.sqrt(a2))))
-        for alpha, fn, z in _unique(starts):
+            kept = _unique(list(self.starts))
+        extra = [(alpha, 1 / (2 * math.pi * math.sqrt(a2)), a1 / (2 * math.sqrt(a2))) for alpha, a1, a2 in self.extra]
+        for alpha, fn, z in _unique(extra, kept):
             cand = yield from self._refine(alpha, fn, z, fine)
             self.candidates.append(cand)
         self.candidates.sort(key=lambda r: r[0])
@@ -471,6 +496,7 @@ class ResonanceSearch:
                                    cost=float(cost))
 
 
+@njit(cache=True)
 def _same_resonance(fn: float, z: float, fn2: float, z2: float) -> bool:
     """Neighbouring resonances: fn within 35 %, zeta within a factor 1.65 (about the grid's spacing)."""
     return abs(math.log(fn / fn2)) <= 0.3 and abs(math.log(z / z2)) <= 0.5
@@ -484,23 +510,34 @@ def _same_basin(p: tuple, q: tuple) -> bool:
     return _same_resonance(p[1], p[2], q[1], q[2]) and abs(math.log(p[0] / q[0])) <= 0.1
 
 
-def _distinct(found: list, count: int) -> list:
-    """The best grid points whose resonance is not a neighbour of a better one's (different basins)."""
-    out: list = []
-    for cost, alpha, fn, z in found:
-        if not math.isfinite(cost):
+@njit(cache=True)
+def _distinct_picks(costs: np.ndarray, freqs: np.ndarray, zetas: np.ndarray, count: int) -> np.ndarray:
+    """Indices of the best grid points whose resonance is not a neighbour of a better one's (different basins),
+    best first, at most ``count``; the points in ``_grid``'s order (alpha, then fn, then zeta), ranked by a
+    stable sort of their costs. One kernel: in Python the sort and the comparisons cost ~100 us cold in the
+    update() that ends the grid."""
+    nz, nf = zetas.shape[0], freqs.shape[0]
+    picks = np.empty(count, dtype=np.int64)
+    m = 0
+    for i in np.argsort(costs, kind="mergesort"):
+        if m == count or not math.isfinite(costs[i]):
             break
-        if not any(_same_resonance(fn, z, f2, z2) for _, f2, z2 in out):
-            out.append((alpha, fn, z))
-        if len(out) == count:
-            break
-    return [(a, f, z) for a, f, z in out]
+        fn, z = freqs[(i // nz) % nf], zetas[i % nz]
+        near = False
+        for k in range(m):
+            j = picks[k]
+            near = near or _same_resonance(fn, z, freqs[(j // nz) % nf], zetas[j % nz])
+        if not near:
+            picks[m] = i
+            m += 1
+    return picks[:m]
 
 
-def _unique(starts: list) -> list:
-    """Starts without the repeats: after a first search its refined candidates often coincide (measured:
-    three identical starts, each refined for 78000 units on a 2 s buffer)."""
-    out: list = []
+def _unique(starts: list, kept: list | tuple = ()) -> list:
+    """``kept`` (no two in one basin), then the starts without the repeats: after a first search its refined
+    candidates often coincide (measured: three identical starts, each refined for 78000 units on a 2 s
+    buffer)."""
+    out: list = list(kept)
     for s in starts:
         if not any(_same_basin(s, o) for o in out):
             out.append(s)
