@@ -266,6 +266,8 @@ class OnlineEstimator(StoredParams):
         self._catchup = 0
         # the window trackers for a stream from rest and one taken in operation, built now (``WindowTracker.start``)
         self._spares = {} if self._recursive else {free: self._window_tracker(free) for free in (False, True)}
+        #: the catch-up's status buffer (``_catch_up``), allocated ahead for the window trackers
+        self._status = np.empty(max([t.feed_chunk for t in self._spares.values()] or [0]), dtype=np.int64)
         return self
 
     def freeze(self) -> None:
@@ -567,9 +569,8 @@ class OnlineEstimator(StoredParams):
             drift=DRIFT_COLUMNS if self.track_drift else 0)
 
     def _start_tracker(self, res) -> None:
-        theta = np.array([res.alpha, math.log(res.a1), math.log(res.a2), res.b, res.c])
         lo, hi = (float(v) for v in self.alpha_bounds)
-        theta[0] = min(max(theta[0], lo), hi)
+        theta = np.array([min(max(res.alpha, lo), hi), math.log(res.a1), math.log(res.a2), res.b, res.c])
         if self._recursive:
             self._tracker = RecursiveTracker(
                 self.basis, theta, window_s=self.window_s, free=bool(self._u_ref), gate=0.0, burst=self._burst,
@@ -590,7 +591,9 @@ class OnlineEstimator(StoredParams):
         """Feed the buffer into the new tracker, a few samples per unit, then go live (gate open)."""
         tr = self._tracker
         per_unit = tr.feed_chunk
-        status = np.empty(per_unit, dtype=np.int64)
+        if self._status.size < per_unit:
+            self._status = np.empty(per_unit, dtype=np.int64)
+        status = self._status
         while units > 0 and self._replayed < self._nbuf:
             units -= 1
             k = self._replayed

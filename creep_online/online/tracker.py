@@ -291,20 +291,33 @@ class WindowTracker(ParameterView):
         self._allocate_work()
         self._theta_at: dict[int, np.ndarray] = {}
         self._monitors = (gate, burst, stuck)
+        self._blank: tuple | None = None
         self.start(theta)
+        self._blank = self._blank_state()
 
     def start(self, theta: np.ndarray) -> None:
         """Linearize at ``theta`` and start from empty statistics: the part of the construction that needs the
         estimate. The rest (``__init__``: allocations, ~0.3-0.4 ms with cold caches) can run before the estimate
         is known: ``OnlineEstimator`` builds its trackers before the stream, so the update() that ends the
-        start-up search does not pay it (it was the max of every latency run since f4dc43e)."""
+        start-up search does not pay it (it was the max of every latency run since f4dc43e). Of the fresh
+        state, only the linearization point and theta's coefficients are set here (one kernel,
+        ``window.start_at``): the rest was built ahead (``_blank_state``)."""
+        st, S, views = self._blank or self._blank_state()
+        self._blank = None
         self.theta[:] = 0.0
         self.theta[:len(theta)] = theta
         self.fit = Fit(theta=self.theta.copy())
+        W.start_at(self.theta, st, self.a1, self.a2, self.basis.lam, self.basis.dx)
+        self._adopt(st, S, views)
+        self._schedule()
+
+    def _blank_state(self) -> tuple:
+        """A fresh state array (linearized at the current estimate), its empty statistics and their views, with the
+        monitors set: ``start`` re-linearizes it at its theta. Built ahead: the numpy calls from Python here
+        cost ~80 us cold in the update() that ends the start-up search."""
         st, S = self._fresh(self.a1, self.a2)
         W.set_monitors(st[:W.SC_SIZE], self.h, *self._monitors)
-        self._install(st, S)
-        self._schedule()
+        return st, S, self._views(st)
 
     @property
     def b_rate(self) -> float:
@@ -366,17 +379,21 @@ class WindowTracker(ParameterView):
         return st, np.zeros((self.p, self.p))
 
     def _install(self, st: np.ndarray, S: np.ndarray) -> None:
+        """Make (st, S) the live state and statistics, with theta's coefficients."""
+        W.set_estimate(self.theta, st, self.basis.lam, self.basis.dx)
+        self._adopt(st, S, self._views(st))
+
+    def _views(self, st: np.ndarray) -> tuple:
+        """The parts of a state array: sc, phi, m, sy, co, ztail, md."""
         lay = self.lay
+        return (st[:W.SC_SIZE], st[lay["phi"]:lay["m"]], st[lay["m"]:lay["sy"]], st[lay["sy"]:lay["co"]],
+                st[lay["co"]:lay["ztail"]], st[lay["ztail"]:lay["md"]], st[lay["md"]:lay["size"]])
+
+    def _adopt(self, st: np.ndarray, S: np.ndarray, views: tuple) -> None:
+        """Make (st, S) with their ``views`` the live state and statistics (their coefficients already set)."""
         self.st, self.S = st, S
-        self.sc = st[:W.SC_SIZE]
-        self.phi = st[lay["phi"]:lay["m"]]
-        self.m = st[lay["m"]:lay["sy"]]
-        self.sy = st[lay["sy"]:lay["co"]]
-        self.co = st[lay["co"]:lay["ztail"]]
-        self.ztail = st[lay["ztail"]:lay["md"]]
-        self.md = st[lay["md"]:lay["size"]]
+        self.sc, self.phi, self.m, self.sy, self.co, self.ztail, self.md = views
         self.a1l, self.a2l = float(st[W.SC_A1L]), float(st[W.SC_A2L])
-        self._coefficients()
         self._snaps = []
 
     def _coefficients(self) -> None:

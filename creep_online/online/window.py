@@ -527,18 +527,36 @@ def start_state(st: np.ndarray, lay: dict, decay: np.ndarray, gain: np.ndarray, 
     st[SC_NM] = n_free
     st[SC_G] = 1.0
     st[SC_FORGET] = forget
-    st[SC_A1L] = a1l
-    st[SC_A2L] = a2l
     st[SC_H] = h
     st[SC_NR] = n_rate
     co = st[lay["co"]:lay["ztail"]]
     co[:q] = decay
     co[q:2 * q] = gain
-    resonance_coefficients(a1l, a2l, h, co[2 * q:2 * q + 18])
     co[2 * q + 18:] = free_decay
+    linearize(st, a1l, a2l)
     phi = st[lay["phi"]:lay["m"]]
     phi[q + ONE] = 1.0
     phi[q + FREE:q + FREE + n_free] = 1.0
+
+
+@njit(cache=CACHE)
+def linearize(st: np.ndarray, a1l: float, a2l: float) -> None:
+    """A fresh state array's linearization point (a1l, a2l) and its resonance coefficients (``start_state``'s
+    part that depends on the estimate)."""
+    q = int(st[SC_NQ])
+    p = q + FREE + int(st[SC_NM]) + int(st[SC_NR])
+    co = SC_SIZE + 3 * p + 2 * q
+    st[SC_A1L] = a1l
+    st[SC_A2L] = a2l
+    resonance_coefficients(a1l, a2l, st[SC_H], st[co:co + 18])
+
+
+@njit(cache=CACHE)
+def start_at(theta: np.ndarray, st: np.ndarray, a1l: float, a2l: float, lam: np.ndarray, dx: float) -> None:
+    """A fresh state array linearized at (a1l, a2l) with theta's coefficients (``linearize``, ``set_estimate``):
+    one kernel for the tracker's start, in the update() that ends the start-up search."""
+    linearize(st, a1l, a2l)
+    set_estimate(theta, st, lam, dx)
 
 
 def set_monitors(sc: np.ndarray, h: float, gate: float, burst: int, stuck: int) -> None:
