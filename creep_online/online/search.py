@@ -255,6 +255,21 @@ def _projected(acc: np.ndarray) -> tuple[float, float, float]:
     return (max(cost, 0.0) / n if math.isfinite(cost) else math.inf), b, c
 
 
+class SearchScratch:
+    """One search's small work arrays, allocated ahead by the searches' owner (the estimator, a tracker) for one
+    search at a time: a search is built inside update(), where each numpy allocation from cold Python costs
+    a few microseconds."""
+
+    def __init__(self, q: int) -> None:
+        self.v = np.empty(q + 2)       # a candidate's model coefficients and their alpha-derivatives
+        self.dv = np.empty(q + 2)
+        self.rc = np.empty(6)          # its resonance step
+        self.vz = np.empty(q)          # its node coefficients
+        self.x = np.zeros(2)           # the resonance states
+        self.acc = np.zeros(6)         # the projected cost's sums
+        self.zeta = np.empty(q)        # the node states (``_history``)
+
+
 class ResonanceSearch:
     """Resumable global search on a buffer (input deviations u, outputs y; NaN = unusable).
 
@@ -265,16 +280,18 @@ class ResonanceSearch:
     ``extra`` are (alpha, a1, a2) candidates to refine besides the grid's;
     ``alphas`` are added to the grid's creep exponents (a user's hint);
     ``starts`` (alpha, fn, zeta) replace the grid (a longer window after a first search);
-    ``fixed_alpha`` searches the resonance only (after a detected change).
+    ``fixed_alpha`` searches the resonance only (after a detected change). ``scratch``: the small work
+    arrays (``SearchScratch``; a search's own when None).
     """
 
     def __init__(self, basis: SoeBasis, u: np.ndarray, y: np.ndarray, zeta0: np.ndarray | None = None,
                  lead: int = 0, extra: tuple = (), alphas: tuple = (), work: np.ndarray | None = None,
-                 starts: list | None = None, fixed_alpha: float | None = None) -> None:
+                 starts: list | None = None, fixed_alpha: float | None = None,
+                 scratch: SearchScratch | None = None) -> None:
         self.basis = basis
         self.u = np.ascontiguousarray(u, dtype=float)
         self.y = np.ascontiguousarray(y, dtype=float)
-        self.zeta0 = np.zeros(basis.size) if zeta0 is None else np.array(zeta0, dtype=float)
+        self.zeta0 = zeta0               # (None: zero; copied by ``_history``)
         self.lead = int(lead)
         self.extra = tuple(extra)
         self.starts = starts             # (alpha, fn, zeta) to refine instead of running the grid
@@ -287,12 +304,10 @@ class ResonanceSearch:
             self._hist = work[:self.u.size]     # a pre-faulted buffer: no page faults in update()
         else:
             self._hist = np.empty((self.u.size, basis.size))
-        self._v = np.empty(basis.size + 2)
-        self._dv = np.empty(basis.size + 2)
-        self._rc = np.empty(6)
-        self._vz = np.empty(basis.size)     # one candidate at a time: its node coefficients, states, sums
-        self._x = np.zeros(2)
-        self._acc = np.zeros(6)
+        sc = scratch if scratch is not None else SearchScratch(basis.size)
+        # one candidate at a time: its node coefficients, states, sums
+        self._v, self._dv, self._rc, self._vz, self._x, self._acc = sc.v, sc.dv, sc.rc, sc.vz, sc.x, sc.acc
+        self._zeta = sc.zeta
         #: the grid's frequencies, computed here: this unit has no other work (none with ``starts``)
         self._freqs = self._grid_frequencies() if starts is None else None
         self._gen = self._run()
@@ -366,11 +381,12 @@ class ResonanceSearch:
         return _projected(acc)
 
     def _history(self) -> Generator:
-        zeta = self.zeta0.copy()
+        zeta = self._zeta
+        zeta[:] = 0.0 if self.zeta0 is None else self.zeta0
         chunk = max(16, UNIT_WORK // self.basis.size)
         for i0 in range(0, self.u.size, chunk):
             i1 = min(i0 + chunk, self.u.size)
-            kernels.node_history(self.u[i0:i1], self.basis.decay, self.basis.gain, zeta, self._hist[i0:i1])
+            kernels.node_history(self.u, self.basis.decay, self.basis.gain, zeta, self._hist, i0, i1)
             yield
 
     def _grid_frequencies(self) -> np.ndarray:
