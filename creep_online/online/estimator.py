@@ -46,7 +46,7 @@ from ..errors import DataError
 from ..model import ONLINE_ALPHA_BOUNDS, ONLINE_REFITS, CreepModel
 from . import refit as RF
 from . import window as W
-from .search import ResonanceSearch
+from .search import ResonanceSearch, SearchScratch
 from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SOE_TOP, SoeBasis
 from . import recursive as R
 from .recursive import RecursiveTracker
@@ -259,6 +259,7 @@ class OnlineEstimator(StoredParams):
         self._burst = max(2, int(round(self.burst_s / h)))
         self._t_need = max(0.05, 200 * h)
         self._search: ResonanceSearch | None = None
+        self._search_scratch = SearchScratch(self.basis.size)
         self._search_rounds = 0
         self._tc_used = 0.0
         self._tracker: WindowTracker | RecursiveTracker | None = None
@@ -539,7 +540,7 @@ class OnlineEstimator(StoredParams):
         starts = [c[1:] for c in prev.candidates] if prev is not None and prev.candidates else None
         alphas = () if self.alpha0 is None else (float(self.alpha0),)
         self._search = ResonanceSearch(self.basis, self._bu[start:end], self._by[start:end], alphas=alphas,
-                                       work=self._hist_work, starts=starts)
+                                       work=self._hist_work, starts=starts, scratch=self._search_scratch)
         self._tc_used = (end - start) * self._h
         self._phase = "searching"
 
@@ -598,7 +599,7 @@ class OnlineEstimator(StoredParams):
             units -= 1
             k = self._replayed
             n = min(per_unit, self._nbuf - k)
-            used = tr.feed_block(self._bu[k:k + n], self._by[k:k + n], status[:n])
+            used = tr.feed_block(self._bu, self._by, status, k, k + n)
             self._replayed += used
             if tr._jobs and units > 0:     # the tracker's own jobs share the budget
                 units -= 1

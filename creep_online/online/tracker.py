@@ -40,7 +40,7 @@ import numpy as np
 
 from . import refit as RF
 from . import window as W
-from .search import ResonanceSearch
+from .search import ResonanceSearch, SearchScratch
 from .soe import SoeBasis
 
 #: Relative move of a1 or a2 from the linearization point that triggers a replay.
@@ -304,12 +304,10 @@ class WindowTracker(ParameterView):
         ``window.start_at``): the rest was built ahead (``_blank_state``)."""
         st, S, views = self._blank or self._blank_state()
         self._blank = None
-        self.theta[:] = 0.0
-        self.theta[:len(theta)] = theta
+        W.start_at(np.asarray(theta, dtype=float), self.theta, st, self.basis.lam, self.basis.dx)
         self.fit = Fit(theta=self.theta.copy())
-        W.start_at(self.theta, st, self.a1, self.a2, self.basis.lam, self.basis.dx)
         self._adopt(st, S, views)
-        self._schedule()
+        self._set_due()                    # (``_schedule`` at sample 0: no re-fit or test is due yet)
 
     def _blank_state(self) -> tuple:
         """A fresh state array (linearized at the current estimate), its empty statistics and their views, with the
@@ -369,6 +367,7 @@ class WindowTracker(ParameterView):
                             for _ in range(SNAP_SLOTS)]
         self._snap_next = 0
         self._replay_work = W.replay_scratch(p)     # (a replay's unit leaves nothing in it: shared by the jobs)
+        self._search_scratch = SearchScratch(self.q)   # (one search at a time: ``_researching``)
 
     def _fresh(self, a1l: float, a2l: float) -> tuple[np.ndarray, np.ndarray]:
         """Empty statistics and zero states for a linearization point (weight 1)."""
@@ -415,9 +414,10 @@ class WindowTracker(ParameterView):
             self._schedule()
         return status
 
-    def feed_block(self, u: np.ndarray, y: np.ndarray, status: np.ndarray) -> int:
-        """Samples up to the next scheduled job or shift; returns how many were consumed."""
-        used = W.block(u, y, self.st, self.S, self.ring, status)
+    def feed_block(self, u: np.ndarray, y: np.ndarray, status: np.ndarray, start: int = 0, stop: int = -1) -> int:
+        """Samples ``start`` to ``stop`` (-1: the end) up to the next scheduled job or shift; returns how many
+        were consumed."""
+        used = W.block(u, y, self.st, self.S, self.ring, status, start, stop)
         if status[used - 1] >= 8:
             self._schedule()
         return used
@@ -862,7 +862,7 @@ class WindowTracker(ParameterView):
             # before the test confirms it, and the grid's best basin can be a wrong one
             search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, fixed_alpha=self.alpha,
                                      work=self.work_memory, extra=((self.alpha, self.a1, self.a2),),
-                                     starts=starts)
+                                     starts=starts, scratch=self._search_scratch)
             yield
             yield from self._run_search(search)
             # each pass's result is reported as soon as it is clearly better than the live estimate; a
@@ -971,7 +971,7 @@ class WindowTracker(ParameterView):
         search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, work=self.work_memory,
                                  fixed_alpha=self.alpha if self.window_start and self._alpha_known else None,
                                  alphas=(self.alpha,),
-                                 extra=((self.alpha, self.a1, self.a2),))
+                                 extra=((self.alpha, self.a1, self.a2),), scratch=self._search_scratch)
         yield
         yield from self._run_search(search)
         r = search.result

@@ -552,10 +552,13 @@ def linearize(st: np.ndarray, a1l: float, a2l: float) -> None:
 
 
 @njit(cache=CACHE)
-def start_at(theta: np.ndarray, st: np.ndarray, a1l: float, a2l: float, lam: np.ndarray, dx: float) -> None:
-    """A fresh state array linearized at (a1l, a2l) with theta's coefficients (``linearize``, ``set_estimate``):
-    one kernel for the tracker's start, in the update() that ends the start-up search."""
-    linearize(st, a1l, a2l)
+def start_at(values: np.ndarray, theta: np.ndarray, st: np.ndarray, lam: np.ndarray, dx: float) -> None:
+    """theta = ``values`` padded with zeros, and a fresh state array linearized at its resonance with its
+    coefficients (``linearize``, ``set_estimate``): one kernel for the tracker's start, in the update() that
+    ends the start-up search (numba's exp is libm's, as math.exp)."""
+    theta[:] = 0.0
+    theta[:values.shape[0]] = values
+    linearize(st, math.exp(theta[1]), math.exp(theta[2]))
     set_estimate(theta, st, lam, dx)
 
 
@@ -773,14 +776,16 @@ def _rescale(S: np.ndarray, sy: np.ndarray, sc: np.ndarray, factor: float) -> No
 
 @njit(cache=CACHE)
 def block(u: np.ndarray, y: np.ndarray, st: np.ndarray, S: np.ndarray, ring: np.ndarray,
-          status: np.ndarray) -> int:
-    """Samples until the end or due work (flag 8); returns how many were consumed."""
-    for k in range(u.shape[0]):
+          status: np.ndarray, start: int = 0, stop: int = -1) -> int:
+    """Samples ``start`` to ``stop`` (-1: the end) until due work (flag 8), their statuses from status[0];
+    returns how many were consumed. (A range, not slices: the start-up replay calls it from cold Python.)"""
+    end = u.shape[0] if stop < 0 else stop
+    for k in range(start, end):
         s = sample(u[k], y[k], st, S, ring)
-        status[k] = s
+        status[k - start] = s
         if s >= 8:
-            return k + 1
-    return u.shape[0]
+            return k - start + 1
+    return end - start
 
 
 @njit(cache=CACHE)
