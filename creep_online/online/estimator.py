@@ -46,7 +46,7 @@ from ..errors import DataError
 from ..model import ONLINE_ALPHA_BOUNDS, ONLINE_REFITS, CreepModel
 from . import refit as RF
 from . import window as W
-from .search import ResonanceSearch, SearchScratch
+from .search import ResonanceSearch, SearchScratch, frequency_steps, grid_ends
 from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SOE_TOP, SoeBasis
 from . import recursive as R
 from .recursive import RecursiveTracker
@@ -260,6 +260,7 @@ class OnlineEstimator(StoredParams):
         self._t_need = max(0.05, 200 * h)
         self._search: ResonanceSearch | None = None
         self._search_scratch = SearchScratch(self.basis.size)
+        self._grid_plan: list | None = None     # [rows, steps, frequencies]: ``_plan_grid``
         self._search_rounds = 0
         self._tc_used = 0.0
         self._tracker: WindowTracker | RecursiveTracker | None = None
@@ -520,6 +521,7 @@ class OnlineEstimator(StoredParams):
         """Buffering and searching: start the search when ready, give it ``units``, build the tracker."""
         if self._phase == "buffering":
             if not self._ready_to_search():
+                self._plan_grid()
                 return
             self._start_search()
             units -= 1
@@ -533,14 +535,38 @@ class OnlineEstimator(StoredParams):
         if self._catchup:
             self._catch_up(max(units, 1))
 
-    def _start_search(self) -> None:
+    def _search_span(self, nbuf: int) -> tuple[int, int]:
+        """(start, end) in the buffer of the search that starts with ``nbuf`` samples buffered."""
         start = 0 if self._u_ref else max(0, self._first_change - 1)
-        end = min(self._nbuf, start + MAX_SEARCH_SAMPLES)
+        return start, min(nbuf, start + MAX_SEARCH_SAMPLES)
+
+    def _plan_grid(self) -> None:
+        """On an idle buffering call, one step of the grid frequencies of the search that starts when the buffer
+        is ready (``search.frequency_steps``, a few numpy calls): that search's first unit (its construction)
+        then does not compute them (~35 us of cold numpy). Only the first search has a grid (later ones refine
+        its candidates); the plan is used only if its rows are the search's (``_start_search``)."""
+        plan = self._grid_plan
+        if self._first_change is None or self._search is not None or plan is not None and plan[2] is not None:
+            return
+        if plan is None:
+            start, end = self._search_span(self._first_change + math.ceil(self._t_search() / self._h))
+            self._grid_plan = [end - start, frequency_steps(*grid_ends(end - start, self._h)), None]
+            return
+        try:
+            next(plan[1])
+        except StopIteration as done:
+            plan[2] = done.value
+
+    def _start_search(self) -> None:
+        start, end = self._search_span(self._nbuf)
         prev = self._search
         starts = [c[1:] for c in prev.candidates] if prev is not None and prev.candidates else None
         alphas = () if self.alpha0 is None else (float(self.alpha0),)
+        plan, self._grid_plan = self._grid_plan, None
+        freqs = plan[2] if plan is not None and plan[0] == end - start else None
         self._search = ResonanceSearch(self.basis, self._bu[start:end], self._by[start:end], alphas=alphas,
-                                       work=self._hist_work, starts=starts, scratch=self._search_scratch)
+                                       work=self._hist_work, starts=starts, scratch=self._search_scratch,
+                                       freqs=freqs)
         self._tc_used = (end - start) * self._h
         self._phase = "searching"
 

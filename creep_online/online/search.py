@@ -217,21 +217,41 @@ def _prepare(alpha: float, a1: float, a2: float, lam: np.ndarray, dx: float, h: 
     return v[q], v[q + 1]
 
 
+def grid_ends(rows: int, h: float) -> tuple[float, float]:
+    """The grid's lowest and highest natural frequencies for a cost over ``rows`` samples: one over their span
+    (at least 1e-3 Hz, at most a sixteenth of the highest) and 0.3 fs."""
+    span = max(rows, 2) * h
+    f_hi = 0.3 / h
+    return min(max(1.0 / span, 1e-3), f_hi / 16), f_hi
+
+
+def frequency_steps(f_lo: float, f_hi: float) -> Generator:
+    """``grid_frequencies`` in three steps of a few numpy calls each (for calls with nothing else to do:
+    ``OnlineEstimator`` computes the start-up search's ahead); the generator's return value is the array."""
+    ls, le = float(np.log10(f_lo)), float(np.log10(f_hi))
+    yield
+    step = (le - ls) / (GRID_FREQS - 1)
+    freqs = np.power(10.0, [i * step + ls for i in range(GRID_FREQS - 1)] + [le])
+    yield
+    freqs[0] = f_lo
+    freqs[-1] = f_hi
+    return freqs
+
+
 def grid_frequencies(f_lo: float, f_hi: float) -> np.ndarray:
-    """``np.geomspace(f_lo, f_hi, GRID_FREQS)`` bit for bit, in three numpy calls.
+    """``np.geomspace(f_lo, f_hi, GRID_FREQS)`` bit for bit, in three numpy calls (``frequency_steps``).
 
     The same operations as numpy's own (log10 of the ends, the linspace between them, ``power(10, .)``,
     the ends put back), with numpy's log10 and power: their SIMD loops differ from ``math``'s in the last
     bit. ``np.geomspace`` itself runs ~100 lines of numpy's Python: 60-130 us cold inside update(),
     once per creep exponent of the grid before.
     """
-    ls, le = float(np.log10(f_lo)), float(np.log10(f_hi))
-    step = (le - ls) / (GRID_FREQS - 1)
-    y = [i * step + ls for i in range(GRID_FREQS - 1)] + [le]
-    freqs = np.power(10.0, y)
-    freqs[0] = f_lo
-    freqs[-1] = f_hi
-    return freqs
+    steps = frequency_steps(f_lo, f_hi)
+    try:
+        while True:
+            next(steps)
+    except StopIteration as done:
+        return done.value
 
 
 def _projected(acc: np.ndarray) -> tuple[float, float, float]:
@@ -281,13 +301,14 @@ class ResonanceSearch:
     ``alphas`` are added to the grid's creep exponents (a user's hint);
     ``starts`` (alpha, fn, zeta) replace the grid (a longer window after a first search);
     ``fixed_alpha`` searches the resonance only (after a detected change). ``scratch``: the small work
-    arrays (``SearchScratch``; a search's own when None).
+    arrays (``SearchScratch``; a search's own when None). ``freqs``: the grid's frequencies computed ahead
+    for this search's rows (``grid_frequencies`` of ``grid_ends(len(u) - lead, h)``; None: computed here).
     """
 
     def __init__(self, basis: SoeBasis, u: np.ndarray, y: np.ndarray, zeta0: np.ndarray | None = None,
                  lead: int = 0, extra: tuple = (), alphas: tuple = (), work: np.ndarray | None = None,
                  starts: list | None = None, fixed_alpha: float | None = None,
-                 scratch: SearchScratch | None = None) -> None:
+                 scratch: SearchScratch | None = None, freqs: np.ndarray | None = None) -> None:
         self.basis = basis
         self.u = np.ascontiguousarray(u, dtype=float)
         self.y = np.ascontiguousarray(y, dtype=float)
@@ -309,7 +330,7 @@ class ResonanceSearch:
         self._v, self._dv, self._rc, self._vz, self._x, self._acc = sc.v, sc.dv, sc.rc, sc.vz, sc.x, sc.acc
         self._zeta = sc.zeta
         #: the grid's frequencies, computed here: this unit has no other work (none with ``starts``)
-        self._freqs = self._grid_frequencies() if starts is None else None
+        self._freqs = None if starts is not None else freqs if freqs is not None else self._grid_frequencies()
         self._gen = self._run()
 
     def step(self) -> bool:
@@ -391,11 +412,7 @@ class ResonanceSearch:
 
     def _grid_frequencies(self) -> np.ndarray:
         """The grid's natural frequencies: log-spaced from one over the cost's span to 0.3 fs."""
-        h = self.basis.h
-        span = max(self.u.size - self.lead, 2) * h
-        f_hi = 0.3 / h
-        f_lo = min(max(1.0 / span, 1e-3), f_hi / 16)
-        return grid_frequencies(f_lo, f_hi)
+        return grid_frequencies(*grid_ends(self.u.size - self.lead, self.basis.h))
 
     def _grid(self, stride: int) -> Generator:
         """Every grid point's projected cost, in units; returns the starts (alpha, fn, zeta) of the REFINE best
