@@ -554,9 +554,10 @@ def test_grid_frequencies_equal_numpy_geomspace_bit_for_bit():
 
 
 def test_distinct_picks_equal_a_stable_sort_then_the_neighbour_rule():
-    """The grid's picks (one kernel) are those of the plain rule: points in a stable sort by cost (ties keep the
-    grid's order, non-finite costs end the list), each kept unless its resonance neighbours a better pick's."""
-    from creep_online.online.search import _GRID_ZETAS, GRID_FREQS, REFINE, _distinct_picks, _same_resonance, \
+    """The grid's ranking (one insertion per point) is a stable sort by cost, and its picks are those of the plain
+    rule: points in that order (ties keep the grid's order, non-finite costs end the list), each kept unless its
+    resonance neighbours a better pick's."""
+    from creep_online.online.search import _GRID_ZETAS, GRID_FREQS, REFINE, _distinct_picks, _rank, _same_resonance, \
         grid_frequencies
     rng = np.random.default_rng(5)
     freqs = grid_frequencies(20.0, 3000.0)
@@ -573,7 +574,12 @@ def test_distinct_picks_equal_a_stable_sort_then_the_neighbour_rule():
             if not any(_same_resonance(*point, freqs[(j // _GRID_ZETAS.size) % GRID_FREQS],
                                        _GRID_ZETAS[j % _GRID_ZETAS.size]) for j in picks):
                 picks.append(i)
-        assert _distinct_picks(costs, freqs, _GRID_ZETAS, REFINE).tolist() == picks
+        mine, ranked = np.empty(REFINE, dtype=np.int64), np.empty(n, dtype=np.int64)
+        kept = costs.copy()
+        for i in range(n):
+            _rank(kept[i], i, costs, ranked)
+        assert ranked.tolist() == sorted(range(n), key=lambda i: kept[i])
+        assert mine[:_distinct_picks(costs, ranked, freqs, _GRID_ZETAS, mine)].tolist() == picks
 
 
 def test_a_search_on_shared_scratch_equals_one_on_its_own():

@@ -418,16 +418,18 @@ class ResonanceSearch:
         """Every grid point's projected cost, in units; returns the starts (alpha, fn, zeta) of the REFINE best
         points in distinct basins (``_distinct_picks``)."""
         found = []
-        costs = np.empty(len(self.alphas) * GRID_FREQS * len(GRID_ZETA))
+        size = len(self.alphas) * GRID_FREQS * len(GRID_ZETA)
+        costs, ranked, picks = np.empty(size), np.empty(size, dtype=np.int64), np.empty(REFINE, dtype=np.int64)
         for alpha in self.alphas:
             for fn in self._freqs:
                 wn = 2 * math.pi * fn
                 for z in GRID_ZETA:
                     a1, a2 = 2 * z / wn, 1 / wn**2
                     cost, _, _ = yield from self._evaluate(alpha, a1, a2, stride)
-                    costs[len(found)] = cost
+                    _rank(cost, len(found), costs, ranked)
                     found.append((alpha, fn, z))
-        return [found[i] for i in _distinct_picks(costs, self._freqs, _GRID_ZETAS, REFINE).tolist()]
+        m = _distinct_picks(costs, ranked, self._freqs, _GRID_ZETAS, picks)
+        return [found[i] for i in picks.tolist()[:m]]
 
     def _refine(self, alpha: float, fn: float, z: float, stride: int) -> Generator:
         """Pattern search in (ln alpha, ln fn, ln zeta) from a start; returns (cost, alpha, fn, zeta).
@@ -544,15 +546,33 @@ def _same_basin(p: tuple, q: tuple) -> bool:
 
 
 @njit(cache=True)
-def _distinct_picks(costs: np.ndarray, freqs: np.ndarray, zetas: np.ndarray, count: int) -> np.ndarray:
-    """Indices of the best grid points whose resonance is not a neighbour of a better one's (different basins),
-    best first, at most ``count``; the points in ``_grid``'s order (alpha, then fn, then zeta), ranked by a
-    stable sort of their costs. One kernel: in Python the sort and the comparisons cost ~100 us cold in the
-    update() that ends the grid."""
+def _rank(cost: float, i: int, costs: np.ndarray, ranked: np.ndarray) -> None:
+    """Grid point i's cost into ``costs`` and its index into ``ranked`` (points 0..i-1 by cost, ties in the
+    grid's order: a stable sort, one insertion per point as the grid runs)."""
+    costs[i] = cost
+    lo, hi = 0, i
+    while lo < hi:                     # the first ranked point that costs more
+        mid = (lo + hi) // 2
+        if costs[ranked[mid]] <= cost:
+            lo = mid + 1
+        else:
+            hi = mid
+    for k in range(i, lo, -1):
+        ranked[k] = ranked[k - 1]
+    ranked[lo] = i
+
+
+@njit(cache=True)
+def _distinct_picks(costs: np.ndarray, ranked: np.ndarray, freqs: np.ndarray, zetas: np.ndarray,
+                    picks: np.ndarray) -> int:
+    """The best grid points whose resonance is not a neighbour of a better one's (different basins), best first,
+    into ``picks`` (at most its size); returns their count. The points are in ``_grid``'s order (alpha, then fn,
+    then zeta), ``ranked`` by cost (``_rank``). One kernel: in Python the sort and the comparisons cost ~100 us
+    cold in the update() that ends the grid, and a sort here ~45 us."""
     nz, nf = zetas.shape[0], freqs.shape[0]
-    picks = np.empty(count, dtype=np.int64)
+    count = picks.shape[0]
     m = 0
-    for i in np.argsort(costs, kind="mergesort"):
+    for i in ranked:
         if m == count or not math.isfinite(costs[i]):
             break
         fn, z = freqs[(i // nz) % nf], zetas[i % nz]
@@ -563,7 +583,7 @@ def _distinct_picks(costs: np.ndarray, freqs: np.ndarray, zetas: np.ndarray, cou
         if not near:
             picks[m] = i
             m += 1
-    return picks[:m]
+    return m
 
 
 def _unique(starts: list, kept: list | tuple = ()) -> list:
