@@ -579,7 +579,7 @@ def test_distinct_picks_equal_a_stable_sort_then_the_neighbour_rule():
         for i in range(n):
             _rank(kept[i], i, costs, ranked)
         assert ranked.tolist() == sorted(range(n), key=lambda i: kept[i])
-        assert mine[:_distinct_picks(costs, ranked, freqs, _GRID_ZETAS, mine)].tolist() == picks
+        assert mine[:_distinct_picks(costs, ranked, n, freqs, _GRID_ZETAS, mine)].tolist() == picks
 
 
 def test_a_search_on_shared_scratch_equals_one_on_its_own():

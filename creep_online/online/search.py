@@ -281,6 +281,10 @@ class SearchScratch:
     a few microseconds."""
 
     def __init__(self, q: int) -> None:
+        points = (len(GRID_ALPHA) + 1) * GRID_FREQS * len(GRID_ZETA)     # a grid with one more creep exponent
+        self.costs = np.empty(points)  # the grid's costs, ranking and picks (``_grid``)
+        self.ranked = np.empty(points, dtype=np.int64)
+        self.picks = np.empty(REFINE, dtype=np.int64)
         self.v = np.empty(q + 2)       # a candidate's model coefficients and their alpha-derivatives
         self.dv = np.empty(q + 2)
         self.rc = np.empty(6)          # its resonance step
@@ -329,6 +333,7 @@ class ResonanceSearch:
         # one candidate at a time: its node coefficients, states, sums
         self._v, self._dv, self._rc, self._vz, self._x, self._acc = sc.v, sc.dv, sc.rc, sc.vz, sc.x, sc.acc
         self._zeta = sc.zeta
+        self._grid_work = (sc.costs, sc.ranked, sc.picks)
         #: the grid's frequencies, computed here: this unit has no other work (none with ``starts``)
         self._freqs = None if starts is not None else freqs if freqs is not None else self._grid_frequencies()
         self._gen = self._run()
@@ -419,7 +424,9 @@ class ResonanceSearch:
         points in distinct basins (``_distinct_picks``)."""
         found = []
         size = len(self.alphas) * GRID_FREQS * len(GRID_ZETA)
-        costs, ranked, picks = np.empty(size), np.empty(size, dtype=np.int64), np.empty(REFINE, dtype=np.int64)
+        costs, ranked, picks = self._grid_work
+        if costs.size < size:            # (more creep exponents than the scratch was sized for)
+            costs, ranked = np.empty(size), np.empty(size, dtype=np.int64)
         for alpha in self.alphas:
             for fn in self._freqs:
                 wn = 2 * math.pi * fn
@@ -428,7 +435,7 @@ class ResonanceSearch:
                     cost, _, _ = yield from self._evaluate(alpha, a1, a2, stride)
                     _rank(cost, len(found), costs, ranked)
                     found.append((alpha, fn, z))
-        m = _distinct_picks(costs, ranked, self._freqs, _GRID_ZETAS, picks)
+        m = _distinct_picks(costs, ranked, size, self._freqs, _GRID_ZETAS, picks)
         return [found[i] for i in picks.tolist()[:m]]
 
     def _refine(self, alpha: float, fn: float, z: float, stride: int) -> Generator:
@@ -563,16 +570,17 @@ def _rank(cost: float, i: int, costs: np.ndarray, ranked: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def _distinct_picks(costs: np.ndarray, ranked: np.ndarray, freqs: np.ndarray, zetas: np.ndarray,
+def _distinct_picks(costs: np.ndarray, ranked: np.ndarray, n: int, freqs: np.ndarray, zetas: np.ndarray,
                     picks: np.ndarray) -> int:
     """The best grid points whose resonance is not a neighbour of a better one's (different basins), best first,
-    into ``picks`` (at most its size); returns their count. The points are in ``_grid``'s order (alpha, then fn,
-    then zeta), ``ranked`` by cost (``_rank``). One kernel: in Python the sort and the comparisons cost ~100 us
+    into ``picks`` (at most its size); returns their count. The n points are in ``_grid``'s order (alpha, then
+    fn, then zeta), ``ranked`` by cost (``_rank``). One kernel: in Python the sort and the comparisons cost ~100 us
     cold in the update() that ends the grid, and a sort here ~45 us."""
     nz, nf = zetas.shape[0], freqs.shape[0]
     count = picks.shape[0]
     m = 0
-    for i in ranked:
+    for k in range(n):
+        i = ranked[k]
         if m == count or not math.isfinite(costs[i]):
             break
         fn, z = freqs[(i // nz) % nf], zetas[i % nz]

@@ -302,20 +302,21 @@ class WindowTracker(ParameterView):
         start-up search does not pay it (it was the max of every latency run since f4dc43e). Of the fresh
         state, only the linearization point and theta's coefficients are set here (one kernel,
         ``window.start_at``): the rest was built ahead (``_blank_state``)."""
-        st, S, views = self._blank or self._blank_state()
+        st, S, views, fit = self._blank or self._blank_state()
         self._blank = None
-        W.start_at(np.asarray(theta, dtype=float), self.theta, st, self.basis.lam, self.basis.dx)
-        self.fit = Fit(theta=self.theta.copy())
+        W.start_at(np.asarray(theta, dtype=float), self.theta, fit.theta, st, self.basis.lam, self.basis.dx)
+        self.fit = fit
         self._adopt(st, S, views)
         self._set_due()                    # (``_schedule`` at sample 0: no re-fit or test is due yet)
 
     def _blank_state(self) -> tuple:
         """A fresh state array (linearized at the current estimate), its empty statistics and their views, with the
-        monitors set: ``start`` re-linearizes it at its theta. Built ahead: the numpy calls from Python here
-        cost ~80 us cold in the update() that ends the start-up search."""
+        monitors set, and the start's ``Fit`` (its theta is filled by ``start``): ``start`` re-linearizes the state
+        at its theta. Built ahead: the numpy calls and the ``Fit`` from Python here cost ~90 us cold in the
+        update() that ends the start-up search."""
         st, S = self._fresh(self.a1, self.a2)
         W.set_monitors(st[:W.SC_SIZE], self.h, *self._monitors)
-        return st, S, self._views(st)
+        return st, S, self._views(st), Fit(theta=np.empty(self.theta.size))
 
     @property
     def b_rate(self) -> float:

@@ -552,12 +552,14 @@ def linearize(st: np.ndarray, a1l: float, a2l: float) -> None:
 
 
 @njit(cache=CACHE)
-def start_at(values: np.ndarray, theta: np.ndarray, st: np.ndarray, lam: np.ndarray, dx: float) -> None:
-    """theta = ``values`` padded with zeros, and a fresh state array linearized at its resonance with its
-    coefficients (``linearize``, ``set_estimate``): one kernel for the tracker's start, in the update() that
-    ends the start-up search (numba's exp is libm's, as math.exp)."""
+def start_at(values: np.ndarray, theta: np.ndarray, copy: np.ndarray, st: np.ndarray, lam: np.ndarray,
+             dx: float) -> None:
+    """theta = ``values`` padded with zeros (and into ``copy``), and a fresh state array linearized at its
+    resonance with its coefficients (``linearize``, ``set_estimate``): one kernel for the tracker's start, in
+    the update() that ends the start-up search (numba's exp is libm's, as math.exp)."""
     theta[:] = 0.0
     theta[:values.shape[0]] = values
+    copy[:] = theta
     linearize(st, math.exp(theta[1]), math.exp(theta[2]))
     set_estimate(theta, st, lam, dx)
 
