@@ -307,7 +307,7 @@ class WindowTracker(ParameterView):
         W.start_at(np.asarray(theta, dtype=float), self.theta, fit.theta, st, self.basis.lam, self.basis.dx)
         self.fit = fit
         self._adopt(st, S, views)
-        self._set_due()                    # (``_schedule`` at sample 0: no re-fit or test is due yet)
+        self._set_due(self.n)              # (``_schedule`` at sample 0: no re-fit or test is due yet)
 
     def _blank_state(self) -> tuple:
         """A fresh state array (linearized at the current estimate), its empty statistics and their views, with the
@@ -443,16 +443,17 @@ class WindowTracker(ParameterView):
                 self._begin_refit()
             self._jobs.append(self._refit_job(started))
         if self.detect and n and n % self.test_every == 0:
-            self._snapshot()
+            self._snapshot(n)
             if len(self._snaps) > 2:
                 self._jobs.append(self._change_job(self._snaps[0]))
-        self._set_due()
+        self._set_due(n)
 
-    def _set_due(self) -> None:
-        """The sample at which the per-sample kernel calls back (``_schedule``): the next re-fit or change test."""
+    def _set_due(self, n: int) -> None:
+        """The sample at which the per-sample kernel calls back (``_schedule``) after sample n (now): the next re-fit
+        or change test. (n passed in: ``self.n`` reads the state array, each read a numpy call from cold Python.)"""
         due = self._next_refit
         if self.detect:
-            due = min(due, self._test_after(self.n))
+            due = min(due, self._test_after(n))
         self.sc[W.SC_DUE] = due
 
     def _test_after(self, n: int) -> int:
@@ -464,8 +465,9 @@ class WindowTracker(ParameterView):
         period = min(2 * self._refit_period, max(self.refit_every, self.test_every)) if calm else self.refit_every
         if period != self._refit_period:
             self._refit_period = period
-            self._next_refit = max(self._refit_n + period, self.n + 1)
-            self._set_due()
+            n = self.n
+            self._next_refit = max(self._refit_n + period, n + 1)
+            self._set_due(n)
 
     # ------------------------------------------------------------------ background work
     @property
@@ -473,8 +475,12 @@ class WindowTracker(ParameterView):
         return bool(self._jobs)
 
     def _queued(self, *names: str) -> bool:
-        """Is a job of one of these kinds (generator function names) queued?"""
-        return any(j.__name__ in names for j in self._jobs)
+        """Is a job of one of these kinds (generator function names) queued? (A plain loop: a generator
+        expression's frame costs a few microseconds from cold Python, at every re-fit and test.)"""
+        for job in self._jobs:
+            if job.__name__ in names:
+                return True
+        return False
 
     def work(self, units: int = 1) -> bool:
         """Run up to ``units`` units of the queued jobs in order (each unit a few microseconds).
@@ -683,13 +689,15 @@ class WindowTracker(ParameterView):
         self._pace_refits(False)
 
     # ------------------------------------------------------------------ change detection
-    def _snapshot(self) -> None:
+    def _snapshot(self, n: int) -> None:
+        """The change test's snapshot of the statistics and the estimate at sample n (now)."""
         S0, sy0, shift0, theta0 = self._snap_slots[self._snap_next]
         self._snap_next = (self._snap_next + 1) % SNAP_SLOTS
         syy0, g0 = W.snapshot(self.st, self.S, self._shift, self.theta, S0, sy0, shift0, theta0)
-        self._snaps.append((self.n, S0, sy0, syy0, g0, (self.a1l, self.a2l), theta0, shift0))
-        self._theta_at[self.n] = theta0    # the estimate at each snapshot instant
-        for old in [k for k in self._theta_at if k < self.n - 4 * self.test_every]:
+        self._snaps.append((n, S0, sy0, syy0, g0, (self.a1l, self.a2l), theta0, shift0))
+        self._theta_at[n] = theta0         # the estimate at each snapshot instant
+        oldest = n - 4 * self.test_every
+        for old in [k for k in self._theta_at if k < oldest]:
             del self._theta_at[old]
         if len(self._snaps) > 3:
             self._snaps.pop(0)
