@@ -36,7 +36,7 @@ from .window import resonance_step
 GRID_ALPHA = (0.008, 0.025, 0.07, 0.17, 0.35, 0.6)
 #: Damping ratios of the grid.
 GRID_ZETA = (0.015, 0.05, 0.15, 0.4, 1.0)
-_GRID_ZETAS = np.array(GRID_ZETA)
+_GRID_ZETAS = np.array(GRID_ZETA)      # (as an array, for ``_distinct_picks``)
 #: Natural frequencies of the grid (log-spaced from the buffer length to 0.3 fs).
 GRID_FREQS = 18
 #: Rows in the cost of a grid point (the rest are skipped by a stride).
@@ -339,7 +339,7 @@ class ResonanceSearch:
         self._v, self._dv, self._rc, self._vz, self._x, self._acc = sc.v, sc.dv, sc.rc, sc.vz, sc.x, sc.acc
         self._zeta = sc.zeta
         self._grid_work = (sc.costs, sc.ranked, sc.picks)
-        #: the grid's frequencies, computed here: this unit has no other work (none with ``starts``)
+        #: the grid's frequencies (none with ``starts``): given, or computed here (this unit has no other work)
         self._freqs = None if starts is not None else freqs if freqs is not None else self._grid_frequencies()
         self._gen = self._run()
 
