@@ -37,6 +37,8 @@ GRID_ALPHA = (0.008, 0.025, 0.07, 0.17, 0.35, 0.6)
 #: Damping ratios of the grid.
 GRID_ZETA = (0.015, 0.05, 0.15, 0.4, 1.0)
 _GRID_ZETAS = np.array(GRID_ZETA)      # (as an array, for ``_distinct_picks``)
+#: The grid's creep exponents without a hint (the set and the sort cost ~10 us cold in a search's construction).
+_GRID_ALPHAS = tuple(sorted(set(GRID_ALPHA)))
 #: Natural frequencies of the grid (log-spaced from the buffer length to 0.3 fs).
 GRID_FREQS = 18
 #: Rows in the cost of a grid point (the rest are skipped by a stride).
@@ -327,7 +329,8 @@ class ResonanceSearch:
         self.starts = starts             # (alpha, fn, zeta) to refine instead of running the grid
         self.candidates: list = []       # refined (cost, alpha, fn, zeta), best first
         self.fixed_alpha = fixed_alpha   # search only the resonance, at this alpha (after a change)
-        self.alphas = (fixed_alpha,) if fixed_alpha is not None else tuple(sorted(set(GRID_ALPHA) | set(alphas)))
+        self.alphas = (fixed_alpha,) if fixed_alpha is not None else \
+            tuple(sorted(set(GRID_ALPHA) | set(alphas))) if alphas else _GRID_ALPHAS
         self.result: SearchResult | None = None
         self.units = 0
         if work is not None and work.shape[0] >= self.u.size and work.shape[1] == basis.size:
