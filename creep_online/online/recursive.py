@@ -509,8 +509,8 @@ class RecursiveTracker(ParameterView):
         theta0 = np.zeros(n)
         theta0[:len(theta)] = theta
         a1, a2 = math.exp(theta0[1]), math.exp(theta0[2])
-        W.start_state(st, lay, basis.decay, basis.gain, np.exp(-np.asarray(FREE_RATES[:self.n_free]) * h),
-                      self.forget, h, a1, a2)
+        W.start_state(st, basis.decay, basis.gain, np.exp(-np.asarray(FREE_RATES[:self.n_free]) * h),
+                      self.forget, h, a1, a2, 0)
         W.set_monitors(st[:W.SC_SIZE], h, gate, burst, stuck)
         st[W.SC_DUE] = math.inf          # Python is called only at an alarm (and until its event settles)
         co = st[lay["co"]:lay["ztail"]]

@@ -240,6 +240,7 @@ class WindowTracker(ParameterView):
         self.h = basis.h
         self.q = basis.size
         self.n_free = len(FREE_RATES) if free else 0
+        self._free_decay = np.exp(-np.asarray(FREE_RATES[:self.n_free]) * self.h)   # per sample (``_fresh``)
         #: the free responses' rates, also what a search's judge projects out (``ResonanceSearch.judged_cost``)
         self._free_decays = tuple(FREE_RATES[:self.n_free])
         self.n_rate = int(drift)         # drift columns: 0 none, 1 gain rate, 2 gain and alpha rates
@@ -373,8 +374,7 @@ class WindowTracker(ParameterView):
     def _fresh(self, a1l: float, a2l: float) -> tuple[np.ndarray, np.ndarray]:
         """Empty statistics and zero states for a linearization point (weight 1)."""
         st = np.zeros(self.lay["size"])
-        W.start_state(st, self.lay, self.basis.decay, self.basis.gain,
-                      np.exp(-np.asarray(FREE_RATES[:self.n_free]) * self.h), self.forget, self.h, a1l, a2l,
+        W.start_state(st, self.basis.decay, self.basis.gain, self._free_decay, self.forget, self.h, a1l, a2l,
                       self.n_rate)
         return st, np.zeros((self.p, self.p))
 

@@ -515,28 +515,29 @@ def layout(q: int, n_free: int, n_rate: int = 0) -> dict:
     return o
 
 
-def start_state(st: np.ndarray, lay: dict, decay: np.ndarray, gain: np.ndarray, free_decay: np.ndarray,
-                forget: float, h: float, a1l: float, a2l: float, n_rate: int = 0) -> None:
-    """A fresh state array's header, coefficients and constant regressor entries (both trackers).
+@njit(cache=CACHE)
+def start_state(st: np.ndarray, decay: np.ndarray, gain: np.ndarray, free_decay: np.ndarray, forget: float,
+                h: float, a1l: float, a2l: float, n_rate: int) -> None:
+    """A fresh state array's header, coefficients and constant regressor entries (both trackers; the parts at
+    ``layout``'s offsets). One kernel: the trackers' jobs build fresh states from cold Python.
 
     ``decay``/``gain``: the SOE nodes' per-sample decay and input gain; ``free_decay``: the free
     responses' per-sample decay; the resonance coefficients at the linearization point (a1l, a2l).
     """
-    q, n_free = decay.size, free_decay.size
+    q, n_free = decay.shape[0], free_decay.shape[0]
     st[SC_NQ] = q
     st[SC_NM] = n_free
     st[SC_G] = 1.0
     st[SC_FORGET] = forget
     st[SC_H] = h
     st[SC_NR] = n_rate
-    co = st[lay["co"]:lay["ztail"]]
-    co[:q] = decay
-    co[q:2 * q] = gain
-    co[2 * q + 18:] = free_decay
+    co = SC_SIZE + 3 * (q + FREE + n_free + n_rate)
+    st[co:co + q] = decay
+    st[co + q:co + 2 * q] = gain
+    st[co + 2 * q + 18:co + 2 * q + 18 + n_free] = free_decay
     linearize(st, a1l, a2l)
-    phi = st[lay["phi"]:lay["m"]]
-    phi[q + ONE] = 1.0
-    phi[q + FREE:q + FREE + n_free] = 1.0
+    st[SC_SIZE + q + ONE] = 1.0
+    st[SC_SIZE + q + FREE:SC_SIZE + q + FREE + n_free] = 1.0
 
 
 @njit(cache=CACHE)
