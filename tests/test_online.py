@@ -639,3 +639,27 @@ def test_a_sub_threshold_change_reads_changing_not_good(monkeypatch):
         reasons.append(e.reason)
     assert any(r.startswith("the last second disagrees") for r in reasons)
     assert good_outside <= 1.6
+
+
+def test_the_grid_planned_on_idle_calls_is_the_searchs_own_and_changes_nothing(monkeypatch):
+    """The start-up search's grid frequencies are computed ahead on idle buffering calls (a few numpy calls per
+    call) for the rows the search will take: the search gets exactly them, and every estimate is the one of an
+    estimator that computes them in the search's first unit."""
+    _, _, u, y = _plant(0.2, 150.0, 0.1, 1.3, 1e-4, 0.6, 1.0, 0.05)
+
+    def run() -> tuple[OnlineEstimator, list[dict], bool | None]:
+        est, seen, planned = OnlineEstimator(1e-4), [], None
+        for a, b in zip(u.tolist(), y.tolist()):
+            plan = est._grid_plan
+            est.update(a, b)
+            if plan is not None and plan[2] is not None and est._search is not None and planned is None:
+                planned = est._search._freqs is plan[2]
+            seen.append(est.estimate.to_dict())
+        return est, seen, planned
+
+    est, ahead, planned = run()
+    assert planned and est.phase == "tracking"
+    monkeypatch.setattr(OnlineEstimator, "_plan_grid", lambda self: None)
+    _, direct, never = run()
+    assert never is None
+    assert ahead == direct

@@ -539,3 +539,80 @@ def test_a_tracker_built_ahead_and_started_equals_one_built_at_the_estimate(free
     ahead.finish()
     direct.finish()
     np.testing.assert_array_equal(ahead.theta, direct.theta)
+
+
+def test_grid_frequencies_equal_numpy_geomspace_bit_for_bit():
+    """The search's grid frequencies (three numpy calls instead of np.geomspace's Python, inside update()) are
+    np.geomspace's to the last bit, over the spans and rates the searches use."""
+    from creep_online.online.search import GRID_FREQS, grid_frequencies
+    for h in (1e-4, 2e-4, 5e-4, 1e-3, 1 / 3000, 1e-2):
+        for rows in (2, 17, 500, 1499, 5001, 20000, 1 << 15):
+            f_hi = 0.3 / h
+            f_lo = min(max(1.0 / (rows * h), 1e-3), f_hi / 16)
+            mine, ref = grid_frequencies(f_lo, f_hi), np.geomspace(f_lo, f_hi, GRID_FREQS)
+            assert mine.dtype == ref.dtype and mine.tobytes() == ref.tobytes(), (h, rows)
+
+
+def test_distinct_picks_equal_a_stable_sort_then_the_neighbour_rule():
+    """The grid's ranking (one insertion per point) is a stable sort by cost, and its picks are those of the plain
+    rule: points in that order (ties keep the grid's order, non-finite costs end the list), each kept unless its
+    resonance neighbours a better pick's."""
+    from creep_online.online.search import _GRID_ZETAS, GRID_FREQS, REFINE, _distinct_picks, _rank, _same_resonance, \
+        grid_frequencies
+    rng = np.random.default_rng(5)
+    freqs = grid_frequencies(20.0, 3000.0)
+    n = 6 * GRID_FREQS * _GRID_ZETAS.size
+    for trial in range(200):
+        costs = rng.choice([0.5, 1.0, 2.0, math.inf], n) if trial % 2 else rng.uniform(0, 1, n)
+        costs[rng.integers(n, size=5)] = 0.0
+        ranked = sorted(range(n), key=lambda i: costs[i])
+        picks: list[int] = []
+        for i in ranked:
+            if len(picks) == REFINE or not math.isfinite(costs[i]):
+                break
+            point = (freqs[(i // _GRID_ZETAS.size) % GRID_FREQS], _GRID_ZETAS[i % _GRID_ZETAS.size])
+            if not any(_same_resonance(*point, freqs[(j // _GRID_ZETAS.size) % GRID_FREQS],
+                                       _GRID_ZETAS[j % _GRID_ZETAS.size]) for j in picks):
+                picks.append(i)
+        mine, ranked = np.empty(REFINE, dtype=np.int64), np.empty(n, dtype=np.int64)
+        kept = costs.copy()
+        for i in range(n):
+            _rank(kept[i], i, costs, ranked)
+        assert ranked.tolist() == sorted(range(n), key=lambda i: kept[i])
+        assert mine[:_distinct_picks(costs, ranked, n, freqs, _GRID_ZETAS, mine)].tolist() == picks
+
+
+def test_a_search_on_shared_scratch_equals_one_on_its_own():
+    """Searches that reuse their owner's work arrays (``SearchScratch``, allocated ahead) give the results of
+    searches that allocate their own, also after another search has used them."""
+    from creep_online.online.search import SearchScratch
+    h = 1e-3
+    t = np.arange(400) * h
+    u = np.where(t >= 0.01, 1.0, 0.0)
+    y = simulate(CreepModel.from_resonance(0.3, 25.0, 0.2, 1.2), t, u)
+    basis = SoeBasis.build(h, top=SOE_TOP)
+    scratch = SearchScratch(basis.size)
+    ResonanceSearch(basis, u, -y, scratch=scratch).run()
+    zeta0 = np.linspace(0.0, 1.0, basis.size)
+    for kwargs in ({}, {"zeta0": zeta0, "lead": 40, "fixed_alpha": 0.3}):
+        own = ResonanceSearch(basis, u, y, **kwargs).run()
+        shared = ResonanceSearch(basis, u, y, scratch=scratch, **kwargs).run()
+        assert shared == own
+
+
+def test_block_over_a_range_equals_block_over_slices():
+    """The start-up replay feeds ranges of the buffer (no slices from Python): the same states, statistics,
+    ring and statuses as the slices."""
+    h = 1e-4
+    model = CreepModel.from_resonance(0.2, 300.0, 0.1, 1.5)
+    rng = np.random.default_rng(6)
+    u = np.repeat(rng.uniform(-1, 1, 8), 50)
+    y = simulate(model, np.arange(u.size) * h, u) + rng.normal(0, 1e-3, u.size)
+    sliced, ranged = _tracker(model, h), _tracker(model, h)
+    s1, s2 = np.zeros(u.size, dtype=np.int64), np.zeros(u.size, dtype=np.int64)
+    for k in range(0, u.size, 37):
+        used = sliced.feed_block(u[k:k + 37], y[k:k + 37], s1[k:])
+        assert ranged.feed_block(u, y, s2[k:], k, min(k + 37, u.size)) == used
+    np.testing.assert_array_equal(s1, s2)
+    for a, b in ((sliced.st, ranged.st), (sliced.S, ranged.S), (sliced.ring, ranged.ring)):
+        np.testing.assert_array_equal(a, b)

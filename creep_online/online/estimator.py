@@ -46,7 +46,7 @@ from ..errors import DataError
 from ..model import ONLINE_ALPHA_BOUNDS, ONLINE_REFITS, CreepModel
 from . import refit as RF
 from . import window as W
-from .search import ResonanceSearch
+from .search import ResonanceSearch, SearchScratch, frequency_steps, grid_ends
 from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SOE_TOP, SoeBasis
 from . import recursive as R
 from .recursive import RecursiveTracker
@@ -232,6 +232,7 @@ class OnlineEstimator(StoredParams):
         self._h = h
         self.basis = SoeBasis.build(h, horizon_s=float(self.horizon_s), dx=float(self.soe_dx), top=SOE_TOP)
         self._units = self.work_units or max(1, int(h / 100e-6))
+        self._bounds = tuple(float(v) for v in self.alpha_bounds)     # alpha's (lo, hi) as floats
         self._refit_every = max(5, int(round(self.update_every_s / h)))
         self._test_every = max(10, int(round(0.5 / h)))
         self._history = int(min(MAX_HISTORY, max(1024, 3 * (self.window_s or 30.0) / h)))
@@ -259,6 +260,8 @@ class OnlineEstimator(StoredParams):
         self._burst = max(2, int(round(self.burst_s / h)))
         self._t_need = max(0.05, 200 * h)
         self._search: ResonanceSearch | None = None
+        self._search_scratch = SearchScratch(self.basis.size)
+        self._grid_plan: list | None = None     # [rows, steps, frequencies]: ``_plan_grid``
         self._search_rounds = 0
         self._tc_used = 0.0
         self._tracker: WindowTracker | RecursiveTracker | None = None
@@ -266,6 +269,8 @@ class OnlineEstimator(StoredParams):
         self._catchup = 0
         # the window trackers for a stream from rest and one taken in operation, built now (``WindowTracker.start``)
         self._spares = {} if self._recursive else {free: self._window_tracker(free) for free in (False, True)}
+        #: the catch-up's status buffer (``_catch_up``), allocated ahead for the window trackers
+        self._status = np.empty(max([t.feed_chunk for t in self._spares.values()] or [0]), dtype=np.int64)
         return self
 
     def freeze(self) -> None:
@@ -517,6 +522,7 @@ class OnlineEstimator(StoredParams):
         """Buffering and searching: start the search when ready, give it ``units``, build the tracker."""
         if self._phase == "buffering":
             if not self._ready_to_search():
+                self._plan_grid()
                 return
             self._start_search()
             units -= 1
@@ -530,14 +536,38 @@ class OnlineEstimator(StoredParams):
         if self._catchup:
             self._catch_up(max(units, 1))
 
-    def _start_search(self) -> None:
+    def _search_span(self, nbuf: int) -> tuple[int, int]:
+        """(start, end) in the buffer of the search that starts with ``nbuf`` samples buffered."""
         start = 0 if self._u_ref else max(0, self._first_change - 1)
-        end = min(self._nbuf, start + MAX_SEARCH_SAMPLES)
+        return start, min(nbuf, start + MAX_SEARCH_SAMPLES)
+
+    def _plan_grid(self) -> None:
+        """On an idle buffering call, one step of the grid frequencies of the search that starts when the buffer
+        is ready (``search.frequency_steps``, a few numpy calls): that search's first unit (its construction)
+        then does not compute them (~35 us of cold numpy). Only the first search has a grid (later ones refine
+        its candidates); the plan is used only if its rows are the search's (``_start_search``)."""
+        plan = self._grid_plan
+        if self._first_change is None or self._search is not None or plan is not None and plan[2] is not None:
+            return
+        if plan is None:
+            start, end = self._search_span(self._first_change + math.ceil(self._t_search() / self._h))
+            self._grid_plan = [end - start, frequency_steps(*grid_ends(end - start, self._h)), None]
+            return
+        try:
+            next(plan[1])
+        except StopIteration as done:
+            plan[2] = done.value
+
+    def _start_search(self) -> None:
+        start, end = self._search_span(self._nbuf)
         prev = self._search
         starts = [c[1:] for c in prev.candidates] if prev is not None and prev.candidates else None
         alphas = () if self.alpha0 is None else (float(self.alpha0),)
+        plan, self._grid_plan = self._grid_plan, None
+        freqs = plan[2] if plan is not None and plan[0] == end - start else None
         self._search = ResonanceSearch(self.basis, self._bu[start:end], self._by[start:end], alphas=alphas,
-                                       work=self._hist_work, starts=starts)
+                                       work=self._hist_work, starts=starts, scratch=self._search_scratch,
+                                       freqs=freqs)
         self._tc_used = (end - start) * self._h
         self._phase = "searching"
 
@@ -557,7 +587,7 @@ class OnlineEstimator(StoredParams):
     def _window_tracker(self, free: bool) -> WindowTracker:
         """A window tracker with this estimator's settings, linearized at a placeholder resonance (fs / 20,
         zeta 0.5) until ``WindowTracker.start`` gives it the start-up search's estimate."""
-        lo, hi = (float(v) for v in self.alpha_bounds)
+        lo, hi = self._bounds
         wn = 2.0 * math.pi / (20.0 * self._h)
         theta = np.array([0.5 * (lo + hi), math.log(1.0 / wn), math.log(1.0 / wn ** 2), 1.0, 0.0])
         return WindowTracker(
@@ -567,17 +597,16 @@ class OnlineEstimator(StoredParams):
             drift=DRIFT_COLUMNS if self.track_drift else 0)
 
     def _start_tracker(self, res) -> None:
-        theta = np.array([res.alpha, math.log(res.a1), math.log(res.a2), res.b, res.c])
-        lo, hi = (float(v) for v in self.alpha_bounds)
-        theta[0] = min(max(theta[0], lo), hi)
+        lo, hi = self._bounds
+        theta = np.array([min(max(res.alpha, lo), hi), math.log(res.a1), math.log(res.a2), res.b, res.c])
         if self._recursive:
             self._tracker = RecursiveTracker(
                 self.basis, theta, window_s=self.window_s, free=bool(self._u_ref), gate=0.0, burst=self._burst,
                 stuck=max(10, int(round(0.05 / self._h))), alpha_bounds=(lo, hi), refit_every=self._refit_every,
                 detect=bool(self.detect_changes), scale=res.b * (self._u_hi - self._u_lo))
         else:
-            self._tracker = self._spares[bool(self._u_ref)]
-            self._spares = {}
+            # (the other spare stays until reset(): freeing its arrays here cost ~35 us of this update())
+            self._tracker = self._spares.pop(bool(self._u_ref))
             self._tracker.start(theta)
         if self.frozen:
             self._tracker.sc[W.SC_ACC] = 0.0
@@ -590,12 +619,14 @@ class OnlineEstimator(StoredParams):
         """Feed the buffer into the new tracker, a few samples per unit, then go live (gate open)."""
         tr = self._tracker
         per_unit = tr.feed_chunk
-        status = np.empty(per_unit, dtype=np.int64)
+        if self._status.size < per_unit:
+            self._status = np.empty(per_unit, dtype=np.int64)
+        status = self._status
         while units > 0 and self._replayed < self._nbuf:
             units -= 1
             k = self._replayed
             n = min(per_unit, self._nbuf - k)
-            used = tr.feed_block(self._bu[k:k + n], self._by[k:k + n], status[:n])
+            used = tr.feed_block(self._bu, self._by, status, k, k + n)
             self._replayed += used
             if tr._jobs and units > 0:     # the tracker's own jobs share the budget
                 units -= 1
@@ -631,7 +662,7 @@ class OnlineEstimator(StoredParams):
         tr = self._tracker
         values = {"alpha": tr.alpha, "b": tr.b, "a1": tr.a1, "a2": tr.a2}
         rel = {name: tr.fit.std.get(name, math.inf) / max(abs(values[name]), 1e-300) for name in DETERMINED}
-        lo, hi = (float(v) for v in self.alpha_bounds)
+        lo, hi = self._bounds
         pinned = not lo * (1 + BOUND_TOL) < tr.alpha < hi * (1 - BOUND_TOL)
         determined = [name for name, limit in DETERMINED.items()
                       if rel[name] < limit and not (name == "alpha" and pinned)]

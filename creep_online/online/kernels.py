@@ -90,10 +90,11 @@ def advance_state(st: np.ndarray, co: np.ndarray, u: float) -> None:
 # --------------------------------------------------------------------------- start-up search
 @njit(cache=CACHE)
 def node_history(u: np.ndarray, decay: np.ndarray, gain: np.ndarray, zeta: np.ndarray,
-                 out: np.ndarray) -> None:
-    """out[k] = node states before sample k is applied (then advanced with u[k]); zeta updated."""
+                 out: np.ndarray, start: int = 0, stop: int = -1) -> None:
+    """out[k] = node states before sample k is applied (then advanced with u[k]), for k from ``start`` to ``stop``
+    (-1: the end of u); zeta updated. (A range, not slices: the search calls it from cold Python.)"""
     q = zeta.shape[0]
-    for k in range(u.shape[0]):
+    for k in range(start, u.shape[0] if stop < 0 else stop):
         for i in range(q):
             out[k, i] = zeta[i]
             zeta[i] = decay[i] * zeta[i] + gain[i] * u[k]

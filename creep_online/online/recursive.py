@@ -459,14 +459,16 @@ def sample(u: float, y: float, st: np.ndarray, P: np.ndarray, CT: np.ndarray) ->
 
 @njit(cache=CACHE)
 def block(u: np.ndarray, y: np.ndarray, st: np.ndarray, P: np.ndarray, CT: np.ndarray,
-          status: np.ndarray) -> int:
-    """Samples until the end or due work (flag 8); returns how many were consumed."""
-    for k in range(u.shape[0]):
+          status: np.ndarray, start: int = 0, stop: int = -1) -> int:
+    """Samples ``start`` to ``stop`` (-1: the end) until due work (flag 8), their statuses from status[0];
+    returns how many were consumed (``window.block``)."""
+    end = u.shape[0] if stop < 0 else stop
+    for k in range(start, end):
         s = sample(u[k], y[k], st, P, CT)
-        status[k] = s
+        status[k - start] = s
         if s >= 8:
-            return k + 1
-    return u.shape[0]
+            return k - start + 1
+    return end - start
 
 
 class RecursiveTracker(ParameterView):
@@ -507,8 +509,8 @@ class RecursiveTracker(ParameterView):
         theta0 = np.zeros(n)
         theta0[:len(theta)] = theta
         a1, a2 = math.exp(theta0[1]), math.exp(theta0[2])
-        W.start_state(st, lay, basis.decay, basis.gain, np.exp(-np.asarray(FREE_RATES[:self.n_free]) * h),
-                      self.forget, h, a1, a2)
+        W.start_state(st, basis.decay, basis.gain, np.exp(-np.asarray(FREE_RATES[:self.n_free]) * h),
+                      self.forget, h, a1, a2, 0)
         W.set_monitors(st[:W.SC_SIZE], h, gate, burst, stuck)
         st[W.SC_DUE] = math.inf          # Python is called only at an alarm (and until its event settles)
         co = st[lay["co"]:lay["ztail"]]
@@ -571,9 +573,10 @@ class RecursiveTracker(ParameterView):
             self._schedule()
         return status
 
-    def feed_block(self, u: np.ndarray, y: np.ndarray, status: np.ndarray) -> int:
-        """Samples up to the next publication or alarm; returns how many were consumed."""
-        used = block(u, y, self.st, self.P, self.CT, status)
+    def feed_block(self, u: np.ndarray, y: np.ndarray, status: np.ndarray, start: int = 0, stop: int = -1) -> int:
+        """Samples ``start`` to ``stop`` (-1: the end) up to the next publication or alarm; returns how many were
+        consumed."""
+        used = block(u, y, self.st, self.P, self.CT, status, start, stop)
         if status[used - 1] >= 8:
             self._schedule()
         return used

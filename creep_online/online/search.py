@@ -36,6 +36,9 @@ from .window import resonance_step
 GRID_ALPHA = (0.008, 0.025, 0.07, 0.17, 0.35, 0.6)
 #: Damping ratios of the grid.
 GRID_ZETA = (0.015, 0.05, 0.15, 0.4, 1.0)
+_GRID_ZETAS = np.array(GRID_ZETA)      # (as an array, for ``_distinct_picks``)
+#: The grid's creep exponents without a hint (the set and the sort cost ~10 us cold in a search's construction).
+_GRID_ALPHAS = tuple(sorted(set(GRID_ALPHA)))
 #: Natural frequencies of the grid (log-spaced from the buffer length to 0.3 fs).
 GRID_FREQS = 18
 #: Rows in the cost of a grid point (the rest are skipped by a stride).
@@ -216,6 +219,48 @@ def _prepare(alpha: float, a1: float, a2: float, lam: np.ndarray, dx: float, h: 
     return v[q], v[q + 1]
 
 
+def grid_ends(rows: int, h: float) -> tuple[float, float]:
+    """The grid's lowest and highest natural frequencies for a cost over ``rows`` samples: one over their span
+    (at least 1e-3 Hz, at most a sixteenth of the highest) and 0.3 fs."""
+    span = max(rows, 2) * h
+    f_hi = 0.3 / h
+    return min(max(1.0 / span, 1e-3), f_hi / 16), f_hi
+
+
+def frequency_steps(f_lo: float, f_hi: float) -> Generator:
+    """``grid_frequencies`` in five steps of one or two numpy calls each (~10-20 us cold: for calls with nothing
+    else to do, ``OnlineEstimator`` computes the start-up search's ahead); the generator's return value is the
+    array."""
+    ls = float(np.log10(f_lo))
+    yield
+    le = float(np.log10(f_hi))
+    yield
+    step = (le - ls) / (GRID_FREQS - 1)
+    y = np.array([i * step + ls for i in range(GRID_FREQS - 1)] + [le])
+    yield
+    freqs = np.power(10.0, y)
+    yield
+    freqs[0] = f_lo
+    freqs[-1] = f_hi
+    return freqs
+
+
+def grid_frequencies(f_lo: float, f_hi: float) -> np.ndarray:
+    """``np.geomspace(f_lo, f_hi, GRID_FREQS)`` bit for bit, in a few numpy calls (``frequency_steps``).
+
+    The same operations as numpy's own (log10 of the ends, the linspace between them, ``power(10, .)``,
+    the ends put back), with numpy's log10 and power: their SIMD loops differ from ``math``'s in the last
+    bit. ``np.geomspace`` itself runs ~100 lines of numpy's Python: 60-130 us cold inside update(),
+    once per creep exponent of the grid before.
+    """
+    steps = frequency_steps(f_lo, f_hi)
+    try:
+        while True:
+            next(steps)
+    except StopIteration as done:
+        return done.value
+
+
 def _projected(acc: np.ndarray) -> tuple[float, float, float]:
     """(cost per row, b, c) of min ||y - b s - c||^2 from the sums, centred (no cancellation).
 
@@ -237,6 +282,25 @@ def _projected(acc: np.ndarray) -> tuple[float, float, float]:
     return (max(cost, 0.0) / n if math.isfinite(cost) else math.inf), b, c
 
 
+class SearchScratch:
+    """One search's small work arrays, allocated ahead by the searches' owner (the estimator, a tracker) for one
+    search at a time: a search is built inside update(), where each numpy allocation from cold Python costs
+    a few microseconds."""
+
+    def __init__(self, q: int) -> None:
+        points = (len(GRID_ALPHA) + 1) * GRID_FREQS * len(GRID_ZETA)     # a grid with one more creep exponent
+        self.costs = np.empty(points)  # the grid's costs, ranking and picks (``_grid``)
+        self.ranked = np.empty(points, dtype=np.int64)
+        self.picks = np.empty(REFINE, dtype=np.int64)
+        self.v = np.empty(q + 2)       # a candidate's model coefficients and their alpha-derivatives
+        self.dv = np.empty(q + 2)
+        self.rc = np.empty(6)          # its resonance step
+        self.vz = np.empty(q)          # its node coefficients
+        self.x = np.zeros(2)           # the resonance states
+        self.acc = np.zeros(6)         # the projected cost's sums
+        self.zeta = np.empty(q)        # the node states (``_history``)
+
+
 class ResonanceSearch:
     """Resumable global search on a buffer (input deviations u, outputs y; NaN = unusable).
 
@@ -247,34 +311,39 @@ class ResonanceSearch:
     ``extra`` are (alpha, a1, a2) candidates to refine besides the grid's;
     ``alphas`` are added to the grid's creep exponents (a user's hint);
     ``starts`` (alpha, fn, zeta) replace the grid (a longer window after a first search);
-    ``fixed_alpha`` searches the resonance only (after a detected change).
+    ``fixed_alpha`` searches the resonance only (after a detected change). ``scratch``: the small work
+    arrays (``SearchScratch``; a search's own when None). ``freqs``: the grid's frequencies computed ahead
+    for this search's rows (``grid_frequencies`` of ``grid_ends(len(u) - lead, h)``; None: computed here).
     """
 
     def __init__(self, basis: SoeBasis, u: np.ndarray, y: np.ndarray, zeta0: np.ndarray | None = None,
                  lead: int = 0, extra: tuple = (), alphas: tuple = (), work: np.ndarray | None = None,
-                 starts: list | None = None, fixed_alpha: float | None = None) -> None:
+                 starts: list | None = None, fixed_alpha: float | None = None,
+                 scratch: SearchScratch | None = None, freqs: np.ndarray | None = None) -> None:
         self.basis = basis
         self.u = np.ascontiguousarray(u, dtype=float)
         self.y = np.ascontiguousarray(y, dtype=float)
-        self.zeta0 = np.zeros(basis.size) if zeta0 is None else np.array(zeta0, dtype=float)
+        self.zeta0 = zeta0               # (None: zero; copied by ``_history``)
         self.lead = int(lead)
         self.extra = tuple(extra)
         self.starts = starts             # (alpha, fn, zeta) to refine instead of running the grid
         self.candidates: list = []       # refined (cost, alpha, fn, zeta), best first
         self.fixed_alpha = fixed_alpha   # search only the resonance, at this alpha (after a change)
-        self.alphas = (fixed_alpha,) if fixed_alpha is not None else tuple(sorted(set(GRID_ALPHA) | set(alphas)))
+        self.alphas = (fixed_alpha,) if fixed_alpha is not None else \
+            tuple(sorted(set(GRID_ALPHA) | set(alphas))) if alphas else _GRID_ALPHAS
         self.result: SearchResult | None = None
         self.units = 0
         if work is not None and work.shape[0] >= self.u.size and work.shape[1] == basis.size:
             self._hist = work[:self.u.size]     # a pre-faulted buffer: no page faults in update()
         else:
             self._hist = np.empty((self.u.size, basis.size))
-        self._v = np.empty(basis.size + 2)
-        self._dv = np.empty(basis.size + 2)
-        self._rc = np.empty(6)
-        self._vz = np.empty(basis.size)     # one candidate at a time: its node coefficients, states, sums
-        self._x = np.zeros(2)
-        self._acc = np.zeros(6)
+        sc = scratch if scratch is not None else SearchScratch(basis.size)
+        # one candidate at a time: its node coefficients, states, sums
+        self._v, self._dv, self._rc, self._vz, self._x, self._acc = sc.v, sc.dv, sc.rc, sc.vz, sc.x, sc.acc
+        self._zeta = sc.zeta
+        self._grid_work = (sc.costs, sc.ranked, sc.picks)
+        #: the grid's frequencies (none with ``starts``): given, or computed here (this unit has no other work)
+        self._freqs = None if starts is not None else freqs if freqs is not None else self._grid_frequencies()
         self._gen = self._run()
 
     def step(self) -> bool:
@@ -346,27 +415,36 @@ class ResonanceSearch:
         return _projected(acc)
 
     def _history(self) -> Generator:
-        zeta = self.zeta0.copy()
+        zeta = self._zeta
+        zeta[:] = 0.0 if self.zeta0 is None else self.zeta0
         chunk = max(16, UNIT_WORK // self.basis.size)
         for i0 in range(0, self.u.size, chunk):
             i1 = min(i0 + chunk, self.u.size)
-            kernels.node_history(self.u[i0:i1], self.basis.decay, self.basis.gain, zeta, self._hist[i0:i1])
+            kernels.node_history(self.u, self.basis.decay, self.basis.gain, zeta, self._hist, i0, i1)
             yield
 
+    def _grid_frequencies(self) -> np.ndarray:
+        """The grid's natural frequencies: log-spaced from one over the cost's span to 0.3 fs."""
+        return grid_frequencies(*grid_ends(self.u.size - self.lead, self.basis.h))
+
     def _grid(self, stride: int) -> Generator:
-        h = self.basis.h
-        span = max(self.u.size - self.lead, 2) * h
-        f_hi = 0.3 / h
-        f_lo = min(max(1.0 / span, 1e-3), f_hi / 16)
+        """Every grid point's projected cost, in units; returns the starts (alpha, fn, zeta) of the REFINE best
+        points in distinct basins (``_distinct_picks``)."""
         found = []
+        size = len(self.alphas) * GRID_FREQS * len(GRID_ZETA)
+        costs, ranked, picks = self._grid_work
+        if costs.size < size:            # (more creep exponents than the scratch was sized for)
+            costs, ranked = np.empty(size), np.empty(size, dtype=np.int64)
         for alpha in self.alphas:
-            for fn in np.geomspace(f_lo, f_hi, GRID_FREQS):
+            for fn in self._freqs:
                 wn = 2 * math.pi * fn
                 for z in GRID_ZETA:
                     a1, a2 = 2 * z / wn, 1 / wn**2
                     cost, _, _ = yield from self._evaluate(alpha, a1, a2, stride)
-                    found.append((cost, alpha, fn, z))
-        return found
+                    _rank(cost, len(found), costs, ranked)
+                    found.append((alpha, fn, z))
+        m = _distinct_picks(costs, ranked, size, self._freqs, _GRID_ZETAS, picks)
+        return [found[i] for i in picks.tolist()[:m]]
 
     def _refine(self, alpha: float, fn: float, z: float, stride: int) -> Generator:
         """Pattern search in (ln alpha, ln fn, ln zeta) from a start; returns (cost, alpha, fn, zeta).
@@ -452,14 +530,11 @@ class ResonanceSearch:
         coarse = max(1, n // COARSE_ROWS)
         fine = max(1, n // FINE_ROWS)
         if self.starts is None:
-            found = yield from self._grid(coarse)
-            found.sort(key=lambda r: r[0])
-            starts = _distinct(found, REFINE)
+            kept = yield from self._grid(coarse)     # (distinct resonances: no two in one basin)
         else:
-            starts = list(self.starts)
-        for alpha, a1, a2 in self.extra:
-            starts.append((alpha, 1 / (2 * math.pi * math.sqrt(a2)), a1 / (2 * math.sqrt(a2))))
-        for alpha, fn, z in _unique(starts):
+            kept = _unique(list(self.starts))
+        extra = [(alpha, 1 / (2 * math.pi * math.sqrt(a2)), a1 / (2 * math.sqrt(a2))) for alpha, a1, a2 in self.extra]
+        for alpha, fn, z in _unique(extra, kept):
             cand = yield from self._refine(alpha, fn, z, fine)
             self.candidates.append(cand)
         self.candidates.sort(key=lambda r: r[0])
@@ -471,6 +546,7 @@ class ResonanceSearch:
                                    cost=float(cost))
 
 
+@njit(cache=True)
 def _same_resonance(fn: float, z: float, fn2: float, z2: float) -> bool:
     """Neighbouring resonances: fn within 35 %, zeta within a factor 1.65 (about the grid's spacing)."""
     return abs(math.log(fn / fn2)) <= 0.3 and abs(math.log(z / z2)) <= 0.5
@@ -484,23 +560,53 @@ def _same_basin(p: tuple, q: tuple) -> bool:
     return _same_resonance(p[1], p[2], q[1], q[2]) and abs(math.log(p[0] / q[0])) <= 0.1
 
 
-def _distinct(found: list, count: int) -> list:
-    """The best grid points whose resonance is not a neighbour of a better one's (different basins)."""
-    out: list = []
-    for cost, alpha, fn, z in found:
-        if not math.isfinite(cost):
-            break
-        if not any(_same_resonance(fn, z, f2, z2) for _, f2, z2 in out):
-            out.append((alpha, fn, z))
-        if len(out) == count:
-            break
-    return [(a, f, z) for a, f, z in out]
+@njit(cache=True)
+def _rank(cost: float, i: int, costs: np.ndarray, ranked: np.ndarray) -> None:
+    """Grid point i's cost into ``costs`` and its index into ``ranked`` (points 0..i-1 by cost, ties in the
+    grid's order: a stable sort, one insertion per point as the grid runs)."""
+    costs[i] = cost
+    lo, hi = 0, i
+    while lo < hi:                     # the first ranked point that costs more
+        mid = (lo + hi) // 2
+        if costs[ranked[mid]] <= cost:
+            lo = mid + 1
+        else:
+            hi = mid
+    for k in range(i, lo, -1):
+        ranked[k] = ranked[k - 1]
+    ranked[lo] = i
 
 
-def _unique(starts: list) -> list:
-    """Starts without the repeats: after a first search its refined candidates often coincide (measured:
-    three identical starts, each refined for 78000 units on a 2 s buffer)."""
-    out: list = []
+@njit(cache=True)
+def _distinct_picks(costs: np.ndarray, ranked: np.ndarray, n: int, freqs: np.ndarray, zetas: np.ndarray,
+                    picks: np.ndarray) -> int:
+    """The best grid points whose resonance is not a neighbour of a better one's (different basins), best first,
+    into ``picks`` (at most its size); returns their count. The n points are in ``_grid``'s order (alpha, then
+    fn, then zeta), ``ranked`` by cost (``_rank``). One kernel: in Python the sort and the comparisons cost ~100 us
+    cold in the update() that ends the grid, and a sort here ~45 us."""
+    nz, nf = zetas.shape[0], freqs.shape[0]
+    count = picks.shape[0]
+    m = 0
+    for k in range(n):
+        i = ranked[k]
+        if m == count or not math.isfinite(costs[i]):
+            break
+        fn, z = freqs[(i // nz) % nf], zetas[i % nz]
+        near = False
+        for k in range(m):
+            j = picks[k]
+            near = near or _same_resonance(fn, z, freqs[(j // nz) % nf], zetas[j % nz])
+        if not near:
+            picks[m] = i
+            m += 1
+    return m
+
+
+def _unique(starts: list, kept: list | tuple = ()) -> list:
+    """``kept`` (no two in one basin), then the starts without the repeats: after a first search its refined
+    candidates often coincide (measured: three identical starts, each refined for 78000 units on a 2 s
+    buffer)."""
+    out: list = list(kept)
     for s in starts:
         if not any(_same_basin(s, o) for o in out):
             out.append(s)

@@ -40,7 +40,7 @@ import numpy as np
 
 from . import refit as RF
 from . import window as W
-from .search import ResonanceSearch
+from .search import ResonanceSearch, SearchScratch
 from .soe import SoeBasis
 
 #: Relative move of a1 or a2 from the linearization point that triggers a replay.
@@ -240,6 +240,7 @@ class WindowTracker(ParameterView):
         self.h = basis.h
         self.q = basis.size
         self.n_free = len(FREE_RATES) if free else 0
+        self._free_decay = np.exp(-np.asarray(FREE_RATES[:self.n_free]) * self.h)   # per sample (``_fresh``)
         #: the free responses' rates, also what a search's judge projects out (``ResonanceSearch.judged_cost``)
         self._free_decays = tuple(FREE_RATES[:self.n_free])
         self.n_rate = int(drift)         # drift columns: 0 none, 1 gain rate, 2 gain and alpha rates
@@ -291,20 +292,32 @@ class WindowTracker(ParameterView):
         self._allocate_work()
         self._theta_at: dict[int, np.ndarray] = {}
         self._monitors = (gate, burst, stuck)
+        self._blank: tuple | None = None
         self.start(theta)
+        self._blank = self._blank_state()
 
     def start(self, theta: np.ndarray) -> None:
         """Linearize at ``theta`` and start from empty statistics: the part of the construction that needs the
         estimate. The rest (``__init__``: allocations, ~0.3-0.4 ms with cold caches) can run before the estimate
         is known: ``OnlineEstimator`` builds its trackers before the stream, so the update() that ends the
-        start-up search does not pay it (it was the max of every latency run since f4dc43e)."""
-        self.theta[:] = 0.0
-        self.theta[:len(theta)] = theta
-        self.fit = Fit(theta=self.theta.copy())
+        start-up search does not pay it (it was the max of every latency run since f4dc43e). Of the fresh
+        state, only the linearization point and theta's coefficients are set here (one kernel,
+        ``window.start_at``): the rest was built ahead (``_blank_state``)."""
+        st, S, views, fit = self._blank or self._blank_state()
+        self._blank = None
+        W.start_at(np.asarray(theta, dtype=float), self.theta, fit.theta, st, self.basis.lam, self.basis.dx)
+        self.fit = fit
+        self._adopt(st, S, views)
+        self._set_due(self.n)              # (``_schedule`` at sample 0: no re-fit or test is due yet)
+
+    def _blank_state(self) -> tuple:
+        """A fresh state array (linearized at the current estimate), its empty statistics and their views, with the
+        monitors set, and the start's ``Fit`` (its theta is filled by ``start``): ``start`` re-linearizes the state
+        at its theta. Built ahead: the numpy calls and the ``Fit`` from Python here cost ~90 us cold in the
+        update() that ends the start-up search."""
         st, S = self._fresh(self.a1, self.a2)
         W.set_monitors(st[:W.SC_SIZE], self.h, *self._monitors)
-        self._install(st, S)
-        self._schedule()
+        return st, S, self._views(st), Fit(theta=np.empty(self.theta.size))
 
     @property
     def b_rate(self) -> float:
@@ -356,27 +369,31 @@ class WindowTracker(ParameterView):
                             for _ in range(SNAP_SLOTS)]
         self._snap_next = 0
         self._replay_work = W.replay_scratch(p)     # (a replay's unit leaves nothing in it: shared by the jobs)
+        self._search_scratch = SearchScratch(self.q)   # (one search at a time: ``_researching``)
 
     def _fresh(self, a1l: float, a2l: float) -> tuple[np.ndarray, np.ndarray]:
         """Empty statistics and zero states for a linearization point (weight 1)."""
         st = np.zeros(self.lay["size"])
-        W.start_state(st, self.lay, self.basis.decay, self.basis.gain,
-                      np.exp(-np.asarray(FREE_RATES[:self.n_free]) * self.h), self.forget, self.h, a1l, a2l,
+        W.start_state(st, self.basis.decay, self.basis.gain, self._free_decay, self.forget, self.h, a1l, a2l,
                       self.n_rate)
         return st, np.zeros((self.p, self.p))
 
     def _install(self, st: np.ndarray, S: np.ndarray) -> None:
+        """Make (st, S) the live state and statistics, with theta's coefficients."""
+        W.set_estimate(self.theta, st, self.basis.lam, self.basis.dx)
+        self._adopt(st, S, self._views(st))
+
+    def _views(self, st: np.ndarray) -> tuple:
+        """The parts of a state array: sc, phi, m, sy, co, ztail, md."""
         lay = self.lay
+        return (st[:W.SC_SIZE], st[lay["phi"]:lay["m"]], st[lay["m"]:lay["sy"]], st[lay["sy"]:lay["co"]],
+                st[lay["co"]:lay["ztail"]], st[lay["ztail"]:lay["md"]], st[lay["md"]:lay["size"]])
+
+    def _adopt(self, st: np.ndarray, S: np.ndarray, views: tuple) -> None:
+        """Make (st, S) with their ``views`` the live state and statistics (their coefficients already set)."""
         self.st, self.S = st, S
-        self.sc = st[:W.SC_SIZE]
-        self.phi = st[lay["phi"]:lay["m"]]
-        self.m = st[lay["m"]:lay["sy"]]
-        self.sy = st[lay["sy"]:lay["co"]]
-        self.co = st[lay["co"]:lay["ztail"]]
-        self.ztail = st[lay["ztail"]:lay["md"]]
-        self.md = st[lay["md"]:lay["size"]]
+        self.sc, self.phi, self.m, self.sy, self.co, self.ztail, self.md = views
         self.a1l, self.a2l = float(st[W.SC_A1L]), float(st[W.SC_A2L])
-        self._coefficients()
         self._snaps = []
 
     def _coefficients(self) -> None:
@@ -398,9 +415,10 @@ class WindowTracker(ParameterView):
             self._schedule()
         return status
 
-    def feed_block(self, u: np.ndarray, y: np.ndarray, status: np.ndarray) -> int:
-        """Samples up to the next scheduled job or shift; returns how many were consumed."""
-        used = W.block(u, y, self.st, self.S, self.ring, status)
+    def feed_block(self, u: np.ndarray, y: np.ndarray, status: np.ndarray, start: int = 0, stop: int = -1) -> int:
+        """Samples ``start`` to ``stop`` (-1: the end) up to the next scheduled job or shift; returns how many
+        were consumed."""
+        used = W.block(u, y, self.st, self.S, self.ring, status, start, stop)
         if status[used - 1] >= 8:
             self._schedule()
         return used
@@ -425,16 +443,17 @@ class WindowTracker(ParameterView):
                 self._begin_refit()
             self._jobs.append(self._refit_job(started))
         if self.detect and n and n % self.test_every == 0:
-            self._snapshot()
+            self._snapshot(n)
             if len(self._snaps) > 2:
                 self._jobs.append(self._change_job(self._snaps[0]))
-        self._set_due()
+        self._set_due(n)
 
-    def _set_due(self) -> None:
-        """The sample at which the per-sample kernel calls back (``_schedule``): the next re-fit or change test."""
+    def _set_due(self, n: int) -> None:
+        """The sample at which the per-sample kernel calls back (``_schedule``) after sample n (now): the next re-fit
+        or change test. (n passed in: ``self.n`` reads the state array, each read a numpy call from cold Python.)"""
         due = self._next_refit
         if self.detect:
-            due = min(due, self._test_after(self.n))
+            due = min(due, self._test_after(n))
         self.sc[W.SC_DUE] = due
 
     def _test_after(self, n: int) -> int:
@@ -446,8 +465,9 @@ class WindowTracker(ParameterView):
         period = min(2 * self._refit_period, max(self.refit_every, self.test_every)) if calm else self.refit_every
         if period != self._refit_period:
             self._refit_period = period
-            self._next_refit = max(self._refit_n + period, self.n + 1)
-            self._set_due()
+            n = self.n
+            self._next_refit = max(self._refit_n + period, n + 1)
+            self._set_due(n)
 
     # ------------------------------------------------------------------ background work
     @property
@@ -455,8 +475,12 @@ class WindowTracker(ParameterView):
         return bool(self._jobs)
 
     def _queued(self, *names: str) -> bool:
-        """Is a job of one of these kinds (generator function names) queued?"""
-        return any(j.__name__ in names for j in self._jobs)
+        """Is a job of one of these kinds (generator function names) queued? (A plain loop: a generator
+        expression's frame costs a few microseconds from cold Python, at every re-fit and test.)"""
+        for job in self._jobs:
+            if job.__name__ in names:
+                return True
+        return False
 
     def work(self, units: int = 1) -> bool:
         """Run up to ``units`` units of the queued jobs in order (each unit a few microseconds).
@@ -665,13 +689,15 @@ class WindowTracker(ParameterView):
         self._pace_refits(False)
 
     # ------------------------------------------------------------------ change detection
-    def _snapshot(self) -> None:
+    def _snapshot(self, n: int) -> None:
+        """The change test's snapshot of the statistics and the estimate at sample n (now)."""
         S0, sy0, shift0, theta0 = self._snap_slots[self._snap_next]
         self._snap_next = (self._snap_next + 1) % SNAP_SLOTS
         syy0, g0 = W.snapshot(self.st, self.S, self._shift, self.theta, S0, sy0, shift0, theta0)
-        self._snaps.append((self.n, S0, sy0, syy0, g0, (self.a1l, self.a2l), theta0, shift0))
-        self._theta_at[self.n] = theta0    # the estimate at each snapshot instant
-        for old in [k for k in self._theta_at if k < self.n - 4 * self.test_every]:
+        self._snaps.append((n, S0, sy0, syy0, g0, (self.a1l, self.a2l), theta0, shift0))
+        self._theta_at[n] = theta0         # the estimate at each snapshot instant
+        oldest = n - 4 * self.test_every
+        for old in [k for k in self._theta_at if k < oldest]:
             del self._theta_at[old]
         if len(self._snaps) > 3:
             self._snaps.pop(0)
@@ -845,7 +871,7 @@ class WindowTracker(ParameterView):
             # before the test confirms it, and the grid's best basin can be a wrong one
             search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, fixed_alpha=self.alpha,
                                      work=self.work_memory, extra=((self.alpha, self.a1, self.a2),),
-                                     starts=starts)
+                                     starts=starts, scratch=self._search_scratch)
             yield
             yield from self._run_search(search)
             # each pass's result is reported as soon as it is clearly better than the live estimate; a
@@ -954,7 +980,7 @@ class WindowTracker(ParameterView):
         search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, work=self.work_memory,
                                  fixed_alpha=self.alpha if self.window_start and self._alpha_known else None,
                                  alphas=(self.alpha,),
-                                 extra=((self.alpha, self.a1, self.a2),))
+                                 extra=((self.alpha, self.a1, self.a2),), scratch=self._search_scratch)
         yield
         yield from self._run_search(search)
         r = search.result

@@ -515,30 +515,54 @@ def layout(q: int, n_free: int, n_rate: int = 0) -> dict:
     return o
 
 
-def start_state(st: np.ndarray, lay: dict, decay: np.ndarray, gain: np.ndarray, free_decay: np.ndarray,
-                forget: float, h: float, a1l: float, a2l: float, n_rate: int = 0) -> None:
-    """A fresh state array's header, coefficients and constant regressor entries (both trackers).
+@njit(cache=CACHE)
+def start_state(st: np.ndarray, decay: np.ndarray, gain: np.ndarray, free_decay: np.ndarray, forget: float,
+                h: float, a1l: float, a2l: float, n_rate: int) -> None:
+    """A fresh state array's header, coefficients and constant regressor entries (both trackers; the parts at
+    ``layout``'s offsets). One kernel: the trackers' jobs build fresh states from cold Python.
 
     ``decay``/``gain``: the SOE nodes' per-sample decay and input gain; ``free_decay``: the free
     responses' per-sample decay; the resonance coefficients at the linearization point (a1l, a2l).
     """
-    q, n_free = decay.size, free_decay.size
+    q, n_free = decay.shape[0], free_decay.shape[0]
     st[SC_NQ] = q
     st[SC_NM] = n_free
     st[SC_G] = 1.0
     st[SC_FORGET] = forget
-    st[SC_A1L] = a1l
-    st[SC_A2L] = a2l
     st[SC_H] = h
     st[SC_NR] = n_rate
-    co = st[lay["co"]:lay["ztail"]]
-    co[:q] = decay
-    co[q:2 * q] = gain
-    resonance_coefficients(a1l, a2l, h, co[2 * q:2 * q + 18])
-    co[2 * q + 18:] = free_decay
-    phi = st[lay["phi"]:lay["m"]]
-    phi[q + ONE] = 1.0
-    phi[q + FREE:q + FREE + n_free] = 1.0
+    co = SC_SIZE + 3 * (q + FREE + n_free + n_rate)
+    st[co:co + q] = decay
+    st[co + q:co + 2 * q] = gain
+    st[co + 2 * q + 18:co + 2 * q + 18 + n_free] = free_decay
+    linearize(st, a1l, a2l)
+    st[SC_SIZE + q + ONE] = 1.0
+    st[SC_SIZE + q + FREE:SC_SIZE + q + FREE + n_free] = 1.0
+
+
+@njit(cache=CACHE)
+def linearize(st: np.ndarray, a1l: float, a2l: float) -> None:
+    """A fresh state array's linearization point (a1l, a2l) and its resonance coefficients (``start_state``'s
+    part that depends on the estimate)."""
+    q = int(st[SC_NQ])
+    p = q + FREE + int(st[SC_NM]) + int(st[SC_NR])
+    co = SC_SIZE + 3 * p + 2 * q
+    st[SC_A1L] = a1l
+    st[SC_A2L] = a2l
+    resonance_coefficients(a1l, a2l, st[SC_H], st[co:co + 18])
+
+
+@njit(cache=CACHE)
+def start_at(values: np.ndarray, theta: np.ndarray, copy: np.ndarray, st: np.ndarray, lam: np.ndarray,
+             dx: float) -> None:
+    """theta = ``values`` padded with zeros (and into ``copy``), and a fresh state array linearized at its
+    resonance with its coefficients (``linearize``, ``set_estimate``): one kernel for the tracker's start, in
+    the update() that ends the start-up search (numba's exp is libm's, as math.exp)."""
+    theta[:] = 0.0
+    theta[:values.shape[0]] = values
+    copy[:] = theta
+    linearize(st, math.exp(theta[1]), math.exp(theta[2]))
+    set_estimate(theta, st, lam, dx)
 
 
 def set_monitors(sc: np.ndarray, h: float, gate: float, burst: int, stuck: int) -> None:
@@ -755,14 +779,16 @@ def _rescale(S: np.ndarray, sy: np.ndarray, sc: np.ndarray, factor: float) -> No
 
 @njit(cache=CACHE)
 def block(u: np.ndarray, y: np.ndarray, st: np.ndarray, S: np.ndarray, ring: np.ndarray,
-          status: np.ndarray) -> int:
-    """Samples until the end or due work (flag 8); returns how many were consumed."""
-    for k in range(u.shape[0]):
+          status: np.ndarray, start: int = 0, stop: int = -1) -> int:
+    """Samples ``start`` to ``stop`` (-1: the end) until due work (flag 8), their statuses from status[0];
+    returns how many were consumed. (A range, not slices: the start-up replay calls it from cold Python.)"""
+    end = u.shape[0] if stop < 0 else stop
+    for k in range(start, end):
         s = sample(u[k], y[k], st, S, ring)
-        status[k] = s
+        status[k - start] = s
         if s >= 8:
-            return k + 1
-    return u.shape[0]
+            return k - start + 1
+    return end - start
 
 
 @njit(cache=CACHE)
