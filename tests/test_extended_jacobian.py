@@ -8,8 +8,10 @@ catches any wrong chain-rule factor or a missing term of the projection (the
 Kaufman term alone is off by 4e-3..0.6 here); so is a delay's (a spline's
 slope), and so are a parallel path's own parameters (the effect's
 ``unit_step_derivatives``: a second mode's in fn and zeta, a second creep's
-exponent). The effects' other parameters keep forward differences (step
-1e-7, as scipy's ``diff_step``): 1e-3.
+exponent), also in a coupled design (input effects beside parallel paths: the
+inner problem is bilinear in the paths' gain ratios and its curvature enters,
+``varpro.projected_jacobian``). The effects' other parameters keep forward
+differences (step 1e-7, as scipy's ``diff_step``): 1e-3.
 """
 from __future__ import annotations
 
@@ -37,6 +39,9 @@ DESIGNS = [
     ("drift", ("drift", "nonlinear_gain")),
     ("delay", ("hysteresis", "leakage", "delay")),    # rows, filter and delay at once
     ("second_mode", ("second_mode", "delay")),        # a delayed parallel path: the delay by differences
+    ("hysteresis", ("hysteresis", "second_creep")),   # coupled: the path sees the input rows (gain ratio inside)
+    ("second_mode", ("second_mode", "nonlinear_gain", "leakage")),   # coupled and output-filtered
+    ("second_mode", ("second_mode", "second_creep", "hysteresis")),  # two coupled paths
 ]
 
 

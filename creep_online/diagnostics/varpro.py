@@ -24,13 +24,21 @@ from scipy.linalg import qr
 RCOND = 1e-10
 
 
-def projected_jacobian(a: np.ndarray, moved: np.ndarray, pulled: np.ndarray) -> np.ndarray:
+def projected_jacobian(a: np.ndarray, moved: np.ndarray, pulled: np.ndarray,
+                       curvature: np.ndarray | None = None) -> np.ndarray:
     """Jacobian (n, m) of r = y - A A^+ y for m nonlinear parameters, from D_k = dA/dtheta_k.
 
     ``a``: the (weighted) design (n, p); ``moved[k]`` = D_k c (c: the fit's
     coefficients), shape (m, n); ``pulled[k]`` = D_k^T r (r: the weighted
     residual), shape (m, p). Only these products of the D_k enter, so a caller
     may form them without the derivative columns themselves.
+
+    ``curvature`` (p, p), for an inner problem that is not linear (a model
+    bilinear in its "linear" parameters x, ``a`` its tangent dy/dx at the
+    solution): H = (d a / d x)^T r, the residual-weighted second derivatives.
+    The inner solution then moves with theta by (a^T a - H)^{-1} instead of
+    a^+, and dr/dtheta_k = -D_k c - a (a^T a - H)^{-1} (D_k^T r - a^T D_k c),
+    worked out on a's kept singular subspace.
     """
     scale = np.linalg.norm(a, axis=0)
     scale[scale == 0] = 1.0
@@ -38,9 +46,15 @@ def projected_jacobian(a: np.ndarray, moved: np.ndarray, pulled: np.ndarray) -> 
     keep = sv > RCOND * (sv[0] if sv.size else 0.0)
     u, sv, vt = u[:, keep], sv[keep], vt[keep]
     moved = np.atleast_2d(moved)
-    projected = moved - (moved @ u) @ u.T                           # P D_k c
-    back = ((np.atleast_2d(pulled) / scale) @ vt.T / sv) @ u.T       # (A^+)^T D_k^T r, A = U diag(sv) V^T S
-    return -(projected + back).T
+    pulled = np.atleast_2d(pulled) / scale
+    if curvature is None:
+        projected = moved - (moved @ u) @ u.T                       # P D_k c
+        back = ((pulled @ vt.T) / sv) @ u.T                         # (A^+)^T D_k^T r, A = U diag(sv) V^T S
+        return -(projected + back).T
+    v = vt / scale                                                  # x = S^-1 V w on the kept subspace
+    inner = np.diag(sv ** 2) - v @ curvature @ v.T
+    w = np.linalg.solve(inner, (pulled @ vt.T - (moved @ u) * sv).T).T
+    return -(moved + (w * sv) @ u.T).T
 
 
 def _thin_svd(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
