@@ -66,6 +66,8 @@ def test_the_pair_search_finds_a_pair_the_single_fits_rank_apart(pair, band, see
     assert len(d.pairs_tried) >= 2 * (len(d.candidates) - 1) - 1     # both rounds, every applicable partner
     out = d.to_dict()
     assert out["verdict"] == d.verdict and len(out["combination"]["pairs_tried"]) == len(d.pairs_tried)
+    assert out["combination"]["effects"] == d.combination.effect.split("+")    # one order: the single fits'
+    assert out["combination"]["effects"][0] == d.verdict                         # the stand-in's verdict leads
 
 
 def test_a_record_one_effect_explains_to_the_noise_is_not_searched_for_a_pair():

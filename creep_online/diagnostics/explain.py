@@ -136,7 +136,7 @@ class Diagnosis:
             "missing_effects": [c.to_dict() for c in self.candidates],
             "base_model": {**b.model.describe(), "offset": b.offset},
             "combination": None if self.combination is None else {
-                "effects": list(self.combination.fit.effects), **self.combination.to_dict(),
+                "effects": self.combination.effect.split("+"), **self.combination.to_dict(),
                 "params": jsonable(self.combination.fit.effect_params),
                 "pairs_tried": [{"effects": k.split("+"), "evidence": v[0], "residual_rms": v[1]}
                                 for k, v in self.pairs_tried.items()]},

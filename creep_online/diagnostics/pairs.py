@@ -87,11 +87,12 @@ def choose_pair(data: ext.Prepared, base: ext.ExtendedFit, singles: list[tuple[s
     small = search_window(data)
     small_base = base if small is data else ext.fit_base(small, start=base.model, max_nfev=max_nfev, grid=False)
     fits: dict[tuple[str, str], ext.ExtendedFit] = {}
-    partner = _round(small, small_base, first, singles, fits, max_nfev, workers, report)
+    flaws: dict[tuple[str, str], str | None] = {}
+    partner = _round(small, small_base, first, singles, fits, flaws, max_nfev, workers, report)
     kept = next(s for s in singles if s[0] == partner)
-    _round(small, small_base, kept, [s for s in singles if s[0] != first[0]], fits, max_nfev, workers, report)
+    _round(small, small_base, kept, [s for s in singles if s[0] != first[0]], fits, flaws, max_nfev, workers, report)
     scores = {k: _weigh(small_base, f, small.n) for k, f in fits.items()}
-    sound = [k for k in fits if contradicts(fits[k], small) is None]
+    sound = [k for k in fits if flaws[k] is None]
     if not sound:
         return None
     best = max(sound, key=lambda k: scores[k][0])
@@ -113,15 +114,18 @@ def search_window(data: ext.Prepared) -> ext.Prepared:
     return small.prefix(SEARCH_SAMPLES) if small.n > SEARCH_SAMPLES else small
 
 
-def _round(data: ext.Prepared, base: ext.ExtendedFit, kept: tuple, singles: list, fits: dict,
+def _round(data: ext.Prepared, base: ext.ExtendedFit, kept: tuple, singles: list, fits: dict, flaws: dict,
            max_nfev: int, workers: int, report: Callable[[str], None]) -> str:
-    """Fit ``kept`` with every other effect of ``singles`` (warm from ``kept``'s own fit); the best partner."""
+    """Fit ``kept`` with every other effect of ``singles`` (warm from ``kept``'s own fit); the best partner.
+
+    ``fits`` and ``flaws`` (each pair's ``contradicts``, judged once) gather every pair fitted so far."""
     others = [s[0] for s in singles if s[0] != kept[0] and (kept[0], s[0]) not in fits and (s[0], kept[0]) not in fits]
     done = ordered_map(lambda e: ext.fit_extended(data, (kept[0], e), base, max_nfev=max_nfev, warm=kept[1]),
                        others, workers, before=lambda _i, e: report(f"pair search: {kept[0]} + {e}"))
     for e, fit in zip(others, done):
         fits[(kept[0], e)] = fit
-    mine = [k for k in fits if kept[0] in k and contradicts(fits[k], data) is None] or [k for k in fits if kept[0] in k]
+        flaws[(kept[0], e)] = contradicts(fit, data)
+    mine = [k for k in fits if kept[0] in k and flaws[k] is None] or [k for k in fits if kept[0] in k]
     best = max(mine, key=lambda k: evidence(base, fits[k], data.n)[0])
     return best[1] if best[0] == kept[0] else best[0]
 
