@@ -27,6 +27,7 @@ from typing import Callable
 
 import numpy as np
 from scipy.linalg import lstsq as scipy_lstsq
+from scipy.linalg import qr
 from scipy.optimize import least_squares
 
 from .. import effects as fx
@@ -472,8 +473,8 @@ class Design:
             self._solved.pop(next(iter(self._solved)))
         return coef, y_hat, wres
 
-    def _coupled_project(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(coefficients, output, weighted residual, weighted tangent design) of the coupled model.
+    def _coupled_project(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
+        """(coefficients, output, weighted residual, (weighted tangent design, curvature)) of the coupled model.
 
         With input effects the forward model (``effects.simulate_with_effects``)
         feeds every path the transformed input v = sum_i (c_i / c_0) x_i (x: the
@@ -486,24 +487,47 @@ class Design:
         solution (each path on the plain input, its gain free). Fitting each
         path on the plain input instead left a pair of hysteresis and a second
         creep at 1.5-3x the noise from the true parameters, and the fitted
-        model simulated to ~500x the noise off its own fit. The coefficients
-        are reported in the uncoupled layout (the path's gain g = kappa b), so
-        every effect reads its parameters as before; the tangent design
-        (B_i + kappa P_i, K, static) is what the exact Jacobian projects on.
+        model simulated to ~500x the noise off its own fit. Every column is a
+        combination of the rows B, P, static, so one QR of those rows turns
+        each least squares into a small one (rows x columns of R). The
+        coefficients are reported in the uncoupled layout (the path's gain
+        g = kappa b), so every effect reads its parameters as before; the
+        tangent design (B_i + kappa P_i, K, static) is what the exact Jacobian
+        projects on, with the inner problem's curvature (d tangent / d(c, kappa))^T r.
         """
         base, par, static = self._coupled_paths(theta)
-        rows, npar, wy, w = base.shape[0], len(par), self.data.wy, self.data.weights
-        par = np.array(par)
+        rows, npar, w = base.shape[0], len(par), self.data.weights
+        basis = np.vstack([base, *par, static])                 # rows B, P_1, ..., P_J, static
+        wbasis = basis if w is None else basis * w
+        q, r = qr(wbasis.T, mode="economic", check_finite=False)
+        qy = q.T @ self.data.wy
+        m, nstat = basis.shape[0], static.shape[0]
+        tail = np.zeros((m, nstat))
+        tail[m - nstat:] = np.eye(nstat)
 
-        def weigh(a: np.ndarray) -> np.ndarray:
-            return a if w is None else a * w
-        wstatic = weigh(static)
-        free = _solve(np.vstack([weigh(base), weigh(par[:, 0]), wstatic]).T, wy)
-        start = free[rows:rows + npar] / free[0] if free[0] != 0.0 else np.zeros(npar)
-        kappa, c = np.where(np.isfinite(start), start, 0.0), free[:rows]
+        def paths(kappa: np.ndarray) -> np.ndarray:
+            """Combinations of the basis rows giving the columns B_i + kappa . P_i."""
+            out = np.zeros((m, rows))
+            out[:rows] = np.eye(rows)
+            for j in range(npar):
+                out[rows * (1 + j):rows * (2 + j)] = kappa[j] * np.eye(rows)
+            return out
+
+        def slopes(c: np.ndarray) -> np.ndarray:
+            """Combinations giving K_j = sum_i c_i P_ji (the model's derivatives in kappa)."""
+            out = np.zeros((m, npar))
+            for j in range(npar):
+                out[rows * (1 + j):rows * (2 + j), j] = c
+            return out
+
+        free = np.zeros((m, npar))
+        free[rows * (1 + np.arange(npar)), np.arange(npar)] = 1.0      # each path on the plain input, gain free
+        first = _solve(r @ np.hstack([paths(np.zeros(npar)), free, tail]), qy)
+        start = first[rows:rows + npar] / first[0] if first[0] != 0.0 else np.zeros(npar)
+        start = np.where(np.isfinite(start), start, 0.0)
+        kappa, c = start, first[:rows]
         for _ in range(COUPLING_STEPS):
-            k = np.einsum("jrn,r->jn", par, c)
-            sol = _solve(np.vstack([weigh(base + np.tensordot(kappa, par, axes=1)), weigh(k), wstatic]).T, wy)
+            sol = _solve(r @ np.hstack([paths(kappa), slopes(c), tail]), qy)
             step, c = sol[rows:rows + npar], sol[:rows]
             if not np.all(np.isfinite(step)):
                 break
@@ -511,22 +535,22 @@ class Design:
             if np.all(np.abs(step) <= COUPLING_RTOL * np.maximum(np.abs(kappa), 1e-300)):
                 break
         best = None
-        for kap in (kappa, np.where(np.isfinite(start), start, 0.0)):   # the uncoupled start as a safeguard
-            a = base + np.tensordot(kap, par, axes=1)
-            wa = np.vstack([weigh(a), wstatic]).T
-            sol = _solve(wa, wy)
-            wres = wy - wa @ sol
+        for kap in (kappa, start):                             # the uncoupled start as a safeguard
+            combo = np.hstack([paths(kap), tail])
+            sol = _solve(r @ combo, qy)
+            wres = self.data.wy - wbasis.T @ (combo @ sol)
             if best is None or wres @ wres < best[0]:
-                best = (float(wres @ wres), kap, a, sol, wres)
-        _, kappa, a, sol, wres = best
+                best = (float(wres @ wres), kap, combo, sol, wres)
+        _, kappa, combo, sol, wres = best
         c = sol[:rows]
         coef = np.concatenate([c, kappa * c[0], sol[rows:]])
-        y_hat = np.vstack([a, static]).T @ sol
-        tangent = np.vstack([weigh(a), weigh(np.einsum("jrn,r->jn", par, c)), wstatic]).T
-        # the tangent's derivatives in (c, kappa) against the residual: d(B_i + kappa P_i)/dkappa = d(K)/dc_i = P_i
+        y_hat = basis.T @ (combo @ sol)
+        tangent = wbasis.T @ np.hstack([paths(kappa), slopes(c), tail])
+        # d(B_i + kappa_j P_ji)/d kappa_j = d(K_j)/d c_i = P_ji, against the residual
+        pr = (wbasis[rows:rows * (1 + npar)] @ wres).reshape(npar, rows)
         curvature = np.zeros((coef.size, coef.size))
-        curvature[:rows, rows:rows + npar] = (weigh(par) @ wres).T
-        curvature[rows:rows + npar, :rows] = weigh(par) @ wres
+        curvature[:rows, rows:rows + npar] = pr.T
+        curvature[rows:rows + npar, :rows] = pr
         return coef, y_hat, wres, (tangent, curvature)
 
     @property
