@@ -67,6 +67,7 @@ RF_SCORING = 35   # 1 while the normal equations are the score test's (at the re
 RF_NORMAL_ROWS = 36   # rows of the normal equations per slice (``SLICE_MACS``)
 RF_COST_ROWS = 37     # rows of the trial cost per slice
 RF_FACTORED = 38      # 1 if the covariance's Cholesky factor exists (its inverse's stage reads it)
+RF_GAIN_BOTH = 39     # the score test's Gauss-Newton gain with the rates freed (its second slice subtracts)
 HEAD = 40
 
 #: Multiply-adds per slice of a re-fit (about a microsecond): the per-sample kernel runs one slice per
@@ -74,14 +75,16 @@ HEAD = 40
 #: ~1-2 us more on ~2 % of its samples, not 7-45 us on ~1 % of them.
 SLICE_MACS = 4000
 
-#: Stages of a fit, in order: (idle until ``begin``, which also moves the drift origin, or
-#: ``start_test``), the statistics at true scale (one slice); per Levenberg-Marquardt step the model coefficients, the
+#: Stages of a fit, in order: (idle until ``begin`` or ``start_test``), for a re-fit the drift origin's move
+#: (``window.move_origin``, O(P^2): in a slice, not in the Python call that starts the re-fit) with the statistics
+#: at true scale in the same slice, or (a change test) these alone; per Levenberg-Marquardt step the model coefficients, the
 #: Jacobian's, the normal equations' rows in slices and their assembly, the damped step, the trial's
 #: coefficients, the trial's cost in slices and the verdict; then the covariance's factor, its inverse
-#: (and the Wald test), and for the score test the normal equations again at the result and the score.
+#: (and the Wald test), and for the score test the normal equations again at the result and the score's two
+#: Gauss-Newton gains (with and without the rates), one slice each.
 #: Each call does one stage or slice: about a microsecond of work (``SLICE_MACS``).
 (ST_IDLE, ST_SCALE, ST_JACOBIAN, ST_ASSEMBLE, ST_ROWS, ST_SOLVE, ST_TRIAL_POINT, ST_TRIAL,
- ST_COVARIANCE, ST_INVERSE, ST_SCORE) = range(11)
+ ST_COVARIANCE, ST_INVERSE, ST_SCORE, ST_SCORE_WITHOUT, ST_BEGIN) = range(13)
 
 #: Parameter masks (rows of the masks block): all free, drift rates fixed, alpha and rates fixed, the
 #: change test's (the resonance, the gain and the offset), and the change test's with the drift rates.
@@ -178,11 +181,13 @@ def begin(st: np.ndarray, S: np.ndarray, shift: np.ndarray, wk: np.ndarray, wind
     """Start a re-fit of the window: what it frees and which drift test follows (``_plan``; the tracker's
     state decides), and the drift origin to the newest sample (``window.move_origin``: alpha and b of the
     fit are then the values now). ``refit_unit`` (or ``sample_work``) then runs it. ``hold_alpha``: the window
-    restarted after a plant change (alpha held for HOLD_N samples), not after a corrected start."""
+    restarted after a plant change (alpha held for HOLD_N samples), not after a corrected start.
+
+    The origin's move is the re-fit's first slice (``ST_BEGIN``): O(P^2) over statistics that are cold by the
+    time a re-fit starts, it cost ~10 us of the Python call that starts it, which is then over 25 us."""
     _plan(wk, st[W.SC_N], window_start, drift_on, converged, refits, hold_alpha)
-    W.move_origin(st, S, shift)
     wk[RF_ROW] = 0.0
-    wk[RF_STAGE] = ST_SCALE
+    wk[RF_STAGE] = ST_BEGIN
 
 
 @njit(cache=CACHE)
@@ -218,6 +223,9 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
     stage = int(wk[RF_STAGE])
     if stage == ST_IDLE:
         return True
+    if stage == ST_BEGIN:              # a re-fit's drift origin to the newest sample (``begin``), then the scaling
+        W.move_origin(st, S, shift)    # in the same slice: the origin and the statistics of one instant
+        stage = ST_SCALE
     if stage == ST_SCALE:              # the statistics at true scale, frozen for the fit, in ONE slice: under
         # sample_work a sample lands between two slices, and rows scaled a sample apart (this stage was two
         # slices) gave a window cost that grew with the stream (demo: 1.0x -> 1.85x the noise floor in 16 s,
@@ -296,7 +304,12 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
         wk[RF_SCORING] = 1.0           # the score test: the normal equations at the result, then the score
         wk[RF_STAGE] = ST_JACOBIAN
         return False
-    stat = W.drift_score(H2, g2, free, int(wk[RF_R0])) / wk[RF_SIGMA2]
+    r0 = int(wk[RF_R0])
+    if stage == ST_SCORE:              # the score test's gain with the rates freed, then without (two slices)
+        wk[RF_GAIN_BOTH] = W.drift_gain(H2, g2, free, r0, True, L, d, trial, mt)
+        wk[RF_STAGE] = ST_SCORE_WITHOUT
+        return False
+    stat = (wk[RF_GAIN_BOTH] - W.drift_gain(H2, g2, free, r0, False, L, d, trial, mt)) / wk[RF_SIGMA2]
     wk[RF_DRIFT_STAT] = stat
     if stat > wk[RF_DRIFT_ON]:
         wk[RF_DRIFT_SWITCH] = 1.0

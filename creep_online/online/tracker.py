@@ -119,7 +119,7 @@ UNIT_MACS = 80000
 #: Snapshot slots of the change test, reused in turn (see ``WindowTracker._allocate_work``).
 SNAP_SLOTS = 6
 #: Jobs that run before the long ones (``WindowTracker._next_job``).
-PERIODIC_JOBS = ("_refit_job", "_change_job")
+PERIODIC_JOBS = ("_snapshot_job", "_refit_job", "_change_job")
 #: The drift rates enter the fit when they would lower the window cost by this many noise variances
 #: (score test at rates zero; chi-square with 2 degrees of freedom: p ~ 4e-6), and leave it when their
 #: Wald statistic falls below DRIFT_OFF. Where the data cannot tell drift from creep (a single step)
@@ -303,9 +303,21 @@ class WindowTracker(ParameterView):
         start-up search does not pay it (it was the max of every latency run since f4dc43e). Of the fresh
         state, only the linearization point and theta's coefficients are set here (one kernel,
         ``window.start_at``): the rest was built ahead (``_blank_state``)."""
-        st, S, views, fit = self._blank or self._blank_state()
-        self._blank = None
+        self.start_state(theta)
+        self.start_adopt()
+
+    def start_state(self, theta: np.ndarray) -> None:
+        """``start``'s first half: the fresh state linearized at ``theta`` (one kernel). The estimator calls the two
+        halves on two calls: together, with cold caches, they were ~35-40 us."""
+        if self._blank is None:
+            self._blank = self._blank_state()
+        st, fit = self._blank[0], self._blank[3]
         W.start_at(np.asarray(theta, dtype=float), self.theta, fit.theta, st, self.basis.lam, self.basis.dx)
+
+    def start_adopt(self) -> None:
+        """``start``'s second half: the state of ``start_state`` becomes the live one."""
+        st, S, views, fit = self._blank
+        self._blank = None
         self.fit = fit
         self._adopt(st, S, views)
         self._set_due(self.n)              # (``_schedule`` at sample 0: no re-fit or test is due yet)
@@ -436,16 +448,10 @@ class WindowTracker(ParameterView):
         if due and self.fitting and not self._refit_queued:
             self._refit_queued = True      # (a backlog would only re-fit the same statistics again)
             self._refit_n = n
-            # started here if nothing runs before it: this sample runs Python anyway, and a cold visit
-            # to the interpreter costs more than the work (the next sample would have paid ~20 us)
-            started = self.machine is None and not self._queued(*PERIODIC_JOBS)
-            if started:
-                self._begin_refit()
-            self._jobs.append(self._refit_job(started))
+            # started by its job's first unit, on a later call: this one has run the sample and Python already
+            self._jobs.append(self._refit_job())
         if self.detect and n and n % self.test_every == 0:
             self._snapshot(n)
-            if len(self._snaps) > 2:
-                self._jobs.append(self._change_job(self._snaps[0]))
         self._set_due(n)
 
     def _set_due(self, n: int) -> None:
@@ -523,15 +529,17 @@ class WindowTracker(ParameterView):
             elif not self.work(1 << 30) and self.machine is None:
                 break
 
-    def _refit_job(self, started: bool = False) -> Generator:
-        """A re-fit of the window: ``_begin_refit`` (unless ``started`` already at the due sample), its slices in
-        the per-sample kernel, then the result swapped in (``_accept``); while it is queued no other is
-        (``_schedule``)."""
+    def _refit_job(self) -> Generator:
+        """A re-fit of the window: ``_begin_refit``, its slices in the per-sample kernel, then the result swapped in
+        (``_accept``) and what it triggers (``_after_accept``), each on its own call: with cold caches each of these
+        Python visits costs 10-25 us, together they were over 25 us. While it is queued no other is (``_schedule``)."""
         try:
-            if not started:
-                self._begin_refit()
-                yield MACHINE
-            self._accept()
+            self._begin_refit()
+            yield MACHINE
+            raw = self._accept()
+            if raw is not None:
+                yield
+                self._after_accept(raw)
         finally:
             self._refit_queued = False
 
@@ -541,31 +549,38 @@ class WindowTracker(ParameterView):
                  self.refits, self._alpha_known)
         self.machine = MACHINE_REFIT
 
-    def _accept(self) -> None:
-        """Swap a finished re-fit in (``refit.accept``, one kernel), then record it and what it triggers.
+    def _accept(self) -> tuple | None:
+        """Swap a finished re-fit in (``refit.accept``, one kernel) and record it; returns its numbers for
+        ``_after_accept`` (None if it was not swapped in).
 
         Plain floats from one tuple: numpy from Python is slow here (cold code paths). The ``Fit``
         with its 1-sigma dictionary is built when someone asks for it (``fit``), not in update().
-        One unit: each visit to cold Python costs ~10-20 us of its own, so fewer, longer visits.
         """
         raw = RF.accept(self.st, self.theta, self._wk, self.basis.lam, self.basis.dx)
-        (verdict, _, _, _, _, cost, neff, move, drift, drift_stat, drift_switch, *_, n, noise, relinearize) = raw
+        verdict, drift, drift_stat, drift_switch = raw[0], raw[8], raw[9], raw[10]
         if drift:
             self.drift_stat = drift_stat
             if drift_switch:
                 self.drift_on = drift_switch > 0.0
         if verdict == RF.STALE:
-            return                         # re-linearized meanwhile: the next refit decides
+            return None                    # re-linearized meanwhile: the next refit decides
         if verdict == RF.REJECTED:
             self.rejected += 1             # a failed fit is never swapped in
             self._pace_refits(False)
-            self._watch(math.inf, True, n, noise)
-            return
-        self.converged = self.converged or move < 0.01
+            self._watch(math.inf, True, raw[18], raw[19])
+            return None
+        n = raw[18]
+        self.converged = self.converged or raw[7] < 0.01
         self.refits += 1
         self._fit, self._fit_raw, self._fit_sample = None, (raw, self.drift_on), n
         if self._first_fit is None:
             self._first_fit = n
+        return raw
+
+    def _after_accept(self, raw: tuple) -> None:
+        """What an accepted re-fit triggers (on the call after ``_accept``): the re-search watch, the re-fit pace,
+        a replay when the resonance left the linearization point, the settling of a change event."""
+        (_, _, _, _, _, cost, neff, move, *_, n, noise, relinearize) = raw
         rms = math.sqrt(max(cost, 0.0) / max(neff, 1.0))
         fine = not relinearize and self._fine_relinearization_due(rms, noise, n)
         if not fine:
@@ -633,7 +648,7 @@ class WindowTracker(ParameterView):
         """
         if after_test:
             due = self._test_after(self.n)
-            while self.n <= due or self.machine == MACHINE_TEST or self._queued("_change_job"):
+            while self.n <= due or self.machine == MACHINE_TEST or self._queued("_snapshot_job", "_change_job"):
                 yield WAIT
         a1, a2 = self.a1, self.a2
         st, S = self._fresh(a1, a2)
@@ -690,17 +705,31 @@ class WindowTracker(ParameterView):
 
     # ------------------------------------------------------------------ change detection
     def _snapshot(self, n: int) -> None:
-        """The change test's snapshot of the statistics and the estimate at sample n (now)."""
-        S0, sy0, shift0, theta0 = self._snap_slots[self._snap_next]
+        """The change test's snapshot of the statistics and the estimate at sample n (now): the copy at this
+        instant (one kernel), its bookkeeping on the next call (``_snapshot_job``; together they were over 25 us)."""
+        slot = self._snap_slots[self._snap_next]
         self._snap_next = (self._snap_next + 1) % SNAP_SLOTS
-        syy0, g0 = W.snapshot(self.st, self.S, self._shift, self.theta, S0, sy0, shift0, theta0)
+        syy0, g0 = W.snapshot(self.st, self.S, self._shift, self.theta, *slot)
+        self._jobs.append(self._snapshot_job(n, slot, syy0, g0, self.st))
+
+    def _snapshot_job(self, n: int, slot: tuple, syy0: float, g0: float, st: np.ndarray) -> Generator:
+        """Record the snapshot taken at sample n (``_snapshot``) and queue the change test of the second since
+        the one before the last. Dropped if the live state was replaced meanwhile (a replay's swap, a restart:
+        ``_adopt`` starts the snapshots afresh)."""
+        if st is not self.st:
+            return
+        S0, sy0, shift0, theta0 = slot
         self._snaps.append((n, S0, sy0, syy0, g0, (self.a1l, self.a2l), theta0, shift0))
-        self._theta_at[n] = theta0         # the estimate at each snapshot instant
-        oldest = n - 4 * self.test_every
-        for old in [k for k in self._theta_at if k < oldest]:
-            del self._theta_at[old]
+        self._theta_at[n] = theta0         # the estimate at each snapshot instant, the last five
+        self._theta_at.pop(n - 5 * self.test_every, None)
+        if len(self._theta_at) > 5:        # (an instant without a snapshot: not in a stream fed sample by sample)
+            for old in [k for k in self._theta_at if k < n - 4 * self.test_every]:
+                del self._theta_at[old]
         if len(self._snaps) > 3:
             self._snaps.pop(0)
+        if len(self._snaps) > 2:
+            self._jobs.append(self._change_job(self._snaps[0]))
+        yield
 
     def _change_job(self, snap: tuple) -> Generator:
         """Likelihood-ratio test of the samples since the snapshot against the window's estimate."""
@@ -712,8 +741,10 @@ class WindowTracker(ParameterView):
         # the drift columns stay in, at the window's rates (the snapshot moved to the live time origin):
         # over a second the drift is not negligible (alpha +0.7 %/s at a 2e-4 noise on a 0.5 output is ~5
         # noise levels), and without it a drifting plant's step looked like a change
+        yield                              # (the checks and the statistics: two visits, each under 25 us)
+        if lin0 != (self.a1l, self.a2l) or n0 < self.window_start:
+            return                         # (re-linearized or restarted meanwhile)
         wk = self._test_wk
-        # (the checks above and the statistics: one unit, one visit to cold Python)
         RF.start_test(self.st, self.S, S0, sy0, syy0, self._shift, shift0, self.theta, wk,
                       self.n_rate > 0 and not self.drift_on)
         nr = self.n - n0
