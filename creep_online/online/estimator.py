@@ -783,6 +783,7 @@ def warm_kernels() -> None:
     W.snapshot(st, S, shift, tr.theta, S.copy(), np.empty(tr.p), shift.copy(), tr.theta.copy())
     RF.start_test(st, S, S.copy(), np.ones(tr.p), 1.0, shift, shift.copy(), tr.theta.copy(), tr._test_wk.copy(),
                   True)
+    RF.queue_test(tr._test_wk.copy(), 0, 1.0, True)
     wk = tr._wk.copy()
     RF.begin(st, S, shift, wk, 1, False, True, 0, True)
     RF.run(st, S, shift, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)

@@ -386,7 +386,9 @@ class ResonanceSearch:
             _rows_free(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, f, decay, e, r0, min(n, r0 + chunk),
                        self.lead, G)
             yield
-        return _free_cost(G)
+        cost = _free_cost(G)
+        yield                              # (a caller's next work starts on the next unit)
+        return cost
 
     def judged_rows(self) -> int:
         """The rows ``judged_cost`` (and ``exact_cost``) sum over: after ``lead``, with a finite output."""

@@ -369,16 +369,17 @@ class WindowTracker(ParameterView):
                   "LN_A2_MIN": 2.0 * math.log(self.h / (2.0 * math.pi * FN_MAX_FS)),
                   "LN_ZETA_LO": math.log(ZETA_BOUNDS[0]), "LN_ZETA_HI": math.log(ZETA_BOUNDS[1]),
                   "RELINEARIZE": RELINEARIZE}
-        works = [RF.allocate(p, k, r0, REFIT_STEPS, policy), RF.allocate(p, k, r0, TEST_STEPS, policy)]
+        works = [RF.allocate(p, k, r0, REFIT_STEPS, policy),
+                 RF.allocate(p, k, r0, TEST_STEPS, policy, SNAP_SLOTS, self._shift.shape)]
         # one array for what the per-sample kernel's slices need (``refit.context``): theta, the shift and
         # the work arrays become views into it
         self._ctx, self.theta, self._shift, (self._wk, self._test_wk) = RF.context(
             self.theta, self._shift, self.basis.lam, self.basis.dx, works)
         self._refit_queued = False
-        # the change test's snapshots, in slots reused in turn: a test holds its snapshot for ~15
-        # units, ``_theta_at`` keeps the last five estimates
-        self._snap_slots = [(np.empty((p, p)), np.empty(p), np.empty_like(self._shift), np.empty(k))
-                            for _ in range(SNAP_SLOTS)]
+        # the change test's snapshots, in slots reused in turn (a test holds its snapshot for ~15
+        # units, ``_theta_at`` keeps the last five estimates), inside the test's work array: its first slice reads
+        # the snapshot there, in the per-sample kernel (``refit.queue_test``)
+        self._snap_slots = RF.snapshot_slots(self._test_wk, p, k)
         self._snap_next = 0
         self._replay_work = W.replay_scratch(p)     # (a replay's unit leaves nothing in it: shared by the jobs)
         self._search_scratch = SearchScratch(self.q)   # (one search at a time: ``_researching``)
@@ -652,6 +653,7 @@ class WindowTracker(ParameterView):
                 yield WAIT
         a1, a2 = self.a1, self.a2
         st, S = self._fresh(a1, a2)
+        yield                              # (the allocations alone: with the set-up below, ~55-65 us cold)
         lay = self.lay
         phi = st[lay["phi"]:lay["m"]]
         oldest = int(self.sc[W.SC_RSTART])
@@ -686,7 +688,8 @@ class WindowTracker(ParameterView):
             i += n
             if self.detect and i % self.test_every == 0 and i - oldest > skip:
                 snaps = (snaps + [(i, S.copy(), st[lay_sy].copy(), float(st[W.SC_SYY]), float(st[W.SC_G]),
-                                   lin, self._theta_at.get(i, self.theta).copy(), np.zeros_like(self._shift))])[-3:]
+                                   lin, self._theta_at.get(i, self.theta).copy(), np.zeros_like(self._shift),
+                                   -1)])[-3:]     # (no slot: the test starts from Python, ``refit.start_test``)
             if i >= self.n:                # caught up: swap now (a yield would let a new sample in)
                 break
             yield
@@ -707,19 +710,19 @@ class WindowTracker(ParameterView):
     def _snapshot(self, n: int) -> None:
         """The change test's snapshot of the statistics and the estimate at sample n (now): the copy at this
         instant (one kernel), its bookkeeping on the next call (``_snapshot_job``; together they were over 25 us)."""
-        slot = self._snap_slots[self._snap_next]
-        self._snap_next = (self._snap_next + 1) % SNAP_SLOTS
-        syy0, g0 = W.snapshot(self.st, self.S, self._shift, self.theta, *slot)
-        self._jobs.append(self._snapshot_job(n, slot, syy0, g0, self.st))
+        index = self._snap_next
+        self._snap_next = (index + 1) % SNAP_SLOTS
+        syy0, g0 = W.snapshot(self.st, self.S, self._shift, self.theta, *self._snap_slots[index])
+        self._jobs.append(self._snapshot_job(n, index, syy0, g0, self.st))
 
-    def _snapshot_job(self, n: int, slot: tuple, syy0: float, g0: float, st: np.ndarray) -> Generator:
+    def _snapshot_job(self, n: int, index: int, syy0: float, g0: float, st: np.ndarray) -> Generator:
         """Record the snapshot taken at sample n (``_snapshot``) and queue the change test of the second since
         the one before the last. Dropped if the live state was replaced meanwhile (a replay's swap, a restart:
         ``_adopt`` starts the snapshots afresh)."""
         if st is not self.st:
             return
-        S0, sy0, shift0, theta0 = slot
-        self._snaps.append((n, S0, sy0, syy0, g0, (self.a1l, self.a2l), theta0, shift0))
+        S0, sy0, shift0, theta0 = self._snap_slots[index]
+        self._snaps.append((n, S0, sy0, syy0, g0, (self.a1l, self.a2l), theta0, shift0, index))
         self._theta_at[n] = theta0         # the estimate at each snapshot instant, the last five
         self._theta_at.pop(n - 5 * self.test_every, None)
         if len(self._theta_at) > 5:        # (an instant without a snapshot: not in a stream fed sample by sample)
@@ -733,7 +736,7 @@ class WindowTracker(ParameterView):
 
     def _change_job(self, snap: tuple) -> Generator:
         """Likelihood-ratio test of the samples since the snapshot against the window's estimate."""
-        n0, S0, sy0, syy0, g0, lin0, theta0, shift0 = snap
+        n0, S0, sy0, syy0, g0, lin0, theta0, shift0, slot = snap
         g = float(self.sc[W.SC_G])
         if g < g0 or self._fit_sample < n0 or lin0 != (self.a1l, self.a2l) or n0 < self.window_start \
                 or not self.converged or self._researching() or self._misfit_from_start():
@@ -741,20 +744,20 @@ class WindowTracker(ParameterView):
         # the drift columns stay in, at the window's rates (the snapshot moved to the live time origin):
         # over a second the drift is not negligible (alpha +0.7 %/s at a 2e-4 noise on a 0.5 output is ~5
         # noise levels), and without it a drifting plant's step looked like a change
-        yield                              # (the checks and the statistics: two visits, each under 25 us)
-        if lin0 != (self.a1l, self.a2l) or n0 < self.window_start:
-            return                         # (re-linearized or restarted meanwhile)
-        wk = self._test_wk
-        RF.start_test(self.st, self.S, S0, sy0, syy0, self._shift, shift0, self.theta, wk,
-                      self.n_rate > 0 and not self.drift_on)
-        nr = self.n - n0
         lin = (self.a1l, self.a2l)
+        wk = self._test_wk
+        free_rates = self.n_rate > 0 and not self.drift_on
+        if slot >= 0:                      # the statistics since the snapshot: the test's first slice
+            RF.queue_test(wk, slot, syy0, free_rates)
+        else:                              # (a replay's snapshot, not in a slot: from here)
+            RF.start_test(self.st, self.S, S0, sy0, syy0, self._shift, shift0, self.theta, wk, free_rates)
         self.machine = MACHINE_TEST        # TEST_STEPS Levenberg-Marquardt steps, then the covariance, in the
         yield MACHINE                      # per-sample kernel
         # plain floats from here on (numpy from Python is slow here)
         r = RF.TestOutcome._make(RF.test_outcome(wk, self.theta))
         if not (math.isfinite(r.after) and r.after > 0.0 and math.isfinite(r.before)):
             return
+        nr = r.n - n0                      # the rows tested
         sigma2 = r.after / max(nr - 4, 1)
         lr = (r.before - r.after) / sigma2
         # the test is calibrated against its own recent level: a drifting plant (or a model that is
@@ -780,6 +783,7 @@ class WindowTracker(ParameterView):
         if lr < max(CHANGE_LR, CHANGE_JUMP * level) or not moved or lin != (self.a1l, self.a2l):
             self._lr_recent = (self._lr_recent + [float(lr)])[-CHANGE_HISTORY:]
             return
+        yield                              # the restart on the next call (with the test's result: ~90-130 us)
         settled = bool(self._settled_before(n0, theta0))
         if settled:
             self.theta[0] = theta0[0]      # alpha as it was before the change (the refits chased it since)
@@ -925,6 +929,7 @@ class WindowTracker(ParameterView):
         r = search.result
         if r is None or not (math.isfinite(r.cost) and r.a1 > 0 and r.a2 > 0 and r.b != 0):
             return
+        yield                              # (the search's last unit ended this call)
         c_live = yield from search.judged_cost(self.alpha, self.a1, self.a2, self._free_decays)
         c_new = yield from search.judged_cost(r.alpha, r.a1, r.a2, self._free_decays)
         if _likelihood_ratio(search.judged_rows(), c_live, c_new) > RESEARCH_LR:
@@ -1014,6 +1019,7 @@ class WindowTracker(ParameterView):
                                  extra=((self.alpha, self.a1, self.a2),), scratch=self._search_scratch)
         yield
         yield from self._run_search(search)
+        yield                              # (the search's last unit ended this call)
         r = search.result
         live = (self.alpha, self.a1, self.a2)
         # both judged with the resonance state at the segment's start unknown (``judged_cost``)
