@@ -784,6 +784,7 @@ def warm_kernels() -> None:
     RF.start_test(st, S, S.copy(), np.ones(tr.p), 1.0, shift, shift.copy(), tr.theta.copy(), tr._test_wk.copy(),
                   True)
     RF.queue_test(tr._test_wk.copy(), 0, 1.0, True)
+    RF.snapshot(st, S, tr._ctx.copy(), T.MACHINE_TEST, 0)
     wk = tr._wk.copy()
     RF.begin(st, S, shift, wk, 1, False, True, 0, True)
     RF.run(st, S, shift, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)

@@ -74,7 +74,8 @@ RF_FREE_RATES = 42    # 1: the test frees the drift rates (``start_test``'s free
 RF_SLOTS = 43         # snapshot slots after the scratch (the change test's work array only)
 RF_SHIFT_ROWS = 44    # the drift-origin total's shape (a slot holds a copy)
 RF_SHIFT_COLS = 45
-RF_SINCE_N = 46       # the sample count at which a change test took its statistics
+RF_SINCE_N = 46       # the sample count at which a change test took its statistics ...
+RF_SINCE_G = 47       # ... and their weight g
 HEAD = 48
 
 #: Multiply-adds per slice of a re-fit (about a microsecond): the per-sample kernel runs one slice per
@@ -82,16 +83,17 @@ HEAD = 48
 #: ~1-2 us more on ~2 % of its samples, not 7-45 us on ~1 % of them.
 SLICE_MACS = 4000
 
-#: Stages of a fit, in order: (idle until ``begin`` or ``start_test``), for a re-fit the drift origin's move
-#: (``window.move_origin``, O(P^2): in a slice, not in the Python call that starts the re-fit) with the statistics
-#: at true scale in the same slice, or (a change test) these alone; per Levenberg-Marquardt step the model coefficients, the
+#: Stages of a fit, in order: (idle until ``begin``, ``queue_test`` or ``start_test``), for a re-fit the drift
+#: origin's move (``window.move_origin``, O(P^2): in a slice, not in the Python call that starts the re-fit) and
+#: the statistics at true scale (one slice each), for a change test the statistics since its snapshot (two
+#: slices, ``queue_test``; none after ``start_test``); per Levenberg-Marquardt step the model coefficients, the
 #: Jacobian's, the normal equations' rows in slices and their assembly, the damped step, the trial's
 #: coefficients, the trial's cost in slices and the verdict; then the covariance's factor, its inverse
 #: (and the Wald test), and for the score test the normal equations again at the result and the score's two
 #: Gauss-Newton gains (with and without the rates), one slice each.
 #: Each call does one stage or slice: about a microsecond of work (``SLICE_MACS``).
 (ST_IDLE, ST_SCALE, ST_JACOBIAN, ST_ASSEMBLE, ST_ROWS, ST_SOLVE, ST_TRIAL_POINT, ST_TRIAL,
- ST_COVARIANCE, ST_INVERSE, ST_SCORE, ST_SCORE_WITHOUT, ST_BEGIN, ST_SINCE) = range(14)
+ ST_COVARIANCE, ST_INVERSE, ST_SCORE, ST_SCORE_WITHOUT, ST_BEGIN, ST_SINCE, ST_SINCE_FINISH) = range(15)
 
 #: Parameter masks (rows of the masks block): all free, drift rates fixed, alpha and rates fixed, the
 #: change test's (the resonance, the gain and the offset), and the change test's with the drift rates.
@@ -187,6 +189,16 @@ def _slot(wk: np.ndarray, p: int, k: int, i: int) -> tuple:
     return S0, sy0, shift0, wk[o:o + k]
 
 
+@njit(cache=CACHE)
+def snapshot(st: np.ndarray, S: np.ndarray, ctx: np.ndarray, which: int, slot: int) -> tuple:
+    """``window.snapshot`` into snapshot slot ``slot`` of the context's work array ``which``, with theta and the
+    drift-origin total from the context; returns (syy, g). Three arrays instead of eight: each array argument
+    costs numba's dispatch, and this runs from cold Python at every change test's instant."""
+    theta, shift, lam, dx, wk = _unpack(ctx, which)
+    S0, sy0, shift0, theta0 = _slot(wk, S.shape[0], theta.shape[0], slot)
+    return W.snapshot(st, S, shift, theta, S0, sy0, shift0, theta0)
+
+
 def snapshot_slots(wk: np.ndarray, p: int, k: int) -> list[tuple]:
     """The change test's snapshot slots in its work array (``allocate``'s ``slots``): (S0, sy0, shift0, theta0)
     views each, which ``window.snapshot`` fills. In the work array, the test's first slice reads its snapshot
@@ -262,13 +274,21 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
     stage = int(wk[RF_STAGE])
     if stage == ST_IDLE:
         return True
-    if stage == ST_SINCE:              # a change test's statistics since its snapshot (``queue_test``)
-        S0, sy0, shift0, theta0 = _slot(wk, p, k, int(wk[RF_SNAP]))
-        _since(st, S, S0, sy0, wk[RF_SNAP_SYY], shift, shift0, live, wk, wk[RF_FREE_RATES] != 0.0)
+    if stage == ST_SINCE:              # a change test's statistics since its snapshot (``queue_test``), in two
+        S0, sy0, shift0, theta0 = _slot(wk, p, k, int(wk[RF_SNAP]))     # slices: the difference at this instant,
+        wk[RF_FYY] = W.since_difference(st, S, S0, sy0, wk[RF_SNAP_SYY], F, fy)
+        _test_start(st, live, wk, wk[RF_FREE_RATES] != 0.0)
+        wk[RF_STAGE] = ST_SINCE_FINISH
         return False
-    if stage == ST_BEGIN:              # a re-fit's drift origin to the newest sample (``begin``), then the scaling
-        W.move_origin(st, S, shift)    # in the same slice: the origin and the statistics of one instant
-        stage = ST_SCALE
+    if stage == ST_SINCE_FINISH:       # ... then moved to the live drift origin and scaled (only F, fy)
+        S0, sy0, shift0, theta0 = _slot(wk, p, k, int(wk[RF_SNAP]))
+        wk[RF_FYY] = W.since_finish(st, S0, sy0, shift, shift0, F, fy, wk[RF_FYY], wk[RF_SINCE_G])
+        wk[RF_STAGE] = ST_JACOBIAN
+        return False
+    if stage == ST_BEGIN:              # a re-fit's drift origin to the newest sample (``begin``); the statistics
+        W.move_origin(st, S, shift)    # are scaled in the next slice (the two together, cold, were ~15-25 us)
+        wk[RF_STAGE] = ST_SCALE
+        return False
     if stage == ST_SCALE:              # the statistics at true scale, frozen for the fit, in ONE slice: under
         # sample_work a sample lands between two slices, and rows scaled a sample apart (this stage was two
         # slices) gave a window cost that grew with the stream (demo: 1.0x -> 1.85x the noise floor in 16 s,
@@ -474,13 +494,22 @@ def queue_test(wk: np.ndarray, slot: int, syy0: float, free_rates: bool) -> None
 @njit(cache=CACHE)
 def _since(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, syy0: float, shift: np.ndarray,
            shift0: np.ndarray, live: np.ndarray, wk: np.ndarray, free_rates: bool) -> None:
-    """``start_test``'s work (also the first slice of a test started by ``queue_test``)."""
+    """``start_test``'s work in one call."""
     p, k = S.shape[0], live.shape[0]
     theta, var, H, g, cov, H2, g2, F, fy, masks = _views(wk, p, k)
     wk[RF_FYY] = W.since_statistics(st, S, S0, sy0, syy0, shift, shift0, F, fy)
+    _test_start(st, live, wk, free_rates)
+    wk[RF_STAGE] = ST_JACOBIAN
+
+
+@njit(cache=CACHE)
+def _test_start(st: np.ndarray, live: np.ndarray, wk: np.ndarray, free_rates: bool) -> None:
+    """A change test's header at the instant of its statistics: theta from the live estimate, fresh damping."""
+    k = live.shape[0]
+    wk[HEAD:HEAD + k] = live
     wk[RF_NEFF] = st[W.SC_NEFF]
     wk[RF_SINCE_N] = st[W.SC_N]
-    theta[:] = live
+    wk[RF_SINCE_G] = st[W.SC_G]
     wk[RF_A1L], wk[RF_A2L] = st[W.SC_A1L], st[W.SC_A2L]
     wk[RF_STEP] = 0.0
     wk[RF_MU] = 1e-3
@@ -488,7 +517,6 @@ def _since(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, syy0:
     wk[RF_DRIFT] = 0.0
     wk[RF_DRIFT_SWITCH] = 0.0
     wk[RF_SCORING] = 0.0
-    wk[RF_STAGE] = ST_JACOBIAN
 
 
 @njit(cache=CACHE)

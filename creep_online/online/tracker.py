@@ -712,7 +712,7 @@ class WindowTracker(ParameterView):
         instant (one kernel), its bookkeeping on the next call (``_snapshot_job``; together they were over 25 us)."""
         index = self._snap_next
         self._snap_next = (index + 1) % SNAP_SLOTS
-        syy0, g0 = W.snapshot(self.st, self.S, self._shift, self.theta, *self._snap_slots[index])
+        syy0, g0 = RF.snapshot(self.st, self.S, self._ctx, MACHINE_TEST, index)
         self._jobs.append(self._snapshot_job(n, index, syy0, g0, self.st))
 
     def _snapshot_job(self, n: int, index: int, syy0: float, g0: float, st: np.ndarray) -> Generator:
@@ -783,23 +783,24 @@ class WindowTracker(ParameterView):
         if lr < max(CHANGE_LR, CHANGE_JUMP * level) or not moved or lin != (self.a1l, self.a2l):
             self._lr_recent = (self._lr_recent + [float(lr)])[-CHANGE_HISTORY:]
             return
-        yield                              # the restart on the next call (with the test's result: ~90-130 us)
-        settled = bool(self._settled_before(n0, theta0))
-        if settled:
-            self.theta[0] = theta0[0]      # alpha as it was before the change (the refits chased it since)
-        self._restart_window(n0, "b" in moved, alpha_known=settled)
+        yield                              # the event on the next call, the restart on the one after (with the
+        settled = bool(self._settled_before(n0, theta0))      # test's result all in one call: ~90-130 us)
         last = self.events[-1] if self.events else None
         if last is not None and not last["settled"]:
             # the same change seen again from a cleaner window: one event, restarted later
             last["restarts"] += 1
             last["lr"] = max(last["lr"], float(lr))
-            return
-        self.events.append({"t": n0 * self.h, "detected_t": self.n * self.h, "moved": sorted(moved),
-                            "relative_change": {k: float(v) for k, v in moves.items()}, "lr": float(lr),
-                            "settled": False, "restarts": 1, "_before": theta0[:4].copy(),
-                            # False: the estimate it was judged against was still moving (a start-up
-                            # estimate converging): the event may correct the estimate, not the plant
-                            "estimate_settled": settled})
+        else:
+            self.events.append({"t": n0 * self.h, "detected_t": self.n * self.h, "moved": sorted(moved),
+                                "relative_change": {k: float(v) for k, v in moves.items()}, "lr": float(lr),
+                                "settled": False, "restarts": 1, "_before": theta0[:4].copy(),
+                                # False: the estimate it was judged against was still moving (a start-up
+                                # estimate converging): the event may correct the estimate, not the plant
+                                "estimate_settled": settled})
+        yield
+        if settled:
+            self.theta[0] = theta0[0]      # alpha as it was before the change (the refits chased it since)
+        self._restart_window(n0, "b" in moved, alpha_known=settled)
 
     def _settled_before(self, n0: int, theta0: np.ndarray) -> bool:
         """Was the window's estimate settled over the second before the tested one? Only then is its alpha the
@@ -932,7 +933,9 @@ class WindowTracker(ParameterView):
         yield                              # (the search's last unit ended this call)
         c_live = yield from search.judged_cost(self.alpha, self.a1, self.a2, self._free_decays)
         c_new = yield from search.judged_cost(r.alpha, r.a1, r.a2, self._free_decays)
-        if _likelihood_ratio(search.judged_rows(), c_live, c_new) > RESEARCH_LR:
+        rows = search.judged_rows()
+        yield
+        if _likelihood_ratio(rows, c_live, c_new) > RESEARCH_LR:
             self.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
             self._coefficients()
             yield
@@ -1025,7 +1028,9 @@ class WindowTracker(ParameterView):
         # both judged with the resonance state at the segment's start unknown (``judged_cost``)
         c_live = yield from search.judged_cost(*live, self._free_decays)
         c_new = yield from search.judged_cost(r.alpha, r.a1, r.a2, self._free_decays)
-        lr = _likelihood_ratio(search.judged_rows(), c_live, c_new)
+        rows = search.judged_rows()
+        yield
+        lr = _likelihood_ratio(rows, c_live, c_new)
         change = {"alpha": r.alpha / live[0] - 1, "a1": r.a1 / live[1] - 1, "a2": r.a2 / live[2] - 1,
                   "b": r.b / self.b - 1 if self.b else 0.0}
         moved = sorted(k for k in ("a1", "a2") if abs(change[k]) > CHANGE_MOVE[k])

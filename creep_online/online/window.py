@@ -385,10 +385,13 @@ def snapshot(st: np.ndarray, S: np.ndarray, shift: np.ndarray, theta: np.ndarray
     """Copy what the change test needs of this instant into preallocated arrays; returns (syy, g).
 
     Runs on the per-sample path every ``test_every`` samples: four numpy copies from Python cost
-    ~50 us there (cold code), this ~3 us."""
+    ~50 us there (cold code), this ~3 us. Only S's upper triangle is copied (all ``since_statistics``
+    reads): half the memory written into a slot that is cold by then."""
     sc = st[:SC_SIZE]
     q, p, m, sy, md = parts(st)
-    S0[:, :] = S
+    for i in range(p):
+        for j in range(i, p):
+            S0[i, j] = S[i, j]
     sy0[:] = sy
     shift0[:, :] = shift
     theta0[:] = theta
@@ -398,31 +401,51 @@ def snapshot(st: np.ndarray, S: np.ndarray, shift: np.ndarray, theta: np.ndarray
 @njit(cache=CACHE)
 def since_statistics(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, syy0: float,
                      shift: np.ndarray, shift0: np.ndarray, R: np.ndarray, ry: np.ndarray) -> float:
-    """Statistics of the samples since a snapshot (S0, sy0, syy0, shift0) at true scale, for the change test:
-    R (full symmetric), ry; returns ryy.
+    """Statistics of the samples since a snapshot (S0, sy0, syy0, shift0; S0's upper triangle) at true scale, for
+    the change test: R (full symmetric), ry; returns ryy. ``since_difference`` at this instant, then
+    ``since_finish`` (the change test runs them as two slices: only the first reads the live statistics)."""
+    ryy = since_difference(st, S, S0, sy0, syy0, R, ry)
+    return since_finish(st, S0, sy0, shift, shift0, R, ry, ryy, st[SC_G])
 
-    Live minus the snapshot moved to the live drift origin. A move of the origin is the regressor map
-    x -> x (I - E), E holding t v in the rate columns' rows 0..nv-1; two such maps compose additively (E
-    fills only rate columns and reads none: E_i E_j = 0), so every move since the snapshot is one map with
-    D = shift - shift0, applied as ``rereference`` applies one; only the rate rows and columns change.
-    """
-    sc = st[:SC_SIZE]
-    nr = int(sc[SC_NR])
+
+@njit(cache=CACHE)
+def since_difference(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, syy0: float,
+                     R: np.ndarray, ry: np.ndarray) -> float:
+    """The live statistics minus a snapshot's, as accumulated (weight g, the snapshot at its own drift origin):
+    R's upper triangle, ry; returns ryy."""
     q, p, m, sy, md = parts(st)
     for i in range(p):
         for j in range(i, p):
             R[i, j] = S[i, j] - S0[i, j]
         ry[i] = sy[i] - sy0[i]
+    return st[SC_SYY] - syy0
+
+
+@njit(cache=CACHE)
+def since_finish(st: np.ndarray, S0: np.ndarray, sy0: np.ndarray, shift: np.ndarray, shift0: np.ndarray,
+                 R: np.ndarray, ry: np.ndarray, ryy: float, g: float) -> float:
+    """``since_difference``'s result with the snapshot moved to the live drift origin and scaled by the weight g
+    of its instant: R full symmetric, ry, and the returned ryy at true scale. Reads only the state's sizes.
+
+    A move of the origin is the regressor map x -> x (I - E), E holding t v in the rate columns' rows
+    0..nv-1; two such maps compose additively (E fills only rate columns and reads none: E_i E_j = 0), so
+    every move since the snapshot is one map with D = shift - shift0, applied as ``rereference`` applies
+    one; only the rate rows and columns change.
+    """
+    sc = st[:SC_SIZE]
+    nr = int(sc[SC_NR])
+    q, p, m, sy, md = parts(st)
     if nr > 0:
         nv, r0 = q + ONE, p - nr
         D = shift - shift0
-        G = np.empty((p, nr))            # S0[:, :nv] @ D (sums in locals: see ``_upper_times``)
+        G = np.empty((p, nr))            # full(S0)[:, :nv] @ D from S0's upper triangle (``_upper_times``)
         for i in range(p):
-            S0i = S0[i]
             for k in range(nr):
                 t = 0.0
-                for j in range(nv):
-                    t += S0i[j] * D[j, k]
+                for j in range(min(i, nv)):
+                    t += S0[j, i] * D[j, k]
+                for j in range(i, nv):
+                    t += S0[i, j] * D[j, k]
                 G[i, k] = t
         for k in range(nr):              # dS[:, r0:] += G, dS[r0:, :] += G^T, dS[r0:, r0:] -= D^T G[:nv]
             j = r0 + k
@@ -438,7 +461,6 @@ def since_statistics(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndar
             for l in range(nv):
                 c += D[l, k] * sy0[l]
             ry[j] += c
-    g = sc[SC_G]
     inv = 1.0 / g
     for i in range(p):
         for j in range(i, p):
@@ -446,7 +468,7 @@ def since_statistics(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndar
             R[i, j] = v
             R[j, i] = v
         ry[i] = ry[i] / g
-    return (sc[SC_SYY] - syy0) / g
+    return ryy / g
 
 
 @njit(cache=CACHE)
