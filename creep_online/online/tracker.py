@@ -116,6 +116,8 @@ CALM_MOVE = 1e-3
 #: Smaller units also stretch a replay over more samples: at 10000 the re-convergence after a change,
 #: fed sample by sample at 10 kHz, went from 3.5 to 5.5 s (median).
 UNIT_MACS = 80000
+#: Remembered samples copied per unit for a search's segment (``WindowTracker._ring_segment``).
+SEGMENT_CHUNK = 4096
 #: Snapshot slots of the change test, reused in turn (see ``WindowTracker._allocate_work``).
 SNAP_SLOTS = 6
 #: Jobs that run before the long ones (``WindowTracker._next_job``).
@@ -382,6 +384,12 @@ class WindowTracker(ParameterView):
         self._snap_slots = RF.snapshot_slots(self._test_wk, p, k)
         self._snap_next = 0
         self._replay_work = W.replay_scratch(p)     # (a replay's unit leaves nothing in it: shared by the jobs)
+        # a search's segment (``_ring_segment``) and the states-only fast-forward before it (``_nodes_at``), made
+        # and pre-faulted here: one search at a time
+        rows = min(self.ring.shape[1], 1 << 15 if self.work_memory is None else self.work_memory.shape[0])
+        self._segment = np.zeros((2, rows))
+        self._segment.fill(0.0)
+        self._nodes_state = (np.zeros(self.lay["size"]), np.zeros((p, p)))
         self._search_scratch = SearchScratch(self.q)   # (one search at a time: ``_researching``)
 
     def _fresh(self, a1l: float, a2l: float) -> tuple[np.ndarray, np.ndarray]:
@@ -390,11 +398,6 @@ class WindowTracker(ParameterView):
         W.start_state(st, self.basis.decay, self.basis.gain, self._free_decay, self.forget, self.h, a1l, a2l,
                       self.n_rate)
         return st, np.zeros((self.p, self.p))
-
-    def _install(self, st: np.ndarray, S: np.ndarray) -> None:
-        """Make (st, S) the live state and statistics, with theta's coefficients."""
-        W.set_estimate(self.theta, st, self.basis.lam, self.basis.dx)
-        self._adopt(st, S, self._views(st))
 
     def _views(self, st: np.ndarray) -> tuple:
         """The parts of a state array: sc, phi, m, sy, co, ztail, md."""
@@ -694,13 +697,8 @@ class WindowTracker(ParameterView):
                 break
             yield
         # swap: the live scalars and tail, the replayed states and statistics
-        new = self.st.copy()
-        for part in ("phi", "sy", "co"):
-            new[lay[part]:lay[part] + (lay[{"phi": "m", "sy": "co", "co": "ztail"}[part]] - lay[part])] = \
-                st[lay[part]:lay[{"phi": "m", "sy": "co", "co": "ztail"}[part]]]
-        for k in (W.SC_G, W.SC_SYY, W.SC_NEFF, W.SC_A1L, W.SC_A2L, W.SC_TREF):
-            new[k] = st[k]
-        self._install(new, S)
+        new = W.swapped_state(self.st, st, self.theta, self.basis.lam, self.basis.dx)
+        self._adopt(new, S, self._views(new))
         self._snaps = snaps                # the change test keeps its reference through a replay
         self._shift[:] = 0.0               # (replayed at one origin: the snapshots' and the statistics' own)
         self.relinearizations += 1
@@ -970,7 +968,10 @@ class WindowTracker(ParameterView):
     def _nodes_at(self, n0: int) -> Generator:
         """The exact node state before remembered sample n0 (fast-forwarded from the ring's oldest, in units)."""
         oldest = int(self.sc[W.SC_RSTART])
-        st, S = self._fresh(self.a1l, self.a2l)       # node states only (no statistics)
+        st, S = self._nodes_state          # node states only (no statistics: S is not touched)
+        st.fill(0.0)
+        W.start_state(st, self.basis.decay, self.basis.gain, self._free_decay, self.forget, self.h, self.a1l,
+                      self.a2l, self.n_rate)
         st[self.lay["phi"]:self.lay["phi"] + self.q] = self.ztail
         st[W.SC_N] = oldest
         chunk = max(16, UNIT_MACS // (4 * self.q))         # states only: ~0.04 us per sample at Q = 42
@@ -1064,15 +1065,14 @@ class WindowTracker(ParameterView):
         self.fitting = True
 
     def _ring_segment(self, n0: int, n1: int) -> Generator:
-        """Copies of the remembered u, y for samples n0..n1 (a few thousand per unit); returns (u, y)."""
-        u = np.empty(n1 - n0)
-        y = np.empty(n1 - n0)
-        size = self.ring.shape[1]
-        for k0 in range(0, n1 - n0, 1024):
-            k1 = min(n1 - n0, k0 + 1024)
-            pos = (self._ring_position(n0 + k0) + np.arange(k1 - k0)) % size
-            u[k0:k1] = self.ring[0, pos]
-            y[k0:k1] = self.ring[1, pos]
+        """Copies of the remembered u, y for samples n0..n1 (``SEGMENT_CHUNK`` per unit); returns (u, y), views of
+        the tracker's segment buffer (``_allocate_work``: one search at a time uses it; allocating them here,
+        up to 2 x 256 kB, and numpy's fancy indexing cost ~80 us in one update())."""
+        u, y = self._segment[0, :n1 - n0], self._segment[1, :n1 - n0]
+        size, slot = self.ring.shape[1], self._ring_position(n0)
+        for k0 in range(0, n1 - n0, SEGMENT_CHUNK):
+            k1 = min(n1 - n0, k0 + SEGMENT_CHUNK)
+            W.ring_copy(self.ring, (slot + k0) % size, u[k0:k1], y[k0:k1])
             yield
         return u, y
 

@@ -1321,6 +1321,36 @@ def replay(ring: np.ndarray, p0: int, n: int, skip: int, st: np.ndarray, S: np.n
         _add_block(X, Xw, yb, nb, S, sy, tmp, tv)
 
 
+@njit(cache=CACHE)
+def ring_copy(ring: np.ndarray, p0: int, u: np.ndarray, y: np.ndarray) -> None:
+    """u, y = the remembered inputs and outputs from ring position p0 on (wrapping), as many as u holds."""
+    size = ring.shape[1]
+    for k in range(u.shape[0]):
+        pos = (p0 + k) % size
+        u[k] = ring[0, pos]
+        y[k] = ring[1, pos]
+
+
+@njit(cache=CACHE)
+def swapped_state(live: np.ndarray, replayed: np.ndarray, theta: np.ndarray, lam: np.ndarray,
+                  dx: float) -> np.ndarray:
+    """The state after a replay: the live one (its scalars, monitors, tail) with the replayed states, statistics
+    and coefficients (phi, sy, co; the weight, syy, effective samples, linearization point, drift origin), and
+    the prediction's coefficients for theta at the new point (``set_estimate``). One kernel: as numpy slices from
+    Python, in the update() that swaps, it cost ~35-50 us cold."""
+    q = int(live[SC_NQ])
+    p = q + FREE + int(live[SC_NM]) + int(live[SC_NR])
+    o = SC_SIZE
+    ztail = o + 3 * p + 2 * q + 18 + int(live[SC_NM])
+    new = live.copy()
+    new[o:o + p] = replayed[o:o + p]                       # phi
+    new[o + 2 * p:ztail] = replayed[o + 2 * p:ztail]       # sy, co
+    for k in (SC_G, SC_SYY, SC_NEFF, SC_A1L, SC_A2L, SC_TREF):
+        new[k] = replayed[k]
+    set_estimate(theta, new, lam, dx)
+    return new
+
+
 @njit(cache=CACHE, fastmath=FAST)
 def replay_direct(ring: np.ndarray, p0: int, n: int, skip: int, st: np.ndarray, S: np.ndarray) -> None:
     """``replay`` one rank-one update per sample, as the live kernel accumulates (the reference in the tests)."""
