@@ -850,6 +850,9 @@ class WindowTracker(ParameterView):
         self._first_fit = None
         self._research_wait = int(RESEARCH_AFTER_S / self.h)
         self.machine = None
+        # the queued jobs are dropped; a re-fit queued but not yet started would otherwise leave its flag set (its
+        # ``finally`` never runs) and no re-fit would be queued again (seen once the restart came a few calls later)
+        self._refit_queued = False
         self._jobs = [self._research_job(self.window_start)]
         self._pace_refits(False)
 
