@@ -643,23 +643,27 @@ def test_a_sub_threshold_change_reads_changing_not_good(monkeypatch):
 
 def test_the_grid_planned_on_idle_calls_is_the_searchs_own_and_changes_nothing(monkeypatch):
     """The start-up search's grid frequencies are computed ahead on idle buffering calls (a few numpy calls per
-    call) for the rows the search will take: the search gets exactly them, and every estimate is the one of an
-    estimator that computes them in the search's first unit."""
+    call) for the rows the search will take: the search gets exactly them, bit for bit the frequencies an
+    estimator without the plan computes in the search's first unit; that unit is then saved (the estimates
+    land a sample earlier), and the stream ends at the same estimate."""
     _, _, u, y = _plant(0.2, 150.0, 0.1, 1.3, 1e-4, 0.6, 1.0, 0.05)
 
-    def run() -> tuple[OnlineEstimator, list[dict], bool | None]:
-        est, seen, planned = OnlineEstimator(1e-4), [], None
+    def run() -> tuple[OnlineEstimator, np.ndarray, bool | None]:
+        est, planned = OnlineEstimator(1e-4), None
         for a, b in zip(u.tolist(), y.tolist()):
             plan = est._grid_plan
             est.update(a, b)
             if plan is not None and plan[2] is not None and est._search is not None and planned is None:
                 planned = est._search._freqs is plan[2]
-            seen.append(est.estimate.to_dict())
-        return est, seen, planned
+        return est, est._search._freqs, planned
 
     est, ahead, planned = run()
     assert planned and est.phase == "tracking"
     monkeypatch.setattr(OnlineEstimator, "_plan_grid", lambda self: None)
-    _, direct, never = run()
+    direct, computed, never = run()
     assert never is None
-    assert ahead == direct
+    assert np.array_equal(ahead, computed)
+    a, d = est.estimate, direct.estimate
+    assert a.quality == d.quality == "good" and a.events == d.events
+    for name in ("alpha", "a1", "a2", "b"):
+        assert getattr(a, name) == pytest.approx(getattr(d, name), rel=1e-6)

@@ -349,9 +349,9 @@ def test_refit_machine_equals_its_kernels_in_sequence():
     normal_slices = -(-tr.p // int(tr._wk[RF.RF_NORMAL_ROWS]))
     cost_slices = -(-tr.p // int(tr._wk[RF.RF_COST_ROWS]))
     assert normal_slices > 1                          # the slices are exercised
-    # scaling (1); per step the model coefficients, the Jacobian's, the rows, the solve, the trial's
-    # coefficients, its cost; the covariance's factor and inverse
-    assert units == 1 + T.REFIT_STEPS * (2 + normal_slices + 2 + cost_slices) + 2
+    # the drift origin's move (1), scaling (1); per step the model coefficients, the Jacobian's, the rows, the
+    # solve, the trial's coefficients, its cost; the covariance's factor and inverse
+    assert units == 2 + T.REFIT_STEPS * (2 + normal_slices + 2 + cost_slices) + 2
     head, fitted, var = RF.result(tr._wk)
     assert np.array_equal(fitted, theta) and np.array_equal(var, np.diag(cov))
     assert head[RF.RF_AFTER] == out[1] and head[RF.RF_DRIFT] == 0.0
@@ -368,18 +368,23 @@ def test_the_per_sample_kernel_runs_the_refit_machine_to_the_same_result(slices,
     """refit.sample_work (a sample, then slices of the re-fit, with theta, shift, nodes and work arrays taken
     from the context array) = refit.run on the state at the re-fit's start, bit for bit, and reports the end
     with MACHINE_DONE after exactly the machine's number of slices. With outputs measured meanwhile the
-    statistics move under the fit: it must read them at one instant (its start). Scaled in two slices a
-    sample apart, they gave a window cost that grew with the stream while theta stayed right (the demo
-    ended "degraded" at 1.85x the noise floor, sample by sample only)."""
+    statistics move under the fit: it must read them at one instant (the scaling's slice, after the drift
+    origin's move in the slice before). Scaled in two slices a sample apart, they gave a window cost that grew
+    with the stream while theta stayed right (the demo ended "degraded" at 1.85x the noise floor, sample by
+    sample only)."""
     tr = _fed_drifting_tracker(4)
     lam, dx = tr.basis.lam, tr.basis.dx
     rng = np.random.default_rng(1)
     ys = [math.nan if outputs == "missing" else 0.8 + 1e-3 * rng.standard_normal() for _ in range(2000)]
     RF.begin(tr.st, tr.S, tr._shift, tr._wk, 0, False, False, 1, True)
-    # the reference: the same first sample (sample_work takes it before the first slice), then the machine
+    # the reference: the same first sample (sample_work takes it before the first slice), the drift origin's
+    # move (the first slice), with one slice per call the second sample, then the machine
     st, S, shift, theta, wk, ring = (a.copy() for a in (tr.st, tr.S, tr._shift, tr.theta, tr._wk, tr.ring))
     W.sample(0.5, ys[0], st, S, ring)
-    expected = 0
+    RF.refit_unit(st, S, shift, theta, wk, lam, dx)
+    if slices == 1:
+        W.sample(0.5, ys[1], st, S, ring)
+    expected = 1
     probe = wk.copy()
     while not RF.refit_unit(st.copy(), S.copy(), shift.copy(), theta.copy(), probe, lam, dx):
         expected += 1

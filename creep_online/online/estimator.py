@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
+from typing import Generator
 
 import numpy as np
 
@@ -265,6 +266,7 @@ class OnlineEstimator(StoredParams):
         self._search_rounds = 0
         self._tc_used = 0.0
         self._tracker: WindowTracker | RecursiveTracker | None = None
+        self._starting: Generator | None = None     # the tracker's start under way (``_start_steps``)
         self._recursive = self.refit == "recursive"
         self._catchup = 0
         # the window trackers for a stream from rest and one taken in operation, built now (``WindowTracker.start``)
@@ -395,8 +397,10 @@ class OnlineEstimator(StoredParams):
         else:                             # a re-fit or change test under way: its slices run in the kernel
             status = RF.sample_work(du, y, tr.st, tr.S, tr.ring, tr._ctx, tr.machine, self._units)
             if status >= RF.MACHINE_DONE:
-                tr.machine = None         # (its job reads the result at the next sample)
-                status -= RF.MACHINE_DONE
+                tr.machine = None         # its job reads the result at the next sample (this call has done
+                status -= RF.MACHINE_DONE   # the machine's last slice: with the job's visit it was over 25 us)
+                if status < 8:
+                    return
         if status >= 8:                   # jobs queued (and the change test's snapshot taken): their first
             tr._schedule()                # unit waits for the next sample, this call has done enough
         elif tr._jobs:
@@ -519,7 +523,13 @@ class OnlineEstimator(StoredParams):
         return self._t_need
 
     def _advance_start(self, units: int) -> None:
-        """Buffering and searching: start the search when ready, give it ``units``, build the tracker."""
+        """Buffering and searching: start the search when ready, give it ``units``, start the tracker.
+
+        Sample by sample the search's end, the tracker's two start steps and the replay's first unit each take
+        a call of their own (``_start_steps``): together they were one update() of ~80-120 us. The estimate
+        reads "searching" until the tracker has started, a few samples later. With ``units`` >= 2^29 (block
+        mode, a full buffer) everything runs in this call."""
+        eager = units >= 1 << 29
         if self._phase == "buffering":
             if not self._ready_to_search():
                 self._plan_grid()
@@ -527,12 +537,20 @@ class OnlineEstimator(StoredParams):
             self._start_search()
             units -= 1
         if self._phase == "searching":
-            s = self._search
-            while units > 0 and not s.step():
-                units -= 1
-            if s.result is None or self._longer_window_needed(s.result):
+            if self._starting is None:
+                s = self._search
+                while units > 0 and not s.step():
+                    units -= 1
+                if s.result is None or self._longer_window_needed(s.result):
+                    return
+                self._starting = self._start_steps(s.result)
+                if not eager:
+                    return
+            for _ in self._starting:
+                if not eager:
+                    return
+            if not eager:                  # started in this call: the replay from the next
                 return
-            self._start_tracker(s.result)
         if self._catchup:
             self._catch_up(max(units, 1))
 
@@ -596,7 +614,10 @@ class OnlineEstimator(StoredParams):
             refit_every=self._refit_every, test_every=self._test_every, detect=bool(self.detect_changes),
             drift=DRIFT_COLUMNS if self.track_drift else 0)
 
-    def _start_tracker(self, res) -> None:
+    def _start_steps(self, res) -> Generator:
+        """Start the tracker at the search's result, in steps (one per call sample by sample, ``_advance_start``):
+        the window tracker's fresh state (``WindowTracker.start_state``), then its adoption; the replay of the
+        buffer (``_catch_up``) follows."""
         lo, hi = self._bounds
         theta = np.array([min(max(res.alpha, lo), hi), math.log(res.a1), math.log(res.a2), res.b, res.c])
         if self._recursive:
@@ -606,8 +627,16 @@ class OnlineEstimator(StoredParams):
                 detect=bool(self.detect_changes), scale=res.b * (self._u_hi - self._u_lo))
         else:
             # (the other spare stays until reset(): freeing its arrays here cost ~35 us of this update())
+            tracker = self._spares[bool(self._u_ref)]
+            tracker.start_state(theta)
+            yield
             self._tracker = self._spares.pop(bool(self._u_ref))
-            self._tracker.start(theta)
+            self._tracker.start_adopt()
+        self._starting = None
+        self._start_tracking()
+
+    def _start_tracking(self) -> None:
+        """The tracker has started: the replay of the buffer (``_catch_up``) follows."""
         if self.frozen:
             self._tracker.sc[W.SC_ACC] = 0.0
         self._tracker.fitting = False
@@ -754,6 +783,8 @@ def warm_kernels() -> None:
     W.snapshot(st, S, shift, tr.theta, S.copy(), np.empty(tr.p), shift.copy(), tr.theta.copy())
     RF.start_test(st, S, S.copy(), np.ones(tr.p), 1.0, shift, shift.copy(), tr.theta.copy(), tr._test_wk.copy(),
                   True)
+    RF.queue_test(tr._test_wk.copy(), 0, 1.0, True)
+    RF.snapshot(st, S, tr._ctx.copy(), T.MACHINE_TEST, 0)
     wk = tr._wk.copy()
     RF.begin(st, S, shift, wk, 1, False, True, 0, True)
     RF.run(st, S, shift, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)
@@ -765,5 +796,14 @@ def warm_kernels() -> None:
     W.drift_score(np.eye(k) + 0.1, np.ones(k), np.ones(k), k - 2)
     RF.begin(tr.st, tr.S, tr._shift, tr._wk, 1, False, True, 0, True)      # (this estimator is thrown away)
     RF.sample_work(0.0, 0.0, tr.st, tr.S, tr.ring, tr._ctx, T.MACHINE_REFIT, 1)
+    W.ring_copy(tr.ring, 0, np.empty(4), np.empty(4))
+    W.swapped_state(tr.st, tr.st.copy(), tr.theta, tr.basis.lam, tr.basis.dx)
+    # a post-change search (alpha fixed) and its judged costs: their kernels otherwise load at the first change
+    search = ResonanceSearch(tr.basis, u[:300] - u[0], u[:300] * 0.5, fixed_alpha=0.1,
+                             extra=((0.1, 2e-3, 1e-6),), work=None)
+    search.run()
+    for decays in ((), T.FREE_RATES):
+        for _ in search.judged_cost(0.1, 2e-3, 1e-6, decays):
+            pass
     T.WindowTracker  # noqa: B018 - imported for its kernels
     R.warm()

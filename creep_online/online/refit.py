@@ -67,21 +67,33 @@ RF_SCORING = 35   # 1 while the normal equations are the score test's (at the re
 RF_NORMAL_ROWS = 36   # rows of the normal equations per slice (``SLICE_MACS``)
 RF_COST_ROWS = 37     # rows of the trial cost per slice
 RF_FACTORED = 38      # 1 if the covariance's Cholesky factor exists (its inverse's stage reads it)
-HEAD = 40
+RF_GAIN_BOTH = 39     # the score test's Gauss-Newton gain with the rates freed (its second slice subtracts)
+RF_SNAP = 40          # the change test's snapshot slot (``snapshot_slots``) ...
+RF_SNAP_SYY = 41      # ... its syy
+RF_FREE_RATES = 42    # 1: the test frees the drift rates (``start_test``'s free_rates)
+RF_SLOTS = 43         # snapshot slots after the scratch (the change test's work array only)
+RF_SHIFT_ROWS = 44    # the drift-origin total's shape (a slot holds a copy)
+RF_SHIFT_COLS = 45
+RF_SINCE_N = 46       # the sample count at which a change test took its statistics ...
+RF_SINCE_G = 47       # ... and their weight g
+HEAD = 48
 
 #: Multiply-adds per slice of a re-fit (about a microsecond): the per-sample kernel runs one slice per
 #: sample while a re-fit or a change test is under way (``sample_work``), so a 10 kHz control loop sees
 #: ~1-2 us more on ~2 % of its samples, not 7-45 us on ~1 % of them.
 SLICE_MACS = 4000
 
-#: Stages of a fit, in order: (idle until ``begin``, which also moves the drift origin, or
-#: ``start_test``), the statistics at true scale (one slice); per Levenberg-Marquardt step the model coefficients, the
+#: Stages of a fit, in order: (idle until ``begin``, ``queue_test`` or ``start_test``), for a re-fit the drift
+#: origin's move (``window.move_origin``, O(P^2): in a slice, not in the Python call that starts the re-fit) and
+#: the statistics at true scale (one slice each), for a change test the statistics since its snapshot (two
+#: slices, ``queue_test``; none after ``start_test``); per Levenberg-Marquardt step the model coefficients, the
 #: Jacobian's, the normal equations' rows in slices and their assembly, the damped step, the trial's
 #: coefficients, the trial's cost in slices and the verdict; then the covariance's factor, its inverse
-#: (and the Wald test), and for the score test the normal equations again at the result and the score.
+#: (and the Wald test), and for the score test the normal equations again at the result and the score's two
+#: Gauss-Newton gains (with and without the rates), one slice each.
 #: Each call does one stage or slice: about a microsecond of work (``SLICE_MACS``).
 (ST_IDLE, ST_SCALE, ST_JACOBIAN, ST_ASSEMBLE, ST_ROWS, ST_SOLVE, ST_TRIAL_POINT, ST_TRIAL,
- ST_COVARIANCE, ST_INVERSE, ST_SCORE) = range(11)
+ ST_COVARIANCE, ST_INVERSE, ST_SCORE, ST_SCORE_WITHOUT, ST_BEGIN, ST_SINCE, ST_SINCE_FINISH) = range(15)
 
 #: Parameter masks (rows of the masks block): all free, drift rates fixed, alpha and rates fixed, the
 #: change test's (the resonance, the gain and the offset), and the change test's with the drift rates.
@@ -89,14 +101,18 @@ MASK_ALL, MASK_CONSTANT, MASK_HOLD, MASK_TEST, MASK_TEST_RATES = 0, 1, 2, 3, 4
 MASKS = 5
 
 
-def allocate(p: int, k: int, r0: int, steps: int, policy: dict) -> np.ndarray:
+def allocate(p: int, k: int, r0: int, steps: int, policy: dict, slots: int = 0,
+             shift_shape: tuple[int, int] = (0, 0)) -> np.ndarray:
     """A fresh work array for statistics of size p and k parameters (rates from r0 on).
 
     ``policy``: the tracker's settings the re-fit applies, by header name without ``RF_`` (alpha
     bounds LO, HI; DRIFT_ON, DRIFT_OFF, DRIFT_MAX; HOLD_N, DRIFT_MIN_N, DRIFT_EVERY, NRATE;
-    LN_A2_MIN, LN_ZETA_LO, LN_ZETA_HI, RELINEARIZE).
+    LN_A2_MIN, LN_ZETA_LO, LN_ZETA_HI, RELINEARIZE). ``slots``: the change test's snapshot slots
+    (``snapshot_slots``) for a drift-origin total of ``shift_shape``.
     """
-    wk = np.zeros(_masks_at(p, k) + MASKS * k + _scratch_size(p, k))
+    rows, cols = shift_shape
+    wk = np.zeros(_masks_at(p, k) + MASKS * k + _scratch_size(p, k) + slots * _slot_size(p, k, rows * cols))
+    wk[RF_SLOTS], wk[RF_SHIFT_ROWS], wk[RF_SHIFT_COLS] = slots, rows, cols
     wk[RF_MU] = 1e-3
     wk[RF_STEPS] = steps
     wk[RF_K], wk[RF_R0] = k, r0
@@ -145,11 +161,49 @@ def _views(wk: np.ndarray, p: int, k: int) -> tuple:
     return theta, var, H, g, cov, H2, g2, F, fy, masks
 
 
+@njit(cache=CACHE)
 def _scratch_size(p: int, k: int) -> int:
     """C (p x k), A^T (4 x mq), m, F A (p x 4), F m, the trial theta (k) and its coefficients (p), the
     model coefficients and their alpha-derivative (p each, Q + 2 used), the covariance's factor (k x k)
     and scaling (k)."""
     return p * k + 4 * (p - (k - 4)) + p + 4 * p + p + k + p + 2 * p + k * k + k
+
+
+@njit(cache=CACHE)
+def _slot_size(p: int, k: int, shift_size: int) -> int:
+    """A snapshot slot: S0 (p x p), sy0 (p), shift0 (shift_size), theta0 (k)."""
+    return p * p + p + shift_size + k
+
+
+@njit(cache=CACHE)
+def _slot(wk: np.ndarray, p: int, k: int, i: int) -> tuple:
+    """S0, sy0, shift0, theta0 of snapshot slot i: views into the work array after the scratch."""
+    rows, cols = int(wk[RF_SHIFT_ROWS]), int(wk[RF_SHIFT_COLS])
+    o = _masks_at(p, k) + MASKS * k + _scratch_size(p, k) + i * _slot_size(p, k, rows * cols)
+    S0 = wk[o:o + p * p].reshape(p, p)
+    o += p * p
+    sy0 = wk[o:o + p]
+    o += p
+    shift0 = wk[o:o + rows * cols].reshape(rows, cols)
+    o += rows * cols
+    return S0, sy0, shift0, wk[o:o + k]
+
+
+@njit(cache=CACHE)
+def snapshot(st: np.ndarray, S: np.ndarray, ctx: np.ndarray, which: int, slot: int) -> tuple:
+    """``window.snapshot`` into snapshot slot ``slot`` of the context's work array ``which``, with theta and the
+    drift-origin total from the context; returns (syy, g). Three arrays instead of eight: each array argument
+    costs numba's dispatch, and this runs from cold Python at every change test's instant."""
+    theta, shift, lam, dx, wk = _unpack(ctx, which)
+    S0, sy0, shift0, theta0 = _slot(wk, S.shape[0], theta.shape[0], slot)
+    return W.snapshot(st, S, shift, theta, S0, sy0, shift0, theta0)
+
+
+def snapshot_slots(wk: np.ndarray, p: int, k: int) -> list[tuple]:
+    """The change test's snapshot slots in its work array (``allocate``'s ``slots``): (S0, sy0, shift0, theta0)
+    views each, which ``window.snapshot`` fills. In the work array, the test's first slice reads its snapshot
+    there (``queue_test``), inside the per-sample kernel."""
+    return [_slot(wk, p, k, i) for i in range(int(wk[RF_SLOTS]))]
 
 
 @njit(cache=CACHE)
@@ -178,11 +232,13 @@ def begin(st: np.ndarray, S: np.ndarray, shift: np.ndarray, wk: np.ndarray, wind
     """Start a re-fit of the window: what it frees and which drift test follows (``_plan``; the tracker's
     state decides), and the drift origin to the newest sample (``window.move_origin``: alpha and b of the
     fit are then the values now). ``refit_unit`` (or ``sample_work``) then runs it. ``hold_alpha``: the window
-    restarted after a plant change (alpha held for HOLD_N samples), not after a corrected start."""
+    restarted after a plant change (alpha held for HOLD_N samples), not after a corrected start.
+
+    The origin's move is the re-fit's first slice (``ST_BEGIN``): O(P^2) over statistics that are cold by the
+    time a re-fit starts, it cost ~10 us of the Python call that starts it, which is then over 25 us."""
     _plan(wk, st[W.SC_N], window_start, drift_on, converged, refits, hold_alpha)
-    W.move_origin(st, S, shift)
     wk[RF_ROW] = 0.0
-    wk[RF_STAGE] = ST_SCALE
+    wk[RF_STAGE] = ST_BEGIN
 
 
 @njit(cache=CACHE)
@@ -218,6 +274,21 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
     stage = int(wk[RF_STAGE])
     if stage == ST_IDLE:
         return True
+    if stage == ST_SINCE:              # a change test's statistics since its snapshot (``queue_test``), in two
+        S0, sy0, shift0, theta0 = _slot(wk, p, k, int(wk[RF_SNAP]))     # slices: the difference at this instant,
+        wk[RF_FYY] = W.since_difference(st, S, S0, sy0, wk[RF_SNAP_SYY], F, fy)
+        _test_start(st, live, wk, wk[RF_FREE_RATES] != 0.0)
+        wk[RF_STAGE] = ST_SINCE_FINISH
+        return False
+    if stage == ST_SINCE_FINISH:       # ... then moved to the live drift origin and scaled (only F, fy)
+        S0, sy0, shift0, theta0 = _slot(wk, p, k, int(wk[RF_SNAP]))
+        wk[RF_FYY] = W.since_finish(st, S0, sy0, shift, shift0, F, fy, wk[RF_FYY], wk[RF_SINCE_G])
+        wk[RF_STAGE] = ST_JACOBIAN
+        return False
+    if stage == ST_BEGIN:              # a re-fit's drift origin to the newest sample (``begin``); the statistics
+        W.move_origin(st, S, shift)    # are scaled in the next slice (the two together, cold, were ~15-25 us)
+        wk[RF_STAGE] = ST_SCALE
+        return False
     if stage == ST_SCALE:              # the statistics at true scale, frozen for the fit, in ONE slice: under
         # sample_work a sample lands between two slices, and rows scaled a sample apart (this stage was two
         # slices) gave a window cost that grew with the stream (demo: 1.0x -> 1.85x the noise floor in 16 s,
@@ -296,7 +367,12 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
         wk[RF_SCORING] = 1.0           # the score test: the normal equations at the result, then the score
         wk[RF_STAGE] = ST_JACOBIAN
         return False
-    stat = W.drift_score(H2, g2, free, int(wk[RF_R0])) / wk[RF_SIGMA2]
+    r0 = int(wk[RF_R0])
+    if stage == ST_SCORE:              # the score test's gain with the rates freed, then without (two slices)
+        wk[RF_GAIN_BOTH] = W.drift_gain(H2, g2, free, r0, True, L, d, trial, mt)
+        wk[RF_STAGE] = ST_SCORE_WITHOUT
+        return False
+    stat = (wk[RF_GAIN_BOTH] - W.drift_gain(H2, g2, free, r0, False, L, d, trial, mt)) / wk[RF_SIGMA2]
     wk[RF_DRIFT_STAT] = stat
     if stat > wk[RF_DRIFT_ON]:
         wk[RF_DRIFT_SWITCH] = 1.0
@@ -401,11 +477,39 @@ def start_test(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, s
     second is fitted by moving the resonance (seen: a flat compensated hold drifting ~4 noise levels
     per second read a1 +35 %, a2 -26 %, statistic 731: a change restarted the window at 1.5 s).
     """
+    _since(st, S, S0, sy0, syy0, shift, shift0, live, wk, free_rates)
+
+
+@njit(cache=CACHE)
+def queue_test(wk: np.ndarray, slot: int, syy0: float, free_rates: bool) -> None:
+    """Start the change test on the snapshot in ``slot`` (``snapshot_slots``): its first slice, in the per-sample
+    kernel, takes the statistics since the snapshot (``start_test``'s work, ~7 us warm, ~15 us cold: with the
+    Python that starts it, it was over 25 us in one update())."""
+    wk[RF_SNAP] = slot
+    wk[RF_SNAP_SYY] = syy0
+    wk[RF_FREE_RATES] = 1.0 if free_rates else 0.0
+    wk[RF_STAGE] = ST_SINCE
+
+
+@njit(cache=CACHE)
+def _since(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, syy0: float, shift: np.ndarray,
+           shift0: np.ndarray, live: np.ndarray, wk: np.ndarray, free_rates: bool) -> None:
+    """``start_test``'s work in one call."""
     p, k = S.shape[0], live.shape[0]
     theta, var, H, g, cov, H2, g2, F, fy, masks = _views(wk, p, k)
     wk[RF_FYY] = W.since_statistics(st, S, S0, sy0, syy0, shift, shift0, F, fy)
+    _test_start(st, live, wk, free_rates)
+    wk[RF_STAGE] = ST_JACOBIAN
+
+
+@njit(cache=CACHE)
+def _test_start(st: np.ndarray, live: np.ndarray, wk: np.ndarray, free_rates: bool) -> None:
+    """A change test's header at the instant of its statistics: theta from the live estimate, fresh damping."""
+    k = live.shape[0]
+    wk[HEAD:HEAD + k] = live
     wk[RF_NEFF] = st[W.SC_NEFF]
-    theta[:] = live
+    wk[RF_SINCE_N] = st[W.SC_N]
+    wk[RF_SINCE_G] = st[W.SC_G]
     wk[RF_A1L], wk[RF_A2L] = st[W.SC_A1L], st[W.SC_A2L]
     wk[RF_STEP] = 0.0
     wk[RF_MU] = 1e-3
@@ -413,7 +517,6 @@ def start_test(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, s
     wk[RF_DRIFT] = 0.0
     wk[RF_DRIFT_SWITCH] = 0.0
     wk[RF_SCORING] = 0.0
-    wk[RF_STAGE] = ST_JACOBIAN
 
 
 @njit(cache=CACHE)
@@ -538,10 +641,10 @@ def bound_resonance(theta: np.ndarray, wk: np.ndarray) -> bool:
 
 
 #: What ``test_outcome`` returns: the window costs of the last second at the live estimate and at the test's
-#: fit; the fit's and the live ln a1, ln a2, b; the fit's variances (times sigma^2) of ln a1, ln a2, b
-#: (a plain tuple, as ``accept``'s).
+#: fit; the fit's and the live ln a1, ln a2, b; the fit's variances (times sigma^2) of ln a1, ln a2, b; the
+#: sample count at which it took its statistics (a plain tuple, as ``accept``'s).
 TestOutcome = namedtuple("TestOutcome", "before after ln_a1 ln_a2 b live_ln_a1 live_ln_a2 live_b "
-                                        "var_ln_a1 var_ln_a2 var_b")
+                                        "var_ln_a1 var_ln_a2 var_b n")
 
 
 @njit(cache=CACHE)
@@ -551,7 +654,7 @@ def test_outcome(wk: np.ndarray, live: np.ndarray) -> tuple:
     k = live.shape[0]
     theta, var = wk[HEAD:HEAD + k], wk[HEAD + k:HEAD + 2 * k]
     return (wk[RF_START_COST], wk[RF_AFTER], theta[1], theta[2], theta[3], live[1], live[2], live[3],
-            var[1], var[2], var[3])
+            var[1], var[2], var[3], int(wk[RF_SINCE_N]))
 
 
 def result(wk: np.ndarray) -> tuple[list[float], list[float], list[float]]:

@@ -299,6 +299,28 @@ class SearchScratch:
         self.x = np.zeros(2)           # the resonance states
         self.acc = np.zeros(6)         # the projected cost's sums
         self.zeta = np.empty(q)        # the node states (``_history``)
+        self.judge: dict = {}          # ``judged_cost``'s arrays per (decay rates, step)
+
+
+def _judge_arrays(scratch: SearchScratch, rates: tuple, h: float) -> tuple:
+    """``judged_cost``'s arrays for these decay rates (1/s) at step h: the two homogeneous resonance states, the
+    per-row decays, the decays' states and the Gram matrix; made once per (rates, h) and reset by
+    ``_judge_reset`` (the numpy calls that made them each time cost ~50 us of cold Python in one update())."""
+    key = (rates, h)
+    arrays = scratch.judge.get(key)
+    if arrays is None:
+        m = len(rates)
+        arrays = (np.empty(4), np.exp(-np.asarray(rates, dtype=float) * h), np.empty(m), np.empty((5 + m, 5 + m)))
+        scratch.judge[key] = arrays
+    return arrays
+
+
+@njit(cache=True)
+def _judge_reset(f: np.ndarray, e: np.ndarray, G: np.ndarray) -> None:
+    """Start values of ``_rows_free``'s accumulators: the unit resonance states, the decays at 1, G zero."""
+    f[0], f[1], f[2], f[3] = 1.0, 0.0, 0.0, 1.0
+    e[:] = 1.0
+    G[:, :] = 0.0
 
 
 class ResonanceSearch:
@@ -338,12 +360,14 @@ class ResonanceSearch:
         else:
             self._hist = np.empty((self.u.size, basis.size))
         sc = scratch if scratch is not None else SearchScratch(basis.size)
+        self._scratch = sc
         # one candidate at a time: its node coefficients, states, sums
         self._v, self._dv, self._rc, self._vz, self._x, self._acc = sc.v, sc.dv, sc.rc, sc.vz, sc.x, sc.acc
         self._zeta = sc.zeta
         self._grid_work = (sc.costs, sc.ranked, sc.picks)
-        #: the grid's frequencies (none with ``starts``): given, or computed here (this unit has no other work)
-        self._freqs = None if starts is not None else freqs if freqs is not None else self._grid_frequencies()
+        #: the grid's frequencies (none with ``starts``): given, or computed by the first unit (``_run``; with the
+        #: construction, in one update(), they were ~70 us of cold numpy and Python)
+        self._freqs = freqs
         self._gen = self._run()
 
     def step(self) -> bool:
@@ -375,18 +399,18 @@ class ResonanceSearch:
         vz, x = self._vz, self._x
         vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
                             self._rc, vz, x, self._acc)
-        f = np.array([1.0, 0.0, 0.0, 1.0])
-        rates = np.asarray(decays, dtype=float)
-        decay, e = np.exp(-rates * self.basis.h), np.ones(rates.size)
-        G = np.zeros((5 + rates.size, 5 + rates.size))
+        f, decay, e, G = _judge_arrays(self._scratch, tuple(decays), self.basis.h)
+        _judge_reset(f, e, G)
         yield
         n = self.u.size
-        chunk = max(16, int(UNIT_WORK / (self.basis.size + 30 + 6 * rates.size)))
+        chunk = max(16, int(UNIT_WORK / (self.basis.size + 30 + 6 * e.size)))
         for r0 in range(0, n, chunk):
             _rows_free(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, f, decay, e, r0, min(n, r0 + chunk),
                        self.lead, G)
             yield
-        return _free_cost(G)
+        cost = _free_cost(G)
+        yield                              # (a caller's next work starts on the next unit)
+        return cost
 
     def judged_rows(self) -> int:
         """The rows ``judged_cost`` (and ``exact_cost``) sum over: after ``lead``, with a finite output."""
@@ -525,6 +549,9 @@ class ResonanceSearch:
         return cost
 
     def _run(self) -> Generator:
+        if self._freqs is None and self.starts is None:
+            self._freqs = self._grid_frequencies()
+            yield
         yield from self._history()
         n = self.u.size - self.lead
         coarse = max(1, n // COARSE_ROWS)

@@ -116,10 +116,12 @@ CALM_MOVE = 1e-3
 #: Smaller units also stretch a replay over more samples: at 10000 the re-convergence after a change,
 #: fed sample by sample at 10 kHz, went from 3.5 to 5.5 s (median).
 UNIT_MACS = 80000
+#: Remembered samples copied per unit for a search's segment (``WindowTracker._ring_segment``).
+SEGMENT_CHUNK = 4096
 #: Snapshot slots of the change test, reused in turn (see ``WindowTracker._allocate_work``).
 SNAP_SLOTS = 6
 #: Jobs that run before the long ones (``WindowTracker._next_job``).
-PERIODIC_JOBS = ("_refit_job", "_change_job")
+PERIODIC_JOBS = ("_snapshot_job", "_refit_job", "_change_job")
 #: The drift rates enter the fit when they would lower the window cost by this many noise variances
 #: (score test at rates zero; chi-square with 2 degrees of freedom: p ~ 4e-6), and leave it when their
 #: Wald statistic falls below DRIFT_OFF. Where the data cannot tell drift from creep (a single step)
@@ -303,9 +305,21 @@ class WindowTracker(ParameterView):
         start-up search does not pay it (it was the max of every latency run since f4dc43e). Of the fresh
         state, only the linearization point and theta's coefficients are set here (one kernel,
         ``window.start_at``): the rest was built ahead (``_blank_state``)."""
-        st, S, views, fit = self._blank or self._blank_state()
-        self._blank = None
+        self.start_state(theta)
+        self.start_adopt()
+
+    def start_state(self, theta: np.ndarray) -> None:
+        """``start``'s first half: the fresh state linearized at ``theta`` (one kernel). The estimator calls the two
+        halves on two calls: together, with cold caches, they were ~35-40 us."""
+        if self._blank is None:
+            self._blank = self._blank_state()
+        st, fit = self._blank[0], self._blank[3]
         W.start_at(np.asarray(theta, dtype=float), self.theta, fit.theta, st, self.basis.lam, self.basis.dx)
+
+    def start_adopt(self) -> None:
+        """``start``'s second half: the state of ``start_state`` becomes the live one."""
+        st, S, views, fit = self._blank
+        self._blank = None
         self.fit = fit
         self._adopt(st, S, views)
         self._set_due(self.n)              # (``_schedule`` at sample 0: no re-fit or test is due yet)
@@ -357,18 +371,25 @@ class WindowTracker(ParameterView):
                   "LN_A2_MIN": 2.0 * math.log(self.h / (2.0 * math.pi * FN_MAX_FS)),
                   "LN_ZETA_LO": math.log(ZETA_BOUNDS[0]), "LN_ZETA_HI": math.log(ZETA_BOUNDS[1]),
                   "RELINEARIZE": RELINEARIZE}
-        works = [RF.allocate(p, k, r0, REFIT_STEPS, policy), RF.allocate(p, k, r0, TEST_STEPS, policy)]
+        works = [RF.allocate(p, k, r0, REFIT_STEPS, policy),
+                 RF.allocate(p, k, r0, TEST_STEPS, policy, SNAP_SLOTS, self._shift.shape)]
         # one array for what the per-sample kernel's slices need (``refit.context``): theta, the shift and
         # the work arrays become views into it
         self._ctx, self.theta, self._shift, (self._wk, self._test_wk) = RF.context(
             self.theta, self._shift, self.basis.lam, self.basis.dx, works)
         self._refit_queued = False
-        # the change test's snapshots, in slots reused in turn: a test holds its snapshot for ~15
-        # units, ``_theta_at`` keeps the last five estimates
-        self._snap_slots = [(np.empty((p, p)), np.empty(p), np.empty_like(self._shift), np.empty(k))
-                            for _ in range(SNAP_SLOTS)]
+        # the change test's snapshots, in slots reused in turn (a test holds its snapshot for ~15
+        # units, ``_theta_at`` keeps the last five estimates), inside the test's work array: its first slice reads
+        # the snapshot there, in the per-sample kernel (``refit.queue_test``)
+        self._snap_slots = RF.snapshot_slots(self._test_wk, p, k)
         self._snap_next = 0
         self._replay_work = W.replay_scratch(p)     # (a replay's unit leaves nothing in it: shared by the jobs)
+        # a search's segment (``_ring_segment``) and the states-only fast-forward before it (``_nodes_at``), made
+        # and pre-faulted here: one search at a time
+        rows = min(self.ring.shape[1], 1 << 15 if self.work_memory is None else self.work_memory.shape[0])
+        self._segment = np.zeros((2, rows))
+        self._segment.fill(0.0)
+        self._nodes_state = (np.zeros(self.lay["size"]), np.zeros((p, p)))
         self._search_scratch = SearchScratch(self.q)   # (one search at a time: ``_researching``)
 
     def _fresh(self, a1l: float, a2l: float) -> tuple[np.ndarray, np.ndarray]:
@@ -377,11 +398,6 @@ class WindowTracker(ParameterView):
         W.start_state(st, self.basis.decay, self.basis.gain, self._free_decay, self.forget, self.h, a1l, a2l,
                       self.n_rate)
         return st, np.zeros((self.p, self.p))
-
-    def _install(self, st: np.ndarray, S: np.ndarray) -> None:
-        """Make (st, S) the live state and statistics, with theta's coefficients."""
-        W.set_estimate(self.theta, st, self.basis.lam, self.basis.dx)
-        self._adopt(st, S, self._views(st))
 
     def _views(self, st: np.ndarray) -> tuple:
         """The parts of a state array: sc, phi, m, sy, co, ztail, md."""
@@ -436,16 +452,10 @@ class WindowTracker(ParameterView):
         if due and self.fitting and not self._refit_queued:
             self._refit_queued = True      # (a backlog would only re-fit the same statistics again)
             self._refit_n = n
-            # started here if nothing runs before it: this sample runs Python anyway, and a cold visit
-            # to the interpreter costs more than the work (the next sample would have paid ~20 us)
-            started = self.machine is None and not self._queued(*PERIODIC_JOBS)
-            if started:
-                self._begin_refit()
-            self._jobs.append(self._refit_job(started))
+            # started by its job's first unit, on a later call: this one has run the sample and Python already
+            self._jobs.append(self._refit_job())
         if self.detect and n and n % self.test_every == 0:
             self._snapshot(n)
-            if len(self._snaps) > 2:
-                self._jobs.append(self._change_job(self._snaps[0]))
         self._set_due(n)
 
     def _set_due(self, n: int) -> None:
@@ -523,15 +533,17 @@ class WindowTracker(ParameterView):
             elif not self.work(1 << 30) and self.machine is None:
                 break
 
-    def _refit_job(self, started: bool = False) -> Generator:
-        """A re-fit of the window: ``_begin_refit`` (unless ``started`` already at the due sample), its slices in
-        the per-sample kernel, then the result swapped in (``_accept``); while it is queued no other is
-        (``_schedule``)."""
+    def _refit_job(self) -> Generator:
+        """A re-fit of the window: ``_begin_refit``, its slices in the per-sample kernel, then the result swapped in
+        (``_accept``) and what it triggers (``_after_accept``), each on its own call: with cold caches each of these
+        Python visits costs 10-25 us, together they were over 25 us. While it is queued no other is (``_schedule``)."""
         try:
-            if not started:
-                self._begin_refit()
-                yield MACHINE
-            self._accept()
+            self._begin_refit()
+            yield MACHINE
+            raw = self._accept()
+            if raw is not None:
+                yield
+                self._after_accept(raw)
         finally:
             self._refit_queued = False
 
@@ -541,31 +553,38 @@ class WindowTracker(ParameterView):
                  self.refits, self._alpha_known)
         self.machine = MACHINE_REFIT
 
-    def _accept(self) -> None:
-        """Swap a finished re-fit in (``refit.accept``, one kernel), then record it and what it triggers.
+    def _accept(self) -> tuple | None:
+        """Swap a finished re-fit in (``refit.accept``, one kernel) and record it; returns its numbers for
+        ``_after_accept`` (None if it was not swapped in).
 
         Plain floats from one tuple: numpy from Python is slow here (cold code paths). The ``Fit``
         with its 1-sigma dictionary is built when someone asks for it (``fit``), not in update().
-        One unit: each visit to cold Python costs ~10-20 us of its own, so fewer, longer visits.
         """
         raw = RF.accept(self.st, self.theta, self._wk, self.basis.lam, self.basis.dx)
-        (verdict, _, _, _, _, cost, neff, move, drift, drift_stat, drift_switch, *_, n, noise, relinearize) = raw
+        verdict, drift, drift_stat, drift_switch = raw[0], raw[8], raw[9], raw[10]
         if drift:
             self.drift_stat = drift_stat
             if drift_switch:
                 self.drift_on = drift_switch > 0.0
         if verdict == RF.STALE:
-            return                         # re-linearized meanwhile: the next refit decides
+            return None                    # re-linearized meanwhile: the next refit decides
         if verdict == RF.REJECTED:
             self.rejected += 1             # a failed fit is never swapped in
             self._pace_refits(False)
-            self._watch(math.inf, True, n, noise)
-            return
-        self.converged = self.converged or move < 0.01
+            self._watch(math.inf, True, raw[18], raw[19])
+            return None
+        n = raw[18]
+        self.converged = self.converged or raw[7] < 0.01
         self.refits += 1
         self._fit, self._fit_raw, self._fit_sample = None, (raw, self.drift_on), n
         if self._first_fit is None:
             self._first_fit = n
+        return raw
+
+    def _after_accept(self, raw: tuple) -> None:
+        """What an accepted re-fit triggers (on the call after ``_accept``): the re-search watch, the re-fit pace,
+        a replay when the resonance left the linearization point, the settling of a change event."""
+        (_, _, _, _, _, cost, neff, move, *_, n, noise, relinearize) = raw
         rms = math.sqrt(max(cost, 0.0) / max(neff, 1.0))
         fine = not relinearize and self._fine_relinearization_due(rms, noise, n)
         if not fine:
@@ -633,10 +652,11 @@ class WindowTracker(ParameterView):
         """
         if after_test:
             due = self._test_after(self.n)
-            while self.n <= due or self.machine == MACHINE_TEST or self._queued("_change_job"):
+            while self.n <= due or self.machine == MACHINE_TEST or self._queued("_snapshot_job", "_change_job"):
                 yield WAIT
         a1, a2 = self.a1, self.a2
         st, S = self._fresh(a1, a2)
+        yield                              # (the allocations alone: with the set-up below, ~55-65 us cold)
         lay = self.lay
         phi = st[lay["phi"]:lay["m"]]
         oldest = int(self.sc[W.SC_RSTART])
@@ -671,18 +691,14 @@ class WindowTracker(ParameterView):
             i += n
             if self.detect and i % self.test_every == 0 and i - oldest > skip:
                 snaps = (snaps + [(i, S.copy(), st[lay_sy].copy(), float(st[W.SC_SYY]), float(st[W.SC_G]),
-                                   lin, self._theta_at.get(i, self.theta).copy(), np.zeros_like(self._shift))])[-3:]
+                                   lin, self._theta_at.get(i, self.theta).copy(), np.zeros_like(self._shift),
+                                   -1)])[-3:]     # (no slot: the test starts from Python, ``refit.start_test``)
             if i >= self.n:                # caught up: swap now (a yield would let a new sample in)
                 break
             yield
         # swap: the live scalars and tail, the replayed states and statistics
-        new = self.st.copy()
-        for part in ("phi", "sy", "co"):
-            new[lay[part]:lay[part] + (lay[{"phi": "m", "sy": "co", "co": "ztail"}[part]] - lay[part])] = \
-                st[lay[part]:lay[{"phi": "m", "sy": "co", "co": "ztail"}[part]]]
-        for k in (W.SC_G, W.SC_SYY, W.SC_NEFF, W.SC_A1L, W.SC_A2L, W.SC_TREF):
-            new[k] = st[k]
-        self._install(new, S)
+        new = W.swapped_state(self.st, st, self.theta, self.basis.lam, self.basis.dx)
+        self._adopt(new, S, self._views(new))
         self._snaps = snaps                # the change test keeps its reference through a replay
         self._shift[:] = 0.0               # (replayed at one origin: the snapshots' and the statistics' own)
         self.relinearizations += 1
@@ -690,21 +706,35 @@ class WindowTracker(ParameterView):
 
     # ------------------------------------------------------------------ change detection
     def _snapshot(self, n: int) -> None:
-        """The change test's snapshot of the statistics and the estimate at sample n (now)."""
-        S0, sy0, shift0, theta0 = self._snap_slots[self._snap_next]
-        self._snap_next = (self._snap_next + 1) % SNAP_SLOTS
-        syy0, g0 = W.snapshot(self.st, self.S, self._shift, self.theta, S0, sy0, shift0, theta0)
-        self._snaps.append((n, S0, sy0, syy0, g0, (self.a1l, self.a2l), theta0, shift0))
-        self._theta_at[n] = theta0         # the estimate at each snapshot instant
-        oldest = n - 4 * self.test_every
-        for old in [k for k in self._theta_at if k < oldest]:
-            del self._theta_at[old]
+        """The change test's snapshot of the statistics and the estimate at sample n (now): the copy at this
+        instant (one kernel), its bookkeeping on the next call (``_snapshot_job``; together they were over 25 us)."""
+        index = self._snap_next
+        self._snap_next = (index + 1) % SNAP_SLOTS
+        syy0, g0 = RF.snapshot(self.st, self.S, self._ctx, MACHINE_TEST, index)
+        self._jobs.append(self._snapshot_job(n, index, syy0, g0, self.st))
+
+    def _snapshot_job(self, n: int, index: int, syy0: float, g0: float, st: np.ndarray) -> Generator:
+        """Record the snapshot taken at sample n (``_snapshot``) and queue the change test of the second since
+        the one before the last. Dropped if the live state was replaced meanwhile (a replay's swap, a restart:
+        ``_adopt`` starts the snapshots afresh)."""
+        if st is not self.st:
+            return
+        S0, sy0, shift0, theta0 = self._snap_slots[index]
+        self._snaps.append((n, S0, sy0, syy0, g0, (self.a1l, self.a2l), theta0, shift0, index))
+        self._theta_at[n] = theta0         # the estimate at each snapshot instant, the last five
+        self._theta_at.pop(n - 5 * self.test_every, None)
+        if len(self._theta_at) > 5:        # (an instant without a snapshot: not in a stream fed sample by sample)
+            for old in [k for k in self._theta_at if k < n - 4 * self.test_every]:
+                del self._theta_at[old]
         if len(self._snaps) > 3:
             self._snaps.pop(0)
+        if len(self._snaps) > 2:
+            self._jobs.append(self._change_job(self._snaps[0]))
+        yield
 
     def _change_job(self, snap: tuple) -> Generator:
         """Likelihood-ratio test of the samples since the snapshot against the window's estimate."""
-        n0, S0, sy0, syy0, g0, lin0, theta0, shift0 = snap
+        n0, S0, sy0, syy0, g0, lin0, theta0, shift0, slot = snap
         g = float(self.sc[W.SC_G])
         if g < g0 or self._fit_sample < n0 or lin0 != (self.a1l, self.a2l) or n0 < self.window_start \
                 or not self.converged or self._researching() or self._misfit_from_start():
@@ -712,18 +742,20 @@ class WindowTracker(ParameterView):
         # the drift columns stay in, at the window's rates (the snapshot moved to the live time origin):
         # over a second the drift is not negligible (alpha +0.7 %/s at a 2e-4 noise on a 0.5 output is ~5
         # noise levels), and without it a drifting plant's step looked like a change
-        wk = self._test_wk
-        # (the checks above and the statistics: one unit, one visit to cold Python)
-        RF.start_test(self.st, self.S, S0, sy0, syy0, self._shift, shift0, self.theta, wk,
-                      self.n_rate > 0 and not self.drift_on)
-        nr = self.n - n0
         lin = (self.a1l, self.a2l)
+        wk = self._test_wk
+        free_rates = self.n_rate > 0 and not self.drift_on
+        if slot >= 0:                      # the statistics since the snapshot: the test's first slice
+            RF.queue_test(wk, slot, syy0, free_rates)
+        else:                              # (a replay's snapshot, not in a slot: from here)
+            RF.start_test(self.st, self.S, S0, sy0, syy0, self._shift, shift0, self.theta, wk, free_rates)
         self.machine = MACHINE_TEST        # TEST_STEPS Levenberg-Marquardt steps, then the covariance, in the
         yield MACHINE                      # per-sample kernel
         # plain floats from here on (numpy from Python is slow here)
         r = RF.TestOutcome._make(RF.test_outcome(wk, self.theta))
         if not (math.isfinite(r.after) and r.after > 0.0 and math.isfinite(r.before)):
             return
+        nr = r.n - n0                      # the rows tested
         sigma2 = r.after / max(nr - 4, 1)
         lr = (r.before - r.after) / sigma2
         # the test is calibrated against its own recent level: a drifting plant (or a model that is
@@ -749,22 +781,24 @@ class WindowTracker(ParameterView):
         if lr < max(CHANGE_LR, CHANGE_JUMP * level) or not moved or lin != (self.a1l, self.a2l):
             self._lr_recent = (self._lr_recent + [float(lr)])[-CHANGE_HISTORY:]
             return
-        settled = bool(self._settled_before(n0, theta0))
-        if settled:
-            self.theta[0] = theta0[0]      # alpha as it was before the change (the refits chased it since)
-        self._restart_window(n0, "b" in moved, alpha_known=settled)
+        yield                              # the event on the next call, the restart on the one after (with the
+        settled = bool(self._settled_before(n0, theta0))      # test's result all in one call: ~90-130 us)
         last = self.events[-1] if self.events else None
         if last is not None and not last["settled"]:
             # the same change seen again from a cleaner window: one event, restarted later
             last["restarts"] += 1
             last["lr"] = max(last["lr"], float(lr))
-            return
-        self.events.append({"t": n0 * self.h, "detected_t": self.n * self.h, "moved": sorted(moved),
-                            "relative_change": {k: float(v) for k, v in moves.items()}, "lr": float(lr),
-                            "settled": False, "restarts": 1, "_before": theta0[:4].copy(),
-                            # False: the estimate it was judged against was still moving (a start-up
-                            # estimate converging): the event may correct the estimate, not the plant
-                            "estimate_settled": settled})
+        else:
+            self.events.append({"t": n0 * self.h, "detected_t": self.n * self.h, "moved": sorted(moved),
+                                "relative_change": {k: float(v) for k, v in moves.items()}, "lr": float(lr),
+                                "settled": False, "restarts": 1, "_before": theta0[:4].copy(),
+                                # False: the estimate it was judged against was still moving (a start-up
+                                # estimate converging): the event may correct the estimate, not the plant
+                                "estimate_settled": settled})
+        yield
+        if settled:
+            self.theta[0] = theta0[0]      # alpha as it was before the change (the refits chased it since)
+        self._restart_window(n0, "b" in moved, alpha_known=settled)
 
     def _settled_before(self, n0: int, theta0: np.ndarray) -> bool:
         """Was the window's estimate settled over the second before the tested one? Only then is its alpha the
@@ -816,6 +850,9 @@ class WindowTracker(ParameterView):
         self._first_fit = None
         self._research_wait = int(RESEARCH_AFTER_S / self.h)
         self.machine = None
+        # the queued jobs are dropped; a re-fit queued but not yet started would otherwise leave its flag set (its
+        # ``finally`` never runs) and no re-fit would be queued again (seen once the restart came a few calls later)
+        self._refit_queued = False
         self._jobs = [self._research_job(self.window_start)]
         self._pace_refits(False)
 
@@ -894,9 +931,12 @@ class WindowTracker(ParameterView):
         r = search.result
         if r is None or not (math.isfinite(r.cost) and r.a1 > 0 and r.a2 > 0 and r.b != 0):
             return
+        yield                              # (the search's last unit ended this call)
         c_live = yield from search.judged_cost(self.alpha, self.a1, self.a2, self._free_decays)
         c_new = yield from search.judged_cost(r.alpha, r.a1, r.a2, self._free_decays)
-        if _likelihood_ratio(search.judged_rows(), c_live, c_new) > RESEARCH_LR:
+        rows = search.judged_rows()
+        yield
+        if _likelihood_ratio(rows, c_live, c_new) > RESEARCH_LR:
             self.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
             self._coefficients()
             yield
@@ -931,7 +971,10 @@ class WindowTracker(ParameterView):
     def _nodes_at(self, n0: int) -> Generator:
         """The exact node state before remembered sample n0 (fast-forwarded from the ring's oldest, in units)."""
         oldest = int(self.sc[W.SC_RSTART])
-        st, S = self._fresh(self.a1l, self.a2l)       # node states only (no statistics)
+        st, S = self._nodes_state          # node states only (no statistics: S is not touched)
+        st.fill(0.0)
+        W.start_state(st, self.basis.decay, self.basis.gain, self._free_decay, self.forget, self.h, self.a1l,
+                      self.a2l, self.n_rate)
         st[self.lay["phi"]:self.lay["phi"] + self.q] = self.ztail
         st[W.SC_N] = oldest
         chunk = max(16, UNIT_MACS // (4 * self.q))         # states only: ~0.04 us per sample at Q = 42
@@ -983,12 +1026,15 @@ class WindowTracker(ParameterView):
                                  extra=((self.alpha, self.a1, self.a2),), scratch=self._search_scratch)
         yield
         yield from self._run_search(search)
+        yield                              # (the search's last unit ended this call)
         r = search.result
         live = (self.alpha, self.a1, self.a2)
         # both judged with the resonance state at the segment's start unknown (``judged_cost``)
         c_live = yield from search.judged_cost(*live, self._free_decays)
         c_new = yield from search.judged_cost(r.alpha, r.a1, r.a2, self._free_decays)
-        lr = _likelihood_ratio(search.judged_rows(), c_live, c_new)
+        rows = search.judged_rows()
+        yield
+        lr = _likelihood_ratio(rows, c_live, c_new)
         change = {"alpha": r.alpha / live[0] - 1, "a1": r.a1 / live[1] - 1, "a2": r.a2 / live[2] - 1,
                   "b": r.b / self.b - 1 if self.b else 0.0}
         moved = sorted(k for k in ("a1", "a2") if abs(change[k]) > CHANGE_MOVE[k])
@@ -1022,15 +1068,14 @@ class WindowTracker(ParameterView):
         self.fitting = True
 
     def _ring_segment(self, n0: int, n1: int) -> Generator:
-        """Copies of the remembered u, y for samples n0..n1 (a few thousand per unit); returns (u, y)."""
-        u = np.empty(n1 - n0)
-        y = np.empty(n1 - n0)
-        size = self.ring.shape[1]
-        for k0 in range(0, n1 - n0, 1024):
-            k1 = min(n1 - n0, k0 + 1024)
-            pos = (self._ring_position(n0 + k0) + np.arange(k1 - k0)) % size
-            u[k0:k1] = self.ring[0, pos]
-            y[k0:k1] = self.ring[1, pos]
+        """Copies of the remembered u, y for samples n0..n1 (``SEGMENT_CHUNK`` per unit); returns (u, y), views of
+        the tracker's segment buffer (``_allocate_work``: one search at a time uses it; allocating them here,
+        up to 2 x 256 kB, and numpy's fancy indexing cost ~80 us in one update())."""
+        u, y = self._segment[0, :n1 - n0], self._segment[1, :n1 - n0]
+        size, slot = self.ring.shape[1], self._ring_position(n0)
+        for k0 in range(0, n1 - n0, SEGMENT_CHUNK):
+            k1 = min(n1 - n0, k0 + SEGMENT_CHUNK)
+            W.ring_copy(self.ring, (slot + k0) % size, u[k0:k1], y[k0:k1])
             yield
         return u, y
 

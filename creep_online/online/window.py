@@ -385,10 +385,13 @@ def snapshot(st: np.ndarray, S: np.ndarray, shift: np.ndarray, theta: np.ndarray
     """Copy what the change test needs of this instant into preallocated arrays; returns (syy, g).
 
     Runs on the per-sample path every ``test_every`` samples: four numpy copies from Python cost
-    ~50 us there (cold code), this ~3 us."""
+    ~50 us there (cold code), this ~3 us. Only S's upper triangle is copied (all ``since_statistics``
+    reads): half the memory written into a slot that is cold by then."""
     sc = st[:SC_SIZE]
     q, p, m, sy, md = parts(st)
-    S0[:, :] = S
+    for i in range(p):
+        for j in range(i, p):
+            S0[i, j] = S[i, j]
     sy0[:] = sy
     shift0[:, :] = shift
     theta0[:] = theta
@@ -398,31 +401,51 @@ def snapshot(st: np.ndarray, S: np.ndarray, shift: np.ndarray, theta: np.ndarray
 @njit(cache=CACHE)
 def since_statistics(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, syy0: float,
                      shift: np.ndarray, shift0: np.ndarray, R: np.ndarray, ry: np.ndarray) -> float:
-    """Statistics of the samples since a snapshot (S0, sy0, syy0, shift0) at true scale, for the change test:
-    R (full symmetric), ry; returns ryy.
+    """Statistics of the samples since a snapshot (S0, sy0, syy0, shift0; S0's upper triangle) at true scale, for
+    the change test: R (full symmetric), ry; returns ryy. ``since_difference`` at this instant, then
+    ``since_finish`` (the change test runs them as two slices: only the first reads the live statistics)."""
+    ryy = since_difference(st, S, S0, sy0, syy0, R, ry)
+    return since_finish(st, S0, sy0, shift, shift0, R, ry, ryy, st[SC_G])
 
-    Live minus the snapshot moved to the live drift origin. A move of the origin is the regressor map
-    x -> x (I - E), E holding t v in the rate columns' rows 0..nv-1; two such maps compose additively (E
-    fills only rate columns and reads none: E_i E_j = 0), so every move since the snapshot is one map with
-    D = shift - shift0, applied as ``rereference`` applies one; only the rate rows and columns change.
-    """
-    sc = st[:SC_SIZE]
-    nr = int(sc[SC_NR])
+
+@njit(cache=CACHE)
+def since_difference(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, syy0: float,
+                     R: np.ndarray, ry: np.ndarray) -> float:
+    """The live statistics minus a snapshot's, as accumulated (weight g, the snapshot at its own drift origin):
+    R's upper triangle, ry; returns ryy."""
     q, p, m, sy, md = parts(st)
     for i in range(p):
         for j in range(i, p):
             R[i, j] = S[i, j] - S0[i, j]
         ry[i] = sy[i] - sy0[i]
+    return st[SC_SYY] - syy0
+
+
+@njit(cache=CACHE)
+def since_finish(st: np.ndarray, S0: np.ndarray, sy0: np.ndarray, shift: np.ndarray, shift0: np.ndarray,
+                 R: np.ndarray, ry: np.ndarray, ryy: float, g: float) -> float:
+    """``since_difference``'s result with the snapshot moved to the live drift origin and scaled by the weight g
+    of its instant: R full symmetric, ry, and the returned ryy at true scale. Reads only the state's sizes.
+
+    A move of the origin is the regressor map x -> x (I - E), E holding t v in the rate columns' rows
+    0..nv-1; two such maps compose additively (E fills only rate columns and reads none: E_i E_j = 0), so
+    every move since the snapshot is one map with D = shift - shift0, applied as ``rereference`` applies
+    one; only the rate rows and columns change.
+    """
+    sc = st[:SC_SIZE]
+    nr = int(sc[SC_NR])
+    q, p, m, sy, md = parts(st)
     if nr > 0:
         nv, r0 = q + ONE, p - nr
         D = shift - shift0
-        G = np.empty((p, nr))            # S0[:, :nv] @ D (sums in locals: see ``_upper_times``)
+        G = np.empty((p, nr))            # full(S0)[:, :nv] @ D from S0's upper triangle (``_upper_times``)
         for i in range(p):
-            S0i = S0[i]
             for k in range(nr):
                 t = 0.0
-                for j in range(nv):
-                    t += S0i[j] * D[j, k]
+                for j in range(min(i, nv)):
+                    t += S0[j, i] * D[j, k]
+                for j in range(i, nv):
+                    t += S0[i, j] * D[j, k]
                 G[i, k] = t
         for k in range(nr):              # dS[:, r0:] += G, dS[r0:, :] += G^T, dS[r0:, r0:] -= D^T G[:nv]
             j = r0 + k
@@ -438,7 +461,6 @@ def since_statistics(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndar
             for l in range(nv):
                 c += D[l, k] * sy0[l]
             ry[j] += c
-    g = sc[SC_G]
     inv = 1.0 / g
     for i in range(p):
         for j in range(i, p):
@@ -446,40 +468,68 @@ def since_statistics(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndar
             R[i, j] = v
             R[j, i] = v
         ry[i] = ry[i] / g
-    return (sc[SC_SYY] - syy0) / g
+    return ryy / g
 
 
 @njit(cache=CACHE)
-def _gn_gain(H: np.ndarray, g: np.ndarray, mask: np.ndarray) -> float:
-    """g^T H^-1 g over the parameters with mask != 0 (the cost reduction of a full Gauss-Newton step); 0 if singular."""
-    k = 0
+def gn_gain(H: np.ndarray, g: np.ndarray, mask: np.ndarray, A: np.ndarray, r: np.ndarray, x: np.ndarray) -> float:
+    """g^T H^-1 g over the parameters with mask != 0 (the cost reduction of a full Gauss-Newton step); 0 if singular.
+
+    In preallocated scratch (A: k x k, r and x: k, k = H's size) with a hand-written Cholesky: the score test
+    runs inside the per-sample kernel's slices, where LAPACK's eigvalsh and solve (numba's wrappers allocate and
+    check) took 58-120 us with cold caches, one call over 25 us every fifth calm re-fit. H is scaled to a unit
+    diagonal first; "singular" is a Cholesky pivot at or below 1e-13 (every pivot is at least the smallest
+    eigenvalue, and the largest is at least 1: what passed the former eigenvalue test, ratio above 1e-13,
+    passes this one).
+    """
+    n = 0
     for i in range(mask.shape[0]):
         if mask[i] != 0.0:
-            k += 1
-    idx = np.empty(k, dtype=np.int64)
-    k = 0
-    for i in range(mask.shape[0]):
-        if mask[i] != 0.0:
-            idx[k] = i
-            k += 1
-    A = np.empty((k, k))
-    r = np.empty(k)
-    for a in range(k):
-        r[a] = g[idx[a]] / (math.sqrt(abs(H[idx[a], idx[a]])) + 1e-300)
-    for a in range(k):
-        da = math.sqrt(abs(H[idx[a], idx[a]])) + 1e-300
-        for c in range(k):
-            A[a, c] = H[idx[a], idx[c]] / (da * (math.sqrt(abs(H[idx[c], idx[c]])) + 1e-300))
-    if not (np.all(np.isfinite(A)) and np.all(np.isfinite(r))):
-        return 0.0
-    w = np.linalg.eigvalsh(A)
-    if not w[0] > 1e-13 * w[k - 1]:
-        return 0.0
-    x = np.linalg.solve(A, r)
-    gain = 0.0
-    for a in range(k):
-        gain += x[a] * r[a]
+            x[n] = i                     # the free parameters' indices (x is overwritten by the solve below)
+            n += 1
+    for a in range(n):
+        ia = int(x[a])
+        da = math.sqrt(abs(H[ia, ia])) + 1e-300
+        r[a] = g[ia] / da
+        for c in range(a + 1):
+            ic = int(x[c])
+            v = H[ia, ic] / (da * (math.sqrt(abs(H[ic, ic])) + 1e-300))
+            if not math.isfinite(v) or not math.isfinite(r[a]):
+                return 0.0
+            A[a, c] = v
+    for j in range(n):                   # in place: the lower triangle becomes the factor
+        t = A[j, j]
+        for k in range(j):
+            t -= A[j, k] * A[j, k]
+        if not t > 1e-13:
+            return 0.0
+        djj = math.sqrt(t)
+        A[j, j] = djj
+        for i in range(j + 1, n):
+            t = A[i, j]
+            for k in range(j):
+                t -= A[i, k] * A[j, k]
+            A[i, j] = t / djj
+    for i in range(n):                   # forward: L z = r (z in x)
+        t = r[i]
+        for k in range(i):
+            t -= A[i, k] * x[k]
+        x[i] = t / A[i, i]
+    gain = 0.0                           # r^T (L L^T)^-1 r = |z|^2
+    for i in range(n):
+        gain += x[i] * x[i]
     return gain if math.isfinite(gain) else 0.0
+
+
+@njit(cache=CACHE)
+def drift_gain(H: np.ndarray, g: np.ndarray, free: np.ndarray, r0: int, rates: bool, A: np.ndarray,
+               mask: np.ndarray, r: np.ndarray, x: np.ndarray) -> float:
+    """One half of ``drift_score``: the Gauss-Newton gain over ``free`` (its entries from r0 on ignored) with the
+    drift rates (parameters r0..) freed (``rates``) or fixed; scratch A (k x k), mask, r, x (k each)."""
+    k = H.shape[0]
+    for i in range(k):
+        mask[i] = free[i] if i < r0 else (1.0 if rates else 0.0)
+    return gn_gain(H, g, mask, A, r, x)
 
 
 @njit(cache=CACHE)
@@ -488,11 +538,9 @@ def drift_score(H: np.ndarray, g: np.ndarray, free: np.ndarray, r0: int) -> floa
 
     ``free`` marks the parameters fitted without the rates (their entries from r0 on are ignored).
     """
-    without = free.copy()
-    without[r0:] = 0.0
-    both = without.copy()
-    both[r0:] = 1.0
-    return _gn_gain(H, g, both) - _gn_gain(H, g, without)
+    k = H.shape[0]
+    A, mask, r, x = np.empty((k, k)), np.empty(k), np.empty(k), np.empty(k)
+    return drift_gain(H, g, free, r0, True, A, mask, r, x) - drift_gain(H, g, free, r0, False, A, mask, r, x)
 
 
 def layout(q: int, n_free: int, n_rate: int = 0) -> dict:
@@ -1271,6 +1319,36 @@ def replay(ring: np.ndarray, p0: int, n: int, skip: int, st: np.ndarray, S: np.n
         sc[SC_N] += 1.0
     if nb > 0:
         _add_block(X, Xw, yb, nb, S, sy, tmp, tv)
+
+
+@njit(cache=CACHE)
+def ring_copy(ring: np.ndarray, p0: int, u: np.ndarray, y: np.ndarray) -> None:
+    """u, y = the remembered inputs and outputs from ring position p0 on (wrapping), as many as u holds."""
+    size = ring.shape[1]
+    for k in range(u.shape[0]):
+        pos = (p0 + k) % size
+        u[k] = ring[0, pos]
+        y[k] = ring[1, pos]
+
+
+@njit(cache=CACHE)
+def swapped_state(live: np.ndarray, replayed: np.ndarray, theta: np.ndarray, lam: np.ndarray,
+                  dx: float) -> np.ndarray:
+    """The state after a replay: the live one (its scalars, monitors, tail) with the replayed states, statistics
+    and coefficients (phi, sy, co; the weight, syy, effective samples, linearization point, drift origin), and
+    the prediction's coefficients for theta at the new point (``set_estimate``). One kernel: as numpy slices from
+    Python, in the update() that swaps, it cost ~35-50 us cold."""
+    q = int(live[SC_NQ])
+    p = q + FREE + int(live[SC_NM]) + int(live[SC_NR])
+    o = SC_SIZE
+    ztail = o + 3 * p + 2 * q + 18 + int(live[SC_NM])
+    new = live.copy()
+    new[o:o + p] = replayed[o:o + p]                       # phi
+    new[o + 2 * p:ztail] = replayed[o + 2 * p:ztail]       # sy, co
+    for k in (SC_G, SC_SYY, SC_NEFF, SC_A1L, SC_A2L, SC_TREF):
+        new[k] = replayed[k]
+    set_estimate(theta, new, lam, dx)
+    return new
 
 
 @njit(cache=CACHE, fastmath=FAST)
