@@ -621,3 +621,25 @@ def test_block_over_a_range_equals_block_over_slices():
     np.testing.assert_array_equal(s1, s2)
     for a, b in ((sliced.st, ranged.st), (sliced.S, ranged.S), (sliced.ring, ranged.ring)):
         np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_hand_written_cholesky_gain_equals_a_dense_solve(seed):
+    """window.gn_gain (the drift score test's g^T H^-1 g over the free parameters, a Cholesky in preallocated
+    scratch instead of LAPACK) against numpy's solve, on random SPD matrices with ill-scaled rows; and 0 for a
+    singular H (two equal free columns)."""
+    rng = np.random.default_rng(seed)
+    k = 7
+    m = rng.standard_normal((k, 3 * k)) * np.logspace(-3, 3, k)[:, None]
+    H, g = m @ m.T, rng.standard_normal(k) * np.logspace(-2, 2, k)
+    mask = (rng.uniform(size=k) < 0.7).astype(float)
+    mask[0] = 1.0
+    free = np.flatnonzero(mask)
+    scratch = (np.empty((k, k)), np.empty(k), np.empty(k))
+    expected = g[free] @ np.linalg.solve(H[np.ix_(free, free)], g[free])
+    assert W.gn_gain(H, g, mask, *scratch) == pytest.approx(expected, rel=1e-9)
+    H2 = H.copy()
+    H2[:, 1], H2[1, :] = H2[:, 0], H2[0, :]
+    H2[1, 1] = H2[0, 0]
+    mask[:2] = 1.0
+    assert W.gn_gain(H2, g, mask, *scratch) == 0.0
