@@ -497,24 +497,9 @@ def gn_gain(H: np.ndarray, g: np.ndarray, mask: np.ndarray, A: np.ndarray, r: np
             if not math.isfinite(v) or not math.isfinite(r[a]):
                 return 0.0
             A[a, c] = v
-    for j in range(n):                   # in place: the lower triangle becomes the factor
-        t = A[j, j]
-        for k in range(j):
-            t -= A[j, k] * A[j, k]
-        if not t > 1e-13:
-            return 0.0
-        djj = math.sqrt(t)
-        A[j, j] = djj
-        for i in range(j + 1, n):
-            t = A[i, j]
-            for k in range(j):
-                t -= A[i, k] * A[j, k]
-            A[i, j] = t / djj
-    for i in range(n):                   # forward: L z = r (z in x)
-        t = r[i]
-        for k in range(i):
-            t -= A[i, k] * x[k]
-        x[i] = t / A[i, i]
+    if not cholesky_factor(A, A, n, 1e-13):   # in place: the lower triangle becomes the factor
+        return 0.0
+    forward_substitution(A, r, x, n)     # L z = r (z in x)
     gain = 0.0                           # r^T (L L^T)^-1 r = |z|^2
     for i in range(n):
         gain += x[i] * x[i]
@@ -1188,18 +1173,18 @@ def covariance_inverse(L: np.ndarray, d: np.ndarray, ok: bool, cov: np.ndarray) 
 
 
 @njit(cache=CACHE)
-def _cholesky(A: np.ndarray, L: np.ndarray) -> bool:
-    """Lower Cholesky factor of a small symmetric matrix (no LAPACK call: ~10x less overhead at n ~ 9).
+def cholesky_factor(A: np.ndarray, L: np.ndarray, n: int, pivot_floor: float) -> bool:
+    """Lower Cholesky factor of the leading n x n block of a symmetric A into L's lower triangle.
 
-    Returns False when A is not numerically positive definite.
+    Reads only A's lower triangle and writes only L's, each entry of A read before L's same entry is written,
+    so L may be A itself (in place, no scratch: the drift score test inside the per-sample kernel). Returns
+    False at the first pivot not above ``pivot_floor`` (0: not numerically positive definite).
     """
-    n = A.shape[0]
-    L[:, :] = 0.0
     for j in range(n):
         s = A[j, j]
         for k in range(j):
             s -= L[j, k] * L[j, k]
-        if not s > 0.0:
+        if not s > pivot_floor:
             return False
         djj = math.sqrt(s)
         L[j, j] = djj
@@ -1212,14 +1197,30 @@ def _cholesky(A: np.ndarray, L: np.ndarray) -> bool:
 
 
 @njit(cache=CACHE)
-def _cholesky_solve(L: np.ndarray, b: np.ndarray, x: np.ndarray) -> None:
-    """x = (L L^T)^-1 b by forward and back substitution."""
-    n = L.shape[0]
+def forward_substitution(L: np.ndarray, b: np.ndarray, x: np.ndarray, n: int) -> None:
+    """x = L^-1 b over the leading n x n block of the lower triangular L."""
     for i in range(n):
         t = b[i]
         for k in range(i):
             t -= L[i, k] * x[k]
         x[i] = t / L[i, i]
+
+
+@njit(cache=CACHE)
+def _cholesky(A: np.ndarray, L: np.ndarray) -> bool:
+    """Lower Cholesky factor of a small symmetric matrix (no LAPACK call: ~10x less overhead at n ~ 9).
+
+    Returns False when A is not numerically positive definite.
+    """
+    L[:, :] = 0.0
+    return cholesky_factor(A, L, A.shape[0], 0.0)
+
+
+@njit(cache=CACHE)
+def _cholesky_solve(L: np.ndarray, b: np.ndarray, x: np.ndarray) -> None:
+    """x = (L L^T)^-1 b by forward and back substitution."""
+    n = L.shape[0]
+    forward_substitution(L, b, x, n)
     for i in range(n - 1, -1, -1):
         t = x[i]
         for k in range(i + 1, n):
