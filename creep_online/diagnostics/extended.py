@@ -382,29 +382,40 @@ class Design:
             d = d + e.fitted_delay(p)
         return p, alpha, a1, a2, d
 
-    def columns(self, theta: np.ndarray) -> np.ndarray:
-        """Design matrix (n, p): dynamic paths (delayed, filtered) then offset and additive columns."""
+    def _paths(self, theta: np.ndarray) -> tuple[dict[str, float], np.ndarray, list[np.ndarray], np.ndarray]:
+        """(theta by name, base path rows, each parallel path's rows, static columns), unfiltered, unweighted.
+
+        The base path's rows are its responses to the input rows (u, then the
+        input effects' rows). A parallel path sees the transformed input only in
+        a ``coupled`` design (its rows are then responses to the same input
+        rows); otherwise it is one row, the response to u. Sets ``col_names``.
+        """
         data = self.data
         p, alpha, a1, a2, d = self._base(theta)
-        sup = data.superposer(self.inputs)
+        if data.uniform:
+            base = data.base_path(self.inputs, alpha, a1, a2, d)
+            tau = data.superposer(self.inputs).grid_tau - d
+        else:
+            base = data.superposer(self.inputs).apply(lambda tt: fx.base_step_at(alpha, a1, a2, tt - d))
+            tau = None
+        inputs = self.inputs if self.coupled else ()
+        par = [data.parallel_path(e, p, tuple(p[n] for n in self.own[e.name]), d, tau, inputs)
+               for e in self.stages[Stage.PARALLEL]]
         names: list[str] = ["b"]
         for e, _ in self.inputs:
             names += e.column_names()
-        if data.uniform:
-            dyn = [data.base_path(self.inputs, alpha, a1, a2, d)]
-            tau = sup.grid_tau - d
-        else:
-            dyn = [sup.apply(lambda tt: fx.base_step_at(alpha, a1, a2, tt - d))]
-            tau = None
-        for e in self.stages[Stage.PARALLEL]:
-            own = tuple(p[name] for name in self.own[e.name])
-            dyn.append(data.parallel_path(e, p, own, d, tau))
-            names.append(e.gain_column)
-        cols = np.vstack(dyn)
-        for e in self.stages[Stage.OUTPUT_FILTER]:
-            cols = e.filter_columns(data.t, cols, p)
+        names += [e.gain_column for e in self.stages[Stage.PARALLEL]]
         static, more_names = self._static_columns(p)
         self.col_names = names + more_names
+        return p, base, par, static
+
+    def columns(self, theta: np.ndarray) -> np.ndarray:
+        """Design matrix (n, p) of an uncoupled design: dynamic paths (delayed, filtered) then offset and
+        additive columns."""
+        p, base, par, static = self._paths(theta)
+        cols = np.vstack([base, *par])
+        for e in self.stages[Stage.OUTPUT_FILTER]:
+            cols = e.filter_columns(self.data.t, cols, p)
         return np.vstack([cols, static]).T
 
     def _static_columns(self, p: dict[str, float]) -> tuple[np.ndarray, list[str]]:
@@ -423,25 +434,10 @@ class Design:
         Both dynamic groups are responses to the same input rows (u, then the
         input effects' rows): the parallel paths too see the transformed input.
         """
-        data = self.data
-        p, alpha, a1, a2, d = self._base(theta)
-        names: list[str] = ["b"]
-        for e, _ in self.inputs:
-            names += e.column_names()
-        if data.uniform:
-            base = data.base_path(self.inputs, alpha, a1, a2, d)
-            tau = data.superposer(self.inputs).grid_tau - d
-        else:
-            base = data.superposer(self.inputs).apply(lambda tt: fx.base_step_at(alpha, a1, a2, tt - d))
-            tau = None
-        par = [data.parallel_path(e, p, tuple(p[n] for n in self.own[e.name]), d, tau, self.inputs)
-               for e in self.stages[Stage.PARALLEL]]
-        names += [e.gain_column for e in self.stages[Stage.PARALLEL]]
+        p, base, par, static = self._paths(theta)
         for e in self.stages[Stage.OUTPUT_FILTER]:
-            base = e.filter_columns(data.t, base, p)
-            par = [e.filter_columns(data.t, q, p) for q in par]
-        static, more_names = self._static_columns(p)
-        self.col_names = names + more_names
+            base = e.filter_columns(self.data.t, base, p)
+            par = [e.filter_columns(self.data.t, q, p) for q in par]
         return base, par, static
 
     def project(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
