@@ -78,3 +78,18 @@ def test_a_record_one_effect_explains_to_the_noise_is_not_searched_for_a_pair():
     assert d.verdict == "hysteresis" and not d.standing_in
     assert len(d.pairs_tried) <= 1
 
+
+
+def test_more_rounds_find_the_pair_when_the_first_two_keep_stand_ins():
+    """Delay + drift (3-10x, seed 23): a second creep ranks first alone and a second mode is its best partner
+    (2.47x the noise); the hidden pair was never fitted in the first two rounds. A third round keeping the
+    drift (second best alone) finds it at the floor (``pairs.EXTRA_ROUNDS``)."""
+    bench = _bench()
+    rec = bench.make_pair_record(("delay", "drift"), bench.BANDS["3-10x"], 23)
+    d = diagnose((rec["t"], rec["u"], rec["y"]))
+    assert [c.effect for c in d.candidates if c.significant][0] == "second_creep"
+    assert len(d.pairs_tried) > 2 * (len(d.candidates) - 1)               # a round beyond the first two ran
+    assert d.combination is not None and set(d.combination.effect.split("+")) == {"delay", "drift"}
+    assert d.combination.significant
+    assert d.combination.fit.residual_rms <= bench.FLOOR * rec["noise"]
+    assert d.verdict in ("delay", "drift")

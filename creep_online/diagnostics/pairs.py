@@ -13,11 +13,17 @@ selection on the evidence *given* what is already in the model:
    effect's own fit; the partner with the largest BIC drop wins;
 2. keep that partner and re-choose the first the same way (the best single
    effect is often a stand-in for the pair: a second creep for leakage + drift);
-3. the pair with the largest BIC drop over both rounds is the combination
-   if it explains the record to the noise floor (``SEARCH_ABOVE``); if no
-   pair does, the record holds more than two effects or one the catalogue
-   lacks, and a pair without the best single effect is no safer a guess than
-   one with it: the best pair of the first round (with it) is kept.
+3. while no pair explains the record to the noise floor (``SEARCH_ABOVE``),
+   up to ``EXTRA_ROUNDS`` more rounds, each keeping the best single effect
+   not kept yet: when the best single effect and its best partner are both
+   stand-ins, the hidden pair is never fitted in the first two rounds
+   (delay + drift, where a second mode ranks first and hysteresis is its best
+   partner at 1.6x the noise; the hidden pair, fitted, reaches 1.0x);
+4. the pair with the largest BIC drop over all rounds is the combination
+   if it explains the record to the noise floor; if no pair does, the record
+   holds more than two effects or one the catalogue lacks, and a pair
+   without the best single effect is no safer a guess than one with it:
+   the best pair with it is kept.
 
 A pair whose fitted parameters contradict one of its effects
 (``Effect.contradiction``, e.g. a "disturbance" on a harmonic of a periodic
@@ -49,6 +55,10 @@ from .pool import ordered_map
 SEARCH_ABOVE = 1.08
 #: Samples the pairs are compared on (a long record's window; the bands and pairs benches' records are this long).
 SEARCH_SAMPLES = 6000
+#: Rounds beyond the first two while no pair reaches the floor. In the pairs bench (360 records) the
+#: better-ranked hidden effect was among the three best single fits in every record where the first two
+#: rounds missed a hidden pair that reaches the floor when fitted (10 records).
+EXTRA_ROUNDS = 2
 
 
 @dataclass
@@ -91,6 +101,15 @@ def choose_pair(data: ext.Prepared, base: ext.ExtendedFit, singles: list[tuple[s
     partner = _round(small, small_base, first, singles, fits, flaws, max_nfev, workers, report)
     kept = next(s for s in singles if s[0] == partner)
     _round(small, small_base, kept, [s for s in singles if s[0] != first[0]], fits, flaws, max_nfev, workers, report)
+    anchors = {first[0], partner}
+    for _ in range(EXTRA_ROUNDS):
+        if any(flaws[k] is None and f.residual_rms <= SEARCH_ABOVE * noise for k, f in fits.items()):
+            break
+        more = next((s for s in singles if s[0] not in anchors), None)
+        if more is None:
+            break
+        anchors.add(more[0])
+        _round(small, small_base, more, singles, fits, flaws, max_nfev, workers, report)
     scores = {k: _weigh(small_base, f, small.n) for k, f in fits.items()}
     sound = [k for k in fits if flaws[k] is None]
     if not sound:
