@@ -71,6 +71,9 @@ class ThermalSettling(AdditiveEffect):
     def signature(self, params, fit, base, where, data):
         return f"output settles with tau {params.get('tau_s', float('nan')):.3g} s"
 
+    def contradiction(self, params, data):      # the signature before the base model was passed: still called
+        return None if params.get("tau_s", 1.0) > 0 else "a negative time constant"
+
     def example_params(self, model, t, u, y_base, rng):
         return {"amplitude": float(np.ptp(y_base)) * rng.uniform(0.1, 0.2), "tau_s": (t[-1] - t[0]) * rng.uniform(0.1, 0.3)}
 '''

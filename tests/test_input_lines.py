@@ -61,3 +61,23 @@ def test_a_disturbance_or_a_narrow_mode_on_the_input_harmonic_contradicts_the_ef
     assert mode.contradiction({"fn_hz": 2.0, "zeta": 0.05, "gain": 1.0}, data) is None     # wider than 1/T: a mode
     assert mode.contradiction({"fn_hz": 2.5, "zeta": 0.001, "gain": 1.0}, data) is None
     assert get_effect("drift").contradiction({}, data) is None
+
+
+def test_a_second_mode_below_the_first_or_without_a_resonance_peak_is_not_a_mode():
+    """The catalogue's second mode is a *higher* structural mode that rings: a fitted one at or below the base
+    model's resonance, or damped past 1/sqrt(2), is a path standing in for a slow effect (the pairs bench's
+    leakage + drift records: 0.17 Hz beside a 7 Hz first mode; 70.9 Hz at zeta 0.81 beside a base deformed to
+    3 Hz at zeta 5.4)."""
+    from creep_online import CreepModel
+    rng = np.random.default_rng(3)
+    t, u = staircase(6000, 1e-3, rng)
+    data = prepare(t, u, u)
+    first = CreepModel.from_resonance(alpha=0.03, fn=7.0, zeta=0.9, b=1.5)
+    mode = get_effect("second_mode")
+    assert "not above the first mode" in mode.contradiction({"fn_hz": 0.17, "zeta": 0.26, "gain": -0.04}, data,
+                                                            model=first)
+    assert "not above the first mode" in mode.contradiction({"fn_hz": 6.9, "zeta": 0.05, "gain": 0.1}, data,
+                                                            model=first)
+    assert "no resonance peak" in mode.contradiction({"fn_hz": 70.9, "zeta": 0.81, "gain": 1.4}, data, model=first)
+    assert mode.contradiction({"fn_hz": 25.0, "zeta": 0.05, "gain": 0.1}, data, model=first) is None
+    assert mode.contradiction({"fn_hz": 0.17, "zeta": 0.26, "gain": -0.04}, data) is None   # no base model given

@@ -42,7 +42,9 @@ polarization record took 125 s instead of 21 s.
 """
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Callable
 
 from ..effects import get_effect
@@ -150,12 +152,24 @@ def _round(data: ext.Prepared, base: ext.ExtendedFit, kept: tuple, singles: list
 
 
 def contradicts(fit: ext.ExtendedFit, data: ext.Prepared) -> str | None:
-    """Why the fitted parameters contradict one of the fit's effects on this record (``Effect.contradiction``)."""
+    """Why the fitted parameters contradict one of the fit's effects on this record (``Effect.contradiction``,
+    given the fit's base model where the effect's override takes it)."""
     for name in fit.effects:
-        why = get_effect(name).contradiction(fit.effect_params.get(name, {}), data)
+        effect = get_effect(name)
+        params = fit.effect_params.get(name, {})
+        if _takes_model(type(effect)):
+            why = effect.contradiction(params, data, model=fit.model)
+        else:
+            why = effect.contradiction(params, data)
         if why:
             return f"{name}: {why}"
     return None
+
+
+@lru_cache(maxsize=None)
+def _takes_model(cls: type) -> bool:
+    """Whether an effect's ``contradiction`` accepts the base model (plug-ins written before it was passed do not)."""
+    return "model" in inspect.signature(cls.contradiction).parameters
 
 
 def _weigh(base: ext.ExtendedFit, fit: ext.ExtendedFit, n: int) -> tuple[float, float]:

@@ -206,10 +206,11 @@ class Effect(ABC):
         """None if the record can reveal this effect; else the reason it cannot."""
         return None
 
-    def contradiction(self, params: dict, data) -> str | None:
+    def contradiction(self, params: dict, data, model: Any = None) -> str | None:
         """None if the fitted ``params`` agree with this effect's physics on this record; else why they do not
-        (e.g. a "disturbance" locked to a periodic input). ``diagnose`` never calls a contradicted fit
-        significant, alone or in a pair."""
+        (e.g. a "disturbance" locked to a periodic input). ``model``: the fit's base ``CreepModel`` (a second
+        mode must lie above its resonance). ``diagnose`` never calls a contradicted fit significant, alone or
+        in a pair. An override without ``model`` (written before it was passed) keeps working."""
         return None
 
     @abstractmethod

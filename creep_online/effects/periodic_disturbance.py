@@ -86,7 +86,7 @@ class PeriodicDisturbance(AdditiveEffect):
     def applicable(self, data) -> str | None:
         return None if data.uniform else "needs uniform sampling for its frequency search"
 
-    def contradiction(self, params: dict, data) -> str | None:
+    def contradiction(self, params: dict, data, model=None) -> str | None:
         if not data.uniform:
             return None
         locked = harmonic_of_input(float(params.get("f_hz", float("nan"))), data.t, data.u)

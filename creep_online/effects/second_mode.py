@@ -18,6 +18,10 @@ from .responses import resonance_step, resonance_step_derivatives
 
 FN = "second_mode.log10_fn"
 ZETA = "second_mode.log10_zeta"
+#: Damping at and above which a second-order path has no resonance peak (1/sqrt(2)): the catalogue's second mode
+#: is a higher structural mode, seen as ringing after steps; a fitted "mode" this damped is a low-pass path
+#: standing in for a slow effect (leakage + drift records: 70.9 Hz at zeta 0.81 beside a base deformed to 3 Hz).
+NO_PEAK_ZETA = 1.0 / math.sqrt(2.0)
 #: Relative steps of the damped frequency around a mode's image across Nyquist (``polished_starts``).
 IMAGE_STEPS = (0.97, 0.985, 1.0, 1.015, 1.03)
 
@@ -116,10 +120,16 @@ class SecondMode(ParallelEffect):
     def compensator(self, dt: float, params: dict) -> OutputCompensator:
         return _ModeCompensator(dt, params)
 
-    def contradiction(self, params: dict, data) -> str | None:
+    def contradiction(self, params: dict, data, model=None) -> str | None:
+        fn, zeta = float(params.get("fn_hz", float("nan"))), float(params.get("zeta", float("nan")))
+        if zeta >= NO_PEAK_ZETA:
+            return (f"zeta {zeta:.2g} at {fn:.4g} Hz has no resonance peak: an overdamped path standing in for "
+                    "a slow effect, not a mode")
+        if model is not None and fn <= model.fn:
+            return (f"resonance at {fn:.4g} Hz is not above the first mode's {model.fn:.4g} Hz: a path standing "
+                    "in for another effect, not a higher mode")
         if not data.uniform:
             return None
-        fn, zeta = float(params.get("fn_hz", float("nan"))), float(params.get("zeta", float("nan")))
         locked = harmonic_of_input(fn, data.t, data.u)
         if locked is None or 2.0 * zeta * fn * (data.t[-1] - data.t[0]) >= 1.0:
             return None              # off the input's lines, or wider than the record's resolution: a mode
