@@ -50,7 +50,8 @@ def test_two_hidden_effects_are_both_named_and_their_combination_reaches_the_noi
 
 @pytest.mark.parametrize("pair, band, seed, stand_in", [
     (("leakage", "drift"), "10-100x", 0, "second_creep"),   # second creep alone imitates both slow effects
-    (("delay", "drift"), "3-10x", 1, "second_mode"),        # the delay is 2nd-worst alone: only given the drift
+    (("delay", "drift"), "3-10x", 1, "hysteresis"),         # the delay is 5th alone: only given the drift (an
+    #                                                          overdamped second mode ranked first until contradicted)
 ])
 def test_the_pair_search_finds_a_pair_the_single_fits_rank_apart(pair, band, seed, stand_in):
     bench = _bench()
@@ -81,18 +82,18 @@ def test_a_record_one_effect_explains_to_the_noise_is_not_searched_for_a_pair():
 
 
 def test_more_rounds_find_the_pair_when_the_first_two_keep_stand_ins():
-    """Delay + drift (3-10x, seed 23): a second creep ranks first alone and a second mode is its best partner
-    (2.47x the noise); the hidden pair was never fitted in the first two rounds. A third round keeping the
-    drift (second best alone) finds it at the floor (``pairs.EXTRA_ROUNDS``)."""
+    """Leakage + drift (3-10x, seed 15): hysteresis ranks first alone and the pair it leads the first two rounds to
+    (hysteresis + second creep) stays at 1.6x the noise; the hidden pair was never fitted. A third round keeping
+    the next best single effect finds it at the floor (``pairs.EXTRA_ROUNDS``)."""
     bench = _bench()
-    rec = bench.make_pair_record(("delay", "drift"), bench.BANDS["3-10x"], 23)
+    rec = bench.make_pair_record(("leakage", "drift"), bench.BANDS["3-10x"], 15)
     d = diagnose((rec["t"], rec["u"], rec["y"]))
-    assert [c.effect for c in d.candidates if c.significant][0] == "second_creep"
+    assert [c.effect for c in d.candidates if c.significant][0] == "hysteresis"
     assert len(d.pairs_tried) > 2 * (len(d.candidates) - 1)               # a round beyond the first two ran
-    assert d.combination is not None and set(d.combination.effect.split("+")) == {"delay", "drift"}
+    assert d.combination is not None and set(d.combination.effect.split("+")) == {"leakage", "drift"}
     assert d.combination.significant
     assert d.combination.fit.residual_rms <= bench.FLOOR * rec["noise"]
-    assert d.verdict in ("delay", "drift")
+    assert d.verdict in ("leakage", "drift")
 
 
 def test_a_significant_second_effect_starts_the_search_even_when_a_stand_in_fits_near_the_floor():
