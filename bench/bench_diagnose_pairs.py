@@ -22,6 +22,10 @@ every record. Usage::
     PYTHONPATH=. python bench/bench_diagnose_pairs.py --records 30 [--first-seed 0] [--pairs hysteresis+drift]
         [--bands 3-10x,10-100x] [--forward [--partners all]] [--out F]
     PYTHONPATH=. python bench/bench_diagnose_pairs.py --merge A.json B.json --out F   # consecutive seeds
+    PYTHONPATH=. python bench/bench_diagnose_pairs.py --recheck OLD.json --which missed|above|unsearched --out F
+
+``--recheck`` reruns only an earlier run's misses, each beside its earlier row: a fix's effect on exactly the
+records it was aimed at (a change that can move other records still needs the full table).
 """
 from __future__ import annotations
 
@@ -206,6 +210,32 @@ def run(pairs: list[tuple[str, str]], bands: list[str], first_seed: int, records
             "elapsed_s": time.perf_counter() - started, "rows": rows}
 
 
+def recheck(path: str, which: str) -> dict:
+    """Rerun the records of an earlier run that missed, each beside its earlier row (a fix's effect on exactly
+    the records it was aimed at; the whole table needs a full run)."""
+    before = json.load(open(path))
+    pick = {"missed": lambda x: not x["at_floor"] or not x["both_named"],
+            "above": lambda x: x["combination_over_noise"] > 1.08,
+            "unsearched": lambda x: not x["both_named"] and x["pairs_tried"] == 1}[which]
+    started = time.perf_counter()
+    out = []
+    for key, rows in before["rows"].items():
+        pair, band = key.split("|")
+        for old in (x for x in rows if pick(x)):
+            new = run_one(tuple(pair.split("+")), BANDS[band], old["seed"])
+            out.append({"cell": key, "seed": old["seed"], "now": new,
+                        "before": {k: old[k] for k in ("combination", "combination_over_noise", "both_named",
+                                                       "at_floor", "verdict", "verdict_in_pair", "pairs_tried")}})
+            print(f"[recheck] {key} seed {old['seed']}: {'+'.join(old['combination'])} "
+                  f"{old['combination_over_noise']:.2f}x -> {'+'.join(new.get('combination') or ['error'])} "
+                  f"{new.get('combination_over_noise') or math.nan:.2f}x", file=sys.stderr, flush=True)
+    gained = {k: sum(bool(r["now"].get(k)) for r in out) - sum(bool(r["before"][k]) for r in out)
+              for k in ("both_named", "at_floor", "verdict_in_pair")}
+    return {"bench": "diagnose_pairs_recheck", "command": "python " + shlex.join(sys.argv), "of": path,
+            "which": which, "records": len(out), "gained": gained, "load_average": list(os.getloadavg()),
+            "elapsed_s": time.perf_counter() - started, "rows": out}
+
+
 def main() -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--records", type=int, default=30, help="records per pair and band (the issue's goal: >= 100)")
@@ -218,9 +248,17 @@ def main() -> dict:
                     help="ablation: also forward-select the second effect given the first (forward_selection)")
     ap.add_argument("--partners", choices=("significant", "all"), default="significant",
                     help="with --forward: the partners tried (the candidates significant alone, or all)")
+    ap.add_argument("--recheck", default=None, metavar="JSON",
+                    help="rerun only the records of a previous run's JSON that missed: 'missed' (combination not "
+                         "the hidden pair within 1.3x) or 'above' (combination above 1.08x the noise), e.g. "
+                         "--recheck bench/results/diagnose_pairs.json --which missed")
+    ap.add_argument("--which", choices=("missed", "above", "unsearched"), default="missed",
+                    help="with --recheck: which records ('unsearched': missed and never searched)")
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
-    if args.merge:
+    if args.recheck:
+        doc = recheck(args.recheck, args.which)
+    elif args.merge:
         doc = merge(args.merge, table_of)
         parts = [json.load(open(p)).get("command") for p in args.merge]
         doc["command"] = [c for part in parts for c in (part if isinstance(part, list) else [part])]
