@@ -87,7 +87,8 @@ def run_one(effect: str | None, band: tuple[float, float], seed: int) -> dict:
     return {"seed": seed, "ratio": rec["ratio"], "plant": rec["plant"], "verdict": d.verdict,
             "named_first": (d.verdict.split("+")[0] == effect) if effect else d.verdict == "none",
             "own_fit_over_noise": own[0].fit.residual_rms / rec["noise"] if own else None,
-            "base_over_noise": d.base.residual_rms / rec["noise"], "seconds": time.perf_counter() - t0}
+            "base_over_noise": d.base.residual_rms / rec["noise"], "pairs_tried": len(d.pairs_tried),
+            "seconds": time.perf_counter() - t0}
 
 
 def cell(rows: list[dict]) -> dict:
@@ -99,6 +100,7 @@ def cell(rows: list[dict]) -> dict:
             "at_floor": (sum(v <= FLOOR for v in floor) / n) if floor else None,
             "own_fit_over_noise_max": max(floor) if floor else None,
             "verdicts": dict(Counter(r["verdict"] for r in ok).most_common()),
+            "pair_searched": sum(r.get("pairs_tried", 0) > 1 for r in ok),
             "seconds_p50": float(np.median([r["seconds"] for r in rows]))}
 
 
