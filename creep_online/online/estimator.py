@@ -51,7 +51,7 @@ from .search import ResonanceSearch, SearchScratch, frequency_steps, grid_ends
 from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SOE_TOP, SoeBasis
 from . import recursive as R
 from .recursive import RecursiveTracker
-from .tracker import WindowTracker
+from .tracker import FREE_RATES, WindowTracker
 from .stored_params import StoredParams
 
 PHASES = ("buffering", "searching", "tracking")
@@ -583,9 +583,11 @@ class OnlineEstimator(StoredParams):
         alphas = () if self.alpha0 is None else (float(self.alpha0),)
         plan, self._grid_plan = self._grid_plan, None
         freqs = plan[2] if plan is not None and plan[0] == end - start else None
+        # in operation the buffer starts in the fading memory of an unknown past input: the search projects it
+        # out (the tracker's free responses), as it does the unknown resonance state (``ResonanceSearch`` free)
         self._search = ResonanceSearch(self.basis, self._bu[start:end], self._by[start:end], alphas=alphas,
                                        work=self._hist_work, starts=starts, scratch=self._search_scratch,
-                                       freqs=freqs)
+                                       freqs=freqs, free=FREE_RATES if self._u_ref else None)
         self._tc_used = (end - start) * self._h
         self._phase = "searching"
 

@@ -121,9 +121,10 @@ def _rows(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx0: f
 @njit(cache=True)
 def _rows_free(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx0: float, vx1: float,
                rc: np.ndarray, x: np.ndarray, f: np.ndarray, decay: np.ndarray, e: np.ndarray, r0: int, r1: int,
-               lead: int, G: np.ndarray) -> None:
-    """``_rows`` (every row) with the unknown start as more regressors: the resonance's free responses and
-    the decays ``e`` (the fading memory of an input before the stream).
+               stride: int, lead: int, G: np.ndarray) -> None:
+    """``_rows`` with the unknown start as more regressors: the resonance's free responses and the decays ``e``
+    (the fading memory of an input before the stream). The states advance at every row; the sums take one
+    row per block of ``stride`` (``_kept``; every row at stride 1).
 
     ``f`` carries two homogeneous resonance states (started at the unit vectors at row 0); their outputs
     ``g1``, ``g2`` (through the same coefficients as the forced state) are what an unknown resonance state
@@ -136,7 +137,7 @@ def _rows_free(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, v
     row = np.empty(p)
     x0, x1 = x[0], x[1]
     for k in range(r0, r1):
-        if k >= lead and y[k] == y[k]:
+        if k >= lead and _kept(k, stride) and y[k] == y[k]:
             s = vx0 * x0 + vx1 * x1
             for i in range(q):
                 s += hist[k, i] * vz[i]
@@ -203,6 +204,59 @@ def _free_cost(G: np.ndarray) -> float:
                 C[a, b] -= fa * C[c, b]
     cost = C[k - 1, k - 1]
     return max(cost, 0.0) / n if math.isfinite(cost) else math.inf
+
+
+@njit(cache=True)
+def _free_fit(G: np.ndarray) -> tuple:
+    """(cost per row, b, c) of min ||y - b s - c - sum d_j r_j||^2 from the Gram matrix of ``_rows_free``.
+
+    The same centring and elimination as ``_free_cost`` (the same cost), with y's column carried along so
+    that back-substitution gives the coefficients: b is that of s (a regressor left out there, degenerate,
+    gets a zero coefficient). c is the mean of y - b s, the free parts averaged in: the slow decays and the
+    constant are nearly collinear on a short buffer, so the fit's own offset is arbitrary (-1458 against an
+    output of ~0.2 on a 0.4 s buffer), and a tracker starts its free weights at zero. (inf, 0, 0) when s
+    itself is degenerate.
+    """
+    p = G.shape[0]
+    n = G[1, 1]
+    if n < p + 1:
+        return math.inf, 0.0, 0.0
+    k = p - 1
+    idx = np.empty(k, dtype=np.int64)      # every column but the constant
+    idx[0] = 0
+    for a in range(1, k):
+        idx[a] = a + 1
+    sums = np.empty(k)
+    for a in range(k):
+        sums[a] = G[0, 1] if idx[a] == 0 else G[1, idx[a]]
+    C = np.empty((k, k))
+    for a in range(k):
+        for b in range(a, k):
+            C[a, b] = G[idx[a], idx[b]] - sums[a] * sums[b] / n
+            C[b, a] = C[a, b]
+    if not (C[0, 0] > 1e-9 * G[0, 0] and math.isfinite(C[0, 0])):
+        return math.inf, 0.0, 0.0
+    used = np.zeros(k - 1, dtype=np.bool_)
+    for c in range(k - 1):
+        d = C[c, c]
+        if not d > 1e-10 * G[idx[c], idx[c]]:
+            continue
+        used[c] = True
+        for a in range(c + 1, k):
+            fa = C[a, c] / d
+            for b in range(c + 1, k):
+                C[a, b] -= fa * C[c, b]
+    cost = C[k - 1, k - 1]
+    if not math.isfinite(cost):
+        return math.inf, 0.0, 0.0
+    coef = np.zeros(k - 1)
+    for c in range(k - 2, -1, -1):
+        if used[c]:
+            r = C[c, k - 1]
+            for j in range(c + 1, k - 1):
+                r -= C[c, j] * coef[j]
+            coef[c] = r / C[c, c]
+    return max(cost, 0.0) / n, coef[0], (sums[k - 1] - coef[0] * sums[0]) / n
 
 
 @njit(cache=True)
@@ -336,13 +390,20 @@ class ResonanceSearch:
     ``fixed_alpha`` searches the resonance only (after a detected change). ``scratch``: the small work
     arrays (``SearchScratch``; a search's own when None). ``freqs``: the grid's frequencies computed ahead
     for this search's rows (``grid_frequencies`` of ``grid_ends(len(u) - lead, h)``; None: computed here).
+    ``free``: decay rates (1/s) of a stream taken in operation (the tracker's free responses): every cost of
+    the search (grid, refinement, result) then has the unknown start projected out, as ``judged_cost`` does:
+    the resonance's two free responses and exp(-mu t) for the fading memory of the input before the stream.
+    None: the buffer starts from rest (the resonance at rest, the node state ``zeta0``), the cost of ``_rows``.
     """
 
     def __init__(self, basis: SoeBasis, u: np.ndarray, y: np.ndarray, zeta0: np.ndarray | None = None,
                  lead: int = 0, extra: tuple = (), alphas: tuple = (), work: np.ndarray | None = None,
                  starts: list | None = None, fixed_alpha: float | None = None,
-                 scratch: SearchScratch | None = None, freqs: np.ndarray | None = None) -> None:
+                 scratch: SearchScratch | None = None, freqs: np.ndarray | None = None,
+                 free: tuple | None = None) -> None:
         self.basis = basis
+        #: the unknown start's decay rates (None: a start from rest; see the class docstring)
+        self.free = None if free is None else tuple(float(r) for r in free)
         self.u = np.ascontiguousarray(u, dtype=float)
         self.y = np.ascontiguousarray(y, dtype=float)
         self.zeta0 = zeta0               # (None: zero; copied by ``_history``)
@@ -396,21 +457,31 @@ class ResonanceSearch:
         input before the stream (the tracker's free responses, when the stream started in operation).
         The generator's return value is the cost.
         """
-        vz, x = self._vz, self._x
-        vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
-                            self._rc, vz, x, self._acc)
-        f, decay, e, G = _judge_arrays(self._scratch, tuple(decays), self.basis.h)
-        _judge_reset(f, e, G)
-        yield
-        n = self.u.size
-        chunk = max(16, int(UNIT_WORK / (self.basis.size + 30 + 6 * e.size)))
-        for r0 in range(0, n, chunk):
-            _rows_free(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, f, decay, e, r0, min(n, r0 + chunk),
-                       self.lead, G)
-            yield
+        G = yield from self._free_gram(alpha, a1, a2, tuple(decays), 1)
         cost = _free_cost(G)
         yield                              # (a caller's next work starts on the next unit)
         return cost
+
+    def _free_gram(self, alpha: float, a1: float, a2: float, decays: tuple, stride: int) -> Generator:
+        """The Gram matrix of ``_rows_free`` for one candidate (one row per block of ``stride``), in units; the
+        generator's return value is the matrix (the scratch's: read it before the next candidate)."""
+        vz, x = self._vz, self._x
+        vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
+                            self._rc, vz, x, self._acc)
+        f, decay, e, G = _judge_arrays(self._scratch, decays, self.basis.h)
+        _judge_reset(f, e, G)
+        yield
+        n = self.u.size
+        if stride == 1:
+            per_row = self.basis.size + 30 + 6 * e.size
+        else:                              # the states at every row, the sums at one row per block
+            per_row = 14 + e.size + (self.basis.size + (5 + e.size) * (6 + e.size) / 2) / stride
+        chunk = max(16, int(UNIT_WORK / per_row))
+        for r0 in range(0, n, chunk):
+            _rows_free(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, f, decay, e, r0, min(n, r0 + chunk),
+                       stride, self.lead, G)
+            yield
+        return G
 
     def judged_rows(self) -> int:
         """The rows ``judged_cost`` (and ``exact_cost``) sum over: after ``lead``, with a finite output."""
@@ -424,7 +495,11 @@ class ResonanceSearch:
 
     # ------------------------------------------------------------------ pieces
     def _evaluate(self, alpha: float, a1: float, a2: float, stride: int) -> Generator:
-        """Projected cost of one candidate, in units; the generator's return value is (cost, b, c)."""
+        """Projected cost of one candidate, in units; the generator's return value is (cost, b, c). With
+        ``free`` the unknown start is projected out too (``_free_gram``, ``_free_fit``)."""
+        if self.free is not None:
+            G = yield from self._free_gram(alpha, a1, a2, self.free, stride)
+            return _free_fit(G)
         vz, x, acc = self._vz, self._x, self._acc
         vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
                             self._rc, vz, x, acc)

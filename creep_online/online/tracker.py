@@ -1023,7 +1023,8 @@ class WindowTracker(ParameterView):
         search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, work=self.work_memory,
                                  fixed_alpha=self.alpha if self.window_start and self._alpha_known else None,
                                  alphas=(self.alpha,),
-                                 extra=((self.alpha, self.a1, self.a2),), scratch=self._search_scratch)
+                                 extra=((self.alpha, self.a1, self.a2),), scratch=self._search_scratch,
+                                 free=self._free_decays if self.n_free else None)
         yield
         yield from self._run_search(search)
         yield                              # (the search's last unit ended this call)
