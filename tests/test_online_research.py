@@ -301,6 +301,17 @@ def test_free_fit_is_least_squares_with_the_unknown_start():
     assert _drain(search.exact_cost(model.alpha, model.a1, model.a2))[0] == pytest.approx(cost, rel=1e-12)
     strided, b10, _ = _drain(search._evaluate(model.alpha, model.a1, model.a2, 10))
     assert strided == pytest.approx(1e-6, rel=0.3) and b10 == pytest.approx(1.7, rel=1e-2)
+    # the strided rows evaluate the free responses in closed form (``_free_modes``): on every row, the same fit
+    # as the recursion's, for an underdamped, an overdamped and a critically damped resonance
+    from creep_online.online.search import _rows_free_sparse
+    for a1, a2 in ((model.a1, model.a2), (2.5 * math.sqrt(model.a2), model.a2), (2 * math.sqrt(model.a2), model.a2)):
+        G = _drain(search._free_gram(model.alpha, a1, a2, decays, 1)).copy()
+        G2 = np.zeros_like(G)
+        _drain(search._free_gram(model.alpha, a1, a2, decays, 1))       # (the candidate's coefficients)
+        search._x[:] = 0.0
+        _rows_free_sparse(search._hist, search.u, search.y, search._vz, search._v[-2], search._v[-1], search._rc,
+                          search._x, a1, a2, H, np.array(decays), 0, t.size, 1, 0, G2)
+        assert _free_fit(G2)[0] == pytest.approx(_free_cost(G), rel=1e-6), (a1, a2)
 
 
 def test_a_search_in_operation_finds_the_plant_under_a_fading_memory():
