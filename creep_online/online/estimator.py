@@ -808,7 +808,10 @@ def warm_kernels() -> None:
         for _ in search.judged_cost(0.1, 2e-3, 1e-6, decays):
             pass
     # a search of a stream taken in operation (its costs by ``search._free_fit``): the start-up search's kernels
-    ResonanceSearch(tr.basis, u[:300] - u[0], u[:300] * 0.5, fixed_alpha=0.1, free=T.FREE_RATES,
-                    starts=[(0.1, 20.0, 0.5)], work=None).run()
+    search = ResonanceSearch(tr.basis, u[:300] - u[0], u[:300] * 0.5, fixed_alpha=0.1, free=T.FREE_RATES,
+                             starts=[(0.1, 20.0, 0.5)], work=None)
+    search.run()
+    for _ in search._free_gram(0.1, 2e-3, 1e-6, search.free, 2):     # (the strided rows: ``_rows_free_sparse``)
+        pass
     T.WindowTracker  # noqa: B018 - imported for its kernels
     R.warm()
