@@ -187,9 +187,9 @@ def _rows_free_sparse(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.nda
                       rc: np.ndarray, x: np.ndarray, a1: float, a2: float, h: float, rates: np.ndarray, r0: int,
                       r1: int, stride: int, lead: int, G: np.ndarray) -> None:
     """``_rows_free`` on one row per block of ``stride`` (``_kept``): the forced state advances at every row,
-    the free responses (``_free_modes``: the same span as the homogeneous states) and the decays
-    exp(-mu_j t) are evaluated at the kept rows only (a search's grid and refinement: the recursions of the
-    free states at every row made a candidate ~2.7x the cost of one from rest at a stride of 10)."""
+    the free responses (``_free_modes``: the same span as the homogeneous states, better conditioned than the
+    recursion's outputs of the two unit states) and the decays exp(-mu_j t) are evaluated at the kept rows
+    only (every row at stride 1)."""
     q = vz.shape[0]
     m = rates.shape[0]
     p = 5 + m
@@ -259,20 +259,29 @@ def _free_cost(G: np.ndarray) -> float:
     return max(cost, 0.0) / n if math.isfinite(cost) else math.inf
 
 
+#: A search's ranking cost (``_free_fit``) leaves out a regressor when less than this fraction of its centred sum of
+#: squares is not spanned by the regressors before it (the columns scaled to unit centred sums of squares first).
+#: Rounding in the elimination grows like machine epsilon over this limit, relative to the output's centred sum of
+#: squares; at 80 dB the noise is 1e-8 of that sum, so the limit must stay well above 1e-8.
+FREE_PIVOT = 1e-6
+
+
 @njit(cache=True)
 def _free_fit(G: np.ndarray) -> tuple:
-    """(cost per row, b, c) of min ||y - b s - c - sum d_j r_j||^2 from the Gram matrix of ``_rows_free``.
+    """(cost per row, b, c) of min ||y - b s - c - sum d_j r_j||^2 from the Gram matrix of ``_rows_free``: what a
+    search of a stream taken in operation ranks its candidates by.
 
-    The same centring and elimination as ``_free_cost`` (the same cost), with y's column carried along so
-    that back-substitution gives the coefficients: b is that of s (a regressor left out there, degenerate,
-    gets a zero coefficient). A cost that is not positive is rounding, not a fit, and reads inf: a search
-    ranks thousands of candidates, and on a short buffer the free responses of a slow overdamped one and
-    the decays are nearly collinear (mid_operation seed 2 at 80 dB: fn 4.7 Hz, zeta 1.3, alpha 0.78 "fitted"
-    a 0.45 s buffer at a cost of exactly 0 and won the search; a stricter pivot limit, 1e-8, dropped decays
-    the fading memory needs and biased alpha by 5 %). c is the mean of y - b s, the free parts averaged in: the slow decays and the
-    constant are nearly collinear on a short buffer, so the fit's own offset is arbitrary (-1458 against an
-    output of ~0.2 on a 0.4 s buffer), and a tracker starts its free weights at zero. (inf, 0, 0) when s
-    itself is degenerate.
+    Centred (the offset projected first, as in ``_free_cost``), every column scaled to a unit centred sum of
+    squares, then the regressors eliminated in turn with y's column carried along, so that back-substitution
+    gives the coefficients (b is that of s). A regressor less than ``FREE_PIVOT`` of which is left unspanned by
+    those before it gets a zero coefficient. The judge's ``_free_cost`` eliminates unscaled down to 1e-10 of a
+    column's uncentred sum: there the free responses of some candidates, sums of squares 1e-8 of the output's,
+    and the decays amplified rounding far beyond the noise (mid_operation at 40 dB, seed 18: a candidate with
+    alpha 20x the plant's "fitted" its buffer at 1/5000 of the noise variance, 7e-5 by numpy's least squares,
+    and won the start-up search; seed 2 at 80 dB: a cost of exactly 0). A cost that is not positive is rounding
+    too: inf. c is the mean of y - b s, the free parts averaged in: the slow decays and the constant are nearly
+    collinear on a short buffer, so the fit's own offset is arbitrary (-1458 against an output of ~0.2 on a
+    0.4 s buffer), and a tracker starts its free weights at zero. (inf, 0, 0) when s itself is degenerate.
     """
     p = G.shape[0]
     n = G[1, 1]
@@ -291,12 +300,19 @@ def _free_fit(G: np.ndarray) -> tuple:
         for b in range(a, k):
             C[a, b] = G[idx[a], idx[b]] - sums[a] * sums[b] / n
             C[b, a] = C[a, b]
-    if not (C[0, 0] > 1e-9 * G[0, 0] and math.isfinite(C[0, 0])):
+    if not (C[0, 0] > 1e-9 * G[0, 0] and math.isfinite(C[0, 0]) and C[k - 1, k - 1] > 0.0):
         return math.inf, 0.0, 0.0
+    scale = np.zeros(k)
+    for a in range(k):
+        if C[a, a] > 0.0 and math.isfinite(C[a, a]):
+            scale[a] = 1.0 / math.sqrt(C[a, a])
+    for a in range(k):
+        for b in range(k):
+            C[a, b] *= scale[a] * scale[b]
     used = np.zeros(k - 1, dtype=np.bool_)
     for c in range(k - 1):
         d = C[c, c]
-        if not d > 1e-10 * G[idx[c], idx[c]]:
+        if not d > FREE_PIVOT:
             continue
         used[c] = True
         for a in range(c + 1, k):
@@ -313,7 +329,8 @@ def _free_fit(G: np.ndarray) -> tuple:
             for j in range(c + 1, k - 1):
                 r -= C[c, j] * coef[j]
             coef[c] = r / C[c, c]
-    return max(cost, 0.0) / n, coef[0], (sums[k - 1] - coef[0] * sums[0]) / n
+    b = coef[0] * scale[0] / scale[k - 1]           # back to the unscaled columns
+    return cost / (scale[k - 1] ** 2 * n), b, (sums[k - 1] - b * sums[0]) / n
 
 
 @njit(cache=True)
@@ -520,9 +537,16 @@ class ResonanceSearch:
         yield                              # (a caller's next work starts on the next unit)
         return cost
 
-    def _free_gram(self, alpha: float, a1: float, a2: float, decays: tuple, stride: int) -> Generator:
+    def _free_gram(self, alpha: float, a1: float, a2: float, decays: tuple, stride: int,
+                   closed: bool = False) -> Generator:
         """The Gram matrix of ``_rows_free`` for one candidate (one row per block of ``stride``), in units; the
-        generator's return value is the matrix (the scratch's: read it before the next candidate)."""
+        generator's return value is the matrix (the scratch's: read it before the next candidate).
+
+        At stride 1 the free responses are the recursion's (``_rows_free``, the judge's) unless ``closed``; at a
+        stride, and with ``closed``, their closed form (``_rows_free_sparse``). The recursion's outputs of the two
+        unit states can be nearly collinear: on mid_operation seed 18 at 40 dB a candidate with alpha 20x the
+        plant's then "fitted" its buffer at 1/5000 of the noise variance (1e-8; 7.3e-5 with the closed form,
+        6.9e-5 by numpy's least squares on the simulator's output) and won the start-up search."""
         vz, x = self._vz, self._x
         vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
                             self._rc, vz, x, self._acc)
@@ -530,7 +554,7 @@ class ResonanceSearch:
         _judge_reset(f, e, G)
         yield
         n = self.u.size
-        if stride == 1:
+        if stride == 1 and not closed:
             chunk = max(16, int(UNIT_WORK / (self.basis.size + 30 + 6 * e.size)))
             for r0 in range(0, n, chunk):
                 _rows_free(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, f, decay, e, r0,
@@ -560,9 +584,10 @@ class ResonanceSearch:
     # ------------------------------------------------------------------ pieces
     def _evaluate(self, alpha: float, a1: float, a2: float, stride: int) -> Generator:
         """Projected cost of one candidate, in units; the generator's return value is (cost, b, c). With
-        ``free`` the unknown start is projected out too (``_free_gram``, ``_free_fit``)."""
+        ``free`` the unknown start is projected out too (``_free_gram`` with the free responses in closed form
+        on every stride, ``_free_fit``)."""
         if self.free is not None:
-            G = yield from self._free_gram(alpha, a1, a2, self.free, stride)
+            G = yield from self._free_gram(alpha, a1, a2, self.free, stride, closed=True)
             return _free_fit(G)
         vz, x, acc = self._vz, self._x, self._acc
         vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
