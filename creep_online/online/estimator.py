@@ -51,7 +51,7 @@ from .search import ResonanceSearch, SearchScratch, frequency_steps, grid_ends
 from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SOE_TOP, SoeBasis
 from . import recursive as R
 from .recursive import RecursiveTracker
-from .tracker import WindowTracker
+from .tracker import FREE_RATES, WindowTracker
 from .stored_params import StoredParams
 
 PHASES = ("buffering", "searching", "tracking")
@@ -583,9 +583,11 @@ class OnlineEstimator(StoredParams):
         alphas = () if self.alpha0 is None else (float(self.alpha0),)
         plan, self._grid_plan = self._grid_plan, None
         freqs = plan[2] if plan is not None and plan[0] == end - start else None
+        # in operation the buffer starts in the fading memory of an unknown past input: the search projects it
+        # out (the tracker's free responses), as it does the unknown resonance state (``ResonanceSearch`` free)
         self._search = ResonanceSearch(self.basis, self._bu[start:end], self._by[start:end], alphas=alphas,
                                        work=self._hist_work, starts=starts, scratch=self._search_scratch,
-                                       freqs=freqs)
+                                       freqs=freqs, free=FREE_RATES if self._u_ref else None)
         self._tc_used = (end - start) * self._h
         self._phase = "searching"
 
@@ -805,5 +807,11 @@ def warm_kernels() -> None:
     for decays in ((), T.FREE_RATES):
         for _ in search.judged_cost(0.1, 2e-3, 1e-6, decays):
             pass
+    # a search of a stream taken in operation (its costs by ``search._free_fit``): the start-up search's kernels
+    search = ResonanceSearch(tr.basis, u[:300] - u[0], u[:300] * 0.5, fixed_alpha=0.1, free=T.FREE_RATES,
+                             starts=[(0.1, 20.0, 0.5)], work=None)
+    search.run()
+    for _ in search._free_gram(0.1, 2e-3, 1e-6, search.free, 2):     # (the strided rows: ``_rows_free_sparse``)
+        pass
     T.WindowTracker  # noqa: B018 - imported for its kernels
     R.warm()

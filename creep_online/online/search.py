@@ -165,6 +165,60 @@ def _rows_free(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, v
 
 
 @njit(cache=True)
+def _free_modes(a1: float, a2: float, t: float) -> tuple:
+    """Two functions spanning the free responses of 1/(1 + a1 s + a2 s^2) at time t (s >= 0): e^{st} cos(qt),
+    e^{st} sin(qt)/q (underdamped); e^{(s+q)t}, e^{(s-q)t} expm1(2qt)/(2q) (overdamped: no overflow of cosh
+    against an underflow of e^{st}); e^{st}, t e^{st} (repeated roots). s = -a1/(2 a2), q as in
+    ``window.resonance_step``, whose exact discretization has these as its homogeneous solutions."""
+    s = -a1 / (2.0 * a2)
+    d = s * s - 1.0 / a2
+    if d > 1e-14 * s * s:
+        q = math.sqrt(d)
+        return math.exp((s + q) * t), math.exp((s - q) * t) * math.expm1(2.0 * q * t) / (2.0 * q)
+    e = math.exp(s * t)
+    if d < -1e-14 * s * s:
+        q = math.sqrt(-d)
+        return e * math.cos(q * t), e * math.sin(q * t) / q
+    return e, t * e
+
+
+@njit(cache=True)
+def _rows_free_sparse(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx0: float, vx1: float,
+                      rc: np.ndarray, x: np.ndarray, a1: float, a2: float, h: float, rates: np.ndarray, r0: int,
+                      r1: int, stride: int, lead: int, G: np.ndarray) -> None:
+    """``_rows_free`` on one row per block of ``stride`` (``_kept``): the forced state advances at every row,
+    the free responses (``_free_modes``: the same span as the homogeneous states, better conditioned than the
+    recursion's outputs of the two unit states) and the decays exp(-mu_j t) are evaluated at the kept rows
+    only (every row at stride 1)."""
+    q = vz.shape[0]
+    m = rates.shape[0]
+    p = 5 + m
+    row = np.empty(p)
+    x0, x1 = x[0], x[1]
+    for k in range(r0, r1):
+        if k >= lead and _kept(k, stride) and y[k] == y[k]:
+            s = vx0 * x0 + vx1 * x1
+            for i in range(q):
+                s += hist[k, i] * vz[i]
+            t = k * h
+            row[0] = s
+            row[1] = 1.0
+            row[2], row[3] = _free_modes(a1, a2, t)
+            for j in range(m):
+                row[4 + j] = math.exp(-rates[j] * t)
+            row[p - 1] = y[k]
+            for a in range(p):
+                ra = row[a]
+                for b in range(a, p):
+                    G[a, b] += ra * row[b]
+        n0 = rc[0] * x0 + rc[1] * x1 + rc[4] * u[k]
+        x1 = rc[2] * x0 + rc[3] * x1 + rc[5] * u[k]
+        x0 = n0
+    x[0] = x0
+    x[1] = x1
+
+
+@njit(cache=True)
 def _free_cost(G: np.ndarray) -> float:
     """Cost per row of min ||y - b s - c - sum d_j r_j||^2 from the Gram matrix of ``_rows_free`` (upper
     triangle; columns s, 1, the other regressors r_j, y).
@@ -203,6 +257,80 @@ def _free_cost(G: np.ndarray) -> float:
                 C[a, b] -= fa * C[c, b]
     cost = C[k - 1, k - 1]
     return max(cost, 0.0) / n if math.isfinite(cost) else math.inf
+
+
+#: A search's ranking cost (``_free_fit``) leaves out a regressor when less than this fraction of its centred sum of
+#: squares is not spanned by the regressors before it (the columns scaled to unit centred sums of squares first).
+#: Rounding in the elimination grows like machine epsilon over this limit, relative to the output's centred sum of
+#: squares; at 80 dB the noise is 1e-8 of that sum, so the limit must stay well above 1e-8.
+FREE_PIVOT = 1e-6
+
+
+@njit(cache=True)
+def _free_fit(G: np.ndarray) -> tuple:
+    """(cost per row, b, c) of min ||y - b s - c - sum d_j r_j||^2 from the Gram matrix of ``_rows_free``: what a
+    search of a stream taken in operation ranks its candidates by.
+
+    Centred (the offset projected first, as in ``_free_cost``), every column scaled to a unit centred sum of
+    squares, then the regressors eliminated in turn with y's column carried along, so that back-substitution
+    gives the coefficients (b is that of s). A regressor less than ``FREE_PIVOT`` of which is left unspanned by
+    those before it gets a zero coefficient. The judge's ``_free_cost`` eliminates unscaled down to 1e-10 of a
+    column's uncentred sum: there the free responses of some candidates, sums of squares 1e-8 of the output's,
+    and the decays amplified rounding far beyond the noise (mid_operation at 40 dB, seed 18: a candidate with
+    alpha 20x the plant's "fitted" its buffer at 1/5000 of the noise variance, 7e-5 by numpy's least squares,
+    and won the start-up search; seed 2 at 80 dB: a cost of exactly 0). A cost that is not positive is rounding
+    too: inf. c is the mean of y - b s, the free parts averaged in: the slow decays and the constant are nearly
+    collinear on a short buffer, so the fit's own offset is arbitrary (-1458 against an output of ~0.2 on a
+    0.4 s buffer), and a tracker starts its free weights at zero. (inf, 0, 0) when s itself is degenerate.
+    """
+    p = G.shape[0]
+    n = G[1, 1]
+    if n < p + 1:
+        return math.inf, 0.0, 0.0
+    k = p - 1
+    idx = np.empty(k, dtype=np.int64)      # every column but the constant
+    idx[0] = 0
+    for a in range(1, k):
+        idx[a] = a + 1
+    sums = np.empty(k)
+    for a in range(k):
+        sums[a] = G[0, 1] if idx[a] == 0 else G[1, idx[a]]
+    C = np.empty((k, k))
+    for a in range(k):
+        for b in range(a, k):
+            C[a, b] = G[idx[a], idx[b]] - sums[a] * sums[b] / n
+            C[b, a] = C[a, b]
+    if not (C[0, 0] > 1e-9 * G[0, 0] and math.isfinite(C[0, 0]) and C[k - 1, k - 1] > 0.0):
+        return math.inf, 0.0, 0.0
+    scale = np.zeros(k)
+    for a in range(k):
+        if C[a, a] > 0.0 and math.isfinite(C[a, a]):
+            scale[a] = 1.0 / math.sqrt(C[a, a])
+    for a in range(k):
+        for b in range(k):
+            C[a, b] *= scale[a] * scale[b]
+    used = np.zeros(k - 1, dtype=np.bool_)
+    for c in range(k - 1):
+        d = C[c, c]
+        if not d > FREE_PIVOT:
+            continue
+        used[c] = True
+        for a in range(c + 1, k):
+            fa = C[a, c] / d
+            for b in range(c + 1, k):
+                C[a, b] -= fa * C[c, b]
+    cost = C[k - 1, k - 1]
+    if not (math.isfinite(cost) and cost > 0.0):      # (a noisy output is never fitted exactly: rounding)
+        return math.inf, 0.0, 0.0
+    coef = np.zeros(k - 1)
+    for c in range(k - 2, -1, -1):
+        if used[c]:
+            r = C[c, k - 1]
+            for j in range(c + 1, k - 1):
+                r -= C[c, j] * coef[j]
+            coef[c] = r / C[c, c]
+    b = coef[0] * scale[0] / scale[k - 1]           # back to the unscaled columns
+    return cost / (scale[k - 1] ** 2 * n), b, (sums[k - 1] - b * sums[0]) / n
 
 
 @njit(cache=True)
@@ -336,13 +464,21 @@ class ResonanceSearch:
     ``fixed_alpha`` searches the resonance only (after a detected change). ``scratch``: the small work
     arrays (``SearchScratch``; a search's own when None). ``freqs``: the grid's frequencies computed ahead
     for this search's rows (``grid_frequencies`` of ``grid_ends(len(u) - lead, h)``; None: computed here).
+    ``free``: decay rates (1/s) of a stream taken in operation (the tracker's free responses): every cost of
+    the search (grid, refinement, result) then has the unknown start projected out, as ``judged_cost`` does:
+    the resonance's two free responses and exp(-mu t) for the fading memory of the input before the stream.
+    None: the buffer starts from rest (the resonance at rest, the node state ``zeta0``), the cost of ``_rows``.
     """
 
     def __init__(self, basis: SoeBasis, u: np.ndarray, y: np.ndarray, zeta0: np.ndarray | None = None,
                  lead: int = 0, extra: tuple = (), alphas: tuple = (), work: np.ndarray | None = None,
                  starts: list | None = None, fixed_alpha: float | None = None,
-                 scratch: SearchScratch | None = None, freqs: np.ndarray | None = None) -> None:
+                 scratch: SearchScratch | None = None, freqs: np.ndarray | None = None,
+                 free: tuple | None = None) -> None:
         self.basis = basis
+        #: the unknown start's decay rates (None: a start from rest; see the class docstring)
+        self.free = None if free is None else tuple(float(r) for r in free)
+        self._free_rates = None if free is None else np.array(self.free)   # (``_free_gram``'s kept rows)
         self.u = np.ascontiguousarray(u, dtype=float)
         self.y = np.ascontiguousarray(y, dtype=float)
         self.zeta0 = zeta0               # (None: zero; copied by ``_history``)
@@ -396,21 +532,44 @@ class ResonanceSearch:
         input before the stream (the tracker's free responses, when the stream started in operation).
         The generator's return value is the cost.
         """
-        vz, x = self._vz, self._x
-        vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
-                            self._rc, vz, x, self._acc)
-        f, decay, e, G = _judge_arrays(self._scratch, tuple(decays), self.basis.h)
-        _judge_reset(f, e, G)
-        yield
-        n = self.u.size
-        chunk = max(16, int(UNIT_WORK / (self.basis.size + 30 + 6 * e.size)))
-        for r0 in range(0, n, chunk):
-            _rows_free(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, f, decay, e, r0, min(n, r0 + chunk),
-                       self.lead, G)
-            yield
+        G = yield from self._free_gram(alpha, a1, a2, tuple(decays), 1)
         cost = _free_cost(G)
         yield                              # (a caller's next work starts on the next unit)
         return cost
+
+    def _free_gram(self, alpha: float, a1: float, a2: float, decays: tuple, stride: int,
+                   closed: bool = False) -> Generator:
+        """The Gram matrix of ``_rows_free`` for one candidate (one row per block of ``stride``), in units; the
+        generator's return value is the matrix (the scratch's: read it before the next candidate).
+
+        At stride 1 the free responses are the recursion's (``_rows_free``, the judge's) unless ``closed``; at a
+        stride, and with ``closed``, their closed form (``_rows_free_sparse``). The recursion's outputs of the two
+        unit states can be nearly collinear: on mid_operation seed 18 at 40 dB a candidate with alpha 20x the
+        plant's then "fitted" its buffer at 1/5000 of the noise variance (1e-8; 7.3e-5 with the closed form,
+        6.9e-5 by numpy's least squares on the simulator's output) and won the start-up search."""
+        vz, x = self._vz, self._x
+        vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
+                            self._rc, vz, x, self._acc)
+        f, decay, e, G = _judge_arrays(self._scratch, decays, self.basis.h)
+        _judge_reset(f, e, G)
+        yield
+        n = self.u.size
+        if stride == 1 and not closed:
+            chunk = max(16, int(UNIT_WORK / (self.basis.size + 30 + 6 * e.size)))
+            for r0 in range(0, n, chunk):
+                _rows_free(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, f, decay, e, r0,
+                           min(n, r0 + chunk), self.lead, G)
+                yield
+            return G
+        rates = self._free_rates if decays == self.free else np.array(decays, dtype=float)
+        # the forced state at every row; at a kept row the node sum, 2 + m transcendental functions, the sums
+        per_row = 6 + (self.basis.size + 40 + 20 * rates.size + (5 + rates.size) * (6 + rates.size) / 2) / stride
+        chunk = max(16, int(UNIT_WORK / per_row))
+        for r0 in range(0, n, chunk):
+            _rows_free_sparse(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, a1, a2, self.basis.h, rates, r0,
+                              min(n, r0 + chunk), stride, self.lead, G)
+            yield
+        return G
 
     def judged_rows(self) -> int:
         """The rows ``judged_cost`` (and ``exact_cost``) sum over: after ``lead``, with a finite output."""
@@ -424,7 +583,12 @@ class ResonanceSearch:
 
     # ------------------------------------------------------------------ pieces
     def _evaluate(self, alpha: float, a1: float, a2: float, stride: int) -> Generator:
-        """Projected cost of one candidate, in units; the generator's return value is (cost, b, c)."""
+        """Projected cost of one candidate, in units; the generator's return value is (cost, b, c). With
+        ``free`` the unknown start is projected out too (``_free_gram`` with the free responses in closed form
+        on every stride, ``_free_fit``)."""
+        if self.free is not None:
+            G = yield from self._free_gram(alpha, a1, a2, self.free, stride, closed=True)
+            return _free_fit(G)
         vz, x, acc = self._vz, self._x, self._acc
         vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
                             self._rc, vz, x, acc)
