@@ -88,6 +88,31 @@ def _kept(k: int, stride: int) -> bool:
     return k - block * stride == (((block * 2654435761) & 0xFFFFFFFF) >> 16) % stride
 
 
+@njit(cache=True, inline="always")
+def _forced_output(hist: np.ndarray, k: int, vz: np.ndarray, vx0: float, vx1: float, x0: float, x1: float) -> float:
+    """A candidate's forced response at row k: the resonance state's output plus the creep history's node sum."""
+    s = vx0 * x0 + vx1 * x1
+    for i in range(vz.shape[0]):
+        s += hist[k, i] * vz[i]
+    return s
+
+
+@njit(cache=True, inline="always")
+def _advance(rc: np.ndarray, x0: float, x1: float, uk: float) -> tuple:
+    """The resonance state one sample on (the exact discretization's coefficients ``rc``)."""
+    return rc[0] * x0 + rc[1] * x1 + rc[4] * uk, rc[2] * x0 + rc[3] * x1 + rc[5] * uk
+
+
+@njit(cache=True, inline="always")
+def _add_row(row: np.ndarray, G: np.ndarray) -> None:
+    """The upper triangle of G += row row^T."""
+    p = row.shape[0]
+    for a in range(p):
+        ra = row[a]
+        for b in range(a, p):
+            G[a, b] += ra * row[b]
+
+
 @njit(cache=True)
 def _rows(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx0: float, vx1: float,
           rc: np.ndarray, x: np.ndarray, r0: int, r1: int, stride: int, lead: int, acc: np.ndarray) -> None:
@@ -96,14 +121,11 @@ def _rows(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx0: f
     acc = [n, sum s, sum s^2, sum y, sum s y, sum y^2] over rows k >= lead with
     a finite y, one per block of ``stride`` samples (``_kept``).
     """
-    q = vz.shape[0]
     x0 = x[0]
     x1 = x[1]
     for k in range(r0, r1):
         if k >= lead and _kept(k, stride) and y[k] == y[k]:
-            s = vx0 * x0 + vx1 * x1
-            for i in range(q):
-                s += hist[k, i] * vz[i]
+            s = _forced_output(hist, k, vz, vx0, vx1, x0, x1)
             yk = y[k]
             acc[0] += 1.0
             acc[1] += s
@@ -111,9 +133,7 @@ def _rows(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx0: f
             acc[3] += yk
             acc[4] += s * yk
             acc[5] += yk * yk
-        n0 = rc[0] * x0 + rc[1] * x1 + rc[4] * u[k]
-        x1 = rc[2] * x0 + rc[3] * x1 + rc[5] * u[k]
-        x0 = n0
+        x0, x1 = _advance(rc, x0, x1, u[k])
     x[0] = x0
     x[1] = x1
 
@@ -130,16 +150,13 @@ def _rows_free(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, v
     at the segment's start adds. ``e`` carries exp(-mu_j t) (times ``decay`` per row). G accumulates the
     Gram matrix of [s, 1, g1, g2, e..., y] over rows k >= lead with a finite y (``_free_cost``).
     """
-    q = vz.shape[0]
     m = e.shape[0]
     p = 5 + m
     row = np.empty(p)
     x0, x1 = x[0], x[1]
     for k in range(r0, r1):
         if k >= lead and y[k] == y[k]:
-            s = vx0 * x0 + vx1 * x1
-            for i in range(q):
-                s += hist[k, i] * vz[i]
+            s = _forced_output(hist, k, vz, vx0, vx1, x0, x1)
             row[0] = s
             row[1] = 1.0
             row[2] = vx0 * f[0] + vx1 * f[1]
@@ -147,13 +164,8 @@ def _rows_free(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, v
             for j in range(m):
                 row[4 + j] = e[j]
             row[p - 1] = y[k]
-            for a in range(p):
-                ra = row[a]
-                for b in range(a, p):
-                    G[a, b] += ra * row[b]
-        n0 = rc[0] * x0 + rc[1] * x1 + rc[4] * u[k]
-        x1 = rc[2] * x0 + rc[3] * x1 + rc[5] * u[k]
-        x0 = n0
+            _add_row(row, G)
+        x0, x1 = _advance(rc, x0, x1, u[k])
         for j in (0, 2):
             a0 = rc[0] * f[j] + rc[1] * f[j + 1]
             f[j + 1] = rc[2] * f[j] + rc[3] * f[j + 1]
@@ -190,16 +202,13 @@ def _rows_free_sparse(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.nda
     the free responses (``_free_modes``: the same span as the homogeneous states, better conditioned than the
     recursion's outputs of the two unit states) and the decays exp(-mu_j t) are evaluated at the kept rows
     only (every row at stride 1)."""
-    q = vz.shape[0]
     m = rates.shape[0]
     p = 5 + m
     row = np.empty(p)
     x0, x1 = x[0], x[1]
     for k in range(r0, r1):
         if k >= lead and _kept(k, stride) and y[k] == y[k]:
-            s = vx0 * x0 + vx1 * x1
-            for i in range(q):
-                s += hist[k, i] * vz[i]
+            s = _forced_output(hist, k, vz, vx0, vx1, x0, x1)
             t = k * h
             row[0] = s
             row[1] = 1.0
@@ -207,13 +216,8 @@ def _rows_free_sparse(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.nda
             for j in range(m):
                 row[4 + j] = math.exp(-rates[j] * t)
             row[p - 1] = y[k]
-            for a in range(p):
-                ra = row[a]
-                for b in range(a, p):
-                    G[a, b] += ra * row[b]
-        n0 = rc[0] * x0 + rc[1] * x1 + rc[4] * u[k]
-        x1 = rc[2] * x0 + rc[3] * x1 + rc[5] * u[k]
-        x0 = n0
+            _add_row(row, G)
+        x0, x1 = _advance(rc, x0, x1, u[k])
     x[0] = x0
     x[1] = x1
 
