@@ -93,6 +93,8 @@ def choose_pair(data: ext.Prepared, base: ext.ExtendedFit, singles: list[tuple[s
     if not significant or len(singles) < 2:
         return None
     first = significant[0]
+    small = search_window(data)           # where pairs are compared (only the chosen one sees the whole record)
+    fits: dict[tuple[str, str], ext.ExtendedFit] = {}
     if first[1].residual_rms <= SEARCH_ABOVE * noise or not data.uniform:
         if len(significant) < 2:
             return None
@@ -102,11 +104,10 @@ def choose_pair(data: ext.Prepared, base: ext.ExtendedFit, singles: list[tuple[s
         if not data.uniform or evidence(first[1], fit, data.n)[0] <= EVIDENCE_THRESHOLD:
             return PairChoice(pair, fit, False, {pair: _weigh(base, fit, data.n)})
         report("the two best together beat the best alone: searching the pair")
-    # searched on a window of the record (search_window); only the chosen pair is fitted to the whole record
-    small = search_window(data)
+        if small is data:                 # the first round's fit of this pair, warm from the same fit: kept
+            fits[pair] = fit
     small_base = base if small is data else ext.fit_base(small, start=base.model, max_nfev=max_nfev, grid=False)
-    fits: dict[tuple[str, str], ext.ExtendedFit] = {}
-    flaws: dict[tuple[str, str], str | None] = {}
+    flaws: dict[tuple[str, str], str | None] = {k: contradicts(f, small) for k, f in fits.items()}
     partner = _round(small, small_base, first, singles, fits, flaws, max_nfev, workers, report)
     kept = next(s for s in singles if s[0] == partner)
     _round(small, small_base, kept, [s for s in singles if s[0] != first[0]], fits, flaws, max_nfev, workers, report)
