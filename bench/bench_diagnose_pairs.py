@@ -13,7 +13,12 @@ before the pair search), and how strong each effect is alone (the base
 model's misfit of the record with that effect only, noise-free, over the
 noise). Where the combination is not the hidden pair at the floor, the hidden
 pair is also fitted directly (``extended.fit_extended``, warm from the better
-of its two single fits) to tell a search failure from a ranking one.
+of its two single fits) to tell a search failure from a ranking one. Each row
+lists the chosen pair's ``rivals`` (pairs within the BIC threshold of it, with
+how far behind) and ``named_or_rival``: the hidden pair chosen, or named as a
+rival of a significant combination (the diagnosis then warns that the
+combination is not firm); per cell ``right_with_rivals`` counts the right
+choices that were nonetheless flagged as not firm.
 
 Prints one JSON document (``--out`` also writes it) with the command line, a
 table per pair and band (counts and fractions, what was named when wrong) and
@@ -25,7 +30,8 @@ every record. Usage::
     PYTHONPATH=. python bench/bench_diagnose_pairs.py --recheck OLD.json --which missed|above|unsearched --out F
 
 ``--recheck`` reruns only an earlier run's misses, each beside its earlier row: a fix's effect on exactly the
-records it was aimed at (a change that can move other records still needs the full table).
+records it was aimed at (a change that can move other records still needs the full table). OLD.json may be
+a recheck itself: its rows' current results are then what is picked from.
 """
 from __future__ import annotations
 
@@ -137,7 +143,11 @@ def run_one(pair: tuple[str, str], band: tuple[float, float], seed: int, forward
            "singles_over_noise": {e: c.fit.residual_rms / noise for e, c in singles.items()},
            "hidden_ranks": {e: [c.effect for c in d.candidates].index(e) + 1 for e in singles},
            "ranking": [[c.effect, round(c.evidence, 1), c.significant] for c in d.candidates[:4]],
-           "base_over_noise": d.base.residual_rms / noise, "seconds": seconds}
+           "base_over_noise": d.base.residual_rms / noise, "seconds": seconds,
+           "rivals": {"+".join(r["effects"]): round(r["behind"], 2) for r in d.pair_rivals}}
+    # the hidden pair chosen, or named as a rival of the chosen pair (the record cannot tell them apart)
+    row["named_or_rival"] = bool(combo is not None and combo.significant
+                                 and (right or any(set(r["effects"]) == set(pair) for r in d.pair_rivals)))
     if not row["at_floor"] and len(singles) == 2:
         warm = min(singles.values(), key=lambda c: c.fit.rss).fit
         fit = fit_extended(d.data, pair, d.base, warm=warm)
@@ -167,6 +177,8 @@ def cell(rows: list[dict]) -> dict:
            "combination_right": _count(ok, n, lambda r: r["combination_right"]),
            "at_floor": _count(ok, n, lambda r: r["at_floor"]),
            "verdict_in_pair": _count(ok, n, lambda r: r["verdict_in_pair"]),
+           "named_or_rival": _count(ok, n, lambda r: r.get("named_or_rival", r["both_named"])),
+           "right_with_rivals": _count(ok, n, lambda r: r["both_named"] and bool(r.get("rivals"))),
            "top_two_right": _count(ok, n, lambda r: r.get("top_two_right", r["both_named"])),
            "named_first": dict(Counter(r["verdict"] for r in ok).most_common()),
            "combination_over_noise_max": max(overs) if overs else None,
@@ -214,6 +226,11 @@ def recheck(path: str, which: str) -> dict:
     """Rerun the records of an earlier run that missed, each beside its earlier row (a fix's effect on exactly
     the records it was aimed at; the whole table needs a full run)."""
     before = json.load(open(path))
+    if before["bench"] == "diagnose_pairs_recheck":     # a recheck's rows: rerun what it left missed
+        grouped: dict = {}
+        for r in before["rows"]:
+            grouped.setdefault(r["cell"], []).append(r["now"])
+        before["rows"] = grouped
     pick = {"missed": lambda x: not x["at_floor"] or not x["both_named"],
             "above": lambda x: x["combination_over_noise"] > 1.08,
             "unsearched": lambda x: not x["both_named"] and x["pairs_tried"] == 1}[which]

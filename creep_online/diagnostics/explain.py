@@ -89,6 +89,7 @@ class Diagnosis:
     data: ext.Prepared | None = field(default=None, repr=False)
     physics: dict = field(default_factory=dict)   # holds.physics_check: leakage / second creep / drift by hold physics
     pairs_tried: dict = field(default_factory=dict)  # pairs.choose_pair: "a+b" -> (BIC drop over the base, residual RMS)
+    pair_rivals: list = field(default_factory=list)  # pairs.rival_pairs: the pairs the record does not tell apart
 
     @property
     def verdict(self) -> str:
@@ -139,7 +140,8 @@ class Diagnosis:
                 "effects": self.combination.effect.split("+"), **self.combination.to_dict(),
                 "params": jsonable(self.combination.fit.effect_params),
                 "pairs_tried": [{"effects": k.split("+"), "evidence": v[0], "residual_rms": v[1]}
-                                for k, v in self.pairs_tried.items()]},
+                                for k, v in self.pairs_tried.items()],
+                "rivals": jsonable(self.pair_rivals)},
             "skipped": self.skipped, "location": jsonable(self.location),
             "residual_analysis": jsonable(self.residual_analysis),
             "warnings": self.warnings, "elapsed_s": self.elapsed_s, "source": self.source,
@@ -279,14 +281,17 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
     if len(sig_top) == 2 and sig_top[0].evidence - sig_top[1].evidence < EVIDENCE_THRESHOLD:
         warnings.append(f"{sig_top[0].effect} and {sig_top[1].effect} explain the data about equally well "
                         f"(evidence {sig_top[0].evidence:.4g} vs {sig_top[1].evidence:.4g}): the verdict is not firm")
-    combo, tried = _combination(data, base, ranked, noise, max_nfev, n_workers, report) if combine else (None, {})
+    combo, tried, rivals = (_combination(data, base, ranked, noise, max_nfev, n_workers, report) if combine
+                            else (None, {}, []))
     report("hold physics: leakage, second creep or drift")
     physics = _physics(data, base, tuple(c.fit for c in ranked if c.effect in PHYSICS_EFFECTS))
     result = Diagnosis(source, base, noise, ranked, skipped, where, analysis, combo, warnings, 0.0, data, physics,
-                       tried)
+                       tried, rivals)
     if result.standing_in:
         warnings.append(f"{ranked[0].effect} ranks first alone but the pair {combo.effect} beats it "
                         f"({combo.signature}): the verdict is {result.verdict}")
+    if rivals and combo.significant:
+        warnings.append(_rivals_note(combo.effect, rivals))
     if result.verdict_basis["decided_by"] == "bic_over_physics":
         warnings.append(result.verdict_basis["text"])
     result.elapsed_s = time.perf_counter() - start
@@ -294,20 +299,39 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
 
 
 def _combination(data: ext.Prepared, base: ext.ExtendedFit, ranked: list[Candidate], noise: float, max_nfev: int,
-                 workers: int, report: Callable[[str], None]) -> tuple[Candidate | None, dict]:
+                 workers: int, report: Callable[[str], None]) -> tuple[Candidate | None, dict, list[dict]]:
     """The best pair of effects (pairs.choose_pair) as a candidate, significant when it beats the best single
-    fit; and the pairs tried ("a+b" -> (evidence, residual RMS))."""
+    fit; the pairs tried ("a+b" -> (evidence, residual RMS)); and its rivals (``_rivals``)."""
     choice = choose_pair(data, base, [(c.effect, c.fit, c.significant) for c in ranked], noise,
                          max_nfev=max_nfev, workers=workers, report=report)
     if choice is None:
-        return None, {}
+        return None, {}, []
     ev, lr, pv, dk = evidence(base, choice.fit, data.n)
     ev1 = evidence(ranked[0].fit, choice.fit, data.n)[0]
     how = (f"the best of {len(choice.tried)} pairs, each effect chosen given the other" if choice.searched
            else "the two best single effects")
     combo = Candidate("+".join(choice.effects), ev, lr, pv, dk, bool(ev1 > EVIDENCE_THRESHOLD), choice.fit,
                       f"evidence over {ranked[0].effect} alone: {ev1:.3g}; {how}")
-    return combo, {"+".join(k): v for k, v in choice.tried.items()}
+    return combo, {"+".join(k): v for k, v in choice.tried.items()}, _rivals(choice)
+
+
+def _rivals(choice) -> list[dict]:
+    """The chosen pair's rivals (pairs.rival_pairs) with the numbers that make them rivals: each one's BIC drop,
+    how far it is behind the chosen pair's (negative: ahead, where the chosen pair holds the best single effect),
+    and its residual RMS, all on the window the pairs were compared on."""
+    def score(pair):
+        return choice.tried.get(pair) or choice.tried[pair[::-1]]
+    chosen = score(choice.effects)[0]
+    return [{"effects": list(k), "evidence": score(k)[0], "behind": chosen - score(k)[0], "residual_rms": score(k)[1]}
+            for k in choice.rivals]
+
+
+def _rivals_note(chosen: str, rivals: list[dict]) -> str:
+    """The warning for a pair the record does not tell from others."""
+    own = rivals[0]["evidence"] + rivals[0]["behind"]
+    others = ", ".join(f"{'+'.join(r['effects'])} ({r['evidence']:.4g})" for r in rivals)
+    return (f"the pair {chosen} (evidence {own:.4g}) and {others} explain the data about equally well "
+            f"(BIC drops within {EVIDENCE_THRESHOLD:g}): the combination is not firm")
 
 
 def _physics(data: ext.Prepared, base: ext.ExtendedFit, fits: tuple) -> dict:

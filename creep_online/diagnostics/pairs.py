@@ -23,7 +23,12 @@ selection on the evidence *given* what is already in the model:
    if it explains the record to the noise floor; if no pair does, the record
    holds more than two effects or one the catalogue lacks, and a pair
    without the best single effect is no safer a guess than one with it:
-   the best pair with it is kept.
+   the best pair with it is kept;
+5. every other pair whose BIC drop comes within ``EVIDENCE_THRESHOLD`` of the
+   chosen one's is its **rival**: the record does not tell the two apart
+   (a second creep with alpha2 near 1 beside leakage or drift, a gain
+   nonlinearity beside a hysteresis loop, on a short staircase), and the
+   diagnosis says so instead of presenting the choice as firm.
 
 A pair whose fitted parameters contradict one of its effects
 (``Effect.contradiction``, e.g. a "disturbance" on a harmonic of a periodic
@@ -77,6 +82,7 @@ class PairChoice:
     fit: ext.ExtendedFit
     searched: bool
     tried: dict[tuple[str, str], tuple[float, float]] = field(default_factory=dict)
+    rivals: list[tuple[str, str]] = field(default_factory=list)   # ``rival_pairs``, strongest first
 
 
 def choose_pair(data: ext.Prepared, base: ext.ExtendedFit, singles: list[tuple[str, ext.ExtendedFit, bool]],
@@ -133,7 +139,21 @@ def choose_pair(data: ext.Prepared, base: ext.ExtendedFit, singles: list[tuple[s
         report(f"fitting the chosen pair to the whole record: {best[0]} + {best[1]}")
         fit = ext.fit_extended(data, best, base, max_nfev=max_nfev, warm=fit, workers=workers)
     order = [s[0] for s in singles]
-    return PairChoice(tuple(sorted(best, key=order.index)), fit, True, scores)
+    return PairChoice(_ordered(best, order), fit, True, scores,
+                      [_ordered(k, order) for k in rival_pairs(best, sound, scores)])
+
+
+def rival_pairs(best: tuple[str, str], sound: list[tuple[str, str]],
+                scores: dict[tuple[str, str], tuple[float, float]]) -> list[tuple[str, str]]:
+    """The sound pairs the record does not tell from ``best``: a BIC drop within ``EVIDENCE_THRESHOLD`` of its
+    own, or above it (``best`` kept for the best single effect when no pair reaches the floor); strongest first."""
+    floor = scores[best][0] - EVIDENCE_THRESHOLD
+    return sorted((k for k in sound if k != best and scores[k][0] > floor), key=lambda k: -scores[k][0])
+
+
+def _ordered(pair: tuple[str, str], order: list[str]) -> tuple[str, str]:
+    """A pair's effects in the order of their single fits."""
+    return tuple(sorted(pair, key=order.index))
 
 
 def search_window(data: ext.Prepared) -> ext.Prepared:
