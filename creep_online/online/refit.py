@@ -124,6 +124,8 @@ def allocate(p: int, k: int, r0: int, steps: int, policy: dict, slots: int = 0,
     o = _masks_at(p, k)
     masks = wk[o:o + MASKS * k].reshape(MASKS, k)
     masks[:] = 1.0
+    if r0 > 5:                            # a stream in operation: the offset and free responses undamped
+        masks[:, 4:r0] = W.LINEAR         # (nearly collinear with the slowest free responses)
     masks[MASK_CONSTANT, r0:] = 0.0
     masks[MASK_HOLD, r0:] = 0.0
     masks[MASK_HOLD, 0] = 0.0

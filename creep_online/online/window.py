@@ -53,6 +53,21 @@ from .kernels import model_coefficients
 
 CACHE = True
 
+#: A mask value of ``trial_point``: the parameter moves with LINEAR_DAMPING x the others' damping. For the offset
+#: and free responses of a stream in operation (``refit.allocate``): the output is linear in them and their
+#: columns are nearly collinear over a window (rates 0.01-30 /s against the constant), so the Marquardt damping
+#: of the others (mu >= 1e-7 x the diagonal) held their weakest combinations for seconds (mid_operation seed
+#: 13 at 80 dB: the window at 1.4-1.5x the floor where the exact optimum at the same estimate was 1.0x). It
+#: still grows with mu: a factor that fails (a short window, the columns collinear to rounding) damps them too.
+LINEAR = 2.0
+LINEAR_DAMPING = 1e-5
+#: ... and in the covariance (``covariance_factor``) they carry this weak prior, relative to their own information:
+#: without it the free responses' near-collinear block alone put the condition number beyond what the
+#: inverse is trusted at (1e13), and every variance, alpha's too, read inf ("not determined") for seconds at
+#: the noise floor (mid_operation seeds 1 and 13 at 80 dB: 6.6-7.1 of the last 9 s). A combination of them the
+#: window does not determine says nothing about the others: their variances change by O(LINEAR_PRIOR).
+LINEAR_PRIOR = 1e-9
+
 #: Offsets of the regressor entries after the Q SOE nodes.
 X0, S1, S2, ONE, FREE = 0, 2, 4, 6, 7
 
@@ -1037,7 +1052,7 @@ def lm_trial(theta: np.ndarray, free: np.ndarray, mu: float, H: np.ndarray, g: n
              lo: float, hi: float, out: np.ndarray) -> float:
     """The damped Gauss-Newton step; theta updated in place if the window cost drops.
 
-    ``free[j]`` = 1 lets parameter j move. ``out`` = [cost before, cost
+    ``free[j]`` = 1 lets parameter j move (``LINEAR``: with LINEAR_DAMPING x the damping). ``out`` = [cost before, cost
     after, accepted]. Returns the next damping ``mu``. Three parts (``trial_point``, the trial's cost,
     ``trial_verdict``) that the re-fit runs as separate slices of background work; here in one call.
     """
@@ -1065,6 +1080,8 @@ def trial_point(theta: np.ndarray, free: np.ndarray, mu: float, H: np.ndarray, g
             A[:, i] = 0.0
             A[i, i] = 1.0
             r[i] = 0.0
+        elif free[i] == LINEAR:
+            A[i, i] += LINEAR_DAMPING * mu * H[i, i] + 1e-300
         else:
             A[i, i] += mu * H[i, i] + 1e-300
     out[0] = cost
@@ -1142,6 +1159,9 @@ def covariance_factor(H: np.ndarray, free: np.ndarray, L: np.ndarray, d: np.ndar
             A[i, i] = 1.0
     d[:] = np.sqrt(np.abs(np.diag(A))) + 1e-300
     An = A / np.outer(d, d)
+    for i in range(n):
+        if free[i] == LINEAR:
+            An[i, i] += LINEAR_PRIOR
     if not np.all(np.isfinite(An)):
         return False
     return _cholesky(An, L)
