@@ -335,6 +335,7 @@ def test_refit_machine_equals_its_kernels_in_sequence():
     fyy = W.scaled_statistics(st, S, F, fy)
     theta, mu, out = start.copy(), 1e-3, np.empty(3)
     free = np.ones(theta.size)
+    free[4:5 + tr.n_free] = W.LINEAR                 # the offset and free responses of a stream in operation
     free[-2:] = 0.0                                  # rates off: MASK_CONSTANT
     H, g = np.empty((theta.size, theta.size)), np.empty(theta.size)
     for _ in range(T.REFIT_STEPS):
