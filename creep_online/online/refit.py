@@ -360,7 +360,7 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
         wk[RF_STAGE] = ST_INVERSE
         return False
     if stage == ST_INVERSE:
-        W.covariance_inverse(L, d, wk[RF_FACTORED] != 0.0, cov)
+        W.covariance_inverse(L, d, wk[RF_FACTORED] != 0.0, cov, free)
         for i in range(k):
             var[i] = cov[i, i]
         wk[RF_STAGE] = ST_IDLE
