@@ -35,7 +35,8 @@ What it does:
    (convergence), the scatter over the last 3 s (median over runs of the std
    of each relative error), and the fraction of runs reporting quality
    "good" while outside ("dishonest good"), the seconds of the trajectory that read "good" while
-   outside (``good_while_outside_s``: one point per 0.1 s chunk), and the change events reported
+   outside (``good_while_outside_s``: one point per 0.1 s chunk) and "degraded" while inside
+   (``degraded_while_inside_s``: a right estimate reported as misfitting), and the change events reported
    where no change happened (``false_change_events``: every event in the families without a
    change; with one, the events more than 1.5 s before or 3 s after it).
 
@@ -215,7 +216,8 @@ def run_metrics(res: dict, tr: dict) -> dict:
                within_all=all(within.values()), convergence_s=settle_time(t, inside, 0.0),
                scatter={p: float(np.std(errs[p][last])) for p in PARAMS},
                dishonest_good=res["quality"] == "good" and not all(within.values()),
-               good_while_outside_s=_good_while_outside(res["traj"].get("quality"), inside, t))
+               good_while_outside_s=_good_while_outside(res["traj"].get("quality"), inside, t),
+               degraded_while_inside_s=_degraded_while_inside(res["traj"].get("quality"), inside, t))
     events = res.get("events") or []
     if tr["change_time"] is not None:
         row["reconvergence_s"] = settle_time(t, inside, tr["change_time"])
@@ -238,6 +240,16 @@ def _good_while_outside(quality: list | None, inside: np.ndarray, t: np.ndarray)
     return float(np.sum(dt[good & ~inside]))
 
 
+def _degraded_while_inside(quality: list | None, inside: np.ndarray, t: np.ndarray) -> float | None:
+    """Seconds of the trajectory that read "degraded" while inside the tolerances (a right estimate reported
+    as misfitting: issue 8's symptom)."""
+    if not quality or len(quality) < inside.size:
+        return None
+    bad = np.array([q == "degraded" for q in quality[:inside.size]])
+    dt = np.diff(t, prepend=0.0)
+    return float(np.sum(dt[bad & inside]))
+
+
 def _dist(x: list[float]) -> dict:
     """Median and p90 (p90 is an observed value, so inf-safe), or None for no data."""
     if not x:
@@ -252,7 +264,8 @@ def _floor_ratios(ratios: list) -> dict | None:
 
 
 def _good_outside_summary(seconds: list, n: int) -> dict | None:
-    """Over the runs: the share that read "good" while outside at any time, and the seconds (median, p90, max)."""
+    """Over the runs: the share with any such seconds (good while outside, degraded while inside), and the seconds
+    (median, p90, max)."""
     x = [v for v in seconds if v is not None]
     if not x:
         return None
@@ -272,6 +285,7 @@ def family_metrics(rows: list[dict]) -> dict:
            "convergence_s": _dist([r["convergence_s"] for r in ok]),
            "dishonest_good": sum(r["dishonest_good"] for r in ok) / n,
            "good_while_outside_s": _good_outside_summary([r.get("good_while_outside_s") for r in ok], n),
+           "degraded_while_inside_s": _good_outside_summary([r.get("degraded_while_inside_s") for r in ok], n),
            "quality": {q: sum(r["quality"] == q for r in ok) for q in sorted({r["quality"] for r in ok})},
            "false_change_events": {"runs_with_any": sum(r.get("false_events", 0) > 0 for r in ok) / n,
                                    "total": sum(r.get("false_events", 0) for r in ok),

@@ -335,6 +335,7 @@ def test_refit_machine_equals_its_kernels_in_sequence():
     fyy = W.scaled_statistics(st, S, F, fy)
     theta, mu, out = start.copy(), 1e-3, np.empty(3)
     free = np.ones(theta.size)
+    free[4:5 + tr.n_free] = W.LINEAR                 # the offset and free responses of a stream in operation
     free[-2:] = 0.0                                  # rates off: MASK_CONSTANT
     H, g = np.empty((theta.size, theta.size)), np.empty(theta.size)
     for _ in range(T.REFIT_STEPS):
@@ -490,6 +491,34 @@ def test_varying_plant_equals_simulate_when_constant():
     ref = simulate(model, t, u)
     out = simulate_varying(t, u, model.alpha, model.a1, model.a2, model.b)
     assert np.max(np.abs(out - ref)) < 1e-5 * np.ptp(ref)
+
+
+def test_the_free_responses_block_does_not_void_the_covariance_of_the_others():
+    """A stream in operation fits eight free responses (0.01-30 /s) and an offset, nearly collinear over a window:
+    their block alone puts the normal matrix's condition beyond the 1e13 the inverse is trusted at, and every
+    variance read inf (quality "provisional" at the noise floor for seconds, issue 8). Flagged ``window.LINEAR``
+    they are left out of that test, and the others' variances are the exact least squares' (QR of the regressor),
+    not a prior's: steps' creep, its alpha-derivative and a ringing mode on 6 s and 12 s windows."""
+    rng = np.random.default_rng(0)
+    for span in (12.0, 6.0):
+        t = np.linspace(0.0, span, 6001)
+        steps = np.arange(0.3, span, 1.0)
+        du = rng.uniform(-1.0, 1.0, steps.size)
+        lag = [np.clip(t - s, 0.0, None) for s in steps]
+        creep = sum(d * x ** 0.3 for d, x in zip(du, lag))
+        dcreep = sum(d * x ** 0.3 * np.log(np.maximum(x, 1e-12)) for d, x in zip(du, lag))
+        ring = sum(d * np.exp(-30.0 * x) * np.sin(150.0 * x) for d, x in zip(du, lag))
+        J = np.column_stack([dcreep, creep, ring, np.ones_like(t)] + [np.exp(-m * t) for m in T.WINDOW_FREE_RATES])
+        H = J.T @ J
+        n = H.shape[0]
+        exact = np.sum(np.linalg.solve(np.linalg.qr(J, mode="r"), np.eye(n)) ** 2, axis=1)[:3]
+        cov = np.empty((n, n))
+        free = np.ones(n)
+        free[3:] = W.LINEAR
+        W.covariance(H, free, cov)
+        np.testing.assert_allclose(np.diag(cov)[:3], exact, rtol=1e-4)
+    W.covariance(H, np.ones(n), cov)               # the same 6 s window, every parameter judged: refused
+    assert np.all(np.isinf(cov))
 
 
 def test_small_cholesky_covariance_equals_numpy_inverse_and_refuses_singular():

@@ -124,6 +124,8 @@ def allocate(p: int, k: int, r0: int, steps: int, policy: dict, slots: int = 0,
     o = _masks_at(p, k)
     masks = wk[o:o + MASKS * k].reshape(MASKS, k)
     masks[:] = 1.0
+    if r0 > 5:                            # a stream in operation: the offset and free responses undamped
+        masks[:, 4:r0] = W.LINEAR         # (nearly collinear with the slowest free responses)
     masks[MASK_CONSTANT, r0:] = 0.0
     masks[MASK_HOLD, r0:] = 0.0
     masks[MASK_HOLD, 0] = 0.0
@@ -358,7 +360,7 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
         wk[RF_STAGE] = ST_INVERSE
         return False
     if stage == ST_INVERSE:
-        W.covariance_inverse(L, d, wk[RF_FACTORED] != 0.0, cov)
+        W.covariance_inverse(L, d, wk[RF_FACTORED] != 0.0, cov, free)
         for i in range(k):
             var[i] = cov[i, i]
         wk[RF_STAGE] = ST_IDLE

@@ -53,6 +53,23 @@ from .kernels import model_coefficients
 
 CACHE = True
 
+#: A mask value of ``trial_point``: the parameter moves with LINEAR_DAMPING x the others' damping. For the offset
+#: and free responses of a stream in operation (``refit.allocate``): the output is linear in them and their
+#: columns are nearly collinear over a window (rates 0.01-30 /s against the constant), so the Marquardt damping
+#: of the others (mu >= 1e-7 x the diagonal) held their weakest combinations for seconds (mid_operation seed
+#: 13 at 80 dB: the window at 1.4-1.5x the floor where the exact optimum at the same estimate was 1.0x). It
+#: still grows with mu: a factor that fails (a short window, the columns collinear to rounding) damps them too.
+LINEAR = 2.0
+LINEAR_DAMPING = 1e-5
+#: In the covariance their own block is left out of the condition test (``covariance_inverse``): the free
+#: responses' near-collinear block alone put the condition number beyond what the inverse is trusted at
+#: (1e13), and every variance, alpha's too, read inf ("not determined") for seconds at the noise floor
+#: (mid_operation seeds 1 and 13 at 80 dB: 6.6-7.1 of the last 9 s). Where the factor itself fails in
+#: rounding they carry this prior, relative to their own information (``covariance_factor``): it holds their
+#: undetermined combinations, so a parameter that leans on them reads a smaller variance than the exact
+#: least squares (synthetic step responses on 3-6 s windows: alpha's -13 to -21 %; on 12 s, -0.3 %).
+LINEAR_PRIOR = 1e-9
+
 #: Offsets of the regressor entries after the Q SOE nodes.
 X0, S1, S2, ONE, FREE = 0, 2, 4, 6, 7
 
@@ -1037,7 +1054,7 @@ def lm_trial(theta: np.ndarray, free: np.ndarray, mu: float, H: np.ndarray, g: n
              lo: float, hi: float, out: np.ndarray) -> float:
     """The damped Gauss-Newton step; theta updated in place if the window cost drops.
 
-    ``free[j]`` = 1 lets parameter j move. ``out`` = [cost before, cost
+    ``free[j]`` = 1 lets parameter j move (``LINEAR``: with LINEAR_DAMPING x the damping). ``out`` = [cost before, cost
     after, accepted]. Returns the next damping ``mu``. Three parts (``trial_point``, the trial's cost,
     ``trial_verdict``) that the re-fit runs as separate slices of background work; here in one call.
     """
@@ -1065,6 +1082,8 @@ def trial_point(theta: np.ndarray, free: np.ndarray, mu: float, H: np.ndarray, g
             A[:, i] = 0.0
             A[i, i] = 1.0
             r[i] = 0.0
+        elif free[i] == LINEAR:
+            A[i, i] += LINEAR_DAMPING * mu * H[i, i] + 1e-300
         else:
             A[i, i] += mu * H[i, i] + 1e-300
     out[0] = cost
@@ -1126,7 +1145,7 @@ def covariance(H: np.ndarray, free: np.ndarray, cov: np.ndarray) -> None:
     L = np.empty((n, n))
     d = np.empty(n)
     ok = covariance_factor(H, free, L, d)
-    covariance_inverse(L, d, ok, cov)
+    covariance_inverse(L, d, ok, cov, free)
 
 
 @njit(cache=CACHE)
@@ -1144,13 +1163,21 @@ def covariance_factor(H: np.ndarray, free: np.ndarray, L: np.ndarray, d: np.ndar
     An = A / np.outer(d, d)
     if not np.all(np.isfinite(An)):
         return False
-    return _cholesky(An, L)
+    if _cholesky(An, L):
+        return True
+    linear = False                 # not positive definite in rounding: the free responses' prior, if any
+    for i in range(n):
+        if free[i] == LINEAR:
+            An[i, i] += LINEAR_PRIOR
+            linear = True
+    return linear and _cholesky(An, L)
 
 
 @njit(cache=CACHE)
-def covariance_inverse(L: np.ndarray, d: np.ndarray, ok: bool, cov: np.ndarray) -> None:
+def covariance_inverse(L: np.ndarray, d: np.ndarray, ok: bool, cov: np.ndarray, free: np.ndarray) -> None:
     """The second half of ``covariance``: the inverse from the factor (all inf if it failed or the
-    matrix is too ill-conditioned for its inverse to mean anything)."""
+    matrix is too ill-conditioned for its inverse to mean anything; ``LINEAR`` parameters left out of that
+    judgement)."""
     n = L.shape[0]
     cov[:, :] = np.inf
     if not ok:
@@ -1164,10 +1191,13 @@ def covariance_inverse(L: np.ndarray, d: np.ndarray, ok: bool, cov: np.ndarray) 
         inv[:, j] = col
         e[j] = 0.0
     # An has a unit diagonal, so lambda_max <= n and 1/lambda_min <= trace(inv): n trace(inv)
-    # bounds the condition number (within a factor n of it); beyond 1e13 the inverse is noise
+    # bounds the condition number (within a factor n of it); beyond 1e13 the inverse is noise. The free
+    # responses' own block (``LINEAR``) is left out: their combinations the window does not determine are
+    # theirs (a stream in operation read every variance inf for seconds at the floor for them alone)
     tr = 0.0
     for j in range(n):
-        tr += inv[j, j]
+        if free[j] != LINEAR:
+            tr += inv[j, j]
     if tr > 0.0 and n * tr < 1e13:
         cov[:, :] = inv / np.outer(d, d)
 
