@@ -9,7 +9,9 @@ Usage (from the repository root)::
     .venv/bin/python bench/bench_online.py --sections latency,memory,accuracy,naive,memory_kernels,drift,stationary_window [--quick]
 
 Latency section (the default; prints one JSON document and writes it to ``--out``,
-default ``bench/results/online_latency.json``):
+default ``bench/results/online_latency.json``; ``--in-operation-s S`` cuts the stream from
+the same operation S seconds in, so the estimator takes it in operation, plant in motion and
+input not zero at its first sample, the changes at the same times):
 
 1. builds one stream with ``hil_sim.scenarios.simulate_tv`` (exact time-varying
    plant): 100 s at 10 kHz (10^6 samples), plant alpha 0.05, fn 300 Hz, zeta 0.1,
@@ -101,15 +103,20 @@ WORKER_TIMEOUT_S = 600.0
 GOAL_CPU_US = {"p50": 2.0, "p99": 5.0, "max": 25.0}
 
 
-def make_stream(seconds: float = SECONDS, seed: int = 8) -> dict:
-    """u, y and the per-sample truth of the latency stream (see the module docstring)."""
+def make_stream(seconds: float = SECONDS, seed: int = 8, in_operation_s: float = 0.0) -> dict:
+    """u, y and the per-sample truth of the latency stream (see the module docstring). ``in_operation_s`` > 0:
+    the stream is cut from a longer one after that many seconds of the same operation (the plant in motion,
+    the input not zero at the first sample: the estimator's in-operation path); the changes keep their
+    times in the cut stream."""
     from hil_sim.scenarios import simulate_tv
     rng = np.random.default_rng(seed)
-    n = int(round(seconds / H))
-    t = np.arange(n) * H
-    k = np.floor((t - T_REST) / STEP_EVERY_S).astype(np.int64)
-    levels = rng.uniform(-10.0, 10.0, int(seconds / STEP_EVERY_S) + 2)
-    u = np.where(t >= T_REST, levels[np.clip(k, 0, None)], 0.0)
+    cut = int(round(in_operation_s / H))
+    n = int(round(seconds / H)) + cut
+    t = np.arange(n) * H - cut * H
+    t0 = T_REST - cut * H                  # the operation starts at rest in_operation_s before the stream
+    k = np.floor((t - t0) / STEP_EVERY_S).astype(np.int64)
+    levels = rng.uniform(-10.0, 10.0, int((seconds + cut * H) / STEP_EVERY_S) + 2)
+    u = np.where(t >= t0, levels[np.clip(k, 0, None)], 0.0)
     wn = 2 * math.pi * PLANT["fn_hz"]
     a1 = np.full(n, 2 * PLANT["zeta"] / wn)
     a2 = np.full(n, 1 / wn**2)
@@ -119,10 +126,11 @@ def make_stream(seconds: float = SECONDS, seed: int = 8) -> dict:
     late = t >= STIFFNESS_AT
     for arr in (a1, a2, b):
         arr[late] /= STIFFNESS_RATIO
-    clean = simulate_tv(H, u, alpha, a1, a2, b)
+    clean = simulate_tv(H, u, alpha, a1, a2, b)[cut:]
     std = float(np.sqrt(np.mean(clean**2)) * 10 ** (-SNR_DB / 20))
-    y = clean + rng.normal(0.0, std, n)
-    return {"u": u, "y": y, "truth": {"alpha": alpha, "a1": a1, "a2": a2, "b": b}, "noise_std": std}
+    y = clean + rng.normal(0.0, std, n - cut)
+    return {"u": u[cut:], "y": y, "truth": {"alpha": alpha[cut:], "a1": a1[cut:], "a2": a2[cut:], "b": b[cut:]},
+            "noise_std": std}
 
 
 # --------------------------------------------------------------------------- measurement (both processes)
@@ -381,17 +389,18 @@ def ratios(cur: dict, base: dict) -> dict:
 
 
 def latency_section(baseline: str, gc_modes: list[str], seconds: float = SECONDS, current: str = "worktree",
-                    refits: tuple[str, ...] = ("window", "recursive")) -> dict:
+                    refits: tuple[str, ...] = ("window", "recursive"), in_operation_s: float = 0.0) -> dict:
     """Stream, current code (each Remark-3 strategy in ``refits``), then the baseline in a subprocess (one after
     the other)."""
     from creep_online.online.estimator import OnlineEstimator, warm_kernels
     t0 = time.perf_counter()
-    s = make_stream(seconds)
+    s = make_stream(seconds, in_operation_s=in_operation_s)
     gen_s = time.perf_counter() - t0
     truth_end = {p: float(v[-1]) for p, v in s["truth"].items()}
     doc: dict = {
         "stream": {"samples": int(s["u"].size), "fs_hz": 1 / H, "seconds": seconds, "plant": PLANT,
                    "input": f"rest {T_REST} s, then a random level in [-10, 10] every {STEP_EVERY_S} s",
+                   "in_operation_s": in_operation_s, "first_input": float(s["u"][0]),
                    "changes": [{"t_s": PAYLOAD_AT, "change": "payload", "a2_ratio": PAYLOAD_A2},
                                {"t_s": STIFFNESS_AT, "change": "stiffness", "stiffness_ratio": STIFFNESS_RATIO,
                                 "a1_a2_b_divided_by": STIFFNESS_RATIO}],
@@ -675,6 +684,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--refits", default="window,recursive",
                     help="latency section: Remark 3 strategies measured in this checkout (window, recursive)")
     ap.add_argument("--seconds", type=float, default=SECONDS, help="latency stream length (s; 100 = 10^6 samples)")
+    ap.add_argument("--in-operation-s", type=float, default=0.0,
+                    help="latency stream cut from operation after this many seconds (the in-operation path)")
     ap.add_argument("--out", default=None,
                     help="JSON file (default with the latency section: bench/results/online_latency.json)")
     args = ap.parse_args(argv)
@@ -682,7 +693,7 @@ def main(argv: list[str] | None = None) -> dict:
     gc_modes = ["freeze", "nofreeze"] if args.gc == "both" else [args.gc]
     sections = {
         "latency": lambda: latency_section(args.baseline, gc_modes, args.seconds, args.current,
-                                           tuple(args.refits.split(","))),
+                                           tuple(args.refits.split(",")), args.in_operation_s),
         "memory": lambda: memory_run(3_600_000 if args.quick else 36_000_000),
         "accuracy": lambda: {name: accuracy_run(name, p) for name, p in PLANTS.items()},
         "naive": naive_run,
