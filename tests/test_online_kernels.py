@@ -672,3 +672,56 @@ def test_the_hand_written_cholesky_gain_equals_a_dense_solve(seed):
     H2[1, 1] = H2[0, 0]
     mask[:2] = 1.0
     assert W.gn_gain(H2, g, mask, *scratch) == 0.0
+
+
+def test_a_free_column_that_died_out_is_held_not_divided_by():
+    """A stream in operation fits free responses up to 30 /s: after a replay from ~40 s into the stream their
+    columns are exp(-1200) = 0 over the whole window, their diagonal of J^T J exactly 0. The score test's gain
+    divided by sqrt(0) + 1e-300 twice, whose product underflows to 0 (ZeroDivisionError inside update(), the
+    latency stream cut from operation at 46.7 s), and the covariance read every variance inf. Such a parameter
+    carries no information: the gain and the covariance are those of the others, its own variance inf."""
+    rng = np.random.default_rng(4)
+    k = 6
+    m = rng.standard_normal((k, 4 * k))
+    m[3] = 0.0                                       # the dead column
+    H, g = m @ m.T, rng.standard_normal(k)
+    g[3] = 0.0
+    mask = np.ones(k)
+    live = [0, 1, 2, 4, 5]
+    scratch = (np.empty((k, k)), np.empty(k), np.empty(k))
+    expected = g[live] @ np.linalg.solve(H[np.ix_(live, live)], g[live])
+    assert W.gn_gain(H, g, mask, *scratch) == pytest.approx(expected, rel=1e-9)
+    cov = np.empty((k, k))
+    for free in (np.ones(k), np.where(np.arange(k) == 3, W.LINEAR, 1.0)):
+        W.covariance(H, free, cov)
+        np.testing.assert_allclose(cov[np.ix_(live, live)], np.linalg.inv(H[np.ix_(live, live)]), rtol=1e-8)
+        assert cov[3, 3] == np.inf
+
+
+def test_a_long_stream_taken_in_operation_runs_through_its_replays():
+    """The latency stream of bench_online.py cut from operation 10.05 s in (payload at 40 s): a replay after the
+    change leaves the fastest free responses' columns zero over the window; update() raised ZeroDivisionError
+    at 46.7 s. It runs to the end, follows the change and ends within 1 % of the plant."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    from creep_online.online.estimator import OnlineEstimator
+    root = Path(__file__).resolve().parents[1]
+    saved = sys.path[:]
+    try:
+        spec = importlib.util.spec_from_file_location("bench_online", root / "bench" / "bench_online.py")
+        bench = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(bench)
+        s = bench.make_stream(100.0, in_operation_s=10.05)
+    finally:
+        sys.path[:] = saved
+    n = int(52.0 / bench.H)
+    est = OnlineEstimator(bench.H)
+    update = est.update
+    for uk, yk in zip(s["u"][:n].tolist(), s["y"][:n].tolist()):
+        update(uk, yk)
+    e = est.estimate
+    assert e.events and e.events[0]["moved"] == ["a2"]
+    for name in ("alpha", "a1", "a2", "b"):
+        assert getattr(e, name) == pytest.approx(s["truth"][name][n - 1], rel=0.01), name

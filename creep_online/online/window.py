@@ -501,16 +501,17 @@ def gn_gain(H: np.ndarray, g: np.ndarray, mask: np.ndarray, A: np.ndarray, r: np
     """
     n = 0
     for i in range(mask.shape[0]):
-        if mask[i] != 0.0:
+        if mask[i] != 0.0 and H[i, i] != 0.0:
             x[n] = i                     # the free parameters' indices (x is overwritten by the solve below)
-            n += 1
+            n += 1                       # (one whose column is zero over the window adds nothing: g[i] = 0 too)
     for a in range(n):
         ia = int(x[a])
         da = math.sqrt(abs(H[ia, ia])) + 1e-300
         r[a] = g[ia] / da
         for c in range(a + 1):
             ic = int(x[c])
-            v = H[ia, ic] / (da * (math.sqrt(abs(H[ic, ic])) + 1e-300))
+            dc = math.sqrt(abs(H[ic, ic])) + 1e-300
+            v = H[ia, ic] / (da * dc) if da * dc > 0.0 else H[ia, ic] / da / dc   # (da dc may underflow)
             if not math.isfinite(v) or not math.isfinite(r[a]):
                 return 0.0
             A[a, c] = v
@@ -1155,12 +1156,15 @@ def covariance_factor(H: np.ndarray, free: np.ndarray, L: np.ndarray, d: np.ndar
     n = H.shape[0]
     A = H.copy()
     for i in range(n):
-        if free[i] == 0.0:
+        if free[i] == 0.0 or H[i, i] == 0.0:
             A[i, :] = 0.0
             A[:, i] = 0.0
             A[i, i] = 1.0
     d[:] = np.sqrt(np.abs(np.diag(A))) + 1e-300
-    An = A / np.outer(d, d)
+    for i in range(n):
+        if free[i] != 0.0 and H[i, i] == 0.0:
+            d[i] = -1.0            # a free parameter whose column is zero over the window: held, variance inf
+    An = A / np.outer(np.abs(d), np.abs(d))
     if not np.all(np.isfinite(An)):
         return False
     if _cholesky(An, L):
@@ -1199,7 +1203,11 @@ def covariance_inverse(L: np.ndarray, d: np.ndarray, ok: bool, cov: np.ndarray, 
         if free[j] != LINEAR:
             tr += inv[j, j]
     if tr > 0.0 and n * tr < 1e13:
-        cov[:, :] = inv / np.outer(d, d)
+        cov[:, :] = inv / np.outer(np.abs(d), np.abs(d))
+        for j in range(n):
+            if d[j] < 0.0:         # no information (``covariance_factor``)
+                cov[j, :] = np.inf
+                cov[:, j] = np.inf
 
 
 @njit(cache=CACHE)
