@@ -323,11 +323,14 @@ def _fed_drifting_tracker(seed: int) -> WindowTracker:
     return tr
 
 
-def test_refit_machine_equals_its_kernels_in_sequence():
+@pytest.mark.parametrize("wide", [False, True])
+def test_refit_machine_equals_its_kernels_in_sequence(wide):
     """refit.refit_unit, one stage or slice per call, = the statistics, REFIT_STEPS Levenberg-Marquardt steps
     and the covariance called in sequence, bit for bit (the slices sum in the same order); refit.accept swaps
-    the result in with its coefficients."""
+    the result in with its coefficients. ``wide``: all eight free responses fitted, else the four of
+    ``tracker.WINDOW_FREE_START`` (the others held)."""
     tr = _fed_drifting_tracker(9)
+    tr._wk[RF.RF_WIDE] = 1.0 if wide else 0.0
     st, S, shift, start = tr.st.copy(), tr.S.copy(), tr._shift.copy(), tr.theta.copy()
     lam, dx = tr.basis.lam, tr.basis.dx
     F, fy = np.empty((tr.p, tr.p)), np.empty(tr.p)
@@ -336,6 +339,8 @@ def test_refit_machine_equals_its_kernels_in_sequence():
     theta, mu, out = start.copy(), 1e-3, np.empty(3)
     free = np.ones(theta.size)
     free[4:5 + tr.n_free] = W.LINEAR                 # the offset and free responses of a stream in operation
+    if not wide:                                     # ... four of them until the wide test frees the others
+        free[[5 + i for i, rate in enumerate(T.WINDOW_FREE_RATES) if rate not in T.WINDOW_FREE_START]] = 0.0
     free[-2:] = 0.0                                  # rates off: MASK_CONSTANT
     H, g = np.empty((theta.size, theta.size)), np.empty(theta.size)
     for _ in range(T.REFIT_STEPS):
@@ -725,3 +730,50 @@ def test_a_long_stream_taken_in_operation_runs_through_its_replays():
     assert e.events and e.events[0]["moved"] == ["a2"]
     for name in ("alpha", "a1", "a2", "b"):
         assert getattr(e, name) == pytest.approx(s["truth"][name][n - 1], rel=0.01), name
+
+
+@pytest.mark.parametrize("past", [0.0, 1.0])
+def test_the_wide_test_is_the_gauss_newton_gain_of_the_extra_free_responses(past):
+    """A stream in operation fits four of its eight free responses until the wide test frees the others: after a
+    converged re-fit, (gain over the fit's parameters with the other four freed - gain without) / the noise
+    variance, each gain g^T H^-1 g at the result with the free responses' relative prior on the scaled
+    diagonal (``window.linear_gain``), against numpy's solve; the extra four stay at zero until then, and the
+    switch is on above WIDE_ON. ``past``: the creep of a step of this size 20 ms before the record,
+    b (t + 0.02)^alpha / Gamma(1 + alpha), on the output (a noise-level gain without it; the switch with it)."""
+    model = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
+    h, n = 1e-3, 4000
+    t = np.arange(n) * h
+    u = _staircase(n, 300, 9)
+    y = simulate(model, t, u) + np.random.default_rng(9).normal(0, 1e-3, n)
+    y = y + past * model.b * (t + 0.02) ** model.alpha / math.gamma(1.0 + model.alpha)
+    tr = _tracker(CreepModel.from_resonance(0.12, 33.0, 0.25, 0.9), h, free=True, drift=2)
+    _feed(tr, u, y)
+    assert not tr.free_wide
+    extra = [5 + i for i, rate in enumerate(T.WINDOW_FREE_RATES) if rate not in T.WINDOW_FREE_START]
+    lam, dx = tr.basis.lam, tr.basis.dx
+    RF.begin(tr.st, tr.S, tr._shift, tr._wk, 0, False, True, 0, True)      # converged, the test due
+    RF.run(tr.st, tr.S, tr._shift, tr.theta, tr._wk, lam, dx)
+    head, fitted, _ = RF.result(tr._wk)
+    assert head[RF.RF_DRIFT] == 0.0 and head[RF.RF_WIDE_DUE] == 1.0     # (the window spans < DRIFT_MIN_S)
+    assert all(fitted[i] == 0.0 for i in extra)
+    st, S, shift = tr.st.copy(), tr.S.copy(), tr._shift.copy()
+    F, fy = np.empty((tr.p, tr.p)), np.empty(tr.p)
+    W.move_origin(st, S, shift)
+    fyy = W.scaled_statistics(st, S, F, fy)
+    k = len(fitted)
+    H, g = np.empty((k, k)), np.empty(k)
+    W.lm_normal(np.array(fitted), head[RF.RF_A1L], head[RF.RF_A2L], lam, dx, F, fy, fyy, H, g)
+
+    def gain(free_idx: list[int]) -> float:
+        d = np.sqrt(np.abs(np.diag(H)))[free_idx]
+        A = H[np.ix_(free_idx, free_idx)] / np.outer(d, d)
+        A[np.diag_indices_from(A)] += [W.LINEAR_PRIOR if 4 <= i < 5 + tr.n_free else 0.0 for i in free_idx]
+        r = g[free_idx] / d
+        return float(r @ np.linalg.solve(A, r))
+
+    narrow = [i for i in range(k - 2) if i not in extra]                # rates off (MASK_CONSTANT)
+    sigma2 = head[RF.RF_AFTER] / (head[RF.RF_NEFF] - k)
+    expected = (gain(narrow + extra) - gain(narrow)) / sigma2
+    assert expected > 0.1                                              # (a gain to compare)
+    assert head[RF.RF_WIDE_STAT] == pytest.approx(expected, rel=1e-6)
+    assert tr.free_wide == (expected > T.WIDE_ON) == (past > 0.0)      # (0.6 and 1566 here)

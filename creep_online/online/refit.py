@@ -76,7 +76,12 @@ RF_SHIFT_ROWS = 44    # the drift-origin total's shape (a slot holds a copy)
 RF_SHIFT_COLS = 45
 RF_SINCE_N = 46       # the sample count at which a change test took its statistics ...
 RF_SINCE_G = 47       # ... and their weight g
-HEAD = 48
+RF_WIDE = 48          # 1: the window fits all its free responses; 0: only the four it starts with (``allocate``'s extra)
+RF_WIDE_DUE = 49      # 1: the wide test follows this re-fit (``_plan``)
+RF_WIDE_ON = 50       # its threshold (the tracker's WIDE_ON)
+RF_WIDE_STAT = 51     # its last statistic
+RF_GAIN_NARROW = 52   # its Gauss-Newton gain without the extra free responses (its second slice subtracts it)
+HEAD = 53
 
 #: Multiply-adds per slice of a re-fit (about a microsecond): the per-sample kernel runs one slice per
 #: sample while a re-fit or a change test is under way (``sample_work``), so a 10 kHz control loop sees
@@ -90,25 +95,32 @@ SLICE_MACS = 4000
 #: Jacobian's, the normal equations' rows in slices and their assembly, the damped step, the trial's
 #: coefficients, the trial's cost in slices and the verdict; then the covariance's factor, its inverse
 #: (and the Wald test), and for the score test the normal equations again at the result and the score's two
-#: Gauss-Newton gains (with and without the rates), one slice each.
+#: Gauss-Newton gains (with and without the rates), one slice each; for the wide test (a stream in operation whose
+#: window fits four of its free responses) the same normal equations and its two gains, without and with the
+#: other four, one slice each.
 #: Each call does one stage or slice: about a microsecond of work (``SLICE_MACS``).
 (ST_IDLE, ST_SCALE, ST_JACOBIAN, ST_ASSEMBLE, ST_ROWS, ST_SOLVE, ST_TRIAL_POINT, ST_TRIAL,
- ST_COVARIANCE, ST_INVERSE, ST_SCORE, ST_SCORE_WITHOUT, ST_BEGIN, ST_SINCE, ST_SINCE_FINISH) = range(15)
+ ST_COVARIANCE, ST_INVERSE, ST_SCORE, ST_SCORE_WITHOUT, ST_BEGIN, ST_SINCE, ST_SINCE_FINISH, ST_WIDE,
+ ST_WIDE_WITH) = range(17)
 
 #: Parameter masks (rows of the masks block): all free, drift rates fixed, alpha and rates fixed, the
-#: change test's (the resonance, the gain and the offset), and the change test's with the drift rates.
+#: change test's (the resonance, the gain and the offset), and the change test's with the drift rates; then
+#: the first three again with the extra free responses fixed (at zero: ``allocate``'s extra), NARROW rows on.
 MASK_ALL, MASK_CONSTANT, MASK_HOLD, MASK_TEST, MASK_TEST_RATES = 0, 1, 2, 3, 4
-MASKS = 5
+NARROW = 5
+MASKS = 8
 
 
 def allocate(p: int, k: int, r0: int, steps: int, policy: dict, slots: int = 0,
-             shift_shape: tuple[int, int] = (0, 0)) -> np.ndarray:
+             shift_shape: tuple[int, int] = (0, 0), extra: tuple[int, ...] = ()) -> np.ndarray:
     """A fresh work array for statistics of size p and k parameters (rates from r0 on).
 
     ``policy``: the tracker's settings the re-fit applies, by header name without ``RF_`` (alpha
     bounds LO, HI; DRIFT_ON, DRIFT_OFF, DRIFT_MAX; HOLD_N, DRIFT_MIN_N, DRIFT_EVERY, NRATE;
     LN_A2_MIN, LN_ZETA_LO, LN_ZETA_HI, RELINEARIZE). ``slots``: the change test's snapshot slots
-    (``snapshot_slots``) for a drift-origin total of ``shift_shape``.
+    (``snapshot_slots``) for a drift-origin total of ``shift_shape``. ``extra``: the parameters (free
+    responses) a stream in operation fits only once the wide test has found them needed (``_plan``); none:
+    every free response from the start.
     """
     rows, cols = shift_shape
     wk = np.zeros(_masks_at(p, k) + MASKS * k + _scratch_size(p, k) + slots * _slot_size(p, k, rows * cols))
@@ -133,6 +145,10 @@ def allocate(p: int, k: int, r0: int, steps: int, policy: dict, slots: int = 0,
     masks[MASK_TEST, 1:5] = 1.0
     masks[MASK_TEST_RATES] = masks[MASK_TEST]
     masks[MASK_TEST_RATES, r0:] = 1.0
+    masks[NARROW:NARROW + 3] = masks[:3]
+    for i in extra:
+        masks[NARROW:NARROW + 3, i] = 0.0
+    wk[RF_WIDE] = 0.0 if extra else 1.0
     return wk
 
 
@@ -251,14 +267,19 @@ def _plan(wk: np.ndarray, n: float, window_start: int, drift_on: bool, converged
     Alpha and the drift rates stay fixed in a short window after a change (it determines neither).
     The drift rates are tested once the window is converged and spans DRIFT_MIN_N samples: the Wald
     test at every re-fit while they are on, the score test at every DRIFT_EVERY-th while off.
+    A stream in operation fits its extra free responses only once the wide test (a score test, at every
+    DRIFT_EVERY-th re-fit of a converged window while they are out) has found them needed; then for good.
     """
     span = n - window_start
     hold = hold_alpha and window_start > 0 and span < wk[RF_HOLD_N]
-    wk[RF_MASK] = MASK_HOLD if hold else (MASK_ALL if drift_on else MASK_CONSTANT)
+    narrow = wk[RF_WIDE] == 0.0
+    wk[RF_MASK] = (MASK_HOLD if hold else (MASK_ALL if drift_on else MASK_CONSTANT)) + (NARROW if narrow else 0)
     drift = 0
+    due = refits % int(wk[RF_DRIFT_EVERY]) == 0
     if wk[RF_NRATE] > 0 and not hold and converged and span >= wk[RF_DRIFT_MIN_N]:
-        drift = 2 if drift_on else (1 if refits % int(wk[RF_DRIFT_EVERY]) == 0 else 0)
+        drift = 2 if drift_on else (1 if due else 0)
     wk[RF_DRIFT] = drift
+    wk[RF_WIDE_DUE] = 1.0 if narrow and converged and due else 0.0
 
 
 @njit(cache=CACHE)
@@ -364,20 +385,43 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
         for i in range(k):
             var[i] = cov[i, i]
         wk[RF_STAGE] = ST_IDLE
-        if _drift_test(wk, theta, cov, k, int(wk[RF_DRIFT])):
+        done = _drift_test(wk, theta, cov, k, int(wk[RF_DRIFT]))
+        if wk[RF_WIDE_DUE] != 0.0:     # the wide test needs the noise variance whatever the drift test did
+            wk[RF_SIGMA2] = max(wk[RF_AFTER], 0.0) / max(wk[RF_NEFF] - k, 1.0)
+            if not (wk[RF_SIGMA2] > 0.0 and np.all(np.isfinite(theta))):
+                wk[RF_WIDE_DUE] = 0.0
+        if done and wk[RF_WIDE_DUE] == 0.0:
             return True
-        wk[RF_SCORING] = 1.0           # the score test: the normal equations at the result, then the score
+        wk[RF_SCORING] = 1.0           # the score tests: the normal equations at the result, then the scores
         wk[RF_STAGE] = ST_JACOBIAN
         return False
     r0 = int(wk[RF_R0])
     if stage == ST_SCORE:              # the score test's gain with the rates freed, then without (two slices)
-        wk[RF_GAIN_BOTH] = W.drift_gain(H2, g2, free, r0, True, L, d, trial, mt)
-        wk[RF_STAGE] = ST_SCORE_WITHOUT
+        if wk[RF_DRIFT] == 1.0:
+            wk[RF_GAIN_BOTH] = W.drift_gain(H2, g2, free, r0, True, L, d, trial, mt)
+            wk[RF_STAGE] = ST_SCORE_WITHOUT
+        else:                          # only the wide test
+            wk[RF_STAGE] = ST_WIDE
         return False
-    stat = (wk[RF_GAIN_BOTH] - W.drift_gain(H2, g2, free, r0, False, L, d, trial, mt)) / wk[RF_SIGMA2]
-    wk[RF_DRIFT_STAT] = stat
-    if stat > wk[RF_DRIFT_ON]:
-        wk[RF_DRIFT_SWITCH] = 1.0
+    if stage == ST_SCORE_WITHOUT:
+        stat = (wk[RF_GAIN_BOTH] - W.drift_gain(H2, g2, free, r0, False, L, d, trial, mt)) / wk[RF_SIGMA2]
+        wk[RF_DRIFT_STAT] = stat
+        if stat > wk[RF_DRIFT_ON]:
+            wk[RF_DRIFT_SWITCH] = 1.0
+        if wk[RF_WIDE_DUE] == 0.0:
+            wk[RF_STAGE] = ST_IDLE
+            return True
+        wk[RF_STAGE] = ST_WIDE
+        return False
+    if stage == ST_WIDE:               # the wide test's gain over this fit's parameters, then with the extra free
+        wk[RF_GAIN_NARROW] = W.linear_gain(H2, g2, free, L, trial, mt)    # responses too (two slices)
+        wk[RF_STAGE] = ST_WIDE_WITH
+        return False
+    row = int(wk[RF_MASK]) - NARROW    # (the same mask with them freed)
+    stat = (W.linear_gain(H2, g2, masks[row], L, trial, mt) - wk[RF_GAIN_NARROW]) / wk[RF_SIGMA2]
+    wk[RF_WIDE_STAT] = stat if math.isfinite(stat) else 0.0
+    if stat > wk[RF_WIDE_ON]:
+        wk[RF_WIDE] = 1.0
     wk[RF_STAGE] = ST_IDLE
     return True
 

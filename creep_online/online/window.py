@@ -491,6 +491,24 @@ def since_finish(st: np.ndarray, S0: np.ndarray, sy0: np.ndarray, shift: np.ndar
 @njit(cache=CACHE)
 def gn_gain(H: np.ndarray, g: np.ndarray, mask: np.ndarray, A: np.ndarray, r: np.ndarray, x: np.ndarray) -> float:
     """g^T H^-1 g over the parameters with mask != 0 (the cost reduction of a full Gauss-Newton step); 0 if singular.
+    (``_gain`` without a prior.)"""
+    return _gain(H, g, mask, A, r, x, 0.0)
+
+
+@njit(cache=CACHE)
+def linear_gain(H: np.ndarray, g: np.ndarray, mask: np.ndarray, A: np.ndarray, r: np.ndarray, x: np.ndarray) -> float:
+    """``gn_gain`` with the ``LINEAR`` parameters' relative prior LINEAR_PRIOR (the covariance's where its factor
+    fails): eight free responses are nearly collinear over a window (their block alone put the covariance's
+    condition beyond 1e13, 5b0c485), so a pivot may fall below 1e-13, where ``gn_gain`` reads 0 (the wide
+    test's two gains, ``refit``; both with the same prior)."""
+    return _gain(H, g, mask, A, r, x, LINEAR_PRIOR)
+
+
+@njit(cache=CACHE)
+def _gain(H: np.ndarray, g: np.ndarray, mask: np.ndarray, A: np.ndarray, r: np.ndarray, x: np.ndarray,
+          prior: float) -> float:
+    """g^T H^-1 g over the parameters with mask != 0 (the cost reduction of a full Gauss-Newton step); 0 if singular.
+    ``prior`` (> 0) is added to the scaled diagonal of the parameters whose mask is ``LINEAR``.
 
     In preallocated scratch (A: k x k, r and x: k, k = H's size) with a hand-written Cholesky: the score test
     runs inside the per-sample kernel's slices, where LAPACK's eigvalsh and solve (numba's wrappers allocate and
@@ -515,6 +533,8 @@ def gn_gain(H: np.ndarray, g: np.ndarray, mask: np.ndarray, A: np.ndarray, r: np
             if not math.isfinite(v) or not math.isfinite(r[a]):
                 return 0.0
             A[a, c] = v
+        if prior > 0.0 and mask[ia] == LINEAR:
+            A[a, a] += prior
     if not cholesky_factor(A, A, n, 1e-13):   # in place: the lower triangle becomes the factor
         return 0.0
     forward_substitution(A, r, x, n)     # L z = r (z in x)
