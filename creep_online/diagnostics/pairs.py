@@ -45,9 +45,9 @@ record holds a second effect, and the best single effect may be a stand-in
 that fits to ~1.0-1.07x the noise: in the pairs bench 30 of the 53 records
 whose combination was not the hidden pair were never searched, the hidden
 pair fitting them to 0.98-1.02x). A record one effect explains to the noise
-floor has no second effect to find, and the search costs 2(k-1) pair fits
-for k candidates. Otherwise, and on a record not sampled uniformly (a
-log-spaced creep log: the difference-based noise estimate does not hold
+floor has no second effect to find, and the search costs up to 4k - 10 pair
+fits for k candidates (22 for the eight built-in effects). Otherwise, and on
+a record not sampled uniformly (a log-spaced creep log: the difference-based noise estimate does not hold
 there, and the pair fits are slow), the combination is the two best
 significant single fits, as before. On a long record the pairs are compared on a window
 of ``SEARCH_SAMPLES`` (``search_window``) and only the chosen one is fitted to
