@@ -381,13 +381,13 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
         wk[RF_STAGE] = ST_INVERSE
         return False
     if stage == ST_INVERSE:
-        W.covariance_inverse(L, d, wk[RF_FACTORED] != 0.0, cov, free)
+        W.covariance_inverse(L, d, wk[RF_FACTORED] != 0.0, cov, free, H)
         for i in range(k):
             var[i] = cov[i, i]
         wk[RF_STAGE] = ST_IDLE
         done = _drift_test(wk, theta, cov, k, int(wk[RF_DRIFT]))
         if wk[RF_WIDE_DUE] != 0.0:     # the wide test needs the noise variance whatever the drift test did
-            wk[RF_SIGMA2] = max(wk[RF_AFTER], 0.0) / max(wk[RF_NEFF] - k, 1.0)
+            wk[RF_SIGMA2] = _noise_variance(wk, k)
             if not (wk[RF_SIGMA2] > 0.0 and np.all(np.isfinite(theta))):
                 wk[RF_WIDE_DUE] = 0.0
         if done and wk[RF_WIDE_DUE] == 0.0:
@@ -424,6 +424,13 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
         wk[RF_WIDE] = 1.0
     wk[RF_STAGE] = ST_IDLE
     return True
+
+
+@njit(cache=CACHE)
+def _noise_variance(wk: np.ndarray, k: int) -> float:
+    """The window's noise variance at the fit's result (cost over effective samples less k parameters): what the
+    drift and wide tests' statistics are in units of."""
+    return max(wk[RF_AFTER], 0.0) / max(wk[RF_NEFF] - k, 1.0)
 
 
 @njit(cache=CACHE)
@@ -576,7 +583,7 @@ def _drift_test(wk: np.ndarray, theta: np.ndarray, cov: np.ndarray, k: int, drif
     if drift == 0 or (drift == 1 and not np.all(np.isfinite(theta))):
         wk[RF_DRIFT] = 0.0
         return True
-    sigma2 = max(wk[RF_AFTER], 0.0) / max(wk[RF_NEFF] - k, 1.0)
+    sigma2 = _noise_variance(wk, k)
     wk[RF_SIGMA2] = sigma2
     wk[RF_DRIFT_STAT] = 0.0
     if not sigma2 > 0.0:

@@ -1166,7 +1166,7 @@ def covariance(H: np.ndarray, free: np.ndarray, cov: np.ndarray) -> None:
     L = np.empty((n, n))
     d = np.empty(n)
     ok = covariance_factor(H, free, L, d)
-    covariance_inverse(L, d, ok, cov, free)
+    covariance_inverse(L, d, ok, cov, free, H)
 
 
 @njit(cache=CACHE)
@@ -1181,10 +1181,7 @@ def covariance_factor(H: np.ndarray, free: np.ndarray, L: np.ndarray, d: np.ndar
             A[:, i] = 0.0
             A[i, i] = 1.0
     d[:] = np.sqrt(np.abs(np.diag(A))) + 1e-300
-    for i in range(n):
-        if free[i] != 0.0 and H[i, i] == 0.0:
-            d[i] = -1.0            # a free parameter whose column is zero over the window: held, variance inf
-    An = A / np.outer(np.abs(d), np.abs(d))
+    An = A / np.outer(d, d)
     if not np.all(np.isfinite(An)):
         return False
     if _cholesky(An, L):
@@ -1198,10 +1195,12 @@ def covariance_factor(H: np.ndarray, free: np.ndarray, L: np.ndarray, d: np.ndar
 
 
 @njit(cache=CACHE)
-def covariance_inverse(L: np.ndarray, d: np.ndarray, ok: bool, cov: np.ndarray, free: np.ndarray) -> None:
+def covariance_inverse(L: np.ndarray, d: np.ndarray, ok: bool, cov: np.ndarray, free: np.ndarray,
+                       H: np.ndarray) -> None:
     """The second half of ``covariance``: the inverse from the factor (all inf if it failed or the
     matrix is too ill-conditioned for its inverse to mean anything; ``LINEAR`` parameters left out of that
-    judgement)."""
+    judgement). A free parameter whose column is zero over the window (H's diagonal 0), held in the factor,
+    has no information: its variance is inf."""
     n = L.shape[0]
     cov[:, :] = np.inf
     if not ok:
@@ -1223,9 +1222,9 @@ def covariance_inverse(L: np.ndarray, d: np.ndarray, ok: bool, cov: np.ndarray, 
         if free[j] != LINEAR:
             tr += inv[j, j]
     if tr > 0.0 and n * tr < 1e13:
-        cov[:, :] = inv / np.outer(np.abs(d), np.abs(d))
+        cov[:, :] = inv / np.outer(d, d)
         for j in range(n):
-            if d[j] < 0.0:         # no information (``covariance_factor``)
+            if free[j] != 0.0 and H[j, j] == 0.0:
                 cov[j, :] = np.inf
                 cov[:, j] = np.inf
 
