@@ -310,8 +310,41 @@ def test_free_fit_is_least_squares_with_the_unknown_start():
         _drain(search._free_gram(model.alpha, a1, a2, decays, 1))       # (the candidate's coefficients)
         search._x[:] = 0.0
         _rows_free_sparse(search._hist, search.u, search.y, search._vz, search._v[-2], search._v[-1], search._rc,
-                          search._x, a1, a2, H, np.array(decays), 0, t.size, 1, 0, G2)
+                          search._x, a1, a2, H, np.array(decays), 0, t.size, 1, 0, G2, np.zeros((1, 1)), 0)
         assert _free_fit(G2)[0] == pytest.approx(_free_cost(G), rel=1e-6), (a1, a2)
+
+
+def test_a_search_in_operation_shares_its_candidates_rows_bit_for_bit(monkeypatch):
+    """A search of a stream taken in operation keeps the decays and the constant's, decays' and output's Gram
+    entries of its first candidate at a stride (``FreeRowCache``) and gives every later candidate only its own
+    entries: each candidate's Gram matrix, and the whole search's result, are those computed without it, bit for
+    bit (a NaN row, a lead and a stride included)."""
+    from creep_online.online import search as S
+    model, t, u, y, s, sigma, omega = _ringing_segment()
+    y = y[:3000] + 0.4 * np.exp(-5.0 * t[:3000])
+    y[1234] = np.nan
+    u = u[:3000]
+    basis = SoeBasis.build(H, horizon_s=3600.0)
+    decays = (0.03, 0.2, 1.0, 5.0)
+    candidates = [(model.alpha, model.a1, model.a2), (0.2, 3 * model.a1, 0.5 * model.a2), (0.01, 1e-3, 1e-7)]
+
+    def grams(cached: bool) -> list:
+        search = ResonanceSearch(basis, u, y, free=decays, lead=37)
+        if not cached:
+            monkeypatch.setattr(search._rows_cache, "claim", lambda *a: (-1, 0))
+        _drain(search._history())
+        out = [_drain(search._free_gram(*c, decays, stride, closed=True)).copy()
+               for stride in (3, 1) for c in candidates]
+        monkeypatch.undo()
+        return out
+
+    for a, b in zip(grams(True), grams(False)):
+        assert np.isfinite(a).all()        # (the overdamped candidate's free responses too: ``_free_modes``)
+        assert np.array_equal(a, b)
+    with_cache = ResonanceSearch(basis, u, y, free=decays).run()
+    monkeypatch.setattr(S, "CACHE_ROWS", 0)
+    without = ResonanceSearch(basis, u, y, free=decays).run()
+    assert with_cache == without
 
 
 def test_free_fit_reads_an_exact_fit_as_rounding():

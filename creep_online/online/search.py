@@ -55,6 +55,10 @@ FINE_ROWS = 2000
 UNIT_WORK = 24000
 #: Candidates refined from the grid.
 REFINE = 3
+#: Kept rows (and decay rates) a search's ``FreeRowCache`` holds per stride: a search's strides keep at most
+#: ~2 FINE_ROWS rows (at stride 1 below 2 FINE_ROWS samples); a stride with more is evaluated without it.
+CACHE_ROWS = 4096
+CACHE_DECAYS = 8
 #: Cost evaluations per refined candidate at most in the post-change search (``fixed_alpha``).
 #: A typical refinement takes 40-120; a start in a flat valley walked for 300-570 (seen after a
 #: damping change: 7 s of searching at 10 kHz sample by sample) and ended no better: the window
@@ -179,14 +183,20 @@ def _rows_free(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, v
 @njit(cache=True)
 def _free_modes(a1: float, a2: float, t: float) -> tuple:
     """Two functions spanning the free responses of 1/(1 + a1 s + a2 s^2) at time t (s >= 0): e^{st} cos(qt),
-    e^{st} sin(qt)/q (underdamped); e^{(s+q)t}, e^{(s-q)t} expm1(2qt)/(2q) (overdamped: no overflow of cosh
+    e^{st} sin(qt)/q (underdamped); e^{(s+q)t}, (e^{(s+q)t} - e^{(s-q)t})/(2q) (overdamped: no overflow of cosh
     against an underflow of e^{st}); e^{st}, t e^{st} (repeated roots). s = -a1/(2 a2), q as in
-    ``window.resonance_step``, whose exact discretization has these as its homogeneous solutions."""
+    ``window.resonance_step``, whose exact discretization has these as its homogeneous solutions.
+
+    The overdamped second function is e^{(s+q)t} (1 - e^{-2qt}) / (2q): both factors at most 1. Written as
+    e^{(s-q)t} expm1(2qt) / (2q) it was 0 * inf = NaN once 2qt > 709 (fn 100 Hz, zeta 1.5: after 0.5 s), and
+    ``_free_fit`` then dropped that free response from the candidate's fit: overdamped candidates ranked too
+    high a cost on long buffers."""
     s = -a1 / (2.0 * a2)
     d = s * s - 1.0 / a2
     if d > 1e-14 * s * s:
         q = math.sqrt(d)
-        return math.exp((s + q) * t), math.exp((s - q) * t) * math.expm1(2.0 * q * t) / (2.0 * q)
+        e = math.exp((s + q) * t)
+        return e, -e * math.expm1(-2.0 * q * t) / (2.0 * q)
     e = math.exp(s * t)
     if d < -1e-14 * s * s:
         q = math.sqrt(-d)
@@ -197,11 +207,17 @@ def _free_modes(a1: float, a2: float, t: float) -> tuple:
 @njit(cache=True)
 def _rows_free_sparse(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx0: float, vx1: float,
                       rc: np.ndarray, x: np.ndarray, a1: float, a2: float, h: float, rates: np.ndarray, r0: int,
-                      r1: int, stride: int, lead: int, G: np.ndarray) -> None:
+                      r1: int, stride: int, lead: int, G: np.ndarray, table: np.ndarray,
+                      mode: int) -> None:
     """``_rows_free`` on one row per block of ``stride`` (``_kept``): the forced state advances at every row,
     the free responses (``_free_modes``: the same span as the homogeneous states, better conditioned than the
     recursion's outputs of the two unit states) and the decays exp(-mu_j t) are evaluated at the kept rows
-    only (every row at stride 1)."""
+    only (every row at stride 1).
+
+    ``mode`` (``FreeRowCache``): 0 every entry of G from the decays' exponentials; 1 the same, the decays of
+    kept row k also stored in ``table[k // stride]``; 2 the decays read from the table and only the
+    candidate's entries of G accumulated (``_add_candidate_row``), the rest (the constant, the decays, y:
+    the same for every candidate) left as they are (``FreeRowCache.start``)."""
     m = rates.shape[0]
     p = 5 + m
     row = np.empty(p)
@@ -213,13 +229,52 @@ def _rows_free_sparse(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.nda
             row[0] = s
             row[1] = 1.0
             row[2], row[3] = _free_modes(a1, a2, t)
-            for j in range(m):
-                row[4 + j] = math.exp(-rates[j] * t)
             row[p - 1] = y[k]
-            _add_row(row, G)
+            if mode == 2:
+                for j in range(m):
+                    row[4 + j] = table[k // stride, j]
+                _add_candidate_row(row, G)
+            else:
+                for j in range(m):
+                    row[4 + j] = math.exp(-rates[j] * t)
+                if mode == 1:
+                    table[k // stride, :m] = row[4:p - 1]
+                _add_row(row, G)
         x0, x1 = _advance(rc, x0, x1, u[k])
     x[0] = x0
     x[1] = x1
+
+
+@njit(cache=True, inline="always")
+def _add_candidate_row(row: np.ndarray, G: np.ndarray) -> None:
+    """``_add_row`` for the entries of G that depend on the candidate: those of its forced output (0) and
+    free responses (2, 3). The others (the constant 1, the decays, y) are the same for every candidate."""
+    p = row.shape[0]
+    for a in (0, 2, 3):
+        ra = row[a]
+        for b in range(a, p):
+            G[a, b] += ra * row[b]
+    G[1, 2] += row[2]              # (the constant's entries: 1.0 * row[b], exactly)
+    G[1, 3] += row[3]
+
+
+@njit(cache=True)
+def _keep_gram(G: np.ndarray, Gc: np.ndarray) -> None:
+    """Gc's leading block = G (Gc is sized for the most decays a cache holds)."""
+    p = G.shape[0]
+    Gc[:p, :p] = G
+
+
+@njit(cache=True)
+def _constant_entries(Gc: np.ndarray, G: np.ndarray) -> None:
+    """G zero but for the entries ``_add_candidate_row`` leaves out, copied from a full Gram matrix Gc."""
+    p = G.shape[0]
+    G[:, :] = 0.0
+    G[1, 1] = Gc[1, 1]
+    for b in range(4, p):
+        G[1, b] = Gc[1, b]
+        for a in range(4, b + 1):
+            G[a, b] = Gc[a, b]
 
 
 @njit(cache=True)
@@ -432,6 +487,56 @@ class SearchScratch:
         self.acc = np.zeros(6)         # the projected cost's sums
         self.zeta = np.empty(q)        # the node states (``_history``)
         self.judge: dict = {}          # ``judged_cost``'s arrays per (decay rates, step)
+        self.free_rows = FreeRowCache()     # a stream in operation's candidate-independent rows (``_free_gram``)
+
+
+class FreeRowCache:
+    """What every candidate of one search shares in its strided free Gram matrix (``_free_gram`` with
+    ``closed``), per stride: the decays exp(-mu_j t) at the kept rows and the Gram entries of the constant,
+    the decays and y. The first candidate at a stride computes and keeps them, the others read them and
+    accumulate only their own entries (``_add_candidate_row``): the same sums, bit for bit.
+
+    Why: a stream taken in operation ranks every candidate with the unknown start projected out, and the
+    decays' exponentials and products were about half of each kept row's work (the start-up search of the
+    latency stream in operation took ~5800 units of ~15 us, against ~2100 from rest: ~6000 update() calls
+    over 5 us). Two slots: the grid's stride and the refinement's; cleared by each search that uses it."""
+
+    SLOTS = 2
+
+    def __init__(self) -> None:
+        # written through at construction: no page faults when a search inside update() first fills them
+        self.tables = [np.full((CACHE_ROWS, CACHE_DECAYS), 0.0) for _ in range(self.SLOTS)]
+        self.grams = [np.full((5 + CACHE_DECAYS, 5 + CACHE_DECAYS), 0.0) for _ in range(self.SLOTS)]
+        self.strides = [0] * self.SLOTS      # the stride each slot holds (0: free)
+        self.filled = [False] * self.SLOTS
+
+    def clear(self) -> None:
+        """A new search: nothing it may read."""
+        self.strides = [0] * self.SLOTS
+        self.filled = [False] * self.SLOTS
+
+    def claim(self, stride: int, rows: int, decays: int) -> tuple[int, int]:
+        """(slot, mode of ``_rows_free_sparse``) for one candidate at this stride over ``rows`` samples: read a
+        filled slot (2), fill a new one (1), or no cache (slot -1, mode 0: the rows do not fit, or no slot)."""
+        if decays > CACHE_DECAYS or (rows + stride - 1) // stride > CACHE_ROWS:
+            return -1, 0
+        for i in range(self.SLOTS):
+            if self.strides[i] == stride:
+                return i, 2 if self.filled[i] else 1
+        for i in range(self.SLOTS):
+            if self.strides[i] == 0:
+                self.strides[i] = stride
+                return i, 1
+        return -1, 0
+
+    def keep(self, slot: int, G: np.ndarray) -> None:
+        """The first candidate's Gram matrix at the slot's stride is complete: its shared entries are kept."""
+        _keep_gram(G, self.grams[slot])
+        self.filled[slot] = True
+
+
+#: (the table argument of ``_rows_free_sparse`` without a cache)
+_NO_TABLE = np.zeros((1, 1))
 
 
 def _judge_arrays(scratch: SearchScratch, rates: tuple, h: float) -> tuple:
@@ -505,6 +610,8 @@ class ResonanceSearch:
         self._v, self._dv, self._rc, self._vz, self._x, self._acc = sc.v, sc.dv, sc.rc, sc.vz, sc.x, sc.acc
         self._zeta = sc.zeta
         self._grid_work = (sc.costs, sc.ranked, sc.picks)
+        self._rows_cache = sc.free_rows
+        self._rows_cache.clear()
         #: the grid's frequencies (none with ``starts``): given, or computed by the first unit (``_run``; with the
         #: construction, in one update(), they were ~70 us of cold numpy and Python)
         self._freqs = freqs
@@ -565,14 +672,25 @@ class ResonanceSearch:
                            min(n, r0 + chunk), self.lead, G)
                 yield
             return G
-        rates = self._free_rates if decays == self.free else np.array(decays, dtype=float)
-        # the forced state at every row; at a kept row the node sum, 2 + m transcendental functions, the sums
-        per_row = 6 + (self.basis.size + 40 + 20 * rates.size + (5 + rates.size) * (6 + rates.size) / 2) / stride
+        mine = decays == self.free
+        rates = self._free_rates if mine else np.array(decays, dtype=float)
+        m = rates.size
+        slot, mode = self._rows_cache.claim(stride, n, m) if mine else (-1, 0)
+        table = self._rows_cache.tables[slot] if slot >= 0 else _NO_TABLE
+        if mode == 2:                      # the shared entries from the first candidate at this stride
+            _constant_entries(self._rows_cache.grams[slot], G)
+            shared = m + 3 * (5 + m)       # the decays read, three rows of products
+        else:                              # m exponentials (~20 each), every product
+            shared = 20 * m + (5 + m) * (6 + m) / 2
+        # the forced state at every row; at a kept row the node sum, 2 transcendental functions, the rest
+        per_row = 6 + (self.basis.size + 40 + shared) / stride
         chunk = max(16, int(UNIT_WORK / per_row))
         for r0 in range(0, n, chunk):
             _rows_free_sparse(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, a1, a2, self.basis.h, rates, r0,
-                              min(n, r0 + chunk), stride, self.lead, G)
+                              min(n, r0 + chunk), stride, self.lead, G, table, mode)
             yield
+        if mode == 1:
+            self._rows_cache.keep(slot, G)
         return G
 
     def judged_rows(self) -> int:
