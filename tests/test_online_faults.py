@@ -143,8 +143,22 @@ def test_a_start_up_fault_that_repeats_drops_the_buffer_and_starts_on_new_sample
     assert e.phase == "tracking" and _within(e, truth), (e.phase, _errors(e, truth))
 
 
+def test_a_fault_in_the_replay_of_the_start_up_buffer_searches_again(staircase, monkeypatch):
+    """Sample by sample, the block kernel runs only while the new tracker replays the start-up buffer."""
+    truth, u, y = staircase
+    count = _fail_at(monkeypatch, window_module, "block", {2})
+    est = OnlineEstimator(H)
+    seen = _feed(est, u, y)
+    assert count[0] > 2
+    _check_recorded(est, seen, "ZeroDivisionError", "update", "start-up search starts again")
+    e = est.estimate
+    assert e.quality == "good", e.reason
+    assert _within(e, truth), _errors(e, truth)
+
+
 def test_a_fault_during_a_replay_restarts_and_follows_the_change(monkeypatch):
-    """payload 4 (10 kHz, a2 +... at 8.5 s): replays follow the change; one of them breaks."""
+    """payload 4 (10 kHz, mass added at 8.5 s): replays follow the change; one of them breaks at 10 s, while the
+    estimator re-converges after the change (restarted on the post-change samples, ~4 s to the truth)."""
     sc = scenarios.make("payload", 4)
     count = _fail_at(monkeypatch, window_module, "replay", {400})
     est = OnlineEstimator(sc.h)
