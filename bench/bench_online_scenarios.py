@@ -99,9 +99,10 @@ def run_estimator(u: np.ndarray, y: np.ndarray, h: float, mode: str, kwargs: dic
                 traj[p].append(float(getattr(e, p)))
         e = est.estimate
         out.update(quality=e.quality, phase=e.phase, final={p: float(getattr(e, p)) for p in PARAMS},
-                   events=[float(v["t"]) for v in getattr(e, "events", [])],
+                   events=[float(v["t"]) for v in getattr(e, "events", []) if v.get("kind") != "internal_fault"],
                    unsettled_events=[float(v["t"]) for v in getattr(e, "events", [])
                                      if v.get("estimate_settled") is False],
+                   internal_faults=int(getattr(e, "internal_faults", 0)),
                    floor_ratio=float(e.residual_rms / e.noise_rms) if e.noise_rms > 0 else None)
     except Exception as exc:  # the estimator under test may fail in any way: that is a result
         out["error"] = f"{type(exc).__name__}: {exc}"

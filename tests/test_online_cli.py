@@ -51,3 +51,27 @@ def test_stream_bad_csv_content(tmp_path, capsys):
     bad.write_text("t,u,y\n0,1,2\n0.1,1,nan\n" + "".join(f"{0.1 * k},1,2\n" for k in range(2, 40)))
     assert main(["stream", "--source", f"csv:{bad}", "--json"]) == 2
     assert "bad.csv" in capsys.readouterr().err
+
+
+def test_stream_reports_internal_faults(record, capsys, monkeypatch):
+    """A fault injected into the re-fit job (its first call after 5 s of stream raises; the kernels' warm-up runs
+    3 s): the stream ends normally, the JSON counts it and lists its event, the human summary names it
+    (docs/online.md, "Error contract")."""
+    from creep_online.online import tracker as tracker_module
+    original = tracker_module.WindowTracker._after_accept
+
+    def faulty(self, raw):
+        if self.n * self.h > 5.0 and not getattr(self, "_injected", False):
+            self._injected = True
+            raise ZeroDivisionError("injected")
+        return original(self, raw)
+
+    monkeypatch.setattr(tracker_module.WindowTracker, "_after_accept", faulty)
+    assert main(["stream", "--source", f"csv:{record}", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["internal_faults"] == 1 and out["samples"] == 2400
+    (ev,) = [ev for ev in out["events"] if ev["kind"] == "internal_fault"]
+    assert ev["error"] == "ZeroDivisionError" and ev["recovery"] == "dropped the refit job"
+    assert main(["stream", "--source", f"csv:{record}"]) == 0
+    text = capsys.readouterr().out
+    assert "internal faults: 1" in text and "internal fault at t = " in text and "ZeroDivisionError" in text

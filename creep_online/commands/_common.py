@@ -30,6 +30,12 @@ def moves_text(relative_change: dict) -> str:
     return ", ".join(f"{k} {100 * v:+.1f} %" for k, v in relative_change.items())
 
 
+def fault_line(event: dict) -> str:
+    """An internal-fault event (``kind`` "internal_fault") on one line: when, what, where, how it was recovered."""
+    return (f"internal fault at t = {event['t']:.4g} s: {event['error']} in {event['where']} ({event['message']}); "
+            f"{event['recovery']}")
+
+
 def unsettled_note(event: dict) -> str:
     """What a change event judged against a still-moving estimate says (``estimate_settled`` False): it may
     correct the estimate (a start-up estimate converging) rather than report a change of the plant."""

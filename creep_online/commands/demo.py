@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import CreepOnlineError
 from ..model import ONLINE_REFITS as REFITS
-from ._common import moves_text, print_json, research_lines, unsettled_note
+from ._common import fault_line, moves_text, print_json, research_lines, unsettled_note
 from ._progress import Progress
 
 SCENARIOS = ("stationary", "payload", "drift")
@@ -218,7 +218,8 @@ def _status(loop, truth) -> str:
     text += f"[{e.phase}/{e.quality}] "
     if e.events:
         ev = e.events[-1]
-        text += f"change@{ev['t']:.1f}s({','.join(ev['moved']) or '?'}) "
+        text += (f"fault@{ev['t']:.1f}s({ev['error']}) " if ev.get("kind") == "internal_fault" else
+                 f"change@{ev['t']:.1f}s({','.join(ev['moved']) or '?'}) ")
     switched = [rs for rs in e.researches if rs["switched"]]
     if switched:
         text += f"research@{switched[-1]['t']:.1f}s({','.join(switched[-1]['moved'])}) "
@@ -267,6 +268,9 @@ def _print_summary(r: dict, as_json: bool) -> None:
         why = f" ({est['reason']})" if est.get("reason") else ""
         print(f"  estimate: phase {est['phase']}, quality {est['quality']}{why}")
         for ev in est.get("events", []):
+            if ev.get("kind") == "internal_fault":
+                print(f"    {fault_line(ev)}")
+                continue
             moves = moves_text(ev["relative_change"])
             print(f"    change near t = {ev['t']:.2f} s, detected at {ev['detected_t']:.2f} s: "
                   f"{', '.join(ev['moved']) or 'nothing significant'} moved ({moves}){unsettled_note(ev)}")

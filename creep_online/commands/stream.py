@@ -23,7 +23,7 @@ from ..errors import CreepOnlineError, DataError, TransportError
 from ..io.csvfile import load_record
 from ..online import OnlineEstimator, warm_kernels
 from ..model import ONLINE_REFITS as REFITS
-from ._common import add_column_options, moves_text, print_json, research_lines, unsettled_note
+from ._common import add_column_options, fault_line, moves_text, print_json, research_lines, unsettled_note
 
 
 #: How a stream ended -> exit code. Every end after the first sample prints the estimate and the counters.
@@ -122,8 +122,10 @@ class Trace:
 
 
 def _marks(items: list[dict]) -> str:
-    """``t:moved`` of each change event or re-search, ``;``-separated (a trace cell)."""
-    return ";".join(f"{x['t']:.4g}:{'+'.join(x['moved'])}" for x in items)
+    """``t:moved`` of each change event or re-search (``t:fault:Error`` of an internal fault), ``;``-separated (a
+    trace cell)."""
+    return ";".join(f"{x['t']:.4g}:fault:{x['error']}" if x.get("kind") == "internal_fault" else
+                    f"{x['t']:.4g}:{'+'.join(x['moved'])}" for x in items)
 
 
 def _cell(v) -> str:
@@ -145,7 +147,7 @@ def _report(est: OnlineEstimator, latency: dict, extra: dict) -> dict:
     out = {"alpha": e.alpha, "a1": e.a1, "a2": e.a2, "b": e.b, "samples": e.samples, "latency_us": latency,
            "phase": e.phase, "quality": e.quality, "reason": e.reason, "t_c": e.t_c, "fn_hz": e.fn_hz,
            "zeta": e.zeta, "offset": e.offset, "uncertainty": e.uncertainty, "skipped": est.skipped_nonfinite,
-           "gaps": est.gaps, "alpha_updates": est.alpha_updates, "divergences": est.divergences,
+           "internal_faults": est.internal_faults, "gaps": est.gaps, "alpha_updates": est.alpha_updates, "divergences": est.divergences,
            "outliers": e.outliers, "input_outliers": e.input_outliers, "noise_rms": e.noise_rms,
            "residual_rms": e.residual_rms, "events": e.events, "t": e.t, "dt": est.dt,
            "b_rate": e.b_rate, "alpha_rate": e.alpha_rate, "researches": e.researches}
@@ -179,8 +181,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {name:<6} = {getattr(e, name):.6g}{err}")
     print(f"  fn     = {e.fn_hz:.5g} Hz, zeta = {e.zeta:.4g}, t_c = {e.t_c:.4g} s, offset = {e.offset:.4g}")
     print(f"  skipped {est.skipped_nonfinite} non-finite, {est.gaps} lost, {est.alpha_updates} window fits, "
-          f"outliers gated: {e.outliers} output, {e.input_outliers} input")
+          f"outliers gated: {e.outliers} output, {e.input_outliers} input, internal faults: {est.internal_faults}")
     for ev in e.events:
+        if ev.get("kind") == "internal_fault":
+            print(f"  {fault_line(ev)}")
+            continue
         moves = moves_text(ev["relative_change"])
         print(f"  change near t = {ev['t']:.4g} s (detected {ev['detected_t']:.4g} s): "
               f"{', '.join(ev['moved']) or 'nothing significant'} moved ({moves}){unsettled_note(ev)}")

@@ -34,6 +34,16 @@ is not used (a run longer than ``burst_s`` is accepted: a shift is a change, not
 an outlier); an input sample far outside the range seen so far is held at the
 last plausible value (a glitch) unless it persists; an output frozen while
 the model says it should move is reported (``quality="degraded"``).
+
+Error contract: bad input raises ``DataError`` (non-numbers) or is skipped and
+counted (NaN, inf). Any other exception raised inside ``update()``,
+``update_block()``, ``gap()`` or ``estimate`` is the library's own fault
+(a numerical bug): it is counted (``internal_faults``), recorded as an event
+of kind ``"internal_fault"``, and recovered from (``_recover``), never raised
+into the caller's loop; so is a non-finite estimate or statistic (checked at
+every scheduled re-fit or test and at every ``estimate``). Until the
+estimator has re-converged the quality reads ``degraded`` with the fault as
+reason.
 """
 from __future__ import annotations
 
@@ -43,7 +53,7 @@ from typing import Generator
 
 import numpy as np
 
-from ..errors import DataError
+from ..errors import DataError, one_line
 from ..model import ONLINE_ALPHA_BOUNDS, ONLINE_REFITS, CreepModel
 from . import refit as RF
 from . import window as W
@@ -51,7 +61,7 @@ from .search import ResonanceSearch, SearchScratch, frequency_steps, grid_ends
 from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SOE_TOP, SoeBasis
 from . import recursive as R
 from .recursive import RecursiveTracker
-from .tracker import FREE_RATES, WindowTracker
+from .tracker import FREE_RATES, PERIODIC_JOBS, WindowTracker
 from .stored_params import StoredParams
 
 PHASES = ("buffering", "searching", "tracking")
@@ -72,6 +82,15 @@ FLOOR_RATIO = 2.0
 INPUT_GATE = 20.0
 #: Drift columns with ``track_drift``: 1 the gain's rate, 2 the gain's and alpha's.
 DRIFT_COLUMNS = 2
+#: Exceptions the error contract lets through to the caller: the caller's own errors (bad input: a one-line
+#: ``DataError``) and exhaustion of memory. Every other exception inside update(), update_block(), gap() and
+#: estimate is an internal fault: counted, recorded and recovered from (``OnlineEstimator._fault``).
+PASS_THROUGH = (DataError, MemoryError)
+#: Internal-fault events kept (the newest); ``internal_faults`` counts them all.
+MAX_FAULT_EVENTS = 50
+#: Consecutive faults of the start-up (search, tracker start, replay of the buffer) after which its buffer is
+#: dropped: a fault that the buffered samples cause every time is not searched on again and again.
+STARTUP_FAULTS = 3
 #: The two Remark-3 strategies (``refit``): recompute over the window, or carry on recursively.
 REFITS = ONLINE_REFITS
 
@@ -92,6 +111,9 @@ class OnlineEstimate:
     ``quality`` is ``good`` exactly when it holds all four. A ``provisional``
     estimate with alpha and b in it has a trustworthy creep part and an
     undetermined resonance (``online.gate``: what a compensator may take).
+    ``internal_faults`` counts the library's own numerical faults that the
+    estimator caught and recovered from (each one also an event of kind
+    ``"internal_fault"`` in ``events``; module docstring: error contract).
     """
 
     alpha: float
@@ -123,6 +145,7 @@ class OnlineEstimate:
     rate_uncertainty: dict = field(default_factory=dict)
     researches: list = field(default_factory=list)
     determined: list = field(default_factory=list)
+    internal_faults: int = 0
 
     def to_dict(self) -> dict:
         """JSON-ready dict."""
@@ -239,6 +262,17 @@ class OnlineEstimator(StoredParams):
         self._history = int(min(MAX_HISTORY, max(1024, 3 * (self.window_s or 30.0) / h)))
         self.samples = 0
         self.skipped_nonfinite = 0
+        self.internal_faults = 0
+        self._faults: list[dict] = []      # the internal-fault events (``_fault``), the newest MAX_FAULT_EVENTS
+        self._fault_open: dict | None = None   # the last fault while the estimator re-converges (``_fault_reason``)
+        self._fault_fit_after = 0          # ... a window fit after this tracker sample is one after the recovery
+        self._startup_faults = 0           # consecutive faults of the start-up (``STARTUP_FAULTS``)
+        self._restarted = False            # restarted in operation after a fault: the plant was not at rest
+        self._hint: tuple | None = None    # (alpha, a1, a2) before a fault's restart: a candidate of the search
+        self._n_shift = 0                  # stream samples before the tracker's first (a restart's; 0 otherwise)
+        self._past_events: list[dict] = []     # events and re-searches of trackers a restart dropped, in stream time
+        self._past_researches: list[dict] = []
+        self._block_progress: tuple | None = None   # update_block()'s tracker loop (``_block_resync``)
         self.gaps = 0
         self.input_outliers = 0
         self.frozen = False
@@ -321,19 +355,50 @@ class OnlineEstimator(StoredParams):
 
     @property
     def events(self) -> list[dict]:
-        """Detected abrupt changes: time, parameters that moved, relative moves."""
-        if self._tracker is None:
-            return []
-        return [{k: v for k, v in ev.items() if not k.startswith("_")} for ev in self._tracker.events]
+        """Detected abrupt changes (kind ``"change"``: time, parameters that moved, relative moves) and internal
+        faults (kind ``"internal_fault"``: time, where, the exception's type and message, the recovery), by time.
+        Times are stream times (``samples`` x dt) once a fault has restarted the tracker."""
+        shift = self._n_shift * self._h
+        live = [] if self._tracker is None else [_shifted(ev, shift, "change") for ev in self._tracker.events]
+        events = self._past_events + live
+        if self._faults:
+            events = sorted(events + self._faults, key=lambda ev: ev["t"])
+        return events
+
+    @property
+    def researches(self) -> list[dict]:
+        """The tracker's re-searches of the resonance (and those of trackers a fault's restart dropped)."""
+        shift = self._n_shift * self._h
+        live = [] if self._tracker is None else [_shifted(r, shift) for r in self._tracker.researches]
+        return self._past_researches + live
 
     @property
     def estimate(self) -> OnlineEstimate:
+        """The current answer. Never raises: a fault while it is built (or a non-finite state found) is an internal
+        fault (error contract), and the answer is then the bare one (no model's details, quality degraded)."""
+        try:
+            tr = self._tracker
+            if tr is not None and not self._state_finite(tr):
+                self._fault(None, "estimate")
+            return self._estimate()
+        except PASS_THROUGH:
+            raise
+        except Exception as exc:  # noqa: BLE001 - the error contract: an internal fault never reaches the caller
+            self._fault(exc, "estimate")
+            return self._bare_estimate(*self._fault_reason())
+
+    def _bare_estimate(self, quality: str, reason: str) -> OnlineEstimate:
+        """The estimate without a model (before the first search has ended, or when building it failed)."""
+        return OnlineEstimate(alpha=0.0, a1=0.0, a2=0.0, b=0.0, phase=self._phase, quality=quality,
+                              reason=reason, t=self.samples * self._h, samples=self.samples,
+                              skipped=self.skipped_nonfinite, input_outliers=self.input_outliers,
+                              events=self.events, internal_faults=self.internal_faults)
+
+    def _estimate(self) -> OnlineEstimate:
         tr = self._tracker
         quality, reason, determined = self._assess()
         if tr is None:
-            return OnlineEstimate(alpha=0.0, a1=0.0, a2=0.0, b=0.0, phase=self._phase, quality=quality,
-                                  reason=reason, t=self.samples * self._h, samples=self.samples,
-                                  skipped=self.skipped_nonfinite, input_outliers=self.input_outliers)
+            return self._bare_estimate(quality, reason)
         a1, a2 = tr.a1, tr.a2
         wn = 1.0 / math.sqrt(a2)
         std = {k: _finite(tr.fit.std[k], math.inf) for k in ("alpha", "a1", "a2", "b") if k in tr.fit.std}
@@ -350,7 +415,7 @@ class OnlineEstimator(StoredParams):
             shifts=int(tr.sc[W.SC_SHIFTS]), relinearizations=tr.relinearizations,
             input_outliers=self.input_outliers, events=self.events, b_rate=_finite(tr.b_rate),
             alpha_rate=_finite(tr.alpha_rate), rate_uncertainty=rate_std,
-            researches=[dict(r) for r in tr.researches], determined=determined)
+            researches=self.researches, determined=determined, internal_faults=self.internal_faults)
 
     def predict_one(self, u: float) -> float | None:
         """Model output at the next sample if u is applied now (no state change); None without a model."""
@@ -368,7 +433,11 @@ class OnlineEstimator(StoredParams):
 
     # ------------------------------------------------------------------ feeding
     def update(self, u: float, y: float) -> None:
-        """Feed one sample. Bounded work: never waits for a search or a re-fit."""
+        """Feed one sample. Bounded work: never waits for a search or a re-fit.
+
+        Raises only ``DataError`` (u or y not a number); NaN and inf are skipped and counted. Any internal fault
+        is caught, counted and recovered from (module docstring: error contract): the guard is one ``try``
+        around the whole body, free in Python 3.11 while nothing is raised."""
         try:
             u = float(u)
             y = float(y)
@@ -378,36 +447,46 @@ class OnlineEstimator(StoredParams):
             self.skipped_nonfinite += 1
             return
         self.samples += 1
-        tr = self._live
-        if tr is None:
-            self._buffer(self._input(u), y)
-            self._advance_start(self._units)
-            return
-        if self._u_lo <= u <= self._u_hi:
-            self._u_last = u
-            self._u_run = 0
-            du = u - self._u_ref
-        else:
-            du = self._input(u)
-        # tr.feed() inlined: one Python call less on the per-sample path
-        if self._recursive:
-            status = R.sample(du, y, tr.st, tr.P, tr.CT)
-        elif tr.machine is None:
-            status = W.sample(du, y, tr.st, tr.S, tr.ring)
-        else:                             # a re-fit or change test under way: its slices run in the kernel
-            status = RF.sample_work(du, y, tr.st, tr.S, tr.ring, tr._ctx, tr.machine, self._units)
-            if status >= RF.MACHINE_DONE:
-                tr.machine = None         # its job reads the result at the next sample (this call has done
-                status -= RF.MACHINE_DONE   # the machine's last slice: with the job's visit it was over 25 us)
-                if status < 8:
-                    return
-        if status >= 8:                   # jobs queued (and the change test's snapshot taken): their first
-            tr._schedule()                # unit waits for the next sample, this call has done enough
-        elif tr._jobs:
-            tr.work(self._units)
+        try:
+            tr = self._live
+            if tr is None:
+                self._buffer(self._input(u), y)
+                self._advance_start(self._units)
+                return
+            if self._u_lo <= u <= self._u_hi:
+                self._u_last = u
+                self._u_run = 0
+                du = u - self._u_ref
+            else:
+                du = self._input(u)
+            # tr.feed() inlined: one Python call less on the per-sample path
+            if self._recursive:
+                status = R.sample(du, y, tr.st, tr.P, tr.CT)
+            elif tr.machine is None:
+                status = W.sample(du, y, tr.st, tr.S, tr.ring)
+            else:                             # a re-fit or change test under way: its slices run in the kernel
+                status = RF.sample_work(du, y, tr.st, tr.S, tr.ring, tr._ctx, tr.machine, self._units)
+                if status >= RF.MACHINE_DONE:
+                    tr.machine = None         # its job reads the result at the next sample (this call has done
+                    status -= RF.MACHINE_DONE   # the machine's last slice: with the job's visit it was over 25 us)
+                    if status < 8:
+                        return
+            if status >= 8:                   # jobs queued (and the change test's snapshot taken): their first
+                tr._schedule()                # unit waits for the next sample, this call has done enough
+                if not self._state_finite(tr):
+                    self._fault(None, "update")
+            elif tr._jobs:
+                tr.work(self._units)
+        except PASS_THROUGH:
+            raise
+        except Exception as exc:  # noqa: BLE001 - the error contract: an internal fault never reaches the loop
+            self._fault(exc, "update")
 
     def update_block(self, u: np.ndarray, y: np.ndarray) -> None:
-        """Feed many samples (same semantics as repeated update(); background work runs to completion)."""
+        """Feed many samples (same semantics as repeated update(); background work runs to completion).
+
+        Raises only ``DataError`` (arrays that cannot be used). An internal fault is caught, counted and recovered
+        from, and the block goes on from the sample after the one it came in (``_block_from``)."""
         u = _array(u, "u")
         y = _array(y, "y")
         if u.shape != y.shape:
@@ -416,28 +495,60 @@ class OnlineEstimator(StoredParams):
         if not ok.all():
             self.skipped_nonfinite += int(u.size - np.count_nonzero(ok))
             u, y = u[ok], y[ok]
-        i = 0
+        k = 0
+        while k < u.size:
+            k = self._block_from(u, y, k)
+
+    def _block_from(self, u: np.ndarray, y: np.ndarray, k: int) -> int:
+        """Feed u[k:], y[k:]; returns where it stopped: the end, or after an internal fault the first sample not
+        taken (at least k + 1: a fault that a sample causes every time cannot stall the block)."""
+        done = [k]                           # samples taken so far (``_feed_block`` keeps it current)
+        try:
+            self._feed_block(u, y, done)
+            return u.size
+        except PASS_THROUGH:
+            raise
+        except Exception as exc:  # noqa: BLE001 - the error contract: an internal fault never reaches the loop
+            self._fault(exc, "update_block")
+        return max(done[0], k + 1)
+
+    def _feed_block(self, u: np.ndarray, y: np.ndarray, done: list[int]) -> None:
+        """update_block()'s work from ``done[0]`` on. ``done[0]``: samples taken (counted in ``samples``); in the
+        tracker's loop it is advanced by the tracker's own sample count, which its kernel moves per sample, so a
+        fault inside ``feed_block`` or ``finish`` leaves it exact."""
+        i = done[0]
         n = u.size
-        status = np.empty(n, dtype=np.int64)
         while i < n and self._live is None:
             self.samples += 1
+            done[0] = i + 1
             self._buffer(self._input(float(u[i])), float(y[i]))
             i += 1
             self._advance_start(1 << 30)
         if i == n:
             return
         du = self._inputs(u[i:])
-        y = y[i:]
+        yy = y[i:]
+        status = np.empty(du.size, dtype=np.int64)
         tr = self._live
-        i = 0
-        while i < du.size:
-            used = tr.feed_block(du[i:], y[i:], status[i:])
-            self.samples += used
-            i += used
+        n0, s0, j = tr.n, self.samples, 0
+        self._block_progress = (tr, n0, s0, i, done)
+        while j < du.size:
+            j += tr.feed_block(du[j:], yy[j:], status[j:])
+            self.samples = s0 + j
+            done[0] = i + j
             tr.finish()
+            if not self._state_finite(tr):
+                self._fault(None, "update_block")
+                tr = self._live
+                if tr is None:               # restarted: the rest of the block goes through the start-up
+                    self._block_progress = None
+                    return self._feed_block(u, y, done)
+        self._block_progress = None
 
     def gap(self, n: int) -> None:
-        """n samples were lost (sequence counter): time advances with the input held, no output used."""
+        """n samples were lost (sequence counter): time advances with the input held, no output used.
+
+        Internal faults are caught as in update() (one per lost sample at most)."""
         n = int(n)
         if n <= 0:
             return
@@ -445,10 +556,15 @@ class OnlineEstimator(StoredParams):
         du = self._u_last - (self._u_ref or 0.0)
         for _ in range(n):
             self.samples += 1
-            if self._live is not None:
-                self._live.feed(du, math.nan)
-            else:
-                self._buffer(du, math.nan)
+            try:
+                if self._live is not None:
+                    self._live.feed(du, math.nan)
+                else:
+                    self._buffer(du, math.nan)
+            except PASS_THROUGH:
+                raise
+            except Exception as exc:  # noqa: BLE001 - the error contract: an internal fault never reaches the loop
+                self._fault(exc, "gap")
 
     @property
     def _live(self) -> WindowTracker | RecursiveTracker | None:
@@ -554,9 +670,15 @@ class OnlineEstimator(StoredParams):
         if self._catchup:
             self._catch_up(max(units, 1))
 
+    @property
+    def _in_operation(self) -> bool:
+        """Does the buffer start with the plant not at rest? A stream whose first input is not zero, and every
+        buffer after a fault's restart (``_restart``): the searches and the tracker then fit free responses."""
+        return self._restarted or bool(self._u_ref)
+
     def _search_span(self, nbuf: int) -> tuple[int, int]:
         """(start, end) in the buffer of the search that starts with ``nbuf`` samples buffered."""
-        start = 0 if self._u_ref else max(0, self._first_change - 1)
+        start = 0 if self._in_operation else max(0, self._first_change - 1)
         return start, min(nbuf, start + MAX_SEARCH_SAMPLES)
 
     def _plan_grid(self) -> None:
@@ -585,9 +707,10 @@ class OnlineEstimator(StoredParams):
         freqs = plan[2] if plan is not None and plan[0] == end - start else None
         # in operation the buffer starts in the fading memory of an unknown past input: the search projects it
         # out (the tracker's free responses), as it does the unknown resonance state (``ResonanceSearch`` free)
+        extra = () if self._hint is None else (self._hint,)     # (a fault's restart: the estimate before it)
         self._search = ResonanceSearch(self.basis, self._bu[start:end], self._by[start:end], alphas=alphas,
-                                       work=self._hist_work, starts=starts, scratch=self._search_scratch,
-                                       freqs=freqs, free=FREE_RATES if self._u_ref else None)
+                                       extra=extra, work=self._hist_work, starts=starts, scratch=self._search_scratch,
+                                       freqs=freqs, free=FREE_RATES if self._in_operation else None)
         self._tc_used = (end - start) * self._h
         self._phase = "searching"
 
@@ -624,15 +747,18 @@ class OnlineEstimator(StoredParams):
         theta = np.array([min(max(res.alpha, lo), hi), math.log(res.a1), math.log(res.a2), res.b, res.c])
         if self._recursive:
             self._tracker = RecursiveTracker(
-                self.basis, theta, window_s=self.window_s, free=bool(self._u_ref), gate=0.0, burst=self._burst,
+                self.basis, theta, window_s=self.window_s, free=self._in_operation, gate=0.0, burst=self._burst,
                 stuck=max(10, int(round(0.05 / self._h))), alpha_bounds=(lo, hi), refit_every=self._refit_every,
                 detect=bool(self.detect_changes), scale=res.b * (self._u_hi - self._u_lo))
         else:
             # (the other spare stays until reset(): freeing its arrays here cost ~35 us of this update())
-            tracker = self._spares[bool(self._u_ref)]
+            key = self._in_operation
+            if key not in self._spares:    # (used by a tracker that a fault's restart dropped: ``_restart``)
+                self._spares[key] = self._window_tracker(key)
+            tracker = self._spares[key]
             tracker.start_state(theta)
             yield
-            self._tracker = self._spares.pop(bool(self._u_ref))
+            self._tracker = self._spares.pop(key)
             self._tracker.start_adopt()
         self._starting = None
         self._start_tracking()
@@ -663,12 +789,159 @@ class OnlineEstimator(StoredParams):
                 units -= 1
                 tr.work(1 if units < (1 << 29) else 1 << 30)
         if self._replayed >= self._nbuf:
+            self._startup_faults = 0
             self._catchup = 0
             self._nbuf = 0
             tr.sc[W.SC_GATE] = float(self.outlier_gate)
             tr.fitting = True
             if not self._recursive:        # the recursive tracker has no jobs: its estimate is always current
                 tr._jobs.append(tr._refit_job())
+
+    # ------------------------------------------------------------------ internal faults (error contract)
+    @staticmethod
+    def _state_finite(tr: WindowTracker | RecursiveTracker) -> bool:
+        """Can the tracker's state be trusted: its estimate, its statistics' diagonal (a non-finite regressor
+        poisons it) and its live prediction all finite? Three numpy reductions (~2 us): checked at each scheduled
+        re-fit or test (``update``), after each block unit and at each ``estimate``, not per sample."""
+        return math.isfinite(float(tr.theta.sum()) + float(tr.S.trace()) + float(tr.sc[W.SC_PRED]))
+
+    def _fault(self, exc: BaseException | None, where: str) -> None:
+        """An internal fault in ``where`` (``exc``; None: a non-finite state found): counted, recorded as an event,
+        recovered from (``_recover``). Never raises but ``PASS_THROUGH``: if the recovery itself fails, the
+        estimator starts over from nothing (``_start_over``), its counters and events kept."""
+        self.internal_faults += 1
+        error, message = ("NonFiniteState", "non-finite estimate, statistics or prediction") if exc is None \
+            else (type(exc).__name__, one_line(exc))
+        self._block_resync()
+        try:
+            recovery = self._recover(exc is None, where)
+        except PASS_THROUGH:
+            raise
+        except Exception as again:  # noqa: BLE001 - the recovery's own fault: the last resort
+            recovery = self._start_over(again)
+        t = self.samples * self._h
+        event = {"kind": "internal_fault", "t": t, "detected_t": t, "where": where, "error": error,
+                 "message": message, "recovery": recovery, "moved": [], "relative_change": {}, "settled": True}
+        self._faults = (self._faults + [event])[-MAX_FAULT_EVENTS:]
+        self._fault_open = event
+
+    def _block_resync(self) -> None:
+        """After a fault inside update_block()'s tracker loop: ``samples`` and the block's position from the
+        tracker's own count (its kernel moves it per sample taken), so no sample is lost or fed twice."""
+        progress, self._block_progress = self._block_progress, None
+        if progress is None:
+            return
+        tr, n0, s0, i, done = progress
+        try:
+            taken = tr.n - n0
+        except (TypeError, ValueError, OverflowError):     # (a non-finite count: the position stays)
+            return
+        self.samples = s0 + taken
+        done[0] = i + taken
+
+    def _recover(self, nonfinite: bool, where: str) -> str:
+        """Back to a safe state; returns what was done (the event's ``recovery``).
+
+        * while the report was built (``estimate``) with a finite state: nothing to repair;
+        * during the start-up (search, tracker start, replay of the buffer): the search again (``_restart_startup``);
+        * a live tracker with a finite state whose fault ended a periodic job (re-fit, snapshot, change test):
+          the job is dropped, the next one is scheduled as usual;
+        * otherwise (a non-finite state, a fault in the per-sample kernel or a long job: replay, re-search):
+          the tracker is dropped and the estimator restarts from a search of the remembered samples (``_restart``).
+        """
+        tr = self._tracker
+        if where == "estimate" and not nonfinite:
+            return "estimate reported without the model's details"
+        if tr is None or self._starting is not None or self._catchup:
+            return self._restart_startup()
+        if nonfinite or not self._state_finite(tr):
+            return self._restart()
+        dead = [job for job in tr._jobs if job.gi_frame is None]     # (a generator that raised is closed)
+        if dead and tr.machine is None and all(job.__name__ in PERIODIC_JOBS for job in dead):
+            for job in dead:
+                tr._jobs.remove(job)
+            self._fault_fit_after = tr.n
+            return "dropped the " + ", ".join(job.__name__.strip("_").replace("_", " ") for job in dead)
+        return self._restart()
+
+    def _restart_startup(self) -> str:
+        """A fault before the tracker went live: the search starts again on the buffered samples; after
+        ``STARTUP_FAULTS`` in a row, on new ones (the buffer dropped; the plant is then not at rest)."""
+        self._startup_faults += 1
+        self._drop_tracker()
+        self._fault_fit_after = 0
+        if self._startup_faults < STARTUP_FAULTS:
+            return "the start-up search starts again on the buffered samples"
+        self._restarted = self._restarted or self._first_change is not None
+        self._nbuf = 0
+        self._first_change = None
+        self._n_shift = self.samples
+        self._startup_faults = 0
+        return f"the start-up buffer dropped after {STARTUP_FAULTS} faults: the search starts again on new samples"
+
+    def _restart(self) -> str:
+        """The tracker is not trustworthy: dropped, and the newest remembered samples of its window (its ring, up to
+        the search's ``MAX_SEARCH_SAMPLES``) become the start-up buffer of a stream in operation: a fresh search, a fresh
+        tracker (built here if its spare is used: ~0.4 ms once), the replay of the buffer. The recursive tracker
+        remembers no samples: it starts from new ones."""
+        tr = self._tracker
+        k = 0
+        hint = (tr.alpha, tr.a1, tr.a2)
+        if all(math.isfinite(v) for v in hint) and hint[1] > 0.0 and hint[2] > 0.0:
+            self._hint = hint              # the estimate before the fault competes in the new search
+        if isinstance(tr, WindowTracker):
+            # the newest samples of the window (after a detected change, the post-change ones only)
+            k = max(0, min(int(tr.sc[W.SC_RCOUNT]), tr.n - tr.window_start, MAX_SEARCH_SAMPLES))
+            W.ring_copy(tr.ring, tr._ring_position(tr.n - k), self._bu[:k], self._by[:k])
+        self._drop_tracker()
+        self._restarted = True
+        self._nbuf = k
+        self._n_shift = self.samples - k
+        moves = np.flatnonzero(self._bu[1:k] != self._bu[:k - 1]) if k > 1 else ()
+        self._first_change = int(moves[0]) + 1 if len(moves) else None
+        self._fault_fit_after = 0
+        return (f"tracker restarted: a new search on the {k} remembered samples ({k * self._h:.3g} s)" if k else
+                "tracker restarted: a new search on new samples")
+
+    def _drop_tracker(self) -> None:
+        """Forget the tracker and any start-up under way (their events and re-searches kept, in stream time)."""
+        tr, self._tracker = self._tracker, None
+        if tr is not None:
+            shift = self._n_shift * self._h
+            self._past_events += [_shifted(ev, shift, "change") for ev in tr.events]
+            self._past_researches = (self._past_researches + [_shifted(r, shift) for r in tr.researches])[-50:]
+        self._starting = None
+        self._search = None
+        self._grid_plan = None
+        self._catchup = 0
+        self._phase = "buffering"
+
+    def _start_over(self, again: BaseException) -> str:
+        """The last resort when a recovery itself fails: ``reset()``, the fault record and counters kept."""
+        keep = (self.samples, self.skipped_nonfinite, self.gaps, self.input_outliers, self.internal_faults,
+                self._faults, self._past_events, self._past_researches)
+        self.reset()
+        (self.samples, self.skipped_nonfinite, self.gaps, self.input_outliers, self.internal_faults,
+         self._faults, self._past_events, self._past_researches) = keep
+        self._n_shift = self.samples
+        return f"the recovery failed ({type(again).__name__}: {one_line(again)}): started over from nothing"
+
+    def _fault_reason(self) -> tuple[str, str]:
+        """("degraded", the open fault named) while the estimator re-converges after it."""
+        ev = self._fault_open or (self._faults[-1] if self._faults else None)
+        if ev is None:
+            return "degraded", "internal fault"
+        return "degraded", (f"internal fault at t={ev['t']:.4g} s ({ev['error']} in {ev['where']}: {ev['message']}); "
+                            f"{ev['recovery']}; re-converging")
+
+    def _fault_cleared(self, quality: str) -> bool:
+        """Has the estimator re-converged after the open fault? A window fit after the recovery, and every check
+        passed (or a whole window of stream since: what is wrong then is the checks' to say)."""
+        tr = self._tracker
+        if tr is None or self._catchup or tr.fit.sample <= self._fault_fit_after:
+            return False
+        since = self.samples * self._h - self._fault_open["t"]
+        return not quality or since > (self.window_s or 30.0)
 
     # ------------------------------------------------------------------ monitoring
     def _noise(self) -> float:
@@ -688,6 +961,10 @@ class OnlineEstimator(StoredParams):
         passed (empty before): the estimate's creep part can be trusted while its resonance is not.
         """
         quality, reason = self._checks()
+        if self._fault_open is not None and self._fault_cleared(quality):
+            self._fault_open = None
+        if self._fault_open is not None:
+            return (*self._fault_reason(), [])
         if quality:
             return quality, reason, []
         tr = self._tracker
@@ -716,13 +993,14 @@ class OnlineEstimator(StoredParams):
             return "provisional", "replaying the start-up buffer"
         if tr.sc[W.SC_STUCK]:
             return "degraded", "output frozen or clipped while the model says it moves"
-        now = self.samples * self._h
+        shift = self._n_shift * self._h    # the tracker's time to stream time (non-zero after a fault's restart)
+        now = self.samples * self._h - shift
         if tr.events and (not tr.events[-1]["settled"] or now - tr.events[-1]["detected_t"] < 1.5):
             ev = tr.events[-1]
             if ev.get("estimate_settled") is False:
-                return "provisional", (f"estimate corrected at t={ev['t']:.3g} s ({', '.join(ev['moved'])} moved; "
+                return "provisional", (f"estimate corrected at t={ev['t'] + shift:.3g} s ({', '.join(ev['moved'])} moved; "
                                        "it had not settled: a change of the estimate, maybe not of the plant)")
-            return "changing", f"change detected at t={ev['t']:.3g} s ({', '.join(ev['moved'])} moved)"
+            return "changing", f"change detected at t={ev['t'] + shift:.3g} s ({', '.join(ev['moved'])} moved)"
         dis = tr.disagreement
         if dis is not None and now - dis["t"] < 1.5:
             moves = ", ".join(f"{k} {100 * v:+.0f} %" for k, v in dis["moves"].items())
@@ -731,7 +1009,7 @@ class OnlineEstimator(StoredParams):
         if tr.fit.sample == 0:
             rs = tr.researches[-1] if tr.researches and tr.researches[-1]["switched"] else None
             return "provisional", ("first window fit pending" if rs is None else
-                                   f"resonance re-searched at t={rs['t']:.3g} s ({', '.join(rs['moved'])} moved)")
+                                   f"resonance re-searched at t={rs['t'] + shift:.3g} s ({', '.join(rs['moved'])} moved)")
         held = tr.sc[W.SC_SINCE] * self._h
         if self.window_s is not None and held > 3.0 * self.window_s:    # < 5 % of the last step's weight left
             return "provisional", (f"input constant for {held:.3g} s: the window no longer holds an input change "
@@ -758,6 +1036,18 @@ def _array(x, name: str) -> np.ndarray:
     if a.ndim != 1:
         raise DataError(f"update_block(): {name} must be one-dimensional, got shape {a.shape}")
     return a
+
+
+def _shifted(item: dict, shift: float, kind: str | None = None) -> dict:
+    """A tracker's event or re-search for the caller: private keys dropped, its times moved by ``shift`` (s) to
+    stream time (non-zero after a fault's restart), and its ``kind`` if given."""
+    out = {} if kind is None else {"kind": kind}
+    out.update((k, v) for k, v in item.items() if not k.startswith("_"))
+    if shift:
+        for key in ("t", "detected_t", "settled_t", "done_t"):
+            if key in out:
+                out[key] += shift
+    return out
 
 
 def _finite(x: float, default: float = 0.0) -> float:
