@@ -53,6 +53,15 @@ FINE_ROWS = 2000
 #: 12000 once. At 12000 the steps after a change were ~4400 calls of update() over 5 us per 100 s of the
 #: latency stream (its p99 is the 10000th slowest call), at 24000 ~2100 calls of 15 us mean.
 UNIT_WORK = 24000
+#: A candidate's preparation in the multiply-adds of UNIT_WORK (its model coefficients, resonance step and zeroed
+#: sums, one kernel call: ~2.7 us; FREE_PREPARE_WORK with the unknown start's rows cache and Gram matrix, ~5
+#: us; a multiply-add of UNIT_WORK is ~0.55 ns): the first unit of its evaluation does it with fewer rows
+#: (``_row_units``). It used to be a unit of its own: with a unit's ~3 us of Python, a
+#: candidate from rest on 501 rows took three units (3.4, 15.6 and 1.8 us: the last a single row) for one's work.
+PREPARE_WORK = 5000
+FREE_PREPARE_WORK = 9500
+#: A unit may carry up to this fraction over UNIT_WORK rather than leave a nearly empty one (``_row_units``).
+UNIT_SLACK = 0.1
 #: Candidates refined from the grid.
 REFINE = 3
 #: Kept rows (and decay rates) a search's ``FreeRowCache`` holds per stride: a search's strides keep at most
@@ -469,6 +478,21 @@ def _projected(acc: np.ndarray) -> tuple[float, float, float]:
     return (max(cost, 0.0) / n if math.isfinite(cost) else math.inf), b, c
 
 
+def _row_units(n: int, per_row: float, first: float) -> Generator:
+    """(r0, r1) row ranges of a candidate's evaluation, one per unit of background work: ``first`` work (its
+    preparation, done before the first range) and n rows of ``per_row`` each, cut into the fewest equal units
+    of at most ~UNIT_WORK (up to UNIT_SLACK more rather than a unit with a sliver of rows)."""
+    units = max(1, math.ceil((first + n * per_row) / UNIT_WORK - UNIT_SLACK))
+    lead = first / per_row
+    span = (n + lead) / units
+    r0 = 0
+    for i in range(1, units):
+        r1 = min(n, max(r0, int(i * span - lead)))
+        yield r0, r1
+        r0 = r1
+    yield r0, n
+
+
 class SearchScratch:
     """One search's small work arrays, allocated ahead by the searches' owner (the estimator, a tracker) for one
     search at a time: a search is built inside update(), where each numpy allocation from cold Python costs
@@ -612,6 +636,8 @@ class ResonanceSearch:
         self._grid_work = (sc.costs, sc.ranked, sc.picks)
         self._rows_cache = sc.free_rows
         self._rows_cache.clear()
+        # (looked up once: ~1.3 us of Python per candidate)
+        self._free_arrays = None if free is None else _judge_arrays(sc, self.free, basis.h)
         #: the grid's frequencies (none with ``starts``): given, or computed by the first unit (``_run``; with the
         #: construction, in one update(), they were ~70 us of cold numpy and Python)
         self._freqs = freqs
@@ -661,33 +687,30 @@ class ResonanceSearch:
         vz, x = self._vz, self._x
         vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
                             self._rc, vz, x, self._acc)
-        f, decay, e, G = _judge_arrays(self._scratch, decays, self.basis.h)
-        _judge_reset(f, e, G)
-        yield
+        mine = decays == self.free
+        f, decay, e, G = self._free_arrays if mine else _judge_arrays(self._scratch, decays, self.basis.h)
         n = self.u.size
         if stride == 1 and not closed:
-            chunk = max(16, int(UNIT_WORK / (self.basis.size + 30 + 6 * e.size)))
-            for r0 in range(0, n, chunk):
-                _rows_free(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, f, decay, e, r0,
-                           min(n, r0 + chunk), self.lead, G)
+            _judge_reset(f, e, G)
+            for r0, r1 in _row_units(n, self.basis.size + 30 + 6 * e.size, FREE_PREPARE_WORK):
+                _rows_free(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, f, decay, e, r0, r1, self.lead, G)
                 yield
             return G
-        mine = decays == self.free
         rates = self._free_rates if mine else np.array(decays, dtype=float)
         m = rates.size
         slot, mode = self._rows_cache.claim(stride, n, m) if mine else (-1, 0)
         table = self._rows_cache.tables[slot] if slot >= 0 else _NO_TABLE
-        if mode == 2:                      # the shared entries from the first candidate at this stride
+        if mode == 2:                      # G zero but the shared entries from the first candidate at this stride
             _constant_entries(self._rows_cache.grams[slot], G)
             shared = m + 3 * (5 + m)       # the decays read, three rows of products
         else:                              # m exponentials (~20 each), every product
+            _judge_reset(f, e, G)
             shared = 20 * m + (5 + m) * (6 + m) / 2
         # the forced state at every row; at a kept row the node sum, 2 transcendental functions, the rest
         per_row = 6 + (self.basis.size + 40 + shared) / stride
-        chunk = max(16, int(UNIT_WORK / per_row))
-        for r0 in range(0, n, chunk):
+        for r0, r1 in _row_units(n, per_row, FREE_PREPARE_WORK):
             _rows_free_sparse(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, a1, a2, self.basis.h, rates, r0,
-                              min(n, r0 + chunk), stride, self.lead, G, table, mode)
+                              r1, stride, self.lead, G, table, mode)
             yield
         if mode == 1:
             self._rows_cache.keep(slot, G)
@@ -714,13 +737,8 @@ class ResonanceSearch:
         vz, x, acc = self._vz, self._x, self._acc
         vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
                             self._rc, vz, x, acc)
-        yield
-        n = self.u.size
-        per_row = 6 + self.basis.size / stride
-        chunk = max(16, int(UNIT_WORK / per_row))
-        for r0 in range(0, n, chunk):
-            _rows(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, r0, min(n, r0 + chunk), stride,
-                  self.lead, acc)
+        for r0, r1 in _row_units(self.u.size, 6 + self.basis.size / stride, PREPARE_WORK):
+            _rows(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, r0, r1, stride, self.lead, acc)
             yield
         return _projected(acc)
 
