@@ -161,7 +161,25 @@ def annotate(row: dict) -> dict:
         g = row["detectability_given"] = detectability(row["given_other_over_noise"])
         row["second_detectable_given"] = row["second_detectable"] and all(v["detectable"] for v in g.values())
     row.setdefault("second_detectable_given", row.get("second_detectable"))
+    if "hidden_pair_evidence_over_best" not in row and "ranking" in row:
+        row["hidden_pair_evidence_over_best"] = record_evidence(row)
     return row
+
+
+def record_evidence(row: dict, n: int = N) -> float | None:
+    """The BIC drop of the hidden pair (the combination when it is the pair, else the pair fitted directly)
+    over the best single fit, from the row's numbers (no fit): what the record itself holds for naming both.
+    At most ``EVIDENCE_THRESHOLD``: even the hidden pair, fitted, would not be significant, so the diagnosis
+    cannot name it whatever its search does (a noise draw the a-priori bound cannot see)."""
+    pair = list(row["params"])
+    over = row["combination_over_noise"] if row["combination_right"] else row.get("hidden_pair_fitted_over_noise")
+    if over is None:
+        return None
+    top, top_ev = row["ranking"][0][0], row["ranking"][0][1]
+    ln_base_top = (top_ev + extra_params(top) * math.log(n)) / n        # ln(RSS_base / RSS_top)
+    ln_base_pair = 2.0 * math.log(row["base_over_noise"] / over)
+    dk = max(sum(extra_params(e) for e in pair) - extra_params(top), 1)
+    return n * (ln_base_pair - ln_base_top) - dk * math.log(n)
 
 
 def add_given(path: str, which: str) -> dict:
@@ -284,6 +302,7 @@ def cell(rows: list[dict]) -> dict:
     weaker = [min(r["alone_over_noise"].values()) for r in ok]
     detectable = [r for r in ok if r["second_detectable_given"]]
     hidden = [r for r in ok if not r["second_detectable_given"]]
+    held = [r for r in ok if _in_record(r)]
     out = {"records": n, "errors": n - len(ok),
            "both_named": _count(ok, n, lambda r: r["both_named"]),
            "combination_right": _count(ok, n, lambda r: r["combination_right"]),
@@ -307,12 +326,22 @@ def cell(rows: list[dict]) -> dict:
            "both_named_where_detectable": _count(detectable, len(detectable), lambda r: r["both_named"]),
            "at_floor_where_detectable": _count(detectable, len(detectable), lambda r: r["at_floor"]),
            # below the bound the right answer is the stronger effect alone, no significant pair, no stand-in
-           "right_where_undetectable": _count(hidden, len(hidden), _right_undetectable)}
+           "right_where_undetectable": _count(hidden, len(hidden), _right_undetectable),
+           # the record's own evidence: the hidden pair, chosen or fitted directly, beats the best single by the BIC
+           "second_in_record": _count(ok, n, _in_record),
+           "both_named_where_in_record": _count(held, len(held), lambda r: r["both_named"])}
     fw = [r for r in ok if "forward" in r]
     if fw:
         for key in ("right", "at_floor", "right_swap", "at_floor_swap"):
             out["forward_" + key] = _count(fw, len(fw), lambda r, k=key: r["forward"][k])
     return out
+
+
+def _in_record(row: dict) -> bool:
+    """Whether the record holds the evidence for both effects (``record_evidence`` above the threshold; a row
+    named both has it by definition)."""
+    ev = row.get("hidden_pair_evidence_over_best")
+    return bool(row["both_named"] or (ev is not None and ev > EVIDENCE_THRESHOLD))
 
 
 def _right_undetectable(row: dict) -> bool:
