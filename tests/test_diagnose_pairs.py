@@ -184,3 +184,24 @@ def test_a_pair_the_record_cannot_tell_from_the_chosen_one_is_named_as_its_rival
     assert [set(r["effects"]) for r in rivals] == [{"hysteresis", "drift", "ramp"} - (chosen - {"hysteresis"})]
     assert abs(rivals[0]["behind"]) < 1.0
     assert any("not firm" in w for w in d.warnings)
+
+
+def test_an_effect_too_weak_to_be_named_beside_another_is_counted_apart():
+    """The 1.3-3x band: the weaker effect may be below what the diagnosis' own rule (BIC drop > 10 for its dk
+    parameters) could pass even if the fit took out all of it (``bench_diagnose_pairs.detectability``). A drift at
+    0.01x the noise alone cannot be named on 6000 samples, at 0.3x it must be; hysteresis' ten weights need more
+    signal than the drift's one rate; such a record counts in ``right_where_undetectable``, not as a miss."""
+    bench = _bench()
+    d = bench.detectability({"drift": 0.01, "hysteresis": 0.3})
+    assert d["drift"]["dk"] == 1 and d["hysteresis"]["dk"] == 10
+    assert not d["drift"]["detectable"] and d["hysteresis"]["detectable"]
+    assert bench.detectability({"drift": 0.3})["drift"]["detectable"]
+    assert bench.detectability({"drift": 0.1})["drift"]["p_named"] > bench.detectability({"hysteresis": 0.1})[
+        "hysteresis"]["p_named"]
+    row = {"alone_over_noise": {"hysteresis": 2.0, "drift": 0.01}, "params": {"hysteresis": {}, "drift": {}},
+           "verdict": "hysteresis", "combination": None, "combination_significant": None, "both_named": False,
+           "at_floor": False}
+    bench.annotate(row)
+    assert row["second_detectable"] is False and bench._right_undetectable(row)
+    row.update(combination=["hysteresis", "second_creep"], combination_significant=True)
+    assert not bench._right_undetectable(row)                            # a false pair is wrong at any strength
