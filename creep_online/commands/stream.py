@@ -147,7 +147,8 @@ def _report(est: OnlineEstimator, latency: dict, extra: dict) -> dict:
     out = {"alpha": e.alpha, "a1": e.a1, "a2": e.a2, "b": e.b, "samples": e.samples, "latency_us": latency,
            "phase": e.phase, "quality": e.quality, "reason": e.reason, "t_c": e.t_c, "fn_hz": e.fn_hz,
            "zeta": e.zeta, "offset": e.offset, "uncertainty": e.uncertainty, "skipped": est.skipped_nonfinite,
-           "internal_faults": est.internal_faults, "gaps": est.gaps, "alpha_updates": est.alpha_updates, "divergences": est.divergences,
+           "internal_faults": est.internal_faults, "gaps": est.gaps, "alpha_updates": est.alpha_updates,
+           "divergences": est.divergences,
            "outliers": e.outliers, "input_outliers": e.input_outliers, "noise_rms": e.noise_rms,
            "residual_rms": e.residual_rms, "events": e.events, "t": e.t, "dt": est.dt,
            "b_rate": e.b_rate, "alpha_rate": e.alpha_rate, "researches": e.researches}

@@ -880,10 +880,10 @@ class OnlineEstimator(StoredParams):
         return f"the start-up buffer dropped after {STARTUP_FAULTS} faults: the search starts again on new samples"
 
     def _restart(self) -> str:
-        """The tracker is not trustworthy: dropped, and the newest remembered samples of its window (its ring, up to
-        the search's ``MAX_SEARCH_SAMPLES``) become the start-up buffer of a stream in operation: a fresh search, a fresh
-        tracker (built here if its spare is used: ~0.4 ms once), the replay of the buffer. The recursive tracker
-        remembers no samples: it starts from new ones."""
+        """The tracker is not trustworthy: dropped, and the newest remembered samples of its window (its ring, up
+        to the search's ``MAX_SEARCH_SAMPLES``) become the start-up buffer of a stream in operation: a fresh search,
+        a fresh tracker (built here if its spare is used: ~0.4 ms once), the replay of the buffer. The recursive
+        tracker remembers no samples: it starts from new ones."""
         tr = self._tracker
         k = 0
         hint = (tr.alpha, tr.a1, tr.a2)
@@ -998,7 +998,8 @@ class OnlineEstimator(StoredParams):
         if tr.events and (not tr.events[-1]["settled"] or now - tr.events[-1]["detected_t"] < 1.5):
             ev = tr.events[-1]
             if ev.get("estimate_settled") is False:
-                return "provisional", (f"estimate corrected at t={ev['t'] + shift:.3g} s ({', '.join(ev['moved'])} moved; "
+                return "provisional", (f"estimate corrected at t={ev['t'] + shift:.3g} s "
+                                       f"({', '.join(ev['moved'])} moved; "
                                        "it had not settled: a change of the estimate, maybe not of the plant)")
             return "changing", f"change detected at t={ev['t'] + shift:.3g} s ({', '.join(ev['moved'])} moved)"
         dis = tr.disagreement
@@ -1009,7 +1010,8 @@ class OnlineEstimator(StoredParams):
         if tr.fit.sample == 0:
             rs = tr.researches[-1] if tr.researches and tr.researches[-1]["switched"] else None
             return "provisional", ("first window fit pending" if rs is None else
-                                   f"resonance re-searched at t={rs['t'] + shift:.3g} s ({', '.join(rs['moved'])} moved)")
+                                   f"resonance re-searched at t={rs['t'] + shift:.3g} s "
+                                   f"({', '.join(rs['moved'])} moved)")
         held = tr.sc[W.SC_SINCE] * self._h
         if self.window_s is not None and held > 3.0 * self.window_s:    # < 5 % of the last step's weight left
             return "provisional", (f"input constant for {held:.3g} s: the window no longer holds an input change "

@@ -226,7 +226,7 @@ def _rows_free_sparse(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.nda
     ``mode`` (``FreeRowCache``): 0 every entry of G from the decays' exponentials; 1 the same, the decays of
     kept row k also stored in ``table[k // stride]``; 2 the decays read from the table and only the
     candidate's entries of G accumulated (``_add_candidate_row``), the rest (the constant, the decays, y:
-    the same for every candidate) left as they are (``FreeRowCache.start``)."""
+    the same for every candidate) left as they are (``_constant_entries``)."""
     m = rates.shape[0]
     p = 5 + m
     row = np.empty(p)
