@@ -354,10 +354,13 @@ def test_refit_machine_equals_its_kernels_in_sequence(wide):
         units += 1
     normal_slices = -(-tr.p // int(tr._wk[RF.RF_NORMAL_ROWS]))
     cost_slices = -(-tr.p // int(tr._wk[RF.RF_COST_ROWS]))
-    assert normal_slices > 1                          # the slices are exercised
-    # the drift origin's move (1), scaling (1); per step the model coefficients, the Jacobian's, the rows, the
-    # solve, the trial's coefficients, its cost; the covariance's factor and inverse
-    assert units == 2 + T.REFIT_STEPS * (2 + normal_slices + 2 + cost_slices) + 2
+    inverse_slices = -(-theta.size // int(tr._wk[RF.RF_INVERSE_COLS]))
+    warm_slices = -(-tr.p // int(tr._wk[RF.RF_WARM_ROWS]))
+    assert normal_slices > 1 and inverse_slices > 1 and warm_slices > 1   # the slices are exercised
+    # F warmed, the drift origin's move (1), scaling (1); per step the model coefficients, their resonance
+    # derivatives, the Jacobian's, the rows, the solve, the trial's coefficients, its cost; the covariance's
+    # factor and its inverse's columns
+    assert units == warm_slices + 2 + T.REFIT_STEPS * (3 + normal_slices + 2 + cost_slices) + 1 + inverse_slices
     head, fitted, var = RF.result(tr._wk)
     assert np.array_equal(fitted, theta) and np.array_equal(var, np.diag(cov))
     assert head[RF.RF_AFTER] == out[1] and head[RF.RF_DRIFT] == 0.0
@@ -383,14 +386,21 @@ def test_the_per_sample_kernel_runs_the_refit_machine_to_the_same_result(slices,
     rng = np.random.default_rng(1)
     ys = [math.nan if outputs == "missing" else 0.8 + 1e-3 * rng.standard_normal() for _ in range(2000)]
     RF.begin(tr.st, tr.S, tr._shift, tr._wk, 0, False, False, 1, True)
-    # the reference: the same first sample (sample_work takes it before the first slice), the drift origin's
-    # move (the first slice), with one slice per call the second sample, then the machine
+    # the reference: until the statistics are frozen (the warming slices, the drift origin's move, the scaling)
+    # each call's sample (sample_work takes it before its slices), then its slices; then the machine in one go
     st, S, shift, theta, wk, ring = (a.copy() for a in (tr.st, tr.S, tr._shift, tr.theta, tr._wk, tr.ring))
-    W.sample(0.5, ys[0], st, S, ring)
-    RF.refit_unit(st, S, shift, theta, wk, lam, dx)
-    if slices == 1:
-        W.sample(0.5, ys[1], st, S, ring)
-    expected = 1
+    before = 0
+    frozen = False
+    while not frozen:
+        W.sample(0.5, ys[before // slices], st, S, ring)
+        for _ in range(slices):
+            RF.refit_unit(st, S, shift, theta, wk, lam, dx)
+            before += 1
+            frozen = wk[RF.RF_STAGE] == RF.ST_JACOBIAN
+            if frozen:
+                break
+    assert before > 2                                  # (the warming slices and the move came first)
+    expected = before
     probe = wk.copy()
     while not RF.refit_unit(st.copy(), S.copy(), shift.copy(), theta.copy(), probe, lam, dx):
         expected += 1

@@ -71,6 +71,34 @@ def model_coefficients(alpha: float, lam: np.ndarray, dx: float, a1: float, a2: 
 
 
 @njit(cache=CACHE)
+def model_values(alpha: float, lam: np.ndarray, dx: float, a1: float, a2: float, v: np.ndarray) -> None:
+    """``model_coefficients``' v alone, the same arithmetic operation for operation: without dv/dalpha it
+    takes no logarithm per node (the re-fit's trial coefficients, ``window.trial_coefficients``)."""
+    q = lam.shape[0]
+    s = math.sin(math.pi * alpha) / math.pi
+    lo = lam[1] * math.exp(-dx)
+    hi = lam[q - 1] * math.exp(dx)
+    e0 = math.exp(-(1.0 - alpha) * dx)
+    w0 = s * dx * lo ** (1.0 - alpha) / (1.0 - e0)
+    e1 = math.exp(-alpha * dx)
+    sum_x0 = s * dx * hi ** (-alpha) / (1.0 - e1)
+    sum_a = 0.0
+    for i in range(q):
+        if i == 0:
+            w = w0
+            li = 0.0
+        else:
+            li = lam[i]
+            w = s * dx * li ** (1.0 - alpha)
+        a = 1.0 / (a2 * li * li - a1 * li + 1.0)
+        v[i] = w * a
+        sum_x0 += w * a * (a2 * li - a1)
+        sum_a += w * a
+    v[q] = sum_x0
+    v[q + 1] = -a2 * sum_a
+
+
+@njit(cache=CACHE)
 def advance_state(st: np.ndarray, co: np.ndarray, u: float) -> None:
     """One sample of the state: SOE nodes and the resonance pair, exact for a zero-order-held u.
 

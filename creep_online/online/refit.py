@@ -81,12 +81,23 @@ RF_WIDE_DUE = 49      # 1: the wide test follows this re-fit (``_plan``)
 RF_WIDE_ON = 50       # its threshold (the tracker's WIDE_ON)
 RF_WIDE_STAT = 51     # its last statistic
 RF_GAIN_NARROW = 52   # its Gauss-Newton gain without the extra free responses (its second slice subtracts it)
-HEAD = 53
+RF_INVERSE_COLS = 53  # columns of the covariance's inverse per slice (``SLICE_MACS``, ``SOLVE_MAC_COST``)
+RF_AFTER_WARM = 54    # the stage that follows the warming slices (``ST_WARM``): ST_BEGIN or ST_SINCE
+RF_WARM_ROWS = 55     # rows warmed per slice (``WARM_SLICE``)
+RF_WARMED = 56        # the warming reads' sum (kept, so that the reads are not optimized away)
+HEAD = 57
 
 #: Multiply-adds per slice of a re-fit (about a microsecond): the per-sample kernel runs one slice per
 #: sample while a re-fit or a change test is under way (``sample_work``), so a 10 kHz control loop sees
 #: ~1-2 us more on ~2 % of its samples, not 7-45 us on ~1 % of them.
 SLICE_MACS = 4000
+#: A triangular solve's multiply-add in the cost of a vectorized row loop's (each waits for the one before:
+#: measured, the covariance's 15 solves of 15 took ~4 us, ~1.2 ns per multiply-add, against ~0.3 ns in the rows).
+SOLVE_MAC_COST = 4
+#: Entries of a cold matrix brought into the cache per slice before a stage that must touch all of it in one
+#: slice (``ST_WARM``: the re-fit's frozen statistics F before they are written at one instant, a change test's
+#: snapshot and difference before the difference is taken at one instant).
+WARM_SLICE = 700
 
 #: Stages of a fit, in order: (idle until ``begin``, ``queue_test`` or ``start_test``), for a re-fit the drift
 #: origin's move (``window.move_origin``, O(P^2): in a slice, not in the Python call that starts the re-fit) and
@@ -101,7 +112,7 @@ SLICE_MACS = 4000
 #: Each call does one stage or slice: about a microsecond of work (``SLICE_MACS``).
 (ST_IDLE, ST_SCALE, ST_JACOBIAN, ST_ASSEMBLE, ST_ROWS, ST_SOLVE, ST_TRIAL_POINT, ST_TRIAL,
  ST_COVARIANCE, ST_INVERSE, ST_SCORE, ST_SCORE_WITHOUT, ST_BEGIN, ST_SINCE, ST_SINCE_FINISH, ST_WIDE,
- ST_WIDE_WITH) = range(17)
+ ST_WIDE_WITH, ST_WARM, ST_SINCE_SCALE, ST_DERIVATIVES) = range(20)
 
 #: Parameter masks (rows of the masks block): all free, drift rates fixed, alpha and rates fixed, the
 #: change test's (the resonance, the gain and the offset), and the change test's with the drift rates; then
@@ -131,6 +142,8 @@ def allocate(p: int, k: int, r0: int, steps: int, policy: dict, slots: int = 0,
     mq = p - (k - 4)
     wk[RF_NORMAL_ROWS] = max(1, SLICE_MACS // (4 * mq + p))
     wk[RF_COST_ROWS] = max(1, SLICE_MACS // p)
+    wk[RF_INVERSE_COLS] = max(1, SLICE_MACS // (SOLVE_MAC_COST * k * k))
+    wk[RF_WARM_ROWS] = max(1, WARM_SLICE // p)
     for name, value in policy.items():
         wk[globals()["RF_" + name]] = value
     o = _masks_at(p, k)
@@ -256,7 +269,8 @@ def begin(st: np.ndarray, S: np.ndarray, shift: np.ndarray, wk: np.ndarray, wind
     time a re-fit starts, it cost ~10 us of the Python call that starts it, which is then over 25 us."""
     _plan(wk, st[W.SC_N], window_start, drift_on, converged, refits, hold_alpha)
     wk[RF_ROW] = 0.0
-    wk[RF_STAGE] = ST_BEGIN
+    wk[RF_AFTER_WARM] = ST_BEGIN
+    wk[RF_STAGE] = ST_WARM
 
 
 @njit(cache=CACHE)
@@ -297,6 +311,15 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
     stage = int(wk[RF_STAGE])
     if stage == ST_IDLE:
         return True
+    if stage == ST_WARM:               # the one-instant stage's cold operands into the cache, in slices: the
+        i0 = int(wk[RF_ROW])           # snapshot (read) and F (zeroed) for a change test, F for a re-fit; cold,
+        i1 = min(i0 + int(wk[RF_WARM_ROWS]), p)     # SCALE and SINCE were ~8 and ~11 us, with them warm ~2
+        warm_from = _slot(wk, p, k, int(wk[RF_SNAP]))[0] if wk[RF_AFTER_WARM] == ST_SINCE else F
+        wk[RF_WARMED] += W.warm_rows(warm_from, F, i0, i1)
+        wk[RF_ROW] = i1
+        if i1 == p:
+            wk[RF_STAGE] = wk[RF_AFTER_WARM]
+        return False
     if stage == ST_SINCE:              # a change test's statistics since its snapshot (``queue_test``), in two
         S0, sy0, shift0, theta0 = _slot(wk, p, k, int(wk[RF_SNAP]))     # slices: the difference at this instant,
         wk[RF_FYY] = W.since_difference(st, S, S0, sy0, wk[RF_SNAP_SYY], F, fy)
@@ -305,8 +328,18 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
         return False
     if stage == ST_SINCE_FINISH:       # ... then moved to the live drift origin and scaled (only F, fy)
         S0, sy0, shift0, theta0 = _slot(wk, p, k, int(wk[RF_SNAP]))
-        wk[RF_FYY] = W.since_finish(st, S0, sy0, shift, shift0, F, fy, wk[RF_FYY], wk[RF_SINCE_G])
-        wk[RF_STAGE] = ST_JACOBIAN
+        W.since_moved(st, S0, sy0, shift, shift0, F, fy)
+        wk[RF_ROW] = 0.0
+        wk[RF_STAGE] = ST_SINCE_SCALE
+        return False
+    if stage == ST_SINCE_SCALE:        # ... in row slices (reads only the test's own arrays)
+        i0 = int(wk[RF_ROW])
+        i1 = min(i0 + int(wk[RF_WARM_ROWS]), p)
+        fyy = W.since_scaled(F, fy, wk[RF_FYY], wk[RF_SINCE_G], i0, i1)
+        wk[RF_ROW] = i1
+        if i1 == p:
+            wk[RF_FYY] = fyy
+            wk[RF_STAGE] = ST_JACOBIAN
         return False
     if stage == ST_BEGIN:              # a re-fit's drift origin to the newest sample (``begin``); the statistics
         W.move_origin(st, S, shift)    # are scaled in the next slice (the two together, cold, were ~15-25 us)
@@ -329,10 +362,14 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
     a1l, a2l, fyy = wk[RF_A1L], wk[RF_A2L], wk[RF_FYY]
     if stage == ST_JACOBIAN:           # the model coefficients at theta
         kernels.model_coefficients(theta[0], lam, dx, math.exp(theta[1]), math.exp(theta[2]), v, dv)
+        wk[RF_STAGE] = ST_DERIVATIVES
+        return False
+    if stage == ST_DERIVATIVES:        # their resonance derivatives (into fm and mt: the rows and the trial fill
+        W.resonance_derivatives(theta, lam, dx, fm, mt)     # them later)
         wk[RF_STAGE] = ST_ASSEMBLE
         return False
     if stage == ST_ASSEMBLE:           # J's coefficients
-        W.jacobian_assemble(theta, a1l, a2l, lam, dx, v, dv, C)
+        W.jacobian_assemble(theta, a1l, a2l, lam, dx, v, dv, C, fm, mt)
         W.normal_prepare(theta, C, At, m)
         wk[RF_ROW] = 0.0
         wk[RF_STAGE] = ST_ROWS
@@ -355,14 +392,15 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
         return False
     out = wk[RF_BEFORE:RF_MOVED + 1]
     if stage == ST_SOLVE:              # the damped step
-        ok, mu = W.trial_point(theta, free, wk[RF_MU], H, g, wk[RF_COST], wk[RF_LO], wk[RF_HI], trial, out)
+        ok, mu = W.trial_point(theta, free, wk[RF_MU], H, g, wk[RF_COST], wk[RF_LO], wk[RF_HI], trial, out,
+                               L, d, mt)    # (the covariance's scratch, and the trial's coefficients': idle now)
         if not ok:
             wk[RF_MU] = mu
             return _step_done(wk)
         wk[RF_STAGE] = ST_TRIAL_POINT
         return False
     if stage == ST_TRIAL_POINT:        # the trial's coefficients
-        W.full_coefficients(trial, a1l, a2l, lam, dx, mt)
+        W.trial_coefficients(trial, a1l, a2l, lam, dx, mt, v)
         wk[RF_ROW] = 0.0
         wk[RF_PARTIAL] = fyy
         wk[RF_STAGE] = ST_TRIAL
@@ -378,9 +416,16 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
         return _step_done(wk)
     if stage == ST_COVARIANCE:         # the factor, then the inverse
         wk[RF_FACTORED] = 1.0 if W.covariance_factor(H, free, L, d) else 0.0
+        wk[RF_ROW] = 0.0
         wk[RF_STAGE] = ST_INVERSE
         return False
-    if stage == ST_INVERSE:
+    if stage == ST_INVERSE:            # the inverse's columns in slices (k solves: ~6 us in one); the last judges it
+        j0 = int(wk[RF_ROW])
+        j1 = min(j0 + int(wk[RF_INVERSE_COLS]), k)
+        W.covariance_columns(L, wk[RF_FACTORED] != 0.0, cov, trial, j0, j1)
+        wk[RF_ROW] = j1
+        if j1 < k:
+            return False
         W.covariance_inverse(L, d, wk[RF_FACTORED] != 0.0, cov, free, H)
         for i in range(k):
             var[i] = cov[i, i]
@@ -541,7 +586,9 @@ def queue_test(wk: np.ndarray, slot: int, syy0: float, free_rates: bool) -> None
     wk[RF_SNAP] = slot
     wk[RF_SNAP_SYY] = syy0
     wk[RF_FREE_RATES] = 1.0 if free_rates else 0.0
-    wk[RF_STAGE] = ST_SINCE
+    wk[RF_ROW] = 0.0
+    wk[RF_AFTER_WARM] = ST_SINCE
+    wk[RF_STAGE] = ST_WARM
 
 
 @njit(cache=CACHE)

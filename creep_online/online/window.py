@@ -49,6 +49,7 @@ import math
 import numpy as np
 from numba import njit
 
+from . import kernels
 from .kernels import model_coefficients
 
 CACHE = True
@@ -242,6 +243,29 @@ def full_coefficients(theta: np.ndarray, a1l: float, a2l: float, lam: np.ndarray
     b = theta[3]
     for i in range(q + ONE):
         m[i] = b * k[i]
+    for i in range(q + ONE, p):
+        m[i] = theta[4 + i - q - ONE]
+
+
+@njit(cache=CACHE)
+def trial_coefficients(theta: np.ndarray, a1l: float, a2l: float, lam: np.ndarray, dx: float, m: np.ndarray,
+                       v: np.ndarray) -> None:
+    """``full_coefficients`` into m with the caller's scratch v (Q + 2), and without the alpha-derivative that
+    ``coefficients`` computes and ``full_coefficients`` drops (a logarithm per node, and four temporaries: about
+    a third of the re-fit's trial-point slice). The same arithmetic for m, operation for operation."""
+    q = lam.shape[0]
+    p = m.shape[0]
+    a1 = math.exp(theta[1])
+    a2 = math.exp(theta[2])
+    kernels.model_values(theta[0], lam, dx, a1, a2, v)
+    b = theta[3]
+    for i in range(q + 2):
+        m[i] = b * v[i]
+    d1 = a1 - a1l
+    d2 = a2 - a2l
+    for j in range(2):
+        m[q + 2 + j] = b * (d1 * v[q + j])
+        m[q + 4 + j] = b * (d2 * v[q + j])
     for i in range(q + ONE, p):
         m[i] = theta[4 + i - q - ONE]
 
@@ -443,6 +467,15 @@ def since_finish(st: np.ndarray, S0: np.ndarray, sy0: np.ndarray, shift: np.ndar
                  R: np.ndarray, ry: np.ndarray, ryy: float, g: float) -> float:
     """``since_difference``'s result with the snapshot moved to the live drift origin and scaled by the weight g
     of its instant: R full symmetric, ry, and the returned ryy at true scale. Reads only the state's sizes.
+    ``since_moved``, then ``since_scaled`` over every row (the change test runs them as slices)."""
+    since_moved(st, S0, sy0, shift, shift0, R, ry)
+    return since_scaled(R, ry, ryy, g, 0, R.shape[0])
+
+
+@njit(cache=CACHE)
+def since_moved(st: np.ndarray, S0: np.ndarray, sy0: np.ndarray, shift: np.ndarray, shift0: np.ndarray,
+                R: np.ndarray, ry: np.ndarray) -> None:
+    """The first part of ``since_finish``: the snapshot moved to the live drift origin (R's upper triangle, ry).
 
     A move of the origin is the regressor map x -> x (I - E), E holding t v in the rate columns' rows
     0..nv-1; two such maps compose additively (E fills only rate columns and reads none: E_i E_j = 0), so
@@ -478,14 +511,35 @@ def since_finish(st: np.ndarray, S0: np.ndarray, sy0: np.ndarray, shift: np.ndar
             for l in range(nv):
                 c += D[l, k] * sy0[l]
             ry[j] += c
+
+
+@njit(cache=CACHE)
+def since_scaled(R: np.ndarray, ry: np.ndarray, ryy: float, g: float, i0: int, i1: int) -> float:
+    """The last part of ``since_finish``, rows i0..i1: R's upper triangle mirrored and R, ry scaled by 1/g (the
+    weight of the snapshot's instant); returns ryy / g. Rows are independent (row i writes R[i, i:] and
+    R[i:, i], reads only R[i, i:])."""
     inv = 1.0 / g
-    for i in range(p):
-        for j in range(i, p):
+    for i in range(i0, i1):
+        for j in range(i, R.shape[0]):
             v = R[i, j] * inv
             R[i, j] = v
             R[j, i] = v
         ry[i] = ry[i] / g
     return ryy / g
+
+
+@njit(cache=CACHE)
+def warm_rows(A: np.ndarray, B: np.ndarray, i0: int, i1: int) -> float:
+    """Rows i0..i1 of A read (their sum returned: a value the caller keeps, so the reads stay) and of B zeroed:
+    brings a cold operand and a cold target of a stage that must run in one slice into the cache a few samples
+    ahead, in slices (the re-fit's frozen statistics F, a change test's snapshot and its difference)."""
+    s = 0.0
+    for i in range(i0, i1):
+        for j in range(A.shape[1]):
+            s += A[i, j]
+        for j in range(B.shape[1]):
+            B[i, j] = 0.0
+    return s
 
 
 @njit(cache=CACHE)
@@ -952,6 +1006,13 @@ def _resonance_derivatives(alpha: float, lam: np.ndarray, dx: float, a1: float, 
 
 
 @njit(cache=CACHE)
+def resonance_derivatives(theta: np.ndarray, lam: np.ndarray, dx: float, va1: np.ndarray, va2: np.ndarray) -> None:
+    """d v / d a1 and d v / d a2 at theta (``_resonance_derivatives``): the middle part of ``jacobian_coefficients``,
+    a slice of its own in the re-fit (a power per node: with the assembly, one slice was ~2.3 us)."""
+    _resonance_derivatives(theta[0], lam, dx, math.exp(theta[1]), math.exp(theta[2]), va1, va2)
+
+
+@njit(cache=CACHE)
 def jacobian_coefficients(theta: np.ndarray, a1l: float, a2l: float, lam: np.ndarray, dx: float,
                           C: np.ndarray) -> None:
     """Columns of C: d(phi . m)/d theta_j as coefficient vectors over phi (analytic)."""
@@ -959,22 +1020,21 @@ def jacobian_coefficients(theta: np.ndarray, a1l: float, a2l: float, lam: np.nda
     v = np.empty(q + 2)
     dv = np.empty(q + 2)
     model_coefficients(theta[0], lam, dx, math.exp(theta[1]), math.exp(theta[2]), v, dv)
-    jacobian_assemble(theta, a1l, a2l, lam, dx, v, dv, C)
+    va1, va2 = np.empty(q + 2), np.empty(q + 2)
+    resonance_derivatives(theta, lam, dx, va1, va2)
+    jacobian_assemble(theta, a1l, a2l, lam, dx, v, dv, C, va1, va2)
 
 
 @njit(cache=CACHE)
 def jacobian_assemble(theta: np.ndarray, a1l: float, a2l: float, lam: np.ndarray, dx: float, v: np.ndarray,
-                      dv: np.ndarray, C: np.ndarray) -> None:
-    """The second half of ``jacobian_coefficients``: C from the model coefficients v and dv/dalpha at theta
-    (``kernels.model_coefficients``) and their resonance derivatives."""
+                      dv: np.ndarray, C: np.ndarray, va1: np.ndarray, va2: np.ndarray) -> None:
+    """The last part of ``jacobian_coefficients``: C from the model coefficients v and dv/dalpha at theta
+    (``kernels.model_coefficients``) and their resonance derivatives va1, va2 (``resonance_derivatives``)."""
     q = lam.shape[0]
     n = C.shape[1]
     a1 = math.exp(theta[1])
     a2 = math.exp(theta[2])
     b = theta[3]
-    va1 = np.empty(q + 2)
-    va2 = np.empty(q + 2)
-    _resonance_derivatives(theta[0], lam, dx, a1, a2, va1, va2)
     C[:, :] = 0.0
     d1 = a1 - a1l
     d2 = a2 - a2l
@@ -1095,8 +1155,10 @@ def lm_trial(theta: np.ndarray, free: np.ndarray, mu: float, H: np.ndarray, g: n
     after, accepted]. Returns the next damping ``mu``. Three parts (``trial_point``, the trial's cost,
     ``trial_verdict``) that the re-fit runs as separate slices of background work; here in one call.
     """
-    trial = np.empty(theta.shape[0])
-    ok, mu_fail = trial_point(theta, free, mu, H, g, cost, lo, hi, trial, out)
+    n = theta.shape[0]
+    trial = np.empty(n)
+    ok, mu_fail = trial_point(theta, free, mu, H, g, cost, lo, hi, trial, out, np.empty((n, n)), np.empty(n),
+                              np.empty(n))
     if not ok:
         return mu_fail
     return trial_verdict(theta, trial, cost_of(trial, a1l, a2l, lam, dx, F, fy, fyy), cost, mu, out)
@@ -1104,44 +1166,56 @@ def lm_trial(theta: np.ndarray, free: np.ndarray, mu: float, H: np.ndarray, g: n
 
 @njit(cache=CACHE)
 def trial_point(theta: np.ndarray, free: np.ndarray, mu: float, H: np.ndarray, g: np.ndarray, cost: float,
-                lo: float, hi: float, trial: np.ndarray, out: np.ndarray) -> tuple:
-    """The damped Gauss-Newton step from theta into ``trial``; returns (solved, the damping if not)."""
+                lo: float, hi: float, trial: np.ndarray, out: np.ndarray, A: np.ndarray, d: np.ndarray,
+                x: np.ndarray) -> tuple:
+    """The damped Gauss-Newton step from theta into ``trial``; returns (solved, the damping if not).
+
+    In caller's scratch (A: k x k, d and x: k; the re-fit lends the covariance's, idle during its steps), the
+    scaled matrix's lower triangle built in A and factored in place: written with numpy (a copy of H, its
+    diagonal, an outer product, a quotient, isfinite checks) the step's ten temporaries were about half of its
+    ~2.3 us. The arithmetic is the same, operation for operation."""
     n = theta.shape[0]
-    A = H.copy()
-    r = g.copy()
     top = 0.0
     for i in range(n):
         top = max(top, abs(H[i, i]) * max(abs(theta[i]), 1.0) ** 2)
     for i in range(n):
         # a parameter the window carries (almost) no information about does not move
         if free[i] == 0.0 or not abs(H[i, i]) * max(abs(theta[i]), 1.0) ** 2 > 1e-14 * top:
-            A[i, :] = 0.0
-            A[:, i] = 0.0
-            A[i, i] = 1.0
-            r[i] = 0.0
+            x[i] = 0.0                     # (x marks it: held; its entries of the scaled matrix are the unit's)
+            d[i] = 1.0 + 1e-300
         elif free[i] == LINEAR:
-            A[i, i] += LINEAR_DAMPING * mu * H[i, i] + 1e-300
+            x[i] = 1.0
+            d[i] = math.sqrt(abs(H[i, i] + (LINEAR_DAMPING * mu * H[i, i] + 1e-300))) + 1e-300
         else:
-            A[i, i] += mu * H[i, i] + 1e-300
+            x[i] = 1.0
+            d[i] = math.sqrt(abs(H[i, i] + (mu * H[i, i] + 1e-300))) + 1e-300
     out[0] = cost
     out[1] = cost
     out[2] = 0.0
     failed = min(mu * 10.0, 1e8)
-    d = np.sqrt(np.abs(np.diag(A))) + 1e-300
-    An = A / np.outer(d, d)
-    rhs = r / d
-    if not (np.all(np.isfinite(An)) and np.all(np.isfinite(rhs))):
-        return False, failed
-    L = np.empty((n, n))
-    if not _cholesky(An, L):
-        return False, failed
-    step = np.empty(n)
-    _cholesky_solve(L, rhs, step)
-    step /= d
-    if not np.all(np.isfinite(step)):
-        return False, failed
     for i in range(n):
-        s = step[i]
+        for j in range(i + 1):
+            if x[i] == 0.0 or x[j] == 0.0:
+                a = 1.0 if i == j else 0.0
+            elif i == j:
+                a = H[i, i] + ((LINEAR_DAMPING if free[i] == LINEAR else 1.0) * mu * H[i, i] + 1e-300)
+            else:
+                a = H[i, j]
+            v = a / (d[i] * d[j])
+            if not math.isfinite(v):
+                return False, failed
+            A[i, j] = v
+    for i in range(n):                     # the right-hand side, scaled (x: held or not, then the step)
+        x[i] = (g[i] if x[i] != 0.0 else 0.0) / d[i]
+        if not math.isfinite(x[i]):
+            return False, failed
+    if not cholesky_factor(A, A, n, 0.0):
+        return False, failed
+    _cholesky_solve_in_place(A, x, n)
+    for i in range(n):
+        s = x[i] / d[i]
+        if not math.isfinite(s):
+            return False, failed
         if i == 1 or i == 2:
             s = min(max(s, -0.3), 0.3)
         trial[i] = theta[i] + s
@@ -1182,53 +1256,76 @@ def covariance(H: np.ndarray, free: np.ndarray, cov: np.ndarray) -> None:
     L = np.empty((n, n))
     d = np.empty(n)
     ok = covariance_factor(H, free, L, d)
+    covariance_columns(L, ok, cov, np.empty(n), 0, n)
     covariance_inverse(L, d, ok, cov, free, H)
 
 
 @njit(cache=CACHE)
 def covariance_factor(H: np.ndarray, free: np.ndarray, L: np.ndarray, d: np.ndarray) -> bool:
-    """The first half of ``covariance``: the Cholesky factor L of J^T J over the free parameters, scaled to
-    a unit diagonal by d; False where it is singular."""
-    n = H.shape[0]
-    A = H.copy()
-    for i in range(n):
-        if free[i] == 0.0 or H[i, i] == 0.0:
-            A[i, :] = 0.0
-            A[:, i] = 0.0
-            A[i, i] = 1.0
-    d[:] = np.sqrt(np.abs(np.diag(A))) + 1e-300
-    An = A / np.outer(d, d)
-    if not np.all(np.isfinite(An)):
-        return False
-    if _cholesky(An, L):
+    """The first part of ``covariance``: the Cholesky factor L of J^T J over the free parameters, scaled to
+    a unit diagonal by d; False where it is singular. The scaled matrix's lower triangle is built in L and
+    factored in place (its former numpy temporaries, a copy, a diagonal, an outer product and a quotient,
+    were about half of this slice)."""
+    if _scaled_lower(H, free, L, d, 0.0) and cholesky_factor(L, L, H.shape[0], 0.0):
         return True
     linear = False                 # not positive definite in rounding: the free responses' prior, if any
+    for i in range(H.shape[0]):
+        linear = linear or free[i] == LINEAR
+    return linear and _scaled_lower(H, free, L, d, LINEAR_PRIOR) and cholesky_factor(L, L, H.shape[0], 0.0)
+
+
+@njit(cache=CACHE)
+def _scaled_lower(H: np.ndarray, free: np.ndarray, L: np.ndarray, d: np.ndarray, prior: float) -> bool:
+    """L's lower triangle = H with its held (or uninformative: zero diagonal) rows and columns replaced by the
+    unit's, scaled to a unit diagonal by d, plus ``prior`` on the ``LINEAR`` parameters' diagonal; False if an
+    entry is not finite."""
+    n = H.shape[0]
     for i in range(n):
-        if free[i] == LINEAR:
-            An[i, i] += LINEAR_PRIOR
-            linear = True
-    return linear and _cholesky(An, L)
+        held = free[i] == 0.0 or H[i, i] == 0.0
+        d[i] = math.sqrt(abs(1.0 if held else H[i, i])) + 1e-300
+    for i in range(n):
+        held_i = free[i] == 0.0 or H[i, i] == 0.0
+        for j in range(i + 1):
+            if held_i or free[j] == 0.0 or H[j, j] == 0.0:
+                a = 1.0 if i == j else 0.0
+            else:
+                a = H[i, j]
+            v = a / (d[i] * d[j])
+            if not math.isfinite(v):
+                return False
+            if i == j and free[i] == LINEAR:
+                v += prior
+            L[i, j] = v
+    return True
+
+
+@njit(cache=CACHE)
+def covariance_columns(L: np.ndarray, ok: bool, cov: np.ndarray, x: np.ndarray, j0: int, j1: int) -> None:
+    """Columns j0..j1 of the scaled inverse from the factor into ``cov`` (``covariance_inverse`` then judges and
+    unscales it): the re-fit spreads the k solves over slices. ``x``: a scratch vector of k."""
+    n = L.shape[0]
+    if not ok:
+        return
+    for j in range(j0, j1):
+        for i in range(n):
+            x[i] = 0.0
+        x[j] = 1.0
+        _cholesky_solve_in_place(L, x, n)
+        for i in range(n):
+            cov[i, j] = x[i]
 
 
 @njit(cache=CACHE)
 def covariance_inverse(L: np.ndarray, d: np.ndarray, ok: bool, cov: np.ndarray, free: np.ndarray,
                        H: np.ndarray) -> None:
-    """The second half of ``covariance``: the inverse from the factor (all inf if it failed or the
-    matrix is too ill-conditioned for its inverse to mean anything; ``LINEAR`` parameters left out of that
-    judgement). A free parameter whose column is zero over the window (H's diagonal 0), held in the factor,
-    has no information: its variance is inf."""
+    """The last part of ``covariance``: the inverse whose scaled columns ``covariance_columns`` wrote into cov,
+    judged and unscaled in place (all inf if the factor failed or the matrix is too ill-conditioned for its
+    inverse to mean anything; ``LINEAR`` parameters left out of that judgement). A free parameter whose column
+    is zero over the window (H's diagonal 0), held in the factor, has no information: its variance is inf."""
     n = L.shape[0]
-    cov[:, :] = np.inf
     if not ok:
+        cov[:, :] = np.inf
         return
-    inv = np.empty((n, n))
-    e = np.zeros(n)
-    col = np.empty(n)
-    for j in range(n):
-        e[j] = 1.0
-        _cholesky_solve(L, e, col)
-        inv[:, j] = col
-        e[j] = 0.0
     # An has a unit diagonal, so lambda_max <= n and 1/lambda_min <= trace(inv): n trace(inv)
     # bounds the condition number (within a factor n of it); beyond 1e13 the inverse is noise. The free
     # responses' own block (``LINEAR``) is left out: their combinations the window does not determine are
@@ -1236,13 +1333,17 @@ def covariance_inverse(L: np.ndarray, d: np.ndarray, ok: bool, cov: np.ndarray, 
     tr = 0.0
     for j in range(n):
         if free[j] != LINEAR:
-            tr += inv[j, j]
-    if tr > 0.0 and n * tr < 1e13:
-        cov[:, :] = inv / np.outer(d, d)
+            tr += cov[j, j]
+    if not (tr > 0.0 and n * tr < 1e13):
+        cov[:, :] = np.inf
+        return
+    for i in range(n):
         for j in range(n):
-            if free[j] != 0.0 and H[j, j] == 0.0:
-                cov[j, :] = np.inf
-                cov[:, j] = np.inf
+            cov[i, j] = cov[i, j] / (d[i] * d[j])
+    for j in range(n):
+        if free[j] != 0.0 and H[j, j] == 0.0:
+            cov[j, :] = np.inf
+            cov[:, j] = np.inf
 
 
 @njit(cache=CACHE)
@@ -1294,6 +1395,18 @@ def _cholesky_solve(L: np.ndarray, b: np.ndarray, x: np.ndarray) -> None:
     """x = (L L^T)^-1 b by forward and back substitution."""
     n = L.shape[0]
     forward_substitution(L, b, x, n)
+    for i in range(n - 1, -1, -1):
+        t = x[i]
+        for k in range(i + 1, n):
+            t -= L[k, i] * x[k]
+        x[i] = t / L[i, i]
+
+
+@njit(cache=CACHE)
+def _cholesky_solve_in_place(L: np.ndarray, x: np.ndarray, n: int) -> None:
+    """x = (L L^T)^-1 x over the leading n x n block of the lower triangular L (``_cholesky_solve``'s arithmetic,
+    without a second vector: each entry of x is read before it is written)."""
+    forward_substitution(L, x, x, n)
     for i in range(n - 1, -1, -1):
         t = x[i]
         for k in range(i + 1, n):
