@@ -1394,12 +1394,8 @@ def _cholesky(A: np.ndarray, L: np.ndarray) -> bool:
 def _cholesky_solve(L: np.ndarray, b: np.ndarray, x: np.ndarray) -> None:
     """x = (L L^T)^-1 b by forward and back substitution."""
     n = L.shape[0]
-    forward_substitution(L, b, x, n)
-    for i in range(n - 1, -1, -1):
-        t = x[i]
-        for k in range(i + 1, n):
-            t -= L[k, i] * x[k]
-        x[i] = t / L[i, i]
+    x[:n] = b[:n]
+    _cholesky_solve_in_place(L, x, n)
 
 
 @njit(cache=CACHE)
