@@ -99,16 +99,17 @@ SOLVE_MAC_COST = 4
 #: snapshot and difference before the difference is taken at one instant).
 WARM_SLICE = 700
 
-#: Stages of a fit, in order: (idle until ``begin``, ``queue_test`` or ``start_test``), for a re-fit the drift
-#: origin's move (``window.move_origin``, O(P^2): in a slice, not in the Python call that starts the re-fit) and
-#: the statistics at true scale (one slice each), for a change test the statistics since its snapshot (two
-#: slices, ``queue_test``; none after ``start_test``); per Levenberg-Marquardt step the model coefficients, the
-#: Jacobian's, the normal equations' rows in slices and their assembly, the damped step, the trial's
-#: coefficients, the trial's cost in slices and the verdict; then the covariance's factor, its inverse
-#: (and the Wald test), and for the score test the normal equations again at the result and the score's two
-#: Gauss-Newton gains (with and without the rates), one slice each; for the wide test (a stream in operation whose
-#: window fits four of its free responses) the same normal equations and its two gains, without and with the
-#: other four, one slice each.
+#: Stages of a fit, in order: (idle until ``begin``, ``queue_test`` or ``start_test``), the warming of the cold
+#: matrices the next one-instant stage touches (``ST_WARM``, in slices); for a re-fit the drift origin's move
+#: (``window.move_origin``, O(P^2): in a slice, not in the Python call that starts the re-fit) and the statistics
+#: at true scale (one slice each); for a change test the statistics since its snapshot (the difference at one
+#: instant, then its move and its scaling in row slices, ``queue_test``; none after ``start_test``); per
+#: Levenberg-Marquardt step the model coefficients, their resonance derivatives, the Jacobian's, the normal
+#: equations' rows in slices and their assembly, the damped step, the trial's coefficients, the trial's cost in
+#: slices and the verdict; then the covariance's factor, its inverse in column slices (and the Wald test), and
+#: for the score test the normal equations again at the result and the score's two Gauss-Newton gains (with and
+#: without the rates), one slice each; for the wide test (a stream in operation whose window fits four of its
+#: free responses) the same normal equations and its two gains, without and with the other four, one slice each.
 #: Each call does one stage or slice: about a microsecond of work (``SLICE_MACS``).
 (ST_IDLE, ST_SCALE, ST_JACOBIAN, ST_ASSEMBLE, ST_ROWS, ST_SOLVE, ST_TRIAL_POINT, ST_TRIAL,
  ST_COVARIANCE, ST_INVERSE, ST_SCORE, ST_SCORE_WITHOUT, ST_BEGIN, ST_SINCE, ST_SINCE_FINISH, ST_WIDE,
