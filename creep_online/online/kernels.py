@@ -73,7 +73,7 @@ def model_coefficients(alpha: float, lam: np.ndarray, dx: float, a1: float, a2: 
 @njit(cache=CACHE)
 def model_values(alpha: float, lam: np.ndarray, dx: float, a1: float, a2: float, v: np.ndarray) -> None:
     """``model_coefficients``' v alone, the same arithmetic operation for operation: without dv/dalpha it
-    takes no logarithm per node (the re-fit's trial coefficients, ``window.trial_coefficients``)."""
+    takes no logarithm per node (the re-fit's trial coefficients, ``window.full_coefficients_into``)."""
     q = lam.shape[0]
     s = math.sin(math.pi * alpha) / math.pi
     lo = lam[1] * math.exp(-dx)

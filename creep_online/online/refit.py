@@ -401,7 +401,7 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
         wk[RF_STAGE] = ST_TRIAL_POINT
         return False
     if stage == ST_TRIAL_POINT:        # the trial's coefficients
-        W.trial_coefficients(trial, a1l, a2l, lam, dx, mt, v)
+        W.full_coefficients_into(trial, a1l, a2l, lam, dx, mt, v)
         wk[RF_ROW] = 0.0
         wk[RF_PARTIAL] = fyy
         wk[RF_STAGE] = ST_TRIAL

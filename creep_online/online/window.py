@@ -235,24 +235,15 @@ def coefficients(alpha: float, a1: float, a2: float, a1l: float, a2l: float, lam
 def full_coefficients(theta: np.ndarray, a1l: float, a2l: float, lam: np.ndarray, dx: float,
                       m: np.ndarray) -> None:
     """m such that the model output is phi . m; theta = [alpha, ln a1, ln a2, b, c, d_1..d_M]."""
-    q = lam.shape[0]
-    p = m.shape[0]
-    k = np.zeros(p)
-    dk = np.zeros(p)
-    coefficients(theta[0], math.exp(theta[1]), math.exp(theta[2]), a1l, a2l, lam, dx, k, dk)
-    b = theta[3]
-    for i in range(q + ONE):
-        m[i] = b * k[i]
-    for i in range(q + ONE, p):
-        m[i] = theta[4 + i - q - ONE]
+    full_coefficients_into(theta, a1l, a2l, lam, dx, m, np.empty(lam.shape[0] + 2))
 
 
 @njit(cache=CACHE)
-def trial_coefficients(theta: np.ndarray, a1l: float, a2l: float, lam: np.ndarray, dx: float, m: np.ndarray,
-                       v: np.ndarray) -> None:
-    """``full_coefficients`` into m with the caller's scratch v (Q + 2), and without the alpha-derivative that
-    ``coefficients`` computes and ``full_coefficients`` drops (a logarithm per node, and four temporaries: about
-    a third of the re-fit's trial-point slice). The same arithmetic for m, operation for operation."""
+def full_coefficients_into(theta: np.ndarray, a1l: float, a2l: float, lam: np.ndarray, dx: float, m: np.ndarray,
+                           v: np.ndarray) -> None:
+    """``full_coefficients`` with the caller's scratch v (Q + 2): the re-fit's trial point allocates nothing.
+    Only the model's values are computed (``kernels.model_values``): the alpha-derivative that ``coefficients``
+    adds took a logarithm per node, for nothing here (with four temporaries, about a third of the slice)."""
     q = lam.shape[0]
     p = m.shape[0]
     a1 = math.exp(theta[1])
