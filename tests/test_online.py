@@ -320,6 +320,26 @@ def test_a_start_up_correction_is_reported_as_such():
     truth = sc.final_truth
     assert _within(est.estimate, truth), _errors(est.estimate, truth)
 
+def test_close_modes_the_resonance_stays_where_the_statistics_hold():
+    """close_modes 0 (modes at 2.05 and 2.29 fn), sample by sample: the second step's beating is misfit at 3.5x
+    the noise. Re-fits that moved the resonance beyond where the window's statistics hold (their first-order
+    expansion around the linearization point) walked a1 to +1159 % and a2 onto the higher modes (-95 %) and the
+    record ended at a1 +7.8 %. Within the trust region (``tracker.TRUST``) a2 stays on the first mode and the
+    estimate ends within the tolerances of the best second-order description."""
+    sc = scenarios.make("close_modes", 0)
+    best = sc.truth_best
+    est = OnlineEstimator(sc.h)
+    chunk = int(0.1 / sc.h)
+    a2_ratios = []
+    for k0 in range(0, sc.u.size, chunk):
+        for a, b in zip(sc.u[k0:k0 + chunk].tolist(), sc.y[k0:k0 + chunk].tolist()):
+            est.update(a, b)
+        if est.estimate.phase == "tracking":
+            a2_ratios.append(est.estimate.a2 / best["a2"])
+    assert 0.5 < min(a2_ratios) and max(a2_ratios) < 2.0, (min(a2_ratios), max(a2_ratios))
+    assert _within(est.estimate, best), _errors(est.estimate, best)
+
+
 def _reconvergence_s(est: OnlineEstimator, sc, single: bool) -> float:
     """Feed the record in 0.1 s chunks; seconds from the change until the estimate enters the tolerances
     for good (inf if it ends outside)."""

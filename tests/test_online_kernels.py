@@ -371,6 +371,27 @@ def test_refit_machine_equals_its_kernels_in_sequence(wide):
     assert np.array_equal(tr.m, m)
 
 
+def test_the_refit_keeps_the_resonance_within_its_trust_region_and_the_change_test_does_not():
+    """A re-fit's trial moves ln a1, ln a2 at most ``tracker.TRUST`` from the linearization point (beyond it the
+    statistics' first-order expansion is not the model: close_modes 0 walked a1 to +1159 % on it); alpha, b and
+    the rest are not touched. The change test's fit is not bounded: a plant change is a large move it must see."""
+    tr = _fed_drifting_tracker(9)
+    assert tr._wk[RF.RF_TRUST] == T.TRUST > 0.0 and tr._test_wk[RF.RF_TRUST] == 0.0
+    wk = tr._wk.copy()
+    wk[RF.RF_A1L], wk[RF.RF_A2L] = 2e-4, 3e-7
+    c1, c2 = math.log(2e-4), math.log(3e-7)
+    for d1, d2 in ((1.0, -1.0), (-0.7, 0.9), (0.1, -0.2)):
+        trial = np.array([0.3, c1 + d1, c2 + d2, 1.5, 0.01])
+        RF._trust(trial, wk)
+        assert trial[1] == pytest.approx(c1 + max(min(d1, T.TRUST), -T.TRUST), abs=1e-12)
+        assert trial[2] == pytest.approx(c2 + max(min(d2, T.TRUST), -T.TRUST), abs=1e-12)
+        assert trial[[0, 3, 4]].tolist() == [0.3, 1.5, 0.01]
+    wk[RF.RF_TRUST] = 0.0                             # none: the trial as it was
+    trial = np.array([0.3, c1 + 1.0, c2 - 1.0, 1.5, 0.01])
+    RF._trust(trial, wk)
+    assert trial.tolist() == [0.3, c1 + 1.0, c2 - 1.0, 1.5, 0.01]
+
+
 @pytest.mark.parametrize("slices", [1, 3])
 @pytest.mark.parametrize("outputs", ["missing", "measured"])
 def test_the_per_sample_kernel_runs_the_refit_machine_to_the_same_result(slices, outputs):

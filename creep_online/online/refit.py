@@ -85,7 +85,8 @@ RF_INVERSE_COLS = 53  # columns of the covariance's inverse per slice (``SLICE_M
 RF_AFTER_WARM = 54    # the stage that follows the warming slices (``ST_WARM``): ST_BEGIN or ST_SINCE
 RF_WARM_ROWS = 55     # rows warmed per slice (``WARM_SLICE``)
 RF_WARMED = 56        # the warming reads' sum (kept, so that the reads are not optimized away)
-HEAD = 57
+RF_TRUST = 57         # the resonance's trust region: |ln a - ln a_lin| at most this (0: none; ``_trust``)
+HEAD = 58
 
 #: Multiply-adds per slice of a re-fit (about a microsecond): the per-sample kernel runs one slice per
 #: sample while a re-fit or a change test is under way (``sample_work``), so a 10 kHz control loop sees
@@ -129,7 +130,7 @@ def allocate(p: int, k: int, r0: int, steps: int, policy: dict, slots: int = 0,
 
     ``policy``: the tracker's settings the re-fit applies, by header name without ``RF_`` (alpha
     bounds LO, HI; DRIFT_ON, DRIFT_OFF, DRIFT_MAX; HOLD_N, DRIFT_MIN_N, DRIFT_EVERY, NRATE;
-    LN_A2_MIN, LN_ZETA_LO, LN_ZETA_HI, RELINEARIZE). ``slots``: the change test's snapshot slots
+    LN_A2_MIN, LN_ZETA_LO, LN_ZETA_HI, RELINEARIZE; a re-fit's TRUST). ``slots``: the change test's snapshot slots
     (``snapshot_slots``) for a drift-origin total of ``shift_shape``. ``extra``: the parameters (free
     responses) a stream in operation fits only once the wide test has found them needed (``_plan``); none:
     every free response from the start.
@@ -398,6 +399,7 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
         if not ok:
             wk[RF_MU] = mu
             return _step_done(wk)
+        _trust(trial, wk)
         wk[RF_STAGE] = ST_TRIAL_POINT
         return False
     if stage == ST_TRIAL_POINT:        # the trial's coefficients
@@ -470,6 +472,22 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
         wk[RF_WIDE] = 1.0
     wk[RF_STAGE] = ST_IDLE
     return True
+
+
+@njit(cache=CACHE)
+def _trust(trial: np.ndarray, wk: np.ndarray) -> None:
+    """Keep the trial's ln a1, ln a2 within RF_TRUST of the linearization point (none if RF_TRUST is 0).
+
+    The statistics give the model's cost only near the point they were taken at: beyond it the states are
+    extrapolated to first order, x(a) = x(al) + dx/da (a - al), and the sensitivity columns become free
+    regressors that fit what the second-order model cannot (close unmodeled modes). The re-fit moves the
+    resonance at most to the region's edge; the replay at the new point (``RELINEARIZE``) then lets the
+    exact cost judge the next move."""
+    r = wk[RF_TRUST]
+    if r > 0.0:
+        for i, lin in ((1, wk[RF_A1L]), (2, wk[RF_A2L])):
+            c = math.log(lin)
+            trial[i] = min(max(trial[i], c - r), c + r)
 
 
 @njit(cache=CACHE)

@@ -10,7 +10,8 @@ resumable jobs, one small unit per ``work()`` call:
   with drift columns, the rates b'/b and alpha'); the drift columns' time
   origin moves to the newest sample first, so alpha and b are the values now.
   The rates are fitted only while a score test (on) / Wald test (off) says
-  the data show drift (``DRIFT_ON``, ``DRIFT_OFF``). The fit itself is a numba
+  the data show drift (``DRIFT_ON``, ``DRIFT_OFF``). Its steps keep the resonance near the
+  linearization point, where the statistics are the model (``TRUST``). The fit itself is a numba
   state machine that the per-sample kernel advances in ~1 us slices
   (``refit.py``, ``refit.sample_work``);
 * **relinearize** when a1 or a2 moved more than ``RELINEARIZE`` from the point
@@ -115,6 +116,20 @@ RESEARCH_S = 0.5
 #: Post-change searches at most: RESEARCH_S of samples, then twice as many while the result misfits
 #: (``_resolved``), up to the ring's half or the search's work memory (3.3 s at 10 kHz).
 RESEARCH_PASSES = 3
+#: The window re-fit's trust region for the resonance: its trial steps keep ln a1, ln a2 within this of the
+#: linearization point (``refit._trust``; one Levenberg-Marquardt step's own limit, ``window.trial_point``).
+#: The statistics hold the resonance states only to first order around that point; far from it the sensitivity
+#: columns act as free regressors and the "cost" fits what a second-order model cannot. Seen (close_modes 0,
+#: modes at 2.05 and 2.29 fn, 40 dB): the second step's beating misfit at 3.5x the noise, and while the replay
+#: to the new point ran, re-fits on the old point's statistics walked a1 from +23 % to +124 %, +279 %, +1159 %
+#: (ln a1 1.1 beyond the point after two re-fits), then a2 to -95 %, onto the higher modes; the record ended at
+#: a1 +7.8 %. Bounded, each move beyond the region waits for the replay and the exact cost judges the next:
+#: a2 stays within 3 % and the record ends at a1 -0.5 %. The bound also holds back re-fits that were right to
+#: move far (a window at the noise floor): at 0.15, seven payload and stiffness re-convergences of 40 took
+#: 0.1-0.5 s longer and close_modes 16 ended at alpha 2.4 % (2.01 %); at 0.3, two (stiffness 3 and 5: 2.49 ->
+#: 2.99 s, 1.19 -> 1.69 s, paths that part before the change); of 160 records 19 end elsewhere, one (close_modes
+#: 0) changes its verdict.
+TRUST = 0.3
 #: Levenberg-Marquardt steps per window re-fit and per change test.
 REFIT_STEPS = 2
 TEST_STEPS = 4
@@ -396,7 +411,7 @@ class WindowTracker(ParameterView):
                   "LN_ZETA_LO": math.log(ZETA_BOUNDS[0]), "LN_ZETA_HI": math.log(ZETA_BOUNDS[1]),
                   "RELINEARIZE": RELINEARIZE, "WIDE_ON": WIDE_ON}
         extra = tuple(5 + i for i, rate in enumerate(WINDOW_FREE_RATES[:self.n_free]) if rate not in WINDOW_FREE_START)
-        works = [RF.allocate(p, k, r0, REFIT_STEPS, policy, extra=extra),
+        works = [RF.allocate(p, k, r0, REFIT_STEPS, {**policy, "TRUST": TRUST}, extra=extra),
                  RF.allocate(p, k, r0, TEST_STEPS, policy, SNAP_SLOTS, self._shift.shape)]
         # one array for what the per-sample kernel's slices need (``refit.context``): theta, the shift and
         # the work arrays become views into it
