@@ -310,7 +310,8 @@ def test_free_fit_is_least_squares_with_the_unknown_start():
         _drain(search._free_gram(model.alpha, a1, a2, decays, 1))       # (the candidate's coefficients)
         search._x[:] = 0.0
         _rows_free_sparse(search._hist, search.u, search.y, search._vz, search._v[-2], search._v[-1], search._rc,
-                          search._x, a1, a2, H, np.array(decays), 0, t.size, 1, 0, G2, np.zeros((1, 1)), 0)
+                          search._x, np.array([1.0, 0.0]), a1, a2, H, np.array(decays), 0, t.size, 1, 0, G2,
+                          np.zeros((1, 1)), 0)
         assert _free_fit(G2)[0] == pytest.approx(_free_cost(G), rel=1e-6), (a1, a2)
 
 
@@ -345,6 +346,41 @@ def test_a_search_in_operation_shares_its_candidates_rows_bit_for_bit(monkeypatc
     monkeypatch.setattr(S, "CACHE_ROWS", 0)
     without = ResonanceSearch(basis, u, y, free=decays).run()
     assert with_cache == without
+
+
+@pytest.mark.parametrize("fn", [1.0, 30.0, 300.0, 2500.0])
+def test_the_free_responses_shift_is_their_closed_form(fn):
+    """The strided search rows advance the two free responses by their exact one-step shift (``_free_shift``):
+    over 4000 rows each stays within 1e-11 of the closed form (``_free_modes``) relative to the largest value it
+    has had (rounding: ~4000 steps of a few ulps; measured 2e-13), for damping from 0.003 to 3 and roots that
+    merge (zeta 1 - 1e-6, 1, 1 + 1e-6); from t = 0.6 s too, where the overdamped closed form's 2qt > 709 (it
+    once read 0 * inf there). Over a search's longest buffer (2^15 rows) from row 0, within 1e-10."""
+    from creep_online.online.search import _free_modes, _free_shift
+    h = 1e-4
+    wn = 2 * math.pi * fn
+    for z in (0.003, 0.05, 0.7, 1 - 1e-6, 1.0, 1 + 1e-6, 1.5, 3.0):
+        a1, a2 = 2 * z / wn, 1 / wn ** 2
+        m11, m12, m21, m22 = _free_shift(a1, a2, h)
+        for r0 in (137, 6000):
+            g = np.array(_free_modes(a1, a2, r0 * h))
+            largest = np.abs(g)
+            for k in range(r0, r0 + 4000):
+                closed = np.array(_free_modes(a1, a2, k * h))
+                largest = np.maximum(largest, np.abs(closed))
+                assert np.isfinite(g).all()
+                seen = largest > 1e-250          # (not where both have decayed into the subnormal range)
+                assert (np.abs(g - closed)[seen] <= 1e-11 * largest[seen]).all(), (fn, z, r0, k, g, closed)
+                g = np.array([m11 * g[0] + m12 * g[1], m21 * g[0] + m22 * g[1]])
+    for z in (0.003, 1.5):                        # the longest buffer, lightly damped and overdamped
+        a1, a2 = 2 * z / wn, 1 / wn ** 2
+        m11, m12, m21, m22 = _free_shift(a1, a2, h)
+        g1, g2, big1, big2, worst = 1.0, 0.0, 0.0, 0.0, 0.0
+        for k in range(1 << 15):
+            c1, c2 = _free_modes(a1, a2, k * h)
+            big1, big2 = max(big1, abs(c1)), max(big2, abs(c2))
+            worst = max(worst, abs(g1 - c1) / big1, abs(g2 - c2) / big2 if big2 > 0.0 else 0.0)
+            g1, g2 = m11 * g1 + m12 * g2, m21 * g1 + m22 * g2
+        assert worst <= 1e-10, (fn, z, worst)
 
 
 def test_free_fit_reads_an_exact_fit_as_rounding():
