@@ -88,17 +88,19 @@ RF_WARMED = 56        # the warming reads' sum (kept, so that the reads are not 
 RF_TRUST = 57         # the resonance's trust region: |ln a - ln a_lin| at most this (0: none; ``_trust``)
 HEAD = 58
 
-#: Multiply-adds per slice of a re-fit (about a microsecond): the per-sample kernel runs one slice per
+#: Multiply-adds per slice of a re-fit (well under a microsecond): the per-sample kernel runs one slice per
 #: sample while a re-fit or a change test is under way (``sample_work``), so a 10 kHz control loop sees
-#: ~1-2 us more on ~2 % of its samples, not 7-45 us on ~1 % of them.
-SLICE_MACS = 4000
+#: ~0.3-1 us more on ~3 % of its samples, not 7-45 us on ~1 % of them. At 4000 the normal equations' rows
+#: and the inverse's columns took 0.9 and 1.6 us per slice (timed alone, cold): with a sample's ~2.1 us the
+#: calls sat at 4-5 us, and a loaded machine put a third of them over the 5 us p99 goal. At 2000: 0.3, 0.7 us.
+SLICE_MACS = 2000
 #: A triangular solve's multiply-add in the cost of a vectorized row loop's (each waits for the one before:
 #: measured, the covariance's 15 solves of 15 took ~4 us, ~1.2 ns per multiply-add, against ~0.3 ns in the rows).
 SOLVE_MAC_COST = 4
 #: Entries of a cold matrix brought into the cache per slice before a stage that must touch all of it in one
 #: slice (``ST_WARM``: the re-fit's frozen statistics F before they are written at one instant, a change test's
-#: snapshot and difference before the difference is taken at one instant).
-WARM_SLICE = 700
+#: snapshot and difference before the difference is taken at one instant). At 700: ~0.9 us per slice; 350: ~0.3.
+WARM_SLICE = 350
 
 #: Stages of a fit, in order: (idle until ``begin``, ``queue_test`` or ``start_test``), the warming of the cold
 #: matrices the next one-instant stage touches (``ST_WARM``, in slices); for a re-fit the drift origin's move
@@ -111,7 +113,7 @@ WARM_SLICE = 700
 #: for the score test the normal equations again at the result and the score's two Gauss-Newton gains (with and
 #: without the rates), one slice each; for the wide test (a stream in operation whose window fits four of its
 #: free responses) the same normal equations and its two gains, without and with the other four, one slice each.
-#: Each call does one stage or slice: about a microsecond of work (``SLICE_MACS``).
+#: Each call does one stage or slice: up to about a microsecond of work (``SLICE_MACS``).
 (ST_IDLE, ST_SCALE, ST_JACOBIAN, ST_ASSEMBLE, ST_ROWS, ST_SOLVE, ST_TRIAL_POINT, ST_TRIAL,
  ST_COVARIANCE, ST_INVERSE, ST_SCORE, ST_SCORE_WITHOUT, ST_BEGIN, ST_SINCE, ST_SINCE_FINISH, ST_WIDE,
  ST_WIDE_WITH, ST_WARM, ST_SINCE_SCALE, ST_DERIVATIVES) = range(20)
