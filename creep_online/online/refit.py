@@ -108,15 +108,16 @@ WARM_SLICE = 350
 #: at true scale (one slice each); for a change test the statistics since its snapshot (the difference at one
 #: instant, then its move and its scaling in row slices, ``queue_test``; none after ``start_test``); per
 #: Levenberg-Marquardt step the model coefficients, their resonance derivatives, the Jacobian's, the normal
-#: equations' rows in slices and their assembly, the damped step, the trial's coefficients, the trial's cost in
-#: slices and the verdict; then the covariance's factor, its inverse in column slices (and the Wald test), and
+#: equations' rows in slices and their assembly, the damped step (its factor, then its solve), the trial's
+#: coefficients, the trial's cost in slices and the verdict; then the covariance's factor, its inverse in column
+#: slices (and the Wald test), and
 #: for the score test the normal equations again at the result and the score's two Gauss-Newton gains (with and
 #: without the rates), one slice each; for the wide test (a stream in operation whose window fits four of its
 #: free responses) the same normal equations and its two gains, without and with the other four, one slice each.
 #: Each call does one stage or slice: up to about a microsecond of work (``SLICE_MACS``).
 (ST_IDLE, ST_SCALE, ST_JACOBIAN, ST_ASSEMBLE, ST_ROWS, ST_SOLVE, ST_TRIAL_POINT, ST_TRIAL,
  ST_COVARIANCE, ST_INVERSE, ST_SCORE, ST_SCORE_WITHOUT, ST_BEGIN, ST_SINCE, ST_SINCE_FINISH, ST_WIDE,
- ST_WIDE_WITH, ST_WARM, ST_SINCE_SCALE, ST_DERIVATIVES) = range(20)
+ ST_WIDE_WITH, ST_WARM, ST_SINCE_SCALE, ST_DERIVATIVES, ST_STEP) = range(21)
 
 #: Parameter masks (rows of the masks block): all free, drift rates fixed, alpha and rates fixed, the
 #: change test's (the resonance, the gain and the offset), and the change test's with the drift rates; then
@@ -395,9 +396,15 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
         wk[RF_STAGE] = ST_SOLVE
         return False
     out = wk[RF_BEFORE:RF_MOVED + 1]
-    if stage == ST_SOLVE:              # the damped step
-        ok, mu = W.trial_point(theta, free, wk[RF_MU], H, g, wk[RF_COST], wk[RF_LO], wk[RF_HI], trial, out,
-                               L, d, mt)    # (the covariance's scratch, and the trial's coefficients': idle now)
+    if stage == ST_SOLVE:              # the damped step's system, factored (in the covariance's scratch and the
+        ok, mu = W.trial_factor(theta, free, wk[RF_MU], H, g, wk[RF_COST], out, L, d, mt)   # trial coefficients':
+        if not ok:                     # idle now)
+            wk[RF_MU] = mu
+            return _step_done(wk)
+        wk[RF_STAGE] = ST_STEP
+        return False
+    if stage == ST_STEP:               # the damped step from the factor (one slice with the factor: ~1.4 us)
+        ok, mu = W.trial_step(theta, wk[RF_MU], wk[RF_LO], wk[RF_HI], trial, L, d, mt)
         if not ok:
             wk[RF_MU] = mu
             return _step_done(wk)
