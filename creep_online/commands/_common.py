@@ -36,6 +36,16 @@ def fault_line(event: dict) -> str:
             f"{event['recovery']}")
 
 
+def event_line(event: dict) -> str:
+    """A change event (or an internal fault, ``fault_line``) on one line: when it began and was detected, what
+    moved and by how much, and whether the estimate it was judged against had settled (``stream``, ``demo``)."""
+    if event.get("kind") == "internal_fault":
+        return fault_line(event)
+    moves = moves_text(event["relative_change"])
+    return (f"change near t = {event['t']:.4g} s (detected {event['detected_t']:.4g} s): "
+            f"{', '.join(event['moved']) or 'nothing significant'} moved ({moves}){unsettled_note(event)}")
+
+
 def unsettled_note(event: dict) -> str:
     """What a change event judged against a still-moving estimate says (``estimate_settled`` False): it may
     correct the estimate (a start-up estimate converging) rather than report a change of the plant."""

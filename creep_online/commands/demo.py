@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import CreepOnlineError
 from ..model import ONLINE_REFITS as REFITS
-from ._common import fault_line, moves_text, print_json, research_lines, unsettled_note
+from ._common import event_line, print_json, research_lines
 from ._progress import Progress
 
 SCENARIOS = ("stationary", "payload", "drift")
@@ -268,12 +268,7 @@ def _print_summary(r: dict, as_json: bool) -> None:
         why = f" ({est['reason']})" if est.get("reason") else ""
         print(f"  estimate: phase {est['phase']}, quality {est['quality']}{why}")
         for ev in est.get("events", []):
-            if ev.get("kind") == "internal_fault":
-                print(f"    {fault_line(ev)}")
-                continue
-            moves = moves_text(ev["relative_change"])
-            print(f"    change near t = {ev['t']:.2f} s, detected at {ev['detected_t']:.2f} s: "
-                  f"{', '.join(ev['moved']) or 'nothing significant'} moved ({moves}){unsettled_note(ev)}")
+            print(f"    {event_line(ev)}")
         for line in research_lines(est.get("researches", [])):
             print(f"    {line}")
         print(f"    alpha {m['alpha']:.5f}  (true {t['alpha']:.5f}, error {e['alpha_abs']:+.2e})")

@@ -23,7 +23,7 @@ from ..errors import CreepOnlineError, DataError, TransportError
 from ..io.csvfile import load_record
 from ..online import OnlineEstimator, warm_kernels
 from ..model import ONLINE_REFITS as REFITS
-from ._common import add_column_options, fault_line, moves_text, print_json, research_lines, unsettled_note
+from ._common import add_column_options, event_line, print_json, research_lines
 
 
 #: How a stream ended -> exit code. Every end after the first sample prints the estimate and the counters.
@@ -184,12 +184,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"  skipped {est.skipped_nonfinite} non-finite, {est.gaps} lost, {est.alpha_updates} window fits, "
           f"outliers gated: {e.outliers} output, {e.input_outliers} input, internal faults: {est.internal_faults}")
     for ev in e.events:
-        if ev.get("kind") == "internal_fault":
-            print(f"  {fault_line(ev)}")
-            continue
-        moves = moves_text(ev["relative_change"])
-        print(f"  change near t = {ev['t']:.4g} s (detected {ev['detected_t']:.4g} s): "
-              f"{', '.join(ev['moved']) or 'nothing significant'} moved ({moves}){unsettled_note(ev)}")
+        print(f"  {event_line(ev)}")
     for line in research_lines(e.researches):
         print(f"  {line}")
     if "throughput_sps" in extra:
