@@ -26,7 +26,9 @@ Every stage also has: ``nonlinear_params`` (the few parameters the fit searches,
 with bounds; gains, weights and amplitudes are linear and solved in closed
 form), ``start_values`` (the fit's starting grid), ``fitted_params`` (the
 reported parameter dict), ``compensator`` (per-sample inverse for the online
-estimator), ``applicable`` and ``signature`` (for the diagnosis) and
+estimator), ``applicable`` and ``signature`` (for the diagnosis),
+``score_points`` (where the pair search's trigger tests the effect as a
+partner; default from ``off`` and ``start_values``) and
 ``example_params`` (plausible values for simulated test records).
 
 The registry: the eight built-in effects, then effects named by entry points
