@@ -205,3 +205,79 @@ def test_an_effect_too_weak_to_be_named_beside_another_is_counted_apart():
     assert row["second_detectable"] is False and bench._right_undetectable(row)
     row.update(combination=["hysteresis", "second_creep"], combination_significant=True)
     assert not bench._right_undetectable(row)                            # a false pair is wrong at any strength
+
+
+def test_a_weak_second_effect_the_residual_does_not_show_is_found_by_the_partners_score_test(monkeypatch):
+    """Second mode + hysteresis (1.3-3x, seed 10): hysteresis alone fits to 1.03x the noise with a white residual and
+    the two best single fits together (hysteresis + drift) add nothing, so the search never ran and the mode (0.22x
+    the noise alone) went unnamed, though the hidden pair, fitted, beats hysteresis alone by a BIC drop of ~300.
+    The score test of every partner at the hysteresis fit (``score.partner_scores``, no fit) sees the mode: the
+    search runs and names both at the floor. With the score test switched off the record is answered as before."""
+    from creep_online.diagnostics import pairs
+    bench = _bench()
+    rec = bench.make_pair_record(("second_mode", "hysteresis"), bench.BANDS["1.3-3x"], 10)
+    data = (rec["t"], rec["u"], rec["y"])
+    d = diagnose(data)
+    assert d.candidates[0].effect == "hysteresis"
+    assert d.candidates[0].fit.residual_rms <= 1.08 * d.noise_rms          # one effect "explains" the record
+    assert len(d.pairs_tried) > 1
+    assert d.combination is not None and set(d.combination.effect.split("+")) == {"second_mode", "hysteresis"}
+    assert d.combination.significant
+    assert d.combination.fit.residual_rms <= bench.FLOOR * rec["noise"]
+    assert d.verdict == "hysteresis"
+    monkeypatch.setattr(pairs, "SCORE_THRESHOLD", float("inf"))           # the old trigger: the pair is missed
+    old = diagnose(data)
+    assert len(old.pairs_tried) <= 1
+    assert old.combination is None or "second_mode" not in old.combination.effect.split("+")
+
+
+def test_the_partners_score_test_sees_the_hidden_partner_and_nothing_beside_a_single_effect():
+    """The score statistic itself (``score.partner_scores``): at hysteresis' fit of the record above the second mode
+    passes the evidence threshold by far; at the fit of a single-effect record (leakage, 3-10x, seed 7 of the bands
+    bench) no partner comes near it, so the record is not searched and stays single."""
+    from creep_online.diagnostics import pairs, score
+    bench = _bench()
+    rec = bench.make_pair_record(("second_mode", "hysteresis"), bench.BANDS["1.3-3x"], 10)
+    d = diagnose((rec["t"], rec["u"], rec["y"]))
+    first = d.candidates[0]
+    others = [c.effect for c in d.candidates[1:]]
+    scores = score.partner_scores(d.data, first.effect, first.fit, others, pairs._peaks(d.data, first.fit))
+    best = score.fires(scores, pairs.SCORE_THRESHOLD)
+    assert best is not None and best.effect == "second_mode"
+    assert next(s for s in scores if s.effect == "second_mode").evidence > 10 * pairs.SCORE_THRESHOLD
+    bands = _load("bench_diagnose_bands")
+    rec = bands.make_record("leakage", bands.BANDS["3-10x"], 7)
+    d = diagnose((rec["t"], rec["u"], rec["y"]))
+    first = d.candidates[0]
+    assert first.effect == "leakage" and d.verdict == "leakage"
+    scores = score.partner_scores(d.data, first.effect, first.fit, [c.effect for c in d.candidates[1:]],
+                                  pairs._peaks(d.data, first.fit))
+    assert len(scores) == len(d.candidates) - 1
+    assert score.fires(scores, pairs.SCORE_THRESHOLD) is None
+    assert max(s.evidence for s in scores) < pairs.SCORE_THRESHOLD
+    assert len(d.pairs_tried) <= 1
+
+
+def test_each_effect_says_where_the_score_test_looks_for_it():
+    """``Effect.score_points`` (default from ``ParamSpec.off`` and ``start_values``): a delay is tested at its null
+    (0) first, then on its starting grid; a second mode has no null (its frequency means nothing at gain 0), so it is
+    tested on its frequency grid, and at a residual peak with the narrow and wide dampings; an effect without
+    nonlinear parameters is one point (its columns are the test)."""
+    import math
+
+    import numpy as np
+
+    from creep_online.diagnostics import extended as ext
+    from creep_online.effects import get_effect
+    t = np.arange(2000) / 1000.0
+    u = np.where((t % 0.5) < 0.25, 1.0, -1.0)
+    data = ext.prepare(t, u, np.sin(t))
+    delay = get_effect("delay").score_points(data, [])
+    assert delay[0] == [0.0] and len(delay) == 1 + len(get_effect("delay").start_values(data, [])[0][0])
+    mode = get_effect("second_mode")
+    plain = mode.score_points(data, [])
+    assert len(plain) == 24 and all(z == math.log10(0.05) for _, z in plain)
+    peaked = mode.score_points(data, [50.0])
+    assert [math.log10(50.0), math.log10(0.02)] in [list(p) for p in peaked] and len(peaked) == 26
+    assert get_effect("drift").score_points(data, []) == [[]]
+    assert get_effect("hysteresis").score_points(data, []) == [[]]

@@ -26,7 +26,9 @@ Every stage also has: ``nonlinear_params`` (the few parameters the fit searches,
 with bounds; gains, weights and amplitudes are linear and solved in closed
 form), ``start_values`` (the fit's starting grid), ``fitted_params`` (the
 reported parameter dict), ``compensator`` (per-sample inverse for the online
-estimator), ``applicable`` and ``signature`` (for the diagnosis) and
+estimator), ``applicable`` and ``signature`` (for the diagnosis),
+``score_points`` (where the pair search's trigger tests the effect as a
+partner; default from ``off`` and ``start_values``) and
 ``example_params`` (plausible values for simulated test records).
 
 The registry: the eight built-in effects, then effects named by entry points
@@ -52,6 +54,8 @@ StepFn = Callable[[np.ndarray], np.ndarray]
 
 #: Entry-point group a third-party package declares its effects in (``name = "module:Class"``).
 ENTRY_POINT_GROUP = "creep_online.effects"
+#: Most points of an effect's nonlinear parameters the pair search's trigger tries (``Effect.score_points``).
+SCORE_POINTS = 64
 
 
 class Stage(str, Enum):
@@ -191,6 +195,32 @@ class Effect(ABC):
     def full_record_values(self, peaks: list[float]) -> dict[str, list[float]]:
         """Values of own parameters to retry on the whole record after exploring on a prefix."""
         return {}
+
+    def score_points(self, data, peaks: list[float]) -> list[list[float]]:
+        """Values of own nonlinear parameters (``nonlinear_params`` order) at which the pair search's trigger
+        tests adding this effect to a fit that already explains the record (``diagnostics.score``).
+
+        The test is the score statistic of the effect's parameters at the fitted model, linear ones at 0.
+        Where every nonlinear parameter has an ``off`` value (a delay of 0) that is the null, and the
+        statistic takes the parameters' own derivatives there; a parameter without one (a second mode's
+        frequency: at gain 0 the record says nothing about it) is not identified under the null, so the
+        statistic is the largest over these values (the trigger's threshold counts them). Default: the
+        ``off`` point if there is one, then the fit's own starting grid (``start_values``: the grid values,
+        and the priority values where every parameter has some, e.g. a residual peak), at most ``SCORE_POINTS``; ``[[]]``
+        for an effect with no nonlinear parameters (its columns are the whole test).
+        """
+        specs = self.nonlinear_params(data)
+        if not specs:
+            return [[]]
+        points = [[s.off for s in specs]] if all(s.off is not None for s in specs) else []
+        starts = self.start_values(data, peaks)
+        grids = [list(g) for g, _ in starts]
+        prio = [list(p) for _, p in starts]
+        for lists in (grids, prio):
+            if all(lists):
+                points += [list(row) for row in np.array(np.meshgrid(*lists, indexing="ij")).reshape(len(lists), -1).T]
+        unique = list({tuple(np.round(p, 12)): p for p in points}.values())
+        return unique[:SCORE_POINTS]
 
     @abstractmethod
     def fitted_params(self, fit: FitView) -> dict:
