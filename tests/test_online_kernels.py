@@ -357,10 +357,10 @@ def test_refit_machine_equals_its_kernels_in_sequence(wide):
     inverse_slices = -(-theta.size // int(tr._wk[RF.RF_INVERSE_COLS]))
     warm_slices = -(-tr.p // int(tr._wk[RF.RF_WARM_ROWS]))
     assert normal_slices > 1 and inverse_slices > 1 and warm_slices > 1   # the slices are exercised
-    # F warmed, the drift origin's move (1), scaling (1); per step the model coefficients, their resonance
-    # derivatives, the Jacobian's, the rows, the step's factor and solve, the trial's coefficients, its cost; the
-    # covariance's factor and its inverse's columns
-    assert units == warm_slices + 2 + T.REFIT_STEPS * (3 + normal_slices + 3 + cost_slices) + 1 + inverse_slices
+    # F warmed, the drift origin's move (1), scaling (1); per step the model coefficients (two halves), their
+    # resonance derivatives, the Jacobian's, the rows, the step's factor and solve, the trial's coefficients, its
+    # cost; the covariance's factor and its inverse's columns
+    assert units == warm_slices + 2 + T.REFIT_STEPS * (4 + normal_slices + 3 + cost_slices) + 1 + inverse_slices
     head, fitted, var = RF.result(tr._wk)
     assert np.array_equal(fitted, theta) and np.array_equal(var, np.diag(cov))
     assert head[RF.RF_AFTER] == out[1] and head[RF.RF_DRIFT] == 0.0

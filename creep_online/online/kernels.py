@@ -31,8 +31,16 @@ def model_coefficients(alpha: float, lam: np.ndarray, dx: float, a1: float, a2: 
 
     SOE weights w_i = sin(pi a)/pi dx lam_i^(1-a) (integrator and direct term
     from the geometric continuation of the trapezoid sum, see soe.py); their
-    alpha derivatives are analytic.
+    alpha derivatives are analytic. In two parts the re-fit runs as separate slices (``node_coefficients``
+    over ranges of nodes, then ``coefficient_sums``); here in one call.
     """
+    node_coefficients(alpha, lam, dx, a1, a2, v, dv, 0, lam.shape[0])
+    coefficient_sums(alpha, lam, dx, a1, a2, v, dv)
+
+
+@njit(cache=CACHE, inline="always")
+def _soe_ends(alpha: float, lam: np.ndarray, dx: float) -> tuple:
+    """(s, d ln s/d alpha, the integrator's weight w0 and d ln w0/d alpha, the direct term d and d ln d/d alpha)."""
     q = lam.shape[0]
     s = math.sin(math.pi * alpha) / math.pi
     pc = math.pi * math.cos(math.pi * alpha) / math.sin(math.pi * alpha)  # d ln s / d alpha
@@ -44,11 +52,15 @@ def model_coefficients(alpha: float, lam: np.ndarray, dx: float, a1: float, a2: 
     e1 = math.exp(-alpha * dx)
     d = s * dx * hi ** (-alpha) / (1.0 - e1)
     dld = pc - math.log(hi) - dx * e1 / (1.0 - e1)
-    sum_x0 = d
-    dsum_x0 = d * dld
-    sum_a = 0.0
-    dsum_a = 0.0
-    for i in range(q):
+    return s, pc, w0, dlw0, d, dld
+
+
+@njit(cache=CACHE)
+def node_coefficients(alpha: float, lam: np.ndarray, dx: float, a1: float, a2: float, v: np.ndarray,
+                      dv: np.ndarray, i0: int, i1: int) -> None:
+    """``model_coefficients``' node entries v[i], dv[i] for nodes i0..i1 (a power and a logarithm each)."""
+    s, pc, w0, dlw0, _, _ = _soe_ends(alpha, lam, dx)
+    for i in range(i0, i1):
         if i == 0:
             w = w0
             dw = w0 * dlw0
@@ -60,10 +72,25 @@ def model_coefficients(alpha: float, lam: np.ndarray, dx: float, a1: float, a2: 
         a = 1.0 / (a2 * li * li - a1 * li + 1.0)
         v[i] = w * a
         dv[i] = dw * a
-        sum_x0 += w * a * (a2 * li - a1)
-        dsum_x0 += dw * a * (a2 * li - a1)
-        sum_a += w * a
-        dsum_a += dw * a
+
+
+@njit(cache=CACHE)
+def coefficient_sums(alpha: float, lam: np.ndarray, dx: float, a1: float, a2: float, v: np.ndarray,
+                     dv: np.ndarray) -> None:
+    """``model_coefficients``' two resonance entries (v[q], v[q + 1] and their derivatives) from the node entries:
+    the sums of w_i a_i (a2 lam_i - a1) and of w_i a_i, in node order."""
+    q = lam.shape[0]
+    _, _, _, _, d, dld = _soe_ends(alpha, lam, dx)
+    sum_x0 = d
+    dsum_x0 = d * dld
+    sum_a = 0.0
+    dsum_a = 0.0
+    for i in range(q):
+        li = lam[i] if i > 0 else 0.0
+        sum_x0 += v[i] * (a2 * li - a1)
+        dsum_x0 += dv[i] * (a2 * li - a1)
+        sum_a += v[i]
+        dsum_a += dv[i]
     v[q] = sum_x0
     v[q + 1] = -a2 * sum_a
     dv[q] = dsum_x0

@@ -107,17 +107,16 @@ WARM_SLICE = 350
 #: (``window.move_origin``, O(P^2): in a slice, not in the Python call that starts the re-fit) and the statistics
 #: at true scale (one slice each); for a change test the statistics since its snapshot (the difference at one
 #: instant, then its move and its scaling in row slices, ``queue_test``; none after ``start_test``); per
-#: Levenberg-Marquardt step the model coefficients, their resonance derivatives, the Jacobian's, the normal
-#: equations' rows in slices and their assembly, the damped step (its factor, then its solve), the trial's
-#: coefficients, the trial's cost in slices and the verdict; then the covariance's factor, its inverse in column
-#: slices (and the Wald test), and
-#: for the score test the normal equations again at the result and the score's two Gauss-Newton gains (with and
+#: Levenberg-Marquardt step the model coefficients (in two halves of the nodes), their resonance derivatives, the
+#: Jacobian's, the normal equations' rows in slices and their assembly, the damped step (its factor, then its
+#: solve), the trial's coefficients, the trial's cost in slices and the verdict; then the covariance's factor, its
+#: inverse in column slices (and the Wald test), and for the score test the normal equations again at the result and the score's two Gauss-Newton gains (with and
 #: without the rates), one slice each; for the wide test (a stream in operation whose window fits four of its
 #: free responses) the same normal equations and its two gains, without and with the other four, one slice each.
 #: Each call does one stage or slice: up to about a microsecond of work (``SLICE_MACS``).
 (ST_IDLE, ST_SCALE, ST_JACOBIAN, ST_ASSEMBLE, ST_ROWS, ST_SOLVE, ST_TRIAL_POINT, ST_TRIAL,
  ST_COVARIANCE, ST_INVERSE, ST_SCORE, ST_SCORE_WITHOUT, ST_BEGIN, ST_SINCE, ST_SINCE_FINISH, ST_WIDE,
- ST_WIDE_WITH, ST_WARM, ST_SINCE_SCALE, ST_DERIVATIVES, ST_STEP) = range(21)
+ ST_WIDE_WITH, ST_WARM, ST_SINCE_SCALE, ST_DERIVATIVES, ST_STEP, ST_COEFFICIENTS) = range(22)
 
 #: Parameter masks (rows of the masks block): all free, drift rates fixed, alpha and rates fixed, the
 #: change test's (the resonance, the gain and the offset), and the change test's with the drift rates; then
@@ -365,8 +364,15 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
         return False
     free = masks[int(wk[RF_MASK])]
     a1l, a2l, fyy = wk[RF_A1L], wk[RF_A2L], wk[RF_FYY]
-    if stage == ST_JACOBIAN:           # the model coefficients at theta
-        kernels.model_coefficients(theta[0], lam, dx, math.exp(theta[1]), math.exp(theta[2]), v, dv)
+    if stage == ST_JACOBIAN:           # the model coefficients at theta: the first half of the nodes (all of them
+        half = lam.shape[0] // 2       # in one slice, ~0.8 us, put a third of these calls over 5 us)
+        kernels.node_coefficients(theta[0], lam, dx, math.exp(theta[1]), math.exp(theta[2]), v, dv, 0, half)
+        wk[RF_STAGE] = ST_COEFFICIENTS
+        return False
+    if stage == ST_COEFFICIENTS:       # the other half, and the resonance entries' sums
+        a1, a2 = math.exp(theta[1]), math.exp(theta[2])
+        kernels.node_coefficients(theta[0], lam, dx, a1, a2, v, dv, lam.shape[0] // 2, lam.shape[0])
+        kernels.coefficient_sums(theta[0], lam, dx, a1, a2, v, dv)
         wk[RF_STAGE] = ST_DERIVATIVES
         return False
     if stage == ST_DERIVATIVES:        # their resonance derivatives (into fm and mt: the rows and the trial fill
