@@ -86,7 +86,8 @@ RF_AFTER_WARM = 54    # the stage that follows the warming slices (``ST_WARM``):
 RF_WARM_ROWS = 55     # rows warmed per slice (``WARM_SLICE``)
 RF_WARMED = 56        # the warming reads' sum (kept, so that the reads are not optimized away)
 RF_TRUST = 57         # the resonance's trust region: |ln a - ln a_lin| at most this (0: none; ``_trust``)
-HEAD = 58
+RF_SCALE_ROWS = 58    # rows of a change test's statistics scaled per slice (``since_scaled``; ``WARM_SLICE``)
+HEAD = 59
 
 #: Multiply-adds per slice of a re-fit (well under a microsecond): the per-sample kernel runs one slice per
 #: sample while a re-fit or a change test is under way (``sample_work``), so a 10 kHz control loop sees
@@ -148,6 +149,7 @@ def allocate(p: int, k: int, r0: int, steps: int, policy: dict, slots: int = 0,
     wk[RF_COST_ROWS] = max(1, SLICE_MACS // p)
     wk[RF_INVERSE_COLS] = max(1, SLICE_MACS // (SOLVE_MAC_COST * k * k))
     wk[RF_WARM_ROWS] = max(1, WARM_SLICE // p)
+    wk[RF_SCALE_ROWS] = max(1, WARM_SLICE // p)   # (the scaling also touches rows of F cold since the difference)
     for name, value in policy.items():
         wk[globals()["RF_" + name]] = value
     o = _masks_at(p, k)
@@ -338,7 +340,7 @@ def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarra
         return False
     if stage == ST_SINCE_SCALE:        # ... in row slices (reads only the test's own arrays)
         i0 = int(wk[RF_ROW])
-        i1 = min(i0 + int(wk[RF_WARM_ROWS]), p)
+        i1 = min(i0 + int(wk[RF_SCALE_ROWS]), p)
         fyy = W.since_scaled(F, fy, wk[RF_FYY], wk[RF_SINCE_G], i0, i1)
         wk[RF_ROW] = i1
         if i1 == p:
