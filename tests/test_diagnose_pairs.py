@@ -225,6 +225,8 @@ def test_a_weak_second_effect_the_residual_does_not_show_is_found_by_the_partner
     assert d.combination.significant
     assert d.combination.fit.residual_rms <= bench.FLOOR * rec["noise"]
     assert d.verdict == "hysteresis"
+    reported = d.to_dict()["partner_scores"]                              # the trigger's numbers, in the JSON
+    assert reported[0]["effect"] == "second_mode" and reported[0]["evidence"] > pairs.SCORE_THRESHOLD
     monkeypatch.setattr(pairs, "SCORE_THRESHOLD", float("inf"))           # the old trigger: the pair is missed
     old = diagnose(data)
     assert len(old.pairs_tried) <= 1
@@ -256,6 +258,7 @@ def test_the_partners_score_test_sees_the_hidden_partner_and_nothing_beside_a_si
     assert score.fires(scores, pairs.SCORE_THRESHOLD) is None
     assert max(s.evidence for s in scores) < pairs.SCORE_THRESHOLD
     assert len(d.pairs_tried) <= 1
+    assert [s.effect for s in d.partner_scores] == [s.effect for s in scores]   # the diagnosis' own test, reported
 
 
 def test_each_effect_says_where_the_score_test_looks_for_it():

@@ -90,6 +90,8 @@ class Diagnosis:
     physics: dict = field(default_factory=dict)   # holds.physics_check: leakage / second creep / drift by hold physics
     pairs_tried: dict = field(default_factory=dict)  # pairs.choose_pair: "a+b" -> (BIC drop over the base, residual RMS)
     pair_rivals: list = field(default_factory=list)  # pairs.rival_pairs: the pairs the record does not tell apart
+    #: the pair search's trigger where one effect explains the record (``score.partner_scores``), strongest first
+    partner_scores: list = field(default_factory=list)
 
     @property
     def verdict(self) -> str:
@@ -146,6 +148,8 @@ class Diagnosis:
             "residual_analysis": jsonable(self.residual_analysis),
             "warnings": self.warnings, "elapsed_s": self.elapsed_s, "source": self.source,
             "physics_check": jsonable(self.physics), "verdict_basis": jsonable(self.verdict_basis),
+            "partner_scores": [jsonable({"effect": s.effect, "evidence": s.evidence, "lr": s.lr, "dk": s.dk,
+                                         "points": s.points, "at": s.at}) for s in self.partner_scores],
         }
 
 
@@ -281,12 +285,13 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
     if len(sig_top) == 2 and sig_top[0].evidence - sig_top[1].evidence < EVIDENCE_THRESHOLD:
         warnings.append(f"{sig_top[0].effect} and {sig_top[1].effect} explain the data about equally well "
                         f"(evidence {sig_top[0].evidence:.4g} vs {sig_top[1].evidence:.4g}): the verdict is not firm")
-    combo, tried, rivals = (_combination(data, base, ranked, noise, max_nfev, n_workers, report) if combine
-                            else (None, {}, []))
+    partner_scores: list = []
+    combo, tried, rivals = (_combination(data, base, ranked, noise, max_nfev, n_workers, report, partner_scores)
+                            if combine else (None, {}, []))
     report("hold physics: leakage, second creep or drift")
     physics = _physics(data, base, tuple(c.fit for c in ranked if c.effect in PHYSICS_EFFECTS))
     result = Diagnosis(source, base, noise, ranked, skipped, where, analysis, combo, warnings, 0.0, data, physics,
-                       tried, rivals)
+                       tried, rivals, partner_scores)
     if result.standing_in:
         warnings.append(f"{ranked[0].effect} ranks first alone but the pair {combo.effect} beats it "
                         f"({combo.signature}): the verdict is {result.verdict}")
@@ -299,11 +304,13 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
 
 
 def _combination(data: ext.Prepared, base: ext.ExtendedFit, ranked: list[Candidate], noise: float, max_nfev: int,
-                 workers: int, report: Callable[[str], None]) -> tuple[Candidate | None, dict, list[dict]]:
+                 workers: int, report: Callable[[str], None],
+                 partner_scores: list | None = None) -> tuple[Candidate | None, dict, list[dict]]:
     """The best pair of effects (pairs.choose_pair) as a candidate, significant when it beats the best single
-    fit; the pairs tried ("a+b" -> (evidence, residual RMS)); and its rivals (``_rivals``)."""
+    fit; the pairs tried ("a+b" -> (evidence, residual RMS)); and its rivals (``_rivals``). ``partner_scores``
+    receives the partners' score tests when they run."""
     choice = choose_pair(data, base, [(c.effect, c.fit, c.significant) for c in ranked], noise,
-                         max_nfev=max_nfev, workers=workers, report=report)
+                         max_nfev=max_nfev, workers=workers, report=report, partner_scores=partner_scores)
     if choice is None:
         return None, {}, []
     ev, lr, pv, dk = evidence(base, choice.fit, data.n)

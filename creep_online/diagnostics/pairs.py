@@ -104,12 +104,14 @@ class PairChoice:
 
 def choose_pair(data: ext.Prepared, base: ext.ExtendedFit, singles: list[tuple[str, ext.ExtendedFit, bool]],
                 noise: float, *, max_nfev: int = ext.MAX_NFEV, workers: int = 1,
-                report: Callable[[str], None] | None = None) -> PairChoice | None:
+                report: Callable[[str], None] | None = None,
+                partner_scores: list | None = None) -> PairChoice | None:
     """The best pair of effects for the record, or None when fewer than two effects can be paired.
 
     ``singles``: (effect, its single fit, significant) for every applicable
     candidate, best first. Without a significant single effect there is
     nothing to pair. The pair's effects are ordered by their single fits.
+    ``partner_scores``: a list that receives the partners' score tests when they run (``score.PartnerScore``).
     """
     report = report or (lambda _stage: None)
     significant = [s for s in singles if s[2]]
@@ -133,6 +135,8 @@ def choose_pair(data: ext.Prepared, base: ext.ExtendedFit, singles: list[tuple[s
         else:
             scores = score.partner_scores(small, first[0], first[1], [s[0] for s in singles if s[0] != first[0]],
                                           _peaks(data, first[1]))
+            if partner_scores is not None:
+                partner_scores.extend(scores)
             fired = score.fires(scores, SCORE_THRESHOLD)
             if fired is None:
                 return None if fit is None else PairChoice(pair, fit, False, {pair: _weigh(base, fit, data.n)})
