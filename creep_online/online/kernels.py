@@ -58,29 +58,32 @@ def _soe_ends(alpha: float, lam: np.ndarray, dx: float) -> tuple:
 @njit(cache=CACHE)
 def node_coefficients(alpha: float, lam: np.ndarray, dx: float, a1: float, a2: float, v: np.ndarray,
                       dv: np.ndarray, i0: int, i1: int) -> None:
-    """``model_coefficients``' node entries v[i], dv[i] for nodes i0..i1 (a power and a logarithm each)."""
+    """``model_coefficients``' node entries v[i], dv[i] for nodes i0..i1 (a power each, and a logarithm for dv;
+    an empty dv: v alone)."""
     s, pc, w0, dlw0, _, _ = _soe_ends(alpha, lam, dx)
+    derivative = dv.shape[0] > 0
     for i in range(i0, i1):
         if i == 0:
             w = w0
-            dw = w0 * dlw0
             li = 0.0
         else:
             li = lam[i]
             w = s * dx * li ** (1.0 - alpha)
-            dw = w * (pc - math.log(li))
         a = 1.0 / (a2 * li * li - a1 * li + 1.0)
         v[i] = w * a
-        dv[i] = dw * a
+        if derivative:
+            dw = w0 * dlw0 if i == 0 else w * (pc - math.log(li))
+            dv[i] = dw * a
 
 
 @njit(cache=CACHE)
 def coefficient_sums(alpha: float, lam: np.ndarray, dx: float, a1: float, a2: float, v: np.ndarray,
                      dv: np.ndarray) -> None:
     """``model_coefficients``' two resonance entries (v[q], v[q + 1] and their derivatives) from the node entries:
-    the sums of w_i a_i (a2 lam_i - a1) and of w_i a_i, in node order."""
+    the sums of w_i a_i (a2 lam_i - a1) and of w_i a_i, in node order (an empty dv: v's alone)."""
     q = lam.shape[0]
     _, _, _, _, d, dld = _soe_ends(alpha, lam, dx)
+    derivative = dv.shape[0] > 0
     sum_x0 = d
     dsum_x0 = d * dld
     sum_a = 0.0
@@ -88,41 +91,23 @@ def coefficient_sums(alpha: float, lam: np.ndarray, dx: float, a1: float, a2: fl
     for i in range(q):
         li = lam[i] if i > 0 else 0.0
         sum_x0 += v[i] * (a2 * li - a1)
-        dsum_x0 += dv[i] * (a2 * li - a1)
         sum_a += v[i]
-        dsum_a += dv[i]
+        if derivative:
+            dsum_x0 += dv[i] * (a2 * li - a1)
+            dsum_a += dv[i]
     v[q] = sum_x0
     v[q + 1] = -a2 * sum_a
-    dv[q] = dsum_x0
-    dv[q + 1] = -a2 * dsum_a
+    if derivative:
+        dv[q] = dsum_x0
+        dv[q + 1] = -a2 * dsum_a
 
 
 @njit(cache=CACHE)
 def model_values(alpha: float, lam: np.ndarray, dx: float, a1: float, a2: float, v: np.ndarray) -> None:
     """``model_coefficients``' v alone, the same arithmetic operation for operation: without dv/dalpha it
     takes no logarithm per node (the re-fit's trial coefficients, ``window.full_coefficients_into``)."""
-    q = lam.shape[0]
-    s = math.sin(math.pi * alpha) / math.pi
-    lo = lam[1] * math.exp(-dx)
-    hi = lam[q - 1] * math.exp(dx)
-    e0 = math.exp(-(1.0 - alpha) * dx)
-    w0 = s * dx * lo ** (1.0 - alpha) / (1.0 - e0)
-    e1 = math.exp(-alpha * dx)
-    sum_x0 = s * dx * hi ** (-alpha) / (1.0 - e1)
-    sum_a = 0.0
-    for i in range(q):
-        if i == 0:
-            w = w0
-            li = 0.0
-        else:
-            li = lam[i]
-            w = s * dx * li ** (1.0 - alpha)
-        a = 1.0 / (a2 * li * li - a1 * li + 1.0)
-        v[i] = w * a
-        sum_x0 += w * a * (a2 * li - a1)
-        sum_a += w * a
-    v[q] = sum_x0
-    v[q + 1] = -a2 * sum_a
+    node_coefficients(alpha, lam, dx, a1, a2, v, v[:0], 0, lam.shape[0])     # (an empty dv: no derivative)
+    coefficient_sums(alpha, lam, dx, a1, a2, v, v[:0])
 
 
 @njit(cache=CACHE)
