@@ -111,9 +111,10 @@ WARM_SLICE = 350
 #: Levenberg-Marquardt step the model coefficients (in two halves of the nodes), their resonance derivatives, the
 #: Jacobian's, the normal equations' rows in slices and their assembly, the damped step (its factor, then its
 #: solve), the trial's coefficients, the trial's cost in slices and the verdict; then the covariance's factor, its
-#: inverse in column slices (and the Wald test), and for the score test the normal equations again at the result and the score's two Gauss-Newton gains (with and
-#: without the rates), one slice each; for the wide test (a stream in operation whose window fits four of its
-#: free responses) the same normal equations and its two gains, without and with the other four, one slice each.
+#: inverse in column slices (and the Wald test), and for the score test the normal equations again at the result
+#: and the score's two Gauss-Newton gains (with and without the rates), one slice each; for the wide test (a
+#: stream in operation whose window fits four of its free responses) the same normal equations and its two gains,
+#: without and with the other four, one slice each.
 #: Each call does one stage or slice: up to about a microsecond of work (``SLICE_MACS``).
 (ST_IDLE, ST_SCALE, ST_JACOBIAN, ST_ASSEMBLE, ST_ROWS, ST_SOLVE, ST_TRIAL_POINT, ST_TRIAL,
  ST_COVARIANCE, ST_INVERSE, ST_SCORE, ST_SCORE_WITHOUT, ST_BEGIN, ST_SINCE, ST_SINCE_FINISH, ST_WIDE,
