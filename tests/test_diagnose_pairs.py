@@ -237,13 +237,14 @@ def test_the_partners_score_test_sees_the_hidden_partner_and_nothing_beside_a_si
     """The score statistic itself (``score.partner_scores``): at hysteresis' fit of the record above the second mode
     passes the evidence threshold by far; at the fit of a single-effect record (leakage, 3-10x, seed 7 of the bands
     bench) no partner comes near it, so the record is not searched and stays single."""
-    from creep_online.diagnostics import pairs, score
+    from creep_online.diagnostics import extended as ext, pairs, score
     bench = _bench()
     rec = bench.make_pair_record(("second_mode", "hysteresis"), bench.BANDS["1.3-3x"], 10)
     d = diagnose((rec["t"], rec["u"], rec["y"]))
     first = d.candidates[0]
     others = [c.effect for c in d.candidates[1:]]
-    scores = score.partner_scores(d.data, first.effect, first.fit, others, pairs._peaks(d.data, first.fit))
+    scores = score.partner_scores(d.data, first.effect, first.fit, others,
+                                  ext.residual_peaks(d.data, first.fit.residual))
     best = score.fires(scores, pairs.SCORE_THRESHOLD)
     assert best is not None and best.effect == "second_mode"
     assert next(s for s in scores if s.effect == "second_mode").evidence > 10 * pairs.SCORE_THRESHOLD
@@ -253,7 +254,7 @@ def test_the_partners_score_test_sees_the_hidden_partner_and_nothing_beside_a_si
     first = d.candidates[0]
     assert first.effect == "leakage" and d.verdict == "leakage"
     scores = score.partner_scores(d.data, first.effect, first.fit, [c.effect for c in d.candidates[1:]],
-                                  pairs._peaks(d.data, first.fit))
+                                  ext.residual_peaks(d.data, first.fit.residual))
     assert len(scores) == len(d.candidates) - 1
     assert score.fires(scores, pairs.SCORE_THRESHOLD) is None
     assert max(s.evidence for s in scores) < pairs.SCORE_THRESHOLD

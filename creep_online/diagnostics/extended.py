@@ -929,6 +929,14 @@ def _choose_variants(data: Prepared, effects: tuple[str, ...], base: ExtendedFit
     return chosen
 
 
+def residual_peaks(data: Prepared, residual: np.ndarray) -> list[float]:
+    """Spectral peaks (Hz) of what a fit left, where an effect's line or ringing would sit: the priority starts of
+    effects with a frequency (``fit_extended``) and the pair trigger's points (``pairs.choose_pair``); none on a
+    record not sampled uniformly."""
+    from .locate import spectrum_peaks
+    return [p["f_hz"] for p in spectrum_peaks(data.t, residual, max_peaks=4, ratio=3.0)] if data.uniform else []
+
+
 def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, base: ExtendedFit | None = None,
                  harmonics: int = 1, max_nfev: int = MAX_NFEV, n_starts: int = 2,
                  warm: ExtendedFit | None = None, workers: int = 1) -> ExtendedFit:
@@ -950,10 +958,9 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
         base = fit_base(data)
     if not effects:
         return base
-    from .locate import spectrum_peaks
     variants = _choose_variants(data, effects, base, harmonics, warm)
     design = Design(data, effects, harmonics, variants)
-    peaks = [p["f_hz"] for p in spectrum_peaks(data.t, base.residual, max_peaks=4, ratio=3.0)] if data.uniform else []
+    peaks = residual_peaks(data, base.residual)
     # explore (grids, short polishes) on a prefix of long records: the same experiment, cheaper evaluations
     small = data.explore_data()
     explore = Design(small, effects, harmonics, variants) if small is not data else design

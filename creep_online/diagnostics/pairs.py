@@ -134,7 +134,7 @@ def choose_pair(data: ext.Prepared, base: ext.ExtendedFit, singles: list[tuple[s
             report("the two best together beat the best alone: searching the pair")
         else:
             scores = score.partner_scores(small, first[0], first[1], [s[0] for s in singles if s[0] != first[0]],
-                                          _peaks(data, first[1]))
+                                          ext.residual_peaks(data, first[1].residual))
             if partner_scores is not None:
                 partner_scores.extend(scores)
             fired = score.fires(scores, SCORE_THRESHOLD)
@@ -171,12 +171,6 @@ def choose_pair(data: ext.Prepared, base: ext.ExtendedFit, singles: list[tuple[s
     order = [s[0] for s in singles]
     return PairChoice(_ordered(best, order), fit, True, scores,
                       [_ordered(k, order) for k in rival_pairs(best, sound, scores)])
-
-
-def _peaks(data: ext.Prepared, fit: ext.ExtendedFit) -> list[float]:
-    """Spectral peaks (Hz) of what a fit left (uniform records), where a partner's line or ringing would sit."""
-    from .locate import spectrum_peaks
-    return [p["f_hz"] for p in spectrum_peaks(data.t, fit.residual, max_peaks=4, ratio=3.0)]
 
 
 def rival_pairs(best: tuple[str, str], sound: list[tuple[str, str]],
