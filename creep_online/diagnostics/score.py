@@ -72,7 +72,7 @@ def partner_scores(data: ext.Prepared, first: str, fit: ext.ExtendedFit, partner
     variants = _variants(first, fit)
     single = ext.Design(data, (first,), variants=variants)
     theta1 = _theta(single, fit, {})
-    rss0 = _stepped(single, theta1)
+    rss0 = _stepped(single, theta1)[0]
     out = []
     for name in partners:
         effect = get_effect(name)
@@ -92,7 +92,7 @@ def partner_scores(data: ext.Prepared, first: str, fit: ext.ExtendedFit, partner
         if best is None:
             continue
         _, design, th = best
-        rss1, moved = _stepped(design, th, full=True)
+        rss1, moved = _stepped(design, th)
         rss1 = min(rss1, rss0)
         lr = data.n * math.log(max(rss0, 1e-300) / max(rss1, 1e-300))
         dk = max(len(th) + len(design.project(th)[0]) - fit.n_params, 1)
@@ -129,9 +129,10 @@ def _theta(design: ext.Design, fit: ext.ExtendedFit, partner: dict[str, float]) 
     return np.clip(th, design.lo, design.hi)
 
 
-def _stepped(design: ext.Design, theta: np.ndarray, full: bool = False):
+def _stepped(design: ext.Design, theta: np.ndarray) -> tuple[float, np.ndarray]:
     """RSS after one Gauss-Newton step from ``theta`` (linear coefficients solved exactly; the step's
-    linearized RSS), a parameter on a bound not stepped across it; with ``full``, also the stepped theta."""
+    linearized RSS), a parameter on a bound not stepped across it, and the stepped theta (``theta`` itself
+    where no Jacobian could be had)."""
     r = np.array(design.residual(theta))
     rss = float(r @ r)
     try:
@@ -139,7 +140,7 @@ def _stepped(design: ext.Design, theta: np.ndarray, full: bool = False):
     except (ValueError, ModelError, np.linalg.LinAlgError):
         jac = None
     if jac is None or not np.all(np.isfinite(jac)):
-        return (rss, theta) if full else rss
+        return rss, theta
     free = np.ones(theta.size, dtype=bool)
     step = np.zeros(theta.size)
     for _ in range(3):                        # drop the columns that would step out of the bounds
@@ -158,4 +159,4 @@ def _stepped(design: ext.Design, theta: np.ndarray, full: bool = False):
     rest = r + jac @ step
     stepped = float(rest @ rest)
     rss = min(rss, stepped)
-    return (rss, np.clip(theta + step, design.lo, design.hi)) if full else rss
+    return rss, np.clip(theta + step, design.lo, design.hi)
