@@ -80,6 +80,46 @@ def spectrum_peaks(t: np.ndarray, r: np.ndarray, max_peaks: int = 5, ratio: floa
     return out
 
 
+#: ``spectrum_humps``: Welch segments of this many samples (at most), and the median window as a fraction of
+#: the spectrum's bins: a resonance rings over a band ~2 zeta fn wide (32 Hz at 232 Hz, zeta 0.07), wider than
+#: ``spectrum_peaks``' local median (51 bins of a 4-segment spectrum: 34 Hz on 6000 samples at 1 kHz).
+HUMP_SEGMENT = 256
+HUMP_MEDIAN = 0.25
+
+
+def spectrum_humps(t: np.ndarray, r: np.ndarray, max_peaks: int = 3) -> list[float]:
+    """Frequencies (Hz) of broad humps of the residual spectrum, highest above their surroundings first: a coarse
+    Welch spectrum (``HUMP_SEGMENT``-sample segments) whose peaks stand above a median over a quarter of it by
+    four standard errors of the estimate (1 + 4 / sqrt(segments): 1.6x on 6000 samples).
+
+    Where a damped mode rings, ``spectrum_peaks`` sees no line (its local median follows the hump): a second
+    mode at 233 Hz, zeta 0.07, beside strong hysteresis was never started near its frequency, and the pair's
+    fit stopped at 7x the noise (pairs bench, second mode + hysteresis 10-100x seed 5); one at 398 Hz stood
+    2x above the white noise around it (seed 9)."""
+    from scipy.ndimage import median_filter
+    from scipy.signal import find_peaks, welch
+    t = np.asarray(t, dtype=float)
+    if not is_uniform(t) or t.size < 4 * HUMP_SEGMENT:
+        return []
+    fs = (t.size - 1) / (t[-1] - t[0])
+    f, p = welch(np.asarray(r, dtype=float) - np.mean(r), fs, nperseg=HUMP_SEGMENT)
+    if not np.any(p > 0):
+        return []
+    segments = (t.size - HUMP_SEGMENT) // (HUMP_SEGMENT // 2) + 1
+    med = np.maximum(median_filter(p, size=2 * int(HUMP_MEDIAN * p.size / 2) + 1, mode="nearest"), 1e-300)
+    ratio = p / med
+    idx, _ = find_peaks(p)
+    # (from the fourth bin on: below, the 4-segment spectrum of ``spectrum_peaks`` resolves what is there)
+    idx = sorted((i for i in idx if ratio[i] >= 1.0 + 4.0 / math.sqrt(segments) and 3 <= i < p.size - 1),
+                 key=lambda i: -ratio[i])
+    out = []
+    for i in idx[:max_peaks]:
+        a, b, c = np.log(np.maximum(p[i - 1:i + 2], 1e-300))     # the peak between bins: a parabola in log PSD
+        shift = 0.5 * (a - c) / (a - 2 * b + c) if a - 2 * b + c < 0 else 0.0
+        out.append(float(f[i] + shift * (f[1] - f[0])))
+    return out
+
+
 def frequency_bands(t: np.ndarray, r: np.ndarray, noise_std: float) -> list[dict]:
     """Residual power per decade band relative to white noise of ``noise_std`` (1.0 = at the noise floor)."""
     if not is_uniform(t) or len(t) < 64:
