@@ -259,7 +259,9 @@ def test_the_partners_score_test_sees_the_hidden_partner_and_nothing_beside_a_si
     assert score.fires(scores, pairs.SCORE_THRESHOLD) is None
     assert max(s.evidence for s in scores) < pairs.SCORE_THRESHOLD
     assert len(d.pairs_tried) <= 1
-    assert [s.effect for s in d.partner_scores] == [s.effect for s in scores]   # the diagnosis' own test, reported
+    # the diagnosis' own test, reported, then the runner-up's partners weighed against leakage: none passes either
+    assert [s.effect for s in d.partner_scores if s.beside == 'leakage'] == [s.effect for s in scores]
+    assert all(s.against == 'leakage' and s.evidence < pairs.SCORE_THRESHOLD for s in d.partner_scores)
 
 
 def test_each_effect_says_where_the_score_test_looks_for_it():
@@ -344,3 +346,16 @@ def test_a_pair_left_above_the_floor_is_fitted_again_from_its_other_effects_fit(
     pairs._round(data, base, singles[1], singles, fits, flaws, ext.MAX_NFEV, 1, lambda _s: None, rec["noise"])
     assert list(fits) == [("hysteresis", "second_creep")]     # the same pair, its better fit kept
     assert fits[("hysteresis", "second_creep")].residual_rms <= bench.FLOOR * rec["noise"]
+
+
+def test_a_pair_without_the_best_single_effect_is_found_by_the_runner_ups_score_test():
+    # leakage + drift 1.3-3x seed 0: a second creep explains the record alone (1.002x the noise, white) and no
+    # partner of it passes; leakage + drift, without it, beats it by 15 once fitted. Drift beside leakage,
+    # weighed against the second creep, passes and starts the search, which names both.
+    bench = _bench()
+    rec = bench.make_pair_record(("leakage", "drift"), bench.BANDS["1.3-3x"], 0)
+    d = diagnose((rec["t"], rec["u"], rec["y"]))
+    assert any(s.beside == "leakage" and s.against == "second_creep" for s in d.partner_scores)
+    assert d.combination is not None and set(d.combination.fit.effects) == {"leakage", "drift"}
+    assert d.combination.significant
+    assert d.verdict in ("leakage", "drift")

@@ -149,7 +149,8 @@ class Diagnosis:
             "warnings": self.warnings, "elapsed_s": self.elapsed_s, "source": self.source,
             "physics_check": jsonable(self.physics), "verdict_basis": jsonable(self.verdict_basis),
             "partner_scores": [jsonable({"effect": s.effect, "evidence": s.evidence, "lr": s.lr, "dk": s.dk,
-                                         "points": s.points, "at": s.at}) for s in self.partner_scores],
+                                         "points": s.points, "at": s.at, "beside": s.beside,
+                                         "against": s.against}) for s in self.partner_scores],
         }
 
 

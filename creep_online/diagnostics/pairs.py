@@ -138,9 +138,20 @@ def choose_pair(data: ext.Prepared, base: ext.ExtendedFit, singles: list[tuple[s
             if partner_scores is not None:
                 partner_scores.extend(scores)
             fired = score.fires(scores, SCORE_THRESHOLD)
+            if fired is None and len(significant) >= 2:
+                # the best single effect may stand in for a pair it is not part of: the runner-up's partners,
+                # weighed against the best (``score.partner_scores``' ``against``)
+                runner = significant[1]
+                more = score.partner_scores(small, runner[0], runner[1],
+                                            [s[0] for s in singles if s[0] not in (first[0], runner[0])],
+                                            ext.residual_peaks(data, runner[1].residual), against=first[:2])
+                if partner_scores is not None:
+                    partner_scores.extend(more)
+                scores = sorted(scores + more, key=lambda s: -s.evidence)
+                fired = score.fires(scores, SCORE_THRESHOLD)
             if fired is None:
                 return None if fit is None else PairChoice(pair, fit, False, {pair: _weigh(base, fit, data.n)})
-            report(f"{fired.effect} beside {first[0]} passes the score test (evidence {fired.evidence:.3g}): "
+            report(f"{fired.effect} beside {fired.beside} passes the score test (evidence {fired.evidence:.3g}): "
                    "searching the pair")
         if fit is not None and small is data:   # the first round's fit of this pair, warm from the same fit: kept
             fits[pair] = fit
