@@ -366,6 +366,12 @@ class Design:
         """The same design with its own (empty) solution cache and evaluation counter (for another thread)."""
         return Design(self.data, self.effects, self.harmonics, self.variants)
 
+    def explored(self) -> "Design":
+        """The same design on the record's exploration window (``Prepared.explore_data``); itself if that window
+        is the record."""
+        small = self.data.explore_data()
+        return self if small is self.data else Design(small, self.effects, self.harmonics, self.variants)
+
     def index(self, name: str) -> int:
         return self.names.index(name)
 
@@ -803,8 +809,7 @@ def fit_base(data: Prepared, start: CreepModel | None = None, max_nfev: int = MA
     """
     design = Design(data)
     # long records: choose and pre-polish the starts on a prefix (same experiment, cheaper), finish on all
-    small = data.explore_data()
-    explore = Design(small) if small is not data else design
+    explore = design.explored()
     starts: list[np.ndarray] = []
     if start is not None:
         starts.append(base_theta(start))
@@ -824,9 +829,7 @@ def fit_base(data: Prepared, start: CreepModel | None = None, max_nfev: int = MA
     order = np.argsort(costs)
     polished = []
     for i in order[:2]:
-        th = _optimise(explore, starts[i], max_nfev)
-        if explore is not design:
-            th = _optimise(design, th, FULL_NFEV, FULL_TOL, FULL_FTOL)
+        th = _polish(explore, design, starts[i], max_nfev)
         polished.append((design.cost(th), th))
     polished.sort(key=lambda ct: ct[0])
     fit = _result(design, polished[0][1])
@@ -971,8 +974,7 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     design = Design(data, effects, harmonics, variants)
     peaks = residual_peaks(data, base.residual)
     # explore (grids, short polishes) on a prefix of long records: the same experiment, cheaper evaluations
-    small = data.explore_data()
-    explore = Design(small, effects, harmonics, variants) if small is not data else design
+    explore = design.explored()
     grid, prio = _grid_starts(explore, base, peaks)
 
     def ranked(d: Design, starts: list[np.ndarray]) -> list[tuple[float, np.ndarray]]:
@@ -1024,8 +1026,9 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     above = RESTART_ABOVE_FLOOR * noise_std_estimate(fit.residual) < fit.residual_rms
     if above and (fit.residual_rms < RESTART_EXPLAINED * base.residual_rms or _on_a_bound(design, base.theta[:3])):
         th = _restart_base(design, explore, best, max_nfev)
-        if design.cost(th) < best_cost:
-            best, best_cost = th, design.cost(th)
+        cost = design.cost(th)
+        if cost < best_cost:
+            best, best_cost = th, cost
             fit = _result(design, th)
     if above and fit.residual_rms < RESTART_EXPLAINED * base.residual_rms:
         fit = _other_variants(design, fit, best, best_cost, max_nfev)
@@ -1044,12 +1047,7 @@ def _other_variants(design: Design, fit: ExtendedFit, best: np.ndarray, best_cos
             if variant == design.variants.get(name):
                 continue
             other = Design(design.data, design.effects, design.harmonics, {**design.variants, name: variant})
-            explore = other.data.explore_data()
-            small = Design(explore, other.effects, other.harmonics, other.variants) if explore is not other.data \
-                else other
-            th = _optimise(small, best, max_nfev)
-            if small is not other:
-                th = _optimise(other, th, FULL_NFEV, FULL_TOL, FULL_FTOL)
+            th = _polish(other.explored(), other, best, max_nfev)
             cost = other.cost(th)
             if cost < best_cost:
                 fit, best_cost = _result(other, th), cost
@@ -1118,13 +1116,18 @@ def _restart_base(design: Design, explore: Design, best: np.ndarray, max_nfev: i
         if g not in picks:
             picks.append(g)
     for i in picks:
-        th = _optimise(explore, starts[i], max_nfev)
-        if explore is not design:
-            th = _optimise(design, th, FULL_NFEV, FULL_TOL, FULL_FTOL)
+        th = _polish(explore, design, starts[i], max_nfev)
         c = design.cost(th)
         if c < out_cost:
             out, out_cost = th, c
     return out
+
+
+def _polish(explore: Design, design: Design, theta: np.ndarray, max_nfev: int) -> np.ndarray:
+    """A full polish from ``theta`` on the exploration window (``Design.explored``), then, where that window is
+    not the record, the final polish's few evaluations on the whole record (``FULL_NFEV``)."""
+    th = _optimise(explore, theta, max_nfev)
+    return th if explore is design else _optimise(design, th, FULL_NFEV, FULL_TOL, FULL_FTOL)
 
 
 def _polished_starts(design: Design, polished: list[np.ndarray]) -> list[np.ndarray]:

@@ -133,22 +133,7 @@ def choose_pair(data: ext.Prepared, base: ext.ExtendedFit, singles: list[tuple[s
         if fit is not None and evidence(first[1], fit, data.n)[0] > EVIDENCE_THRESHOLD:
             report("the two best together beat the best alone: searching the pair")
         else:
-            scores = score.partner_scores(small, first[0], first[1], [s[0] for s in singles if s[0] != first[0]],
-                                          ext.residual_peaks(data, first[1].residual))
-            if partner_scores is not None:
-                partner_scores.extend(scores)
-            fired = score.fires(scores, SCORE_THRESHOLD)
-            if fired is None and len(significant) >= 2:
-                # the best single effect may stand in for a pair it is not part of: the runner-up's partners,
-                # weighed against the best (``score.partner_scores``' ``against``)
-                runner = significant[1]
-                more = score.partner_scores(small, runner[0], runner[1],
-                                            [s[0] for s in singles if s[0] not in (first[0], runner[0])],
-                                            ext.residual_peaks(data, runner[1].residual), against=first[:2])
-                if partner_scores is not None:
-                    partner_scores.extend(more)
-                scores = sorted(scores + more, key=lambda s: -s.evidence)
-                fired = score.fires(scores, SCORE_THRESHOLD)
+            fired = _partner_trigger(data, small, singles, significant, partner_scores)
             if fired is None:
                 return None if fit is None else PairChoice(pair, fit, False, {pair: _weigh(base, fit, data.n)})
             report(f"{fired.effect} beside {fired.beside} passes the score test (evidence {fired.evidence:.3g}): "
@@ -183,6 +168,28 @@ def choose_pair(data: ext.Prepared, base: ext.ExtendedFit, singles: list[tuple[s
     order = [s[0] for s in singles]
     return PairChoice(_ordered(best, order), fit, True, scores,
                       [_ordered(k, order) for k in rival_pairs(best, sound, scores)])
+
+
+def _partner_trigger(data: ext.Prepared, small: ext.Prepared, singles: list, significant: list,
+                     sink: list | None) -> score.PartnerScore | None:
+    """The partner whose score test starts the pair search where the best single effect explains the record, or
+    None: first the best effect's partners; then, if none passes, the runner-up's (the best excepted), weighed
+    against the best fit (``score.partner_scores``' ``against``): the best single effect may stand in for a pair
+    it is not part of. The Bonferroni bound counts the points of both. ``sink`` receives every score computed."""
+    first = significant[0]
+    tests = [(first, None)] + ([(significant[1], first[:2])] if len(significant) >= 2 else [])
+    scores: list = []
+    for beside, against in tests:
+        more = score.partner_scores(small, beside[0], beside[1],
+                                    [s[0] for s in singles if s[0] not in (first[0], beside[0])],
+                                    ext.residual_peaks(data, beside[1].residual), against=against)
+        if sink is not None:
+            sink.extend(more)
+        scores = sorted(scores + more, key=lambda s: -s.evidence)
+        fired = score.fires(scores, SCORE_THRESHOLD)
+        if fired is not None:
+            return fired
+    return None
 
 
 def rival_pairs(best: tuple[str, str], sound: list[tuple[str, str]],
