@@ -552,7 +552,10 @@ def test_the_free_responses_block_does_not_void_the_covariance_of_the_others():
         free = np.ones(n)
         free[3:] = W.LINEAR
         W.covariance(H, free, cov)
-        np.testing.assert_allclose(np.diag(cov)[:3], exact, rtol=1e-4)
+        # 1 %: the normal equations cannot do better than ~cond(H) x eps. The 6 s window's H has a condition of
+        # ~3.5e14: the exact inverse of H as rounded (math.fsum of its entries) differs from the QR's variances
+        # by 4.5e-3, and the kernel's by 2.6e-3 with AVX-512's BLAS products (1e-4 had held with AVX2's)
+        np.testing.assert_allclose(np.diag(cov)[:3], exact, rtol=1e-2)
     W.covariance(H, np.ones(n), cov)               # the same 6 s window, every parameter judged: refused
     assert np.all(np.isinf(cov))
 
