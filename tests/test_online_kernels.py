@@ -199,6 +199,59 @@ def test_replay_reproduces_the_statistics():
 
 
 
+
+def test_replay_snapshots_equal_the_statistics_at_their_instants_and_survive_the_next_replay():
+    """A replay passes the change test's instants and keeps the last three snapshots (``window.snapshot`` into the
+    tracker's buffers): each equals the statistics a tracker fed live at that linearization point had at that
+    sample (S's upper triangle, sy, syy, the weight). The next replay writes the other set of buffers: a change
+    test queued on the first replay's snapshot still reads what it was."""
+    model = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
+    h, n, every = 1e-3, 3000, 500
+    u = _staircase(n, 300, 4)
+    y = simulate(model, np.arange(n) * h, u) + 1e-3 * np.random.default_rng(2).normal(size=n)
+    tr = _tracker(model, h)
+    tr.detect, tr.test_every = True, every
+    _feed(tr, u, y)
+    tr._jobs.clear()                               # (the live snapshots' jobs: not what is tested)
+    for _ in tr._relinearize_job(None):
+        pass
+    snaps = tr._snaps
+    assert [s[0] for s in snaps] == [2000, 2500, 3000]
+    fresh = _tracker(model, h, lin=(tr.a1l, tr.a2l))
+    upper = np.triu(np.ones((tr.p, tr.p), dtype=bool))
+    done = 0
+    kept = []
+    for i, S0, sy0, syy0, g0, lin, theta0, shift0, slot in snaps:
+        _feed(fresh, u[done:i], y[done:i])
+        done = i
+        scale = np.abs(fresh.S).max()
+        assert np.allclose(S0[upper], fresh.S[upper], rtol=1e-9, atol=1e-12 * scale)
+        assert np.allclose(sy0, fresh.sy, rtol=1e-9, atol=1e-12 * np.abs(fresh.sy).max())
+        assert syy0 == pytest.approx(float(fresh.sc[W.SC_SYY]), rel=1e-9)
+        assert g0 == pytest.approx(float(fresh.sc[W.SC_G]), rel=1e-12)
+        assert slot == -1 and not shift0.any() and lin == (tr.a1l, tr.a2l)
+        kept.append((S0[upper].copy(), sy0.copy()))
+    for _ in tr._relinearize_job(None):            # the next replay: the first one's snapshots untouched
+        pass
+    for (i, S0, sy0, *_), (S_then, sy_then) in zip(snaps, kept):
+        assert np.array_equal(S0[upper], S_then) and np.array_equal(sy0, sy_then)
+    assert all(a[1] is not b[1] for a, b in zip(snaps, tr._snaps))
+
+
+def test_a_replay_unit_does_about_one_chunk_of_work():
+    """``_replay_unit``: a unit accumulates ``chunk`` samples or only advances up to 8 chunks (1/8 the work each);
+    the unit that ends the skip does both within about one chunk's work, and the units cover every sample."""
+    chunk = 54
+    for skip in (0, 1, 7, 135, 431, 432, 433, 5000):
+        done, work = 0, []
+        while done < skip + 3 * chunk:
+            n = T._replay_unit(chunk, skip - done)
+            advanced = min(n, max(skip - done, 0))
+            work.append(advanced / 8 + (n - advanced))
+            done += n
+        assert max(work) <= chunk + 1
+        assert done >= skip + 3 * chunk
+
 @pytest.mark.parametrize("window_s, drift, skip", [(None, 0, 0), (1.0, 2, 100), (0.01, 2, 0)])
 def test_blocked_replay_equals_one_rank_one_update_per_sample(window_s, drift, skip):
     """``replay`` (rows gathered in blocks, one matrix product each) = ``replay_direct`` (the live kernel's

@@ -148,6 +148,10 @@ CALM_MOVE = 1e-3
 #: Smaller units also stretch a replay over more samples: at 10000 the re-convergence after a change,
 #: fed sample by sample at 10 kHz, went from 3.5 to 5.5 s (median).
 UNIT_MACS = 80000
+#: A replay swaps its statistics in on the unit that catches up with the live stream if that unit replayed at
+#: most this many samples; otherwise on the next unit, with the sample or two that came in meanwhile (the swap,
+#: ~12-15 us cold, and a full replay unit in one update() were ~40 us).
+SWAP_WITH = 4
 #: Remembered samples copied per unit for a search's segment (``WindowTracker._ring_segment``).
 SEGMENT_CHUNK = 4096
 #: Snapshot slots of the change test, reused in turn (see ``WindowTracker._allocate_work``).
@@ -219,6 +223,18 @@ def _likelihood_ratio(rows: int, c_old: float, c_new: float) -> float:
     if not math.isfinite(c_old):
         return math.inf
     return rows * math.log(c_old / c_new) if c_old > 0.0 and c_new > 0.0 else 0.0
+
+
+def _replay_unit(chunk: int, skip_left: int) -> int:
+    """Samples in a replay's next unit: ``chunk`` accumulated, or up to eight times as many only advanced
+    (states, no statistics: ~1/8 of the work) while ``skip_left`` > 0. A unit that ends the skip accumulates
+    only what the advance leaves of one unit's work: accumulating past the skip's end at the advance's
+    length had made single calls of ~90 us (432 samples, 297 of them accumulated)."""
+    if skip_left <= 0:
+        return chunk
+    if skip_left >= 8 * chunk:
+        return 8 * chunk
+    return skip_left + max(chunk - skip_left // 8, 1)
 
 
 def _largest_move(new: list[float], old: list[float]) -> float:
@@ -423,6 +439,13 @@ class WindowTracker(ParameterView):
         # the snapshot there, in the per-sample kernel (``refit.queue_test``)
         self._snap_slots = RF.snapshot_slots(self._test_wk, p, k)
         self._snap_next = 0
+        # a replay's snapshots at the test instants it passes (the last three kept), written by one kernel
+        # (``window.snapshot``: four numpy copies from cold Python cost ~20 us on a replay's unit); two sets,
+        # one per replay in turn: a change test queued on one replay's snapshot reads it after that replay
+        # swapped in, while the next replay writes the other set
+        self._replay_snaps = [[(np.zeros((p, p)), np.zeros(p), np.zeros_like(self._shift), np.zeros(k))
+                               for _ in range(3)] for _ in range(2)]
+        self._replay_set = 0
         self._replay_work = W.replay_scratch(p)     # (a replay's unit leaves nothing in it: shared by the jobs)
         # a search's segment (``_ring_segment``) and the states-only fast-forward before it (``_nodes_at``), made
         # and pre-faulted here: one search at a time
@@ -718,23 +741,29 @@ class WindowTracker(ParameterView):
                 W.drift_coefficients(self.theta, a1, a2, self.basis.lam, self.basis.dx, st[lay["md"]:lay["size"]])
         chunk = self.replay_chunk
         snaps: list[tuple] = []
+        buffers, taken = self._replay_snaps[self._replay_set], 0
+        self._replay_set ^= 1
         yield
         lin = (a1, a2)
-        lay_sy = slice(lay["sy"], lay["co"])
         size, slot = self.ring.shape[1], self._ring_position(oldest) - oldest
         i = oldest
+        deferred = False
         while i < self.n:                  # the live stream keeps appending: catch up
-            n = min(chunk if i - oldest >= skip else 8 * chunk, self.n - i)
+            n = min(_replay_unit(chunk, skip - (i - oldest)), self.n - i)
             if self.detect:                # stop at the change test's snapshot instants
                 n = min(n, self._test_after(i) - i)
             W.replay(self.ring, (slot + i) % size, n, max(skip - (i - oldest), 0), st, S, *self._replay_work)
             i += n
             if self.detect and i % self.test_every == 0 and i - oldest > skip:
-                snaps = (snaps + [(i, S.copy(), st[lay_sy].copy(), float(st[W.SC_SYY]), float(st[W.SC_G]),
-                                   lin, self._theta_at.get(i, self.theta).copy(), np.zeros_like(self._shift),
-                                   -1)])[-3:]     # (no slot: the test starts from Python, ``refit.start_test``)
-            if i >= self.n:                # caught up: swap now (a yield would let a new sample in)
-                break
+                S0, sy0, shift0, theta0 = buffers[taken % 3]     # (the buffers of the one dropped now)
+                taken += 1                 # shift0 stays zero: a replay's snapshots are at its own origin
+                syy0, g0 = W.snapshot(st, S, shift0, self._theta_at.get(i, self.theta), S0, sy0, shift0, theta0)
+                snaps = (snaps + [(i, S0, sy0, syy0, g0, lin, theta0, shift0, -1)])[-3:]
+                # (no slot: the test starts from Python, ``refit.start_test``)
+            if i >= self.n:                # caught up: swap now (a yield lets a new sample in) if this unit was
+                if n <= SWAP_WITH or deferred:  # light; else on the next one, with the samples that came in
+                    break                  # (once: fed in blocks, more than SWAP_WITH may come in per unit)
+                deferred = True
             yield
         # swap: the live scalars and tail, the replayed states and statistics
         new = W.swapped_state(self.st, st, self.theta, self.basis.lam, self.basis.dx)
@@ -1020,6 +1049,7 @@ class WindowTracker(ParameterView):
         chunk = max(16, UNIT_MACS // (4 * self.q))         # states only: ~0.04 us per sample at Q = 42
         size, slot = self.ring.shape[1], self._ring_position(oldest) - oldest
         i = oldest
+        yield                              # (the set-up and a first chunk in one update(): 45-55 us)
         while i < n0:
             n = min(chunk, n0 - i)
             W.replay(self.ring, (slot + i) % size, n, n, st, S, *self._replay_work)
