@@ -472,8 +472,8 @@ class OnlineEstimator(StoredParams):
                 if status < 8:                # the slice was this call's background work: no job runs while the
                     return                    # machine does (``work``; its call cost ~0.4 us on every slice)
             if status >= 8:                   # jobs queued (and the change test's snapshot taken): their first
-                tr._schedule()                # unit waits for the next sample, this call has done enough
-                if not self._state_finite(tr):
+                finite = tr._schedule()       # unit waits for the next sample, this call has done enough
+                if not (self._state_finite(tr) if finite is None else finite):   # (a snapshot checks it)
                     self._fault(None, "update")
             elif tr._jobs:
                 tr.work(self._units)
@@ -1078,7 +1078,7 @@ def warm_kernels() -> None:
     RF.start_test(st, S, S.copy(), np.ones(tr.p), 1.0, shift, shift.copy(), tr.theta.copy(), tr._test_wk.copy(),
                   True)
     RF.queue_test(tr._test_wk.copy(), 0, 1.0, True)
-    RF.snapshot(st, S, tr._ctx.copy(), T.MACHINE_TEST, 0)
+    RF.snapshot(st, S, tr._ctx.copy(), T.MACHINE_TEST, 0, 1.0)
     wk = tr._wk.copy()
     RF.begin(st, S, shift, wk, 1, False, True, 0, True)
     RF.run(st, S, shift, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)

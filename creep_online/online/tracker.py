@@ -506,8 +506,9 @@ class WindowTracker(ParameterView):
     def prediction(self) -> float:
         return float(self.sc[W.SC_PRED])
 
-    def _schedule(self) -> None:
-        """Queue the jobs that are due at this sample and set the next due count."""
+    def _schedule(self) -> bool | None:
+        """Queue the jobs that are due at this sample and set the next due count. Returns whether the state is
+        finite when a change test's snapshot was taken (its kernel checks it, ``refit.snapshot``), else None."""
         n = self.n
         due = n >= self._next_refit
         if due:
@@ -518,8 +519,9 @@ class WindowTracker(ParameterView):
             # started by its job's first unit, on a later call: this one has run the sample and Python already
             self._jobs.append(self._refit_job())
         if self.detect and n and n % self.test_every == 0:
-            self._snapshot(n)
+            return self._snapshot(n)       # (it sets the next due count too)
         self._set_due(n)
+        return None
 
     def _set_due(self, n: int) -> None:
         """The sample at which the per-sample kernel calls back (``_schedule``) after sample n (now): the next re-fit
@@ -774,13 +776,16 @@ class WindowTracker(ParameterView):
         self._pace_refits(False)
 
     # ------------------------------------------------------------------ change detection
-    def _snapshot(self, n: int) -> None:
+    def _snapshot(self, n: int) -> bool:
         """The change test's snapshot of the statistics and the estimate at sample n (now): the copy at this
-        instant (one kernel), its bookkeeping on the next call (``_snapshot_job``; together they were over 25 us)."""
+        instant, the next due count (``_set_due``'s) and the state's check in one kernel, its bookkeeping on the
+        next call (``_snapshot_job``; together they were over 25 us). Returns whether the state is finite."""
         index = self._snap_next
         self._snap_next = (index + 1) % SNAP_SLOTS
-        syy0, g0 = RF.snapshot(self.st, self.S, self._ctx, MACHINE_TEST, index)
+        due = min(self._next_refit, n + self.test_every)     # (``_set_due`` at a test instant)
+        syy0, g0, finite = RF.snapshot(self.st, self.S, self._ctx, MACHINE_TEST, index, due)
         self._jobs.append(self._snapshot_job(n, index, syy0, g0, self.st))
+        return finite
 
     def _snapshot_job(self, n: int, index: int, syy0: float, g0: float, st: np.ndarray) -> Generator:
         """Record the snapshot taken at sample n (``_snapshot``) and queue the change test of the second since
