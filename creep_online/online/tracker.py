@@ -154,6 +154,8 @@ UNIT_MACS = 80000
 SWAP_WITH = 4
 #: Remembered samples copied per unit for a search's segment (``WindowTracker._ring_segment``).
 SEGMENT_CHUNK = 4096
+#: Change-test snapshots kept, live and replayed: the test of the second before the last reads the oldest.
+KEPT_SNAPSHOTS = 3
 #: Snapshot slots of the change test, reused in turn (see ``WindowTracker._allocate_work``).
 SNAP_SLOTS = 6
 #: Jobs that run before the long ones (``WindowTracker._next_job``).
@@ -444,7 +446,7 @@ class WindowTracker(ParameterView):
         # one per replay in turn: a change test queued on one replay's snapshot reads it after that replay
         # swapped in, while the next replay writes the other set
         self._replay_snaps = [[(np.zeros((p, p)), np.zeros(p), np.zeros_like(self._shift), np.zeros(k))
-                               for _ in range(3)] for _ in range(2)]
+                               for _ in range(KEPT_SNAPSHOTS)] for _ in range(2)]
         self._replay_set = 0
         self._replay_work = W.replay_scratch(p)     # (a replay's unit leaves nothing in it: shared by the jobs)
         # a search's segment (``_ring_segment``) and the states-only fast-forward before it (``_nodes_at``), made
@@ -524,12 +526,13 @@ class WindowTracker(ParameterView):
         return None
 
     def _set_due(self, n: int) -> None:
+        """Set the sample at which the per-sample kernel calls back (``_due_after``)."""
+        self.sc[W.SC_DUE] = self._due_after(n)
+
+    def _due_after(self, n: int) -> int:
         """The sample at which the per-sample kernel calls back (``_schedule``) after sample n (now): the next re-fit
         or change test. (n passed in: ``self.n`` reads the state array, each read a numpy call from cold Python.)"""
-        due = self._next_refit
-        if self.detect:
-            due = min(due, self._test_after(n))
-        self.sc[W.SC_DUE] = due
+        return min(self._next_refit, self._test_after(n)) if self.detect else self._next_refit
 
     def _test_after(self, n: int) -> int:
         """The first change-test (snapshot) instant after sample n."""
@@ -757,10 +760,10 @@ class WindowTracker(ParameterView):
             W.replay(self.ring, (slot + i) % size, n, max(skip - (i - oldest), 0), st, S, *self._replay_work)
             i += n
             if self.detect and i % self.test_every == 0 and i - oldest > skip:
-                S0, sy0, shift0, theta0 = buffers[taken % 3]     # (the buffers of the one dropped now)
+                S0, sy0, shift0, theta0 = buffers[taken % KEPT_SNAPSHOTS]     # (the buffers of the one dropped now)
                 taken += 1                 # shift0 stays zero: a replay's snapshots are at its own origin
                 syy0, g0 = W.snapshot(st, S, shift0, self._theta_at.get(i, self.theta), S0, sy0, shift0, theta0)
-                snaps = (snaps + [(i, S0, sy0, syy0, g0, lin, theta0, shift0, -1)])[-3:]
+                snaps = (snaps + [(i, S0, sy0, syy0, g0, lin, theta0, shift0, -1)])[-KEPT_SNAPSHOTS:]
                 # (no slot: the test starts from Python, ``refit.start_test``)
             if i >= self.n:                # caught up: swap now (a yield lets a new sample in) if this unit was
                 if n <= SWAP_WITH or deferred:  # light; else on the next one, with the samples that came in
@@ -782,8 +785,7 @@ class WindowTracker(ParameterView):
         next call (``_snapshot_job``; together they were over 25 us). Returns whether the state is finite."""
         index = self._snap_next
         self._snap_next = (index + 1) % SNAP_SLOTS
-        due = min(self._next_refit, n + self.test_every)     # (``_set_due`` at a test instant)
-        syy0, g0, finite = RF.snapshot(self.st, self.S, self._ctx, MACHINE_TEST, index, due)
+        syy0, g0, finite = RF.snapshot(self.st, self.S, self._ctx, MACHINE_TEST, index, self._due_after(n))
         self._jobs.append(self._snapshot_job(n, index, syy0, g0, self.st))
         return finite
 
@@ -800,9 +802,9 @@ class WindowTracker(ParameterView):
         if len(self._theta_at) > 5:        # (an instant without a snapshot: not in a stream fed sample by sample)
             for old in [k for k in self._theta_at if k < n - 4 * self.test_every]:
                 del self._theta_at[old]
-        if len(self._snaps) > 3:
+        if len(self._snaps) > KEPT_SNAPSHOTS:
             self._snaps.pop(0)
-        if len(self._snaps) > 2:
+        if len(self._snaps) == KEPT_SNAPSHOTS:   # (the oldest is the second before the last)
             self._jobs.append(self._change_job(self._snaps[0]))
         yield
 
