@@ -200,6 +200,38 @@ def test_replay_reproduces_the_statistics():
 
 
 
+def test_replays_swap_two_state_arrays_in_turn_and_each_equals_a_tracker_fed_live():
+    """Each replay writes the spare pair (state, statistics) and swaps it in (``window.swap_into``); the live pair it
+    retires is the next replay's. Three replays in turn, the stream going on between them: after each, the
+    statistics and the next predictions equal those of a tracker fed live at the replay's linearization point,
+    and the live arrays alternate between the same two."""
+    model = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
+    h, n = 1e-3, 4000
+    u = _staircase(n, 300, 5)
+    y = simulate(model, np.arange(n) * h, u) + 1e-3 * np.random.default_rng(3).normal(size=n)
+    tr = _tracker(model, h, lin=(model.a1 * 1.1, model.a2 * 0.9))
+    fresh = _tracker(model, h)
+    arrays = []
+    done = 0
+    for upto in (2000, 3000, 3500):
+        _feed(tr, u[done:upto], y[done:upto])
+        _feed(fresh, u[done:upto], y[done:upto])
+        done = upto
+        for _ in tr._relinearize_job(None):
+            pass
+        arrays.append((tr.st, tr.S))
+        assert (tr.a1l, tr.a2l) == (fresh.a1l, fresh.a2l)
+        assert np.allclose(tr.S, fresh.S, rtol=1e-9, atol=1e-12 * np.abs(fresh.S).max())
+        assert np.allclose(tr.sy, fresh.sy, rtol=1e-9, atol=1e-12 * np.abs(fresh.sy).max())
+        assert tr.sc[W.SC_SYY] == pytest.approx(float(fresh.sc[W.SC_SYY]), rel=1e-9)
+        ahead = slice(upto, upto + 50)
+        assert np.allclose(_feed(tr, u[ahead], y[ahead]), _feed(fresh, u[ahead], y[ahead]), rtol=0, atol=1e-12)
+        done = upto + 50
+    assert arrays[0][0] is arrays[2][0] and arrays[0][1] is arrays[2][1]
+    assert arrays[1][0] is not arrays[0][0] and arrays[1][1] is not arrays[0][1]
+    assert tr.adoptions == 4                       # (the start and three swaps)
+
+
 def test_replay_snapshots_equal_the_statistics_at_their_instants_and_survive_the_next_replay():
     """A replay passes the change test's instants and keeps the last three snapshots (``window.snapshot`` into the
     tracker's buffers): each equals the statistics a tracker fed live at that linearization point had at that

@@ -264,6 +264,22 @@ def test_judged_cost_is_least_squares_with_the_free_responses():
                 assert judged == pytest.approx(1e-6, rel=0.05)     # the noise: nothing left unexplained
 
 
+def test_judged_rows_count_the_rows_after_the_lead_with_an_output():
+    """search.judged_rows: the rows the judged cost summed over (after the lead, the output not NaN), read off
+    its Gram matrix once a judged cost ran, counted over the segment before; the same number both ways."""
+    model, t, u, y, s, sigma, omega = _ringing_segment()
+    y = y.copy()
+    y[[10, 2999, 3000, 5000, 5001, 11999]] = np.nan
+    expected = int(np.count_nonzero(~np.isnan(y[3000:])))
+    search = ResonanceSearch(SoeBasis.build(H, horizon_s=3600.0), u, y, lead=3000)
+    _drain(search._history())
+    assert search.judged_rows() == expected          # (counted)
+    judged = _drain(search.judged_cost(model.alpha, model.a1, model.a2, (1.0,)))
+    assert math.isfinite(judged)
+    assert search._judged_rows == expected           # (the Gram matrix's)
+    assert search.judged_rows() == expected
+
+
 def test_judged_cost_reaches_the_noise_floor_where_the_rest_start_cannot():
     """With a ringing resonance state at the segment's start the search's own cost (state at rest, 0.3 s
     lead against a 0.9 s decay) misses the true model by orders of magnitude; the judged cost finds the

@@ -296,6 +296,7 @@ class OnlineEstimator(StoredParams):
         self._t_need = max(0.05, 200 * h)
         self._search: ResonanceSearch | None = None
         self._search_scratch = SearchScratch(self.basis.size)
+        self._search_scratch.prepare_judge(FREE_RATES, self.basis.h)   # (a start-up search in operation's)
         self._grid_plan: list | None = None     # [rows, steps, frequencies]: ``_plan_grid``
         self._search_rounds = 0
         self._tc_used = 0.0

@@ -63,6 +63,17 @@ FREE_PREPARE_WORK = 9500
 #: A node's share of a row's node sum in UNIT_WORK's multiply-adds: the sum runs in four interleaved partial sums
 #: (``_forced_output``), ~0.6 of the time of one chain (measured: a kept row of a stream in operation 63 -> 53 ns).
 NODE_SUM_COST = 0.6
+#: The node history's rows come from memory, not the cache, on a search's first pass at a stride (its first
+#: candidate), and partly on the second: measured on the latency stream (q = 42, 5500-6100 rows), a kept row's node
+#: sum took ~30 ns per row at stride 2 on the first pass (3.7x the warm cost), ~20 ns on the second, ~13 ns from
+#: the fourth on, and ~220 ns per kept row at stride 12-13 on the first (a row a page away from the last: no
+#: prefetch, a miss each). Units sized on the warm cost made the slowest calls of every run, 30-56 us of kernel.
+#: So the first pass counts its node sums COLD_FIRST times the warm cost, or MISS_WORK multiply-adds (~200 ns)
+#: scaled by the share of a page between kept rows, whichever is more; the second COLD_SECOND times.
+COLD_FIRST = 4.0
+COLD_SECOND = 2.0
+MISS_WORK = 360.0
+PAGE_BYTES = 4096
 #: A unit may carry up to this fraction over UNIT_WORK rather than leave a nearly empty one (``_row_units``).
 UNIT_SLACK = 0.1
 #: Candidates refined from the grid.
@@ -568,6 +579,11 @@ class SearchScratch:
         self.judge: dict = {}          # ``judged_cost``'s arrays per (decay rates, step)
         self.free_rows = FreeRowCache()     # a stream in operation's candidate-independent rows (``_free_gram``)
 
+    def prepare_judge(self, rates: tuple, h: float) -> None:
+        """Make ``judged_cost``'s arrays for these decay rates (1/s) at step h now, outside update(): made by the
+        first judged cost, inside the update() that ran it, they were ~30 us of cold numpy."""
+        _judge_arrays(self, tuple(rates), h)
+
 
 class FreeRowCache:
     """What every candidate of one search shares in its strided free Gram matrix (``_free_gram`` with
@@ -694,9 +710,12 @@ class ResonanceSearch:
         self._rows_cache.clear()
         # (looked up once: ~1.3 us of Python per candidate)
         self._free_arrays = None if free is None else _judge_arrays(sc, self.free, basis.h)
-        #: the grid's frequencies (none with ``starts``): given, or computed by the first unit (``_run``; with the
-        #: construction, in one update(), they were ~70 us of cold numpy and Python)
+        #: the grid's frequencies (none with ``starts``): given, or computed by the first units (``_run``, in
+        #: ``frequency_steps``: with the construction, in one update(), they were ~70 us of cold numpy and Python;
+        #: in one unit of their own ~45 us)
         self._freqs = freqs
+        self._judged_rows: int | None = None
+        self._passes: dict[int, int] = {}     # passes over the rows per stride (``_node_work``)
         self._gen = self._run()
 
     def step(self) -> bool:
@@ -727,6 +746,7 @@ class ResonanceSearch:
         """
         G = yield from self._free_gram(alpha, a1, a2, tuple(decays), 1)
         cost = _free_cost(G)
+        self._judged_rows = int(G[1, 1])   # (the constant column's square: the rows summed over)
         yield                              # (a caller's next work starts on the next unit)
         return cost
 
@@ -746,9 +766,13 @@ class ResonanceSearch:
         mine = decays == self.free
         f, decay, e, G = self._free_arrays if mine else _judge_arrays(self._scratch, decays, self.basis.h)
         n = self.u.size
+        cold = stride not in self._passes  # (a first pass: its set-up in a unit of its own, ``_node_work``)
         if stride == 1 and not closed:
             _judge_reset(f, e, G)
-            for r0, r1 in _row_units(n, NODE_SUM_COST * self.basis.size + 30 + 6 * e.size, FREE_PREPARE_WORK):
+            per_row = self._node_work(1) + 30 + 6 * e.size
+            if cold:
+                yield
+            for r0, r1 in _row_units(n, per_row, 0.0 if cold else FREE_PREPARE_WORK):
                 _rows_free(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, f, decay, e, r0, r1, self.lead, G)
                 yield
             return G
@@ -764,10 +788,12 @@ class ResonanceSearch:
             shared = 20 * m + (5 + m) * (6 + m) / 2
         # the forced state, the free responses' shift and the kept-row test at every row (~12 multiply-adds'
         # time, measured); at a kept row the node sum and the rest
-        per_row = 12 + (NODE_SUM_COST * self.basis.size + shared) / stride
+        per_row = 12 + (self._node_work(stride) + shared) / stride
         g = self._g                        # the free responses at row 0
         g[0], g[1] = 1.0, 0.0
-        for r0, r1 in _row_units(n, per_row, FREE_PREPARE_WORK):
+        if cold:
+            yield
+        for r0, r1 in _row_units(n, per_row, 0.0 if cold else FREE_PREPARE_WORK):
             _rows_free_sparse(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, g, a1, a2, self.basis.h, rates,
                               r0, r1, stride, self.lead, G, table, mode)
             yield
@@ -775,9 +801,27 @@ class ResonanceSearch:
             self._rows_cache.keep(slot, G)
         return G
 
+    def _node_work(self, stride: int) -> float:
+        """A kept row's node sum in UNIT_WORK's multiply-adds, for the next pass over the rows at this stride: the
+        warm cost, more on the first two passes (their rows come from memory: ``COLD_FIRST``). Counts the pass.
+        (A first pass also gets its candidate's set-up, cold Python and kernels, in a unit of its own: with the
+        first rows they were 30-50 us in one update().)"""
+        passes = self._passes.get(stride, 0)
+        self._passes[stride] = passes + 1
+        warm = NODE_SUM_COST * self.basis.size
+        if passes == 0:
+            apart = min(stride * self.basis.size * 8 / PAGE_BYTES, 1.0)     # (a row is q doubles)
+            return max(COLD_FIRST * warm, apart * MISS_WORK)
+        return COLD_SECOND * warm if passes == 1 else warm
+
     def judged_rows(self) -> int:
-        """The rows ``judged_cost`` (and ``exact_cost``) sum over: after ``lead``, with a finite output."""
-        return int(np.count_nonzero(np.isfinite(self.y[self.lead:])))
+        """The rows ``judged_cost`` (and ``exact_cost``) sum over: after ``lead``, with an output (not NaN). Read
+        off the last judged cost's Gram matrix when there is one: counted over the segment, inside the
+        update() that compares two judged costs, it was ~25 us of cold numpy."""
+        if self._judged_rows is not None:
+            return self._judged_rows
+        y = self.y[self.lead:]
+        return int(np.count_nonzero(y == y))
 
     def run(self) -> SearchResult:
         """To completion (block mode)."""
@@ -796,7 +840,11 @@ class ResonanceSearch:
         vz, x, acc = self._vz, self._x, self._acc
         vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
                             self._rc, vz, x, acc)
-        for r0, r1 in _row_units(self.u.size, 6 + NODE_SUM_COST * self.basis.size / stride, PREPARE_WORK):
+        cold = stride not in self._passes
+        per_row = 6 + self._node_work(stride) / stride
+        if cold:
+            yield
+        for r0, r1 in _row_units(self.u.size, per_row, 0.0 if cold else PREPARE_WORK):
             _rows(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, r0, r1, stride, self.lead, acc)
             yield
         return _projected(acc)
@@ -809,10 +857,6 @@ class ResonanceSearch:
             i1 = min(i0 + chunk, self.u.size)
             kernels.node_history(self.u, self.basis.decay, self.basis.gain, zeta, self._hist, i0, i1)
             yield
-
-    def _grid_frequencies(self) -> np.ndarray:
-        """The grid's natural frequencies: log-spaced from one over the cost's span to 0.3 fs."""
-        return grid_frequencies(*grid_ends(self.u.size - self.lead, self.basis.h))
 
     def _grid(self, stride: int) -> Generator:
         """Every grid point's projected cost, in units; returns the starts (alpha, fn, zeta) of the REFINE best
@@ -912,19 +956,23 @@ class ResonanceSearch:
         return cost
 
     def _run(self) -> Generator:
+        # (the units below split the search's one-off Python: each once per search, cold, ~10-25 us; together they
+        # were the slowest calls of update() that did the same work on every run of the latency stream, 45-55 us)
         if self._freqs is None and self.starts is None:
-            self._freqs = self._grid_frequencies()
-            yield
+            self._freqs = yield from frequency_steps(*grid_ends(self.u.size - self.lead, self.basis.h))
         yield from self._history()
         n = self.u.size - self.lead
         coarse = max(1, n // COARSE_ROWS)
         fine = max(1, n // FINE_ROWS)
         if self.starts is None:
             kept = yield from self._grid(coarse)     # (distinct resonances: no two in one basin)
+            yield
         else:
             kept = _unique(list(self.starts))
         extra = [(alpha, 1 / (2 * math.pi * math.sqrt(a2)), a1 / (2 * math.sqrt(a2))) for alpha, a1, a2 in self.extra]
-        for alpha, fn, z in _unique(extra, kept):
+        starts = _unique(extra, kept)
+        yield
+        for alpha, fn, z in starts:
             cand = yield from self._refine(alpha, fn, z, fine)
             self.candidates.append(cand)
         self.candidates.sort(key=lambda r: r[0])

@@ -328,6 +328,7 @@ class WindowTracker(ParameterView):
         self._fine_wait = int(FINE_WAIT_S / self.h)
         self._next_fine = 0                # earliest sample of the next fine relinearization (backoff)
         self.relinearizations = 0
+        self.adoptions = 0               # live states adopted (``_adopt``: the start, each replay's swap, restarts)
         self.refits = 0
         self.rejected = 0                # refits discarded (non-finite or zero gain)
         self.window_start = 0            # first sample in the statistics (moved by a detected change)
@@ -455,14 +456,35 @@ class WindowTracker(ParameterView):
         self._segment = np.zeros((2, rows))
         self._segment.fill(0.0)
         self._nodes_state = (np.zeros(self.lay["size"]), np.zeros((p, p)))
+        # the replays' state and statistics: a spare pair, swapped with the live one by each replay (``_replay_arrays``)
+        spare = np.full(self.lay["size"], 0.0)
+        self._spare: tuple | None = (spare, np.full((p, p), 0.0), self._views(spare))
         self._search_scratch = SearchScratch(self.q)   # (one search at a time: ``_researching``)
+        self._search_scratch.prepare_judge(self._free_decays, self.basis.h)    # (``_take_if_better``'s judge)
 
-    def _fresh(self, a1l: float, a2l: float) -> tuple[np.ndarray, np.ndarray]:
-        """Empty statistics and zero states for a linearization point (weight 1)."""
-        st = np.zeros(self.lay["size"])
+    def _fresh(self, a1l: float, a2l: float, arrays: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Empty statistics and zero states for a linearization point (weight 1), in ``arrays`` (st, S) or new ones."""
+        if arrays is None:
+            st, S = np.zeros(self.lay["size"]), np.zeros((self.p, self.p))
+        else:
+            st, S = arrays
+            st.fill(0.0)
+            S.fill(0.0)
         W.start_state(st, self.basis.decay, self.basis.gain, self._free_decay, self.forget, self.h, a1l, a2l,
                       self.n_rate)
-        return st, np.zeros((self.p, self.p))
+        return st, S
+
+    def _replay_arrays(self, a1l: float, a2l: float) -> tuple:
+        """``_fresh`` state and statistics for a replay, with their views: the spare pair (the one the last swap
+        retired, or made and touched at construction), new arrays only if another replay holds it. In new arrays
+        the replay's first accumulating unit wrote the statistics' pages for the first time: 60-65 us of page
+        faults in one update() (the statistics are p x p, ~28 kB at p = 59)."""
+        spare, self._spare = self._spare, None
+        if spare is None:
+            st, S = self._fresh(a1l, a2l)
+            return st, S, self._views(st)
+        st, S = self._fresh(a1l, a2l, spare[:2])
+        return st, S, spare[2]
 
     def _views(self, st: np.ndarray) -> tuple:
         """The parts of a state array: sc, phi, m, sy, co, ztail, md."""
@@ -473,6 +495,7 @@ class WindowTracker(ParameterView):
     def _adopt(self, st: np.ndarray, S: np.ndarray, views: tuple) -> None:
         """Make (st, S) with their ``views`` the live state and statistics (their coefficients already set)."""
         self.st, self.S = st, S
+        self.adoptions += 1
         self.sc, self.phi, self.m, self.sy, self.co, self.ztail, self.md = views
         self.a1l, self.a2l = float(st[W.SC_A1L]), float(st[W.SC_A2L])
         self._snaps = []
@@ -723,10 +746,9 @@ class WindowTracker(ParameterView):
             while self.n <= due or self.machine == MACHINE_TEST or self._queued("_snapshot_job", "_change_job"):
                 yield WAIT
         a1, a2 = self.a1, self.a2
-        st, S = self._fresh(a1, a2)
-        yield                              # (the allocations alone: with the set-up below, ~55-65 us cold)
+        st, S, views = self._replay_arrays(a1, a2)
+        yield                              # (with the set-up below, ~55-65 us cold)
         lay = self.lay
-        phi = st[lay["phi"]:lay["m"]]
         oldest = int(self.sc[W.SC_RSTART])
         begin = max(self.window_start if start is None else start, oldest)
         # the states are replayed from the oldest remembered sample, exact for the nodes; the
@@ -735,11 +757,10 @@ class WindowTracker(ParameterView):
         skip = begin - oldest
         if oldest > 0:
             skip = max(skip, self._settling_samples(a1, a2))
-        phi[:self.q] = self.ztail
-        phi[self.q + W.FREE:self.q + W.FREE + self.n_free] = \
-            np.exp(-self._free_rates * self.h * oldest)
-        st[W.SC_N] = oldest                # the drift columns' time, and their coefficients at the new point
-        st[W.SC_TREF] = self.sc[W.SC_TREF]
+        # the nodes, the free responses, the drift columns' time at the oldest sample (and, after the yield, their
+        # coefficients at the new point)
+        W.replay_origin(st, self.ztail, self._free_rates, oldest, float(self.sc[W.SC_TREF]))
+        yield
         if self.n_rate:
             W.full_coefficients(self.theta, a1, a2, self.basis.lam, self.basis.dx, st[lay["m"]:lay["sy"]])
             if self.n_rate > 1:
@@ -770,9 +791,10 @@ class WindowTracker(ParameterView):
                     break                  # (once: fed in blocks, more than SWAP_WITH may come in per unit)
                 deferred = True
             yield
-        # swap: the live scalars and tail, the replayed states and statistics
-        new = W.swapped_state(self.st, st, self.theta, self.basis.lam, self.basis.dx)
-        self._adopt(new, S, self._views(new))
+        # swap: the live scalars and tail, the replayed states and statistics; the live pair is the next spare
+        W.swap_into(self.st, st, self.theta, self.basis.lam, self.basis.dx)
+        self._spare = (self.st, self.S, (self.sc, self.phi, self.m, self.sy, self.co, self.ztail, self.md))
+        self._adopt(st, S, views)
         self._snaps = snaps                # the change test keeps its reference through a replay
         self._shift[:] = 0.0               # (replayed at one origin: the snapshots' and the statistics' own)
         self.relinearizations += 1
@@ -786,14 +808,15 @@ class WindowTracker(ParameterView):
         index = self._snap_next
         self._snap_next = (index + 1) % SNAP_SLOTS
         syy0, g0, finite = RF.snapshot(self.st, self.S, self._ctx, MACHINE_TEST, index, self._due_after(n))
-        self._jobs.append(self._snapshot_job(n, index, syy0, g0, self.st))
+        self._jobs.append(self._snapshot_job(n, index, syy0, g0, self.adoptions))
         return finite
 
-    def _snapshot_job(self, n: int, index: int, syy0: float, g0: float, st: np.ndarray) -> Generator:
+    def _snapshot_job(self, n: int, index: int, syy0: float, g0: float, adoptions: int) -> Generator:
         """Record the snapshot taken at sample n (``_snapshot``) and queue the change test of the second since
-        the one before the last. Dropped if the live state was replaced meanwhile (a replay's swap, a restart:
-        ``_adopt`` starts the snapshots afresh)."""
-        if st is not self.st:
+        the one before the last. Dropped if the live state was replaced meanwhile (``adoptions`` counts: a replay's
+        swap, a restart; ``_adopt`` starts the snapshots afresh; the replays reuse two arrays in turn, so their
+        identity would not tell)."""
+        if adoptions != self.adoptions:
             return
         S0, sy0, shift0, theta0 = self._snap_slots[index]
         self._snaps.append((n, S0, sy0, syy0, g0, (self.a1l, self.a2l), theta0, shift0, index))
@@ -841,6 +864,8 @@ class WindowTracker(ParameterView):
             self.disagreement = None       # the common case, without the dictionaries below (cold Python)
             self._lr_recent = (self._lr_recent + [lr])[-CHANGE_HISTORY:]
             return
+        yield                              # a disagreement: what moved, on the next call (rare, cold Python: with
+        # the test's outcome in one call ~30 us)
         moves = {"a1": math.exp(r.ln_a1 - r.live_ln_a1) - 1, "a2": math.exp(r.ln_a2 - r.live_ln_a2) - 1,
                  "b": r.b / r.live_b - 1 if r.live_b else 0.0}
         # relative 1-sigma of the recent fit (ln a1, ln a2 are relative already)
@@ -857,8 +882,9 @@ class WindowTracker(ParameterView):
         if lr < max(CHANGE_LR, CHANGE_JUMP * level) or not moved or lin != (self.a1l, self.a2l):
             self._lr_recent = (self._lr_recent + [float(lr)])[-CHANGE_HISTORY:]
             return
-        yield                              # the event on the next call, the restart on the one after (with the
-        settled = bool(self._settled_before(n0, theta0))      # test's result all in one call: ~90-130 us)
+        yield                              # the event on the next calls, the restart on the one after (with the
+        settled = bool(self._settled_before(n0, theta0))      # test's result all in one call: ~90-130 us; the
+        yield                              # settled check and the event together ~30 us)
         last = self.events[-1] if self.events else None
         if last is not None and not last["settled"]:
             # the same change seen again from a cleaner window: one event, restarted later
@@ -1046,18 +1072,19 @@ class WindowTracker(ParameterView):
 
     def _nodes_at(self, n0: int) -> Generator:
         """The exact node state before remembered sample n0 (fast-forwarded from the ring's oldest, in units)."""
-        oldest = int(self.sc[W.SC_RSTART])
         st, S = self._nodes_state          # node states only (no statistics: S is not touched)
         st.fill(0.0)
         W.start_state(st, self.basis.decay, self.basis.gain, self._free_decay, self.forget, self.h, self.a1l,
                       self.a2l, self.n_rate)
+        yield                              # (with the caller's set-up and the rest below, ~28 us cold in one call)
+        oldest = int(self.sc[W.SC_RSTART])  # (the ring's oldest and its tail, read together)
         st[self.lay["phi"]:self.lay["phi"] + self.q] = self.ztail
         st[W.SC_N] = oldest
         chunk = max(16, UNIT_MACS // (4 * self.q))         # states only: ~0.04 us per sample at Q = 42
         size, slot = self.ring.shape[1], self._ring_position(oldest) - oldest
         i = oldest
         yield                              # (the set-up and a first chunk in one update(): 45-55 us)
-        while i < n0:
+        while i < n0:                      # (n0 is remembered: a search's segment starts well after the oldest)
             n = min(chunk, n0 - i)
             W.replay(self.ring, (slot + i) % size, n, n, st, S, *self._replay_work)
             i += n

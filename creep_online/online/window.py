@@ -657,6 +657,22 @@ def start_state(st: np.ndarray, decay: np.ndarray, gain: np.ndarray, free_decay:
 
 
 @njit(cache=CACHE)
+def replay_origin(st: np.ndarray, ztail: np.ndarray, free_rates: np.ndarray, oldest: int, tref: float) -> None:
+    """A replay's fresh state (``start_state``) placed at the ring's oldest remembered sample: the node states the
+    ring's tail holds, the free responses decayed to that sample (rates in 1/s), its index and the drift origin.
+    One kernel: as numpy from cold Python, in the replay's set-up, ~30 us of one update()."""
+    q = ztail.shape[0]
+    h = st[SC_H]
+    phi = SC_SIZE
+    for i in range(q):
+        st[phi + i] = ztail[i]
+    for j in range(free_rates.shape[0]):
+        st[phi + q + FREE + j] = math.exp(-free_rates[j] * h * oldest)
+    st[SC_N] = oldest
+    st[SC_TREF] = tref
+
+
+@njit(cache=CACHE)
 def linearize(st: np.ndarray, a1l: float, a2l: float) -> None:
     """A fresh state array's linearization point (a1l, a2l) and its resonance coefficients (``start_state``'s
     part that depends on the estimate)."""
@@ -1532,19 +1548,32 @@ def swapped_state(live: np.ndarray, replayed: np.ndarray, theta: np.ndarray, lam
                   dx: float) -> np.ndarray:
     """The state after a replay: the live one (its scalars, monitors, tail) with the replayed states, statistics
     and coefficients (phi, sy, co; the weight, syy, effective samples, linearization point, drift origin), and
-    the prediction's coefficients for theta at the new point (``set_estimate``). One kernel: as numpy slices from
-    Python, in the update() that swaps, it cost ~35-50 us cold."""
+    the prediction's coefficients for theta at the new point (``set_estimate``), as a new array (``swap_into``
+    on a copy of the replayed state). One kernel: as numpy slices from Python, in the update() that swaps, it
+    cost ~35-50 us cold."""
+    new = replayed.copy()
+    swap_into(live, new, theta, lam, dx)
+    return new
+
+
+@njit(cache=CACHE)
+def swap_into(live: np.ndarray, replayed: np.ndarray, theta: np.ndarray, lam: np.ndarray, dx: float) -> None:
+    """``swapped_state`` in place: ``replayed`` takes the live state's scalars, monitors and tail (all but its own
+    phi, sy, co and the weight, syy, effective samples, linearization point, drift origin) and the prediction's
+    coefficients for theta. The tracker swaps its two state arrays so (no allocation in the update() that
+    swaps: a new array's page is first touched there)."""
     q = int(live[SC_NQ])
     p = q + FREE + int(live[SC_NM]) + int(live[SC_NR])
     o = SC_SIZE
     ztail = o + 3 * p + 2 * q + 18 + int(live[SC_NM])
-    new = live.copy()
-    new[o:o + p] = replayed[o:o + p]                       # phi
-    new[o + 2 * p:ztail] = replayed[o + 2 * p:ztail]       # sy, co
-    for k in (SC_G, SC_SYY, SC_NEFF, SC_A1L, SC_A2L, SC_TREF):
-        new[k] = replayed[k]
-    set_estimate(theta, new, lam, dx)
-    return new
+    g, syy, neff = replayed[SC_G], replayed[SC_SYY], replayed[SC_NEFF]
+    a1l, a2l, tref = replayed[SC_A1L], replayed[SC_A2L], replayed[SC_TREF]
+    replayed[:o] = live[:o]
+    replayed[SC_G], replayed[SC_SYY], replayed[SC_NEFF] = g, syy, neff
+    replayed[SC_A1L], replayed[SC_A2L], replayed[SC_TREF] = a1l, a2l, tref
+    replayed[o + p:o + 2 * p] = live[o + p:o + 2 * p]    # (between phi and sy)
+    replayed[ztail:] = live[ztail:]
+    set_estimate(theta, replayed, lam, dx)
 
 
 @njit(cache=CACHE, fastmath=FAST)
