@@ -270,18 +270,23 @@ def test_replay_snapshots_equal_the_statistics_at_their_instants_and_survive_the
     assert all(a[1] is not b[1] for a, b in zip(snaps, tr._snaps))
 
 
-def test_a_replay_unit_does_about_one_chunk_of_work():
-    """``_replay_unit``: a unit accumulates ``chunk`` samples or only advances up to 8 chunks (1/8 the work each);
-    the unit that ends the skip does both within about one chunk's work, and the units cover every sample."""
+def test_a_replay_unit_does_at_most_one_chunk_of_work():
+    """``_replay_unit``: a unit only advances up to 8 chunks (1/8 the work each) or accumulates ``chunk`` samples;
+    no unit does both, the last advancing one ends at the skip, the first accumulating one adds only
+    ``COLD_REPLAY_ROWS`` (cold statistics), and the units cover every sample."""
     chunk = 54
     for skip in (0, 1, 7, 135, 431, 432, 433, 5000):
-        done, work = 0, []
+        done, units = 0, []
         while done < skip + 3 * chunk:
             n = T._replay_unit(chunk, skip - done)
             advanced = min(n, max(skip - done, 0))
-            work.append(advanced / 8 + (n - advanced))
+            assert advanced in (0, n)                      # (advance or accumulate, not both)
+            units.append((advanced, n - advanced))
             done += n
-        assert max(work) <= chunk + 1
+        assert max(a / 8 + b for a, b in units) <= chunk
+        first = next(i for i, (a, b) in enumerate(units) if b)
+        assert sum(a for a, _ in units[:first]) == skip     # (the skip ends at a unit's end)
+        assert units[first][1] == T.COLD_REPLAY_ROWS and all(b == chunk for _, b in units[first + 1:])
         assert done >= skip + 3 * chunk
 
 @pytest.mark.parametrize("window_s, drift, skip", [(None, 0, 0), (1.0, 2, 100), (0.01, 2, 0)])

@@ -347,6 +347,7 @@ def test_a_search_in_operation_shares_its_candidates_rows_bit_for_bit(monkeypatc
 
     def grams(cached: bool) -> list:
         search = ResonanceSearch(basis, u, y, free=decays, lead=37)
+        search._bind()                             # (its scratch, bound on first use: patched below)
         if not cached:
             monkeypatch.setattr(search._rows_cache, "claim", lambda *a: (-1, 0))
         _drain(search._history())

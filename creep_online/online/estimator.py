@@ -642,7 +642,7 @@ class OnlineEstimator(StoredParams):
     def _advance_start(self, units: int) -> None:
         """Buffering and searching: start the search when ready, give it ``units``, start the tracker.
 
-        Sample by sample the search's end, the tracker's two start steps and the replay's first unit each take
+        Sample by sample the search's end, the tracker's start steps and the replay's first unit each take
         a call of their own (``_start_steps``): together they were one update() of ~80-120 us. The estimate
         reads "searching" until the tracker has started, a few samples later. With ``units`` >= 2^29 (block
         mode, a full buffer) everything runs in this call."""
@@ -752,6 +752,7 @@ class OnlineEstimator(StoredParams):
                 stuck=max(10, int(round(0.05 / self._h))), alpha_bounds=(lo, hi), refit_every=self._refit_every,
                 detect=bool(self.detect_changes), scale=res.b * (self._u_hi - self._u_lo))
         else:
+            yield                          # (theta above, the fresh state below: ~30 us cold in one call)
             # (the other spare stays until reset(): freeing its arrays here cost ~35 us of this update())
             key = self._in_operation
             if key not in self._spares:    # (used by a tracker that a fault's restart dropped: ``_restart``)
@@ -783,7 +784,8 @@ class OnlineEstimator(StoredParams):
         while units > 0 and self._replayed < self._nbuf:
             units -= 1
             k = self._replayed
-            n = min(per_unit, self._nbuf - k)
+            # (the first unit a quarter: the new tracker's statistics and the block kernel are cold, ~27 us whole)
+            n = min(per_unit if k else max(per_unit // 4, 1), self._nbuf - k)
             used = tr.feed_block(self._bu, self._by, status, k, k + n)
             self._replayed += used
             if tr._jobs and units > 0:     # the tracker's own jobs share the budget

@@ -695,11 +695,28 @@ class ResonanceSearch:
             tuple(sorted(set(GRID_ALPHA) | set(alphas))) if alphas else _GRID_ALPHAS
         self.result: SearchResult | None = None
         self.units = 0
-        if work is not None and work.shape[0] >= self.u.size and work.shape[1] == basis.size:
+        self._work, self._scratch = work, scratch
+        self._v = None                   # (the scratch's arrays, bound on first use: ``_bind``)
+        #: the grid's frequencies (none with ``starts``): given, or computed by the first units (``_run``, in
+        #: ``frequency_steps``: with the construction, in one update(), they were ~70 us of cold numpy and Python;
+        #: in one unit of their own ~45 us)
+        self._freqs = freqs
+        self._judged_rows: int | None = None
+        self._passes: dict[int, int] = {}     # passes over the rows per stride (``_node_work``)
+        self._gen = self._run()
+
+    def _bind(self) -> None:
+        """The construction's second half, on first use (the first ``step`` is a unit of its own; ``_history``,
+        ``_evaluate`` and ``_free_gram`` bind too): the node history's buffer, the scratch's arrays, the shared
+        rows' cache cleared. Both halves in one update(), from cold Python: 25-40 us."""
+        if self._v is not None:
+            return
+        work, size = self._work, self.basis.size
+        if work is not None and work.shape[0] >= self.u.size and work.shape[1] == size:
             self._hist = work[:self.u.size]     # a pre-faulted buffer: no page faults in update()
         else:
-            self._hist = np.empty((self.u.size, basis.size))
-        sc = scratch if scratch is not None else SearchScratch(basis.size)
+            self._hist = np.empty((self.u.size, size))
+        sc = self._scratch if self._scratch is not None else SearchScratch(size)
         self._scratch = sc
         # one candidate at a time: its node coefficients, states, sums
         self._v, self._dv, self._rc, self._vz, self._x, self._acc = sc.v, sc.dv, sc.rc, sc.vz, sc.x, sc.acc
@@ -709,20 +726,16 @@ class ResonanceSearch:
         self._rows_cache = sc.free_rows
         self._rows_cache.clear()
         # (looked up once: ~1.3 us of Python per candidate)
-        self._free_arrays = None if free is None else _judge_arrays(sc, self.free, basis.h)
-        #: the grid's frequencies (none with ``starts``): given, or computed by the first units (``_run``, in
-        #: ``frequency_steps``: with the construction, in one update(), they were ~70 us of cold numpy and Python;
-        #: in one unit of their own ~45 us)
-        self._freqs = freqs
-        self._judged_rows: int | None = None
-        self._passes: dict[int, int] = {}     # passes over the rows per stride (``_node_work``)
-        self._gen = self._run()
+        self._free_arrays = None if self.free is None else _judge_arrays(sc, self.free, self.basis.h)
 
     def step(self) -> bool:
         """One unit of work; True when the result is ready."""
         if self.result is None:
             self.units += 1
-            next(self._gen, None)
+            if self._v is None:
+                self._bind()
+            else:
+                next(self._gen, None)
         return self.result is not None
 
     def exact_cost(self, alpha: float, a1: float, a2: float) -> Generator:
@@ -760,13 +773,16 @@ class ResonanceSearch:
         unit states can be nearly collinear: on mid_operation seed 18 at 40 dB a candidate with alpha 20x the
         plant's then "fitted" its buffer at 1/5000 of the noise variance (1e-8; 7.3e-5 with the closed form,
         6.9e-5 by numpy's least squares on the simulator's output) and won the start-up search."""
+        self._bind()
         vz, x = self._vz, self._x
         vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
                             self._rc, vz, x, self._acc)
+        cold = stride not in self._passes  # (a first pass: its set-up in units of its own, ``_node_work``)
+        if cold:
+            yield
         mine = decays == self.free
         f, decay, e, G = self._free_arrays if mine else _judge_arrays(self._scratch, decays, self.basis.h)
         n = self.u.size
-        cold = stride not in self._passes  # (a first pass: its set-up in a unit of its own, ``_node_work``)
         if stride == 1 and not closed:
             _judge_reset(f, e, G)
             per_row = self._node_work(1) + 30 + 6 * e.size
@@ -837,6 +853,7 @@ class ResonanceSearch:
         if self.free is not None:
             G = yield from self._free_gram(alpha, a1, a2, self.free, stride, closed=True)
             return _free_fit(G)
+        self._bind()
         vz, x, acc = self._vz, self._x, self._acc
         vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
                             self._rc, vz, x, acc)
@@ -850,6 +867,7 @@ class ResonanceSearch:
         return _projected(acc)
 
     def _history(self) -> Generator:
+        self._bind()
         zeta = self._zeta
         zeta[:] = 0.0 if self.zeta0 is None else self.zeta0
         chunk = max(16, UNIT_WORK // self.basis.size)
@@ -874,6 +892,7 @@ class ResonanceSearch:
                     cost, _, _ = yield from self._evaluate(alpha, a1, a2, stride)
                     _rank(cost, len(found), costs, ranked)
                     found.append((alpha, fn, z))
+        yield                            # (the last candidate's end and the picks below: ~28 us cold in one)
         m = _distinct_picks(costs, ranked, size, self._freqs, _GRID_ZETAS, picks)
         return [found[i] for i in picks.tolist()[:m]]
 

@@ -227,16 +227,19 @@ def _likelihood_ratio(rows: int, c_old: float, c_new: float) -> float:
     return rows * math.log(c_old / c_new) if c_old > 0.0 and c_new > 0.0 else 0.0
 
 
+#: Samples the first accumulating unit of a replay adds (one pass over the statistics, ``window._add_block``).
+COLD_REPLAY_ROWS = 8
+
+
 def _replay_unit(chunk: int, skip_left: int) -> int:
-    """Samples in a replay's next unit: ``chunk`` accumulated, or up to eight times as many only advanced
-    (states, no statistics: ~1/8 of the work) while ``skip_left`` > 0. A unit that ends the skip accumulates
-    only what the advance leaves of one unit's work: accumulating past the skip's end at the advance's
-    length had made single calls of ~90 us (432 samples, 297 of them accumulated)."""
-    if skip_left <= 0:
-        return chunk
-    if skip_left >= 8 * chunk:
-        return 8 * chunk
-    return skip_left + max(chunk - skip_left // 8, 1)
+    """Samples in a replay's next unit: up to eight chunks only advanced (states, no statistics: ~1/8 of the work)
+    while ``skip_left`` > 0, the last of them ending at the skip; then ``COLD_REPLAY_ROWS`` accumulated (the
+    statistics, p x p, and the block's code come from memory after thousands of calls without a replay:
+    with 20 samples after the skip's end in the same unit the call took ~40 us, after ~90 us for 297 when
+    accumulating past the skip's end at the advance's length); then ``chunk`` accumulated."""
+    if skip_left > 0:
+        return min(skip_left, 8 * chunk)
+    return min(COLD_REPLAY_ROWS, chunk) if skip_left == 0 else chunk
 
 
 def _largest_move(new: list[float], old: list[float]) -> float:
@@ -846,7 +849,8 @@ class WindowTracker(ParameterView):
         free_rates = self.n_rate > 0 and not self.drift_on
         if slot >= 0:                      # the statistics since the snapshot: the test's first slice
             RF.queue_test(wk, slot, syy0, free_rates)
-        else:                              # (a replay's snapshot, not in a slot: from here)
+        else:                              # (a replay's snapshot, not in a slot: from here, on the next call: with
+            yield                          # the checks above, cold, ~30-35 us in one)
             RF.start_test(self.st, self.S, S0, sy0, syy0, self._shift, shift0, self.theta, wk, free_rates)
         self.machine = MACHINE_TEST        # TEST_STEPS Levenberg-Marquardt steps, then the covariance, in the
         yield MACHINE                      # per-sample kernel
