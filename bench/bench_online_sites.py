@@ -11,7 +11,8 @@ distribution; this bench says which work the calls over ``--threshold`` did, so 
 Each call gets a *site*: where the estimator was before it and where it stopped after it. Before the
 tracker runs: ``startup:<phase>``. After: ``plain`` (a sample and no background work), ``machine`` (a sample
 and a slice of the re-fit or change test inside the per-sample kernel), or the queue head's job as its
-generators' chain of ``function:line`` (e.g. ``_research_job:975/_run_search:1010``), before -> after.
+generators' chain of ``function:line`` (e.g. ``_research_job:975/_run_search:1010``; a search's own chain in
+brackets), before -> after.
 Reading the chain's frames costs ~1 us per call outside the timed region: the timed calls run colder
 than in ``bench_online.py``, so read the counts per site against each other and across runs, not
 against that bench's totals.
@@ -51,15 +52,25 @@ def site(est) -> str:
     """Where the estimator is between two calls (see the module docstring)."""
     tr = est._live
     if tr is None:
-        return "startup:" + est.phase
+        search = getattr(est, "_search", None)
+        inner = f"[{_chain(search._gen)}]" if est.phase == "searching" and search is not None else ""
+        return "startup:" + est.phase + inner
     if tr.machine is not None:
         return "machine"
     if not tr._jobs:
         return "plain"
-    g, chain = tr._jobs[0], []
+    return _chain(tr._jobs[0])
+
+
+def _chain(g) -> str:
+    """A generator's chain of ``function:line`` (``yield from``), a search's own chain in brackets."""
+    chain = []
     while g is not None and hasattr(g, "gi_code"):
         frame = g.gi_frame
         chain.append(f"{g.gi_code.co_name}:{frame.f_lineno if frame is not None else 'end'}")
+        search = frame.f_locals.get("search") if frame is not None and g.gi_code.co_name == "_run_search" else None
+        if search is not None:
+            chain.append(f"[{_chain(search._gen)}]")
         g = g.gi_yieldfrom
     return "/".join(chain)
 

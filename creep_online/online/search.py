@@ -879,6 +879,7 @@ class ResonanceSearch:
     def _grid(self, stride: int) -> Generator:
         """Every grid point's projected cost, in units; returns the starts (alpha, fn, zeta) of the REFINE best
         points in distinct basins (``_distinct_picks``)."""
+        yield                            # (after the history's last unit: the set-ups below are cold)
         found = []
         size = len(self.alphas) * GRID_FREQS * len(GRID_ZETA)
         costs, ranked, picks = self._grid_work

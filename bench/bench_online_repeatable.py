@@ -1,0 +1,170 @@
+"""update()'s repeatable work: the per-call minimum of its own CPU time over several runs of the latency stream.
+
+Usage (from the repository root)::
+
+    .venv/bin/python bench/bench_online_repeatable.py [--in-operation-s 10.05] [--seconds 100] [--runs 5]
+        [--baseline REV] [--threshold 25] [--out bench/results/online_repeatable.json]
+
+``bench_online.py`` times each update() of the latency stream (``bench_online.make_stream``: 10^6 samples at
+10 kHz, a payload and a stiffness change) once; its maximum is the estimator's slowest call *plus* whatever
+the machine did to that call (an interrupt, a page of the other process's cache traffic): on this shared
+machine a loop around nothing has calls over 25 us of its own CPU time, so one run cannot show whether a slow
+call was the estimator's work. The estimator is deterministic: run k of the stream does the same work at
+call i as run j. The minimum over the runs of call i's time is that work with the machine's share removed
+(an interrupt hits a given call in every one of R runs with probability ~(1e-4)^R), cold caches included:
+a call whose work is cold code or cold data is slow in every run. That series' maximum is what issue 8's
+"no single update() above 25 us" asks of the estimator itself; the single runs' maxima are reported beside it.
+
+Per estimator (the worktree's, and ``--baseline``'s from ``git archive`` in a subprocess): the minimum series'
+p50, p90, p99, max and its calls over 5, 15 and the threshold; each run's own max, p99 and calls over the
+threshold. For the worktree's code the calls of the minimum series over the threshold are labelled by the work
+they ran (``bench_online_sites.site``, one more run with the labels). Prints one JSON document and writes it
+to ``--out``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+from _baseline import extract, run_python  # noqa: E402
+from bench_online import H, make_stream  # noqa: E402
+from bench_online_sites import site  # noqa: E402
+
+#: The measurement, as source: it runs in this process for the worktree's code and in a subprocess (the
+#: baseline's package first on sys.path) for ``--baseline``; only ``OnlineEstimator(dt)`` and ``update`` are used.
+MEASURE = '''
+def per_call_cpu_us(u, y, runs):
+    """Each run: a fresh estimator fed the stream sample by sample, update()'s own CPU time per call (us)."""
+    import gc
+    import time
+    import numpy as np
+    from creep_online.online.estimator import OnlineEstimator, warm_kernels
+    warm_kernels()
+    out = []
+    for _ in range(runs):
+        est = OnlineEstimator(H)
+        cpu = np.empty(len(u), dtype=np.int64)
+        update, clock = est.update, time.thread_time_ns
+        gc.collect()
+        gc.freeze()
+        for k in range(len(u)):
+            c0 = clock()
+            update(u[k], y[k])
+            cpu[k] = clock() - c0
+        gc.unfreeze()
+        e = est.estimate
+        out.append((cpu / 1e3, {"alpha": e.alpha, "a1": e.a1, "a2": e.a2, "b": e.b, "quality": e.quality}))
+    return out
+'''
+
+WORKER = MEASURE + '''
+import json, sys
+import numpy as np
+H = float(sys.argv[2])
+with np.load(sys.argv[1]) as z:
+    u, y = z["u"].tolist(), z["y"].tolist()
+runs = per_call_cpu_us(u, y, int(sys.argv[3]))
+np.save(sys.argv[4], np.vstack([r[0] for r in runs]))
+print(json.dumps([r[1] for r in runs]))
+'''
+
+
+def summary(series: np.ndarray, threshold: float) -> dict:
+    """Distribution of one per-call series (us)."""
+    return {"p50_us": float(np.median(series)), "p90_us": float(np.percentile(series, 90)),
+            "p99_us": float(np.percentile(series, 99)), "max_us": float(series.max()),
+            "over_5us": int(np.count_nonzero(series > 5.0)), "over_15us": int(np.count_nonzero(series > 15.0)),
+            "over_threshold": int(np.count_nonzero(series > threshold))}
+
+
+def report(cpu: np.ndarray, finals: list, threshold: float) -> dict:
+    """The minimum series over the runs (rows of ``cpu``) and each run's own figures."""
+    low = cpu.min(axis=0)
+    return {"min_over_runs": summary(low, threshold),
+            "runs": [{"max_us": float(r.max()), "p99_us": float(np.percentile(r, 99)),
+                      "over_threshold": int(np.count_nonzero(r > threshold))} for r in cpu],
+            "final": finals[-1], "_low": low}
+
+
+def labelled(u: list, y: list, calls: np.ndarray) -> dict[int, str]:
+    """The work each of ``calls`` ran (``site`` before -> after), from one more run of the worktree's code."""
+    from creep_online.online.estimator import OnlineEstimator
+    est = OnlineEstimator(H)
+    want, out = set(int(k) for k in calls), {}
+    for k in range(len(u)):
+        if k in want:
+            before = site(est)
+            est.update(u[k], y[k])
+            after = site(est)
+            out[k] = before if after == before else f"{before} -> {after}"
+        else:
+            est.update(u[k], y[k])
+    return out
+
+
+def baseline_run(rev: str, stream: dict, runs: int) -> tuple[np.ndarray, list, str]:
+    """The per-call times of ``rev``'s estimator (a subprocess on its ``git archive``)."""
+    path, commit = extract(rev)
+    data = os.path.join(path, "stream.npz")
+    np.savez(data, u=stream["u"], y=stream["y"])
+    times = os.path.join(path, "cpu.npy")
+    finals = json.loads(run_python(path, WORKER, data, repr(H), str(runs), times).strip().splitlines()[-1])
+    return np.load(times), finals, commit
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--in-operation-s", type=float, default=10.05,
+                    help="cut the stream this many seconds into the operation (0: from rest)")
+    ap.add_argument("--seconds", type=float, default=100.0)
+    ap.add_argument("--runs", type=int, default=5)
+    ap.add_argument("--baseline", default=None, help="git revision measured the same way (a subprocess)")
+    ap.add_argument("--threshold", type=float, default=25.0, help="us of own CPU time (issue 8's max)")
+    ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "online_repeatable.json"))
+    args = ap.parse_args(argv)
+    stream = make_stream(args.seconds, in_operation_s=args.in_operation_s)
+    u, y = stream["u"].tolist(), stream["y"].tolist()
+    namespace = {"H": H}
+    exec(MEASURE, namespace)
+    results = namespace["per_call_cpu_us"](u, y, args.runs)
+    current = report(np.vstack([r[0] for r in results]), [r[1] for r in results], args.threshold)
+    low = current.pop("_low")
+    slow = np.flatnonzero(low > args.threshold)
+    labels = labelled(u, y, slow)
+    current["over_threshold_calls"] = [{"k": int(k), "t_s": round(float(k) * H, 4), "cpu_us": round(float(low[k]), 1),
+                                        "site": labels[int(k)]} for k in slow[np.argsort(low[slow])[::-1]]]
+    print(f"[repeatable] worktree: max {current['min_over_runs']['max_us']:.1f} us, "
+          f"{len(slow)} calls over {args.threshold:g} us", file=sys.stderr)
+    doc = {"command": "python " + " ".join([Path(sys.argv[0]).name] + (argv if argv is not None else sys.argv[1:])),
+           "stream": {"seconds": args.seconds, "in_operation_s": args.in_operation_s, "fs_hz": 1 / H},
+           "runs": args.runs, "threshold_us": args.threshold,
+           "machine": {"cpu_count": os.cpu_count(), "loadavg": os.getloadavg()}, "worktree": current}
+    if args.baseline:
+        cpu, finals, commit = baseline_run(args.baseline, stream, args.runs)
+        base = report(cpu, finals, args.threshold)
+        base.pop("_low")
+        base["revision"] = commit
+        doc["baseline"] = base
+        cur, old = current["min_over_runs"], base["min_over_runs"]
+        doc["ratio_to_baseline"] = {k: cur[k] / old[k] if old[k] else None
+                                    for k in ("p50_us", "p99_us", "max_us", "over_5us", "over_15us", "over_threshold")}
+        print(f"[repeatable] baseline {commit[:7]}: max {old['max_us']:.1f} us, {old['over_threshold']} calls over "
+              f"{args.threshold:g} us", file=sys.stderr)
+    text = json.dumps(doc, indent=1)
+    print(text)
+    if args.out:
+        Path(args.out).write_text(text + "\n")
+    return doc
+
+
+if __name__ == "__main__":
+    main()
