@@ -15,9 +15,10 @@ call i as run j. The minimum over the runs of call i's time is that work with th
 a call whose work is cold code or cold data is slow in every run. That series' maximum is what issue 8's
 "no single update() above 25 us" asks of the estimator itself; the single runs' maxima are reported beside it.
 
-Per estimator (the worktree's, and ``--baseline``'s from ``git archive`` in a subprocess): the minimum series'
-p50, p90, p99, max and its calls over 5, 15 and the threshold; each run's own max, p99 and calls over the
-threshold. For the worktree's code the calls of the minimum series over the threshold are labelled by the work
+Per estimator (the worktree's, and ``--baseline``'s from ``git archive`` in a subprocess), for the own CPU time
+(``time.thread_time_ns``) and, beside it, the wall time (``perf_counter_ns``: preemption included, which the
+minimum over runs removes as it removes interrupts): the minimum series' p50, p90, p99, max and its calls over
+5, 15 and the threshold; each run's own max, p99 and calls over the threshold. For the worktree's code the calls of the minimum series over the threshold are labelled by the work
 they ran (``bench_online_sites.site``, one more run with the labels). Prints one JSON document and writes it
 to ``--out``.
 """
@@ -42,8 +43,9 @@ from bench_online_sites import site  # noqa: E402
 #: The measurement, as source: it runs in this process for the worktree's code and in a subprocess (the
 #: baseline's package first on sys.path) for ``--baseline``; only ``OnlineEstimator(dt)`` and ``update`` are used.
 MEASURE = '''
-def per_call_cpu_us(u, y, runs):
-    """Each run: a fresh estimator fed the stream sample by sample, update()'s own CPU time per call (us)."""
+def per_call_us(u, y, runs):
+    """Each run: a fresh estimator fed the stream sample by sample, update()'s own CPU time and wall time per
+    call (us; rows 0 and 1 of each run's array)."""
     import gc
     import time
     import numpy as np
@@ -52,17 +54,22 @@ def per_call_cpu_us(u, y, runs):
     out = []
     for _ in range(runs):
         est = OnlineEstimator(H)
-        cpu = np.empty(len(u), dtype=np.int64)
-        update, clock = est.update, time.thread_time_ns
+        times = np.empty((2, len(u)), dtype=np.int64)
+        cpu, wall = times
+        update, cpu_clock, wall_clock = est.update, time.thread_time_ns, time.perf_counter_ns
         gc.collect()
         gc.freeze()
         for k in range(len(u)):
-            c0 = clock()
+            w0 = wall_clock()
+            c0 = cpu_clock()
             update(u[k], y[k])
-            cpu[k] = clock() - c0
+            c1 = cpu_clock()
+            w1 = wall_clock()
+            cpu[k] = c1 - c0
+            wall[k] = w1 - w0
         gc.unfreeze()
         e = est.estimate
-        out.append((cpu / 1e3, {"alpha": e.alpha, "a1": e.a1, "a2": e.a2, "b": e.b, "quality": e.quality}))
+        out.append((times / 1e3, {"alpha": e.alpha, "a1": e.a1, "a2": e.a2, "b": e.b, "quality": e.quality}))
     return out
 '''
 
@@ -72,8 +79,8 @@ import numpy as np
 H = float(sys.argv[2])
 with np.load(sys.argv[1]) as z:
     u, y = z["u"].tolist(), z["y"].tolist()
-runs = per_call_cpu_us(u, y, int(sys.argv[3]))
-np.save(sys.argv[4], np.vstack([r[0] for r in runs]))
+runs = per_call_us(u, y, int(sys.argv[3]))
+np.save(sys.argv[4], np.stack([r[0] for r in runs]))
 print(json.dumps([r[1] for r in runs]))
 '''
 
@@ -86,13 +93,16 @@ def summary(series: np.ndarray, threshold: float) -> dict:
             "over_threshold": int(np.count_nonzero(series > threshold))}
 
 
-def report(cpu: np.ndarray, finals: list, threshold: float) -> dict:
-    """The minimum series over the runs (rows of ``cpu``) and each run's own figures."""
-    low = cpu.min(axis=0)
-    return {"min_over_runs": summary(low, threshold),
-            "runs": [{"max_us": float(r.max()), "p99_us": float(np.percentile(r, 99)),
-                      "over_threshold": int(np.count_nonzero(r > threshold))} for r in cpu],
-            "final": finals[-1], "_low": low}
+def report(times: np.ndarray, finals: list, threshold: float) -> dict:
+    """The minimum series over the runs (``times``: run x [cpu, wall] x call) and each run's own figures, for the
+    own CPU time and the wall time."""
+    low = times.min(axis=0)
+    out = {}
+    for i, clock in enumerate(("cpu", "wall")):
+        out[f"{clock}_min_over_runs"] = summary(low[i], threshold)
+        out[f"{clock}_runs"] = [{"max_us": float(r.max()), "p99_us": float(np.percentile(r, 99)),
+                                 "over_threshold": int(np.count_nonzero(r > threshold))} for r in times[:, i]]
+    return {**out, "final": finals[-1], "_low": low[0]}
 
 
 def labelled(u: list, y: list, calls: np.ndarray) -> dict[int, str]:
@@ -112,7 +122,7 @@ def labelled(u: list, y: list, calls: np.ndarray) -> dict[int, str]:
 
 
 def baseline_run(rev: str, stream: dict, runs: int) -> tuple[np.ndarray, list, str]:
-    """The per-call times of ``rev``'s estimator (a subprocess on its ``git archive``)."""
+    """The per-call times of ``rev``'s estimator (a subprocess on its ``git archive``): run x [cpu, wall] x call."""
     path, commit = extract(rev)
     data = os.path.join(path, "stream.npz")
     np.savez(data, u=stream["u"], y=stream["y"])
@@ -135,26 +145,26 @@ def main(argv: list[str] | None = None) -> dict:
     u, y = stream["u"].tolist(), stream["y"].tolist()
     namespace = {"H": H}
     exec(MEASURE, namespace)
-    results = namespace["per_call_cpu_us"](u, y, args.runs)
-    current = report(np.vstack([r[0] for r in results]), [r[1] for r in results], args.threshold)
+    results = namespace["per_call_us"](u, y, args.runs)
+    current = report(np.stack([r[0] for r in results]), [r[1] for r in results], args.threshold)
     low = current.pop("_low")
     slow = np.flatnonzero(low > args.threshold)
     labels = labelled(u, y, slow)
     current["over_threshold_calls"] = [{"k": int(k), "t_s": round(float(k) * H, 4), "cpu_us": round(float(low[k]), 1),
                                         "site": labels[int(k)]} for k in slow[np.argsort(low[slow])[::-1]]]
-    print(f"[repeatable] worktree: max {current['min_over_runs']['max_us']:.1f} us, "
+    print(f"[repeatable] worktree: max {current['cpu_min_over_runs']['max_us']:.1f} us, "
           f"{len(slow)} calls over {args.threshold:g} us", file=sys.stderr)
     doc = {"command": "python " + " ".join([Path(sys.argv[0]).name] + (argv if argv is not None else sys.argv[1:])),
            "stream": {"seconds": args.seconds, "in_operation_s": args.in_operation_s, "fs_hz": 1 / H},
            "runs": args.runs, "threshold_us": args.threshold,
            "machine": {"cpu_count": os.cpu_count(), "loadavg": os.getloadavg()}, "worktree": current}
     if args.baseline:
-        cpu, finals, commit = baseline_run(args.baseline, stream, args.runs)
-        base = report(cpu, finals, args.threshold)
+        times, finals, commit = baseline_run(args.baseline, stream, args.runs)
+        base = report(times, finals, args.threshold)
         base.pop("_low")
         base["revision"] = commit
         doc["baseline"] = base
-        cur, old = current["min_over_runs"], base["min_over_runs"]
+        cur, old = current["cpu_min_over_runs"], base["cpu_min_over_runs"]
         doc["ratio_to_baseline"] = {k: cur[k] / old[k] if old[k] else None
                                     for k in ("p50_us", "p99_us", "max_us", "over_5us", "over_15us", "over_threshold")}
         print(f"[repeatable] baseline {commit[:7]}: max {old['max_us']:.1f} us, {old['over_threshold']} calls over "
