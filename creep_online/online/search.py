@@ -908,6 +908,7 @@ class ResonanceSearch:
         p = [math.log(alpha), math.log(fn), math.log(z)]
         lo = [math.log(ONLINE_ALPHA_BOUNDS[0]), math.log(1e-3), math.log(0.003)]
         hi = [math.log(ONLINE_ALPHA_BOUNDS[1]), math.log(0.45 / self.basis.h), math.log(3.0)]
+        yield                            # (the last walk's end, this one's set-up and first rows: ~29 us in one)
         best = yield from self._cost_at(p, stride)
         steps = [0.5, 0.25, 0.6]
         evals = 1
