@@ -87,7 +87,9 @@ FULL_FTOL = 1e-5
 #: effect pulls the base fit (and so the warm start) into a wrong resonance. (A wrong candidate
 #: explains little and is not restarted: the diagnosis pays for the restart only where it can help.)
 #: A base fit with a parameter on its bound restarts every extended fit above the floor (``_on_a_bound``).
-RESTART_ABOVE_FLOOR = 1.2
+#: (1.2 until a fit in a wrong basin at 1.18x its own estimate, 1.20x the true noise, was left: hysteresis + second
+#: creep 3-10x seed 47. The single-effect bands' fits end at 0.98-1.06x the noise.)
+RESTART_ABOVE_FLOOR = 1.1
 RESTART_EXPLAINED = 0.5
 #: The restart grid: alpha values and damping values (fn: the record's frequency-response peaks and two defaults).
 RESTART_ALPHAS = (0.05, 0.2, 0.4, 0.7, 0.95)
@@ -1106,8 +1108,17 @@ def _restart_base(design: Design, explore: Design, best: np.ndarray, max_nfev: i
         except (ValueError, ModelError, np.linalg.LinAlgError):
             costs.append(np.inf)
     out, out_cost = best, design.cost(best)
-    picks = [int(i) for i in np.argsort(costs)[:2]]
+    # the cheapest start at each frequency: ranked unpolished, with the effects' parameters of a fit in a wrong
+    # basin, the starts near the plant's resonance can lose to others that polish elsewhere (hysteresis + second
+    # creep 3-10x seed 47: the two cheapest went to 1.066x the noise; each start at 50 Hz, 47.8 Hz in the plant,
+    # reaches 0.988x in 0.3-0.6 s)
     per = len(starts) // len(kept)
+    picks = [int(i) for i in np.argsort(costs)[:2]]
+    for f in range(len(fns)):
+        cell = [i for i in range(per) if (i // len(RESTART_ZETAS)) % len(fns) == f]
+        g = min(cell, key=lambda i: costs[i])
+        if g not in picks:
+            picks.append(g)
     for j in range(1, len(kept)):
         # each exchanged set gets its own polish: ranked with the rest, the grid around the fit it left
         # always costs less (second_creep 10-100x seed 95: the best exchanged start ranked 12th of 144,
