@@ -1094,7 +1094,8 @@ def warm_kernels() -> None:
     RF.begin(tr.st, tr.S, tr._shift, tr._wk, 1, False, True, 0, True)      # (this estimator is thrown away)
     RF.sample_work(0.0, 0.0, tr.st, tr.S, tr.ring, tr._ctx, T.MACHINE_REFIT, 1)
     W.ring_copy(tr.ring, 0, np.empty(4), np.empty(4))
-    W.swapped_state(tr.st, tr.st.copy(), tr.theta, tr.basis.lam, tr.basis.dx)
+    W.swap_into(tr.st.copy(), tr.st.copy(), tr.theta, tr.basis.lam, tr.basis.dx)
+    W.replay_origin(tr.st.copy(), tr.ztail, tr._free_rates, 0, 0.0)
     # a post-change search (alpha fixed) and its judged costs: their kernels otherwise load at the first change
     search = ResonanceSearch(tr.basis, u[:300] - u[0], u[:300] * 0.5, fixed_alpha=0.1,
                              extra=((0.1, 2e-3, 1e-6),), work=None)

@@ -1560,24 +1560,12 @@ def ring_copy(ring: np.ndarray, p0: int, u: np.ndarray, y: np.ndarray) -> None:
 
 
 @njit(cache=CACHE)
-def swapped_state(live: np.ndarray, replayed: np.ndarray, theta: np.ndarray, lam: np.ndarray,
-                  dx: float) -> np.ndarray:
-    """The state after a replay: the live one (its scalars, monitors, tail) with the replayed states, statistics
-    and coefficients (phi, sy, co; the weight, syy, effective samples, linearization point, drift origin), and
-    the prediction's coefficients for theta at the new point (``set_estimate``), as a new array (``swap_into``
-    on a copy of the replayed state). One kernel: as numpy slices from Python, in the update() that swaps, it
-    cost ~35-50 us cold."""
-    new = replayed.copy()
-    swap_into(live, new, theta, lam, dx)
-    return new
-
-
-@njit(cache=CACHE)
 def swap_into(live: np.ndarray, replayed: np.ndarray, theta: np.ndarray, lam: np.ndarray, dx: float) -> None:
-    """``swapped_state`` in place: ``replayed`` takes the live state's scalars, monitors and tail (all but its own
-    phi, sy, co and the weight, syy, effective samples, linearization point, drift origin) and the prediction's
-    coefficients for theta. The tracker swaps its two state arrays so (no allocation in the update() that
-    swaps: a new array's page is first touched there)."""
+    """The state after a replay, in place: ``replayed`` (its states, statistics and coefficients: phi, sy, co; the
+    weight, syy, effective samples, linearization point, drift origin) takes the live state's scalars, monitors
+    and tail, and the prediction's coefficients for theta at the new point (``set_estimate``). One kernel: as numpy
+    slices from Python, in the update() that swaps, it cost ~35-50 us cold; into a new array (``swapped_state``
+    until 93452cc) its page was first touched there. The tracker swaps its two state arrays so."""
     q = int(live[SC_NQ])
     p = q + FREE + int(live[SC_NM]) + int(live[SC_NR])
     o = SC_SIZE
