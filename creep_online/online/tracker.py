@@ -461,7 +461,7 @@ class WindowTracker(ParameterView):
         self._nodes_state = (np.zeros(self.lay["size"]), np.zeros((p, p)))
         # the replays' state and statistics: a spare pair, swapped with the live one by each replay (``_replay_arrays``)
         spare = np.full(self.lay["size"], 0.0)
-        self._spare: tuple | None = (spare, np.full((p, p), 0.0), self._views(spare))
+        self._spare = (spare, np.full((p, p), 0.0), self._views(spare))
         self._search_scratch = SearchScratch(self.q)   # (one search at a time: ``_researching``)
         self._search_scratch.prepare_judge(self._free_decays, self.basis.h)    # (``_take_if_better``'s judge)
 
@@ -478,16 +478,14 @@ class WindowTracker(ParameterView):
         return st, S
 
     def _replay_arrays(self, a1l: float, a2l: float) -> tuple:
-        """``_fresh`` state and statistics for a replay, with their views: the spare pair (the one the last swap
-        retired, or made and touched at construction), new arrays only if another replay holds it. In new arrays
-        the replay's first accumulating unit wrote the statistics' pages for the first time: 60-65 us of page
-        faults in one update() (the statistics are p x p, ~28 kB at p = 59)."""
-        spare, self._spare = self._spare, None
-        if spare is None:
-            st, S = self._fresh(a1l, a2l)
-            return st, S, self._views(st)
-        st, S = self._fresh(a1l, a2l, spare[:2])
-        return st, S, spare[2]
+        """``_fresh`` state and statistics for a replay, with their views, in the spare pair (the one the last swap
+        retired, or made and touched at construction). One replay runs at a time (the long jobs run in order, and a
+        replay dropped by a restart never resumes), so the next replay may take the pair again. In new arrays the
+        replay's first accumulating unit wrote the statistics' pages for the first time: 60-65 us of page faults in
+        one update() (the statistics are p x p, ~28 kB at p = 59)."""
+        st, S, views = self._spare
+        self._fresh(a1l, a2l, (st, S))
+        return st, S, views
 
     def _views(self, st: np.ndarray) -> tuple:
         """The parts of a state array: sc, phi, m, sy, co, ztail, md."""
