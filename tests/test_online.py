@@ -729,7 +729,8 @@ def test_a_sub_threshold_change_reads_changing_not_good(monkeypatch):
 
 def test_the_grid_planned_on_idle_calls_is_the_searchs_own_and_changes_nothing(monkeypatch):
     """The start-up search's grid frequencies are computed ahead on idle buffering calls (a few numpy calls per
-    call) for the rows the search will take: the search gets exactly them, bit for bit the frequencies an
+    call) for the rows the search will take, and the search is built ahead on the next: it is the search that
+    runs, its frequencies exactly bit for bit the frequencies an
     estimator without the plan computes in the search's first unit; that unit is then saved (the estimates
     land a sample earlier), and the stream ends at the same estimate: within a quarter of its reported 1-sigma
     (the re-fits then run on windows a sample apart; measured 0.12 sigma for alpha, 0.09 for b)."""
@@ -741,7 +742,7 @@ def test_the_grid_planned_on_idle_calls_is_the_searchs_own_and_changes_nothing(m
             plan = est._grid_plan
             est.update(a, b)
             if plan is not None and plan[2] is not None and est._search is not None and planned is None:
-                planned = est._search._freqs is plan[2]
+                planned = est._search._freqs is plan[2] and est._search is plan[3]
         return est, est._search._freqs, planned
 
     est, ahead, planned = run()

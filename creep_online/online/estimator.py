@@ -297,7 +297,7 @@ class OnlineEstimator(StoredParams):
         self._search: ResonanceSearch | None = None
         self._search_scratch = SearchScratch(self.basis.size)
         self._search_scratch.prepare_judge(FREE_RATES, self.basis.h)   # (a start-up search in operation's)
-        self._grid_plan: list | None = None     # [rows, steps, frequencies]: ``_plan_grid``
+        self._grid_plan: list | None = None     # [(start, end), steps, frequencies, search]: ``_plan_grid``
         self._search_rounds = 0
         self._tc_used = 0.0
         self._tracker: WindowTracker | RecursiveTracker | None = None
@@ -683,37 +683,50 @@ class OnlineEstimator(StoredParams):
         return start, min(nbuf, start + MAX_SEARCH_SAMPLES)
 
     def _plan_grid(self) -> None:
-        """On an idle buffering call, one step of the grid frequencies of the search that starts when the buffer
-        is ready (``search.frequency_steps``, a few numpy calls): that search's first unit (its construction)
-        then does not compute them (~35 us of cold numpy). Only the first search has a grid (later ones refine
-        its candidates); the plan is used only if its rows are the search's (``_start_search``)."""
+        """On an idle buffering call, one step of the search that starts when the buffer is ready: its grid
+        frequencies (``search.frequency_steps``, a few numpy calls), then its construction (the buffer's rows
+        to come are views of memory already there). Its first unit, in the update() that fills the buffer,
+        then does neither (~35 us of cold numpy; the construction alone ~10 us of cold Python on top of that
+        update()'s own work: 27 us). Only the first search has a grid (later ones refine its candidates); the
+        plan is used only if its rows are the search's (``_start_search``)."""
         plan = self._grid_plan
-        if self._first_change is None or self._search is not None or plan is not None and plan[2] is not None:
+        if self._first_change is None or self._search is not None or plan is not None and plan[3] is not None:
             return
         if plan is None:
             start, end = self._search_span(self._first_change + math.ceil(self._t_search() / self._h))
-            self._grid_plan = [end - start, frequency_steps(*grid_ends(end - start, self._h)), None]
+            self._grid_plan = [(start, end), frequency_steps(*grid_ends(end - start, self._h)), None, None]
             return
-        try:
-            next(plan[1])
-        except StopIteration as done:
-            plan[2] = done.value
+        if plan[2] is None:
+            try:
+                next(plan[1])
+            except StopIteration as done:
+                plan[2] = done.value
+            return
+        plan[3] = self._new_search(*plan[0], plan[2])
 
     def _start_search(self) -> None:
         start, end = self._search_span(self._nbuf)
+        plan, self._grid_plan = self._grid_plan, None
+        planned = plan is not None and plan[0] == (start, end)
+        if planned and plan[3] is not None:
+            self._search = plan[3]
+        else:
+            self._search = self._new_search(start, end, plan[2] if planned else None)
+        self._tc_used = (end - start) * self._h
+        self._phase = "searching"
+
+    def _new_search(self, start: int, end: int, freqs: np.ndarray | None) -> ResonanceSearch:
+        """The search over the buffer's rows [start, end) (some may be still to come), with the grid's
+        frequencies ``freqs`` if computed ahead; after a first search it refines that one's candidates."""
         prev = self._search
         starts = [c[1:] for c in prev.candidates] if prev is not None and prev.candidates else None
         alphas = () if self.alpha0 is None else (float(self.alpha0),)
-        plan, self._grid_plan = self._grid_plan, None
-        freqs = plan[2] if plan is not None and plan[0] == end - start else None
         # in operation the buffer starts in the fading memory of an unknown past input: the search projects it
         # out (the tracker's free responses), as it does the unknown resonance state (``ResonanceSearch`` free)
         extra = () if self._hint is None else (self._hint,)     # (a fault's restart: the estimate before it)
-        self._search = ResonanceSearch(self.basis, self._bu[start:end], self._by[start:end], alphas=alphas,
-                                       extra=extra, work=self._hist_work, starts=starts, scratch=self._search_scratch,
-                                       freqs=freqs, free=FREE_RATES if self._in_operation else None)
-        self._tc_used = (end - start) * self._h
-        self._phase = "searching"
+        return ResonanceSearch(self.basis, self._bu[start:end], self._by[start:end], alphas=alphas,
+                               extra=extra, work=self._hist_work, starts=starts, scratch=self._search_scratch,
+                               freqs=freqs, free=FREE_RATES if self._in_operation else None)
 
     def _longer_window_needed(self, res) -> bool:
         """After a search: grow the buffer to 1.5 settling times of the resonance found and search again."""
