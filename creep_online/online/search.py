@@ -68,12 +68,19 @@ NODE_SUM_COST = 0.6
 #: sum took ~30 ns per row at stride 2 on the first pass (3.7x the warm cost), ~20 ns on the second, ~13 ns from
 #: the fourth on, and ~220 ns per kept row at stride 12-13 on the first (a row a page away from the last: no
 #: prefetch, a miss each). Units sized on the warm cost made the slowest calls of every run, 30-56 us of kernel.
-#: So the first pass counts its node sums COLD_FIRST times the warm cost, or MISS_WORK multiply-adds (~200 ns)
-#: scaled by the share of a page between kept rows, whichever is more; the second COLD_SECOND times.
-COLD_FIRST = 4.0
-COLD_SECOND = 2.0
-MISS_WORK = 360.0
+#: So the first pass counts its node sums COLD_FIRST times the warm cost, or MISS_WORK multiply-adds (~250 ns)
+#: scaled by the share of a page between kept rows, whichever is more; the second COLD_SECOND times. (With 4.0,
+#: 2.0 and 360, the measured costs, a first pass's units took 24-27 us from one process to the next: the
+#: factors carry a quarter's margin; a first pass is a few units per search.)
+COLD_FIRST = 5.0
+COLD_SECOND = 2.5
+MISS_WORK = 450.0
 PAGE_BYTES = 4096
+#: The first unit of a first or second pass over the rows at a stride, and the node history's, also run cold
+#: code (Python and kernels) after thousands of update() calls of other work: 22-26 us where the pass's next
+#: units took 17 us (the latency stream's minimum over nine runs). They start with this much less work (in
+#: UNIT_WORK's multiply-adds).
+COLD_LEAD_WORK = 12000.0
 #: A unit may carry up to this fraction over UNIT_WORK rather than leave a nearly empty one (``_row_units``).
 UNIT_SLACK = 0.1
 #: Candidates refined from the grid.
@@ -774,10 +781,14 @@ class ResonanceSearch:
         plant's then "fitted" its buffer at 1/5000 of the noise variance (1e-8; 7.3e-5 with the closed form,
         6.9e-5 by numpy's least squares on the simulator's output) and won the start-up search."""
         self._bind()
+        passes = self._passes.get(stride, 0)
+        cold = passes == 0                 # (a first pass: its set-up in units of its own, ``_node_work``)
+        lead = COLD_LEAD_WORK if passes <= 1 else FREE_PREPARE_WORK
+        if cold:
+            yield
         vz, x = self._vz, self._x
         vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
                             self._rc, vz, x, self._acc)
-        cold = stride not in self._passes  # (a first pass: its set-up in units of its own, ``_node_work``)
         if cold:
             yield
         mine = decays == self.free
@@ -788,7 +799,7 @@ class ResonanceSearch:
             per_row = self._node_work(1) + 30 + 6 * e.size
             if cold:
                 yield
-            for r0, r1 in _row_units(n, per_row, 0.0 if cold else FREE_PREPARE_WORK):
+            for r0, r1 in _row_units(n, per_row, lead):
                 _rows_free(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, f, decay, e, r0, r1, self.lead, G)
                 yield
             return G
@@ -807,11 +818,13 @@ class ResonanceSearch:
         per_row = 12 + (self._node_work(stride) + shared) / stride
         g = self._g                        # the free responses at row 0
         g[0], g[1] = 1.0, 0.0
-        if cold:
+        if passes <= 1:                    # (the second candidate's set-up after the first's end: ~15 us cold)
             yield
-        for r0, r1 in _row_units(n, per_row, 0.0 if cold else FREE_PREPARE_WORK):
+        for r0, r1 in _row_units(n, per_row, lead):
             _rows_free_sparse(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, g, a1, a2, self.basis.h, rates,
                               r0, r1, stride, self.lead, G, table, mode)
+            yield
+        if cold:                           # (the first candidate's end, the next one's set-up and rows: 26 us)
             yield
         if mode == 1:
             self._rows_cache.keep(slot, G)
@@ -854,15 +867,20 @@ class ResonanceSearch:
             G = yield from self._free_gram(alpha, a1, a2, self.free, stride, closed=True)
             return _free_fit(G)
         self._bind()
+        passes = self._passes.get(stride, 0)
+        cold = passes == 0
+        if cold:
+            yield
         vz, x, acc = self._vz, self._x, self._acc
         vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
                             self._rc, vz, x, acc)
-        cold = stride not in self._passes
         per_row = 6 + self._node_work(stride) / stride
         if cold:
             yield
-        for r0, r1 in _row_units(self.u.size, per_row, 0.0 if cold else PREPARE_WORK):
+        for r0, r1 in _row_units(self.u.size, per_row, COLD_LEAD_WORK if passes <= 1 else PREPARE_WORK):
             _rows(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, r0, r1, stride, self.lead, acc)
+            yield
+        if cold:
             yield
         return _projected(acc)
 
@@ -871,9 +889,11 @@ class ResonanceSearch:
         zeta = self._zeta
         zeta[:] = 0.0 if self.zeta0 is None else self.zeta0
         chunk = max(16, UNIT_WORK // self.basis.size)
-        for i0 in range(0, self.u.size, chunk):
-            i1 = min(i0 + chunk, self.u.size)
+        i0, n = 0, self.u.size
+        while i0 < n:       # (the first chunk smaller: ``COLD_LEAD_WORK``)
+            i1 = min(n, i0 + (chunk if i0 else max(16, int(UNIT_WORK - COLD_LEAD_WORK) // self.basis.size)))
             kernels.node_history(self.u, self.basis.decay, self.basis.gain, zeta, self._hist, i0, i1)
+            i0 = i1
             yield
 
     def _grid(self, stride: int) -> Generator:
@@ -895,6 +915,7 @@ class ResonanceSearch:
                     found.append((alpha, fn, z))
         yield                            # (the last candidate's end and the picks below: ~28 us cold in one)
         m = _distinct_picks(costs, ranked, size, self._freqs, _GRID_ZETAS, picks)
+        yield                            # (the picks and the grid's end, cold: 25-28 us in one)
         return [found[i] for i in picks.tolist()[:m]]
 
     def _refine(self, alpha: float, fn: float, z: float, stride: int) -> Generator:
