@@ -233,10 +233,12 @@ def test_replays_swap_two_state_arrays_in_turn_and_each_equals_a_tracker_fed_liv
 
 
 def test_replay_snapshots_equal_the_statistics_at_their_instants_and_survive_the_next_replay():
-    """A replay passes the change test's instants and keeps the last three snapshots (``window.snapshot`` into the
-    tracker's buffers): each equals the statistics a tracker fed live at that linearization point had at that
-    sample (S's upper triangle, sy, syy, the weight). The next replay writes the other set of buffers: a change
-    test queued on the first replay's snapshot still reads what it was."""
+    """A replay passes the change test's instants and keeps the last three snapshots (``window.snapshot`` into
+    slots of their own in the change test's work array): each equals the statistics a tracker fed live at that
+    linearization point had at that sample (S's upper triangle, sy, syy, the weight), and the test queued on its
+    slot (``refit.queue_test``: the per-sample kernel's slices) ends as the test started from Python on it
+    (``refit.start_test``). The next replay writes the other set of slots: a change test queued on the first
+    replay's snapshot still reads what it was."""
     model = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
     h, n, every = 1e-3, 3000, 500
     u = _staircase(n, 300, 4)
@@ -261,8 +263,22 @@ def test_replay_snapshots_equal_the_statistics_at_their_instants_and_survive_the
         assert np.allclose(sy0, fresh.sy, rtol=1e-9, atol=1e-12 * np.abs(fresh.sy).max())
         assert syy0 == pytest.approx(float(fresh.sc[W.SC_SYY]), rel=1e-9)
         assert g0 == pytest.approx(float(fresh.sc[W.SC_G]), rel=1e-12)
-        assert slot == -1 and not shift0.any() and lin == (tr.a1l, tr.a2l)
+        assert T.SNAP_SLOTS <= slot < T.SNAP_SLOTS + 2 * T.KEPT_SNAPSHOTS
+        assert not shift0.any() and lin == (tr.a1l, tr.a2l)
+        assert all(np.shares_memory(a, b) for a, b in zip(RF.snapshot_slots(tr._test_wk, tr.p, tr.theta.size)[slot],
+                                                          (S0, sy0, shift0, theta0)))
         kept.append((S0[upper].copy(), sy0.copy()))
+    outcomes = []
+    for queued in (True, False):                   # the last snapshot's test, both ways, on copies
+        st, S, shift, wk = tr.st.copy(), tr.S.copy(), tr._shift.copy(), tr._test_wk.copy()
+        i, S0, sy0, syy0, g0, lin, theta0, shift0, slot = snaps[0]
+        if queued:
+            RF.queue_test(wk, slot, syy0, False)
+        else:
+            RF.start_test(st, S, S0, sy0, syy0, shift, shift0, tr.theta, wk, False)
+        RF.run(st, S, shift, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)
+        outcomes.append(np.array(RF.test_outcome(wk, tr.theta)))
+    assert outcomes[0][0] > 0 and np.allclose(outcomes[0], outcomes[1], rtol=1e-12, atol=0)
     for _ in tr._relinearize_job(None):            # the next replay: the first one's snapshots untouched
         pass
     for (i, S0, sy0, *_), (S_then, sy_then) in zip(snaps, kept):

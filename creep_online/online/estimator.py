@@ -1091,8 +1091,6 @@ def warm_kernels() -> None:
     st, S, shift = tr.st.copy(), tr.S.copy(), tr._shift.copy()
     W.set_estimate(tr.theta.copy(), st, tr.basis.lam, tr.basis.dx)
     W.snapshot(st, S, shift, tr.theta, S.copy(), np.empty(tr.p), shift.copy(), tr.theta.copy())
-    RF.start_test(st, S, S.copy(), np.ones(tr.p), 1.0, shift, shift.copy(), tr.theta.copy(), tr._test_wk.copy(),
-                  True)
     RF.queue_test(tr._test_wk.copy(), 0, 1.0, True)
     RF.snapshot(st, S, tr._ctx.copy(), T.MACHINE_TEST, 0, 1.0)
     wk = tr._wk.copy()

@@ -434,7 +434,7 @@ class WindowTracker(ParameterView):
                   "RELINEARIZE": RELINEARIZE, "WIDE_ON": WIDE_ON}
         extra = tuple(5 + i for i, rate in enumerate(WINDOW_FREE_RATES[:self.n_free]) if rate not in WINDOW_FREE_START)
         works = [RF.allocate(p, k, r0, REFIT_STEPS, {**policy, "TRUST": TRUST}, extra=extra),
-                 RF.allocate(p, k, r0, TEST_STEPS, policy, SNAP_SLOTS, self._shift.shape)]
+                 RF.allocate(p, k, r0, TEST_STEPS, policy, SNAP_SLOTS + 2 * KEPT_SNAPSHOTS, self._shift.shape)]
         # one array for what the per-sample kernel's slices need (``refit.context``): theta, the shift and
         # the work arrays become views into it
         self._ctx, self.theta, self._shift, (self._wk, self._test_wk) = RF.context(
@@ -443,14 +443,17 @@ class WindowTracker(ParameterView):
         # the change test's snapshots, in slots reused in turn (a test holds its snapshot for ~15
         # units, ``_theta_at`` keeps the last five estimates), inside the test's work array: its first slice reads
         # the snapshot there, in the per-sample kernel (``refit.queue_test``)
-        self._snap_slots = RF.snapshot_slots(self._test_wk, p, k)
+        slots = RF.snapshot_slots(self._test_wk, p, k)
+        self._snap_slots = slots[:SNAP_SLOTS]
         self._snap_next = 0
         # a replay's snapshots at the test instants it passes (the last three kept), written by one kernel
-        # (``window.snapshot``: four numpy copies from cold Python cost ~20 us on a replay's unit); two sets,
-        # one per replay in turn: a change test queued on one replay's snapshot reads it after that replay
-        # swapped in, while the next replay writes the other set
-        self._replay_snaps = [[(np.zeros((p, p)), np.zeros(p), np.zeros_like(self._shift), np.zeros(k))
-                               for _ in range(KEPT_SNAPSHOTS)] for _ in range(2)]
+        # (``window.snapshot``: four numpy copies from cold Python cost ~20 us on a replay's unit) into slots of
+        # their own (the test on one starts in the per-sample kernel too: from Python, ``refit.start_test``, it
+        # was 25-26 us cold in one update()); two sets, one per replay in turn: a change test queued on one
+        # replay's snapshot reads it after that replay swapped in, while the next replay writes the other set
+        self._replay_snaps = [[(i, *slots[i]) for i in range(SNAP_SLOTS + j * KEPT_SNAPSHOTS,
+                                                                SNAP_SLOTS + (j + 1) * KEPT_SNAPSHOTS)]
+                              for j in range(2)]
         self._replay_set = 0
         self._replay_work = W.replay_scratch(p)     # (a replay's unit leaves nothing in it: shared by the jobs)
         # a search's segment (``_ring_segment``) and the states-only fast-forward before it (``_nodes_at``), made
@@ -782,11 +785,12 @@ class WindowTracker(ParameterView):
             W.replay(self.ring, (slot + i) % size, n, max(skip - (i - oldest), 0), st, S, *self._replay_work)
             i += n
             if self.detect and i % self.test_every == 0 and i - oldest > skip:
-                S0, sy0, shift0, theta0 = buffers[taken % KEPT_SNAPSHOTS]     # (the buffers of the one dropped now)
+                index, S0, sy0, shift0, theta0 = buffers[taken % KEPT_SNAPSHOTS]  # (the slot of the one dropped now)
                 taken += 1                 # shift0 stays zero: a replay's snapshots are at its own origin
-                syy0, g0 = W.snapshot(st, S, shift0, self._theta_at.get(i, self.theta), S0, sy0, shift0, theta0)
-                snaps = (snaps + [(i, S0, sy0, syy0, g0, lin, theta0, shift0, -1)])[-KEPT_SNAPSHOTS:]
-                # (no slot: the test starts from Python, ``refit.start_test``)
+                theta_i = self._theta_at.get(i, self.theta)
+                yield                      # (the snapshot in a unit of its own: with a chunk's rows, 25-27 us)
+                syy0, g0 = W.snapshot(st, S, shift0, theta_i, S0, sy0, shift0, theta0)
+                snaps = (snaps + [(i, S0, sy0, syy0, g0, lin, theta0, shift0, index)])[-KEPT_SNAPSHOTS:]
             if i >= self.n:                # caught up: swap now (a yield lets a new sample in) if this unit was
                 if n <= SWAP_WITH or deferred:  # light; else on the next one, with the samples that came in
                     break                  # (once: fed in blocks, more than SWAP_WITH may come in per unit)
@@ -845,11 +849,7 @@ class WindowTracker(ParameterView):
         lin = (self.a1l, self.a2l)
         wk = self._test_wk
         free_rates = self.n_rate > 0 and not self.drift_on
-        if slot >= 0:                      # the statistics since the snapshot: the test's first slice
-            RF.queue_test(wk, slot, syy0, free_rates)
-        else:                              # (a replay's snapshot, not in a slot: from here, on the next call: with
-            yield                          # the checks above, cold, ~30-35 us in one)
-            RF.start_test(self.st, self.S, S0, sy0, syy0, self._shift, shift0, self.theta, wk, free_rates)
+        RF.queue_test(wk, slot, syy0, free_rates)     # the statistics since the snapshot: the test's first slice
         self.machine = MACHINE_TEST        # TEST_STEPS Levenberg-Marquardt steps, then the covariance, in the
         yield MACHINE                      # per-sample kernel
         # plain floats from here on (numpy from Python is slow here)
@@ -996,6 +996,7 @@ class WindowTracker(ParameterView):
         oldest = int(self.sc[W.SC_RSTART])
         n0 = max(n_from - settle if n_from < n_detect else n_from, oldest)
         zeta0 = yield from self._nodes_at(n0)
+        yield                              # (the fast-forward's end and the segment's first copy: 26-27 us cold)
         cap = min(self.ring.shape[1] // 2, 1 << 15 if self.work_memory is None else self.work_memory.shape[0])
         search: ResonanceSearch | None = None
         seg = 0
