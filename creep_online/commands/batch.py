@@ -9,10 +9,13 @@ arguments or input, 130 interrupted (the rows done are written).
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, Iterator
 
 from ..errors import CreepOnlineError
 from ._progress import for_command
@@ -67,8 +70,9 @@ def run(args: argparse.Namespace) -> int:
     for path in outputs:
         if path is not None:
             check_output(path, inputs)   # never over a record
-    rows, times, interrupted = _run(args, jobs)
-    return _finish(args, jobs, rows, times, interrupted, outputs)
+    with ctrl_c_flag() as pressed:   # (held while the rows are written too: a Ctrl-C then waits for them)
+        rows, times, interrupted = _run(args, jobs, pressed)
+        return _finish(args, jobs, rows, times, interrupted, outputs)
 
 
 def _is_batch_table(path: str | None) -> bool:
@@ -92,9 +96,10 @@ def _outputs(args: argparse.Namespace) -> tuple[Path | None, Path | None]:
     return (Path(args.out) if args.out else None, Path(html) if html else None)
 
 
-def _run(args: argparse.Namespace, jobs: list) -> tuple[list[dict[str, Any]], dict[str, float], bool]:
+def _run(args: argparse.Namespace, jobs: list,
+         pressed: Callable[[], bool]) -> tuple[list[dict[str, Any]], dict[str, float], bool]:
     """The rows (input order), the times (startup_s: cluster up and workers warm; elapsed_s: the records)
-    and whether Ctrl-C stopped the batch."""
+    and whether Ctrl-C (``pressed``, ``ctrl_c_flag``'s) stopped the batch."""
     from ..fleet.runner import dask_client, run_on_dask
     options = {"retune": not args.no_retune, "polish": not args.no_polish}
     rows: list[dict[str, Any]] = []
@@ -108,15 +113,47 @@ def _run(args: argparse.Namespace, jobs: list) -> tuple[list[dict[str, Any]], di
                 t0 = time.perf_counter()
                 progress.stage(bar_text(0, len(jobs), 0, 0.0))
                 failed = 0
-                for row in run_on_dask(jobs, client, diagnose_it=args.diagnose, identify_options=options):
+                for row in run_on_dask(jobs, client, diagnose_it=args.diagnose, identify_options=options,
+                                       stop=pressed):
                     rows.append(row)
                     failed += bool(row["error"])
                     progress.show(bar_text(len(rows), len(jobs), failed, time.perf_counter() - t0))
-        except KeyboardInterrupt:
+        except KeyboardInterrupt:   # (a second Ctrl-C)
             interrupted = True
+        interrupted = interrupted or (pressed() and len(rows) < len(jobs))
     order = {job.id: i for i, job in enumerate(jobs)}
     rows.sort(key=lambda r: order[r["id"]])
     return rows, {"startup_s": t0 - start, "elapsed_s": time.perf_counter() - t0}, interrupted
+
+
+@contextlib.contextmanager
+def ctrl_c_flag() -> Iterator[Callable[[], bool]]:
+    """Within: the first Ctrl-C (SIGINT) only sets a flag, which the yielded function reads; a second one raises
+    KeyboardInterrupt as usual.
+
+    A KeyboardInterrupt raised wherever the main thread happens to be can land
+    inside Dask's client code (a submit, a future's release) and leave its event
+    loop a half-done call, whose traceback Dask's loop thread then printed (seen
+    once in a few runs). The batch asks the flag between records instead. A
+    process started with SIGINT ignored (a shell's background job) keeps it
+    ignored; off the main thread no handler can be set and the flag stays False.
+    """
+    pressed: list[bool] = []
+
+    def first_sets_flag(signum: int, frame: Any) -> None:
+        if pressed:
+            raise KeyboardInterrupt
+        pressed.append(True)
+
+    previous = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or previous is signal.SIG_IGN:
+        yield lambda: False
+        return
+    signal.signal(signal.SIGINT, first_sets_flag)
+    try:
+        yield lambda: bool(pressed)
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _finish(args: argparse.Namespace, jobs: list, rows: list[dict[str, Any]], times: dict[str, float],

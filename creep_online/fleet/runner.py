@@ -25,8 +25,9 @@ import logging
 import os
 import signal
 import threading
+import time
 from itertools import islice
-from typing import Any, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator
 
 from ..errors import CreepOnlineError, one_line
 from ..io.fleet_records import RecordJob
@@ -36,6 +37,8 @@ from .row import empty_row
 CONNECT_TIMEOUT_S = 10.0
 #: Records in flight per worker thread.
 WINDOW_PER_THREAD = 4
+#: Seconds between two looks at ``run_on_dask``'s ``stop`` while no record has finished.
+STOP_POLL_S = 0.05
 INSTALL_HINT = "pip install 'creep_online[fleet]'"
 
 
@@ -117,13 +120,18 @@ def warm_up_workers(client: Any, where: str) -> dict[str, float]:
 
 
 def run_on_dask(jobs: Iterable[RecordJob], client: Any, *, diagnose_it: bool = False,
-                identify_options: dict[str, Any] | None = None) -> Iterator[dict[str, Any]]:
+                identify_options: dict[str, Any] | None = None,
+                stop: Callable[[], bool] | None = None) -> Iterator[dict[str, Any]]:
     """Yield one row per job, in the order they finish (``run_record`` on the cluster's workers).
 
     A record that was bad before any work (``job.error``) gets its row here at
     once. A task the cluster itself could not run (a worker died, creep_online
     missing on a remote worker) gets a row with that error. Closing the
-    generator (e.g. on Ctrl-C) cancels what is still queued.
+    generator (e.g. on Ctrl-C) cancels what is still queued. ``stop`` is asked
+    every ``STOP_POLL_S`` while records run; once it says True no more rows
+    come and what is queued is cancelled (the batch command's Ctrl-C: a flag
+    its SIGINT handler sets, so that no KeyboardInterrupt lands inside Dask's
+    client code, which then printed a callback's traceback on the way out).
     """
     from .job import run_record
     dd = distributed()
@@ -147,7 +155,7 @@ def run_on_dask(jobs: Iterable[RecordJob], client: Any, *, diagnose_it: bool = F
     threads = sum(client.nthreads().values()) or 1
     submit(WINDOW_PER_THREAD * threads)
     try:
-        for future in done:
+        for future in _finished(done, stop):
             submit(1)
             job = in_flight.pop(future.key)[1]
             try:
@@ -161,3 +169,15 @@ def run_on_dask(jobs: Iterable[RecordJob], client: Any, *, diagnose_it: bool = F
         done.clear()
         if in_flight:
             client.cancel([future for future, _ in in_flight.values()])
+
+
+def _finished(done: Any, stop: Callable[[], bool] | None) -> Iterator[Any]:
+    """The futures of ``done`` (an ``as_completed``) as they finish, until it is empty or ``stop()`` is True."""
+    if stop is None:
+        yield from done
+        return
+    while not done.is_empty() and not stop():
+        if done.has_ready():
+            yield from done.next_batch(block=False)
+        else:
+            time.sleep(STOP_POLL_S)
