@@ -797,8 +797,8 @@ class ResonanceSearch:
         if stride == 1 and not closed:
             _judge_reset(f, e, G)
             per_row = self._node_work(1) + 30 + 6 * e.size
-            if cold:
-                yield
+            if cold or self._judged_rows is None:     # (a first judged cost: the recursion's kernel is cold too,
+                yield                                 # 23-26 us with the set-up and its first rows)
             for r0, r1 in _row_units(n, per_row, lead):
                 _rows_free(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, f, decay, e, r0, r1, self.lead, G)
                 yield

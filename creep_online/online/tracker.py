@@ -749,6 +749,7 @@ class WindowTracker(ParameterView):
             due = self._test_after(self.n)
             while self.n <= due or self.machine == MACHINE_TEST or self._queued("_snapshot_job", "_change_job"):
                 yield WAIT
+        yield                              # (a caller's last work and the arrays below were 23 us cold in one)
         a1, a2 = self.a1, self.a2
         st, S, views = self._replay_arrays(a1, a2)
         yield                              # (with the set-up below, ~55-65 us cold)
@@ -802,6 +803,7 @@ class WindowTracker(ParameterView):
         self._adopt(st, S, views)
         self._snaps = snaps                # the change test keeps its reference through a replay
         self._shift[:] = 0.0               # (replayed at one origin: the snapshots' and the statistics' own)
+        yield                              # (the swap and the pace below: 25 us cold in one)
         self.relinearizations += 1
         self._pace_refits(False)
 
@@ -1007,6 +1009,7 @@ class WindowTracker(ParameterView):
                     yield WAIT
                 starts = [c[1:] for c in search.candidates]
             u, y = yield from self._ring_segment(n0, min(self.n, n0 + cap))
+            yield                          # (the segment's last copy and the search's construction: 24-25 us cold)
             seg = u.size
             lead = n_from - n0 if n_from < n_detect else min(settle, u.size // 4)
             # the live estimate competes with the grid: the window re-fits often follow a change
