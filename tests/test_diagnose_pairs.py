@@ -207,6 +207,26 @@ def test_an_effect_too_weak_to_be_named_beside_another_is_counted_apart():
     assert not bench._right_undetectable(row)                            # a false pair is wrong at any strength
 
 
+def test_a_partner_near_the_score_tests_threshold_is_fitted_for_real(monkeypatch):
+    """Delay + drift (1.3-3x, seed 72): drift alone fits to 1.002x the noise and the delay's score test beside it
+    gains LR 6.0 (evidence -2.7: one Gauss-Newton step, and a delay's response is far from linear in the delay),
+    so no search ran and the verdict's combination was drift + hysteresis, though the hidden pair, fitted, beats
+    drift by a BIC drop of 28. A partner within ``NEAR_MISS`` of the threshold is fitted beside its effect: the
+    search runs and names both at the floor. Without the near-miss fit the delay is missed."""
+    from creep_online.diagnostics import pairs
+    bench = _bench()
+    rec = bench.make_pair_record(("delay", "drift"), bench.BANDS["1.3-3x"], 72)
+    data = (rec["t"], rec["u"], rec["y"])
+    d = diagnose(data)
+    near = next(s for s in d.partner_scores if s.effect == "delay" and s.beside == "drift")
+    assert -pairs.NEAR_MISS < near.evidence < pairs.SCORE_THRESHOLD                  # the test alone misses it
+    assert d.combination is not None and set(d.combination.effect.split("+")) == {"delay", "drift"}
+    assert d.combination.significant and d.combination.fit.residual_rms <= bench.FLOOR * rec["noise"]
+    monkeypatch.setattr(pairs, "NEAR_MISS", 0.0)
+    old = diagnose(data)
+    assert old.combination is None or "delay" not in old.combination.effect.split("+")
+
+
 def test_a_weak_second_effect_the_residual_does_not_show_is_found_by_the_partners_score_test(monkeypatch):
     """Second mode + hysteresis (1.3-3x, seed 10): hysteresis alone fits to 1.03x the noise with a white residual and
     the two best single fits together (hysteresis + drift) add nothing, so the search never ran and the mode (0.22x
