@@ -248,6 +248,7 @@ def test_a_weak_second_effect_the_residual_does_not_show_is_found_by_the_partner
     reported = d.to_dict()["partner_scores"]                              # the trigger's numbers, in the JSON
     assert reported[0]["effect"] == "second_mode" and reported[0]["evidence"] > pairs.SCORE_THRESHOLD
     monkeypatch.setattr(pairs, "SCORE_THRESHOLD", float("inf"))           # the old trigger: the pair is missed
+    monkeypatch.setattr(pairs, "NEAR_MISS", float("-inf"))                # (no partner fitted near the threshold)
     old = diagnose(data)
     assert len(old.pairs_tried) <= 1
     assert old.combination is None or "second_mode" not in old.combination.effect.split("+")
