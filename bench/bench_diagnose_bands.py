@@ -88,6 +88,9 @@ def run_one(effect: str | None, band: tuple[float, float], seed: int) -> dict:
             "named_first": (d.verdict.split("+")[0] == effect) if effect else d.verdict == "none",
             "own_fit_over_noise": own[0].fit.residual_rms / rec["noise"] if own else None,
             "base_over_noise": d.base.residual_rms / rec["noise"], "pairs_tried": len(d.pairs_tried),
+            # a significant combination on a single-effect (or clean) record is a false pair
+            "combination": d.combination.effect if d.combination is not None else None,
+            "combination_significant": bool(d.combination.significant) if d.combination is not None else None,
             "seconds": time.perf_counter() - t0}
 
 
@@ -101,6 +104,7 @@ def cell(rows: list[dict]) -> dict:
             "own_fit_over_noise_max": max(floor) if floor else None,
             "verdicts": dict(Counter(r["verdict"] for r in ok).most_common()),
             "pair_searched": sum(r.get("pairs_tried", 0) > 1 for r in ok),
+            "false_pairs": sum(bool(r.get("combination_significant")) for r in ok),
             "seconds_p50": float(np.median([r["seconds"] for r in rows]))}
 
 
