@@ -709,7 +709,7 @@ class ResonanceSearch:
         #: in one unit of their own ~45 us)
         self._freqs = freqs
         self._judged_rows: int | None = None
-        self._passes: dict[int, int] = {}     # passes over the rows per stride (``_node_work``)
+        self._passes: dict[int, int] = {}     # passes over the rows per stride (``_start_pass``)
         self._gen = self._run()
 
     def _bind(self) -> None:
@@ -781,8 +781,8 @@ class ResonanceSearch:
         plant's then "fitted" its buffer at 1/5000 of the noise variance (1e-8; 7.3e-5 with the closed form,
         6.9e-5 by numpy's least squares on the simulator's output) and won the start-up search."""
         self._bind()
-        passes = self._passes.get(stride, 0)
-        cold = passes == 0                 # (a first pass: its set-up in units of its own, ``_node_work``)
+        passes = self._start_pass(stride)
+        cold = passes == 0                 # (a first pass: its set-up in units of its own)
         lead = COLD_LEAD_WORK if passes <= 1 else FREE_PREPARE_WORK
         if cold:
             yield
@@ -796,7 +796,7 @@ class ResonanceSearch:
         n = self.u.size
         if stride == 1 and not closed:
             _judge_reset(f, e, G)
-            per_row = self._node_work(1) + 30 + 6 * e.size
+            per_row = self._node_work(1, passes) + 30 + 6 * e.size
             if cold or self._judged_rows is None:     # (a first judged cost: the recursion's kernel is cold too,
                 yield                                 # 23-26 us with the set-up and its first rows)
             for r0, r1 in _row_units(n, per_row, lead):
@@ -815,7 +815,7 @@ class ResonanceSearch:
             shared = 20 * m + (5 + m) * (6 + m) / 2
         # the forced state, the free responses' shift and the kept-row test at every row (~12 multiply-adds'
         # time, measured); at a kept row the node sum and the rest
-        per_row = 12 + (self._node_work(stride) + shared) / stride
+        per_row = 12 + (self._node_work(stride, passes) + shared) / stride
         g = self._g                        # the free responses at row 0
         g[0], g[1] = 1.0, 0.0
         if passes <= 1:                    # (the second candidate's set-up after the first's end: ~15 us cold)
@@ -830,13 +830,17 @@ class ResonanceSearch:
             self._rows_cache.keep(slot, G)
         return G
 
-    def _node_work(self, stride: int) -> float:
-        """A kept row's node sum in UNIT_WORK's multiply-adds, for the next pass over the rows at this stride: the
-        warm cost, more on the first two passes (their rows come from memory: ``COLD_FIRST``). Counts the pass.
-        (A first pass also gets its candidate's set-up, cold Python and kernels, in a unit of its own: with the
-        first rows they were 30-50 us in one update().)"""
+    def _start_pass(self, stride: int) -> int:
+        """Count a candidate's pass over the rows at this stride; returns the passes before it (0: a first pass,
+        whose rows come from memory and whose set-up gets units of its own: with the first rows they were 30-50 us
+        in one update())."""
         passes = self._passes.get(stride, 0)
         self._passes[stride] = passes + 1
+        return passes
+
+    def _node_work(self, stride: int, passes: int) -> float:
+        """A kept row's node sum in UNIT_WORK's multiply-adds on a pass at this stride after ``passes`` others: the
+        warm cost, more on the first two passes (their rows come from memory: ``COLD_FIRST``)."""
         warm = NODE_SUM_COST * self.basis.size
         if passes == 0:
             apart = min(stride * self.basis.size * 8 / PAGE_BYTES, 1.0)     # (a row is q doubles)
@@ -867,14 +871,14 @@ class ResonanceSearch:
             G = yield from self._free_gram(alpha, a1, a2, self.free, stride, closed=True)
             return _free_fit(G)
         self._bind()
-        passes = self._passes.get(stride, 0)
+        passes = self._start_pass(stride)
         cold = passes == 0
         if cold:
             yield
         vz, x, acc = self._vz, self._x, self._acc
         vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
                             self._rc, vz, x, acc)
-        per_row = 6 + self._node_work(stride) / stride
+        per_row = 6 + self._node_work(stride, passes) / stride
         if cold:
             yield
         for r0, r1 in _row_units(self.u.size, per_row, COLD_LEAD_WORK if passes <= 1 else PREPARE_WORK):
