@@ -741,8 +741,8 @@ def test_the_grid_planned_on_idle_calls_is_the_searchs_own_and_changes_nothing(m
         for a, b in zip(u.tolist(), y.tolist()):
             plan = est._grid_plan
             est.update(a, b)
-            if plan is not None and plan[2] is not None and est._search is not None and planned is None:
-                planned = est._search._freqs is plan[2] and est._search is plan[3]
+            if plan is not None and plan.freqs is not None and est._search is not None and planned is None:
+                planned = est._search._freqs is plan.freqs and est._search is plan.search
         return est, est._search._freqs, planned
 
     est, ahead, planned = run()

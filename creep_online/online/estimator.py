@@ -152,6 +152,16 @@ class OnlineEstimate:
         return asdict(self)
 
 
+@dataclass
+class _GridPlan:
+    """The start-up search prepared on idle buffering calls (``OnlineEstimator._plan_grid``): the buffer's rows it
+    will take, its grid frequencies' steps, the frequencies once computed, the search once built."""
+    span: tuple[int, int]
+    steps: Generator
+    freqs: np.ndarray | None = None
+    search: ResonanceSearch | None = None
+
+
 class OnlineEstimator(StoredParams):
     """Fractional creep model identified sample by sample (scikit-learn / river style).
 
@@ -297,7 +307,7 @@ class OnlineEstimator(StoredParams):
         self._search: ResonanceSearch | None = None
         self._search_scratch = SearchScratch(self.basis.size)
         self._search_scratch.prepare_judge(FREE_RATES, self.basis.h)   # (a start-up search in operation's)
-        self._grid_plan: list | None = None     # [(start, end), steps, frequencies, search]: ``_plan_grid``
+        self._grid_plan: _GridPlan | None = None
         self._search_rounds = 0
         self._tc_used = 0.0
         self._tracker: WindowTracker | RecursiveTracker | None = None
@@ -690,28 +700,28 @@ class OnlineEstimator(StoredParams):
         update()'s own work: 27 us). Only the first search has a grid (later ones refine its candidates); the
         plan is used only if its rows are the search's (``_start_search``)."""
         plan = self._grid_plan
-        if self._first_change is None or self._search is not None or plan is not None and plan[3] is not None:
+        if self._first_change is None or self._search is not None or plan is not None and plan.search is not None:
             return
         if plan is None:
             start, end = self._search_span(self._first_change + math.ceil(self._t_search() / self._h))
-            self._grid_plan = [(start, end), frequency_steps(*grid_ends(end - start, self._h)), None, None]
+            self._grid_plan = _GridPlan((start, end), frequency_steps(*grid_ends(end - start, self._h)))
             return
-        if plan[2] is None:
+        if plan.freqs is None:
             try:
-                next(plan[1])
+                next(plan.steps)
             except StopIteration as done:
-                plan[2] = done.value
+                plan.freqs = done.value
             return
-        plan[3] = self._new_search(*plan[0], plan[2])
+        plan.search = self._new_search(*plan.span, plan.freqs)
 
     def _start_search(self) -> None:
         start, end = self._search_span(self._nbuf)
         plan, self._grid_plan = self._grid_plan, None
-        planned = plan is not None and plan[0] == (start, end)
-        if planned and plan[3] is not None:
-            self._search = plan[3]
+        planned = plan is not None and plan.span == (start, end)
+        if planned and plan.search is not None:
+            self._search = plan.search
         else:
-            self._search = self._new_search(start, end, plan[2] if planned else None)
+            self._search = self._new_search(start, end, plan.freqs if planned else None)
         self._tc_used = (end - start) * self._h
         self._phase = "searching"
 
