@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from creep_online.diagnostics import diagnose
+from creep_online.effects import HYSTERESIS_THRESHOLDS
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -189,11 +190,11 @@ def test_a_pair_the_record_cannot_tell_from_the_chosen_one_is_named_as_its_rival
 def test_an_effect_too_weak_to_be_named_beside_another_is_counted_apart():
     """The 1.3-3x band: the weaker effect may be below what the diagnosis' own rule (BIC drop > 10 for its dk
     parameters) could pass even if the fit took out all of it (``bench_diagnose_pairs.detectability``). A drift at
-    0.01x the noise alone cannot be named on 6000 samples, at 0.3x it must be; hysteresis' ten weights need more
+    0.01x the noise alone cannot be named on 6000 samples, at 0.3x it must be; hysteresis' weights need more
     signal than the drift's one rate; such a record counts in ``right_where_undetectable``, not as a miss."""
     bench = _bench()
     d = bench.detectability({"drift": 0.01, "hysteresis": 0.3})
-    assert d["drift"]["dk"] == 1 and d["hysteresis"]["dk"] == 10
+    assert d["drift"]["dk"] == 1 and d["hysteresis"]["dk"] == len(HYSTERESIS_THRESHOLDS)
     assert not d["drift"]["detectable"] and d["hysteresis"]["detectable"]
     assert bench.detectability({"drift": 0.3})["drift"]["detectable"]
     assert bench.detectability({"drift": 0.1})["drift"]["p_named"] > bench.detectability({"hysteresis": 0.1})[
