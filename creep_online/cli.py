@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
 import warnings
 
@@ -89,6 +90,40 @@ def main(argv: list[str] | None = None) -> int:
         return 3
 
 
+def console() -> None:
+    """The ``creep-online`` program (and ``python -m creep_online``): ``main`` with its status as the exit code.
+
+    After the command has returned, the interpreter still shuts down (Dask's
+    cluster, threads, buffered output); a Ctrl-C then used to end the process
+    by the signal with no word (seen after ``batch``). From that point a Ctrl-C
+    flushes the output, says in one line that the command had ended and with
+    which status, and exits with 130. A process started with Ctrl-C ignored
+    keeps it ignored.
+    """
+    code = main()
+    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
+        signal.signal(signal.SIGINT, _interrupted_while_exiting(code))
+    sys.exit(code)
+
+
+def _interrupted_while_exiting(code: int):
+    """A SIGINT handler for the interpreter's shutdown after the command ended with ``code``."""
+    def handler(signum, frame) -> None:
+        _quietly(sys.stdout.flush)
+        _quietly(lambda: print(f"creep-online: interrupted while exiting (the command had ended, exit status "
+                               f"{code})", file=sys.stderr, flush=True))
+        os._exit(130)
+    return handler
+
+
+def _quietly(write) -> None:
+    """Run ``write``; a closed or vanished stream has nothing more to say."""
+    try:
+        write()
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
 def _requested(argv: list[str]) -> str:
     """The command named on the command line ('' when none: only the top-level listing is needed)."""
     for arg in argv:
@@ -98,4 +133,4 @@ def _requested(argv: list[str]) -> str:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    console()

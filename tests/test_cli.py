@@ -69,3 +69,32 @@ def test_simulate_non_uniform_time_is_explained(tmp_path, capsys):
     assert main(["simulate", "--params", "alpha=0.5,a1=0.1,a2=0.01", "--input", str(tmp_path / "in.csv"),
                  "-o", str(tmp_path / "o.csv")]) == 2
     assert "not uniformly sampled" in capsys.readouterr().err
+
+
+#: A program that runs the command line as ``creep-online`` does, with a SIGINT that lands during the interpreter's
+#: shutdown after the command returned (as a Ctrl-C while Dask's cluster closes after ``batch``).
+_CTRL_C_AT_EXIT = """
+import atexit, os, signal, sys, time
+atexit.register(lambda: (os.kill(os.getpid(), signal.SIGINT), time.sleep(5)))
+sys.argv = ["creep-online", "identify", sys.argv[1]]
+from creep_online.cli import console
+console()
+"""
+
+
+@pytest.mark.parametrize("ignored", [False, True])
+def test_a_ctrl_c_while_the_interpreter_exits_is_one_line_and_status_130(tmp_path, ignored):
+    import signal
+    import subprocess
+    import sys
+    missing = tmp_path / "missing.csv"
+    proc = subprocess.run([sys.executable, "-c", _CTRL_C_AT_EXIT, str(missing)], capture_output=True, text=True,
+                          timeout=60, preexec_fn=(lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if ignored
+                          else None)
+    lines = proc.stderr.strip().splitlines()
+    assert "Traceback" not in proc.stderr and lines[0].startswith("creep-online identify: error:")
+    if ignored:     # started with Ctrl-C ignored (a background job): the command's own status
+        assert proc.returncode == 2 and len(lines) == 1
+    else:           # before, the process died by the signal (status -2) with nothing said
+        assert proc.returncode == 130
+        assert lines[1:] == ["creep-online: interrupted while exiting (the command had ended, exit status 2)"]
