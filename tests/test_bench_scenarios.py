@@ -47,3 +47,24 @@ def test_a_record_that_does_not_determine_the_damping_is_not_reported_good():
     assert est.estimate.quality != "good"
     assert abs(est.estimate.alpha / final["alpha"] - 1) < bench.TOL["alpha"]
     assert abs(est.estimate.b / final["b"] - 1) < bench.TOL["b"]
+
+
+def test_a_drifting_plant_at_80_db_keeps_alpha_and_b_through_its_re_searches(monkeypatch):
+    """Drift seed 1 at 80 dB: the window misfits at 1.5-2x the floor (a1 barely determined), and a re-search on
+    2 s with constant parameters saw the drift's trend (~20x the noise) as misfit: a candidate without a
+    resonance won, its switch zeroed the drift rates, and the estimate ended alpha 23 %, b 26 % off, degraded.
+    With the trend projected out and the rates kept, alpha and b stay within tolerance to the end."""
+    bench = _bench()
+    monkeypatch.setattr(scenarios, "SNR_DB", 80.0)
+    scen = scenarios.make("drift", 1)
+    est = OnlineEstimator(scen.h)
+    worst = {"alpha": 0.0, "b": 0.0}
+    step = int(round(1.0 / scen.h))
+    for k in range(0, scen.u.size, step):
+        est.update_block(scen.u[k:k + step], scen.y[k:k + step])
+        truth = scen.truth_at(min(k + step, scen.u.size) - 1)
+        if k * scen.h >= 10.0:
+            for p in worst:
+                worst[p] = max(worst[p], abs(getattr(est.estimate, p) / float(truth[p]) - 1))
+    assert worst["alpha"] < bench.TOL["alpha"] and worst["b"] < bench.TOL["b"], worst
+    assert est.estimate.quality != "degraded"
