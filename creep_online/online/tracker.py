@@ -192,12 +192,13 @@ RESEARCH_AFTER_S = 1.0
 RESEARCH_SEGMENT_S = 2.0
 #: ... and while the window models a drift (``drift_on``) its candidates, the live one too, are fitted and judged
 #: with these slow free responses (1/s) projected out, where the stream's own (``FREE_RATES``, in operation) are
-#: not there already: a drift's trend over the segment is not the resonance's to explain. On a drifting plant at 80 dB (drift seed 1:
-#: alpha +20 % over 60 s, 2 kHz) the 2 s segment's trend is ~20x the noise: the true model, constant over it,
-#: misfit it at 61x the noise variance, the live estimate at 47x, and a candidate with the resonance gone
-#: (fn 83 -> 900 Hz) and alpha +7 % at 4.4x won (likelihood ratio 9240); with these two rates the truth sits
-#: at 1.00x, the live estimate at 1.03x, that candidate at 2.1x. (Not without a drift: slow responses are
-#: nearly creep, and on close unmodelled modes, 40 dB, seed 4, re-searches with them moved alpha by +25-31 %.)
+#: not there already: a drift's trend over the segment is not the resonance's to explain. On a drifting plant at
+#: 80 dB (drift seed 1: alpha +20 % over 60 s, 2 kHz) the 2 s segment's trend is ~20x the noise: the true model,
+#: constant over it, misfit it at 61x the noise variance, the live estimate at 47x, and a candidate with the
+#: resonance gone (fn 83 -> 900 Hz) and alpha +7 % at 4.4x won (likelihood ratio 9240); with these two rates
+#: the truth sits at 1.00x, the live estimate at 1.03x, that candidate at 2.1x. (Not without a drift: slow
+#: responses are nearly creep, and on close unmodelled modes, 40 dB, seed 4, re-searches with them moved alpha
+#: by +25-31 %.)
 RESEARCH_TRENDS = (0.03, 0.2)
 #: The search's result replaces the live estimate when its likelihood ratio on those samples exceeds this
 #: (rows x ln(cost ratio); chi-square with 3 degrees of freedom: p ~ 1e-6) and the resonance moves by more
