@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from creep_online.diagnostics import diagnose
-from creep_online.effects import HYSTERESIS_THRESHOLDS
+from creep_online.effects import HYSTERESIS_COMPONENTS
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -194,7 +194,7 @@ def test_an_effect_too_weak_to_be_named_beside_another_is_counted_apart():
     signal than the drift's one rate; such a record counts in ``right_where_undetectable``, not as a miss."""
     bench = _bench()
     d = bench.detectability({"drift": 0.01, "hysteresis": 0.3})
-    assert d["drift"]["dk"] == 1 and d["hysteresis"]["dk"] == len(HYSTERESIS_THRESHOLDS)
+    assert d["drift"]["dk"] == 1 and d["hysteresis"]["dk"] == HYSTERESIS_COMPONENTS
     assert not d["drift"]["detectable"] and d["hysteresis"]["detectable"]
     assert bench.detectability({"drift": 0.3})["drift"]["detectable"]
     assert bench.detectability({"drift": 0.1})["drift"]["p_named"] > bench.detectability({"hysteresis": 0.1})[
