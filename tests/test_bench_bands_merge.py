@@ -1,20 +1,18 @@
 """``bench_diagnose_bands.py --merge``: runs and earlier merges over consecutive seeds make one table."""
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
 
+from bench_loader import load_bench
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("bench_diagnose_bands", ROOT / "bench" / "bench_diagnose_bands.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_bench("bench_diagnose_bands")
 
 
 def _run(first: int, n: int, elapsed: float, miss: int | None = None) -> dict:

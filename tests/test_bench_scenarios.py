@@ -1,9 +1,7 @@
 """The scenario bench's determinacy check (``cramer_rao_rel``): what a record's final window can determine."""
 from __future__ import annotations
 
-import importlib.util
 import math
-from pathlib import Path
 
 import numpy as np
 
@@ -11,14 +9,11 @@ from creep_online.online import OnlineEstimator
 from hil_sim import scenarios
 from hil_sim.scenarios import simulate_tv
 
-ROOT = Path(__file__).resolve().parents[1]
+from bench_loader import load_bench
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("bench_online_scenarios", ROOT / "bench" / "bench_online_scenarios.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_bench("bench_online_scenarios")
 
 
 def test_the_gain_alone_has_the_closed_form_bound_and_more_unknowns_only_widen_it():

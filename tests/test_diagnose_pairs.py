@@ -8,28 +8,17 @@ alone. Outcomes only, never timings.
 """
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import pytest
 
 from creep_online.diagnostics import diagnose
 from creep_online.effects import HYSTERESIS_COMPONENTS
 
-ROOT = Path(__file__).resolve().parents[1]
+from bench_loader import load_bench
 
 
 def _load(name: str):
-    """A bench module by file name (the benches put bench/ on the path: restored after)."""
-    saved = sys.path[:]
-    try:
-        spec = importlib.util.spec_from_file_location(name, ROOT / "bench" / f"{name}.py")
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-    finally:
-        sys.path[:] = saved
-    return mod
+    """A bench module by file name."""
+    return load_bench(name)
 
 
 def _bench():

@@ -23,6 +23,8 @@ from creep_online.online.soe import SOE_TOP, SoeBasis, resonance_zoh
 from creep_online.online.tracker import WindowTracker
 from creep_online.simulate import fractional_integral, simulate
 
+from bench_loader import load_bench
+
 
 def _tracker(model: CreepModel, h: float, lin: tuple[float, float] | None = None, free: bool = False,
              window_s: float | None = None, history: int = 1 << 14, drift: int = 0) -> WindowTracker:
@@ -847,20 +849,9 @@ def test_a_long_stream_taken_in_operation_runs_through_its_replays():
     """The latency stream of bench_online.py cut from operation 10.05 s in (payload at 40 s): a replay after the
     change leaves the fastest free responses' columns zero over the window; update() raised ZeroDivisionError
     at 46.7 s. It runs to the end, follows the change and ends within 1 % of the plant."""
-    import importlib.util
-    import sys
-    from pathlib import Path
-
     from creep_online.online.estimator import OnlineEstimator
-    root = Path(__file__).resolve().parents[1]
-    saved = sys.path[:]
-    try:
-        spec = importlib.util.spec_from_file_location("bench_online", root / "bench" / "bench_online.py")
-        bench = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(bench)
-        s = bench.make_stream(100.0, in_operation_s=10.05)
-    finally:
-        sys.path[:] = saved
+    bench = load_bench("bench_online")
+    s = bench.make_stream(100.0, in_operation_s=10.05)
     n = int(52.0 / bench.H)
     est = OnlineEstimator(bench.H)
     update = est.update
