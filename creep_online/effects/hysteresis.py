@@ -129,24 +129,27 @@ class Hysteresis(InputEffect):
         r = self.thresholds(data)
         return play_operators(u, r, initial=u[0] + INITIAL_STATES[variant or "centred"] * r)
 
-    def components(self, data, variant: str | None) -> np.ndarray:
-        """(thresholds, HYSTERESIS_COMPONENTS): the leading left singular vectors of the record's play outputs.
+    def components(self, data, variant: str | None, plays: np.ndarray | None = None) -> np.ndarray:
+        """(thresholds, HYSTERESIS_COMPONENTS): the leading left singular vectors of the record's play outputs
+        (``plays``, when the caller has them already).
 
         The fitted sum ``w @ plays = c @ (U.T @ plays)`` with ``w = U c``: the
         columns are the plays' strongest directions, and the weights of the
         thresholds come back as ``U c``. Signs fixed (largest entry positive)
         so that a record gives the same columns every time.
         """
-        plays = self._plays(data, data.u, variant)
+        if plays is None:
+            plays = self._plays(data, data.u, variant)
         vals, vecs = np.linalg.eigh(plays @ plays.T)
         top = vecs[:, np.argsort(vals)[::-1][:HYSTERESIS_COMPONENTS]]
         return top * np.sign(top[np.abs(top).argmax(axis=0), np.arange(top.shape[1])])
 
     def design_rows(self, data, u: np.ndarray, variant: str | None, before: bool = False) -> np.ndarray:
-        U = self.components(data, variant)
+        own = self._plays(data, data.u, variant)
+        U = self.components(data, variant, own)
         if before:  # the operators rest on the input before the record
             return U.sum(axis=0)[:, None] * u[None, :]
-        return U.T @ self._plays(data, u, variant)
+        return U.T @ (own if u is data.u else self._plays(data, u, variant))
 
     def column_names(self) -> list[str]:
         return [f"pi{i}" for i in range(1, HYSTERESIS_COMPONENTS + 1)]
