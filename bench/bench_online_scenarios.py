@@ -73,8 +73,6 @@ TRAJ_DT = 0.1
 MAX_CHUNK = 1000
 #: Scatter window at the end of the record (s).
 SCATTER_S = 3.0
-#: The estimator's default forgetting window (s): the data that can determine its final estimate.
-WINDOW_S = 10.0
 #: A parameter counts as determined by a record when its Cramer-Rao bound over the final window is
 #: below its tolerance at this many standard deviations (1.96: an efficient estimator lands within
 #: the tolerance 95 % of the time).
@@ -168,8 +166,17 @@ def generate(families: list[str], plants: int, folder: Path, offset: int = 0,
     return truth
 
 
-def cramer_rao_rel(scen, window_s: float = WINDOW_S, params: tuple[str, ...] = PARAMS) -> dict[str, float]:
-    """The Cramer-Rao bound of each parameter's relative error from the record's last ``window_s``.
+def estimator_window_s() -> float:
+    """The estimator's default forgetting window (s), read off its constructor: the data that can determine its
+    final estimate."""
+    import inspect
+    from creep_online.online import OnlineEstimator
+    return float(inspect.signature(OnlineEstimator.__init__).parameters["window_s"].default)
+
+
+def cramer_rao_rel(scen, window_s: float | None = None, params: tuple[str, ...] = PARAMS) -> dict[str, float]:
+    """The Cramer-Rao bound of each parameter's relative error from the record's last ``window_s`` (default: the
+    estimator's window, ``estimator_window_s``).
 
     The sensitivities d y / d ln p of the noise-free output to alpha, a1, a2
     and b (central differences of the scenario's own simulator, the whole
@@ -184,6 +191,7 @@ def cramer_rao_rel(scen, window_s: float = WINDOW_S, params: tuple[str, ...] = P
     known: the bound is optimistic, so "undetermined" is a safe verdict.)
     """
     from hil_sim.scenarios import simulate_tv
+    window_s = estimator_window_s() if window_s is None else window_s
     arrays = {p: np.asarray(getattr(scen, p), dtype=float) for p in PARAMS}
     last = slice(max(0, scen.u.size - int(round(window_s / scen.h))), scen.u.size)
     step = 1e-4
