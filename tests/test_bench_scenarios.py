@@ -48,7 +48,8 @@ def test_a_drifting_plant_at_80_db_keeps_alpha_and_b_through_its_re_searches(mon
     """Drift seed 1 at 80 dB: the window misfits at 1.5-2x the floor (a1 barely determined), and a re-search on
     2 s with constant parameters saw the drift's trend (~20x the noise) as misfit: a candidate without a
     resonance won, its switch zeroed the drift rates, and the estimate ended alpha 23 %, b 26 % off, degraded.
-    With the trend projected out and the rates kept, alpha and b stay within tolerance to the end."""
+    With the trend projected out and the rates kept, alpha and b stay within tolerance to the end (and the
+    quality does not read "good" over the remaining misfit)."""
     bench = _bench()
     monkeypatch.setattr(scenarios, "SNR_DB", 80.0)
     scen = scenarios.make("drift", 1)
@@ -62,4 +63,6 @@ def test_a_drifting_plant_at_80_db_keeps_alpha_and_b_through_its_re_searches(mon
             for p in worst:
                 worst[p] = max(worst[p], abs(getattr(est.estimate, p) / float(truth[p]) - 1))
     assert worst["alpha"] < bench.TOL["alpha"] and worst["b"] < bench.TOL["b"], worst
-    assert est.estimate.quality != "degraded"
+    # the window still misfits (1.6x the floor: the drift columns are first order in time) and a1 is off: the
+    # quality says so rather than "good"
+    assert est.estimate.quality != "good", est.estimate.reason
