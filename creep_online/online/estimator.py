@@ -115,7 +115,8 @@ class OnlineEstimate:
     ``determined`` names the parameters the data determine now (relative
     1-sigma within ``DETERMINED``), and is empty unless the window is at the
     noise floor with no change, degradation or long constant input pending:
-    ``quality`` is ``good`` exactly when it holds all four. A ``provisional``
+    ``quality`` is ``good`` exactly when it holds all four and the window's
+    error is within ``GOOD_RATIO`` of the noise floor. A ``provisional``
     estimate with alpha and b in it has a trustworthy creep part and an
     undetermined resonance (``online.gate``: what a compensator may take).
     ``internal_faults`` counts the library's own numerical faults that the
