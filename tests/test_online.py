@@ -756,6 +756,42 @@ def test_a_sub_threshold_change_reads_changing_not_good(monkeypatch):
     assert good_outside <= 1.6
 
 
+def test_a_slow_resonance_found_wrong_at_the_start_is_searched_again_and_followed():
+    """strong_creep seed 3016 (a fresh seed: 1.2 Hz, zeta 0.075 at 10 kHz, a random staircase of 5-50 ms holds):
+    the start-up search's 2 s took a 0.37 Hz, zeta 0.004 resonance with alpha 0.90 and b of the wrong sign (the
+    window at ~110x the noise floor). Two things kept it there to the end (alpha +274 %, a2 +1900 %): the
+    re-search's far better result (likelihood ratio 77614) was refused for its gain's sign, and the change test's
+    post-change search waited one settling time of that wrong resonance (437 s) with the window not fitting. A
+    gross misfit now lets the sign flip and that wait is capped by what the search holds."""
+    sc = scenarios.make("strong_creep", 3016)
+    est = OnlineEstimator(sc.h)
+    est.update_block(sc.u, sc.y)
+    e = est.estimate
+    assert _within(e, sc.final_truth) and e.quality == "good", (_errors(e, sc.final_truth), e.reason)
+    assert any(r["switched"] and r["relative_change"]["b"] < -1.0 for r in e.researches), e.researches
+
+
+def test_a_change_that_never_settles_reads_degraded_once_the_window_misses_the_data(load_cell, monkeypatch):
+    """An unsettled change event said "changing" / "estimate corrected" for as long as it stayed unsettled, and
+    masked a window at 115x the noise floor for 9 s (strong_creep 3016 before its fix). After its first 1.5 s
+    it yields to "degraded" when the window is above FLOOR_RATIO; below, it still names the change."""
+    from creep_online.online import estimator as estimator_module
+    t, u, y = load_cell[1:]
+    est = OnlineEstimator(t[1] - t[0])
+    est.update_block(u, y)
+    now = est.estimate.t
+    est._tracker.events.append({"kind": "change", "t": now - 3.0, "detected_t": now - 2.0, "moved": ["a1"],
+                                "settled": False, "estimate_settled": False})
+    monkeypatch.setattr(est, "_floor_ratio", lambda: 50.0)
+    assert est.estimate.quality == "degraded" and est.estimate.reason.startswith("window error 50")
+    monkeypatch.setattr(est, "_floor_ratio", lambda: 1.1)
+    assert est.estimate.quality == "provisional" and "had not settled" in est.estimate.reason
+    est._tracker.events[-1]["detected_t"] = now - 1.0             # within its first 1.5 s: the change is named
+    monkeypatch.setattr(est, "_floor_ratio", lambda: 50.0)
+    assert est.estimate.reason.startswith("estimate corrected"), est.estimate.reason
+    assert estimator_module.FLOOR_RATIO < 50.0
+
+
 def test_the_grid_planned_on_idle_calls_is_the_searchs_own_and_changes_nothing(monkeypatch):
     """The start-up search's grid frequencies are computed ahead on idle buffering calls (a few numpy calls per
     call) for the rows the search will take, and the search is built ahead on the next: it is the search that

@@ -1039,7 +1039,10 @@ class OnlineEstimator(StoredParams):
             return "degraded", "output frozen or clipped while the model says it moves"
         shift = self._n_shift * self._h    # the tracker's time to stream time (non-zero after a fault's restart)
         now = self.samples * self._h - shift
-        if tr.events and (not tr.events[-1]["settled"] or now - tr.events[-1]["detected_t"] < 1.5):
+        # an unsettled change holds "changing" past its first 1.5 s only while the window is below "degraded": a
+        # change whose fit never settles is a window that misses the data (seen for 9 s at 115x the floor)
+        if tr.events and (now - tr.events[-1]["detected_t"] < 1.5
+                          or (not tr.events[-1]["settled"] and self._floor_ratio() <= FLOOR_RATIO)):
             ev = tr.events[-1]
             if ev.get("estimate_settled") is False:
                 return "provisional", (f"estimate corrected at t={ev['t'] + shift:.3g} s "

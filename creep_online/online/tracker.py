@@ -213,6 +213,14 @@ RESEARCH_LR = 30.0
 #: stays flat) the offset and free responses fit the output alone and the search "finds" b ~ 0, a
 #: degenerate model that then misfits the whole window (measured: b -99 %, window error 400x the floor).
 RESEARCH_GAIN_RATIO = 5.0
+#: ... but its sign may flip when the live estimate misfits its window by more than this multiple of the noise
+#: floor: then it is not a model of the plant, and its gain's sign no reference (strong_creep seed 3016: 1.2 Hz,
+#: zeta 0.075 at 10 kHz, a random staircase; the start-up search's 2 s took a 0.37 Hz resonance with alpha 0.90
+#: and b of the wrong sign, the window sat at 111x the floor, and the re-search's result, alpha 0.36, b -0.82x
+#: the live one, likelihood ratio 77614, was refused for the sign). The size rule stays: a compensated closed
+#: loop misfits grossly too, and there the degenerate b ~ 0 still comes (with it waived, a drifting compensated
+#: plant's adaptive creep error went from 1/5 of the frozen compensator's to 1800x it).
+RESEARCH_GROSS_MISFIT = 10.0
 RESEARCH_ALPHA_MOVE = 0.02
 #: A re-search that changed nothing doubles the wait before the next one, up to this (s): where the data
 #: cannot do better (unmodeled dynamics) the searches become rare.
@@ -1006,15 +1014,17 @@ class WindowTracker(ParameterView):
         """
         self.fitting = False
         n_detect = self.n
+        cap = min(self.ring.shape[1] // 2, 1 << 15 if self.work_memory is None else self.work_memory.shape[0])
         settle = self._settling_samples(self.a1, self.a2)      # of the old resonance
-        wait = max(int(RESEARCH_S / self.h), settle // 2)      # at least one settling time
+        # at least one settling time, at most what the search holds: the old resonance may be a wrong one (a
+        # 0.27 Hz, zeta 0.005 estimate set a wait of 437 s, and the window stopped fitting for good)
+        wait = min(max(int(RESEARCH_S / self.h), settle // 2), cap)
         while self.n < n_from + wait or (not self._input_moved(n_from) and self.n < n_from + 3 * wait):
             yield WAIT
         oldest = int(self.sc[W.SC_RSTART])
         n0 = max(n_from - settle if n_from < n_detect else n_from, oldest)
         zeta0 = yield from self._nodes_at(n0)
         yield                              # (the fast-forward's end and the segment's first copy: 26-27 us cold)
-        cap = min(self.ring.shape[1] // 2, 1 << 15 if self.work_memory is None else self.work_memory.shape[0])
         search: ResonanceSearch | None = None
         seg = 0
         for _ in range(RESEARCH_PASSES):
@@ -1128,11 +1138,13 @@ class WindowTracker(ParameterView):
         span = int(RESEARCH_AFTER_S / self.h)
         if n - self._misfit_since >= span and n - self.window_start >= span and n >= self._next_research:
             reason = "fit broken" if broken else f"window error {rms / floor:.1f}x the noise floor"
-            self._jobs.append(self._research_again_job(reason))
+            gross = broken or rms > RESEARCH_GROSS_MISFIT * floor
+            self._jobs.append(self._research_again_job(reason, gross))
 
-    def _research_again_job(self, reason: str) -> Generator:
+    def _research_again_job(self, reason: str, gross: bool = False) -> Generator:
         """Search the resonance (and alpha, unless it is held after a change) on the recent samples with the
         live estimate competing; switch to the result only if its likelihood ratio says it is clearly better.
+        ``gross``: the live estimate misfits grossly (``RESEARCH_GROSS_MISFIT``), so its gain's sign is no reference.
 
         The samples: those since the window start that the ring and the search's work memory hold (the
         newest ones). Both candidates are judged by the same exact projected cost on them.
@@ -1172,7 +1184,7 @@ class WindowTracker(ParameterView):
         if abs(change["alpha"]) > RESEARCH_ALPHA_MOVE:
             moved = ["alpha"] + moved
         gain_ratio = r.b / self.b if self.b else 0.0
-        plausible = 1.0 / RESEARCH_GAIN_RATIO < gain_ratio < RESEARCH_GAIN_RATIO
+        plausible = 1.0 / RESEARCH_GAIN_RATIO < abs(gain_ratio) < RESEARCH_GAIN_RATIO and (gain_ratio > 0 or gross)
         # with a drift's trends out the segment hardly determines alpha (slow responses are nearly creep; the window's
         # 10 s do): a large move of it is the misfit's, not the plant's
         alpha_held = drifting and abs(change["alpha"]) > DRIFTING_ALPHA_MOVE
