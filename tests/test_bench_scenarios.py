@@ -79,8 +79,7 @@ def test_a_drift_goes_on_through_a_change_of_the_resonance(noise_seed, monkeypat
     monkeypatch.setattr(scenarios, "SNR_DB", 80.0)
     scen = scenarios.make("drift", 1)
     clean = simulate_tv(scen.h, scen.u, scen.alpha, scen.a1, scen.a2, scen.b)
-    std = float(np.sqrt(np.mean(clean ** 2))) * 10 ** (-80.0 / 20)
-    y = clean + np.random.default_rng(noise_seed).normal(0.0, std, clean.size)
+    y, _ = scenarios._noisy(clean, np.random.default_rng(noise_seed))     # the scenarios' own noise, 80 dB
     est = OnlineEstimator(scen.h)
     step = int(round(1.0 / scen.h))
     for k in range(0, scen.u.size, step):
