@@ -9,7 +9,7 @@ For each record of ``hil_sim.scenarios`` (the same seeds as
 ``bench_online_scenarios.py``) the Fisher information of (ln alpha, ln a1, ln a2,
 ln b, offset) over the last ``--last`` seconds and over the whole record, with
 the Jacobian by forward differences (relative step 1e-4) of the exact
-noise-free simulation ``simulate_tv`` along the true parameter trajectories
+noise-free simulation ``Scenario.clean`` along the true parameter trajectories
 (a drift scales the whole trajectory) and the record's white noise variance.
 The relative 1-sigma bounds (%) say which misses of the scenario bench are
 information-limited: an estimator whose window is the last 10 s cannot
@@ -35,14 +35,8 @@ STEP = 1e-4
 
 def bounds(scen, last_s: float) -> dict:
     """Relative 1-sigma CRB (%) of alpha, a1, a2, b over the last ``last_s`` seconds and the whole record."""
-    from hil_sim.scenarios import simulate_tv
-    base = {k: np.asarray(getattr(scen, k), dtype=float).copy() for k in PARAMS}
-    y0 = simulate_tv(scen.h, scen.u, **base)
-    cols = []
-    for k in PARAMS:
-        moved = {kk: v.copy() for kk, v in base.items()}
-        moved[k] = moved[k] * (1 + STEP)
-        cols.append((simulate_tv(scen.h, scen.u, **moved) - y0) / STEP)    # dy / d ln(parameter)
+    y0 = scen.clean()
+    cols = [(scen.clean(**{k: 1 + STEP}) - y0) / STEP for k in PARAMS]     # dy / d ln(parameter)
     cols.append(np.ones_like(y0))                                            # the output offset
     J = np.array(cols).T
     var = scen.params["noise_std"] ** 2

@@ -180,7 +180,7 @@ def cramer_rao_rel(scen, window_s: float | None = None, params: tuple[str, ...] 
 
     The sensitivities d y / d ln p of the noise-free output to alpha, a1, a2
     and b (central differences of the scenario's own simulator, the whole
-    record simulated so that the window starts from the true state), white
+    record simulated so that the window starts from the true state: ``Scenario.clean``), white
     noise of the scenario's std: F = S^T S / sigma^2, and sqrt(diag F^-1) is
     the smallest standard deviation of a relative error any unbiased
     estimator reaches on that window with the model's structure known
@@ -190,15 +190,13 @@ def cramer_rao_rel(scen, window_s: float | None = None, params: tuple[str, ...] 
     merit or fault. (Offsets and the state before the record are taken as
     known: the bound is optimistic, so "undetermined" is a safe verdict.)
     """
-    from hil_sim.scenarios import simulate_tv
     window_s = estimator_window_s() if window_s is None else window_s
-    arrays = {p: np.asarray(getattr(scen, p), dtype=float) for p in PARAMS}
     last = slice(max(0, scen.u.size - int(round(window_s / scen.h))), scen.u.size)
     step = 1e-4
     cols = []
     for p in params:
-        up = simulate_tv(scen.h, scen.u, **{**arrays, p: arrays[p] * (1 + step)})[last]
-        down = simulate_tv(scen.h, scen.u, **{**arrays, p: arrays[p] * (1 - step)})[last]
+        up = scen.clean(**{p: 1 + step})[last]
+        down = scen.clean(**{p: 1 - step})[last]
         cols.append((up - down) / (2 * step))
     sens = np.stack(cols, axis=1) / float(scen.params["noise_std"])
     cov = np.linalg.pinv(sens.T @ sens)

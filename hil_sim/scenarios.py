@@ -246,6 +246,9 @@ class Scenario:
     ``y`` carries the noise; ``alpha``, ``a1``, ``a2``, ``b`` are the plant's
     parameters at every sample; ``truth_best`` (close_modes only) is the best
     second-order fit of the noise-free record, the fair target for a1, a2.
+    ``u_history`` (mid_operation only) is the input before the record's first
+    sample, the plant at rest before it: what ``clean`` needs to start the
+    record from its true state.
     """
 
     family: str
@@ -261,6 +264,22 @@ class Scenario:
     change_time: float | None = None
     params: dict = field(default_factory=dict)
     truth_best: dict | None = None
+    u_history: np.ndarray | None = None
+
+    def clean(self, **scaled: float) -> np.ndarray:
+        """The noise-free output over the record, each parameter's whole trajectory multiplied by ``scaled[name]``
+        (default 1), the unmodeled modes included, the state at the first sample the true one (the history
+        simulated before it with the parameters' first values): the reference of the bench's Cramer-Rao bounds
+        and oracle fit."""
+        arrays = {k: np.asarray(getattr(self, k), dtype=float) * scaled.get(k, 1.0)
+                  for k in ("alpha", "a1", "a2", "b")}
+        u = self.u
+        skip = 0 if self.u_history is None else self.u_history.size
+        if skip:
+            u = np.concatenate((self.u_history, self.u))
+            arrays = {k: np.concatenate((np.full(skip, v[0]), v)) for k, v in arrays.items()}
+        modes = [tuple(m) for m in self.params.get("modes", [])]
+        return simulate_tv(self.h, u, modes=modes, **arrays)[skip:]
 
     def truth_at(self, index: int | np.ndarray) -> dict:
         """Truth (alpha, a1, a2, b) at sample index (or indices): truth_best where one is set."""
@@ -277,8 +296,9 @@ class Scenario:
         """Write to a compressed npz (t is rebuilt from h on load)."""
         meta = {"family": self.family, "seed": self.seed, "h": self.h, "change_time": self.change_time,
                 "params": self.params, "truth_best": self.truth_best}
+        history = {} if self.u_history is None else {"u_history": self.u_history}
         np.savez_compressed(path, u=self.u, y=self.y, alpha=self.alpha, a1=self.a1, a2=self.a2,
-                            b=self.b, meta=np.array(json.dumps(meta)))
+                            b=self.b, meta=np.array(json.dumps(meta)), **history)
 
     @classmethod
     def load(cls, path: str | Path) -> "Scenario":
@@ -286,6 +306,8 @@ class Scenario:
         with np.load(path) as z:
             meta = json.loads(str(z["meta"]))
             arrays = {k: z[k] for k in ("u", "y", "alpha", "a1", "a2", "b")}
+            if "u_history" in z:
+                arrays["u_history"] = z["u_history"]
         t = np.arange(arrays["u"].size) * meta["h"]
         return cls(t=t, **arrays, **meta)
 
@@ -459,6 +481,7 @@ def mid_operation(seed: int) -> Scenario:
     name = str(rng.choice(["steps", "staircase"]))
     scen, _ = _build("mid_operation", seed, rng, h, INPUTS[name](t, rng), truth,
                      {**params, "input": name, "dropped_s": 5.0})
+    scen.u_history = scen.u[:skip].copy()
     for k in ("u", "y", "alpha", "a1", "a2", "b"):
         setattr(scen, k, getattr(scen, k)[skip:].copy())
     scen.t = np.arange(scen.u.size) * h

@@ -92,7 +92,7 @@ def test_family_contract(family, tmp_path):
         k = int(round(scen.change_time / scen.h))
         assert 0 < k < n and any(getattr(scen, p)[k] != getattr(scen, p)[k - 1] for p in ("a1", "a2", "b"))
     if family == "mid_operation":
-        assert scen.u[0] != 0.0
+        assert scen.u[0] != 0.0 and scen.u_history.size > 0
     if family == "close_modes":
         assert set(scen.truth_best) == {"alpha", "a1", "a2", "b"}
         assert scen.final_truth == scen.truth_best
@@ -101,6 +101,24 @@ def test_family_contract(family, tmp_path):
     scen.save(tmp_path / "s.npz")
     back = S.Scenario.load(tmp_path / "s.npz")
     assert np.array_equal(back.y, scen.y) and back.params == scen.params and back.final_truth == scen.final_truth
+    assert (back.u_history is None) == (scen.u_history is None)
+    if scen.u_history is not None:
+        assert np.array_equal(back.u_history, scen.u_history)
+
+
+@pytest.mark.parametrize("family", sorted(S.FAMILIES))
+def test_the_clean_output_is_the_record_without_its_noise(family):
+    """``Scenario.clean()`` (the bench's reference for its bounds and its oracle) is the record less its noise:
+    the difference has the noise's std (within the chi-square spread of >= 100,000 samples), for a record
+    taken mid-operation too (its history simulated first; started from rest its output is far off, which is what
+    the bounds of mid_operation had taken before). Scaling a parameter by 1 changes nothing."""
+    scen = S.make(family, 0)
+    std = scen.params["noise_std"]
+    assert np.std(scen.y - scen.clean()) == pytest.approx(std, rel=0.02)
+    assert np.array_equal(scen.clean(alpha=1.0), scen.clean())
+    if family == "mid_operation":
+        from_rest = S.simulate_tv(scen.h, scen.u, scen.alpha, scen.a1, scen.a2, scen.b)
+        assert np.std(scen.y - from_rest) > 3 * std
 
 
 def test_strong_creep_spans_the_ranges():
