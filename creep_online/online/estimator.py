@@ -31,8 +31,11 @@ unit count is ``max(1, floor(dt / 100 us))``: one unit at 10 kHz, 10 at 1 kHz,
 
 Robustness: an output whose innovation exceeds ``outlier_gate`` robust scales
 is not used (a run longer than ``burst_s`` is accepted: a shift is a change, not
-an outlier); an input sample far outside the range seen so far is held at the
-last plausible value (a glitch) unless it persists; an output frozen while
+an outlier); an input sample far outside the range seen so far is a glitch
+candidate: the samples are kept back until the input either returns (a glitch:
+they are fed with the last plausible input) or stays for longer than
+``burst_s`` (a move: they are fed as they came, the model never sees a real
+step late), then fed a few per call; an output frozen while
 the model says it should move is reported (``quality="degraded"``).
 
 Error contract: bad input raises ``DataError`` (non-numbers) or is skipped and
@@ -48,6 +51,7 @@ reason.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import asdict, dataclass, field
 from typing import Generator
 
@@ -85,8 +89,12 @@ FLOOR_RATIO = 2.0
 #: FLOOR_RATIO alone (a model error of up to 1.7 noise levels) estimates read "good" beside close unmodeled modes
 #: at 1.2-1.9x (40 dB) and on a drifting plant at 80 dB at 1.6x with a1 37 % off.
 GOOD_RATIO = 1.2
-#: Default ``input_gate``: an input further than this many input ranges from the last accepted one is a glitch.
+#: Default ``input_gate``: an input further than this many input ranges from the last accepted one is a glitch
+#: candidate (``OnlineEstimator._classify``).
 INPUT_GATE = 20.0
+#: Samples kept back by the input gate are fed this many per update() once decided (with the new sample's, at
+#: most this many kernel calls and one unit of background work per call): the estimate catches up ~burst_s later.
+DRAIN_PER_UPDATE = 2
 #: Drift columns with ``track_drift``: 1 the gain's rate, 2 the gain's and alpha's.
 DRIFT_COLUMNS = 2
 #: Exceptions the error contract lets through to the caller: the caller's own errors (bad input: a one-line
@@ -189,9 +197,12 @@ class OnlineEstimator(StoredParams):
     outlier_gate:   innovation gate in robust scales (0 disables the gate).
     burst_s:        longest run of gated outputs treated as outliers (s); longer is a shift.
     input_gate:     an input sample further than this many input ranges (seen so far) from the last
-                    accepted one is held as a glitch for up to ``burst_s`` (0 disables: inputs the
-                    caller computed itself, e.g. a compensator's commands, whose step transients
-                    legitimately jump far beyond what came before).
+                    accepted one is a glitch candidate: kept back until the input returns within
+                    ``burst_s`` (a glitch: fed with the last accepted input, counted in
+                    ``input_outliers``) or stays (a move: fed as it came); the estimate then lags by
+                    those samples for a few calls. 0 disables it: inputs the caller computed itself,
+                    e.g. a compensator's commands, whose step transients legitimately jump far beyond
+                    what came before and return.
     detect_changes: run the change test (likelihood ratio every 0.5 s).
     work_units:     background units per update() (None: max(1, floor(dt / 100 us))).
     track_drift:    model a linear drift of b and alpha inside the window (two more linear parameters);
@@ -298,7 +309,9 @@ class OnlineEstimator(StoredParams):
         self._u_ref: float | None = None
         self._u_lo = self._u_hi = 0.0
         self._u_last = 0.0
-        self._u_run = 0
+        self._held: list[tuple[float, float]] = []           # glitch candidates (u, y) not yet decided
+        self._backlog: deque[tuple[float, float]] = deque()   # decided samples (du, y) the live tracker awaits
+        self._deferred = False                               # either is non-empty: update()'s slow path
         self._first_change: int | None = None
         self._bu = np.empty(BUFFER_SAMPLES)
         self._by = np.empty(BUFFER_SAMPLES)
@@ -469,15 +482,16 @@ class OnlineEstimator(StoredParams):
         try:
             tr = self._live
             if tr is None:
-                self._buffer(self._input(u), y)
+                for v, w in self._classify(u, y):
+                    self._buffer(self._accept(v), w)
                 self._advance_start(self._units)
                 return
-            if self._u_lo <= u <= self._u_hi:
+            if self._u_lo <= u <= self._u_hi and not self._deferred:
                 self._u_last = u
-                self._u_run = 0
                 du = u - self._u_ref
             else:
-                du = self._input(u)
+                self._update_deferred(tr, u, y)
+                return
             # tr.feed() inlined: one Python call less on the per-sample path
             if self._recursive:
                 status = R.sample(du, y, tr.st, tr.P, tr.CT)
@@ -540,21 +554,23 @@ class OnlineEstimator(StoredParams):
         while i < n and self._live is None:
             self.samples += 1
             done[0] = i + 1
-            self._buffer(self._input(float(u[i])), float(y[i]))
+            for v, w in self._classify(float(u[i]), float(y[i])):
+                self._buffer(self._accept(v), w)
             i += 1
             self._advance_start(1 << 30)
         if i == n:
             return
-        du = self._inputs(u[i:])
-        yy = y[i:]
+        du, yy, exact = self._inputs(u[i:], y[i:])
         status = np.empty(du.size, dtype=np.int64)
         tr = self._live
         n0, s0, j = tr.n, self.samples, 0
-        self._block_progress = (tr, n0, s0, i, done)
+        # the arrays are the samples as they came unless the input gate kept some back or had some waiting: then
+        # all of u[i:] is taken (decided or held), and a fault leaves the rest of du, yy waiting (``_block_resync``)
+        self._block_progress = (tr, n0, s0, i, done, None if exact else (du, yy, n))
         while j < du.size:
             j += tr.feed_block(du[j:], yy[j:], status[j:])
-            self.samples = s0 + j
-            done[0] = i + j
+            self.samples = s0 + (j if exact else n - i)
+            done[0] = i + j if exact else n
             tr.finish()
             if not self._state_finite(tr):
                 self._fault(None, "update_block")
@@ -572,6 +588,8 @@ class OnlineEstimator(StoredParams):
         if n <= 0:
             return
         self.gaps += n
+        if self._deferred:
+            self._settle_inputs()
         du = self._u_last - (self._u_ref or 0.0)
         for _ in range(n):
             self.samples += 1
@@ -591,19 +609,36 @@ class OnlineEstimator(StoredParams):
         return self._tracker if self._catchup == 0 else None
 
     # ------------------------------------------------------------------ input handling
-    def _input(self, u: float) -> float:
-        """Input deviation from the first level; an implausible glitch is held at the last accepted value."""
+    def _classify(self, u: float, y: float) -> list[tuple[float, float]]:
+        """The input gate: the samples (input to apply, y) decided by this one, in order (often just this one).
+
+        An input further than ``input_gate`` ranges (seen so far) from the last accepted one is a glitch candidate
+        and is kept back with its output. If the input returns before more than ``burst_s`` of them, they were a
+        glitch: fed with the last accepted input (and counted in ``input_outliers``). If the input stays, it was a
+        move: they are fed as they came. (Held and fed at once, as before, a real step taken early in a stream,
+        30 of its first step's size, reached the model 2 ms late: the states kept the delayed step, the window sat
+        at 150-390x the noise floor for seconds and a re-search took a wrong resonance: payload seed 3004 at 80 dB.)
+        """
         if self._u_ref is None:
             self._u_ref = u
             self._u_lo = self._u_hi = u
             self._u_last = u
         rng = self._u_hi - self._u_lo
         if rng > 0 and self.input_gate > 0 and abs(u - self._u_last) > self.input_gate * rng:
-            self._u_run += 1
-            if self._u_run <= self._burst:
-                self.input_outliers += 1
-                return self._u_last - self._u_ref
-        self._u_run = 0
+            self._held.append((u, y))
+            if len(self._held) <= self._burst:
+                return []
+            held, self._held = self._held, []
+            return held
+        if not self._held:
+            return [(u, y)]
+        held, self._held = self._held, []
+        self.input_outliers += len(held)
+        return [(self._u_last, w) for _, w in held] + [(u, y)]
+
+    def _accept(self, u: float) -> float:
+        """Take u as the input applied (the range seen so far, the first input change); its deviation from the
+        first level. Called per sample in stream order, just before the sample is fed or buffered."""
         if u != self._u_last and self._first_change is None:
             self._first_change = self._nbuf
         self._u_last = u
@@ -611,16 +646,59 @@ class OnlineEstimator(StoredParams):
         self._u_hi = max(self._u_hi, u)
         return u - self._u_ref
 
-    def _inputs(self, u: np.ndarray) -> np.ndarray:
-        """Vector form of ``_input`` (fast when every sample lies within the range seen so far)."""
-        if self._u_lo <= u.min() and u.max() <= self._u_hi:
+    def _inputs(self, u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+        """Vector form of ``_classify`` and ``_accept`` for the live tracker: (du, y, exact). Exact: the arrays
+        are the block's samples one for one (every input within the range seen so far, nothing waiting: the
+        fast path); otherwise the samples that waited come first and glitch candidates at the end stay held."""
+        if not self._deferred and self._u_lo <= u.min() and u.max() <= self._u_hi:
             self._u_last = float(u[-1])
-            self._u_run = 0
-            return u - self._u_ref
-        out = np.empty(u.size)
+            return u - self._u_ref, y, True
+        ready = list(self._backlog)
+        self._backlog.clear()
         for k in range(u.size):
-            out[k] = self._input(float(u[k]))
-        return out
+            ready.extend((self._accept(v), w) for v, w in self._classify(float(u[k]), float(y[k])))
+        self._deferred = bool(self._held)
+        out = np.array(ready, dtype=float).reshape(-1, 2)
+        return np.ascontiguousarray(out[:, 0]), np.ascontiguousarray(out[:, 1]), False
+
+    def _update_deferred(self, tr: WindowTracker | RecursiveTracker, u: float, y: float) -> None:
+        """update()'s slow path: an input outside the range seen so far, or samples waiting. The sample goes
+        through the input gate; of the decided ones at most ``DRAIN_PER_UPDATE`` are fed now, in order."""
+        self._backlog.extend((self._accept(v), w) for v, w in self._classify(u, y))
+        for k in range(min(DRAIN_PER_UPDATE, len(self._backlog))):
+            du, w = self._backlog.popleft()
+            self._feed_live(tr, du, w, work=k == DRAIN_PER_UPDATE - 1 or not self._backlog)
+            if self._live is not tr:       # a fault restarted the tracker: the rest goes to the start-up buffer
+                while self._backlog:
+                    self._buffer(*self._backlog.popleft())
+                break
+        self._deferred = bool(self._held or self._backlog)
+
+    def _feed_live(self, tr: WindowTracker | RecursiveTracker, du: float, y: float, work: bool) -> None:
+        """One sample into the live tracker with its slice of a re-fit under way and, if ``work``, a share of the
+        queued jobs (the per-sample path of update(), for the samples the input gate kept back)."""
+        machine = not self._recursive and tr.machine is not None
+        status = tr.feed(du, y) if self._recursive else tr.feed(du, y, self._units)
+        if status >= 8:
+            if not self._state_finite(tr):
+                self._fault(None, "update")
+        elif work and not machine and tr._jobs:
+            tr.work(self._units)
+
+    def _settle_inputs(self) -> None:
+        """Before a gap: glitch candidates still held count as a glitch (the input is unknown past them) and every
+        sample waiting is fed (or buffered) now."""
+        if self._held:
+            self.input_outliers += len(self._held)
+            self._backlog.extend((self._u_last - self._u_ref, w) for _, w in self._held)
+            self._held = []
+        while self._backlog:
+            du, w = self._backlog.popleft()
+            if self._live is not None:
+                self._feed_live(self._live, du, w, work=True)
+            else:
+                self._buffer(du, w)
+        self._deferred = False
 
     # ------------------------------------------------------------------ start-up
     def _buffer(self, du: float, y: float) -> None:
@@ -865,13 +943,20 @@ class OnlineEstimator(StoredParams):
         progress, self._block_progress = self._block_progress, None
         if progress is None:
             return
-        tr, n0, s0, i, done = progress
+        tr, n0, s0, i, done, classified = progress
         try:
             taken = tr.n - n0
         except (TypeError, ValueError, OverflowError):     # (a non-finite count: the position stays)
             return
-        self.samples = s0 + taken
-        done[0] = i + taken
+        if classified is None:
+            self.samples = s0 + taken
+            done[0] = i + taken
+            return
+        du, yy, n = classified           # all of the block was taken: what the tracker has not, waits
+        self._backlog.extendleft(reversed(list(zip(du[taken:].tolist(), yy[taken:].tolist()))))
+        self._deferred = bool(self._held or self._backlog)
+        self.samples = s0 + (n - i)
+        done[0] = n
 
     def _recover(self, nonfinite: bool, where: str) -> str:
         """Back to a safe state; returns what was done (the event's ``recovery``).
