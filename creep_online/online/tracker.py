@@ -1223,7 +1223,7 @@ class WindowTracker(ParameterView):
         self._misfit_since = None
         if switch and suspect is not None:
             yield
-            self._declare_found_change(suspect, r, change, moved, lr)
+            yield from self._declare_found_change(suspect, r, change, moved, lr)
             return
         if not switch:                     # the data cannot do better here: search less often
             self._next_research = self.n + self._research_wait
@@ -1245,7 +1245,7 @@ class WindowTracker(ParameterView):
         yield from self._relinearize_job(None)
         self.fitting = True
 
-    def _declare_found_change(self, n_seen: int, r, change: dict, moved: list[str], lr: float) -> None:
+    def _declare_found_change(self, n_seen: int, r, change: dict, moved: list[str], lr: float) -> Generator:
         """A sudden misfit's re-search found the plant changed (``SUDDEN_RATIO``): a change event as the change
         test's (its time the last re-fit at the noise floor: the change came after it), the search's resonance
         and gain taken, and the window restarted after the re-fit that saw the misfit, as for a change the test
@@ -1256,8 +1256,10 @@ class WindowTracker(ParameterView):
                             "relative_change": {k: float(v) for k, v in change.items()}, "lr": float(lr),
                             "settled": False, "restarts": 1, "_before": before, "estimate_settled": True,
                             "found_by": "re-search"})
+        yield                              # (each part on its own call, as the change test's: cold Python)
         self.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
         self._coefficients()
+        yield
         self._restart_window(n_seen, abs(change["b"]) > CHANGE_MOVE["b"], alpha_known=True)
 
     def _ring_segment(self, n0: int, n1: int) -> Generator:
