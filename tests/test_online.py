@@ -404,6 +404,8 @@ def test_a_change_the_test_cannot_see_is_found_by_the_sudden_misfit(monkeypatch)
     events = est.estimate.events
     assert len(events) == 1 and events[0]["found_by"] == "re-search" and events[0]["moved"] == ["a2"], events
     assert sc.change_time - 1.0 <= events[0]["t"] <= sc.change_time, events
+    from creep_online.commands._common import event_line
+    assert "a2 moved" in event_line(events[0]) and "found by re-searching a sudden misfit" in event_line(events[0])
 
 
 @pytest.mark.parametrize("family, seed", [("payload", 0), ("payload", 1), ("stiffness", 0)])

@@ -42,8 +42,9 @@ def event_line(event: dict) -> str:
     if event.get("kind") == "internal_fault":
         return fault_line(event)
     moves = moves_text(event["relative_change"])
+    found = "; found by re-searching a sudden misfit" if event.get("found_by") == "re-search" else ""
     return (f"change near t = {event['t']:.4g} s (detected {event['detected_t']:.4g} s): "
-            f"{', '.join(event['moved']) or 'nothing significant'} moved ({moves}){unsettled_note(event)}")
+            f"{', '.join(event['moved']) or 'nothing significant'} moved ({moves}){found}{unsettled_note(event)}")
 
 
 def unsettled_note(event: dict) -> str:
