@@ -4,7 +4,7 @@ Usage (repository root)::
 
     python bench/bench_online_oracle.py [--families drift,payload] [--plants 20] [--seed-offset 0]
         [--snr-db 40] [--last 10] [--compare bench/results/online_scenarios_single_40db_X.json]
-        [--processes 2] [--out bench/results/online_oracle.json]
+        [--processes 2] [--from ORACLE.json] [--out bench/results/online_oracle.json]
 
 For each record of ``hil_sim.scenarios`` (the seeds and noise draws of
 ``bench_online_scenarios.py`` at the same ``--snr-db``) the maximum-likelihood
@@ -22,7 +22,9 @@ within all four tolerances is what the data allow, and an online estimator
 is not expected above it. With ``--compare`` (a ``bench_online_scenarios.py``
 JSON of the same seeds and SNR) each run is cross-tabulated: the estimator
 within where the oracle is, and the runs the estimator misses although the
-oracle is within (the estimator's own shortfall).
+oracle is within (the estimator's own shortfall). ``--from`` takes the fits of
+an earlier run of this bench (they do not depend on the estimator) and only
+cross-tabulates them against ``--compare``.
 
 close_modes is left out (its truth is the best second-order fit of a plant
 with more modes: no structure to hand an oracle). Output: JSON (also to
@@ -120,19 +122,26 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--last", type=float, default=10.0, help="seconds at the end of the record (the window)")
     ap.add_argument("--compare", default=None, help="a bench_online_scenarios.py JSON of the same seeds and SNR")
     ap.add_argument("--processes", type=int, default=2)
+    ap.add_argument("--from", dest="source", default=None, help="this bench's JSON: its fits, cross-tabulated anew")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "online_oracle.json"))
     args = ap.parse_args(argv)
     families = [f for f in args.families.split(",") if f in FAMILIES and f != "close_modes"]
     estimator = json.loads(Path(args.compare).read_text())["current"]["families"] if args.compare else {}
-    jobs = [(fam, seed, args.snr_db, args.last) for fam in families
-            for seed in range(args.seed_offset, args.seed_offset + args.plants)]
     start = time.perf_counter()
-    with get_context("spawn").Pool(max(1, args.processes)) as pool:
-        rows = pool.map(_one, jobs, chunksize=1)
-    doc = {"config": {"families": families, "plants": args.plants, "seed_offset": args.seed_offset,
-                      "snr_db": SNR_DB if args.snr_db is None else args.snr_db, "last_s": args.last,
-                      "tolerances": TOL, "compare": args.compare},
-           "families": {}, "elapsed_s": None}
+    if args.source:
+        earlier = json.loads(Path(args.source).read_text())
+        config = {**earlier["config"], "compare": args.compare, "from": args.source}
+        families = [f for f in earlier["families"] if f in families]
+        rows = [r for f in families for r in earlier["families"][f]["runs_detail"]]
+    else:
+        jobs = [(fam, seed, args.snr_db, args.last) for fam in families
+                for seed in range(args.seed_offset, args.seed_offset + args.plants)]
+        with get_context("spawn").Pool(max(1, args.processes)) as pool:
+            rows = pool.map(_one, jobs, chunksize=1)
+        config = {"families": families, "plants": args.plants, "seed_offset": args.seed_offset,
+                  "snr_db": SNR_DB if args.snr_db is None else args.snr_db, "last_s": args.last,
+                  "tolerances": TOL, "compare": args.compare}
+    doc = {"config": config, "families": {}, "elapsed_s": None}
     for fam in families:
         mine = [r for r in rows if r["family"] == fam]
         doc["families"][fam] = {**_compared(mine, estimator.get(fam)), "runs_detail": mine}
