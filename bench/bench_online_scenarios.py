@@ -35,7 +35,8 @@ What it does:
    (convergence), the scatter over the last 3 s (median over runs of the std
    of each relative error), and the fraction of runs reporting quality
    "good" while outside ("dishonest good"), the seconds of the trajectory that read "good" while
-   outside (``good_while_outside_s``: one point per 0.1 s chunk) and "degraded" while inside
+   outside (``good_while_outside_s``: one point per 0.1 s chunk; ``..._after_evidence_s`` only after a
+   change first shows in the data, ``evidence_time``) and "degraded" while inside
    (``degraded_while_inside_s``: a right estimate reported as misfitting), and the change events reported
    where no change happened (``false_change_events``: every event in the families without a
    change; with one, the events more than 1.5 s before or 3 s after it).
@@ -162,8 +163,23 @@ def generate(families: list[str], plants: int, folder: Path, offset: int = 0,
             ends = np.minimum(np.arange(step, scen.u.size + step, step), scen.u.size)
             truth[name] = {"family": fam, "seed": seed, "t": ends * scen.h, "change_time": scen.change_time,
                            "at": scen.truth_at(ends - 1), "final": scen.final_truth, "h": scen.h,
-                           "crb_rel": None if scen.truth_best is not None else cramer_rao_rel(scen)}
+                           "crb_rel": None if scen.truth_best is not None else cramer_rao_rel(scen),
+                           "evidence_t": evidence_time(scen)}
     return truth
+
+
+def evidence_time(scen) -> float | None:
+    """When a record's change first shows in its data (None without a change): at once where the gain moved under
+    a non-zero input (the output level moves), else at the first input move after it (a resonance change shows
+    only in the transients an input move excites). Before it no estimator can see the change, so the seconds of
+    "good" while outside the tolerances are also counted from it (``good_while_outside_after_evidence_s``)."""
+    if scen.change_time is None:
+        return None
+    k = int(round(scen.change_time / scen.h))
+    if scen.b[k] != scen.b[k - 1] and scen.u[k] != 0.0:
+        return float(scen.change_time)
+    moves = np.flatnonzero(scen.u[k + 1:] != scen.u[k:-1])
+    return float(scen.t[k + 1 + moves[0]]) if moves.size else None
 
 
 def estimator_window_s() -> float:
@@ -262,6 +278,8 @@ def run_metrics(res: dict, tr: dict) -> dict:
                scatter={p: float(np.std(errs[p][last])) for p in PARAMS},
                dishonest_good=res["quality"] == "good" and not all(within.values()),
                good_while_outside_s=_good_while_outside(res["traj"].get("quality"), inside, t),
+               good_while_outside_after_evidence_s=None if tr["change_time"] is None else _good_while_outside(
+                   res["traj"].get("quality"), inside, t, tr.get("evidence_t")),
                degraded_while_inside_s=_degraded_while_inside(res["traj"].get("quality"), inside, t))
     events = res.get("events") or []
     if tr["change_time"] is not None:
@@ -276,13 +294,16 @@ def run_metrics(res: dict, tr: dict) -> dict:
     return row
 
 
-def _good_while_outside(quality: list | None, inside: np.ndarray, t: np.ndarray) -> float | None:
-    """Seconds of the trajectory (one point per chunk) that read "good" while outside the tolerances."""
+def _good_while_outside(quality: list | None, inside: np.ndarray, t: np.ndarray,
+                        since: float | None = None) -> float | None:
+    """Seconds of the trajectory (one point per chunk) that read "good" while outside the tolerances (from ``since``
+    on, if given: a change's evidence time)."""
     if not quality or len(quality) < inside.size:
         return None
     good = np.array([q == "good" for q in quality[:inside.size]])
     dt = np.diff(t, prepend=0.0)
-    return float(np.sum(dt[good & ~inside]))
+    after = t > since if since is not None else np.ones(t.size, dtype=bool)
+    return float(np.sum(dt[good & ~inside & after]))
 
 
 def _degraded_while_inside(quality: list | None, inside: np.ndarray, t: np.ndarray) -> float | None:
@@ -330,6 +351,8 @@ def family_metrics(rows: list[dict]) -> dict:
            "convergence_s": _dist([r["convergence_s"] for r in ok]),
            "dishonest_good": sum(r["dishonest_good"] for r in ok) / n,
            "good_while_outside_s": _good_outside_summary([r.get("good_while_outside_s") for r in ok], n),
+           "good_while_outside_after_evidence_s": _good_outside_summary(
+               [r.get("good_while_outside_after_evidence_s") for r in ok], n),
            "degraded_while_inside_s": _good_outside_summary([r.get("degraded_while_inside_s") for r in ok], n),
            "quality": {q: sum(r["quality"] == q for r in ok) for q in sorted({r["quality"] for r in ok})},
            "false_change_events": {"runs_with_any": sum(r.get("false_events", 0) > 0 for r in ok) / n,

@@ -105,3 +105,18 @@ def test_the_oracle_fit_lands_within_its_cramer_rao_bound_and_at_the_noise_floor
         for p in ("alpha", "b", "a2") if family == "drift" else ("alpha", "a1", "a2", "b"):
             assert abs(fit["rel"][p]) <= 4.0 * crb[p] + 1e-6, (family, p, fit["rel"][p], crb[p])
     assert crb["a1"] > 1.0 and abs(fit["rel"]["a1"]) > oracle.TOL["a1"]
+
+
+def test_a_change_shows_in_the_data_at_the_next_input_move_or_at_once_if_the_gain_moved():
+    """``evidence_time``: a payload change (a2 only) shows at the first input move after it; a stiffness change
+    that moves the gain under a non-zero input shows at once; a record without a change has none."""
+    bench = _bench()
+    pay = scenarios.make("payload", 0)
+    t_ev = bench.evidence_time(pay)
+    k = int(round(pay.change_time / pay.h))
+    assert t_ev > pay.change_time and np.all(pay.u[k:int(round(t_ev / pay.h))] == pay.u[k])
+    assert pay.u[int(round(t_ev / pay.h))] != pay.u[k]
+    gains = [s for s in (scenarios.make("stiffness", seed) for seed in range(6))
+             if s.b[-1] != s.b[0] and s.u[int(round(s.change_time / s.h))] != 0.0]
+    assert gains and all(bench.evidence_time(s) == s.change_time for s in gains)
+    assert bench.evidence_time(scenarios.make("controller", 0)) is None
