@@ -482,8 +482,7 @@ class OnlineEstimator(StoredParams):
         try:
             tr = self._live
             if tr is None:
-                for v, w in self._classify(u, y):
-                    self._buffer(self._accept(v), w)
+                self._buffer_sample(u, y)
                 self._advance_start(self._units)
                 return
             if self._u_lo <= u <= self._u_hi and not self._deferred:
@@ -554,8 +553,7 @@ class OnlineEstimator(StoredParams):
         while i < n and self._live is None:
             self.samples += 1
             done[0] = i + 1
-            for v, w in self._classify(float(u[i]), float(y[i])):
-                self._buffer(self._accept(v), w)
+            self._buffer_sample(float(u[i]), float(y[i]))
             i += 1
             self._advance_start(1 << 30)
         if i == n:
@@ -575,10 +573,13 @@ class OnlineEstimator(StoredParams):
             if not self._state_finite(tr):
                 self._fault(None, "update_block")
                 tr = self._live
-                if tr is None:               # restarted: the rest of the block goes through the start-up
-                    self._block_progress = None
+                if tr is None or not exact:  # restarted: the rest of the block goes through the start-up (what
+                    self._block_progress = None   # the gate had decided waits: ``_block_resync``)
                     return self._feed_block(u, y, done)
         self._block_progress = None
+        if not exact:                        # (every sample of the block may still be held)
+            self.samples = s0 + (n - i)
+            done[0] = n
 
     def gap(self, n: int) -> None:
         """n samples were lost (sequence counter): time advances with the input held, no output used.
@@ -627,12 +628,15 @@ class OnlineEstimator(StoredParams):
         if rng > 0 and self.input_gate > 0 and abs(u - self._u_last) > self.input_gate * rng:
             self._held.append((u, y))
             if len(self._held) <= self._burst:
+                self._deferred = True
                 return []
             held, self._held = self._held, []
+            self._deferred = bool(self._backlog)
             return held
         if not self._held:
             return [(u, y)]
         held, self._held = self._held, []
+        self._deferred = bool(self._backlog)
         self.input_outliers += len(held)
         return [(self._u_last, w) for _, w in held] + [(u, y)]
 
@@ -660,6 +664,15 @@ class OnlineEstimator(StoredParams):
         self._deferred = bool(self._held)
         out = np.array(ready, dtype=float).reshape(-1, 2)
         return np.ascontiguousarray(out[:, 0]), np.ascontiguousarray(out[:, 1]), False
+
+    def _buffer_sample(self, u: float, y: float) -> None:
+        """A sample into the start-up buffer through the input gate, after any the live tracker had waiting (a
+        fault's restart leaves them: ``_update_deferred``, ``_block_resync``)."""
+        while self._backlog:
+            self._buffer(*self._backlog.popleft())
+        for v, w in self._classify(u, y):
+            self._buffer(self._accept(v), w)
+        self._deferred = bool(self._held)
 
     def _update_deferred(self, tr: WindowTracker | RecursiveTracker, u: float, y: float) -> None:
         """update()'s slow path: an input outside the range seen so far, or samples waiting. The sample goes
