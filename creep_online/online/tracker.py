@@ -197,6 +197,11 @@ RESEARCH_AFTER_S = 1.0
 #: off at 80 dB: 1.2-1.6x) is never sudden.
 SUDDEN_RATIO = 3.0
 SUDDEN_WITHIN_S = 1.0
+#: ... and only after a window at the floor that determined the resonance and alpha (relative 1-sigma within these,
+#: the estimator's ``DETERMINED``): a misfit after an undetermined estimate is new excitation revealing it, to be
+#: searched freely, not a change (quiet start seed 8: small steps fitted at the floor by alpha +7000 %; the first
+#: large step misfit 3.8x, and a "change" searched with that alpha held kept it at -83 % for 4 s).
+SUDDEN_DETERMINED = {"alpha": 0.01, "a1": 0.025, "a2": 0.025}
 #: Longest segment searched (s; also bounded by the search's work memory). The search's model has constant
 #: parameters: on 16 s of a drifting plant (2 kHz) it preferred alpha +29 %, b -33 % (a gain drift looks
 #: like creep), on 2 s the drift is a fraction of the tolerances, and at 10 kHz sample by sample the
@@ -720,7 +725,7 @@ class WindowTracker(ParameterView):
         rms = math.sqrt(max(cost, 0.0) / max(neff, 1.0))
         fine = not relinearize and self._fine_relinearization_due(rms, noise, n)
         if not fine:
-            self._watch(rms, False, n, noise)
+            self._watch(rms, False, n, noise, raw)
         self._pace_refits(self.converged and move < CALM_MOVE and rms <= MISFIT_CLEAR_RATIO * noise
                           and not (relinearize or fine) and not (self.events and not self.events[-1]["settled"]))
         if relinearize or fine:
@@ -1143,16 +1148,25 @@ class WindowTracker(ParameterView):
         return st[self.lay["phi"]:self.lay["phi"] + self.q].copy()
 
     # ------------------------------------------------------------------ re-search trigger
-    def _watch(self, rms: float, broken: bool, n: int, floor: float) -> None:
-        """After each re-fit (at sample n; the output's noise level ``floor``): start a re-search once the error
-        has sat above the noise floor (or the fit has been broken) for ``RESEARCH_AFTER_S`` (plain floats:
-        runs at every re-fit)."""
+    def _resonance_determined(self, raw: tuple) -> bool:
+        """Does an accepted re-fit (``refit.accept``'s tuple) determine alpha, a1 and a2 (``SUDDEN_DETERMINED``)?"""
+        r = RF.Accepted._make(raw)
+        sigma2 = max(r.cost, 0.0) / max(r.neff - self.theta.size, 1.0)
+        limits = SUDDEN_DETERMINED
+        return (abs(r.var_alpha) * sigma2 <= (limits["alpha"] * r.alpha) ** 2
+                and abs(r.var_ln_a1) * sigma2 <= limits["a1"] ** 2 and abs(r.var_ln_a2) * sigma2 <= limits["a2"] ** 2)
+
+    def _watch(self, rms: float, broken: bool, n: int, floor: float, raw: tuple | None = None) -> None:
+        """After each re-fit (at sample n; the output's noise level ``floor``; ``raw`` the accepted fit's tuple):
+        start a re-search once the error has sat above the noise floor (or the fit has been broken) for
+        ``RESEARCH_AFTER_S``, and note the last fit at the floor that determined the resonance (``SUDDEN_RATIO``)
+        (plain floats: runs at every re-fit)."""
         if not self.fitting or self._researching():
             return
         if not (broken or (floor > 0.0 and rms > RESEARCH_RATIO * floor)):
             if not (floor > 0.0 and rms > MISFIT_CLEAR_RATIO * floor):
                 self._misfit_since = None
-                if self.converged:
+                if self.converged and raw is not None and self._resonance_determined(raw):
                     self._floor_at = n
             return
         if self._misfit_since is None:
