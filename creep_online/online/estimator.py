@@ -488,6 +488,9 @@ class OnlineEstimator(StoredParams):
             if self._u_lo <= u <= self._u_hi and not self._deferred:
                 self._u_last = u
                 du = u - self._u_ref
+            elif not self._deferred and not (self.input_gate > 0
+                                             and abs(u - self._u_last) > self.input_gate * (self._u_hi - self._u_lo)):
+                du = self._accept(u)           # the range grows (no glitch candidate): still the direct path
             else:
                 self._update_deferred(tr, u, y)
                 return

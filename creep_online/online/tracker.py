@@ -366,6 +366,7 @@ class WindowTracker(ParameterView):
         self._misfit_since: int | None = None   # first re-fit of the current run of misfits
         self._misfit_sudden = False             # ... and it came suddenly after a window at the floor (SUDDEN_RATIO)
         self._floor_at: int | None = None       # the last re-fit that found the converged window at the noise floor
+        self._floor_raw: tuple | None = None    # ... its accepted fit (``refit.accept``'s tuple)
         self._first_fit: int | None = None      # first re-fit of the current window (start, change, re-search)
         self._research_wait = int(RESEARCH_AFTER_S / self.h)
         self._next_research = 0            # earliest sample of the next re-search (backoff)
@@ -1149,7 +1150,7 @@ class WindowTracker(ParameterView):
 
     # ------------------------------------------------------------------ re-search trigger
     def _resonance_determined(self, raw: tuple) -> bool:
-        """Does an accepted re-fit (``refit.accept``'s tuple) determine alpha, a1 and a2 (``SUDDEN_DETERMINED``)?"""
+        """Did an accepted re-fit (``refit.accept``'s tuple) determine alpha, a1 and a2 (``SUDDEN_DETERMINED``)?"""
         r = RF.Accepted._make(raw)
         sigma2 = max(r.cost, 0.0) / max(r.neff - self.theta.size, 1.0)
         limits = SUDDEN_DETERMINED
@@ -1159,20 +1160,20 @@ class WindowTracker(ParameterView):
     def _watch(self, rms: float, broken: bool, n: int, floor: float, raw: tuple | None = None) -> None:
         """After each re-fit (at sample n; the output's noise level ``floor``; ``raw`` the accepted fit's tuple):
         start a re-search once the error has sat above the noise floor (or the fit has been broken) for
-        ``RESEARCH_AFTER_S``, and note the last fit at the floor that determined the resonance (``SUDDEN_RATIO``)
+        ``RESEARCH_AFTER_S``, and note the last converged fit at the floor (``SUDDEN_RATIO``)
         (plain floats: runs at every re-fit)."""
         if not self.fitting or self._researching():
             return
         if not (broken or (floor > 0.0 and rms > RESEARCH_RATIO * floor)):
             if not (floor > 0.0 and rms > MISFIT_CLEAR_RATIO * floor):
                 self._misfit_since = None
-                if self.converged and raw is not None and self._resonance_determined(raw):
-                    self._floor_at = n
+                if self.converged and raw is not None:
+                    self._floor_at, self._floor_raw = n, raw     # (judged at a misfit's onset only: rare)
             return
         if self._misfit_since is None:
             self._misfit_since = n
             self._misfit_sudden = not broken and rms >= SUDDEN_RATIO * floor and self._floor_at is not None \
-                and n - self._floor_at <= int(SUDDEN_WITHIN_S / self.h)
+                and n - self._floor_at <= int(SUDDEN_WITHIN_S / self.h) and self._resonance_determined(self._floor_raw)
         span = int(RESEARCH_AFTER_S / self.h)
         if n - self._misfit_since >= span and n - self.window_start >= span and n >= self._next_research:
             reason = "fit broken" if broken else f"window error {rms / floor:.1f}x the noise floor"
