@@ -88,9 +88,11 @@ def test_a_ctrl_c_while_the_interpreter_exits_is_one_line_and_status_130(tmp_pat
     import subprocess
     import sys
     missing = tmp_path / "missing.csv"
+    # the child's Ctrl-C disposition set explicitly: a test run started in the background (nohup, `&`) ignores
+    # SIGINT and its children inherit that, which would make the first case the second
+    disposition = signal.SIG_IGN if ignored else signal.SIG_DFL
     proc = subprocess.run([sys.executable, "-c", _CTRL_C_AT_EXIT, str(missing)], capture_output=True, text=True,
-                          timeout=60, preexec_fn=(lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if ignored
-                          else None)
+                          timeout=60, preexec_fn=lambda: signal.signal(signal.SIGINT, disposition))
     lines = proc.stderr.strip().splitlines()
     assert "Traceback" not in proc.stderr and lines[0].startswith("creep-online identify: error:")
     if ignored:     # started with Ctrl-C ignored (a background job): the command's own status
