@@ -49,9 +49,9 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-PARAMS = ("alpha", "a1", "a2", "b")
-#: The scenario bench's tolerances (``bench_online_scenarios.TOL``), relative.
-TOL = {"alpha": 0.02, "b": 0.03, "a1": 0.05, "a2": 0.05}
+sys.path.insert(0, str(ROOT / "bench"))
+
+from bench_online_scenarios import PARAMS, TOL  # noqa: E402  (the scenario bench's tolerances: the same "within")
 #: Largest |ln factor| the fit may take (a factor of e^5 ~ 150: far beyond any tolerance, keeps the simulator
 #: inside its stable range on a flat cost).
 LN_FACTOR_BOUND = 5.0

@@ -65,7 +65,7 @@ from .search import ResonanceSearch, SearchScratch, frequency_steps, grid_ends
 from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SOE_TOP, SoeBasis
 from . import recursive as R
 from .recursive import RecursiveTracker
-from .tracker import FREE_RATES, PERIODIC_JOBS, WindowTracker
+from .tracker import DETERMINED, FREE_RATES, PERIODIC_JOBS, WindowTracker
 from .stored_params import StoredParams
 
 PHASES = ("buffering", "searching", "tracking")
@@ -76,8 +76,6 @@ MAX_SEARCH_SAMPLES = 1 << 15
 BUFFER_SAMPLES = 1 << 17
 #: Largest history kept for replays (samples).
 MAX_HISTORY = 1 << 16
-#: Relative 1-sigma limits for "determined" parameters (half the accuracy goals).
-DETERMINED = {"alpha": 0.01, "b": 0.015, "a1": 0.025, "a2": 0.025}
 #: alpha within this relative distance of an end of ``alpha_bounds`` is held by the bound, not determined.
 BOUND_TOL = 1e-3
 #: Live error (window rms) above this multiple of the noise floor is "degraded": the model misses part of the data.
@@ -488,8 +486,7 @@ class OnlineEstimator(StoredParams):
             if self._u_lo <= u <= self._u_hi and not self._deferred:
                 self._u_last = u
                 du = u - self._u_ref
-            elif not self._deferred and not (self.input_gate > 0
-                                             and abs(u - self._u_last) > self.input_gate * (self._u_hi - self._u_lo)):
+            elif not self._deferred and not self._glitch_candidate(u):
                 du = self._accept(u)           # the range grows (no glitch candidate): still the direct path
             else:
                 self._update_deferred(tr, u, y)
@@ -627,8 +624,7 @@ class OnlineEstimator(StoredParams):
             self._u_ref = u
             self._u_lo = self._u_hi = u
             self._u_last = u
-        rng = self._u_hi - self._u_lo
-        if rng > 0 and self.input_gate > 0 and abs(u - self._u_last) > self.input_gate * rng:
+        if self._glitch_candidate(u):
             self._held.append((u, y))
             if len(self._held) <= self._burst:
                 self._deferred = True
@@ -642,6 +638,12 @@ class OnlineEstimator(StoredParams):
         self._deferred = bool(self._backlog)
         self.input_outliers += len(held)
         return [(self._u_last, w) for _, w in held] + [(u, y)]
+
+    def _glitch_candidate(self, u: float) -> bool:
+        """Is u further than ``input_gate`` input ranges (seen so far; none before the input has moved) from the
+        last accepted input?"""
+        rng = self._u_hi - self._u_lo
+        return rng > 0 and self.input_gate > 0 and abs(u - self._u_last) > self.input_gate * rng
 
     def _accept(self, u: float) -> float:
         """Take u as the input applied (the range seen so far, the first input change); its deviation from the
@@ -671,8 +673,7 @@ class OnlineEstimator(StoredParams):
     def _buffer_sample(self, u: float, y: float) -> None:
         """A sample into the start-up buffer through the input gate, after any the live tracker had waiting (a
         fault's restart leaves them: ``_update_deferred``, ``_block_resync``)."""
-        while self._backlog:
-            self._buffer(*self._backlog.popleft())
+        self._backlog_to_buffer()
         for v, w in self._classify(u, y):
             self._buffer(self._accept(v), w)
         self._deferred = bool(self._held)
@@ -685,8 +686,7 @@ class OnlineEstimator(StoredParams):
             du, w = self._backlog.popleft()
             self._feed_live(tr, du, w, work=k == DRAIN_PER_UPDATE - 1 or not self._backlog)
             if self._live is not tr:       # a fault restarted the tracker: the rest goes to the start-up buffer
-                while self._backlog:
-                    self._buffer(*self._backlog.popleft())
+                self._backlog_to_buffer()
                 break
         self._deferred = bool(self._held or self._backlog)
 
@@ -708,13 +708,17 @@ class OnlineEstimator(StoredParams):
             self.input_outliers += len(self._held)
             self._backlog.extend((self._u_last - self._u_ref, w) for _, w in self._held)
             self._held = []
-        while self._backlog:
+        while self._backlog and self._live is not None:
             du, w = self._backlog.popleft()
-            if self._live is not None:
-                self._feed_live(self._live, du, w, work=True)
-            else:
-                self._buffer(du, w)
+            self._feed_live(self._live, du, w, work=True)
+        self._backlog_to_buffer()
         self._deferred = False
+
+    def _backlog_to_buffer(self) -> None:
+        """The decided samples the live tracker has not taken, in order, into the start-up buffer (the tracker was
+        restarted by a fault: the start-up takes them first)."""
+        while self._backlog:
+            self._buffer(*self._backlog.popleft())
 
     # ------------------------------------------------------------------ start-up
     def _buffer(self, du: float, y: float) -> None:
@@ -1101,7 +1105,7 @@ class OnlineEstimator(StoredParams):
         ``determined`` lists the parameters within their ``DETERMINED`` limit once every other check has
         passed (empty before): the estimate's creep part can be trusted while its resonance is not.
         """
-        quality, reason = self._checks()
+        quality, reason, ratio = self._checks()
         if self._fault_open is not None and self._fault_cleared(quality):
             self._fault_open = None
         if self._fault_open is not None:
@@ -1122,52 +1126,52 @@ class OnlineEstimator(StoredParams):
             if name not in determined:
                 return "provisional", f"{name} not yet determined by the data ({100 * rel[name]:.2g} % 1-sigma)", \
                     determined
-        ratio = self._floor_ratio()
         if ratio > GOOD_RATIO:
             return "provisional", (f"window error {ratio:.2f}x the noise floor: the model misses a little of the data "
                                    "(unmodeled dynamics, or parameters moving within the window)"), determined
         return "good", "", determined
 
-    def _checks(self) -> tuple[str, str]:
-        """(quality, reason) from every check but the parameters' determination; ("", "") if all pass."""
+    def _checks(self) -> tuple[str, str, float]:
+        """(quality, reason, the window's error over the noise floor) from every check but the parameters'
+        determination; ("", "", ratio) if all pass (the ratio NaN before the tracker is live)."""
         tr = self._tracker
         if tr is None:
             return "none", ("waiting for the input to move" if self._first_change is None
-                            else "searching the resonance and creep")
+                            else "searching the resonance and creep"), math.nan
         if self._catchup:
-            return "provisional", "replaying the start-up buffer"
+            return "provisional", "replaying the start-up buffer", math.nan
+        ratio = self._floor_ratio()
         if tr.sc[W.SC_STUCK]:
-            return "degraded", "output frozen or clipped while the model says it moves"
+            return "degraded", "output frozen or clipped while the model says it moves", ratio
         shift = self._n_shift * self._h    # the tracker's time to stream time (non-zero after a fault's restart)
         now = self.samples * self._h - shift
         # an unsettled change holds "changing" past its first 1.5 s only while the window is below "degraded": a
         # change whose fit never settles is a window that misses the data (seen for 9 s at 115x the floor)
         if tr.events and (now - tr.events[-1]["detected_t"] < 1.5
-                          or (not tr.events[-1]["settled"] and self._floor_ratio() <= FLOOR_RATIO)):
+                          or (not tr.events[-1]["settled"] and ratio <= FLOOR_RATIO)):
             ev = tr.events[-1]
             if ev.get("estimate_settled") is False:
                 return "provisional", (f"estimate corrected at t={ev['t'] + shift:.3g} s "
                                        f"({', '.join(ev['moved'])} moved; "
-                                       "it had not settled: a change of the estimate, maybe not of the plant)")
-            return "changing", f"change detected at t={ev['t'] + shift:.3g} s ({', '.join(ev['moved'])} moved)"
+                                       "it had not settled: a change of the estimate, maybe not of the plant)"), ratio
+            return "changing", f"change detected at t={ev['t'] + shift:.3g} s ({', '.join(ev['moved'])} moved)", ratio
         dis = tr.disagreement
         if dis is not None and now - dis["t"] < 1.5:
             moves = ", ".join(f"{k} {100 * v:+.0f} %" for k, v in dis["moves"].items())
             return "changing", (f"the last second disagrees with the window's estimate ({moves}, likelihood ratio "
-                                f"{dis['lr']:.3g}): the plant may be changing")
+                                f"{dis['lr']:.3g}): the plant may be changing"), ratio
         if tr.fit.sample == 0:
             rs = tr.researches[-1] if tr.researches and tr.researches[-1]["switched"] else None
             return "provisional", ("first window fit pending" if rs is None else
                                    f"resonance re-searched at t={rs['t'] + shift:.3g} s "
-                                   f"({', '.join(rs['moved'])} moved)")
+                                   f"({', '.join(rs['moved'])} moved)"), ratio
         held = tr.sc[W.SC_SINCE] * self._h
         if self.window_s is not None and held > 3.0 * self.window_s:    # < 5 % of the last step's weight left
             return "provisional", (f"input constant for {held:.3g} s: the window no longer holds an input change "
-                                   "(the estimate is the last one the data determined)")
-        ratio = self._floor_ratio()
+                                   "(the estimate is the last one the data determined)"), ratio
         if ratio > FLOOR_RATIO:
-            return "degraded", f"window error {ratio:.1f}x the noise floor: the model misses part of the data"
-        return "", ""
+            return "degraded", f"window error {ratio:.1f}x the noise floor: the model misses part of the data", ratio
+        return "", "", ratio
 
 
 def _number(x, name: str) -> float:

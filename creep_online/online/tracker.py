@@ -197,11 +197,13 @@ RESEARCH_AFTER_S = 1.0
 #: off at 80 dB: 1.2-1.6x) is never sudden.
 SUDDEN_RATIO = 3.0
 SUDDEN_WITHIN_S = 1.0
-#: ... and only after a window at the floor that determined the resonance and alpha (relative 1-sigma within these,
-#: the estimator's ``DETERMINED``): a misfit after an undetermined estimate is new excitation revealing it, to be
-#: searched freely, not a change (quiet start seed 8: small steps fitted at the floor by alpha +7000 %; the first
-#: large step misfit 3.8x, and a "change" searched with that alpha held kept it at -83 % for 4 s).
-SUDDEN_DETERMINED = {"alpha": 0.01, "a1": 0.025, "a2": 0.025}
+#: ... and only after a window at the floor that determined the resonance and alpha (``DETERMINED``): a misfit after
+#: an undetermined estimate is new excitation revealing it, to be searched freely, not a change (quiet start seed 8:
+#: small steps fitted at the floor by alpha +7000 %; the first large step misfit 3.8x, and a "change" searched with
+#: that alpha held kept it at -83 % for 4 s).
+#: Relative 1-sigma limits for "determined" parameters (half the accuracy goals): the estimate's ``determined`` and
+#: its "good" (``estimator._assess``), and the sudden misfit's condition above.
+DETERMINED = {"alpha": 0.01, "b": 0.015, "a1": 0.025, "a2": 0.025}
 #: Longest segment searched (s; also bounded by the search's work memory). The search's model has constant
 #: parameters: on 16 s of a drifting plant (2 kHz) it preferred alpha +29 %, b -33 % (a gain drift looks
 #: like creep), on 2 s the drift is a fraction of the tolerances, and at 10 kHz sample by sample the
@@ -759,7 +761,7 @@ class WindowTracker(ParameterView):
         if self._fit is None:
             raw, drift_on = self._fit_raw
             r = RF.Accepted._make(raw)
-            sigma2 = max(r.cost, 0.0) / max(r.neff - self.theta.size, 1.0)
+            sigma2 = self._noise_variance(r)
             var = (r.var_alpha, r.var_ln_a1, r.var_ln_a2, r.var_b, r.var_offset, r.var_rate0, r.var_rate1)
             sd = [math.sqrt(abs(v) * sigma2) if math.isfinite(v) else math.inf for v in var]
             a1, a2 = math.exp(r.ln_a1), math.exp(r.ln_a2)
@@ -938,16 +940,22 @@ class WindowTracker(ParameterView):
             last["restarts"] += 1
             last["lr"] = max(last["lr"], float(lr))
         else:
-            self.events.append({"t": n0 * self.h, "detected_t": self.n * self.h, "moved": sorted(moved),
-                                "relative_change": {k: float(v) for k, v in moves.items()}, "lr": float(lr),
-                                "settled": False, "restarts": 1, "_before": theta0[:4].copy(),
-                                # False: the estimate it was judged against was still moving (a start-up
-                                # estimate converging): the event may correct the estimate, not the plant
-                                "estimate_settled": settled})
+            # estimate_settled False: the estimate it was judged against was still moving (a start-up estimate
+            # converging): the event may correct the estimate, not the plant
+            self._open_event(n0 * self.h, sorted(moved), moves, lr, theta0, estimate_settled=settled)
         yield
         if settled:
             self.theta[0] = theta0[0]      # alpha as it was before the change (the refits chased it since)
         self._restart_window(n0, "b" in moved, alpha_known=settled)
+
+    def _open_event(self, t: float, moved: list[str], moves: dict, lr: float, before: np.ndarray,
+                    **extra) -> None:
+        """Record a change event, not yet settled (``_settle_events`` fills in what moved once the fit has stopped
+        moving): when it began (t, s) and was detected, the parameters that moved and by how much, its likelihood
+        ratio, and the estimate before it (``before[:4]``, copied)."""
+        self.events.append({"t": t, "detected_t": self.n * self.h, "moved": moved,
+                            "relative_change": {k: float(v) for k, v in moves.items()}, "lr": float(lr),
+                            "settled": False, "restarts": 1, "_before": before[:4].copy(), **extra})
 
     def _settled_before(self, n0: int, theta0: np.ndarray) -> bool:
         """Was the window's estimate settled over the second before the tested one? Only then is its alpha the
@@ -1149,13 +1157,18 @@ class WindowTracker(ParameterView):
         return st[self.lay["phi"]:self.lay["phi"] + self.q].copy()
 
     # ------------------------------------------------------------------ re-search trigger
+    def _noise_variance(self, r: RF.Accepted) -> float:
+        """The noise variance an accepted re-fit's window estimates (its cost over the degrees of freedom left): the
+        scale of its parameter variances."""
+        return max(r.cost, 0.0) / max(r.neff - self.theta.size, 1.0)
+
     def _resonance_determined(self, raw: tuple) -> bool:
-        """Did an accepted re-fit (``refit.accept``'s tuple) determine alpha, a1 and a2 (``SUDDEN_DETERMINED``)?"""
+        """Did an accepted re-fit (``refit.accept``'s tuple) determine alpha, a1 and a2 (``DETERMINED``)?"""
         r = RF.Accepted._make(raw)
-        sigma2 = max(r.cost, 0.0) / max(r.neff - self.theta.size, 1.0)
-        limits = SUDDEN_DETERMINED
-        return (abs(r.var_alpha) * sigma2 <= (limits["alpha"] * r.alpha) ** 2
-                and abs(r.var_ln_a1) * sigma2 <= limits["a1"] ** 2 and abs(r.var_ln_a2) * sigma2 <= limits["a2"] ** 2)
+        sigma2 = self._noise_variance(r)
+        return (abs(r.var_alpha) * sigma2 <= (DETERMINED["alpha"] * r.alpha) ** 2
+                and abs(r.var_ln_a1) * sigma2 <= DETERMINED["a1"] ** 2
+                and abs(r.var_ln_a2) * sigma2 <= DETERMINED["a2"] ** 2)
 
     def _watch(self, rms: float, broken: bool, n: int, floor: float, raw: tuple | None = None) -> None:
         """After each re-fit (at sample n; the output's noise level ``floor``; ``raw`` the accepted fit's tuple):
@@ -1265,12 +1278,8 @@ class WindowTracker(ParameterView):
         test's (its time the last re-fit at the noise floor: the change came after it), the search's resonance
         and gain taken, and the window restarted after the re-fit that saw the misfit, as for a change the test
         found (``_restart_window``: the post-change search, with this result competing, then the replay)."""
-        before = self.theta[:4].copy()
         t_floor = (self._floor_at if self._floor_at is not None else n_seen) * self.h
-        self.events.append({"t": t_floor, "detected_t": self.n * self.h, "moved": moved,
-                            "relative_change": {k: float(v) for k, v in change.items()}, "lr": float(lr),
-                            "settled": False, "restarts": 1, "_before": before, "estimate_settled": True,
-                            "found_by": "re-search"})
+        self._open_event(t_floor, moved, change, lr, self.theta, estimate_settled=True, found_by="re-search")
         yield                              # (each part on its own call, as the change test's: cold Python)
         self.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
         self._coefficients()
