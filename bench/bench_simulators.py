@@ -1,7 +1,7 @@
 """Accuracy and speed of the simulators (issue 2). Prints one JSON document.
 
 * convergence: max error relative to the peak output against the exact
-  references in ../shared/data/oracle, for h, 2h, 4h, ... and the fitted order.
+  references in tests/data/oracle, for h, 2h, 4h, ... and the fitted order.
 * truncation: error of short memory L against full memory for a unit step
   (the dropped tail ((N h)^alpha - (L h)^alpha) / Gamma(1+alpha)) and for the
   whole model, for several alpha and N/L.
@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
 import time
 from pathlib import Path
@@ -27,7 +26,7 @@ sys.path.insert(0, str(ROOT))
 from creep_online import CreepModel, simulate  # noqa: E402
 from creep_online.simulate import fractional_integral  # noqa: E402
 
-ORACLE = Path(os.environ.get("CREEP_ONLINE_SHARED_DATA", ROOT.parent / "shared" / "data")) / "oracle"
+ORACLE = ROOT / "tests" / "data" / "oracle"
 
 
 def distribution(samples: list[float]) -> dict[str, float]:

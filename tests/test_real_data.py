@@ -1,4 +1,4 @@
-"""Diagnosis of real third-party measurements (../shared/data/real/): known physics turned into assertions.
+"""Diagnosis of real third-party measurements (tests/data/real/, each with its source and licence): known physics turned into assertions.
 
 * both 1 Hz piezo sets: hysteresis;
 * the fine-steering mirror: a second resonance (~0.9 and ~2.1 kHz), from a
@@ -17,11 +17,9 @@ from creep_online.diagnostics import diagnose
 from creep_online.diagnostics.loading import load_for_diagnosis
 from creep_online.diagnostics.mimo import virtual_siso
 
-from conftest import SHARED_DATA
+from conftest import DATA
 
-# the real measurements are the test: a missing folder fails (conftest's shared_data fixture)
-REAL = SHARED_DATA / "real"
-pytestmark = pytest.mark.usefixtures("shared_data")
+REAL = DATA / "real"
 
 
 def _diagnose(rel):
@@ -49,7 +47,7 @@ def test_micromanipulator_shows_hysteresis():
 def _fsm(level):
     ins, outs = [], []
     for r in range(3):
-        a = np.loadtxt(REAL / "fsm-cubespec-multisine" / f"fsm_{level}mV_test_r{r}.csv", delimiter=",", skiprows=1)
+        a = np.loadtxt(REAL / "fsm-cubespec-multisine" / f"fsm_{level}mV_test_r{r}.csv.gz", delimiter=",", skiprows=1)
         ins.append(a[:, [1, 3, 4]])
         outs.append(a[:, 2])
     return virtual_siso(ins, outs, fs=6400.0, period=8192, channel=0, periods=2)

@@ -25,20 +25,20 @@ def fomcon_cases(root):
     return json.loads((root / "fomcon" / "cases.json").read_text())["cases"]
 
 
-def test_paper_method_matches_fomcon_to_1e9(shared_data):
-    for case in fomcon_cases(shared_data):
-        data = _csv(shared_data / "fomcon" / case["csv"])
+def test_paper_method_matches_fomcon_to_1e9(reference_data):
+    for case in fomcon_cases(reference_data):
+        data = _csv(reference_data / "fomcon" / case["csv"])
         m = CreepModel(case["alpha"], case["a1"], case["a2"], case["b"])
         y = simulate(m, data[:, 0], data[:, 1], method="paper")
         rel = np.max(np.abs(y - data[:, 2])) / np.max(np.abs(data[:, 2]))
         assert rel < 1e-9, (case["name"], rel)
 
 
-def test_exact_method_matches_inverse_laplace_steps(shared_data):
-    refs = json.loads((shared_data / "oracle" / "mpmath_refs.json").read_text())["models"]
+def test_exact_method_matches_inverse_laplace_steps(reference_data):
+    refs = json.loads((reference_data / "oracle" / "mpmath_refs.json").read_text())["models"]
     h = 1e-4
     for ref in refs:
-        data = _csv(shared_data / "oracle" / ref["csv"])
+        data = _csv(reference_data / "oracle" / ref["csv"])
         alpha, a1, a2, b = (float(ref[k]) for k in ("alpha", "a1", "a2", "b"))
         idx = np.rint(data[:, 0] / h).astype(int)
         on_grid = np.abs(idx * h - data[:, 0]) < 1e-12
@@ -52,10 +52,10 @@ def exact_refs(root):
     return json.loads((root / "oracle" / "exact_refs.json").read_text())
 
 
-def test_exact_method_matches_piecewise_references(shared_data):
+def test_exact_method_matches_piecewise_references(reference_data):
     # the references are integrated to 1e-10 relative; we agree to that level
-    for ref in exact_refs(shared_data):
-        data = _csv(shared_data / "oracle" / f"{ref['name']}.csv")
+    for ref in exact_refs(reference_data):
+        data = _csv(reference_data / "oracle" / f"{ref['name']}.csv")
         m = CreepModel(ref["alpha"], ref["a1"], ref["a2"], ref["b"])
         y = simulate(m, data[:, 0], data[:, 1])
         rel = np.max(np.abs(y - data[:, 2])) / np.max(np.abs(data[:, 2]))
@@ -111,10 +111,10 @@ def _order(errors, hs):
     return np.polyfit(np.log(hs), np.log(errors), 1)[0]
 
 
-def test_convergence_orders_against_the_exact_reference(shared_data):
+def test_convergence_orders_against_the_exact_reference(reference_data):
     """paper (eq. 13) and split form converge at first order in h; exact is exact at every h."""
-    ref = next(r for r in exact_refs(shared_data) if r["name"].startswith("exact_updown"))
-    data = _csv(shared_data / "oracle" / f"{ref['name']}.csv")
+    ref = next(r for r in exact_refs(reference_data) if r["name"].startswith("exact_updown"))
+    data = _csv(reference_data / "oracle" / f"{ref['name']}.csv")
     m = CreepModel(ref["alpha"], ref["a1"], ref["a2"], ref["b"])
     scale = np.max(np.abs(data[:, 2]))
     hs, errs = [], {"paper": [], "split": [], "exact": []}
