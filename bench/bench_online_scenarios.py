@@ -101,18 +101,24 @@ def run_estimator(u: np.ndarray, y: np.ndarray, h: float, mode: str, kwargs: dic
             traj["samples"].append(min(k + step, u.size))
             traj["quality"].append(e.quality)
             for p in PARAMS:
-                traj[p].append(float(getattr(e, p)))
+                traj[p].append(_number(getattr(e, p)))
         e = est.estimate
-        out.update(quality=e.quality, phase=e.phase, final={p: float(getattr(e, p)) for p in PARAMS},
+        out.update(quality=e.quality, phase=e.phase, final={p: _number(getattr(e, p)) for p in PARAMS},
                    events=[float(v["t"]) for v in getattr(e, "events", []) if v.get("kind") != "internal_fault"],
                    unsettled_events=[float(v["t"]) for v in getattr(e, "events", [])
                                      if v.get("estimate_settled") is False],
                    internal_faults=int(getattr(e, "internal_faults", 0)),
-                   floor_ratio=float(e.residual_rms / e.noise_rms) if e.noise_rms > 0 else None)
+                   floor_ratio=float(e.residual_rms / e.noise_rms) if e.residual_rms is not None and e.noise_rms
+                   else None)
     except Exception as exc:  # the estimator under test may fail in any way: that is a result
         out["error"] = f"{type(exc).__name__}: {exc}"
     out["elapsed_s"] = time.perf_counter() - start
     return out
+
+
+def _number(v) -> float:
+    """An estimate's value as a float: NaN while it is not estimated (None; older revisions said 0.0)."""
+    return math.nan if v is None else float(v)
 
 
 def _feed(est, u: np.ndarray, y: np.ndarray, mode: str) -> None:
@@ -145,18 +151,19 @@ def worker_main(argv: list[str]) -> None:
 
 # --------------------------------------------------------------------------- scenarios and truth
 def generate(families: list[str], plants: int, folder: Path, offset: int = 0,
-             snr_db: float | None = None) -> dict[str, dict]:
+             snr_db: float | None = None, rest: int | None = None) -> dict[str, dict]:
     """Make and save the scenarios; keep for each only the truth at the chunk ends (the metrics' needs).
 
     ``snr_db``: the output's SNR instead of the scenarios' own ``SNR_DB`` (a 20-bit capacitive sensor
-    reads 80-90 dB: numerical errors the 40 dB default hides show there)."""
+    reads 80-90 dB: numerical errors the 40 dB default hides show there). ``rest``: the input's first change
+    after this many samples of rest (0: the step at the first sample; ``scenarios.make``)."""
     from hil_sim import scenarios
     if snr_db is not None:
         scenarios.SNR_DB = float(snr_db)
     truth = {}
     for fam in families:
         for seed in range(offset, offset + plants):
-            scen = scenarios.make(fam, seed)
+            scen = scenarios.make(fam, seed, rest)
             name = f"{fam}_{seed:03d}.npz"
             scen.save(folder / name)
             step = chunk_size(scen.h)
@@ -413,6 +420,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--kwargs", default="{}", help="JSON dict passed to OnlineEstimator(dt, **kwargs)")
     ap.add_argument("--snr-db", type=float, default=None,
                     help="output SNR in dB (default: hil_sim.scenarios.SNR_DB, 40)")
+    ap.add_argument("--rest-samples", type=int, default=None,
+                    help="records whose input's first change comes after this many samples of rest (0: the step "
+                         "at the first sample, the input at its level from the first sample; default: the "
+                         "families' 0.05-0.3 s); mid_operation, taken in operation, is left out")
     ap.add_argument("--refit", choices=("window", "recursive"), default=None,
                     help="Remark 3's strategy of the current estimator (default: the estimator's default)")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "online_scenarios.json"))
@@ -437,12 +448,15 @@ def main(argv: list[str] | None = None) -> dict:
     unknown = set(families) - set(FAMILIES)
     if unknown:
         raise SystemExit(f"unknown families {sorted(unknown)}; choose from {', '.join(FAMILIES)}")
+    if args.rest_samples is not None:
+        families = [f for f in families if f in scenarios.FROM_REST]
     kwargs = json.loads(args.kwargs)
     start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="online_scenarios_") as tmp:
         work = Path(tmp)
         (work / "scenarios").mkdir()
-        truth = generate(families, args.plants, work / "scenarios", args.seed_offset, args.snr_db)
+        truth = generate(families, args.plants, work / "scenarios", args.seed_offset, args.snr_db,
+                         args.rest_samples)
         files = sorted((work / "scenarios").glob("*.npz"))
         gen_s = time.perf_counter() - start
         base = None if args.baseline == "none" else start_baseline(args.baseline, files, args.mode, kwargs, work)
@@ -450,6 +464,7 @@ def main(argv: list[str] | None = None) -> dict:
         current = run_files(files, args.mode, current_kwargs)
         run_s = time.perf_counter() - start - gen_s
         doc = {"config": {"plants": args.plants, "seed_offset": args.seed_offset, "families": families, "mode": args.mode,
+                          "rest_samples": args.rest_samples,
                           "kwargs": current_kwargs, "snr_db": scenarios.SNR_DB,
                           "tolerances": TOL, "traj_dt_s": TRAJ_DT, "scatter_s": SCATTER_S},
                "current": {"revision": git_head(), "families": summarize(current, truth),

@@ -35,7 +35,11 @@ quiet_start    small steps first (levels 0-0.1 for 1.5-3 s: the start-up search 
 
 Draws are log-uniform: strong_creep as listed; the other families alpha
 0.01-0.5, zeta 0.02-0.5, b = +-10^U(-1,1). Every input rests at 0 for
-0.05-0.3 s before its first change (mid_operation excepted).
+0.05-0.3 s before its first change (mid_operation excepted), or, with
+``make(family, seed, rest=k)``, for k samples: ``rest=0`` is the step at the
+first sample (the input at its first level from the first sample, the plant at
+rest before it: the most common first record), the same plant and input
+otherwise.
 """
 from __future__ import annotations
 
@@ -179,61 +183,64 @@ def _held(t: np.ndarray, t0: float, edges: np.ndarray, levels: np.ndarray) -> np
     return np.where(t >= t0, levels[np.clip(k, 0, levels.size - 1)], 0.0)
 
 
-def _start(rng: np.random.Generator) -> float:
-    """First input change: 0.05-0.3 s of rest first (the estimators take the offset there)."""
-    return float(rng.uniform(0.05, 0.3))
+def _start(rng: np.random.Generator, t: np.ndarray, rest: int | None = None) -> float:
+    """First input change: 0.05-0.3 s of rest first (the estimators take the offset there), or after ``rest``
+    samples (0: the input at its first level from the first sample, the plant at rest before it). The draw is made
+    either way, so the plant and the rest of the input are the same whatever ``rest``."""
+    t0 = float(rng.uniform(0.05, 0.3))
+    return t0 if rest is None else float(t[rest]) if rest < t.size else float(t[-1]) + 1.0
 
 
-def steps(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def steps(t: np.ndarray, rng: np.random.Generator, rest: int | None = None) -> np.ndarray:
     """A step every 1 s to a random level in [-1, 1]."""
     edges = np.arange(0.0, t[-1] + 1.0, 1.0)
-    return _held(t, _start(rng), edges, rng.uniform(-1.0, 1.0, edges.size))
+    return _held(t, _start(rng, t, rest), edges, rng.uniform(-1.0, 1.0, edges.size))
 
 
-def staircase(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def staircase(t: np.ndarray, rng: np.random.Generator, rest: int | None = None) -> np.ndarray:
     """Up-then-down staircase with reversals: increments 0.1-0.3, holds 0.5-1.5 s."""
     holds = rng.uniform(0.5, 1.5, int(t[-1] / 0.5) + 2)
     edges = np.concatenate(([0.0], np.cumsum(holds)[:-1]))
     up = np.where(np.arange(edges.size) < edges.size // 2, 0.7, 0.3)
     sign = np.where(rng.random(edges.size) < up, 1.0, -1.0)
-    return _held(t, _start(rng), edges, np.cumsum(sign * rng.uniform(0.1, 0.3, edges.size)))
+    return _held(t, _start(rng, t, rest), edges, np.cumsum(sign * rng.uniform(0.1, 0.3, edges.size)))
 
 
-def random_staircase(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def random_staircase(t: np.ndarray, rng: np.random.Generator, rest: int | None = None) -> np.ndarray:
     """A controller's output: holds of 5-50 ms at random levels in [-1, 1]."""
     holds = rng.uniform(5e-3, 50e-3, int(t[-1] / 5e-3) + 2)
     edges = np.concatenate(([0.0], np.cumsum(holds)[:-1]))
-    return _held(t, _start(rng), edges, rng.uniform(-1.0, 1.0, edges.size))
+    return _held(t, _start(rng, t, rest), edges, rng.uniform(-1.0, 1.0, edges.size))
 
 
-def prbs(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def prbs(t: np.ndarray, rng: np.random.Generator, rest: int | None = None) -> np.ndarray:
     """Random binary sequence 0/1 with a bit period of 1-20 ms."""
     bit = rng.uniform(1e-3, 20e-3)
     edges = np.arange(0.0, t[-1] + bit, bit)
     levels = rng.integers(0, 2, edges.size).astype(float)
     levels[0] = 1.0
-    return _held(t, _start(rng), edges, levels)
+    return _held(t, _start(rng, t, rest), edges, levels)
 
 
-def multisine(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def multisine(t: np.ndarray, rng: np.random.Generator, rest: int | None = None) -> np.ndarray:
     """Eight sines, log-spaced 0.2 Hz to fs/20, random phases, peak 1 (changes every sample)."""
     fs = 1.0 / (t[1] - t[0])
     f = np.geomspace(0.2, fs / 20.0, 8)
-    t0 = _start(rng)
+    t0 = _start(rng, t, rest)
     tau = np.maximum(t - t0, 0.0)[:, None]
     x = np.sin(2 * np.pi * f * tau + rng.uniform(0, 2 * np.pi, f.size)).sum(axis=1)
     return np.where(t >= t0, x / np.max(np.abs(x)), 0.0)
 
 
-def triangle(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def triangle(t: np.ndarray, rng: np.random.Generator, rest: int | None = None) -> np.ndarray:
     """Triangle wave 0..1 with a period of 0.5-4 s."""
     period = rng.uniform(0.5, 4.0)
-    t0 = _start(rng)
+    t0 = _start(rng, t, rest)
     phase = np.mod(np.maximum(t - t0, 0.0) / period, 1.0)
     return np.where(t >= t0, 1.0 - np.abs(2.0 * phase - 1.0), 0.0)
 
 
-INPUTS: dict[str, Callable[[np.ndarray, np.random.Generator], np.ndarray]] = {
+INPUTS: dict[str, Callable[..., np.ndarray]] = {
     "steps": steps, "staircase": staircase, "random_staircase": random_staircase,
     "prbs": prbs, "multisine": multisine, "triangle": triangle}
 
@@ -374,19 +381,19 @@ def _strong_creep_plant(rng: np.random.Generator) -> dict:
             "input": str(rng.choice(list(INPUTS))), "input_scale": float(10.0 ** rng.uniform(-1.0, 2.0))}
 
 
-def strong_creep(seed: int) -> Scenario:
+def strong_creep(seed: int, rest: int | None = None) -> Scenario:
     """Stationary plant over the widest ranges, any input family."""
     rng = np.random.default_rng([seed, 1])
     plant = _strong_creep_plant(rng)
     h = 1.0 / plant["fs"]
     t = np.arange(int(plant["duration_s"] / h)) * h
     truth, params = _split({k: v for k, v in plant.items() if k != "fs"})
-    u = plant["input_scale"] * INPUTS[plant["input"]](t, rng)
+    u = plant["input_scale"] * INPUTS[plant["input"]](t, rng, rest)
     return _build("strong_creep", seed, rng, h, u, truth, params)[0]
 
 
 def _abrupt(family: str, seed: int, stream: int,
-            change: Callable[[dict, np.random.Generator], tuple[dict, dict]]) -> Scenario:
+            change: Callable[[dict, np.random.Generator], tuple[dict, dict]], rest: int | None = None) -> Scenario:
     """16 s at 10 kHz, fn 100-1000 Hz, steps every 1 s; ``change`` gives the parameters after t_change.
 
     ``stream`` keeps the families' random draws apart for equal seeds.
@@ -399,7 +406,7 @@ def _abrupt(family: str, seed: int, stream: int,
     after, info = change(plant, rng)
     on = t >= t_change
     truth = {k: np.where(on, after[k], plant[k]) for k in ("alpha", "a1", "a2", "b")}
-    return _build(family, seed, rng, h, steps(t, rng), truth, {**plant, **info, "input": "steps"},
+    return _build(family, seed, rng, h, steps(t, rng, rest), truth, {**plant, **info, "input": "steps"},
                   change_time=float(t[np.argmax(on)]))[0]
 
 
@@ -419,17 +426,17 @@ def _stiffness_or_damping(plant: dict, rng: np.random.Generator) -> tuple[dict, 
     return {**plant, "a1": plant["a1"] * c}, {"change": "damping", "damping_ratio": c}
 
 
-def payload(seed: int) -> Scenario:
+def payload(seed: int, rest: int | None = None) -> Scenario:
     """A payload added mid-record."""
-    return _abrupt("payload", seed, 2, _add_mass)
+    return _abrupt("payload", seed, 2, _add_mass, rest)
 
 
-def stiffness(seed: int) -> Scenario:
+def stiffness(seed: int, rest: int | None = None) -> Scenario:
     """A stiffness or damping change mid-record."""
-    return _abrupt("stiffness", seed, 3, _stiffness_or_damping)
+    return _abrupt("stiffness", seed, 3, _stiffness_or_damping, rest)
 
 
-def drift(seed: int) -> Scenario:
+def drift(seed: int, rest: int | None = None) -> Scenario:
     """Thermal drift: alpha +10-20 % and b +5-10 % linearly over 60 s at 2 kHz."""
     rng = np.random.default_rng([seed, 4])
     h = 5e-4
@@ -439,21 +446,21 @@ def drift(seed: int) -> Scenario:
     ramp = t / t[-1]
     truth = {**_split(plant)[0], "alpha": plant["alpha"] * (1 + da * ramp), "b": plant["b"] * (1 + db * ramp)}
     name = str(rng.choice(["steps", "staircase"]))
-    return _build("drift", seed, rng, h, INPUTS[name](t, rng), truth,
+    return _build("drift", seed, rng, h, INPUTS[name](t, rng, rest), truth,
                   {**plant, "alpha_drift": da, "b_drift": db, "input": name})[0]
 
 
-def controller(seed: int) -> Scenario:
+def controller(seed: int, rest: int | None = None) -> Scenario:
     """Stationary plant under a controller-like random staircase (5-50 ms holds)."""
     rng = np.random.default_rng([seed, 5])
     h = 1e-4
     t = np.arange(int(12.0 / h)) * h
     truth, params = _split(_stationary_plant(rng, 100.0, 2500.0))
-    return _build("controller", seed, rng, h, random_staircase(t, rng), truth,
+    return _build("controller", seed, rng, h, random_staircase(t, rng, rest), truth,
                   {**params, "input": "random_staircase"})[0]
 
 
-def close_modes(seed: int) -> Scenario:
+def close_modes(seed: int, rest: int | None = None) -> Scenario:
     """First mode plus two weaker ones 1.3-2.5x above it; truth_best from a noise-free second-order fit."""
     rng = np.random.default_rng([seed, 6])
     h = 1e-4
@@ -463,7 +470,7 @@ def close_modes(seed: int) -> Scenario:
     modes = tuple((float(rng.uniform(0.1, 0.4)), *_resonance(plant["fn"] * r, _loguniform(rng, 0.02, 0.2)))
                   for r in ratios)
     truth, params = _split(plant)
-    u = steps(t, rng)
+    u = steps(t, rng, rest)
     scen, clean = _build("close_modes", seed, rng, h, u, truth,
                          {**params, "input": "steps", "modes": [list(m) for m in modes],
                           "mode_ratios": ratios.tolist()}, modes=modes)
@@ -471,7 +478,7 @@ def close_modes(seed: int) -> Scenario:
     return scen
 
 
-def mid_operation(seed: int) -> Scenario:
+def mid_operation(seed: int, rest: int | None = None) -> Scenario:
     """12 s of a stationary plant taken 5 s into operation (steps or staircase since t = 0.05-0.3 s)."""
     rng = np.random.default_rng([seed, 7])
     h = 1e-4
@@ -488,14 +495,14 @@ def mid_operation(seed: int) -> Scenario:
     return scen
 
 
-def quiet_start(seed: int) -> Scenario:
+def quiet_start(seed: int, rest: int | None = None) -> Scenario:
     """A start the search can get wrong: 1.5-3 s of small steps (levels 0-0.1 every 0.3 s, the resonance
     near the noise), then steps to +-1 every 0.5 s (the jump stays within 20 input ranges: not a glitch)."""
     rng = np.random.default_rng([seed, 8])
     h = 1e-4
     t = np.arange(int(10.0 / h)) * h
     truth, params = _split(_stationary_plant(rng, 2.0, 300.0))
-    t0, t_big = _start(rng), float(rng.uniform(1.5, 3.0))
+    t0, t_big = _start(rng, t, rest), float(rng.uniform(1.5, 3.0))
     small = _held(t, t0, np.arange(0.0, t_big, 0.3), rng.uniform(0.0, 0.1, int(t_big / 0.3) + 1))
     big = _held(t, t0 + t_big, np.arange(0.0, 10.0, 0.5), rng.uniform(-1.0, 1.0, 20))
     u = np.where(t >= t0 + t_big, big, small)
@@ -503,12 +510,24 @@ def quiet_start(seed: int) -> Scenario:
     return _build("quiet_start", seed, rng, h, u, truth, info)[0]
 
 
-FAMILIES: dict[str, Callable[[int], Scenario]] = {
+FAMILIES: dict[str, Callable[..., Scenario]] = {
     "strong_creep": strong_creep, "payload": payload, "stiffness": stiffness, "drift": drift,
     "controller": controller, "close_modes": close_modes, "mid_operation": mid_operation,
     "quiet_start": quiet_start}
 
 
-def make(family: str, seed: int) -> Scenario:
-    """Scenario ``seed`` of ``family`` (deterministic)."""
-    return FAMILIES[family](seed)
+#: Families whose records can start at rest (all but the one taken in operation): ``make``'s ``rest``.
+FROM_REST = tuple(name for name in FAMILIES if name != "mid_operation")
+
+
+def make(family: str, seed: int, rest: int | None = None) -> Scenario:
+    """Scenario ``seed`` of ``family`` (deterministic). ``rest``: the input's first change after this many samples
+    of rest (0: its first level from the first sample, the plant at rest before it: the step at the first sample)
+    instead of the family's 0.05-0.3 s; the same plant and input otherwise. Not for mid_operation (taken in
+    operation: no rest)."""
+    if rest is not None and family not in FROM_REST:
+        raise ValueError(f"{family} records are taken in operation: no rest to set")
+    scen = FAMILIES[family](seed, rest)
+    if rest is not None:
+        scen.params["rest_samples"] = int(rest)
+    return scen

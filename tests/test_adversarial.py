@@ -329,7 +329,9 @@ def test_stream_link_lost_for_good_prints_the_estimate_and_exits_4():
     assert "Traceback" not in err and "link lost" in err
     report = json.loads(out)
     assert report["samples"] > 1000 and report["end"]["reason"] == "link_lost"
-    assert report["source_stats"]["disconnects"] == 1 and report["alpha"] is not None
+    # the estimate so far is printed (its values None while not yet estimated: this stream joins the record after
+    # its step, and a held input shows nothing to estimate)
+    assert report["source_stats"]["disconnects"] == 1 and {"alpha", "phase", "quality", "reason"} <= set(report)
 
 
 def test_stream_ctrl_c_prints_the_estimate_and_exits_130():

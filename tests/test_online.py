@@ -6,6 +6,7 @@ the issue's: alpha 2 %, b 3 %, a1 and a2 5 % (the textbook cases much tighter).
 """
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -34,7 +35,8 @@ def _plant(alpha, fn, zeta, b, h, seconds, amp, t0, seed=0, snr_db=40.0):
 
 
 def _errors(e: OnlineEstimate, truth: dict) -> dict:
-    return {k: abs(getattr(e, k) / truth[k] - 1) for k in TOL}
+    """Relative errors; inf for a value not yet estimated (None)."""
+    return {k: math.inf if getattr(e, k) is None else abs(getattr(e, k) / truth[k] - 1) for k in TOL}
 
 
 def _within(e: OnlineEstimate, truth: dict, scale: float = 1.0) -> bool:
@@ -67,7 +69,10 @@ def test_load_cell_single_samples_phases_and_accuracy(load_cell):
         e = est.estimate
         if not phases or phases[-1] != e.phase:
             phases.append(e.phase)
-        assert all(math.isfinite(x) for x in (e.alpha, e.a1, e.a2, e.b, e.t))
+        values = (e.alpha, e.a1, e.a2, e.b)
+        # a value is a finite number once estimated, None (not 0) before: all four together, with the model
+        assert all(v is None for v in values) == (est.model is None), values
+        assert all(v is None or math.isfinite(v) for v in values) and math.isfinite(e.t)
     assert phases[0] == "buffering" and phases[-1] == "tracking" and "searching" in phases
     e = est.estimate
     assert _within(e, _truth(model), scale=0.25)          # alpha 0.5 %, b 0.75 %, a1 a2 1.25 %
@@ -723,7 +728,10 @@ def test_estimate_is_finite_before_any_model():
     e = est.estimate
     assert isinstance(e, OnlineEstimate)
     assert e.phase == "buffering" and e.quality == "none" and e.reason
-    assert all(math.isfinite(v) for v in (e.alpha, e.a1, e.a2, e.b))
+    # not yet estimated: None, never 0.0 (JSON null)
+    assert all(getattr(e, k) is None for k in ("alpha", "a1", "a2", "b", "fn_hz", "zeta", "offset", "t_c",
+                                               "noise_rms", "residual_rms", "b_rate", "alpha_rate"))
+    assert json.loads(json.dumps(e.to_dict()))["alpha"] is None and e.frozen is False
     assert est.model is None and est.last_prediction is None and est.predict_one(1.0) is None
     for _ in range(5000):
         est.update(0.0, 0.01)          # no excitation: nothing to identify, memory stays bounded

@@ -28,7 +28,8 @@ TOL = {"alpha": 0.02, "b": 0.03, "a1": 0.05, "a2": 0.05}
 
 
 def _errors(e, truth: dict) -> dict:
-    return {k: abs(getattr(e, k) / truth[k] - 1) for k in TOL}
+    """Relative errors; inf for a value not yet estimated (None)."""
+    return {k: math.inf if getattr(e, k) is None else abs(getattr(e, k) / truth[k] - 1) for k in TOL}
 
 
 def _within(e, truth: dict) -> bool:

@@ -129,9 +129,23 @@ def _marks(items: list[dict]) -> str:
 
 
 def _cell(v) -> str:
+    """A trace cell: text quoted if needed, a number, or empty for a value not yet estimated (None)."""
+    if v is None:
+        return ""
     if isinstance(v, str):
         return '"' + v.replace('"', "'") + '"' if ("," in v or '"' in v) else v
     return repr(float(v))
+
+
+#: How the estimator read the stream's start (``OnlineEstimate.start``), for the text report.
+START_TEXT = {"rest": "at rest (first input 0)",
+              "step": "a step from rest at the first sample (the input read as 0 before it)",
+              "operation": "in operation (the plant moving from an unknown past input)"}
+
+
+def _value(v: float | None, spec: str) -> str:
+    """A value of the estimate as text: formatted, or "-" while it is not estimated (None)."""
+    return "-" if v is None else format(v, spec)
 
 
 def _latency(us: np.ndarray) -> dict:
@@ -151,7 +165,8 @@ def _report(est: OnlineEstimator, latency: dict, extra: dict) -> dict:
            "divergences": est.divergences,
            "outliers": e.outliers, "input_outliers": e.input_outliers, "noise_rms": e.noise_rms,
            "residual_rms": e.residual_rms, "events": e.events, "t": e.t, "dt": est.dt,
-           "b_rate": e.b_rate, "alpha_rate": e.alpha_rate, "researches": e.researches}
+           "b_rate": e.b_rate, "alpha_rate": e.alpha_rate, "researches": e.researches,
+           "frozen": e.frozen, "start": e.start}
     out.update(extra)
     return out
 
@@ -179,8 +194,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"{spec}: {e.samples} samples ({e.t:.4g} s at dt = {est.dt:.4g} s), phase {e.phase}, quality {e.quality}{why}")
     for name in ("alpha", "a1", "a2", "b"):
         err = f"  +/- {sd[name]:.3g}" if name in sd and math.isfinite(sd[name]) else ""
-        print(f"  {name:<6} = {getattr(e, name):.6g}{err}")
-    print(f"  fn     = {e.fn_hz:.5g} Hz, zeta = {e.zeta:.4g}, t_c = {e.t_c:.4g} s, offset = {e.offset:.4g}")
+        print(f"  {name:<6} = {_value(getattr(e, name), '.6g')}{err}")
+    if e.start is not None:
+        print(f"  start  : {START_TEXT.get(e.start, e.start)}" + ("; frozen (freeze())" if e.frozen else ""))
+    print(f"  fn     = {_value(e.fn_hz, '.5g')} Hz, zeta = {_value(e.zeta, '.4g')}, t_c = {_value(e.t_c, '.4g')} s, "
+          f"offset = {_value(e.offset, '.4g')}")
     print(f"  skipped {est.skipped_nonfinite} non-finite, {est.gaps} lost, {est.alpha_updates} window fits, "
           f"outliers gated: {e.outliers} output, {e.input_outliers} input, internal faults: {est.internal_faults}")
     for ev in e.events:

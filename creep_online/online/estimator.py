@@ -65,6 +65,7 @@ from .search import ResonanceSearch, SearchScratch, frequency_steps, grid_ends
 from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SOE_TOP, SoeBasis
 from . import recursive as R
 from .recursive import RecursiveTracker
+from . import rest
 from .tracker import DETERMINED, FREE_RATES, PERIODIC_JOBS, WindowTracker
 from .stored_params import StoredParams
 
@@ -75,7 +76,7 @@ MAX_SEARCH_SAMPLES = 1 << 15
 #: Start-up buffer (samples): the search window plus what arrives while the search runs.
 BUFFER_SAMPLES = 1 << 17
 #: Largest history kept for replays (samples).
-MAX_HISTORY = 1 << 16
+MAX_HISTORY = 1 << 19
 #: alpha within this relative distance of an end of ``alpha_bounds`` is held by the bound, not determined.
 BOUND_TOL = 1e-3
 #: Live error (window rms) above this multiple of the noise floor is "degraded": the model misses part of the data.
@@ -104,13 +105,28 @@ MAX_FAULT_EVENTS = 50
 #: Consecutive faults of the start-up (search, tracker start, replay of the buffer) after which its buffer is
 #: dropped: a fault that the buffered samples cause every time is not searched on again and again.
 STARTUP_FAULTS = 3
+#: Before the input's first move the start-up buffer keeps at most IDLE_BUFFER samples: then only the latest IDLE_KEEP
+#: (nothing to identify yet; a stream in operation's distant past only adds its creep to the free responses' load).
+IDLE_BUFFER = 4096
+IDLE_KEEP = 1024
+#: Buffered inputs moved to another frame per unit of work (``OnlineEstimator._reframe``: ~5 us of numpy).
+REFRAME_CHUNK = 8192
 #: The two Remark-3 strategies (``refit``): recompute over the window, or carry on recursively.
 REFITS = ONLINE_REFITS
 
 
 @dataclass
 class OnlineEstimate:
-    """The estimator's current answer. Every number is finite.
+    """The estimator's current answer. Every number is finite; a value not yet estimated is None (JSON null).
+
+    Before the first model (phases ``buffering`` and ``searching``) alpha, a1, a2, b, fn_hz, zeta, offset,
+    noise_rms, residual_rms, b_rate and alpha_rate are None, and so is t_c until the start-up search has begun;
+    residual_rms also until the first window fit. ``frozen`` is True after ``freeze()``: the estimate then stays
+    while the samples still run through the model, and ``quality`` says so and judges the frozen model against the
+    new samples (``reason`` names the misfit). ``start`` says how the stream was read to start: ``"rest"`` (its first
+    input zero), ``"step"`` (its input at a non-zero level from the first sample, read as a step from rest there:
+    the input 0 before it), ``"operation"`` (taken in operation: the plant moving from an unknown past input), None
+    while the data do not tell yet (``rest.py``).
 
     With drift tracking (``track_drift``) alpha and b are the values at the
     newest re-fit (not window averages); ``b_rate`` and ``alpha_rate`` are their
@@ -130,36 +146,38 @@ class OnlineEstimate:
     ``"internal_fault"`` in ``events``; module docstring: error contract).
     """
 
-    alpha: float
-    a1: float
-    a2: float
-    b: float
+    alpha: float | None
+    a1: float | None
+    a2: float | None
+    b: float | None
     phase: str
     quality: str
     uncertainty: dict = field(default_factory=dict)
     t: float = 0.0
     samples: int = 0
-    t_c: float = 0.0
-    fn_hz: float = 0.0
-    zeta: float = 0.0
-    offset: float = 0.0
+    t_c: float | None = None
+    fn_hz: float | None = None
+    zeta: float | None = None
+    offset: float | None = None
     skipped: int = 0
     alpha_updates: int = 0
     divergences: int = 0
     reason: str = ""
-    noise_rms: float = 0.0
-    residual_rms: float = 0.0
+    noise_rms: float | None = None
+    residual_rms: float | None = None
     outliers: int = 0
     input_outliers: int = 0
     shifts: int = 0
     relinearizations: int = 0
     events: list = field(default_factory=list)
-    b_rate: float = 0.0
-    alpha_rate: float = 0.0
+    b_rate: float | None = None
+    alpha_rate: float | None = None
     rate_uncertainty: dict = field(default_factory=dict)
     researches: list = field(default_factory=list)
     determined: list = field(default_factory=list)
     internal_faults: int = 0
+    frozen: bool = False
+    start: str | None = None
 
     def to_dict(self) -> dict:
         """JSON-ready dict."""
@@ -303,6 +321,7 @@ class OnlineEstimator(StoredParams):
         self.gaps = 0
         self.input_outliers = 0
         self.frozen = False
+        self._frozen_t = 0.0               # stream time of freeze()
         self._phase = "buffering"
         self._u_ref: float | None = None
         self._u_lo = self._u_hi = 0.0
@@ -311,6 +330,14 @@ class OnlineEstimator(StoredParams):
         self._backlog: deque[tuple[float, float]] = deque()   # decided samples (du, y) the live tracker awaits
         self._deferred = False                               # either is non-empty: update()'s slow path
         self._first_change: int | None = None
+        #: how the stream starts (``rest.py``): "rest" (its first input zero), "step" (a step from rest at its first
+        #: sample), "operation" (taken in operation), None while the data do not tell yet
+        self._start: str | None = None
+        self._competing = False            # both readings of the start are being searched (``_compete``)
+        self._move_a: int | None = None    # the input's first move (buffer index) in operation's reading
+        self._jump = 0.0                   # the first input level (the step's size in the step's reading)
+        self._lead: int | None = None      # rest samples prepended to the buffer (``_lead_in``; None: not yet)
+        self._start_wait = max(64, min(int(rest.WAIT_S / h), BUFFER_SAMPLES // 2))   # (``rest.WAIT_S``)
         self._bu = np.empty(BUFFER_SAMPLES)
         self._by = np.empty(BUFFER_SAMPLES)
         self._nbuf = 0
@@ -319,6 +346,7 @@ class OnlineEstimator(StoredParams):
         self._by.fill(0.0)
         self._hist_work = np.zeros((MAX_SEARCH_SAMPLES, self.basis.size))
         self._hist_work.fill(0.0)
+        self._noise_scratch = np.zeros(W.NOISE_SEED_ROWS)
         self._ring = np.zeros((2, self._history))
         self._ring.fill(0.0)
         self._burst = max(2, int(round(self.burst_s / h)))
@@ -328,6 +356,7 @@ class OnlineEstimator(StoredParams):
         self._search_scratch.prepare_judge(FREE_RATES, self.basis.h)   # (a start-up search in operation's)
         self._grid_plan: _GridPlan | None = None
         self._search_rounds = 0
+        self._search_end = 0                # end (buffer index) of the last start-up search's rows
         self._tc_used = 0.0
         self._tracker: WindowTracker | RecursiveTracker | None = None
         self._starting: Generator | None = None     # the tracker's start under way (``_start_steps``)
@@ -340,7 +369,10 @@ class OnlineEstimator(StoredParams):
         return self
 
     def freeze(self) -> None:
-        """Stop adapting: samples still advance the states and the predictions; the estimate stays."""
+        """Stop adapting: samples still advance the states and the predictions; the estimate stays, and its quality
+        judges it against the new samples (``_frozen_quality``)."""
+        if not self.frozen:
+            self._frozen_t = self.samples * self._h
         self.frozen = True
         if self._tracker is not None:
             self._tracker.sc[W.SC_ACC] = 0.0
@@ -419,33 +451,36 @@ class OnlineEstimator(StoredParams):
 
     def _bare_estimate(self, quality: str, reason: str) -> OnlineEstimate:
         """The estimate without a model (before the first search has ended, or when building it failed)."""
-        return OnlineEstimate(alpha=0.0, a1=0.0, a2=0.0, b=0.0, phase=self._phase, quality=quality,
+        return OnlineEstimate(alpha=None, a1=None, a2=None, b=None, phase=self._phase, quality=quality,
                               reason=reason, t=self.samples * self._h, samples=self.samples,
-                              skipped=self.skipped_nonfinite, input_outliers=self.input_outliers,
-                              events=self.events, internal_faults=self.internal_faults)
+                              t_c=self._tc_used or None, skipped=self.skipped_nonfinite,
+                              input_outliers=self.input_outliers, events=self.events,
+                              internal_faults=self.internal_faults, frozen=self.frozen, start=self._start)
 
     def _estimate(self) -> OnlineEstimate:
         tr = self._tracker
         quality, reason, determined = self._assess()
         if tr is None:
             return self._bare_estimate(quality, reason)
-        a1, a2 = tr.a1, tr.a2
-        wn = 1.0 / math.sqrt(a2)
+        a1, a2 = _known(tr.a1), _known(tr.a2)
+        wn = 1.0 / math.sqrt(a2) if a2 is not None and a2 > 0.0 else None
         std = {k: _finite(tr.fit.std[k], math.inf) for k in ("alpha", "a1", "a2", "b") if k in tr.fit.std}
         rate_std = {k: _finite(tr.fit.std[k], math.inf) for k in ("b_rate", "alpha_rate")
                     if tr.drift_on and k in tr.fit.std}
         return OnlineEstimate(
-            alpha=_finite(tr.alpha), a1=_finite(a1), a2=_finite(a2), b=_finite(tr.b), phase=self._phase,
+            alpha=_known(tr.alpha), a1=a1, a2=a2, b=_known(tr.b), phase=self._phase,
             quality=quality, reason=reason, uncertainty=std, t=self.samples * self._h, samples=self.samples,
-            t_c=_finite(self._tc_used), fn_hz=_finite(wn / (2 * math.pi)), zeta=_finite(a1 * wn / 2),
-            offset=_finite(tr.offset), skipped=self.skipped_nonfinite,
+            t_c=self._tc_used or None, fn_hz=None if wn is None else _known(wn / (2 * math.pi)),
+            zeta=None if wn is None or a1 is None else _known(a1 * wn / 2),
+            offset=_known(tr.offset), skipped=self.skipped_nonfinite,
             alpha_updates=self.alpha_updates, divergences=self.divergences,
-            noise_rms=_finite(self._noise()),
-            residual_rms=_finite(self._residual()), outliers=int(tr.sc[W.SC_OUTLIERS]),
+            noise_rms=_known(self._noise()),
+            residual_rms=self._residual(), outliers=int(tr.sc[W.SC_OUTLIERS]),
             shifts=int(tr.sc[W.SC_SHIFTS]), relinearizations=tr.relinearizations,
-            input_outliers=self.input_outliers, events=self.events, b_rate=_finite(tr.b_rate),
-            alpha_rate=_finite(tr.alpha_rate), rate_uncertainty=rate_std,
-            researches=self.researches, determined=determined, internal_faults=self.internal_faults)
+            input_outliers=self.input_outliers, events=self.events, b_rate=_known(tr.b_rate),
+            alpha_rate=_known(tr.alpha_rate), rate_uncertainty=rate_std,
+            researches=self.researches, determined=determined, internal_faults=self.internal_faults,
+            frozen=self.frozen, start=self._start)
 
     def predict_one(self, u: float) -> float | None:
         """Model output at the next sample if u is applied now (no state change); None without a model."""
@@ -624,6 +659,9 @@ class OnlineEstimator(StoredParams):
             self._u_ref = u
             self._u_lo = self._u_hi = u
             self._u_last = u
+            # a first input of zero is a start at rest; a non-zero one at the stream's first sample is read from the
+            # data (``_read_start``); after a start over in mid-stream the plant is in operation
+            self._start = "rest" if u == 0.0 else (None if self.samples == 1 else "operation")
         if self._glitch_candidate(u):
             self._held.append((u, y))
             if len(self._held) <= self._burst:
@@ -724,14 +762,16 @@ class OnlineEstimator(StoredParams):
     def _buffer(self, du: float, y: float) -> None:
         """Append to the start-up buffer (before any input change only the last samples are kept)."""
         k = self._nbuf
-        if self._first_change is None and k >= 4096:     # no excitation yet: keep the latest only
-            keep = 1024
+        if self._first_change is None and k >= IDLE_BUFFER and self._start is not None:  # no excitation: the latest
+            keep = IDLE_KEEP
             self._bu[:keep] = self._bu[k - keep:k]
             self._by[:keep] = self._by[k - keep:k]
             k = keep
         if k == self._bu.size:
             if self._first_change is None:
-                keep = 1024
+                if self._start is None:      # (a held input whose output never showed a step: the first sample goes)
+                    self._start = "operation"
+                keep = IDLE_KEEP
                 self._bu[:keep] = self._bu[k - keep:k]
                 self._by[:keep] = self._by[k - keep:k]
                 k = keep
@@ -763,7 +803,11 @@ class OnlineEstimator(StoredParams):
         reads "searching" until the tracker has started, a few samples later. With ``units`` >= 2^29 (block
         mode, a full buffer) everything runs in this call."""
         eager = units >= 1 << 29
+        if self._lead is None and self._first_change is not None and not self._in_operation:
+            self._lead_in()
         if self._phase == "buffering":
+            if self._start is None and not self._competing and self._read_start():
+                return
             if not self._ready_to_search():
                 self._plan_grid()
                 return
@@ -776,7 +820,8 @@ class OnlineEstimator(StoredParams):
                     units -= 1
                 if s.result is None or self._longer_window_needed(s.result):
                     return
-                self._starting = self._start_steps(s.result)
+                self._starting = self._compete_and_start(s.result) if self._competing else \
+                    self._start_steps(s.result)
                 if not eager:
                     return
             for _ in self._starting:
@@ -786,6 +831,115 @@ class OnlineEstimator(StoredParams):
                 return
         if self._catchup:
             self._catch_up(max(units, 1))
+
+    def _read_start(self) -> bool:
+        """A stream whose input is at a non-zero level from its first sample: a step from rest there, or taken in
+        operation (``rest``)? Read when the search in operation is ready (the input has moved: if the output may show
+        a step, both readings compete, ``_compete``), or every ``rest.WAIT_S`` while the input holds (the step's
+        reading once the output shows one; until then the buffer keeps the first sample). Returns whether this call
+        read it."""
+        n = self._nbuf
+        moved = self._first_change is not None
+        if not (self._ready_to_search() if moved else n % self._start_wait == 0):
+            return False
+        if not rest.starts_near_rest(self._by[:n]):
+            self._start = "operation"
+            self._keep_latest_before_move()
+            return True
+        if not (moved or rest.shows_step(self._by[:n])):
+            return True                    # (near rest, not moved yet: read again after another WAIT_S)
+        self._competing = moved
+        if not moved:
+            self._start = "step"
+        self._move_a = self._first_change
+        self._jump = self._u_ref
+        self._u_lo, self._u_hi = min(self._u_lo, 0.0), max(self._u_hi, 0.0)
+        for _ in self._reframe(0.0):       # (before the first move: at most WAIT_S, a few numpy calls)
+            pass
+        self._first_change = 0
+        self._grid_plan = None
+        return True
+
+    def _keep_latest_before_move(self) -> None:
+        """A stream read in operation after its input moved: of the samples before the move, the latest ``IDLE_KEEP``
+        only if there were ``IDLE_BUFFER`` of them, as ``_buffer`` drops them while the input holds (the reading kept
+        them all). A held input's are dropped by ``_buffer`` itself."""
+        fc = self._first_change
+        if fc is None or fc < IDLE_BUFFER:
+            return
+        drop = fc - IDLE_KEEP
+        n = self._nbuf - drop
+        self._bu[:n] = self._bu[drop:drop + n]
+        self._by[:n] = self._by[drop:drop + n]
+        self._nbuf = n
+        self._first_change = fc - drop
+        self._grid_plan = None
+
+    def _lead_in(self) -> None:
+        """A stream read from rest: the rest it implies before its first sample, if it shows too little of it
+        (``rest.lead_in``): input 0, output at the mean of its rest outputs (those up to its first input change). The
+        tracker's time then runs that many samples ahead of the stream's (``_n_shift``)."""
+        fc, n = self._first_change, self._nbuf
+        rest_y = self._by[:min(fc + 1, n)]
+        lead = rest.lead_in(fc + 1) if np.isfinite(rest_y).any() and n + rest.REST_LEAD < self._bu.size else 0
+        self._lead = lead
+        if not lead:
+            return
+        level = float(np.nanmean(rest_y))
+        self._bu[lead:lead + n] = self._bu[:n]
+        self._by[lead:lead + n] = self._by[:n]
+        self._bu[:lead] = 0.0
+        self._by[:lead] = level
+        self._nbuf = n + lead
+        self._first_change = fc + lead
+        self._n_shift -= lead
+        self._grid_plan = None
+
+    def _drop_lead(self) -> Generator:
+        """The lead-in out of the buffer again (the in-operation reading was taken), ``REFRAME_CHUNK`` per unit."""
+        lead, self._lead = self._lead or 0, 0
+        k = lead
+        while k < self._nbuf:              # (samples that arrive meanwhile are moved too)
+            k1 = min(k + REFRAME_CHUNK, self._nbuf)
+            self._bu[k - lead:k1 - lead] = self._bu[k:k1]
+            self._by[k - lead:k1 - lead] = self._by[k:k1]
+            k = k1
+            yield
+        self._nbuf -= lead
+        self._n_shift += lead
+
+    def _reframe(self, u_ref: float) -> Generator:
+        """The buffered inputs as deviations from ``u_ref`` (0: the step's reading, the input 0 before the first
+        sample; the first level: the stream in operation), ``REFRAME_CHUNK`` per unit; samples that arrive meanwhile
+        are buffered in the new frame."""
+        shift, self._u_ref = self._u_ref - u_ref, u_ref
+        n = self._nbuf
+        for k in range(0, n, REFRAME_CHUNK):
+            self._bu[k:min(k + REFRAME_CHUNK, n)] += shift
+            yield
+
+    def _compete(self, step) -> Generator:
+        """Both readings of the start on the samples the step's search had (``rest``, stage 2): the buffer in the
+        in-operation frame, its search (the step's result a candidate), the costs compared; the buffer in the frame
+        taken. In units; returns the search result to start the tracker at."""
+        lead = self._lead or 0
+        rows = self._search_end - lead     # (the step's search: from the sample before its first change)
+        yield from self._reframe(self._jump)
+        search = ResonanceSearch(self.basis, self._bu[lead:lead + rows], self._by[lead:lead + rows],
+                                 extra=((step.alpha, step.a1, step.a2),), work=self._hist_work,
+                                 scratch=self._search_scratch, free=FREE_RATES)
+        while not search.step():
+            yield
+        operation = search.result
+        self._competing = False
+        if rest.prefer_step(step.cost, operation.cost, rows, 2 + len(FREE_RATES)):
+            self._start = "step"
+            yield from self._reframe(0.0)
+            return step
+        self._start = "operation"
+        yield from self._drop_lead()
+        self._first_change = self._move_a
+        return operation
 
     @property
     def _in_operation(self) -> bool:
@@ -822,6 +976,7 @@ class OnlineEstimator(StoredParams):
 
     def _start_search(self) -> None:
         start, end = self._search_span(self._nbuf)
+        self._search_end = end
         plan, self._grid_plan = self._grid_plan, None
         planned = plan is not None and plan.span == (start, end)
         if planned and plan.search is not None:
@@ -869,6 +1024,11 @@ class OnlineEstimator(StoredParams):
             refit_every=self._refit_every, test_every=self._test_every, detect=bool(self.detect_changes),
             drift=DRIFT_COLUMNS if self.track_drift else 0)
 
+    def _compete_and_start(self, step) -> Generator:
+        """``_compete``, then ``_start_steps`` at the reading taken."""
+        res = yield from self._compete(step)
+        yield from self._start_steps(res)
+
     def _start_steps(self, res) -> Generator:
         """Start the tracker at the search's result, in steps (one per call sample by sample, ``_advance_start``):
         the window tracker's fresh state (``WindowTracker.start_state``), then its adoption; the replay of the
@@ -895,7 +1055,10 @@ class OnlineEstimator(StoredParams):
         self._start_tracking()
 
     def _start_tracking(self) -> None:
-        """The tracker has started: the replay of the buffer (``_catch_up``) follows."""
+        """The tracker has started: its noise monitor at the buffer's noise level (``window.noise_seed``), the replay
+        of the buffer (``_catch_up``) follows."""
+        lead = self._lead or 0
+        self._tracker.sc[W.SC_NOISE] = W.noise_seed(self._by[lead:], self._nbuf - lead, self._noise_scratch)
         if self.frozen:
             self._tracker.sc[W.SC_ACC] = 0.0
         self._tracker.fitting = False
@@ -1009,9 +1172,12 @@ class OnlineEstimator(StoredParams):
         self._startup_faults += 1
         self._drop_tracker()
         self._fault_fit_after = 0
-        if self._startup_faults < STARTUP_FAULTS:
+        if self._startup_faults < STARTUP_FAULTS and not self._competing:   # (competing: between two frames)
             return "the start-up search starts again on the buffered samples"
         self._restarted = self._restarted or self._first_change is not None
+        if self._start is None:            # (the stream's first samples are gone: a step there can no longer show)
+            self._start = "operation"
+            self._competing = False
         self._nbuf = 0
         self._first_change = None
         self._n_shift = self.samples
@@ -1087,17 +1253,19 @@ class OnlineEstimator(StoredParams):
         tr = self._tracker
         return 0.0 if tr is None else float(tr.sc[W.SC_NOISE])
 
-    def _residual(self) -> float:
+    def _residual(self) -> float | None:
+        """The window fit's rms error (None before the first window fit)."""
         tr = self._tracker
         if tr is None or not math.isfinite(tr.fit.cost) or tr.fit.neff <= 0:
-            return 0.0
+            return None
         return math.sqrt(max(tr.fit.cost, 0.0) / tr.fit.neff)
 
     def _floor_ratio(self) -> float:
-        """The window's error over the noise floor (the floor at least 1e-9 of the output's span, for noiseless data)."""
+        """The window's error over the noise floor (the floor at least 1e-9 of the output's span, for noiseless data;
+        0 before the first window fit)."""
         tr = self._tracker
         floor = max(self._noise(), 1e-9 * abs(tr.b) * max(self._u_hi - self._u_lo, 1e-300))
-        return self._residual() / floor if floor > 0 else math.inf
+        return (self._residual() or 0.0) / floor if floor > 0 else math.inf
 
     def _assess(self) -> tuple[str, str, list[str]]:
         """(quality, reason, determined): good only at the noise floor (``GOOD_RATIO``) with every parameter determined.
@@ -1110,6 +1278,8 @@ class OnlineEstimator(StoredParams):
             self._fault_open = None
         if self._fault_open is not None:
             return (*self._fault_reason(), [])
+        if self.frozen and self._tracker is not None and not self._catchup:
+            return (*self._frozen_quality(), [])
         if quality:
             return quality, reason, []
         tr = self._tracker
@@ -1131,13 +1301,38 @@ class OnlineEstimator(StoredParams):
                                    "(unmodeled dynamics, or parameters moving within the window)"), determined
         return "good", "", determined
 
+    def _waiting_reason(self) -> str:
+        """What the estimator waits for before its first estimate."""
+        if self._competing:
+            return ("searching the resonance and creep: the input's first level as a step from rest at the first "
+                    "sample, against a stream in operation")
+        if self._start is None and self._u_ref is not None:
+            return (f"reading the start: the input is at {self._u_ref:.4g} from the first sample; waiting for the "
+                    "output to move from its first value (a step from rest) or for the input to move (a stream in "
+                    "operation)")
+        if self._first_change is None:
+            return "waiting for the input to move" + (
+                " (the stream is in operation: its output did not start at rest)" if self._start == "operation" else "")
+        return "searching the resonance and creep"
+
+    def _frozen_quality(self) -> tuple[str, str]:
+        """A frozen estimate's quality: never "good" (it no longer follows the plant); "degraded" when the live
+        prediction error of the last ~0.2 s (``window.SC_E2``) exceeds ``FLOOR_RATIO`` of the noise floor, else
+        "provisional"; the reason says it is frozen and how well it still predicts."""
+        tr = self._tracker
+        floor = max(self._noise(), 1e-9 * abs(tr.b) * max(self._u_hi - self._u_lo, 1e-300))
+        live = math.sqrt(max(float(tr.sc[W.SC_E2]), 0.0)) / floor if floor > 0 else math.inf
+        held = f"frozen since t={self._frozen_t:.4g} s: the estimate is held, not adapted"
+        if live > FLOOR_RATIO:
+            return "degraded", f"{held}; it misses the data now (live error {live:.3g}x the noise floor)"
+        return "provisional", f"{held} (live error {live:.3g}x the noise floor)"
+
     def _checks(self) -> tuple[str, str, float]:
         """(quality, reason, the window's error over the noise floor) from every check but the parameters'
         determination; ("", "", ratio) if all pass (the ratio NaN before the tracker is live)."""
         tr = self._tracker
         if tr is None:
-            return "none", ("waiting for the input to move" if self._first_change is None
-                            else "searching the resonance and creep"), math.nan
+            return "none", self._waiting_reason(), math.nan
         if self._catchup:
             return "provisional", "replaying the start-up buffer", math.nan
         ratio = self._floor_ratio()
@@ -1208,6 +1403,12 @@ def _finite(x: float, default: float = 0.0) -> float:
     return x if math.isfinite(x) else default
 
 
+def _known(x: float) -> float | None:
+    """x as a float, or None (not estimated) when it is not finite."""
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
 def warm_kernels() -> None:
     """Compile (or load from numba's cache) every kernel that Python calls, so no update() pays for it."""
     from . import tracker as T
@@ -1257,3 +1458,5 @@ def warm_kernels() -> None:
         pass
     T.WindowTracker  # noqa: B018 - imported for its kernels
     R.warm()
+    rest.shows_step(np.linspace(0.0, 1.0, 64))       # the start's reading (a stream whose first input is not 0)
+    W.noise_seed(t, t.size, np.empty(W.NOISE_SEED_ROWS))

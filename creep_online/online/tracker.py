@@ -553,6 +553,15 @@ class WindowTracker(ParameterView):
         """The model coefficients for theta, and what the gate needs to know of the estimate."""
         W.set_estimate(self.theta, self.st, self.basis.lam, self.basis.dx)
 
+    def _take_resonance(self) -> None:
+        """A search's resonance was written into theta: predict with it at once if the live states represent it
+        (within ``TRUST`` of their linearization point, as a re-fit's move); otherwise the prediction keeps the
+        last estimate's coefficients until the replay at the new point is swapped in (``_relinearize_job``).
+        The states hold the resonance to first order around their point only: a prediction with a resonance
+        far from it is no model at all (a1 x900 beyond the point predicted 1e5 times the output's span)."""
+        if max(abs(self.theta[1] - math.log(self.a1l)), abs(self.theta[2] - math.log(self.a2l))) <= TRUST:
+            self._coefficients()
+
     # ------------------------------------------------------------------ per sample
     def feed(self, u: float, y: float, slices: int = 1) -> int:
         """One sample (u as applied, y measured; NaN y = missing), and ``slices`` slices of the re-fit or
@@ -1105,7 +1114,7 @@ class WindowTracker(ParameterView):
         yield
         if _likelihood_ratio(rows, c_live, c_new) > RESEARCH_LR:
             self.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
-            self._coefficients()
+            self._take_resonance()
             yield
 
     @staticmethod
@@ -1263,7 +1272,7 @@ class WindowTracker(ParameterView):
         # the drift rates stay: no change of the plant was declared, and a drifting window fitted without them
         # misfits (drift seed 1 at 80 dB: a switch that zeroed them left the window at 250x the noise floor,
         # and the re-fits then pulled alpha +13 %, b -15 %)
-        self._coefficients()
+        self._take_resonance()
         self.converged = False
         self._lr_recent = []
         self.fit = Fit(theta=self.theta.copy())   # quality: "first window fit pending" until the next re-fit
@@ -1282,7 +1291,7 @@ class WindowTracker(ParameterView):
         self._open_event(t_floor, moved, change, lr, self.theta, estimate_settled=True, found_by="re-search")
         yield                              # (each part on its own call, as the change test's: cold Python)
         self.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
-        self._coefficients()
+        self._take_resonance()
         yield
         self._restart_window(n_seen, abs(change["b"]) > CHANGE_MOVE["b"], alpha_known=True)
 

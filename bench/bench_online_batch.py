@@ -1,0 +1,238 @@
+"""Online against batch on the same records, and the online estimator's live prediction error per window.
+
+Usage (from the repository root, with the package installed or ``PYTHONPATH=.``)::
+
+    python bench/bench_online_batch.py [--plants 20] [--seed-offset 0] [--snr-db 40] [--families payload,drift]
+        [--rest-samples 0] [--out bench/results/online_vs_batch_40db.json]
+    python bench/bench_online_batch.py --real [--out bench/results/online_divergence_real.json]
+
+Scenario records (``hil_sim.scenarios``; ``--rest-samples`` as in ``bench_online_scenarios.py``): each is fed to
+``OnlineEstimator`` sample by sample (``update()``), its live prediction error (the output minus
+``last_prediction`` after each sample, as ``creep-online fit --online`` shows it) kept; the final estimate and
+its 1-sigma are compared with ``identify`` on the same data:
+
+* the record, for the stationary families (mid_operation: ``identify`` reads it in operation);
+* the samples after the change (t re-zeroed, the plant then in operation) for payload and stiffness;
+* the last window (the estimator's ``window_s``, 10 s) for drift: the online estimate is the plant's value now,
+  a batch fit of the whole drifting record its average.
+
+A record counts where ``identify`` fits it at the noise floor (its residual's rms within
+``identification.FLOOR_WARNING`` of its white-noise level: what ``identify`` itself warns about). There the
+online estimate agrees when, for each of alpha, b, a1, a2, ``|online - batch|`` is within the looser of the
+combined 1-sigma (``sqrt(sd_online^2 + sd_batch^2)``) and the scenario tolerance (alpha 2 %, b 3 %, a1 and a2
+5 % of the batch value).
+
+Divergence: per window of ``--window`` s (1 s) where the estimator tracks, the rms of the live prediction error
+over the rms variation of the output (its standard deviation over the window): a prediction worse than the
+window's own mean is a divergence (ratio > 1). Windows with fewer than half their samples predicted are left out.
+``--real`` runs every record in tests/data/real (uniform time; the polymer-melt records' log-spaced time is not)
+through the same check.
+"""
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import math  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+PARAMS = ("alpha", "b", "a1", "a2")
+#: The scenario tolerances (relative), as bench_online_scenarios.TOL.
+TOL = {"alpha": 0.02, "b": 0.03, "a1": 0.05, "a2": 0.05}
+#: Divergence windows (s).
+WINDOW_S = 1.0
+
+
+def live_run(h: float, u: np.ndarray, y: np.ndarray, **kwargs):
+    """The estimator fed sample by sample; (estimator, live prediction error per sample: NaN while not tracking)."""
+    from creep_online.online import OnlineEstimator
+    est = OnlineEstimator(h, **kwargs)
+    err = np.full(u.size, np.nan)
+    for i, (a, b) in enumerate(zip(u.tolist(), y.tolist())):
+        est.update(a, b)
+        p = est.last_prediction
+        if p is not None and est.phase == "tracking":
+            err[i] = b - p
+    return est, err
+
+
+def window_ratios(err: np.ndarray, y: np.ndarray, h: float, window_s: float = WINDOW_S) -> list[dict]:
+    """Per window of ``window_s``: the live error's rms over the output's standard deviation there (windows with at
+    least half their samples predicted)."""
+    w = max(2, int(round(window_s / h)))
+    out = []
+    for a in range(0, y.size - w // 2, w):
+        e = err[a:a + w]
+        ok = np.isfinite(e)
+        if np.count_nonzero(ok) < w // 2:
+            continue
+        spread = float(np.std(y[a:a + w][ok]))
+        rms = float(np.sqrt(np.mean(e[ok] ** 2)))
+        out.append({"t": a * h, "error_rms": rms, "output_std": spread,
+                    "ratio": rms / spread if spread > 0 else (0.0 if rms == 0 else math.inf)})
+    return out
+
+
+def batch_segment(scen, window_s: float) -> slice:
+    """The samples ``identify`` is given (module docstring)."""
+    n = scen.u.size
+    if scen.family == "drift":
+        return slice(max(0, n - int(round(window_s / scen.h))), n)
+    if scen.change_time is not None:
+        return slice(int(round(scen.change_time / scen.h)), n)
+    return slice(0, n)
+
+
+def batch_fit(scen, window_s: float) -> dict:
+    """``identify`` on the record's batch segment: its model, 1-sigma and floor ratio (or the error)."""
+    from creep_online.global_fit import floor_ratio
+    from creep_online.identification import FLOOR_WARNING, identify
+    seg = batch_segment(scen, window_s)
+    u, y = scen.u[seg], scen.y[seg]
+    t = np.arange(u.size) * scen.h
+    try:
+        res = identify(t, u, y)
+    except Exception as exc:  # noqa: BLE001 - a batch failure is a result
+        return {"error": f"{type(exc).__name__}: {exc}"}
+    ratio = floor_ratio(y - res.y_hat)
+    return {"model": res.model.params(), "sd": dict(res.uncertainty), "floor_ratio": ratio,
+            "at_floor": bool(ratio <= FLOOR_WARNING), "segment_s": [seg.start * scen.h, u.size * scen.h]}
+
+
+def agreement(online: dict, sd_online: dict, batch: dict, sd_batch: dict) -> dict:
+    """Per parameter: |online - batch|, the combined 1-sigma, the tolerance, and whether within the looser."""
+    out = {}
+    for p in PARAMS:
+        on, ba = online.get(p), batch[p]
+        diff = math.inf if on is None else abs(on - ba)
+        sigma = math.hypot(sd_online.get(p, math.inf), sd_batch.get(p, math.inf))
+        tol = TOL[p] * abs(ba)
+        out[p] = {"online": on, "batch": ba, "rel_diff": diff / abs(ba) if ba else math.inf,
+                  "combined_sigma_rel": sigma / abs(ba) if ba else math.inf, "within": bool(diff <= max(sigma, tol))}
+    return out
+
+
+def scenario_row(scen, window_s: float) -> dict:
+    """One scenario record: online (sample by sample), batch, agreement, divergence."""
+    t0 = time.perf_counter()
+    est, err = live_run(scen.h, scen.u, scen.y)
+    e = est.estimate
+    online = {p: getattr(e, p) for p in PARAMS}
+    windows = window_ratios(err, scen.y, scen.h)
+    batch = batch_fit(scen, window_s)
+    row = {"family": scen.family, "seed": scen.seed, "quality": e.quality, "start": e.start, "online": online,
+           "online_sd": dict(e.uncertainty), "batch": batch,
+           "max_window_ratio": max((w["ratio"] for w in windows), default=None),
+           "worst_window": max(windows, key=lambda w: w["ratio"]) if windows else None,
+           "truth": scen.final_truth, "elapsed_s": time.perf_counter() - t0}
+    if "model" in batch:
+        row["agreement"] = agreement(online, row["online_sd"], batch["model"], batch["sd"])
+        row["agrees"] = all(v["within"] for v in row["agreement"].values())
+    return row
+
+
+def family_summary(rows: list[dict]) -> dict:
+    """Per family: records, those at the batch floor, the fraction agreeing there (and over all), the worst
+    relative differences at the floor, and the divergence check."""
+    floor = [r for r in rows if r["batch"].get("at_floor")]
+    ratios = [r["max_window_ratio"] for r in rows if r["max_window_ratio"] is not None]
+    return {
+        "records": len(rows), "at_batch_floor": len(floor),
+        "agree_at_floor": (sum(r["agrees"] for r in floor) / len(floor)) if floor else None,
+        "agree_all": sum(bool(r.get("agrees")) for r in rows) / len(rows),
+        "max_rel_diff_at_floor": {p: max((r["agreement"][p]["rel_diff"] for r in floor), default=None)
+                                  for p in PARAMS},
+        "disagreeing_at_floor": [{"seed": r["seed"], **{p: r["agreement"][p] for p in PARAMS}}
+                                 for r in floor if not r["agrees"]],
+        "max_window_ratio": max(ratios) if ratios else None, "divergent_records": sum(v > 1.0 for v in ratios)}
+
+
+def real_records() -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
+    """(name, t, u, y) of every uniformly sampled record in tests/data/real (its t, u, y columns: the SISO view)."""
+    import gzip
+    out = []
+    for path in sorted((ROOT / "tests" / "data" / "real").glob("*/*.csv*")):
+        opener = gzip.open if path.suffix == ".gz" else open
+        with opener(path, "rt") as f:
+            names = f.readline().strip().split(",")
+            data = np.loadtxt(f, delimiter=",")
+        t = data[:, 0]
+        dt = np.diff(t)
+        if not (dt.size and np.all(dt > 0) and np.ptp(dt) <= 1e-3 * np.mean(dt)):
+            print(f"{path.name}: time not uniform, left out", file=sys.stderr)
+            continue
+        out.append((f"{path.parent.name}/{path.name}", t, data[:, names.index("u")], data[:, names.index("y")]))
+    return out
+
+
+def real_main(out: Path) -> dict:
+    rows = []
+    for name, t, u, y in real_records():
+        h = float(np.mean(np.diff(t)))
+        est, err = live_run(h, u, y)
+        windows = window_ratios(err, y, h)
+        e = est.estimate
+        rows.append({"record": name, "samples": int(u.size), "quality": e.quality, "start": e.start,
+                     "max_window_ratio": max((w["ratio"] for w in windows), default=None), "windows": windows})
+        print(f"{name}: max window ratio {rows[-1]['max_window_ratio']}, {e.quality}, start {e.start}",
+              file=sys.stderr, flush=True)
+    ratios = [r["max_window_ratio"] for r in rows if r["max_window_ratio"] is not None]
+    doc = {"records": rows, "max_window_ratio": max(ratios), "divergent_records": sum(v > 1.0 for v in ratios)}
+    out.write_text(json.dumps(doc, indent=1, default=str) + "\n")
+    return doc
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--plants", type=int, default=20)
+    ap.add_argument("--seed-offset", type=int, default=0)
+    ap.add_argument("--snr-db", type=float, default=40.0)
+    ap.add_argument("--families", default=None)
+    ap.add_argument("--rest-samples", type=int, default=None)
+    ap.add_argument("--real", action="store_true", help="the divergence check on tests/data/real instead")
+    ap.add_argument("--out", default=None)
+    args = ap.parse_args(argv)
+    if args.real:
+        doc = real_main(Path(args.out or ROOT / "bench" / "results" / "online_divergence_real.json"))
+        print(json.dumps({k: v for k, v in doc.items() if k != "records"}, indent=1))
+        return doc
+    from hil_sim import scenarios
+    from bench_online_scenarios import estimator_window_s
+    scenarios.SNR_DB = args.snr_db
+    families = args.families.split(",") if args.families else list(scenarios.FAMILIES)
+    if args.rest_samples is not None:
+        families = [f for f in families if f in scenarios.FROM_REST]
+    window_s = estimator_window_s()
+    start = time.perf_counter()
+    rows: dict[str, list] = {}
+    for fam in families:
+        for seed in range(args.seed_offset, args.seed_offset + args.plants):
+            row = scenario_row(scenarios.make(fam, seed, args.rest_samples), window_s)
+            rows.setdefault(fam, []).append(row)
+            b = row["batch"]
+            print(f"{fam} {seed}: batch floor {b.get('floor_ratio', float('nan')):.2f} agrees {row.get('agrees')} "
+                  f"window ratio {row['max_window_ratio']} {row['quality']}", file=sys.stderr, flush=True)
+    summary = {fam: family_summary(r) for fam, r in rows.items()}
+    doc = {"config": {"plants": args.plants, "seed_offset": args.seed_offset, "snr_db": args.snr_db,
+                      "rest_samples": args.rest_samples, "tolerances": TOL, "window_s": WINDOW_S},
+           "summary": summary, "records": rows, "elapsed_s": time.perf_counter() - start}
+    rest = "" if args.rest_samples is None else f"_rest{args.rest_samples}"
+    out = Path(args.out or ROOT / "bench" / "results" / f"online_vs_batch_{args.snr_db:g}db{rest}.json")
+    out.write_text(json.dumps(doc, indent=1, default=str) + "\n")
+    print(json.dumps(summary, indent=1, default=str))
+    return doc
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(ROOT / "bench"))
+    main()
