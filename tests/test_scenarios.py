@@ -131,3 +131,24 @@ def test_strong_creep_spans_the_ranges():
     assert min(d["fn"] for d in draws) < 2.0 and fn_ratio.max() > 0.9 and fn_ratio.max() <= 1.0
     assert {d["input"] for d in draws} == set(S.INPUTS)
     assert {d["fs"] for d in draws} == {1000.0, 2000.0, 10_000.0}
+
+
+@pytest.mark.parametrize("family, rest", [(f, 0) for f in S.FROM_REST] + [("controller", 1), ("payload", 10)])
+def test_a_family_record_can_start_with_the_step(family, rest):
+    """``make(family, seed, rest=k)``: the same plant and input levels, the input's first change after k samples of
+    rest (0: the input at its first level from the first sample); the output at rest (zero) until it."""
+    base, scen = S.make(family, 3), S.make(family, 3, rest)
+    assert scen.params["rest_samples"] == rest
+    assert all(np.array_equal(getattr(base, k), getattr(scen, k)) for k in ("alpha", "a1", "a2", "b"))
+    moves = np.flatnonzero(np.diff(scen.u, prepend=0.0) != 0.0)
+    assert moves[0] == rest or family == "strong_creep" and scen.params["input"] == "triangle"
+    assert np.all(scen.u[:rest] == 0.0)
+    assert np.all(scen.clean()[:rest + 1] == 0.0)
+    levels = lambda u: set(np.unique(u).tolist()) - {0.0}      # noqa: E731 - the held levels
+    if scen.params.get("input") in ("steps", "staircase", "random_staircase", "prbs"):
+        assert levels(base.u) <= levels(scen.u)     # (starting earlier, it reaches at least as many)
+
+
+def test_mid_operation_has_no_rest_to_set():
+    with pytest.raises(ValueError, match="in operation"):
+        S.make("mid_operation", 0, 0)

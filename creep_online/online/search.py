@@ -85,6 +85,10 @@ COLD_LEAD_WORK = 12000.0
 UNIT_SLACK = 0.1
 #: Candidates refined from the grid.
 REFINE = 3
+#: The walk's damping ratios (the box's zeta edges; the tracker's ``ZETA_BOUNDS``).
+ZETA_BOX = (0.003, 3.0)
+#: A result within this (in ln) of the box's edge is held by it (``ResonanceSearch.at_bound``).
+BOX_EDGE = 1e-3
 #: Kept rows (and decay rates) a search's ``FreeRowCache`` holds per stride: a search's strides keep at most
 #: ~2 FINE_ROWS rows (at stride 1 below 2 FINE_ROWS samples); a stride with more is evaluated without it.
 CACHE_ROWS = 4096
@@ -931,8 +935,7 @@ class ResonanceSearch:
         """
         # plain floats on these 3-vectors: numpy from Python costs more than the step's kernel here
         p = [math.log(alpha), math.log(fn), math.log(z)]
-        lo = [math.log(ONLINE_ALPHA_BOUNDS[0]), math.log(1e-3), math.log(0.003)]
-        hi = [math.log(ONLINE_ALPHA_BOUNDS[1]), math.log(0.45 / self.basis.h), math.log(3.0)]
+        lo, hi = self._box()
         yield                            # (the last walk's end, this one's set-up and first rows: ~29 us in one)
         best = yield from self._cost_at(p, stride)
         steps = [0.5, 0.25, 0.6]
@@ -970,6 +973,20 @@ class ResonanceSearch:
                     return (best, *map(math.exp, p))
             steps = [0.4 * v for v in steps]
         return (best, *map(math.exp, p))
+
+    def _box(self) -> tuple[list[float], list[float]]:
+        """The walk's bounds in (ln alpha, ln fn, ln zeta): alpha's supported range, fn up to 0.45 fs, ``ZETA_BOX``."""
+        return ([math.log(ONLINE_ALPHA_BOUNDS[0]), math.log(1e-3), math.log(ZETA_BOX[0])],
+                [math.log(ONLINE_ALPHA_BOUNDS[1]), math.log(0.45 / self.basis.h), math.log(ZETA_BOX[1])])
+
+    def at_bound(self, r: SearchResult) -> bool:
+        """Does the result sit on an edge of the walk's box (within ``BOX_EDGE`` in ln): a candidate the box holds,
+        not one the data show (alpha only when the search frees it)."""
+        wn = 1.0 / math.sqrt(r.a2)
+        p = (math.log(r.alpha), math.log(wn / (2 * math.pi)), math.log(r.a1 * wn / 2))
+        lo, hi = self._box()
+        axes = self._axes()
+        return any(p[j] - lo[j] < BOX_EDGE or hi[j] - p[j] < BOX_EDGE for j in axes)
 
     def _losing(self, cost: float, level: int) -> bool:
         """Give up a post-change walk (``fixed_alpha``) that, its steps shrunk LOSING_LEVEL times, still costs
