@@ -910,3 +910,36 @@ def test_the_grid_planned_on_idle_calls_is_the_searchs_own_and_changes_nothing(m
     assert a.quality == d.quality == "good" and a.events == d.events
     for name in ("alpha", "a1", "a2", "b"):
         assert abs(getattr(a, name) - getattr(d, name)) <= 0.25 * a.uncertainty[name], name
+
+
+def test_a_frozen_estimate_says_so_and_judges_itself_on_another_plant():
+    """After freeze(), a plant with fn 200 Hz instead of 300 Hz and twice the gain for 4 s: the estimate stays, is
+    ``frozen`` (in to_dict() too), never reads "good", and names its misfit (before, "good" with no reason)."""
+    from hil_sim.scenarios import simulate_tv
+    h = 1e-4
+
+    def record(fn: float, b: float, n: int, seed: int):
+        a1, a2 = 2 * 0.05 / (2 * math.pi * fn), 1 / (2 * math.pi * fn) ** 2
+        t = np.arange(n) * h
+        u = np.where(t < 0.05, 0.0, np.floor(t / 0.5) % 3 - 1.0)
+        y = simulate_tv(h, u, 0.1, a1, a2, b)
+        return u, y + np.random.default_rng(seed).normal(0, 1e-3, n)
+
+    u, y = record(300.0, 1.0, 60000, 0)
+    est = OnlineEstimator(h)
+    est.update_block(u, y)
+    assert est.estimate.quality == "good" and est.estimate.frozen is False
+    est.freeze()
+    held = est.estimate
+    same_u, same_y = record(300.0, 1.0, 70000, 1)
+    est.update_block(same_u[60000:], same_y[60000:])
+    e = est.estimate
+    assert e.frozen and e.quality == "provisional" and "frozen" in e.reason, e.reason     # still predicts well
+    other_u, other_y = record(200.0, 2.0, 110000, 2)
+    est.update_block(other_u[70000:], other_y[70000:])
+    e = est.estimate
+    assert e.to_dict()["frozen"] is True
+    assert e.quality == "degraded" and "frozen" in e.reason and "misses the data" in e.reason, e.reason
+    assert e.alpha == pytest.approx(held.alpha, rel=1e-4) and e.b == pytest.approx(held.b, rel=1e-4)
+    est.unfreeze()
+    assert est.estimate.frozen is False

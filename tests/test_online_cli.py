@@ -75,3 +75,44 @@ def test_stream_reports_internal_faults(record, capsys, monkeypatch):
     assert main(["stream", "--source", f"csv:{record}"]) == 0
     text = capsys.readouterr().out
     assert "internal faults: 1" in text and "internal fault at t = " in text and "ZeroDivisionError" in text
+
+
+@pytest.fixture(scope="module")
+def step_record(tmp_path_factory):
+    """The paper's experiment: the input at its level from the first sample, the output rising from zero."""
+    model = CreepModel.from_resonance(0.02, 300.0, 0.08, 1.8)
+    h, n = 1e-4, 30000
+    t = np.arange(n) * h
+    u = np.ones(n)
+    y = simulate(model, t, u) + np.random.default_rng(0).normal(0, 1e-4, n)
+    path = tmp_path_factory.mktemp("stream") / "step.csv"
+    save_csv(path, t, u, y)
+    return path
+
+
+def test_stream_reads_a_step_at_the_first_sample(step_record, capsys):
+    assert main(["stream", "--source", f"csv:{step_record}", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["phase"] == "tracking" and out["start"] == "step" and out["frozen"] is False
+    assert out["alpha"] == pytest.approx(0.02, rel=3e-3) and out["b"] == pytest.approx(1.8, rel=3e-3)
+
+
+def test_unknown_values_are_null_in_the_json_and_empty_in_the_trace(tmp_path, capsys):
+    """Not yet estimated is not zero: JSON null, an empty trace cell, "-" in the text."""
+    t = np.arange(300) * 1e-4
+    short = tmp_path / "short.csv"
+    save_csv(short, t, np.ones(t.size), 1e-3 * np.sin(t))      # too short to read the start: nothing estimated
+    trace = tmp_path / "trace.csv"
+    assert main(["stream", "--source", f"csv:{short}", "--json", "--trace", str(trace)]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["phase"] == "buffering" and out["quality"] == "none"
+    for key in ("alpha", "a1", "a2", "b", "fn_hz", "zeta", "offset", "t_c", "noise_rms", "residual_rms", "b_rate",
+                "alpha_rate"):
+        assert out[key] is None, key
+    lines = trace.read_text().splitlines()
+    header = lines[0].split(",")
+    first = lines[1].split(",")
+    assert all(first[header.index(k)] == "" for k in ("alpha", "a1", "a2", "b", "fn_hz", "zeta"))
+    assert first[header.index("quality")] == "none"
+    assert main(["stream", "--source", f"csv:{short}"]) == 0
+    assert "alpha  = -" in capsys.readouterr().out
