@@ -948,9 +948,16 @@ class OnlineEstimator(StoredParams):
         return self._restarted or bool(self._u_ref)
 
     def _search_span(self, nbuf: int) -> tuple[int, int]:
-        """(start, end) in the buffer of the search that starts with ``nbuf`` samples buffered."""
-        start = 0 if self._in_operation else max(0, self._first_change - 1)
-        return start, min(nbuf, start + MAX_SEARCH_SAMPLES)
+        """(start, end) in the buffer of the search that starts with ``nbuf`` samples buffered: from rest, the search
+        window after the first change (a step read at the first sample after a held second has a whole second
+        buffered: searched at a stride, a 1.7 kHz mode's transient fell between the rows and the search took a
+        resonance 4x slower); in operation, and for the step's reading in a competition (``_compete``: it must
+        meet the input's moves that the in-operation reading is searched on), everything buffered."""
+        if self._in_operation:
+            return 0, min(nbuf, MAX_SEARCH_SAMPLES)
+        start = max(0, self._first_change - 1)
+        end = nbuf if self._competing else self._first_change + math.ceil(self._t_search() / self._h)
+        return start, min(nbuf, end, start + MAX_SEARCH_SAMPLES)
 
     def _plan_grid(self) -> None:
         """On an idle buffering call, one step of the search that starts when the buffer is ready: its grid
