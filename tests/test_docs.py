@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import resource
 import subprocess
 import sys
 import time
@@ -86,9 +87,13 @@ def test_examples_run(page: Path, tmp_path: Path):
     spec.write_text(json.dumps({"page": str(page.relative_to(ROOT)), "blocks": runnable}))
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
            "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     proc = subprocess.run([sys.executable, __file__, str(spec)], cwd=tmp_path, env=env, capture_output=True,
                           text=True, timeout=PAGE_TIMEOUT)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
     assert proc.returncode == 0, f"{page.relative_to(ROOT)}: {proc.stderr[-4000:]}"
+    cpu = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+    print(f"{page.relative_to(ROOT)}: {len(runnable)} blocks, {cpu:.1f} s CPU")
 
 
 def test_site_builds_strictly(tmp_path: Path):
