@@ -116,6 +116,18 @@ HISTORY = re.compile(r"\b(round \d|this round|previous round|issue \d+|latest \(
                      r"branch `|was \d[^ ]* now)\b", re.IGNORECASE)
 
 
+#: The two quick-start commands: the README shows them exactly, and .ci/run runs exactly these.
+QUICK_START = ('python3 -m venv .venv && .venv/bin/pip install -q -e ".[all]" && .venv/bin/creep-online demo',
+               ".venv/bin/python -m pytest -q")
+
+
+def test_readme_is_a_front_page():
+    text = (ROOT / "README.md").read_text()
+    assert len(text.splitlines()) <= 300
+    for command in QUICK_START:
+        assert command in text and command in (ROOT / ".ci" / "run").read_text(), command
+
+
 def test_no_history_in_user_docs():
     found = []
     for p in pages():
