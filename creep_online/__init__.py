@@ -11,6 +11,9 @@ import os
 # user's explicit setting.
 for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
+# With colorama installed (the docs extra brings it), numba colours its messages and colorama writes a
+# terminal reset at exit: stray bytes after a command's output (`--json` on a terminal is then not JSON).
+os.environ.setdefault("NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING", "1")
 
 # Before numba is imported: a read-only install caches kernels in a per-user directory.
 from ._lazy import lazy_attributes as _lazy_attributes
