@@ -90,7 +90,7 @@ def fit_base_by_rule(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, source: str
     """The base model fitted under the reading the rule picks: (prepared record, base fit).
 
     The first reading's fit starts from identify's model (``use_identify``) and a grid; the other
-    reading's from that fit's model. ``warnings`` gets the prepared record's notes and, when the
+    reading's from that fit's model, and, once it has won, from a grid too. ``warnings`` gets the prepared record's notes and, when the
     input starts away from 0, the reading used; ``report`` the stages as they start.
     """
     warnings = [] if warnings is None else warnings
@@ -107,7 +107,10 @@ def fit_base_by_rule(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, source: str
         alt = ext.prepare(t, u, y, source=source, u_pre=other[0], t_pre=other[1])
         alt_base = ext.fit_base(alt, start=base.model, max_nfev=max_nfev, grid=False)
         if clearly_better(alt_base.rss, base.rss):
-            data, base, chosen = alt, alt_base, other
+            # the reading is chosen: its fit gets the grid the first reading's had (a start from the other
+            # reading's model can stay in that reading's basin)
+            searched = ext.fit_base(alt, start=alt_base.model, max_nfev=max_nfev)
+            data, base, chosen = alt, min(alt_base, searched, key=lambda f: f.rss), other
     if len(tried) > 1:
         why = " (fits clearly better than the other reading)" if chosen != tried[0] else ""
         warnings.append(describe(chosen, float(u[0]), float(t[0])) + why)

@@ -196,6 +196,10 @@ def _checked_effects(base: CreepModel, effects: dict) -> dict:
     for name, params in effects.items():
         if not isinstance(params, dict):
             raise DataError(f"effects.{name} must be a JSON object of parameters, got {type(params).__name__}")
+        expected = _parameter_names(name, base, t, u)
+        if expected and not set(params) & expected:
+            raise DataError(f"effects.{name}: none of its parameters given (expected {', '.join(sorted(expected))}, "
+                            f"got {', '.join(sorted(params)) or 'none'})")
         try:
             y = simulate_with_effects(base, t, u, {name: params})
         except Exception as exc:  # noqa: BLE001 - an effect's own check may raise anything: one line, naming it
@@ -231,3 +235,15 @@ def read_model_json(path: str | Path) -> FittedModel:
                        initial_state="reading" if effects else "free_response",
                        fitted={"command": "fit" if "effects" in doc else "identify",
                                "fit_percent": doc.get("fit_percent")})
+
+
+def _parameter_names(name: str, base: CreepModel, t: np.ndarray, u: np.ndarray) -> set[str]:
+    """The parameter names an effect's plausible example has (empty when the effect cannot make one)."""
+    from ..effects import get_effect
+    from ..effects.forward import simulate_with_effects
+    try:
+        example = get_effect(name).example_params(base, t, u, simulate_with_effects(base, t, u),
+                                                  np.random.default_rng(0))
+    except Exception:  # noqa: BLE001 - a plug-in's example may fail on this tiny record: no name check then
+        return set()
+    return set(example) if isinstance(example, dict) else set()
