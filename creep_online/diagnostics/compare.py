@@ -122,6 +122,7 @@ def compare(model, record, *, initial: str = "estimate", u_pre: float | None = N
     else:
         fit = _by_bic(fitted, data, w, u_pre, t_pre)
     y_hat, offset, info = fit
+    info = {"method": initial, **info}
     noise = noise_std_estimate(data.y - y_hat)
     metrics = {**error_metrics(data.y, y_hat, noise), "noise_rms": noise, **_residual_shape(data.t, data.y - y_hat,
                                                                                               noise)}
@@ -159,8 +160,7 @@ def _offset_fit(fitted: FittedModel, data, w: np.ndarray, reading, free_offset: 
     """(y_hat, offset, info) with the offset weighted-least-squares fitted (or the model's)."""
     path = _path(fitted, data, reading)
     offset = float(np.sum(w * w * (data.y - path)) / np.sum(w * w)) if free_offset else fitted.offset
-    info = {"method": "zero" if free_offset and reading == (fitted.input_offset, None) else "reading",
-            "reading": "equilibrium" if reading[0] is None else "rest", "input_before": reading[0],
+    info = {"chosen_by": "the model's convention", "reading": "equilibrium" if reading[0] is None else "rest", "input_before": reading[0],
             "offset_estimated": bool(free_offset), "free_response_terms": 0}
     return path + offset, offset, info
 
@@ -180,7 +180,7 @@ def _by_reading(fitted: FittedModel, data, w: np.ndarray, u_pre, t_pre) -> tuple
         if best is None or (k > 0 and clearly_better(rss, best[0])):
             best = (rss, fit)
     y_hat, offset, info = best[1]
-    info["method"] = "reading"
+    info["chosen_by"] = "start rule"
     return y_hat, offset, info
 
 
@@ -199,7 +199,7 @@ def _by_bic(fitted: FittedModel, data, w: np.ndarray, u_pre, t_pre) -> tuple:
             k = free_fit[2]["free_response_terms"] + 1
             candidates.append((_bic(_wrss(data.y - free_fit[0], w), n, k), free_fit))
     best = min(candidates, key=lambda c: c[0])[1]
-    best[2]["method"] = "estimate"
+    best[2]["chosen_by"] = "BIC"
     return best
 
 
@@ -232,7 +232,7 @@ def _free_response_fit(fitted: FittedModel, data) -> tuple | None:
     c, *_ = np.linalg.lstsq(cols[:, keep] / norms[keep], data.y - path, rcond=1e-12)
     coef[keep] = c / norms[keep]
     y_hat = path + cols @ coef
-    info = {"method": "estimate", "reading": "equilibrium", "input_before": None, "offset_estimated": True,
+    info = {"chosen_by": "BIC", "reading": "equilibrium", "input_before": None, "offset_estimated": True,
             "free_response_terms": int(keep.sum()) - 1}
     return y_hat, float(coef[0]), info
 
