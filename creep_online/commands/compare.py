@@ -64,6 +64,7 @@ def format_summary(result, model_file: str) -> str:
     fitted = m.fitted.get("fit_percent")
     effects = ", ".join(m.effects) or "none"
     units = m.units.get("y", "")
+    offset_source = "estimated for this record" if init["offset_estimated"] else "the model's own"
     lines = [f"{model_file}: {m.base}; effects: {effects}",
              f"{result.source}: {result.y.size} samples",
              f"  fit      = {result.fit_percent:.2f} % (NRMSE)"
@@ -74,7 +75,7 @@ def format_summary(result, model_file: str) -> str:
              + ("; white (at the noise floor)" if r["white"] else "; not white: the model misses something"),
              f"  worst    : {r['worst_window']['t_start']:.4g}-{r['worst_window']['t_end']:.4g} s "
              f"(rms {r['worst_window']['rms']:.4g})",
-             f"  estimated: offset {result.offset:.6g} ({'fitted' if init['offset_estimated'] else 'the model'}'s), "
+             f"  estimated: offset {result.offset:.6g} ({offset_source}), "
              f"start {_start_words(init)}"]
     return "\n".join(lines)
 
