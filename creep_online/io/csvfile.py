@@ -129,10 +129,10 @@ def _header_units(path: Path, line: str, required: tuple[str, ...],
     if missing:
         shown = delimiter.join(c.strip() for c in cells)[:80]
         other = [d for d in DELIMITERS if d != delimiter and d in line]
-        hint = f"; the header is {_delimiter_name(delimiter)}-separated" + (
+        hint = f"the header is {_delimiter_name(delimiter)}-separated" + (
             f" and also holds {_delimiter_name(other[0])}s" if other else "")
         raise DataError(f"{path}: missing column(s) {','.join(missing)} in header '{shown}' (need "
-                        f"{','.join(required)}{hint}; {NAMING_HINT})")
+                        f"{','.join(required)}); {hint}: {NAMING_HINT}")
     for c in required:
         if len(found[c]) > 1:
             where = [i + 1 for i in found[c]]
