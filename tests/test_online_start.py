@@ -87,12 +87,13 @@ def test_the_lead_in_completes_the_rest_to_rest_lead_samples():
 
 
 # ---------------------------------------------------------------------- the paper's experiment
-@pytest.mark.parametrize("seed", [1, 2, 5, 8])
+@pytest.mark.parametrize("seed", [1, 2, 5, 6, 8])
 @pytest.mark.parametrize("mode", ["block", "single"])
 def test_a_step_at_the_first_sample_is_read_from_rest_to_the_papers_accuracy(seed, mode):
     """The input at its level from the first sample (no sample of rest): alpha and b within 0.3 % at t_c + 5 s
     at 80 dB (bench/bench_online_first_sample.py: 20 plants, both modes). Before, such a record ended in phase
-    buffering, "waiting for the input to move", with every value 0."""
+    buffering, "waiting for the input to move", with every value 0. Seed 6 is a 2 Hz mode at 10 kHz: its first
+    search (0.05 s) ends on the box's edge (zeta 3, alpha 0.95), which now asks for a longer window."""
     h, u, y, truth = _step_record(seed)
     e = _estimate_after_t_c(h, u, y, mode)
     assert e.start == "step" and e.phase == "tracking", e.reason
