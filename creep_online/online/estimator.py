@@ -350,6 +350,7 @@ class OnlineEstimator(StoredParams):
         self._hist_work = np.zeros((MAX_SEARCH_SAMPLES, self.basis.size))
         self._hist_work.fill(0.0)
         self._noise_scratch = np.zeros(W.NOISE_SEED_ROWS)
+        self._noise_seed = 0.0             # the start-up buffer's noise level (``_start_tracking``)
         self._ring = np.zeros((2, self._history))
         self._ring.fill(0.0)
         self._burst = max(2, int(round(self.burst_s / h)))
@@ -1073,7 +1074,8 @@ class OnlineEstimator(StoredParams):
         """The tracker has started: its noise monitor at the buffer's noise level (``window.noise_seed``), the replay
         of the buffer (``_catch_up``) follows."""
         lead = self._lead or 0
-        self._tracker.sc[W.SC_NOISE] = W.noise_seed(self._by[lead:], self._nbuf - lead, self._noise_scratch)
+        self._noise_seed = W.noise_seed(self._by[lead:], self._nbuf - lead, self._noise_scratch)
+        self._tracker.sc[W.SC_NOISE] = self._noise_seed
         if self.frozen:
             self._tracker.sc[W.SC_ACC] = 0.0
         self._tracker.fitting = False
@@ -1088,13 +1090,16 @@ class OnlineEstimator(StoredParams):
         if self._status.size < per_unit:
             self._status = np.empty(per_unit, dtype=np.int64)
         status = self._status
+        lead = self._lead or 0
         while units > 0 and self._replayed < self._nbuf:
             units -= 1
             k = self._replayed
             # (the first unit a quarter: the new tracker's statistics and the block kernel are cold, ~27 us whole)
-            n = min(per_unit if k else max(per_unit // 4, 1), self._nbuf - k)
+            n = min(per_unit if k else max(per_unit // 4, 1), self._nbuf - k, lead - k if k < lead else self._nbuf)
             used = tr.feed_block(self._bu, self._by, status, k, k + n)
             self._replayed += used
+            if k < lead <= self._replayed:   # the lead-in's still outputs are no sample of the sensor's noise
+                W.restart_monitors(tr.sc, self._noise_seed)
             if tr._jobs and units > 0:     # the tracker's own jobs share the budget
                 units -= 1
                 tr.work(1 if units < (1 << 29) else 1 << 30)

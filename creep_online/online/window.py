@@ -766,6 +766,15 @@ def noise_seed(y: np.ndarray, n: int, scratch: np.ndarray) -> float:
     return float(np.median(scratch[:k])) / (0.6745 * math.sqrt(6.0))
 
 
+def restart_monitors(sc: np.ndarray, noise: float) -> None:
+    """The output monitors as at a stream's first sample, the noise level at ``noise``: after samples that are not the
+    sensor's (a lead-in of still outputs: no noise, every output a repeat)."""
+    sc[SC_NOISE] = noise
+    sc[SC_STILL] = 0.0
+    sc[SC_PMOVE] = 0.0
+    sc[SC_REPRATE] = 0.0
+
+
 @njit(cache=CACHE, fastmath=FAST)
 def _monitor(y: float, pred: float, sc: np.ndarray) -> None:
     """Noise floor (second differences), frozen-output detector."""
