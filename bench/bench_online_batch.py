@@ -183,6 +183,38 @@ def family_summary(rows: list[dict]) -> dict:
         "divergent_records": sum(r["divergent_windows"] > 0 for r in rows)}
 
 
+def truth_errors(row: dict) -> dict:
+    """Per estimator (online, batch): the parameters outside the scenario tolerance of the record's final truth
+    (close_modes: its best second-order fit): who is off where the two disagree."""
+    truth = row["truth"]
+    out = {}
+    for name, est in (("online", row["online"]), ("batch", row["batch"].get("model") or {})):
+        out[name] = sorted(p for p in PARAMS if est.get(p) is None or abs(est[p] / truth[p] - 1) > TOL[p])
+    return out
+
+
+def table(doc: dict) -> str:
+    """The online-vs-batch table of a results document, one line per family (``--table``)."""
+    lines = [f"{doc['config']['snr_db']:g} dB" + ("" if doc["config"].get("rest_samples") is None else
+                                                 f", rest {doc['config']['rest_samples']} samples"),
+             f"{'family':14s} {'records':>7s} {'at floor':>8s} {'agree':>6s} {'max |on-batch|/batch at floor (alpha b a1 a2)':>45s}"
+             f"  disagreeing: off the truth (online | batch)  divergent windows  max ratio (away / after change)"]
+    for fam, rows in doc["records"].items():
+        m = doc["summary"][fam]
+        floor = [r for r in rows if r["batch"].get("at_floor")]
+        off = [(r["seed"], truth_errors(r)) for r in floor if not r.get("agrees")]
+        diff = " ".join("-" if m["max_rel_diff_at_floor"][p] is None else f"{100 * m['max_rel_diff_at_floor'][p]:.2g}%"
+                        for p in PARAMS)
+        agree = "-" if m["agree_at_floor"] is None else f"{m['agree_at_floor']:.2f}"
+        worst = "; ".join(f"{seed}: {','.join(e['online']) or 'none'} | {','.join(e['batch']) or 'none'}"
+                          for seed, e in off)
+        away, after = m.get("max_ratio_away_from_change"), m.get("max_ratio_after_change")
+        lines.append(f"{fam:14s} {m['records']:7d} {m['at_batch_floor']:8d} {agree:>6s} {diff:>45s}  {worst or '-'}  "
+                     f"{sum(r.get('divergent_windows', 0) for r in rows)}  "
+                     f"{'-' if away is None else f'{away:.3g}'} / {'-' if after is None else f'{after:.3g}'}")
+    return "\n".join(lines)
+
+
 def real_records() -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
     """(name, t, u, y) of every uniformly sampled record in tests/data/real (its t, u, y columns: the SISO view)."""
     import gzip
@@ -227,8 +259,12 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--families", default=None)
     ap.add_argument("--rest-samples", type=int, default=None)
     ap.add_argument("--real", action="store_true", help="the divergence check on tests/data/real instead")
+    ap.add_argument("--table", default=None, metavar="JSON", help="print the table of a results file and exit")
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
+    if args.table:
+        print(table(json.loads(Path(args.table).read_text())))
+        return {}
     if args.real:
         doc = real_main(Path(args.out or ROOT / "bench" / "results" / "online_divergence_real.json"))
         print(json.dumps({k: v for k, v in doc.items() if k != "records"}, indent=1))

@@ -26,13 +26,14 @@ The estimator reads it in two stages:
    searched on the same samples, the step from rest (from rest, the input 0
    before the first sample) and the stream in operation (its unknown past's free
    responses projected out), and ``prefer_step`` compares their costs: the
-   in-operation reading is taken only if it fits better by more than its extra
-   free parameters are worth (an information criterion). (Seen: a stream in
+   in-operation reading is taken only if it fits clearly better (``COST_RATIO``)
+   and by more than its extra free parameters are worth (an information
+   criterion). (Seen: a stream in
    operation whose output happened to start near zero and crept far before the
    input's first move, mid_operation seed 1000 at 80 dB; the step's reading fits
    the resonance the move reveals only with the past's creep, which it lacks.)
    If the input has not moved, only the step's reading can give an estimate:
-   it is taken.
+   it is taken once the output shows the step.
 
 A stream read from rest with few rest samples before its first input change
 gets the rest its reading implies prepended (``REST_LEAD``, ``lead_in``).
