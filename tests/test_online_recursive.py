@@ -157,17 +157,18 @@ def random_runs():
 
 
 def test_converges_on_random_plants_from_a_start_in_the_basin(random_runs):
-    """The recursion is local: it converges to within the tolerances wherever the start-up search's resonance
-    is within 30 % of the truth in fn (measured: 4 of the 10 plants, all four converge), and a run that starts
-    in a wrong basin (the slow 1-6 Hz plants, whose first 50 ms the search misreads; the window tracker's
-    re-fits recover 3 of those 6, docs/online.md) never reports "good"."""
+    """The recursion is local: wherever the start-up search's resonance is within 30 % of the truth in fn it
+    converges to within the tolerances or says that its model misses the data (measured: 8 of the 10 plants start
+    there, the slow 1-6 Hz ones too since a search on the box's edge asks for a longer window; 7 converge, and
+    alpha 0.0067 at 5.8 Hz ends 2.7 % off reading "degraded", where the window tracker ends 0.15 % off), and a
+    run that starts in a wrong basin never reports "good"."""
     inside = [_within(e, truth) for e, truth, _ in random_runs]
     in_basin = [err < 0.3 for *_, err in random_runs]
     print(f"recursive tracker: {sum(inside)} of {len(inside)} random plants within the tolerances, "
           f"{sum(in_basin)} started within 30 % of fn")
-    assert sum(in_basin) >= 3
+    assert sum(in_basin) >= 6 and sum(ok and basin for ok, basin in zip(inside, in_basin)) >= 6
     for p, (e, truth, err), ok, basin in zip(PLANTS, random_runs, inside, in_basin):
-        assert ok or not basin, (p, err, _errors(e, truth))
+        assert ok or not basin or e.quality == "degraded", (p, err, _errors(e, truth), e.quality)
         assert ok or e.quality != "good", (p, e.quality, _errors(e, truth))
 
 

@@ -145,12 +145,14 @@ def test_a_research_reaches_the_stream_json_text_and_trace(tmp_path, capsys):
     from creep_online.io.csvfile import save_csv
 
     # a wrong start-up basin that the stream's re-search leaves at 1.3 s (with the change test on, as in
-    # the command)
+    # the command); the start-up search window held at 0.05 s (--t-c): left to grow, the search gets this
+    # plant's basin at the start and there is nothing to re-search
     u, y, _ = _quiet_start_record(0.3, 8.0, 0.05, 1.0, seed=1)
     path = tmp_path / "quiet.csv"
     save_csv(path, np.arange(u.size) * H, u, y)
     trace = tmp_path / "trace.csv"
-    assert main(["stream", "--source", f"csv:{path}", "--block", "--json", "--trace", str(trace)]) == 0
+    assert main(["stream", "--source", f"csv:{path}", "--block", "--json", "--t-c", "0.05",
+                 "--trace", str(trace)]) == 0
     out = json.loads(capsys.readouterr().out)
     switched = [r for r in out["researches"] if r["switched"]]
     assert switched and set(switched[0]["moved"]) & {"a1", "a2"}
@@ -158,7 +160,8 @@ def test_a_research_reaches_the_stream_json_text_and_trace(tmp_path, capsys):
         rows = list(csv.DictReader(f))
     assert rows[0]["researches"] == "" and rows[-1]["researches"].startswith(f"{switched[0]['t']:.4g}:")
     # the same feed (block mode in the trace's 10 ms chunks: where a waiting job resumes depends on them)
-    assert main(["stream", "--source", f"csv:{path}", "--block", "--trace", str(tmp_path / "again.csv")]) == 0
+    assert main(["stream", "--source", f"csv:{path}", "--block", "--t-c", "0.05",
+                 "--trace", str(tmp_path / "again.csv")]) == 0
     text = capsys.readouterr().out
     assert f"resonance re-searched at t = {switched[0]['t']:.4g} s" in text and "likelihood ratio" in text
 

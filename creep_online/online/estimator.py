@@ -109,6 +109,8 @@ STARTUP_FAULTS = 3
 #: (nothing to identify yet; a stream in operation's distant past only adds its creep to the free responses' load).
 IDLE_BUFFER = 4096
 IDLE_KEEP = 1024
+#: A ready buffer waits at most this many calls for the start-up search's plan (``_plan_pending``; it takes ~4).
+PLAN_WAITS = 8
 #: A start-up search whose result sits on its box's edge searches again on this many times the window (at most three
 #: rounds, ``t_c_max``): the resonance did not show in it.
 BOX_GROWTH = 4.0
@@ -361,6 +363,7 @@ class OnlineEstimator(StoredParams):
         self._grid_plan: _GridPlan | None = None
         self._search_rounds = 0
         self._search_end = 0                # end (buffer index) of the last start-up search's rows
+        self._plan_waits = 0                # ready calls spent on the plan (``_plan_pending``)
         self._tc_used = 0.0
         self._tracker: WindowTracker | RecursiveTracker | None = None
         self._starting: Generator | None = None     # the tracker's start under way (``_start_steps``)
@@ -812,7 +815,7 @@ class OnlineEstimator(StoredParams):
         if self._phase == "buffering":
             if self._start is None and not self._competing and self._read_start():
                 return
-            if not self._ready_to_search():
+            if not self._ready_to_search() or self._plan_pending():
                 self._plan_grid()
                 return
             self._start_search()
@@ -985,6 +988,18 @@ class OnlineEstimator(StoredParams):
             return
         plan.search = self._new_search(*plan.span, plan.freqs)
 
+    def _plan_pending(self) -> bool:
+        """Is the first search's plan (``_plan_grid``) still being prepared although the buffer is ready? A step read
+        at the first sample finds its buffer full at once: the few calls of the plan come first (unplanned, the
+        search's construction and first unit were ~170 us in one update()). Not in a competition of the start's
+        readings (its search takes every buffered sample, not the plan's rows)."""
+        plan = self._grid_plan
+        if (self._search is not None or self._competing or self._first_change is None
+                or plan is not None and plan.search is not None or self._plan_waits >= PLAN_WAITS):
+            return False
+        self._plan_waits += 1
+        return True
+
     def _start_search(self) -> None:
         start, end = self._search_span(self._nbuf)
         self._search_end = end
@@ -1065,16 +1080,23 @@ class OnlineEstimator(StoredParams):
             tracker = self._spares[key]
             tracker.start_state(theta)
             yield
+            self._buffer_noise()           # (a median of 2048 second differences: in a call of its own)
+            yield
             self._tracker = self._spares.pop(key)
             self._tracker.start_adopt()
         self._starting = None
         self._start_tracking()
 
-    def _start_tracking(self) -> None:
-        """The tracker has started: its noise monitor at the buffer's noise level (``window.noise_seed``), the replay
-        of the buffer (``_catch_up``) follows."""
+    def _buffer_noise(self) -> None:
+        """The start-up buffer's noise level (``window.noise_seed``; a lead-in's still outputs left out)."""
         lead = self._lead or 0
         self._noise_seed = W.noise_seed(self._by[lead:], self._nbuf - lead, self._noise_scratch)
+
+    def _start_tracking(self) -> None:
+        """The tracker has started: its noise monitor at the buffer's noise level (``_buffer_noise``, computed by the
+        window tracker's start a call before), the replay of the buffer (``_catch_up``) follows."""
+        if self._recursive:
+            self._buffer_noise()
         self._tracker.sc[W.SC_NOISE] = self._noise_seed
         if self.frozen:
             self._tracker.sc[W.SC_ACC] = 0.0
