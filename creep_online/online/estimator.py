@@ -115,7 +115,7 @@ PLAN_WAITS = 8
 #: rounds, ``t_c_max``): the resonance did not show in it.
 BOX_GROWTH = 4.0
 #: Buffered inputs moved to another frame per unit of work (``OnlineEstimator._reframe``: ~5 us of numpy).
-REFRAME_CHUNK = 8192
+REFRAME_CHUNK = 4096
 #: The two Remark-3 strategies (``refit``): recompute over the window, or carry on recursively.
 REFITS = ONLINE_REFITS
 
@@ -341,7 +341,10 @@ class OnlineEstimator(StoredParams):
         self._competing = False            # both readings of the start are being searched (``_compete``)
         self._move_a: int | None = None    # the input's first move (buffer index) in operation's reading
         self._jump = 0.0                   # the first input level (the step's size in the step's reading)
-        self._lead: int | None = None      # rest samples prepended to the buffer (``_lead_in``; None: not yet)
+        self._reframing: Generator | None = None   # the buffer moving to the step's frame (``_read_start``)
+        self._lead: int | None = None      # rest samples replayed before the buffer (``_lead_in``; None: not yet)
+        self._lead_u = np.zeros(rest.REST_LEAD)           # ... their inputs (0) and outputs (the rest level)
+        self._lead_y = np.zeros(rest.REST_LEAD)
         self._start_wait = max(64, min(int(rest.WAIT_S / h), BUFFER_SAMPLES // 2))   # (``rest.WAIT_S``)
         self._bu = np.empty(BUFFER_SAMPLES)
         self._by = np.empty(BUFFER_SAMPLES)
@@ -810,8 +813,15 @@ class OnlineEstimator(StoredParams):
         reads "searching" until the tracker has started, a few samples later. With ``units`` >= 2^29 (block
         mode, a full buffer) everything runs in this call."""
         eager = units >= 1 << 29
+        while self._reframing is not None:     # (the step's reading's buffer moving to its frame, a chunk per call)
+            if next(self._reframing, _DONE) is _DONE:
+                self._reframing = None
+            if not eager:
+                return
         if self._lead is None and self._first_change is not None and not self._in_operation:
             self._lead_in()
+            if not eager:
+                return
         if self._phase == "buffering":
             if self._start is None and not self._competing and self._read_start():
                 return
@@ -849,11 +859,12 @@ class OnlineEstimator(StoredParams):
         moved = self._first_change is not None
         if not (self._ready_to_search() if moved else n % self._start_wait == 0):
             return False
-        if not rest.starts_near_rest(self._by[:n]):
+        near, step = rest.reading(self._by[:n])
+        if not near:
             self._start = "operation"
             self._keep_latest_before_move()
             return True
-        if not (moved or rest.shows_step(self._by[:n])):
+        if not (moved or step):
             return True                    # (near rest, not moved yet: read again after another WAIT_S)
         self._competing = moved
         if not moved:
@@ -861,8 +872,8 @@ class OnlineEstimator(StoredParams):
         self._move_a = self._first_change
         self._jump = self._u_ref
         self._u_lo, self._u_hi = min(self._u_lo, 0.0), max(self._u_hi, 0.0)
-        for _ in self._reframe(0.0):       # (before the first move: at most WAIT_S, a few numpy calls)
-            pass
+        self._reframing = self._reframe(0.0)   # (in the next calls)
+        next(self._reframing)              # (the frame itself now: samples from the next call on are in it)
         self._first_change = 0
         self._grid_plan = None
         return True
@@ -884,36 +895,16 @@ class OnlineEstimator(StoredParams):
 
     def _lead_in(self) -> None:
         """A stream read from rest: the rest it implies before its first sample, if it shows too little of it
-        (``rest.lead_in``): input 0, output at the mean of its rest outputs (those up to its first input change). The
-        tracker's time then runs that many samples ahead of the stream's (``_n_shift``)."""
-        fc, n = self._first_change, self._nbuf
-        rest_y = self._by[:min(fc + 1, n)]
-        lead = rest.lead_in(fc + 1) if np.isfinite(rest_y).any() and n + rest.REST_LEAD < self._bu.size else 0
-        self._lead = lead
-        if not lead:
-            return
-        level = float(np.nanmean(rest_y))
-        self._bu[lead:lead + n] = self._bu[:n]
-        self._by[lead:lead + n] = self._by[:n]
-        self._bu[:lead] = 0.0
-        self._by[:lead] = level
-        self._nbuf = n + lead
-        self._first_change = fc + lead
-        self._n_shift -= lead
-        self._grid_plan = None
-
-    def _drop_lead(self) -> Generator:
-        """The lead-in out of the buffer again (the in-operation reading was taken), ``REFRAME_CHUNK`` per unit."""
-        lead, self._lead = self._lead or 0, 0
-        k = lead
-        while k < self._nbuf:              # (samples that arrive meanwhile are moved too)
-            k1 = min(k + REFRAME_CHUNK, self._nbuf)
-            self._bu[k - lead:k1 - lead] = self._bu[k:k1]
-            self._by[k - lead:k1 - lead] = self._by[k:k1]
-            k = k1
-            yield
-        self._nbuf -= lead
-        self._n_shift += lead
+        (``rest.lead_in``): input 0, output at the mean of its rest outputs (those up to its first input change),
+        replayed into the tracker before the buffer (``_catch_up``; the searches start at the first change and need
+        no more rest). The tracker's time then runs that many samples ahead of the stream's (``_n_shift``)."""
+        fc = self._first_change
+        lead = rest.lead_in(fc + 1)
+        outputs = [v for v in self._by[:min(fc + 1, self._nbuf)].tolist() if v == v] if lead else []
+        self._lead = lead if outputs else 0     # (plain Python on <= REST_LEAD values: numpy's nanmean was ~100 us cold)
+        if self._lead:
+            self._lead_y[:lead] = sum(outputs) / len(outputs)
+            self._n_shift -= lead
 
     def _reframe(self, u_ref: float) -> Generator:
         """The buffered inputs as deviations from ``u_ref`` (0: the step's reading, the input 0 before the first
@@ -921,6 +912,7 @@ class OnlineEstimator(StoredParams):
         are buffered in the new frame."""
         shift, self._u_ref = self._u_ref - u_ref, u_ref
         n = self._nbuf
+        yield                              # (the frame is set: the caller's next samples are buffered in it)
         for k in range(0, n, REFRAME_CHUNK):
             self._bu[k:min(k + REFRAME_CHUNK, n)] += shift
             yield
@@ -929,12 +921,10 @@ class OnlineEstimator(StoredParams):
         """Both readings of the start on the samples the step's search had (``rest``, stage 2): the buffer in the
         in-operation frame, its search (the step's result a candidate), the costs compared; the buffer in the frame
         taken. In units; returns the search result to start the tracker at."""
-        lead = self._lead or 0
-        rows = self._search_end - lead     # (the step's search: from the sample before its first change)
+        rows = self._search_end            # (the step's search: from the first sample)
         yield from self._reframe(self._jump)
-        search = ResonanceSearch(self.basis, self._bu[lead:lead + rows], self._by[lead:lead + rows],
-                                 extra=((step.alpha, step.a1, step.a2),), work=self._hist_work,
-                                 scratch=self._search_scratch, free=FREE_RATES)
+        search = ResonanceSearch(self.basis, self._bu[:rows], self._by[:rows], extra=((step.alpha, step.a1, step.a2),),
+                                 work=self._hist_work, scratch=self._search_scratch, free=FREE_RATES)
         while not search.step():
             yield
         operation = search.result
@@ -944,7 +934,8 @@ class OnlineEstimator(StoredParams):
             yield from self._reframe(0.0)
             return step
         self._start = "operation"
-        yield from self._drop_lead()
+        self._n_shift += self._lead or 0   # (no rest to replay in operation)
+        self._lead = 0
         self._first_change = self._move_a
         return operation
 
@@ -1089,8 +1080,7 @@ class OnlineEstimator(StoredParams):
 
     def _buffer_noise(self) -> None:
         """The start-up buffer's noise level (``window.noise_seed``; a lead-in's still outputs left out)."""
-        lead = self._lead or 0
-        self._noise_seed = W.noise_seed(self._by[lead:], self._nbuf - lead, self._noise_scratch)
+        self._noise_seed = W.noise_seed(self._by, self._nbuf, self._noise_scratch)
 
     def _start_tracking(self) -> None:
         """The tracker has started: its noise monitor at the buffer's noise level (``_buffer_noise``, computed by the
@@ -1113,19 +1103,24 @@ class OnlineEstimator(StoredParams):
             self._status = np.empty(per_unit, dtype=np.int64)
         status = self._status
         lead = self._lead or 0
-        while units > 0 and self._replayed < self._nbuf:
+        total = lead + self._nbuf          # (the lead-in's rest first, then the buffer)
+        while units > 0 and self._replayed < total:
             units -= 1
             k = self._replayed
             # (the first unit a quarter: the new tracker's statistics and the block kernel are cold, ~27 us whole)
-            n = min(per_unit if k else max(per_unit // 4, 1), self._nbuf - k, lead - k if k < lead else self._nbuf)
-            used = tr.feed_block(self._bu, self._by, status, k, k + n)
+            n = min(per_unit if k else max(per_unit // 4, 1), total - k)
+            if k < lead:
+                n = min(n, lead - k)
+                used = tr.feed_block(self._lead_u, self._lead_y, status, k, k + n)
+            else:
+                used = tr.feed_block(self._bu, self._by, status, k - lead, k - lead + n)
             self._replayed += used
             if k < lead <= self._replayed:   # the lead-in's still outputs are no sample of the sensor's noise
                 W.restart_monitors(tr.sc, self._noise_seed)
             if tr._jobs and units > 0:     # the tracker's own jobs share the budget
                 units -= 1
                 tr.work(1 if units < (1 << 29) else 1 << 30)
-        if self._replayed >= self._nbuf:
+        if self._replayed >= total:
             self._startup_faults = 0
             self._catchup = 0
             self._nbuf = 0
@@ -1220,6 +1215,7 @@ class OnlineEstimator(StoredParams):
         if self._start is None:            # (the stream's first samples are gone: a step there can no longer show)
             self._start = "operation"
             self._competing = False
+        self._lead = 0
         self._nbuf = 0
         self._first_change = None
         self._n_shift = self.samples
@@ -1242,6 +1238,7 @@ class OnlineEstimator(StoredParams):
             W.ring_copy(tr.ring, tr._ring_position(tr.n - k), self._bu[:k], self._by[:k])
         self._drop_tracker()
         self._restarted = True
+        self._lead = 0                     # (in operation: no rest to replay)
         self._nbuf = k
         self._n_shift = self.samples - k
         moves = np.flatnonzero(self._bu[1:k] != self._bu[:k - 1]) if k > 1 else ()
@@ -1411,6 +1408,10 @@ class OnlineEstimator(StoredParams):
         return "", "", ratio
 
 
+#: A generator's end (``next(gen, _DONE)``).
+_DONE = object()
+
+
 def _number(x, name: str) -> float:
     try:
         return float(x)
@@ -1500,5 +1501,5 @@ def warm_kernels() -> None:
         pass
     T.WindowTracker  # noqa: B018 - imported for its kernels
     R.warm()
-    rest.shows_step(np.linspace(0.0, 1.0, 64))       # the start's reading (a stream whose first input is not 0)
+    rest.reading(np.linspace(0.0, 1.0, 64))          # the start's reading (a stream whose first input is not 0)
     W.noise_seed(t, t.size, np.empty(W.NOISE_SEED_ROWS))

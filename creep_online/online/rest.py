@@ -100,20 +100,26 @@ def start_levels(y: np.ndarray, noise_rows: int, level_rows: int) -> tuple[float
     return level, 0.5117 * clipped / (n - i0)
 
 
-def starts_near_rest(y: np.ndarray) -> bool:
-    """Does the first of the outputs ``y`` buffered since the first sample sit near the rest level, zero: within
-    ``REST_SHARE`` of the output's movement from it, or within ``NEAR_SIGMAS`` noise levels (stage 1)?"""
+def reading(y: np.ndarray) -> tuple[bool, bool]:
+    """Stage 1 on the outputs ``y`` buffered since the first sample: (near rest, shows a step). Near rest: the first
+    output within ``REST_SHARE`` of the output's movement from it, or within ``NEAR_SIGMAS`` noise levels, of zero.
+    Shows a step: near rest, and the output moved from its first sample by ``MOVED_SIGMAS`` noise levels (a held
+    input's step to estimate). One kernel call (``start_levels``)."""
     level, noise = start_levels(y, NOISE_ROWS, LEVEL_ROWS)
     y0 = float(y[0])
-    return abs(y0) <= max(REST_SHARE * abs(level - y0), NEAR_SIGMAS * noise)
+    moved = abs(level - y0)
+    near = abs(y0) <= max(REST_SHARE * moved, NEAR_SIGMAS * noise)
+    return near, near and moved > 0.0 and moved >= MOVED_SIGMAS * noise
+
+
+def starts_near_rest(y: np.ndarray) -> bool:
+    """``reading``'s first answer."""
+    return reading(y)[0]
 
 
 def shows_step(y: np.ndarray) -> bool:
-    """``starts_near_rest``, and the output has moved from its first sample by ``MOVED_SIGMAS`` noise levels: a held
-    input's step shows (stage 1 without a move of the input)."""
-    level, noise = start_levels(y, NOISE_ROWS, LEVEL_ROWS)
-    moved = abs(level - float(y[0]))
-    return moved > 0.0 and moved >= MOVED_SIGMAS * noise and starts_near_rest(y)
+    """``reading``'s second answer."""
+    return reading(y)[1]
 
 
 def prefer_step(cost_step: float, cost_operation: float, rows: int, extra_parameters: int) -> bool:
