@@ -22,11 +22,11 @@ def record(tmp_path_factory):
     return path
 
 
-def _run_in_pty(args: list[str], timeout: float = 120.0) -> tuple[int, str]:
+def _run_in_pty(args: list[str], cwd=None, timeout: float = 120.0) -> tuple[int, str]:
     """Run the CLI with stdout and stderr on a real pseudo-terminal; return (exit code, what it showed)."""
     master, slave = pty.openpty()
     proc = subprocess.Popen([sys.executable, "-m", "creep_online", *args], stdin=subprocess.DEVNULL,
-                            stdout=slave, stderr=slave, close_fds=True)
+                            stdout=slave, stderr=slave, close_fds=True, cwd=cwd)
     os.close(slave)
     shown = read_until_closed(master, time.monotonic() + timeout)
     os.close(master)
@@ -60,7 +60,8 @@ def test_disabled_progress_writes_nothing(tmp_path):
 
 
 def test_diagnose_shows_its_stages_on_a_terminal(record):
-    code, shown = _run_in_pty(["diagnose", str(record), "--effects", "drift,leakage"])
+    # the file by a short name: the status line (100 columns) would cut a long temporary path's stage off
+    code, shown = _run_in_pty(["diagnose", record.name, "--effects", "drift,leakage"], cwd=record.parent)
     assert code == 0, shown
     assert "base model" in shown and "[1/2] fitting the base model + drift" in shown
     assert "[2/2] fitting the base model + leakage" in shown
