@@ -38,6 +38,10 @@ def _runs_workers(config: pytest.Config) -> bool:
 def pytest_sessionstart(session: pytest.Session) -> None:
     if not _runs_workers(session.config):
         return
+    reporter = session.config.pluginmanager.get_plugin("terminalreporter")
+    if reporter is not None:
+        reporter.write_line("loading the numba kernels for the workers (compiling them takes about a minute "
+                            "of CPU on a fresh clone)")
     procs = [subprocess.Popen([sys.executable, "-c", code], cwd=REPO, stdout=subprocess.DEVNULL,
                               stderr=subprocess.PIPE, text=True) for code in WARM_KERNELS]
     for proc in procs:
