@@ -33,7 +33,8 @@ SCRIPT = ("import os, numpy as np, creep_online as c; t = np.arange(200) * 1e-3;
 def _interpreter_for_others() -> str | None:
     """A Python of this minor version that another user can execute (the venv's may live under /root)."""
     here = Path(sys.executable).resolve()
-    candidates = [here, Path("/usr/bin/python3"), Path("/usr/local/bin/python3")]
+    version = "%d.%d" % sys.version_info[:2]
+    candidates = [here, *(Path(d) / f"python{v}" for d in ("/usr/bin", "/usr/local/bin") for v in (version, "3"))]
     for exe in candidates:
         if not exe.exists():
             continue
