@@ -223,7 +223,6 @@ def test_a_partner_near_the_score_tests_threshold_is_fitted_for_real(monkeypatch
     assert old.combination is None or "delay" not in old.combination.effect.split("+")
 
 
-@pytest.mark.xdist_group("weak_mode_beside_hysteresis")
 def test_a_weak_second_effect_the_residual_does_not_show_is_found_by_the_partners_score_test(
         weak_mode_beside_hysteresis, monkeypatch):
     """Second mode + hysteresis (1.3-3x, seed 10): hysteresis alone fits to 1.03x the noise with a white residual and
@@ -250,7 +249,6 @@ def test_a_weak_second_effect_the_residual_does_not_show_is_found_by_the_partner
     assert old.combination is None or "second_mode" not in old.combination.effect.split("+")
 
 
-@pytest.mark.xdist_group("weak_mode_beside_hysteresis")
 def test_the_partners_score_test_sees_the_hidden_partner_and_nothing_beside_a_single_effect(
         weak_mode_beside_hysteresis):
     """The score statistic itself (``score.partner_scores``): at hysteresis' fit of the record above the second mode

@@ -486,7 +486,6 @@ def drift_runs():
     return runs
 
 
-@pytest.mark.xdist_group("drift_runs")
 def test_drift_family_is_followed(drift_runs):
     """alpha and b are the values now, not window averages: within tolerance at the end of the drift.
 
@@ -503,7 +502,6 @@ def test_drift_family_is_followed(drift_runs):
     assert creep_ok >= 5, [(sc.seed, _errors(e, sc.final_truth)) for sc, e in drift_runs]
 
 
-@pytest.mark.xdist_group("drift_runs")
 def test_drift_family_reports_honest_uncertainty_and_rates(drift_runs):
     """Errors of alpha and b lie within 3 reported sigma; the drift rates have the drift's sign."""
     honest = 0

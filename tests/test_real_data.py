@@ -69,7 +69,6 @@ def polymer_creep():
     return _diagnose("pe-melt-creep-reptate/pe_cm3_creep_10Pa.csv")
 
 
-@pytest.mark.xdist_group("polymer_creep")
 def test_polymer_creep_needs_a_second_power_law(polymer_creep):
     d = polymer_creep
     assert d.data.weights is not None  # log-spaced: relative fit
@@ -80,7 +79,6 @@ def test_polymer_creep_needs_a_second_power_law(polymer_creep):
     assert fit.residual_rms < 0.3 * d.base.residual_rms
 
 
-@pytest.mark.xdist_group("polymer_creep")
 def test_polymer_creep_one_hold_leaves_the_physics_inconclusive_and_the_bic_decides(polymer_creep):
     """A creep test is a single hold: whether the extra motion follows the input (second creep) or ignores it
     (drift) cannot be seen in one hold, so the hold physics says so and the verdict rests on the BIC ranking."""
