@@ -56,6 +56,11 @@ PARAMS = ("alpha", "b", "a1", "a2")
 TOL = {"alpha": 0.02, "b": 0.03, "a1": 0.05, "a2": 0.05}
 #: Divergence windows (s).
 WINDOW_S = 1.0
+def command_line() -> str:
+    """The command line that made a results document (recorded in it)."""
+    return " ".join(["python bench/bench_online_batch.py", *sys.argv[1:]])
+
+
 #: Windows this long after a plant change are reported apart (the change test's half second, the post-change
 #: search's wait for an input move, up to 1 s, and its replay).
 CHANGE_ALLOWANCE_S = 2.0
@@ -245,7 +250,7 @@ def real_main(out: Path) -> dict:
         print(f"{name}: max window ratio {rows[-1]['max_window_ratio']}, divergent windows "
               f"{rows[-1]['divergent_windows']}, {e.quality}, start {e.start}", file=sys.stderr, flush=True)
     ratios = [r["max_window_ratio"] for r in rows if r["max_window_ratio"] is not None]
-    doc = {"records": rows, "max_window_ratio": max(ratios),
+    doc = {"command": command_line(), "records": rows, "max_window_ratio": max(ratios),
            "divergent_records": sum(r["divergent_windows"] > 0 for r in rows)}
     out.write_text(json.dumps(doc, indent=1, default=str) + "\n")
     return doc
@@ -287,7 +292,7 @@ def main(argv: list[str] | None = None) -> dict:
                   f"window ratio {row['max_window_ratio']} divergent {row['divergent_windows']} {row['quality']}",
                   file=sys.stderr, flush=True)
     summary = {fam: family_summary(r) for fam, r in rows.items()}
-    doc = {"config": {"plants": args.plants, "seed_offset": args.seed_offset, "snr_db": args.snr_db,
+    doc = {"command": command_line(), "config": {"plants": args.plants, "seed_offset": args.seed_offset, "snr_db": args.snr_db,
                       "rest_samples": args.rest_samples, "tolerances": TOL, "window_s": WINDOW_S},
            "summary": summary, "records": rows, "elapsed_s": time.perf_counter() - start}
     rest = "" if args.rest_samples is None else f"_rest{args.rest_samples}"

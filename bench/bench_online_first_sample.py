@@ -150,7 +150,8 @@ def main(argv: list[str] | None = None) -> dict:
                                                  / len(det)) if det else None,
                 "max_rel_error": {k: max(r["rel_error"][k] for r in sel) for k in ("alpha", "b")},
                 "starts": sorted({r["start"] for r in sel})}
-    doc = {"config": {"plants": args.plants, "seed_offset": args.seed_offset, "snr_db": args.snr_db,
+    doc = {"command": " ".join(["python bench/bench_online_first_sample.py", *sys.argv[1:]]),
+           "config": {"plants": args.plants, "seed_offset": args.seed_offset, "snr_db": args.snr_db,
                       "rest_samples": rests, "modes": modes, "accuracy": ACCURACY, "after_t_c_s": AFTER_TC_S},
            "summary": summary, "runs": rows, "elapsed_s": time.perf_counter() - start}
     text = json.dumps(doc, indent=1, default=lambda x: str(x))
