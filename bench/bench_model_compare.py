@@ -3,26 +3,37 @@
 For random records of every class a user makes (from rest with a lead-in, a
 plain step at the first sample, a short lead-in, taken in operation with steps
 or a dense input, dense from rest, time stamps with jitter, each catalogue
-effect hidden in the plant, hil_sim's stationary scenario families), fixed seeds:
+effect hidden in the plant, hil_sim's stationary scenario families, every pair
+and triple of catalogue effects hidden at once, 10 s excerpts of the real
+micromanipulator record), fixed seeds:
 
 * ``identify``: ``compare(result, record)``, and the model saved and loaded
   again (``save_model``/``load_model``), against the result's fit percent;
   ``result.simulate(t, u)`` against ``result.y_hat``;
 * the extended fit (the ``fit`` command's path: the start rule's base fit, then
-  ``fit_extended``) with the record's hidden effect (or drift): the same three;
+  ``fit_extended``) with the record's hidden effects (or drift): the same three;
 * the command line: ``identify -o`` / ``fit -o`` then ``compare --json``.
 
 A case passes when every fit percent is reproduced within TOLERANCE points.
 Prints JSON: the fraction that pass per path and per class, the worst
 differences, and the time per case.
 
-Usage: nice -n 10 python bench/bench_model_compare.py [--seeds 3] [--classes a,b] [--no-cli] [--out FILE]
+A combination class is ``effects:A+B[+C]`` (a random 1 kHz plant from
+``hil_sim.hidden_effects``, its staircase, each effect at its ``example_params``
+strength, noise 0.2-1 % of the range; the record starts from rest after a
+lead-in, with a step at its first sample, or cut out of operation, in turn over the seeds). The real
+class ``real:micromanipulator`` is the 10 s excerpt starting at 10 x seed s of
+tests/data/real/piezo-micromanipulator-1Hz, fitted with hysteresis and nonlinear gain.
+
+Usage: nice -n 10 python bench/bench_model_compare.py [--seeds 3] [--classes a,b | --set plain|combinations]
+       [--no-cli] [--out FILE]
 """
 from __future__ import annotations
 
 import argparse
 import contextlib
 import io
+import itertools
 import json
 import math
 import os
@@ -30,6 +41,7 @@ import sys
 import tempfile
 import time
 import warnings
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -48,7 +60,18 @@ PLAIN_CLASSES = ("rest_lead_in", "first_sample_step", "short_lead_in", "operatio
                  "dense_from_rest", "jitter")
 #: hil_sim's scenario families whose plant does not change (12-16 s at 1-10 kHz: the slow classes).
 SCENARIOS = ("strong_creep", "mid_operation", "quiet_start", "controller")
-CLASSES = PLAIN_CLASSES + tuple(f"effect:{e}" for e in EFFECTS) + tuple(f"scenario:{s}" for s in SCENARIOS)
+#: Every pair and triple of catalogue effects hidden at once (the fit gets all of them).
+COMBINATIONS = tuple(f"effects:{'+'.join(c)}" for k in (2, 3) for c in itertools.combinations(EFFECTS, k))
+#: Real records: (file under tests/data/real, the effects fitted), 10 s excerpts.
+REAL = {"real:micromanipulator": ("piezo-micromanipulator-1Hz/micromanipulator_1Hz.csv", "hysteresis,nonlinear_gain")}
+REAL_EXCERPT_S = 10.0
+CLASSES = (PLAIN_CLASSES + tuple(f"effect:{e}" for e in EFFECTS) + tuple(f"scenario:{s}" for s in SCENARIOS)
+           + COMBINATIONS + tuple(REAL))
+#: Named sets of classes (``--set``).
+SETS = {"plain": PLAIN_CLASSES + tuple(f"effect:{e}" for e in EFFECTS) + tuple(f"scenario:{s}" for s in SCENARIOS),
+        "combinations": COMBINATIONS + tuple(REAL)}
+#: How a combination record starts, by seed: from rest after a lead-in, a step at the first sample, in operation.
+COMBINATION_STARTS = ("rest_lead_in", "first_sample_step", "operation")
 
 
 def random_plant(rng: np.random.Generator, fs: float) -> CreepModel:
@@ -74,8 +97,47 @@ def dense(n: int, rng: np.random.Generator, start: int) -> np.ndarray:
     return staircase(n, rng, start, (2, 20))
 
 
+def combination_record(effects: tuple[str, ...], seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, u, y): a random plant with ``effects`` hidden at once, starting as ``COMBINATION_STARTS`` in turn over the
+    seeds (from a different place for each combination, so that one seed covers every start)."""
+    from hil_sim.hidden_effects import effect_params, random_model, staircase
+    key = zlib.crc32("+".join(effects).encode())
+    rng = np.random.default_rng([seed, key])
+    h = 1e-3
+    n = int(rng.integers(3000, 5000))
+    start = COMBINATION_STARTS[(seed + key) % len(COMBINATION_STARTS)]
+    history = int(rng.integers(n // 4, n // 2)) if start == "operation" else 0
+    t, u = staircase(n + history, h, rng)
+    model = random_model(rng)
+    y_base = simulate_with_effects(model, t, u)
+    params = {e: effect_params(e, model, t, u, y_base, rng) for e in effects}
+    clean = simulate_with_effects(model, t, u, params)
+    if start == "first_sample_step":
+        history = int(np.flatnonzero(u)[0])
+    clean, u = clean[history:], u[history:]
+    y = clean + float(np.ptp(clean)) * rng.uniform(0.002, 0.01) * rng.standard_normal(clean.size)
+    return np.arange(clean.size) * h, u, y
+
+
+def real_excerpt(kind: str, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
+    """(t, u, y, effects) of the 10 s excerpt of a real record starting at 10 x seed s (time from 0)."""
+    name, effects = REAL[kind]
+    path = Path(__file__).resolve().parent.parent / "tests" / "data" / "real" / name
+    t, u, y = np.loadtxt(path, delimiter=",", skiprows=1, unpack=True)
+    keep = (t >= REAL_EXCERPT_S * seed) & (t < REAL_EXCERPT_S * (seed + 1))
+    if not keep.any():
+        raise ValueError(f"{kind}: the record has no excerpt {seed}")
+    return t[keep] - t[keep][0], u[keep], y[keep], effects
+
+
 def make_record(kind: str, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
-    """(t, u, y, effect) of one record of class ``kind`` (deterministic in ``seed``); effect: the hidden one or ''."""
+    """(t, u, y, effects) of one record of class ``kind`` (deterministic in ``seed``); effects: the hidden ones
+    (comma-separated) or ''."""
+    if kind in REAL:
+        return real_excerpt(kind, seed)
+    if kind.startswith("effects:"):
+        effects = tuple(kind.split(":", 1)[1].split("+"))
+        return (*combination_record(effects, seed), ",".join(effects))
     if kind.startswith("scenario:"):
         from hil_sim.scenarios import make
         sc = make(kind.split(":", 1)[1], seed)
@@ -115,12 +177,12 @@ def make_record(kind: str, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return t, u[history:], y, ""
 
 
-def extended_fit(t, u, y, effect: str):
-    """What ``creep-online fit --effects EFFECT`` computes: the start rule's base fit, then the extended fit."""
+def extended_fit(t, u, y, effects: str):
+    """What ``creep-online fit --effects EFFECTS`` computes: the start rule's base fit, then the extended fit."""
     from creep_online.diagnostics.extended import fit_extended
     from creep_online.diagnostics.start import fit_base_by_rule
     data, base = fit_base_by_rule(t, u, y)
-    return fit_extended(data, (effect,), base)
+    return fit_extended(data, tuple(effects.split(",")), base)
 
 
 def _reproduced(result, t, u, y, folder: Path, name: str) -> dict:
@@ -194,7 +256,13 @@ def summarise(cases: list[dict]) -> dict:
     if cli:
         worst["cli"] = float(max(abs(c["cli"][p]["compare"] - c["cli"][p]["fit"]) for c in cli for p in ("identify", "fit")))
     elapsed = np.array([c["elapsed_s"] for c in cases])
+    groups = {"pairs": [c for c in cases if c["class"].startswith("effects:") and c["class"].count("+") == 1],
+              "triples": [c for c in cases if c["class"].startswith("effects:") and c["class"].count("+") == 2],
+              "real": [c for c in cases if c["class"] in REAL]}
     return {"cases": len(cases), "passed_fraction": fraction(cases), "tolerance_points": TOLERANCE,
+            "combinations": {k: {"cases": len(v), "passed_fraction": fraction(v),
+                                 "worst_difference_points": max((c["worst"] for c in v), default=float("nan"))}
+                             for k, v in groups.items()},
             "by_class": by_class, "worst_difference_points": worst,
             "initial_state_cases": sum(c["identify"]["initial_state"] for c in cases),
             "simulate_max_rel_error": {p: float(max(c[p]["simulate"] for c in cases)) for p in ("identify", "fit")},
@@ -206,16 +274,19 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--classes", default=",".join(CLASSES))
+    ap.add_argument("--set", choices=tuple(SETS), default=None, help="a named set of classes instead of --classes")
     ap.add_argument("--no-cli", action="store_true", help="skip the command-line path")
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
     cases = []
-    for kind in args.classes.split(","):
+    kinds = SETS[args.set] if args.set else args.classes.split(",")
+    for kind in kinds:
         for seed in range(args.seeds):
             case = run_case(kind, seed, not args.no_cli)
             cases.append(case)
             print(f"{kind} seed {seed}: worst {case['worst']:.3g} points, {case['elapsed_s']:.1f} s", file=sys.stderr)
-    out = {"bench": "model_compare", "summary": summarise(cases), "cases": cases}
+    out = {"bench": "model_compare", "command": " ".join(["python", "bench/bench_model_compare.py", *sys.argv[1:]]),
+           "summary": summarise(cases), "cases": cases}
     text = json.dumps(out, indent=2)
     print(text)
     if args.out:

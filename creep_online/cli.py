@@ -1,4 +1,4 @@
-"""The ``creep-online`` command line (its stable keys and exit codes: README.md, docs/reliability.md).
+"""The ``creep-online`` command line (its stable keys and exit codes: docs/reference/json.md, docs/reference/exit-codes.md).
 
 Each sub-command lives in ``creep_online.commands.<name>`` and exposes
 ``register(subparsers)``, which adds its parser and sets ``func``. Any

@@ -37,7 +37,7 @@ from ._threads import single_threaded
 from .discretize import foh_matrices_batch, step_response_grid, step_response_sensitivity
 from .errors import DataError, IdentificationError
 from .global_fit import GRID_ZETAS, GlobalFit, at_floor, floor_ratio, global_fit, global_uncertainty, n_bic
-from .metrics import fit_percent, long_run_variance_factor, noise_std_estimate
+from .metrics import fit_percent, long_run_variance_factor, noise_std_estimate, rms
 from .model import IDENTIFY_ALPHA_BOUNDS as ALPHA_BOUNDS  # alpha search interval of layer 1 and the polish
 from .initial_state import FreeResponse
 from .model import CreepModel, ExtendedModel, FittedModel
@@ -607,8 +607,7 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
         if timing.flagged:
             warnings.append(timing.describe())
     if polish and ratio > FLOOR_WARNING:
-        warnings.append(f"the fit does not reach the noise floor (residual rms {ratio:.2f} x its white-noise level): "
-                        "the data hold something the model does not (another effect, coloured noise, timing)")
+        warnings.append(_floor_warning(ratio, residual, y))
     warnings += _identifiability(t, u, y, h, model, t_c, sched, noise)
     warnings += [f"{k} is poorly determined by these data (1-sigma {sd / abs(getattr(model, k)):.0%})"
                  for k, sd in uncertainty.items() if sd > POORLY_DETERMINED * abs(getattr(model, k))]
@@ -616,6 +615,18 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
         model=model, fit_percent=fit_percent(y, y_hat), elapsed_s=time.perf_counter() - start,
         t_c=t_c, offset=offset, input_offset=u0, warnings=warnings, stages=stages,
         uncertainty=uncertainty, noise_std=noise, y_hat=y_hat + offset, initial_response=initial_response)
+
+
+def _floor_warning(ratio: float, residual: np.ndarray, y: np.ndarray) -> str:
+    """The warning for a fit above the noise floor; a noise-free record (most of the residual exactly 0, so
+    its white-noise level is 0) has no floor to be measured against, and says so instead of a ratio."""
+    if math.isfinite(ratio):
+        return (f"the fit does not reach the noise floor (residual rms {ratio:.2f} x its white-noise level): "
+                "the data hold something the model does not (another effect, coloured noise, timing)")
+    spread = float(np.std(y))
+    share = f" ({rms(residual) / spread:.2g} of the output's spread)" if spread > 0 else ""
+    return (f"the record is noise-free (its residual has no white noise), so the fit cannot be judged against a "
+            f"noise floor: residual rms {rms(residual):.3g}{share}")
 
 
 def _timing(model: CreepModel, h: float, u: np.ndarray, residual: np.ndarray,

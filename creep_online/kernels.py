@@ -1,6 +1,6 @@
 """Numba kernels: the inner loops of every simulator, compiled once and cached on disk.
 
-Three families live here (README.md, "The simulators (and how right they are)"):
+Three families live here (docs/model.md, "The simulators"):
 
 * ``gl_paper``: the multi-term revised Grunwald-Letnikov recursion of the paper's
   eq. 13/14 exactly as FOMCON's ``lsim`` computes it (implicit, full or truncated

@@ -1,4 +1,4 @@
-"""The online table of docs/diagnostics.md: hidden-effect records streamed through the plain and the extended estimator.
+"""Online, with the extended model (docs/measurements.md): hidden-effect records streamed through the plain and the extended estimator.
 
 ``python -m hil_sim.online_table [N] [SEEDS] [--cold]`` prints one JSON line
 per (seed, effect): the batch residual before and after the extended fit and

@@ -237,3 +237,57 @@ def test_simulate_refuses_an_output_format_it_cannot_write(tmp_path, capsys, suf
     assert main(["simulate", "--params", "alpha=0.5,a1=0.1,a2=0.01", "--input", str(tmp_path / "in.csv"),
                  "-o", str(tmp_path / f"out{suffix}")]) == 2
     assert "unknown output format" in capsys.readouterr().err and not (tmp_path / f"out{suffix}").exists()
+
+
+COMBINATIONS = [c.split(":", 1)[1] for c in BENCH.COMBINATIONS]
+
+
+@pytest.mark.parametrize("combination", COMBINATIONS)
+def test_a_combination_simulates_its_own_design(combination):
+    """Every pair and triple of effects: the fitted model's forward simulation is the design's output, at any
+    parameters (here the start of the fit), the input effects side by side as the fit estimates them."""
+    from creep_online.diagnostics.extended import Design, _default_tail, _result, base_theta
+    from creep_online.diagnostics.start import readings
+    effects = tuple(combination.split("+"))
+    t, u, y = BENCH.combination_record(effects, seed=0)
+    data = prepare(t, u, y, u_pre=readings(u)[0][0])
+    design = Design(data, effects)
+    theta = np.clip(np.concatenate([base_theta(CreepModel.from_resonance(0.3, 40.0, 0.1, 1.0)),
+                                    _default_tail(design)]), design.lo, design.hi)
+    fit = _result(design, theta)
+    assert np.max(np.abs(fit.simulate(t, u) - fit.y_hat)) <= 1e-9 * np.ptp(y)
+
+
+def test_input_effects_add_their_terms_side_by_side():
+    from creep_online.effects.forward import transformed_input
+    from creep_online.effects.hysteresis import hysteresis_input
+    u = np.array([0.0, 1.0, 2.0, 1.5, 0.5, 1.0])
+    hyst = {"r": [0.2, 0.6], "w": [0.3, -0.1]}
+    v, pre = transformed_input({"hysteresis": hyst, "nonlinear_gain": {"k2": 0.1, "k3": -0.02}}, u, 0.5)
+    assert v == pytest.approx(hysteresis_input(u, hyst["r"], hyst["w"]) + 0.1 * u**2 - 0.02 * u**3, abs=1e-14)
+    assert pre == pytest.approx(0.5 * 1.2 + 0.1 * 0.25 - 0.02 * 0.125, abs=1e-14)
+
+
+@pytest.mark.parametrize("kind", ["effects:hysteresis+nonlinear_gain", "effects:hysteresis+periodic_disturbance",
+                                  "effects:nonlinear_gain+second_mode+drift"])
+def test_combinations_reproduce_their_fit_percent(kind):
+    case = BENCH.run_case(kind, seed=0, cli=False)
+    assert case["worst"] <= TOL, case
+    assert case["fit"]["simulate"] < 1e-9, case["fit"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", BENCH.COMBINATIONS)
+def test_every_combination_reproduces_its_fit_percent(kind):
+    case = BENCH.run_case(kind, seed=1, cli=False)
+    assert case["worst"] <= TOL, case
+
+
+@pytest.mark.slow
+def test_the_micromanipulator_excerpt_round_trips_through_the_command_line(tmp_path):
+    """The real record's first 10 s, fitted with hysteresis and nonlinear gain, saved and compared."""
+    t, u, y, effects = BENCH.real_excerpt("real:micromanipulator", 0)
+    data = tmp_path / "micro.csv"
+    save_csv(data, t, u, y)
+    fit = _cli_json(["fit", data, "--effects", effects, "-o", tmp_path / "micro.json"])
+    assert abs(_cli_json(["compare", tmp_path / "micro.json", data])["fit_percent"] - fit["fit_percent"]) <= TOL

@@ -156,3 +156,13 @@ def test_errors_agree_with_the_reported_uncertainty_on_random_plants():
             err = abs(getattr(res.model, name) - getattr(m, name))
             warned = any(name in w for w in res.warnings)
             assert warned or err < 5 * sd + 5e-4 * abs(getattr(m, name)), (i, name, m, res.model, sd)
+
+
+def test_a_noise_free_record_says_so_instead_of_an_infinite_ratio():
+    """More than half the record at rest and no noise: the residual's white-noise level is 0."""
+    t = np.arange(6000) * 1e-3
+    u = np.where(t >= 3.5, 1.0, 0.0)
+    res = identify(t, u, simulate(CreepModel.from_resonance(0.3, 50.0, 0.1, 2.0), t, u))
+    assert res.noise_std == 0.0
+    assert not any("inf" in w for w in res.warnings), res.warnings
+    assert any("noise-free" in w for w in res.warnings), res.warnings

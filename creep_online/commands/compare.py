@@ -70,14 +70,20 @@ def format_summary(result, model_file: str) -> str:
              f"  fit      = {result.fit_percent:.2f} % (NRMSE)"
              + (f"; {fitted:.2f} % on the record it was fitted on" if fitted is not None else ""),
              f"  residual : rms {r['residual_rms']:.4g}{(' ' + units) if units else ''}, max |e| "
-             f"{r['residual_max_abs']:.4g}, mean {r['residual_mean']:.3g}; noise ~{r['noise_rms']:.3g} "
-             f"({r.get('residual_over_noise', float('nan')):.2f}x)"
-             + ("; white (at the noise floor)" if r["white"] else "; not white: the model misses something"),
+             f"{r['residual_max_abs']:.4g}, mean {r['residual_mean']:.3g}; " + _noise_words(r),
              f"  worst    : {r['worst_window']['t_start']:.4g}-{r['worst_window']['t_end']:.4g} s "
              f"(rms {r['worst_window']['rms']:.4g})",
              f"  estimated: offset {result.offset:.6g} ({offset_source}), "
              f"start {_start_words(init)}"]
     return "\n".join(lines)
+
+
+def _noise_words(r: dict) -> str:
+    """The residual against the noise: its ratio and whether it is white, or that the record is noise-free."""
+    if not r["noise_rms"] > 0:
+        return "noise-free record (the residual has no white noise to compare with)"
+    return (f"noise ~{r['noise_rms']:.3g} ({r['residual_over_noise']:.2f}x)"
+            + ("; white (at the noise floor)" if r["white"] else "; not white: the model misses something"))
 
 
 def _start_words(init: dict) -> str:

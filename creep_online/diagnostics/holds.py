@@ -29,7 +29,7 @@ the second creep records tried at 3-10x the noise as ``none``). The check names
 an effect when it beats one creep law and both other effects by ``EVIDENCE``;
 ``none`` when nothing beats one creep law by that much; ``inconclusive``
 otherwise (no staircase, holds too few or short, or two effects explain the
-holds about equally well). Measured in docs/diagnostics.md ("Hold physics").
+holds about equally well). Measured by bench/bench_diagnose_physics.py.
 """
 from __future__ import annotations
 

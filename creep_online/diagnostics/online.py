@@ -11,8 +11,8 @@ integral of the output over tau). ``ExtendedOnlineEstimator`` feeds the
 compensated stream to the project's ``OnlineEstimator`` (unchanged), so the
 estimator runs with the extended model, and its live prediction error can be
 compared with the plain estimator's (``live_error``; both warm-started from
-their batch fits, ``warm_start``; ``hil_sim.online_table`` gives the table in
-docs/diagnostics.md). Per-sample work is O(1) for every effect except
+their batch fits, ``warm_start``; ``hil_sim.online_table`` measures it, docs/measurements.md,
+"Online, with the extended model"). Per-sample work is O(1) for every effect except
 ``second_creep`` (O(number of input changes so far), exact for a staircase).
 """
 from __future__ import annotations
@@ -30,7 +30,7 @@ OUTPUT_ORDER = (Stage.OUTPUT_FILTER, Stage.ADDITIVE, Stage.PARALLEL)
 class EffectCompensator:
     """Per-sample inverse of fitted effects (parameters as in ``ExtendedFit.effect_params``).
 
-    Per sample: the input-stage compensators transform the input; on the
+    Per sample: the input-stage compensators each add their term to the input; on the
     first sample every other compensator learns the equilibrium the record
     starts in (that input and output); the delay line delays the input; then
     the output-side compensators remove their effects from the output in
@@ -54,9 +54,10 @@ class EffectCompensator:
     def step(self, u: float, y: float) -> tuple[float, float]:
         """(v, y_base) for one sample."""
         n = self.n
-        v = float(u)
-        for c in self._inputs:
-            v = c.input(v)
+        u = float(u)
+        v = u
+        for c in self._inputs:  # side by side, as in the forward model (``effects.forward.transformed_input``)
+            v += c.input(u) - u
         if not self._started:  # the record starts in equilibrium at its first (transformed) input
             self._started = True
             for c in self._delays + self._outputs:

@@ -10,7 +10,7 @@ numpy's loops, the numba kernels, compiled ``nogil``); the rest holds it
 threads overlap ~1.5x rather than 2x. Worker processes (fork) measured about
 the same (1.87-1.94 s against 2.0-2.1 s on two 30,000-sample records) and were
 not taken: they fork a process that has threads, start with cold caches and do
-not exist on Windows (docs/diagnostics.md, Speed).
+not exist on Windows.
 
 Determinism: every fit is a pure function of the record, the base fit and the
 effect; a remembered response is bit for bit what a recomputation gives, and

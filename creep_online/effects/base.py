@@ -255,7 +255,11 @@ class Effect(ABC):
 
 
 class InputEffect(Effect):
-    """Transforms the input before every linear path; its fit adds input rows (each with a linear weight)."""
+    """Transforms the input before every linear path; its fit adds input rows (each with a linear weight).
+
+    Several input effects act side by side, each adding its own term to the same input:
+    ``v = u + sum_e (transform_input(u) - u)`` (``forward.transformed_input``), as their rows sit beside u in the fit.
+    """
 
     stage = Stage.INPUT
 

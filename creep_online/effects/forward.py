@@ -1,9 +1,15 @@
 """The forward model: the base creep model extended by effects, for a zero-order-held input.
 
-Signal flow, stage by stage (``base.Stage``; within a stage, registry order):
+Signal flow, stage by stage (``base.Stage``):
 input effects -> the linear paths in parallel (base model and parallel
 effects) -> delay -> output filters -> the offset and additive effects. Each
 stage's work is done by the effects' own hooks; this module only wires them.
+
+Input effects act side by side, not one after another: each adds its own term
+to the input, ``v = u + sum_e (T_e[u] - u)`` (``transformed_input``). That is
+the model the extended fit estimates (each effect's input rows beside u, with
+linear weights), so a saved combination reproduces its fit; chained (the
+polynomial of the hysteresis operator's output) it would not.
 """
 from __future__ import annotations
 
@@ -39,6 +45,22 @@ def snapped_time(t: np.ndarray) -> tuple[np.ndarray, float]:
     return t[0] + np.arange(t.size) * h, jitter
 
 
+def transformed_input(effects: dict[str, dict], u: np.ndarray, u_pre: float | None = None
+                      ) -> tuple[np.ndarray, float | None]:
+    """(v, v_pre): the input the linear paths see, each input effect's term added to u (and to u_pre).
+
+    ``v = u + sum_e (T_e[u] - u)`` over the input-stage effects in ``effects``; with one effect
+    ``v = T_e[u]``. ``v_pre`` is None when ``u_pre`` is (the record starts in equilibrium).
+    """
+    u = np.asarray(u, dtype=float)
+    v, pre = u, u_pre
+    for e in in_forward_order(effects, Stage.INPUT):
+        v = v + (e.transform_input(u, effects[e.name]) - u)
+        if u_pre is not None:
+            pre = pre + (e.transform_before(u_pre, effects[e.name]) - u_pre)
+    return v, pre
+
+
 def simulate_with_effects(model: "CreepModel", t: np.ndarray, u: np.ndarray, effects: dict[str, dict] | None = None,
                           *, offset: float = 0.0, u_pre: float | None = 0.0, t_pre: float | None = None) -> np.ndarray:
     """Output of the base model extended by catalogue effects, for a zero-order-held input.
@@ -65,11 +87,7 @@ def simulate_with_effects(model: "CreepModel", t: np.ndarray, u: np.ndarray, eff
     def stage(s: Stage) -> list:
         return in_forward_order(effects, s)
 
-    v, pre = u, u_pre
-    for e in stage(Stage.INPUT):
-        v = e.transform_input(v, effects[e.name])
-        if pre is not None:
-            pre = e.transform_before(pre, effects[e.name])
+    v, pre = transformed_input(effects, u, u_pre)
     sup = Superposer(t, v, x_pre=pre, t_pre=t_pre)
     d = 0.0
     for e in stage(Stage.DELAY):

@@ -27,6 +27,12 @@ HYSTERESIS_THRESHOLDS = tuple((k + 0.5) / 48 for k in range(24))
 #: On the 18 records above, 8 components already give the 24 plays' residual to four decimals; 12 keep a margin
 #: (and the parameters the BIC counts near the old 10).
 HYSTERESIS_COMPONENTS = 12
+#: A component whose eigenvalue (its column's squared norm) is below this fraction of the largest is left
+#: out (its column set to zero, its weight 0): a staircase of a few levels moves only a few distinct plays,
+#: the rest of the directions are rounding noise, and a weight fitted to noise (1e13 on one record) makes
+#: ``w = U c`` cancel so badly that the saved weights no longer give the fitted output (relative 1e-2).
+#: Kept directions down to 1e-12 (singular value 1e-6) lose at most ~1e-10 of the output that way.
+COMPONENT_FLOOR = 1e-12
 #: Play-operator states before the record, as multiples of the threshold added to u[0]: centred on u[0],
 #: or as left by a rise to u[0] (p = u[0] - r) or a fall to u[0] (p = u[0] + r).
 INITIAL_STATES = {"centred": 0.0, "ascending": -1.0, "descending": 1.0}
@@ -120,6 +126,10 @@ class Hysteresis(InputEffect):
     def transform_input(self, v: np.ndarray, params: dict) -> np.ndarray:
         return hysteresis_input(v, params.get("r", []), params.get("w", []), params.get("initial", "centred"))
 
+    def transform_before(self, v_pre: float, params: dict) -> float:
+        """At rest before the record every operator rests on that input: ``(1 + sum_i w_i) u_pre``."""
+        return float(v_pre * (1.0 + np.sum(np.asarray(params.get("w", []), dtype=float))))
+
     @staticmethod
     def thresholds(data) -> np.ndarray:
         """The fit's play-operator thresholds for this record (input units)."""
@@ -136,13 +146,16 @@ class Hysteresis(InputEffect):
         The fitted sum ``w @ plays = c @ (U.T @ plays)`` with ``w = U c``: the
         columns are the plays' strongest directions, and the weights of the
         thresholds come back as ``U c``. Signs fixed (largest entry positive)
-        so that a record gives the same columns every time.
+        so that a record gives the same columns every time; directions below
+        ``COMPONENT_FLOOR`` are zero columns.
         """
         if plays is None:
             plays = self._plays(data, data.u, variant)
         vals, vecs = np.linalg.eigh(plays @ plays.T)
-        top = vecs[:, np.argsort(vals)[::-1][:HYSTERESIS_COMPONENTS]]
-        return top * np.sign(top[np.abs(top).argmax(axis=0), np.arange(top.shape[1])])
+        order = np.argsort(vals)[::-1][:HYSTERESIS_COMPONENTS]
+        top = vecs[:, order] * np.sign(vecs[np.abs(vecs[:, order]).argmax(axis=0), order])
+        top[:, vals[order] < COMPONENT_FLOOR * max(vals[order[0]], 0.0)] = 0.0
+        return top
 
     def design_rows(self, data, u: np.ndarray, variant: str | None, before: bool = False) -> np.ndarray:
         own = self._plays(data, data.u, variant)

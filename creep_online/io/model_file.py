@@ -7,7 +7,7 @@ One versioned schema (``SCHEMA``, ``SCHEMA_VERSION``)::
       "schema_version": 1,
       "creep_online_version": "0.1.0",
       "created": "2025-01-31T12:00:00Z",
-      "model": {"alpha": 0.12, "a1": 3.8e-4, "a2": 1.4e-7, "b": 2.5, "fn_hz": 420.0, "zeta": 0.08},
+      "model": {"alpha": 0.12, "a1": 6.06e-5, "a2": 1.436e-7, "b": 2.5, "fn_hz": 420.0, "zeta": 0.08},
       "effects": {"delay": {"delay_s": 0.002}},
       "offset": 0.0,
       "input_offset": 0.0,

@@ -11,7 +11,7 @@ Phases (``OnlineEstimate.phase``):
     longer window, the buffer grows and the search runs again.
 ``tracking``
     The tracker replays the buffer and follows the plant. Two strategies
-    (DESIGN.md section 4, Remark 3; ``refit``): ``"window"`` (default,
+    (docs/online.md, "Remark 3: window vs recursive"; ``refit``): ``"window"`` (default,
     ``tracker.py``) recomputes over the window; ``"recursive"``
     (``recursive.py``) carries on with the newest estimate (a Gauss-Newton
     recursive prediction-error method with a CUSUM change detector, constant

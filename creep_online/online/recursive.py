@@ -1,6 +1,6 @@
 """The recursive tracker (Remark 3, "carry on with the newest estimate"): a Gauss-Newton RPEM, no replay.
 
-DESIGN.md section 4, Remark 3: the fractional recursion depends on alpha, so when
+docs/online.md, "Remark 3: window vs recursive": the fractional recursion depends on alpha, so when
 alpha (or the resonance) changes one either recomputes over the window
 (``tracker.WindowTracker``) or carries on with the newest estimate. This module
 is the second strategy. It uses the window tracker's regressor ``phi``
