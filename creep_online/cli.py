@@ -2,18 +2,26 @@
 
 Each sub-command lives in ``creep_online.commands.<name>`` and exposes
 ``register(subparsers)``, which adds its parser and sets ``func``. Any
-CreepOnlineError becomes one line on stderr and exit code 2, never a traceback.
+CreepOnlineError becomes one line on stderr and exit code 2, never a traceback;
+so does a bad flag (argparse's usage block is replaced by one line). Ctrl-C,
+SIGTERM and SIGHUP end any command the same way (``creep_online._signals``):
+the work done is kept, one line says so, the exit status is 128 + the signal.
+Everything printed goes through ``TerminalText``: control characters from a
+file name or a header reach the terminal escaped, never raw.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
 import signal
 import sys
 import warnings
+from typing import Iterator, TextIO
 
-from .errors import CreepOnlineError, CreepOnlineWarning, one_line as _one_line
+from . import _signals
+from .errors import CreepOnlineError, CreepOnlineWarning, one_line as _one_line, printable
 
 COMMANDS = ("identify", "simulate", "stream", "diagnose", "fit", "demo", "batch")
 #: One-line help of each command for the top-level listing, so that ``--help`` imports no command
@@ -29,9 +37,42 @@ SUMMARIES = {
 }
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse's parser whose errors are one line (``creep-online CMD: error: ...``) with exit status 2."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {printable(message, keep_return=False)} (see {self.prog} --help)\n")
+
+
+class TerminalText:
+    """A text stream that writes control characters escaped (``errors.printable``): what a record's name or a
+    CSV header holds is shown, never acted on by the terminal. Everything else is the wrapped stream's."""
+
+    def __init__(self, stream: TextIO) -> None:
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        self._stream.write(printable(text))
+        return len(text)
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
+
+
+@contextlib.contextmanager
+def _terminal_text() -> Iterator[None]:
+    """sys.stdout and sys.stderr through ``TerminalText`` for the command's run."""
+    saved = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = (s if s is None or isinstance(s, TerminalText) else TerminalText(s) for s in saved)
+    try:
+        yield
+    finally:
+        sys.stdout, sys.stderr = saved
+
+
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The full parser; with ``only``, just that command is imported and the others are listed by name."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="creep-online",
         description="Identify the fractional-order creep model b / (s^alpha (1 + a1 s + a2 s^2)), batch or online.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -62,32 +103,37 @@ def _warning_printer(command: str):
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point; returns the exit code (0 ok, 1 failed check, 2 bad input, 3 internal error).
+    """Entry point; returns the exit code (0 ok, 1 failed check, 2 bad input, 3 internal error, 128 + N ended
+    by signal N: 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP).
 
     ``creep-online stream`` has its own codes for how a stream ended (see its --help).
     """
-    parser = build_parser(only=_requested(sys.argv[1:] if argv is None else argv))
-    args = parser.parse_args(argv)
-    try:
-        with warnings.catch_warnings():
-            warnings.showwarning = _warning_printer(args.command)
-            return int(args.func(args) or 0)
-    except CreepOnlineError as exc:
-        print(f"creep-online {args.command}: error: {_one_line(exc)}", file=sys.stderr)
-        return 2
-    except BrokenPipeError:
-        # the reader (e.g. `| head`) went away: not an error of ours
-        sys.stderr.close()
-        return 0
-    except KeyboardInterrupt:
-        print(f"creep-online {args.command}: interrupted", file=sys.stderr)
-        return 130
-    except Exception as exc:  # noqa: BLE001 - a bug of ours: one line, not a traceback
-        if os.environ.get("CREEP_ONLINE_DEBUG"):
-            raise
-        print(f"creep-online {args.command}: internal error: {type(exc).__name__}: {_one_line(exc)} "
-              f"(please report it; CREEP_ONLINE_DEBUG=1 shows the traceback)", file=sys.stderr)
-        return 3
+    argv = sys.argv[1:] if argv is None else list(argv)
+    command = _requested(argv) or "creep-online"
+    with _signals.stop_signals(), _terminal_text():
+        try:
+            parser = build_parser(only=_requested(argv))
+            args = parser.parse_args(argv)
+            command = args.command
+            with warnings.catch_warnings():
+                warnings.showwarning = _warning_printer(args.command)
+                return int(args.func(args) or 0)
+        except CreepOnlineError as exc:
+            print(f"creep-online {command}: error: {_one_line(exc)}", file=sys.stderr)
+            return 2
+        except BrokenPipeError:
+            # the reader (e.g. `| head`) went away: not an error of ours
+            _quietly(sys.stderr.close)
+            return 0
+        except KeyboardInterrupt as exc:    # Ctrl-C, SIGTERM, SIGHUP (``_signals.Interrupted``)
+            _quietly(lambda: print(f"creep-online {command}: {_signals.describe(exc)}", file=sys.stderr))
+            return _signals.exit_code(exc)
+        except Exception as exc:  # noqa: BLE001 - a bug of ours: one line, not a traceback
+            if os.environ.get("CREEP_ONLINE_DEBUG"):
+                raise
+            print(f"creep-online {command}: internal error: {type(exc).__name__}: {_one_line(exc)} "
+                  f"(please report it; CREEP_ONLINE_DEBUG=1 shows the traceback)", file=sys.stderr)
+            return 3
 
 
 def console() -> None:
@@ -97,22 +143,24 @@ def console() -> None:
     cluster, threads, buffered output); a Ctrl-C then used to end the process
     by the signal with no word (seen after ``batch``). From that point a Ctrl-C
     flushes the output, says in one line that the command had ended and with
-    which status, and exits with 130. A process started with Ctrl-C ignored
-    keeps it ignored.
+    which status, and exits with 130 (SIGTERM and SIGHUP alike, with their
+    own status). A process started with a signal ignored keeps it ignored.
     """
     code = main()
-    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
-        signal.signal(signal.SIGINT, _interrupted_while_exiting(code))
+    for signum in _signals.STOP_SIGNALS:
+        if signal.getsignal(signum) is not signal.SIG_IGN:
+            signal.signal(signum, _interrupted_while_exiting(code))
     sys.exit(code)
 
 
 def _interrupted_while_exiting(code: int):
-    """A SIGINT handler for the interpreter's shutdown after the command ended with ``code``."""
+    """A stop-signal handler for the interpreter's shutdown after the command ended with ``code``."""
     def handler(signum, frame) -> None:
         _quietly(sys.stdout.flush)
-        _quietly(lambda: print(f"creep-online: interrupted while exiting (the command had ended, exit status "
-                               f"{code})", file=sys.stderr, flush=True))
-        os._exit(130)
+        what = "interrupted" if signum == signal.SIGINT else _signals.STOP_SIGNALS.get(signum, "stopped")
+        _quietly(lambda: print(f"creep-online: {what} while exiting (the "
+                               f"command had ended, exit status {code})", file=sys.stderr, flush=True))
+        os._exit(128 + signum)
     return handler
 
 

@@ -7,7 +7,7 @@ from ..diagnostics.extended import check_effects, fit_base, fit_extended, prepar
 from ..diagnostics.loading import load_for_diagnosis
 from ..effects import effect_names
 from ..metrics import noise_std_estimate
-from ._common import print_json
+from ._common import nonempty, print_json, seconds
 from ._progress import for_command
 
 
@@ -16,14 +16,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Fits b / (s^alpha (1 + a1 s + a2 s^2)) plus the named effects "
                                    f"({', '.join(effect_names())}; one or several) and prints the parameters and "
                                    "the fit before and after.")
-    p.add_argument("data", help="CSV file with header t,u,y")
-    p.add_argument("--effects", required=True, help="comma-separated catalogue names, e.g. delay,drift")
+    p.add_argument("data", type=nonempty, help="CSV file with header t,u,y")
+    p.add_argument("--effects", required=True, type=nonempty, help="comma-separated catalogue names, e.g. delay,drift")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.add_argument("--online", action="store_true",
                    help="also stream the record through the online estimator, plain and with the fitted effects "
                         "compensated sample by sample, each given its batch fit's alpha as a hint, and show "
                         "the live prediction error of both (uniform time)")
-    p.add_argument("--window", type=float, default=1.0, help="window of the live error display in s (default 1)")
+    p.add_argument("--window", type=seconds, default=1.0, help="window of the live error display in s (default 1)")
     p.set_defaults(func=run)
 
 

@@ -11,7 +11,7 @@ from ..io.safe_files import check_output
 from ..io.csvfile import read_columns
 from ..record import Record
 from ..simulate import METHODS, simulate
-from ._common import parse_params, print_json
+from ._common import nonempty, parse_params, print_json, whole
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -21,13 +21,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "for a zero-order-held input to ~1e-14), 'paper' (eq. 13, the multi-term "
                                    "Grunwald-Letnikov recursion exactly as FOMCON lsim computes it), "
                                    "'split' (exact ZOH fractional integral + exact FOH resonance).")
-    p.add_argument("--params", required=True, help="alpha=..,a1=..,a2=..,b=.. or alpha=..,fn=..,zeta=..,b=.. "
+    p.add_argument("--params", required=True, type=nonempty, help="alpha=..,a1=..,a2=..,b=.. or alpha=..,fn=..,zeta=..,b=.. "
                                                     "(fn in Hz; b defaults to 1)")
-    p.add_argument("--input", required=True, help="CSV with header t,u (uniform sampling)")
-    p.add_argument("-o", "--output", required=True,
+    p.add_argument("--input", required=True, type=nonempty, help="CSV with header t,u (uniform sampling)")
+    p.add_argument("-o", "--output", required=True, type=nonempty,
                    help="CSV to write (t,u,y; written atomically, never over the input)")
     p.add_argument("--method", choices=METHODS, default="exact", help="simulator (default: exact)")
-    p.add_argument("--memory", type=int, default=None, help="truncate the fractional memory to L samples "
+    p.add_argument("--memory", type=whole(1), default=None, help="truncate the fractional memory to L samples "
                                                              "(paper and split only)")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.set_defaults(func=run)

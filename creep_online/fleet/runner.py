@@ -67,10 +67,7 @@ def dask_client(scheduler: str | None = None, workers: int | None = None) -> Ite
     """
     dd = distributed()
     if scheduler:
-        try:
-            client = dd.Client(scheduler, timeout=CONNECT_TIMEOUT_S)
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise CreepOnlineError(f"cannot reach the Dask scheduler at {scheduler}: {one_line(exc)}") from None
+        client = _connect(dd, scheduler)
         with contextlib.closing(client):
             warm_up_workers(client, scheduler)
             yield client
@@ -83,6 +80,39 @@ def dask_client(scheduler: str | None = None, workers: int | None = None) -> Ite
     with contextlib.closing(cluster), contextlib.closing(dd.Client(cluster)) as client:
         warm_up_workers(client, "the local cluster")
         yield client
+
+
+def _connect(dd: Any, scheduler: str) -> Any:
+    """A ``Client`` of the scheduler at ``scheduler``, or one CreepOnlineError within ``CONNECT_TIMEOUT_S`` (+5 s).
+
+    Whatever answers there decides how the connection fails: nothing listening
+    (Dask's own timeout), a service that is not Dask (an HTTP server made
+    Dask's reader allocate exabytes, an echo server failed its assertions) or
+    a port that accepts and stays silent (Dask's handshake waited without
+    end). The client is built in a helper thread and waited for at most the
+    timeout; every failure is the same one line.
+    """
+    result: dict[str, Any] = {}
+
+    def attempt() -> None:
+        try:
+            result["client"] = dd.Client(scheduler, timeout=CONNECT_TIMEOUT_S)
+        except BaseException as exc:  # noqa: BLE001 - reported below, on the caller's thread
+            result["error"] = exc
+
+    helper = threading.Thread(target=attempt, name="dask-connect", daemon=True)
+    helper.start()
+    helper.join(CONNECT_TIMEOUT_S + 5.0)
+    if "client" in result:
+        return result["client"]
+    if "error" not in result:
+        raise CreepOnlineError(f"no Dask scheduler answered at {scheduler} within {CONNECT_TIMEOUT_S + 5:g} s "
+                               f"(is it a Dask scheduler's address, tcp://HOST:8786?)")
+    exc = result["error"]
+    if isinstance(exc, (OSError, TimeoutError)):
+        raise CreepOnlineError(f"cannot reach the Dask scheduler at {scheduler}: {one_line(exc)}")
+    raise CreepOnlineError(f"{scheduler} did not answer as a Dask scheduler ({type(exc).__name__}: "
+                           f"{one_line(exc)[:120]})")
 
 
 @contextlib.contextmanager

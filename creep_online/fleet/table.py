@@ -2,7 +2,9 @@
 
 Both are written atomically (temporary file, then rename), so an interrupted
 batch never leaves half a table. A failed record's numbers are empty cells in
-CSV and nulls in Parquet.
+CSV and nulls in Parquet. Text cells of the CSV (a record's name, its error)
+that a spreadsheet would read as a formula are written as text
+(``safe_files.spreadsheet_text``).
 """
 from __future__ import annotations
 
@@ -11,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import CreepOnlineError, OutputError
-from ..io.safe_files import atomic_write, check_output
+from ..io.safe_files import atomic_write, check_output, spreadsheet_text
 from .row import COLUMNS
 
 FORMATS = (".csv", ".parquet")
@@ -47,8 +49,15 @@ def write_table(rows: list[dict[str, Any]], path: str | Path) -> Path:
             writer = csv.DictWriter(fh, fieldnames=COLUMNS, extrasaction="ignore", lineterminator="\n")
             writer.writeheader()
             for r in rows:
-                writer.writerow({k: "" if r.get(k) is None else r[k] for k in COLUMNS})
+                writer.writerow({k: _cell(r.get(k)) for k in COLUMNS})
     return out
+
+
+def _cell(value: Any) -> Any:
+    """A CSV cell: empty for a missing number, text neutralised for spreadsheets (record names, errors)."""
+    if value is None:
+        return ""
+    return spreadsheet_text(value) if isinstance(value, str) else value
 
 
 def _write_parquet(rows: list[dict[str, Any]], out: Path) -> None:

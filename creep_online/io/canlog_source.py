@@ -22,6 +22,7 @@ class CanLogSource(SampleSource):
 
     options = (RATE, DBC, REALTIME, WINDOW.with_default(32))
     target_label = "file"
+    target_is_file = True
 
     def __init__(self, path: str, *, rate: float | None = None, dbc: str | None = None, realtime: bool = False,
                  window: int = 32, stall: float = 0.5, **kw) -> None:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import time
 
 from .frames import RawSample
-from .source_options import REALTIME, STALL, WINDOW, Option
+from .source_options import REALTIME, STALL, WINDOW, Option, nonempty
 from .sources import SampleSource
 
 
@@ -18,9 +18,10 @@ class CsvSource(SampleSource):
     """A ``t,u,y`` CSV file as a stream (sequence = row index), optionally paced in real time."""
 
     options = (REALTIME, WINDOW, STALL,
-               Option("u_column", str, None, "input column (CSV header name or GCS NAMEi)"),
-               Option("y_column", str, None, "output column (CSV header name or GCS NAMEi)"))
+               Option("u_column", nonempty, None, "input column (CSV header name or GCS NAMEi)"),
+               Option("y_column", nonempty, None, "output column (CSV header name or GCS NAMEi)"))
     target_label = "file"
+    target_is_file = True
 
     def __init__(self, path: str, *, realtime: bool = False, chunk: int = 1000,
                  u_column: str | None = None, y_column: str | None = None, **kw) -> None:

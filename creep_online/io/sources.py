@@ -18,10 +18,11 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, ClassVar, Iterator, NamedTuple
 
+from ..checks import count, positive
 from ..errors import TransportError
 from .frames import ParserStats, RawSample
 from .sequence import SequenceStats, SequenceTracker
-from .source_options import RECONNECT, RECONNECT_TIMEOUT, STALL, WINDOW, Option
+from .source_options import RECONNECT, RECONNECT_TIMEOUT, RECONNECT_TIMEOUT_S, STALL, WINDOW, Option
 
 __all__ = ["Sample", "SourceStats", "SampleSource", "ReconnectingSource", "TransportError", "open_source"]
 
@@ -103,6 +104,7 @@ class SampleSource:
     name = "source"
     options: ClassVar[tuple[Option, ...]] = (WINDOW, STALL)
     target_label: ClassVar[str] = "target"
+    target_is_file: ClassVar[bool] = False     # TARGET names a file the source reads (csv:, canlog:)
     keeps_unknown_options: ClassVar[bool] = False
 
     @classmethod
@@ -113,6 +115,10 @@ class SampleSource:
     def __init__(self, *, window: int = 16, modulus: int | None = None, rate: float | None = None,
                  t_from_seq: bool = False, stall: float = 0.5,
                  on_event: Callable[[str], None] | None = _stderr_event) -> None:
+        window = count(window, "window (reorder window, samples)", minimum=0, maximum=1 << 20)
+        stall = positive(stall, "stall (s of silence)") if stall != float("inf") else stall
+        if rate is not None:
+            rate = positive(rate, "rate (Hz)")
         self.stats = SourceStats()
         self.tracker: SequenceTracker = SequenceTracker(window=window, modulus=modulus,
                                                         stats=self.stats.sequence)
@@ -218,10 +224,11 @@ class ReconnectingSource(SampleSource):
     options = SampleSource.options + (RECONNECT, RECONNECT_TIMEOUT)
     target_label = "port"
 
-    def __init__(self, *, reconnect: bool = True, reconnect_timeout: float | None = None, **kw) -> None:
+    def __init__(self, *, reconnect: bool = True, reconnect_timeout: float | None = RECONNECT_TIMEOUT_S, **kw) -> None:
         super().__init__(**kw)
         self.reconnect = bool(reconnect)
-        self.reconnect_timeout = reconnect_timeout
+        self.reconnect_timeout = None if reconnect_timeout is None else \
+            positive(reconnect_timeout, "reconnect_timeout (s)")
         self._down_since: float | None = None
         self._next_try = 0.0
         self._backoff = 0.05

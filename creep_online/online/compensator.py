@@ -50,6 +50,7 @@ import numpy as np
 from ..errors import DataError, ModelError
 from ..model import CreepModel, ExtendedModel
 from . import compensator_kernels as CK
+from .checkpoint import Checkpointable
 from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SoeBasis
 from .stored_params import StoredParams
 
@@ -64,7 +65,7 @@ MAX_REPLAY = 1 << 22
 REPLAY_CHUNK = 16
 
 
-class CreepCompensator(StoredParams):
+class CreepCompensator(StoredParams, Checkpointable):
     """Command u for reference r, sample by sample, inverting creep, resonance (and hysteresis).
 
     Every constructor argument is stored verbatim (``get_params``).
