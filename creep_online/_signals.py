@@ -14,13 +14,28 @@ started (``nohup``, a background job) stays ignored.
 of a stream that has already stopped): a signal arriving within it is noted
 and raised when it ends. ``flagged()`` turns the first signal into a flag the
 code polls (the batch asks it between records) and only a second one raises.
+
+Python runs a signal handler only between two bytecodes, so a stop signal
+that arrives while a compiled kernel runs for minutes (a full-memory
+simulation of a long record) would wait for it. A watchdog thread, woken by
+the signal itself (``signal.set_wakeup_fd``), gives the handler
+``GRACE_S`` seconds; past them it removes the temporary files in flight
+(``temporary``), says so in one line and ends the process with the same
+status.
 """
 from __future__ import annotations
 
 import contextlib
+import os
+import shutil
 import signal
+import sys
 import threading
+from pathlib import Path
 from typing import Any, Callable, Iterator
+
+#: Seconds a stop signal may wait for Python to handle it before the watchdog ends the process.
+GRACE_S = 3.0
 
 #: The signals that stop a run, and how the one-line message names them.
 STOP_SIGNALS = {signal.SIGINT: "interrupted (Ctrl-C)", signal.SIGTERM: "terminated (SIGTERM)",
@@ -60,12 +75,15 @@ class _State:
         self.pending: int | None = None      # a signal noted while deferred or flagged
         self.count = 0                       # signals seen while flagged
         self.installed = False               # our handlers are in place (``stop_signals``)
+        self.handled = 0                     # signals the Python handler has seen (the watchdog compares)
+        self.temporary: set[str] = set()     # temporary files and folders in flight (``temporary``)
 
 
 _state = _State()
 
 
 def _handler(signum: int, frame: Any) -> None:
+    _state.handled += 1
     if _state.mode == "raise":
         raise Interrupted(signum)
     if _state.mode == "flag":
@@ -93,12 +111,82 @@ def stop_signals() -> Iterator[None]:
         previous[signum] = current
         signal.signal(signum, _handler)
     _state.mode, _state.pending, _state.count, _state.installed = "raise", None, 0, True
+    watchdog = _Watchdog() if previous else None
     try:
         yield
     finally:
         _state.installed = False
+        if watchdog is not None:
+            watchdog.stop()
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+
+
+@contextlib.contextmanager
+def temporary(path: str | Path) -> Iterator[None]:
+    """Within: ``path`` (a temporary file or folder) is removed if the watchdog has to end the process."""
+    key = str(path)
+    _state.temporary.add(key)
+    try:
+        yield
+    finally:
+        _state.temporary.discard(key)
+
+
+class _Watchdog:
+    """Ends the process when a stop signal is not handled within GRACE_S (module docstring)."""
+
+    def __init__(self) -> None:
+        self._read, self._write = os.pipe()
+        os.set_blocking(self._write, False)
+        try:
+            self._previous_fd = signal.set_wakeup_fd(self._write, warn_on_full_buffer=False)
+        except ValueError:           # (not the main thread: no watchdog)
+            os.close(self._read)
+            os.close(self._write)
+            self._read = -1
+            return
+        self._thread = threading.Thread(target=self._watch, name="creep-online-signals", daemon=True)
+        self._thread.start()
+
+    def _watch(self) -> None:
+        while True:
+            try:
+                data = os.read(self._read, 64)
+            except OSError:
+                return
+            if not data:
+                return
+            stops = [b for b in data if b in STOP_SIGNALS]
+            if not stops:
+                continue
+            seen = _state.handled
+            waited = threading.Event()
+            if not waited.wait(GRACE_S) and _state.handled == seen and _state.installed:
+                self._end(stops[0])
+
+    @staticmethod
+    def _end(signum: int) -> None:
+        for path in list(_state.temporary):
+            if os.path.isdir(path):
+                shutil.rmtree(path, ignore_errors=True)
+            else:
+                with contextlib.suppress(OSError):
+                    os.unlink(path)
+        with contextlib.suppress(Exception):
+            sys.stderr.write(f"creep-online: {STOP_SIGNALS[signum]} while busy in a computation: stopped now, "
+                             f"nothing written\n")
+            sys.stderr.flush()
+        os._exit(128 + signum)
+
+    def stop(self) -> None:
+        if self._read < 0:
+            return
+        with contextlib.suppress(ValueError):
+            signal.set_wakeup_fd(self._previous_fd)
+        os.close(self._write)
+        self._thread.join(1.0)
+        os.close(self._read)
 
 
 @contextlib.contextmanager

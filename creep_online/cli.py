@@ -91,14 +91,18 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
 
 
 def _warning_printer(command: str):
-    """showwarning replacement: our warnings as one line, anything else as Python prints it."""
+    """showwarning replacement: every warning on one line (ours as they are, others with their kind and where
+    they came from); ``CREEP_ONLINE_DEBUG=1`` shows the others as Python prints them."""
     default = warnings.showwarning
 
     def show(message, category, filename, lineno, file=None, line=None):
         if issubclass(category, CreepOnlineWarning):
-            print(f"creep-online {command}: warning: {message}", file=sys.stderr)
-        else:
+            print(f"creep-online {command}: warning: {_one_line(message)}", file=sys.stderr)
+        elif os.environ.get("CREEP_ONLINE_DEBUG"):
             default(message, category, filename, lineno, file, line)
+        else:
+            print(f"creep-online {command}: warning: {category.__name__}: {_one_line(message)} "
+                  f"({os.path.basename(str(filename))}:{lineno})", file=sys.stderr)
     return show
 
 
@@ -113,7 +117,10 @@ def main(argv: list[str] | None = None) -> int:
     with _signals.stop_signals(), _terminal_text():
         try:
             parser = build_parser(only=_requested(argv))
-            args = parser.parse_args(argv)
+            try:
+                args = parser.parse_args(argv)
+            except SystemExit as stop:     # --help, --version, or a bad flag (its one line already printed)
+                return stop.code if isinstance(stop.code, int) else 2
             command = args.command
             with warnings.catch_warnings():
                 warnings.showwarning = _warning_printer(args.command)

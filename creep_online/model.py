@@ -87,7 +87,7 @@ class CreepModel:
     def from_resonance(cls, alpha: float, fn: float, zeta: float, b: float = 1.0) -> "CreepModel":
         """Build the model from the natural frequency ``fn`` (Hz) and damping ``zeta``."""
         if not (is_real(fn) and is_real(zeta) and math.isfinite(fn) and math.isfinite(zeta) and fn > 0 and zeta > 0):
-            raise ModelError(f"fn and zeta must be positive finite numbers, got fn={fn!r}, zeta={zeta!r}")
+            raise ModelError(f"fn and zeta must be > 0 and finite, got fn={fn!r}, zeta={zeta!r}")
         wn = 2.0 * math.pi * float(fn)
         try:
             a1, a2 = 2.0 * float(zeta) / wn, 1.0 / wn**2

@@ -157,8 +157,8 @@ def test_diagnose_refuses_extreme_amplitudes(files, capsys, name):
 
 
 @pytest.mark.parametrize("flags, words", [
-    (["--t-c", "-1"], ["t_c"]), (["--t-c", "0"], ["t_c"]), (["--t-c", "nan"], ["t_c"]),
-    (["--layer1-step", "0"], ["layer1_step"]), (["--alpha0", "1.5"], ["alpha0"]),
+    (["--t-c", "-1"], ["--t-c"]), (["--t-c", "0"], ["--t-c"]), (["--t-c", "nan"], ["--t-c"]),
+    (["--layer1-step", "0"], ["--layer1-step"]), (["--alpha0", "1.5"], ["--alpha0"]),
 ])
 def test_identify_settings_are_checked(files, capsys, flags, words):
     code, _, err = _cli(["identify", files["good"], *flags], capsys)
@@ -200,7 +200,7 @@ def test_simulate_bad_output_paths(files, capsys, tmp_path, target, words):
 def test_simulate_failure_leaves_the_old_output_intact(files, capsys, tmp_path):
     out = tmp_path / "out.csv"
     out.write_text("precious\n")
-    code, _, err = _cli(["simulate", "--params", "alpha=0.3,a1=0.01,a2=1e-300", "--input", files["good"],
+    code, _, err = _cli(["simulate", "--params", "alpha=0.3,a1=0.01,a2=1e-4,b=1e300", "--input", files["u_huge"],
                          "-o", out], capsys)
     _assert_one_line_error(code, err, "not finite")
     assert out.read_text() == "precious\n"
@@ -228,15 +228,15 @@ def test_report_folder_with_other_files_is_refused(files, capsys, tmp_path):
     folder.mkdir()
     (folder / "notes.txt").write_text("mine")
     code, _, err = _cli(["diagnose", files["good"], "--report", folder], capsys)
-    _assert_one_line_error(code, err, "other files")
+    _assert_one_line_error(code, err, "not an earlier creep-online report")
     assert (folder / "notes.txt").read_text() == "mine"
 
 
 def test_report_folder_is_all_or_nothing(tmp_path):
     from creep_online.io.safe_files import report_dir
     folder = tmp_path / "rep"
-    folder.mkdir()
-    (folder / "index.html").write_text("old report")
+    with report_dir(folder) as tmp:
+        (tmp / "index.html").write_text("old report")
     with pytest.raises(KeyboardInterrupt):
         with report_dir(folder) as tmp:
             (tmp / "index.html").write_text("half")
@@ -246,7 +246,7 @@ def test_report_folder_is_all_or_nothing(tmp_path):
     with report_dir(folder) as tmp:
         (tmp / "index.html").write_text("new report")
         (tmp / "plot.png").write_bytes(b"png")
-    assert sorted(p.name for p in folder.iterdir()) == ["index.html", "plot.png"]
+    assert sorted(p.name for p in folder.iterdir()) == [".creep-online-report", "index.html", "plot.png"]
     assert (folder / "index.html").read_text() == "new report"
     assert [p.name for p in tmp_path.iterdir()] == ["rep"]
 

@@ -35,6 +35,9 @@ from .row import empty_row
 
 #: Seconds to wait for an existing scheduler before giving up with a one-line error.
 CONNECT_TIMEOUT_S = 10.0
+#: Worker deaths a task may see before Dask fails it (KilledWorker) on the local cluster (Dask's default: 3, each
+#: death of a record too large for memory costing a worker's restart).
+ALLOWED_FAILURES = 1
 #: Records in flight per worker thread.
 WINDOW_PER_THREAD = 4
 #: Seconds between two looks at ``run_on_dask``'s ``stop`` while no record has finished.
@@ -74,7 +77,8 @@ def dask_client(scheduler: str | None = None, workers: int | None = None) -> Ite
         return
     if workers is not None and workers < 1:
         raise CreepOnlineError(f"--workers must be at least 1 (got {workers})")
-    with _workers_ignore_ctrl_c():
+    import dask
+    with _workers_ignore_ctrl_c(), dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES}):
         cluster = dd.LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
                                   host="127.0.0.1", dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
     with contextlib.closing(cluster), contextlib.closing(dd.Client(cluster)) as client:
@@ -151,7 +155,8 @@ def warm_up_workers(client: Any, where: str) -> dict[str, float]:
 
 def run_on_dask(jobs: Iterable[RecordJob], client: Any, *, diagnose_it: bool = False,
                 identify_options: dict[str, Any] | None = None,
-                stop: Callable[[], bool] | None = None) -> Iterator[dict[str, Any]]:
+                stop: Callable[[], bool] | None = None, task: Callable[..., dict] | None = None
+                ) -> Iterator[dict[str, Any]]:
     """Yield one row per job, in the order they finish (``run_record`` on the cluster's workers).
 
     A record that was bad before any work (``job.error``) gets its row here at
@@ -162,9 +167,17 @@ def run_on_dask(jobs: Iterable[RecordJob], client: Any, *, diagnose_it: bool = F
     come and what is queued is cancelled (the batch command's Ctrl-C: a flag
     its SIGINT handler sets, so that no KeyboardInterrupt lands inside Dask's
     client code, which then printed a callback's traceback on the way out).
+
+    One bad record never fails its neighbours: when a worker dies (a record
+    too large for its memory), Dask fails every task that was on it with
+    ``KilledWorker``, the healthy ones queued behind the culprit too. Those
+    records are run again at the end, one at a time, so only the record that
+    kills a worker on its own gets the error row. ``task`` replaces
+    ``run_record`` (tests: a task that kills its worker).
     """
     from .job import run_record
     dd = distributed()
+    task = task or run_record
     options = {"diagnose_it": diagnose_it, "identify_options": identify_options}
     pending = []
     for job in jobs:
@@ -172,13 +185,25 @@ def run_on_dask(jobs: Iterable[RecordJob], client: Any, *, diagnose_it: bool = F
             yield run_record(job, **options)
         else:
             pending.append(job)
+    suspects: list[RecordJob] = []
+    yield from _run_window(dd, client, task, pending, options, stop, suspects)
+    for job in suspects:                   # alone now: a worker that dies is this record's doing
+        if stop is not None and stop():
+            return
+        yield from _run_window(dd, client, task, [job], options, stop, None)
+
+
+def _run_window(dd: Any, client: Any, task: Callable[..., dict], pending: list[RecordJob], options: dict,
+                stop: Callable[[], bool] | None, suspects: list[RecordJob] | None) -> Iterator[dict[str, Any]]:
+    """The rows of ``pending`` run in a bounded window; with ``suspects`` a list, the records whose worker died
+    go there instead of getting an error row."""
     queue = iter(pending)
     in_flight: dict[str, tuple[Any, RecordJob]] = {}
     done = dd.as_completed()
 
     def submit(n: int) -> None:
         for job in islice(queue, n):
-            future = client.submit(run_record, job, pure=False, **options)
+            future = client.submit(task, job, pure=False, **options)
             in_flight[future.key] = (future, job)
             done.add(future)
 
@@ -191,8 +216,14 @@ def run_on_dask(jobs: Iterable[RecordJob], client: Any, *, diagnose_it: bool = F
             try:
                 row = future.result()
             except Exception as exc:  # noqa: BLE001 - the cluster failed this one record; go on
+                if suspects is not None and type(exc).__name__ == "KilledWorker":
+                    suspects.append(job)   # perhaps only queued behind the record that killed the worker
+                    future.release()
+                    continue
                 row = empty_row(job)
-                row["error"] = f"the cluster could not run it: {type(exc).__name__}: {one_line(exc)}"
+                why = " (its worker died running it alone: too large for a worker's memory?)" \
+                    if type(exc).__name__ == "KilledWorker" else ""
+                row["error"] = f"the cluster could not run it: {type(exc).__name__}: {one_line(exc)}{why}"
             future.release()
             yield row
     finally:

@@ -25,8 +25,8 @@ from ..errors import DataError, TransportError
 from .capancdt_frames import COUNTER_MODULUS, CapancdtParser, Identity, Packet, channel_list, scale
 from .command_schedule import CommandSchedule
 from .frames import RawSample
-from .source_options import (RECONNECT, RECONNECT_TIMEOUT, RECONNECT_TIMEOUT_S, STALL, WINDOW, Option, nonempty,
-                             positive, whole)
+from .source_options import (IDLE_TIMEOUT, RECONNECT, RECONNECT_TIMEOUT, RECONNECT_TIMEOUT_S, STALL, WINDOW, Option,
+                             nonempty, positive, whole)
 from .sources import ReconnectingSource
 
 #: The controller's data port (as public DT6220 scripts use it) and fastest data rate (sample time 256 us).
@@ -40,7 +40,7 @@ class CapancdtSource(ReconnectingSource):
     """Samples (u from the command schedule, y = distance in um) from a capaNCDT-style TCP stream."""
 
     link = "connection"
-    options = (WINDOW.with_default(0), STALL, RECONNECT, RECONNECT_TIMEOUT) + (
+    options = (WINDOW.with_default(0), STALL, RECONNECT, RECONNECT_TIMEOUT, IDLE_TIMEOUT) + (
         Option("command", nonempty, None, "t,u file of the actuator command, zero-order held (required)", path=True),
         Option("rate", positive, DATA_RATE, "the controller's data rate in Hz (frames carry a counter, not a time)"),
         Option("channel", whole(1), 1, "the channel that measures the actuator (1-based)"),

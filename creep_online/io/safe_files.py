@@ -30,6 +30,7 @@ import tempfile
 from pathlib import Path
 from typing import IO, Iterable, Iterator
 
+from .._signals import temporary
 from ..errors import OutputError
 
 #: The marker file of a report folder: which tool wrote it and the files it holds (JSON).
@@ -113,12 +114,13 @@ def atomic_write(path: str | Path, mode: str = "w", encoding: str | None = "utf-
     except OSError as exc:
         raise OutputError(f"{out}: cannot write ({exc.strerror})") from None
     try:
-        with os.fdopen(fd, mode, encoding=None if "b" in mode else encoding) as fh:
-            yield fh
-            fh.flush()
-            os.fsync(fh.fileno())
-        _keep_mode(out, tmp)
-        os.replace(tmp, out)
+        with temporary(tmp):
+            with os.fdopen(fd, mode, encoding=None if "b" in mode else encoding) as fh:
+                yield fh
+                fh.flush()
+                os.fsync(fh.fileno())
+            _keep_mode(out, tmp)
+            os.replace(tmp, out)
     except OSError as exc:
         _unlink(tmp)
         raise OutputError(f"{out}: cannot write ({exc.strerror or exc})") from None
@@ -199,13 +201,14 @@ def report_dir(path: str | Path) -> Iterator[Path]:
     except OSError as exc:
         raise OutputError(f"{out}: cannot create the report folder ({exc.strerror})") from None
     try:
-        yield tmp
-        files = sorted(p.name for p in tmp.iterdir() if p.name != REPORT_MARKER)
-        (tmp / REPORT_MARKER).write_text(json.dumps({"tool": "creep-online", "files": files}, indent=1) + "\n",
-                                         encoding="utf-8")
-        tmp.chmod(0o777 & ~_umask())
-        check_report_dir(out)     # still only a report of ours (the user may have put files there meanwhile)
-        _swap_in(tmp, out)
+        with temporary(tmp):
+            yield tmp
+            files = sorted(p.name for p in tmp.iterdir() if p.name != REPORT_MARKER)
+            (tmp / REPORT_MARKER).write_text(json.dumps({"tool": "creep-online", "files": files}, indent=1) + "\n",
+                                             encoding="utf-8")
+            tmp.chmod(0o777 & ~_umask())
+            check_report_dir(out)     # still only a report of ours (the user may have put files there meanwhile)
+            _swap_in(tmp, out)
     except OutputError:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

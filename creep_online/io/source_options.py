@@ -118,6 +118,10 @@ RECONNECT = Option("reconnect", flag, True, "reopen a lost link with backoff (0:
 RECONNECT_TIMEOUT_S = 60.0
 RECONNECT_TIMEOUT = Option("reconnect_timeout", positive, RECONNECT_TIMEOUT_S,
                            "give up reconnecting after this many seconds")
+#: How long a live link may deliver nothing at all before the stream ends with "link lost".
+IDLE_TIMEOUT_S = 60.0
+IDLE_TIMEOUT = Option("idle_timeout", positive, IDLE_TIMEOUT_S,
+                      "end the stream after this many seconds without a sample on a connected link")
 REALTIME = Option("realtime", flag, False, "pace a replay in real time")
 DBC = Option("dbc", nonempty, None, "DBC file with the amplifier's messages (default: the packaged one)", path=True)
 

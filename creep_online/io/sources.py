@@ -22,7 +22,8 @@ from ..checks import count, positive
 from ..errors import TransportError
 from .frames import ParserStats, RawSample
 from .sequence import SequenceStats, SequenceTracker
-from .source_options import RECONNECT, RECONNECT_TIMEOUT, RECONNECT_TIMEOUT_S, STALL, WINDOW, Option
+from .source_options import (IDLE_TIMEOUT, IDLE_TIMEOUT_S, RECONNECT, RECONNECT_TIMEOUT, RECONNECT_TIMEOUT_S, STALL,
+                             WINDOW, Option)
 
 __all__ = ["Sample", "SourceStats", "SampleSource", "ReconnectingSource", "TransportError", "open_source"]
 
@@ -221,14 +222,37 @@ class ReconnectingSource(SampleSource):
     """
 
     link = "link"  # what the messages call it
-    options = SampleSource.options + (RECONNECT, RECONNECT_TIMEOUT)
+    options = SampleSource.options + (RECONNECT, RECONNECT_TIMEOUT, IDLE_TIMEOUT)
     target_label = "port"
 
-    def __init__(self, *, reconnect: bool = True, reconnect_timeout: float | None = RECONNECT_TIMEOUT_S, **kw) -> None:
+    def __init__(self, *, reconnect: bool = True, reconnect_timeout: float | None = RECONNECT_TIMEOUT_S,
+                 idle_timeout: float | None = IDLE_TIMEOUT_S, **kw) -> None:
         super().__init__(**kw)
         self.reconnect = bool(reconnect)
         self.reconnect_timeout = None if reconnect_timeout is None else \
             positive(reconnect_timeout, "reconnect_timeout (s)")
+        self.idle_timeout = None if idle_timeout is None else positive(idle_timeout, "idle_timeout (s)")
+        self._idle_since = time.monotonic()
+
+    def read(self, timeout: float = 0.1) -> list[Sample]:
+        """``SampleSource.read``; a connected link that delivers no sample for ``idle_timeout`` s ends the stream
+        (TransportError: "link lost"), so a device that never sends holds no stream, or its service, forever.
+        While the link is down ``reconnect_timeout`` rules instead."""
+        out = super().read(timeout)
+        now = time.monotonic()
+        if out or not self.link_up:
+            self._idle_since = now
+        elif self.idle_timeout is not None and not self.ended and now - self._idle_since > self.idle_timeout:
+            self.ended = True
+            raise TransportError(f"{self.name}: no data for {self.idle_timeout:g} s on the {self.link} "
+                                 f"(idle_timeout)")
+        return out
+        if self.idle_timeout is not None and not self.ended and now - max(self._idle_since, self._last_data or 0.0) \
+                > self.idle_timeout:
+            self.ended = True
+            raise TransportError(f"{self.name}: no data for {self.idle_timeout:g} s on the {self.link} "
+                                 f"(idle_timeout)")
+        return out
         self._down_since: float | None = None
         self._next_try = 0.0
         self._backoff = 0.05

@@ -626,7 +626,7 @@ class OnlineEstimator(StoredParams, Checkpointable):
         """n samples were lost (sequence counter): time advances with the input held, no output used.
 
         Internal faults are caught as in update() (one per lost sample at most)."""
-        n = count(n, "gap(): n (lost samples)", minimum=0)
+        n = count(n, "gap(): n (lost samples)", minimum=0, maximum=1 << 62)
         if n == 0:
             return
         if n > GAP_REPLAY_MAX:
