@@ -26,7 +26,7 @@ runs some categories, ``--sample N`` every N-th attempt, ``--baseline REF``
 runs the same sweep on an earlier commit (``git archive``), ``--list`` prints
 the failures.
 """
-from __future__ import annotations
+
 
 import argparse
 import copy
@@ -1310,8 +1310,10 @@ def build(fx: Fixtures, only: set[str], servers: FakeServers) -> list[Case]:
 def warm() -> None:
     """Compile or load the kernels once here, so that each forked attempt starts warm."""
     from creep_online import CreepModel, identify, simulate
+    from creep_online.cli import build_parser
     from creep_online.online import OnlineEstimator, warm_kernels
-    import creep_online.cli  # noqa: F401
+    import creep_online.diagnostics  # noqa: F401
+    build_parser()                    # every command's module
     warm_kernels()
     t = np.arange(600) * 1e-3
     u = (t > 0.05).astype(float)

@@ -6,6 +6,10 @@ and plots are optional extras.
 """
 import os
 
+from ._signals import guard_cli_start as _guard_cli_start
+
+_guard_cli_start()     # the creep-online program: Ctrl-C while this package loads is one line, never a traceback
+
 # The matrices here are tiny (2x2 to 10x10); multi-threaded BLAS only adds
 # synchronisation (measured: identification 13x slower on 2 cores). Respect a
 # user's explicit setting.

@@ -12,7 +12,7 @@ import csv
 from pathlib import Path
 from typing import Any
 
-from ..errors import CreepOnlineError, OutputError
+from ..errors import CreepOnlineError, OutputError, printable
 from ..io.safe_files import atomic_write, check_output, spreadsheet_text
 from .row import COLUMNS
 
@@ -54,10 +54,11 @@ def write_table(rows: list[dict[str, Any]], path: str | Path) -> Path:
 
 
 def _cell(value: Any) -> Any:
-    """A CSV cell: empty for a missing number, text neutralised for spreadsheets (record names, errors)."""
+    """A CSV cell: empty for a missing number; text with control characters escaped (a carriage return in a
+    record's name would split its row) and neutralised for spreadsheets (record names, errors)."""
     if value is None:
         return ""
-    return spreadsheet_text(value) if isinstance(value, str) else value
+    return spreadsheet_text(printable(value, keep_return=False)) if isinstance(value, str) else value
 
 
 def _write_parquet(rows: list[dict[str, Any]], out: Path) -> None:

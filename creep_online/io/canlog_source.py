@@ -43,8 +43,24 @@ class _HeaderFirst:
 
 def _resync_blf(reader) -> bool:
     """Move a BLF reader to the next object signature after a corrupt one (scanning at most ``BLF_SCAN`` bytes);
-    False at the end of the file or when none is found."""
+    False at the end of the file or when none is found.
+
+    The block after a lost one may start with the end of an object that began in the lost one: its data are
+    read from their first object signature on (python-can's reader expects one at the start).
+    """
     reader._tail = b""
+    if not getattr(reader, "_creep_resync", False):
+        parse = reader._parse_container
+
+        def parse_after_loss(data: bytes):
+            if reader._creep_lost:
+                reader._creep_lost = False
+                found = data.find(b"LOBJ")
+                data = data[found:] if found >= 0 else b""
+            return parse(data)
+        reader._parse_container = parse_after_loss
+        reader._creep_resync = True
+    reader._creep_lost = True
     fh = reader.file
     try:
         start = fh.tell()

@@ -42,6 +42,8 @@ class CommandSchedule:
         name = str(path)
         try:
             text = read_input(path, what="command schedule (t,u file)", max_line=4096).decode("utf-8-sig")
+        except DataError as exc:
+            raise DataError(f"cannot read the command schedule: {exc}") from None
         except UnicodeDecodeError as exc:
             raise DataError(f"{name}: not a text file (undecodable byte at offset {exc.start})") from None
         t: list[float] = []

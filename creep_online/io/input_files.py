@@ -97,7 +97,7 @@ def read_input(path: str | Path, *, what: str = "file", max_line: int | None = N
     name = str(path)
     st = check_kind(path, what)
     limit = max_input_bytes() if limit is None else limit
-    if stat.S_ISREG(st.st_mode):
+    if stat.S_ISREG(st.st_mode) and name != "-":
         if st.st_size > limit:
             raise DataError(f"{name}: {st.st_size} bytes, more than the {limit} this tool reads "
                             f"(CREEP_ONLINE_MAX_INPUT_BYTES)")

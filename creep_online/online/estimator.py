@@ -268,6 +268,8 @@ class OnlineEstimator(StoredParams, Checkpointable):
             raise DataError(f"alpha_bounds must be two numbers (lo, hi), got {self.alpha_bounds!r}") from None
         if not 0 < lo < hi < 1:
             raise DataError(f"alpha_bounds must satisfy 0 < lo < hi < 1, got {self.alpha_bounds!r}")
+        if self.alpha0 is not None and not lo <= self.alpha0 <= hi:
+            raise DataError(f"alpha0 ({self.alpha0:g}) must lie within alpha_bounds ({lo:g}, {hi:g})")
         if not is_real(self.outlier_gate) or not _finite_float(self.outlier_gate) or not self.outlier_gate >= 0:
             raise DataError(f"outlier_gate must be >= 0 (0 disables it), got {self.outlier_gate!r}")
         if not is_real(self.input_gate) or not _finite_float(self.input_gate) or not self.input_gate >= 0:

@@ -664,6 +664,13 @@ def _judge_reset(f: np.ndarray, e: np.ndarray, G: np.ndarray) -> None:
     G[:, :] = 0.0
 
 
+def _finished() -> Generator:
+    """A generator that has run to its end (a restored search's finished work)."""
+    gen = (x for x in ())
+    next(gen, None)
+    return gen
+
+
 class ResonanceSearch(Checkpointable):
     """Resumable global search on a buffer (input deviations u, outputs y; NaN = unusable).
 
@@ -729,7 +736,7 @@ class ResonanceSearch(Checkpointable):
     def _restore_state(self, state: dict) -> None:
         progress = state.pop("_gen")
         self.__dict__.update(state)
-        self._gen = self._run() if progress == inspect.GEN_CREATED else iter(())
+        self._gen = self._run() if progress == inspect.GEN_CREATED else _finished()
 
     def _bind(self) -> None:
         """The construction's second half, on first use (the first ``step`` is a unit of its own; ``_history``,
