@@ -133,7 +133,8 @@ def main(argv: list[str] | None = None) -> int:
             _quietly(sys.stderr.close)
             return 0
         except KeyboardInterrupt as exc:    # Ctrl-C, SIGTERM, SIGHUP (``_signals.Interrupted``)
-            _quietly(lambda: print(f"creep-online {command}: {_signals.describe(exc)}", file=sys.stderr))
+            said = f"creep-online {command}: {_signals.describe(exc)}"
+            _quietly(lambda: print(said, file=sys.stderr))
             return _signals.exit_code(exc)
         except Exception as exc:  # noqa: BLE001 - a bug of ours: one line, not a traceback
             if os.environ.get("CREEP_ONLINE_DEBUG"):

@@ -40,8 +40,9 @@ class DataWarning(CreepOnlineWarning):
     """A doubtful but usable data file (e.g. a last line without end-of-line)."""
 
 
-#: Characters a terminal may act on (C0 but tab/newline/return, DEL, C1, bidirectional overrides): never shown raw.
-_CONTROL = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069]")
+#: Characters a terminal may act on (C0 but tab/newline/return, DEL, C1, bidirectional overrides) and the lone
+#: surrogates that stand for undecodable bytes of a file name: never shown raw.
+_CONTROL = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069\ud800-\udfff]")
 
 
 def _escape(match: re.Match) -> str:

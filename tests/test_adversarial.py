@@ -1,11 +1,15 @@
-"""Adversarial inputs (issue 14): no traceback, one-line errors with exit 2, inputs never destroyed.
+"""Adversarial inputs: no traceback, one-line errors with exit 2, inputs never destroyed.
 
-Categories (docs/reliability.md has the table): files the CSV reader is given,
-numbers out of range, invalid settings, outputs that would destroy data,
-report folders, frame encoders, and streams that end (link lost, Ctrl-C,
-corrupt CAN log). Real files, real subprocesses and real pseudo-terminals;
-the frame parsers themselves are fuzzed in test_fuzz_frames.py, the
-read-only install in test_readonly_install.py.
+Categories (docs/reliability.md, "Measured", has the counts of the sweep over
+all of them): files the CSV reader is given, numbers out of range, invalid
+settings, outputs that would destroy data, report folders, frame encoders,
+streams that end (link lost, Ctrl-C, corrupt CAN log), and below: source
+options, spellings of a spec, pipes and `-`, names that would reach a terminal
+raw. Signals, FIFOs, checkpoints, the API's number contract, CAN logs of every
+format and a sample of the sweep itself (``bench/bench_reliability.py``) are
+in test_reliability.py. Real files, real subprocesses and real
+pseudo-terminals; the frame parsers themselves are fuzzed in
+test_fuzz_frames.py, the read-only install in test_readonly_install.py.
 """
 from __future__ import annotations
 
@@ -75,7 +79,8 @@ def _cli(argv: list[str], capsys) -> tuple[int, str, str]:
 def _assert_one_line_error(code: int, err: str, *words: str) -> None:
     assert code == 2, err
     assert "Traceback" not in err
-    lines = [ln for ln in err.splitlines() if ln.strip() and ": warning: " not in ln]
+    lines = [ln for ln in err.splitlines() if ln.strip() and ": warning: " not in ln
+             and not ln.startswith("creep-online: ")]     # (a stream's events: a source says what it saw)
     assert len(lines) == 1 and ": error: " in lines[0], err
     for w in words:
         assert w in lines[0], (w, lines[0])
@@ -365,3 +370,52 @@ def test_canlog_bad_records_are_counted_and_skipped(tmp_path):
     samples = list(src)
     assert src.ended and src.stats.parser.malformed == 1
     assert len(samples) >= 398
+
+
+# ------------------------------------------------------------------ source options and spellings
+HOSTILE = ("nan", "inf", "-1", "1e300", "", "abc")
+OPTIONS = {"csv": ("csv:{good}", ("window", "stall", "realtime", "u_column")),
+           "canlog": ("canlog:{good}", ("rate", "window", "dbc")),
+           "capancdt": ("capancdt:127.0.0.1:9?command={good}", ("rate", "range", "channel", "timeout", "counter0",
+                                                              "reconnect_timeout", "idle_timeout")),
+           "serial": ("serial:/dev/creep-online-no-port", ("rate", "baud", "scale_u", "window", "stall"))}
+
+
+@pytest.mark.parametrize("kind, option", [(k, o) for k, (_, opts) in OPTIONS.items() for o in opts])
+def test_every_source_option_refuses_hostile_values_in_one_line(files, capsys, kind, option):
+    base = OPTIONS[kind][0].format(good=files["good"])
+    for value in HOSTILE:
+        spec = base + ("&" if "?" in base else "?") + f"{option}={value}"
+        code, _, err = _cli(["stream", "--source", spec], capsys)
+        assert "Traceback" not in err and "internal error" not in err, err
+        if code != 0:                              # (a long stall, a bare ``realtime``: valid)
+            _assert_one_line_error(code, err)
+
+
+@pytest.mark.parametrize("spec", ["CSV:{good}", "Csv:{good}", " csv:{good}", "csv:", "nosuch:{good}", "{good}"])
+def test_spec_spellings_that_are_not_a_kind_are_refused(files, capsys, spec):
+    code, _, err = _cli(["stream", "--source", spec.format(good=files["good"])], capsys)
+    _assert_one_line_error(code, err)
+
+
+def test_stdin_as_dash_is_read_like_a_file(files):
+    res = subprocess.run([sys.executable, "-m", "creep_online", "identify", "-", "--json"], capture_output=True,
+                         text=True, stdin=open(files["good"]), timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["samples"] == 1500
+
+
+def test_an_output_name_the_system_cannot_use_is_one_line(files, capsys, tmp_path):
+    for name in ("x" * 5000, str(tmp_path / ("y" * 300) / "out.csv")):
+        code, _, err = _cli(["simulate", "--params", PARAMS, "--input", files["good"], "-o", name], capsys)
+        _assert_one_line_error(code, err)
+    code, _, err = _cli(["diagnose", files["good"], "--report", "x" * 5000], capsys)
+    _assert_one_line_error(code, err)
+
+
+def test_every_warning_is_one_line(files, capsys, tmp_path):
+    """A numpy RuntimeWarning printed its source line too (two lines beside the error)."""
+    code, _, err = _cli(["simulate", "--params", "alpha=0.3,a1=0.01,a2=1e-4,b=1e300", "--input", files["u_huge"],
+                         "-o", tmp_path / "o.csv"], capsys)
+    assert code == 2
+    assert all(ln.startswith("creep-online simulate: ") for ln in err.splitlines() if ln.strip()), err

@@ -62,7 +62,8 @@ def _cli(argv, capsys) -> tuple[int, str, str]:
 def _one_line_error(code: int, err: str, *words: str) -> None:
     assert code == 2, err
     assert "Traceback" not in err
-    lines = [ln for ln in err.splitlines() if ln.strip() and ": warning: " not in ln]
+    lines = [ln for ln in err.splitlines() if ln.strip() and ": warning: " not in ln
+             and not ln.startswith("creep-online: ")]     # (a stream's events: a source says what it saw)
     assert len(lines) == 1 and ": error: " in lines[0], err
     for w in words:
         assert w in lines[0], (w, lines[0])

@@ -13,9 +13,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import math
+import os
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -287,7 +287,7 @@ def _feed_blocks(est: OnlineEstimator, u: np.ndarray, y: np.ndarray, trace: Trac
 
 def _has_options(path: str) -> bool:
     """``FILE?key=value``: a CSV replayed through its source (e.g. ``?realtime=1``), unless FILE has a '?'."""
-    return "?" in path and not Path(path).exists()
+    return "?" in path and not os.path.exists(path)
 
 
 def _column_options(spec: str, args: argparse.Namespace) -> dict:

@@ -75,7 +75,9 @@ def check_kind(path: str | Path, what: str = "file") -> os.stat_result:
     except FileNotFoundError:
         raise DataError(f"{name}: no such file") from None
     except OSError as exc:
-        raise DataError(f"{name}: cannot read ({exc.strerror})") from None
+        raise DataError(f"{name[:80]}: cannot read ({exc.strerror or exc})") from None
+    except ValueError as exc:                    # an embedded NUL
+        raise DataError(f"{name[:80]!r}: not a usable file name ({exc})") from None
     mode = st.st_mode
     if name == "-" and (stat.S_ISCHR(mode) and os.isatty(0)):
         raise DataError("-: standard input is a terminal; pipe or redirect a file into it (identify - < data.csv)")

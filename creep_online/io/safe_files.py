@@ -63,11 +63,26 @@ def _same_file(a: Path, b: Path) -> bool:
         return False
 
 
+def _checked_name(path: str | Path, what: str) -> Path:
+    """``path`` as a Path; OutputError for an empty name or one the system cannot look up (too long, ...)."""
+    if not str(path).strip():
+        raise OutputError(f"{what} name is empty")
+    out = Path(path)
+    try:
+        os.stat(out)
+    except (FileNotFoundError, NotADirectoryError):
+        pass
+    except OSError as exc:
+        shown = str(path) if len(str(path)) <= 80 else str(path)[:77] + "..."
+        raise OutputError(f"{shown}: cannot be written ({exc.strerror or exc})") from None
+    except ValueError as exc:                    # an embedded NUL
+        raise OutputError(f"{str(path)[:80]!r}: not a usable file name ({exc})") from None
+    return out
+
+
 def check_output(path: str | Path, inputs: Iterable[str | Path] = ()) -> Path:
     """The output path, or OutputError when writing it would fail or destroy an input."""
-    if not str(path).strip():
-        raise OutputError("an output file name is empty")
-    out = Path(path)
+    out = _checked_name(path, "an output file")
     for src in inputs:
         if str(src) == "-":
             continue
@@ -147,9 +162,7 @@ def _unlink(path: str) -> None:
 
 def check_report_dir(path: str | Path) -> Path:
     """The report folder, or OutputError if it cannot be written or holds anything but an earlier report."""
-    if not str(path).strip():
-        raise OutputError("the report folder name is empty")
-    out = Path(path)
+    out = _checked_name(path, "the report folder")
     if out.exists() and not out.is_dir():
         raise OutputError(f"{out}: exists and is not a folder")
     if out.is_dir():

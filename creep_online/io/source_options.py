@@ -30,19 +30,24 @@ def flag(text: str) -> bool:
     raise ValueError(f"expected 0 or 1, got {text!r}")
 
 
+#: The largest number an option of a source takes (a rate in Hz, a time in s, a range): beyond it a value is a
+#: unit mistake (and a socket's timeout or a sample step would overflow).
+OPTION_MAX = 1e9
+
+
 def positive(text: str) -> float:
-    """A finite number > 0 (a rate, a time, a range)."""
+    """A finite number > 0 and at most OPTION_MAX (a rate, a time, a range)."""
     value = float(text)
-    if not (math.isfinite(value) and value > 0):
-        raise ValueError("expected a positive finite number")
+    if not (math.isfinite(value) and 0 < value <= OPTION_MAX):
+        raise ValueError(f"expected a positive number up to {OPTION_MAX:g}")
     return value
 
 
 def nonzero(text: str) -> float:
     """A finite non-zero number (a scale)."""
     value = float(text)
-    if not (math.isfinite(value) and value != 0):
-        raise ValueError("expected a finite non-zero number")
+    if not (math.isfinite(value) and value != 0 and abs(value) <= OPTION_MAX):
+        raise ValueError(f"expected a non-zero number up to {OPTION_MAX:g} in size")
     return value
 
 

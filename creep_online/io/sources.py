@@ -22,7 +22,7 @@ from ..checks import count, positive
 from ..errors import TransportError
 from .frames import ParserStats, RawSample
 from .sequence import SequenceStats, SequenceTracker
-from .source_options import (IDLE_TIMEOUT, IDLE_TIMEOUT_S, RECONNECT, RECONNECT_TIMEOUT, RECONNECT_TIMEOUT_S, STALL,
+from .source_options import (IDLE_TIMEOUT, IDLE_TIMEOUT_S, OPTION_MAX, RECONNECT, RECONNECT_TIMEOUT, RECONNECT_TIMEOUT_S, STALL,
                              WINDOW, Option)
 
 __all__ = ["Sample", "SourceStats", "SampleSource", "ReconnectingSource", "TransportError", "open_source"]
@@ -117,9 +117,9 @@ class SampleSource:
                  t_from_seq: bool = False, stall: float = 0.5,
                  on_event: Callable[[str], None] | None = _stderr_event) -> None:
         window = count(window, "window (reorder window, samples)", minimum=0, maximum=1 << 20)
-        stall = positive(stall, "stall (s of silence)") if stall != float("inf") else stall
+        stall = positive(stall, "stall (s of silence)", maximum=OPTION_MAX) if stall != float("inf") else stall
         if rate is not None:
-            rate = positive(rate, "rate (Hz)")
+            rate = positive(rate, "rate (Hz)", maximum=OPTION_MAX)
         self.stats = SourceStats()
         self.tracker: SequenceTracker = SequenceTracker(window=window, modulus=modulus,
                                                         stats=self.stats.sequence)
@@ -230,8 +230,9 @@ class ReconnectingSource(SampleSource):
         super().__init__(**kw)
         self.reconnect = bool(reconnect)
         self.reconnect_timeout = None if reconnect_timeout is None else \
-            positive(reconnect_timeout, "reconnect_timeout (s)")
-        self.idle_timeout = None if idle_timeout is None else positive(idle_timeout, "idle_timeout (s)")
+            positive(reconnect_timeout, "reconnect_timeout (s)", maximum=OPTION_MAX)
+        self.idle_timeout = None if idle_timeout is None else \
+            positive(idle_timeout, "idle_timeout (s)", maximum=OPTION_MAX)
         self._idle_since = time.monotonic()
 
     def read(self, timeout: float = 0.1) -> list[Sample]:
