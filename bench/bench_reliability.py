@@ -302,7 +302,7 @@ class Fixtures:
         ub = np.where((tb % 4.0) > 2.0, 1.0, 0.0)
         yb = simulate(CreepModel(**TRUE), tb, ub) + 1e-4 * rng.standard_normal(tb.size)
         self.big = self.csv("big.csv", tb, ub, yb)
-        (root / "tu.csv").write_text("t,u\n" + "".join(f"{a!r},{b!r}\n" for a, b in zip(t, u)))
+        (root / "tu.csv").write_text("t,u\n" + "".join(f"{a!r},{b!r}\n" for a, b in zip(t.tolist(), u.tolist())))
         self.tu = root / "tu.csv"
         self.gz = root / "rec.csv.gz"
         self.gz.write_bytes(gzip.compress(self.rec.read_bytes()))
@@ -378,8 +378,8 @@ def estimate_ok(res: Outcome, samples: int | None = None, alpha: float = TRUE["a
         return "silently_wrong"
     if samples is not None and d.get("samples") != samples:
         return "silently_wrong"
-    if d.get("quality") == "none" and d.get("reason"):
-        return None
+    if d.get("quality") in ("none", "degraded") and d.get("reason"):
+        return None                                  # an honest "no estimate" (the reason says why)
     if d.get("phase") == "tracking" and abs(d.get("alpha", 0) - alpha) < 0.05:
         return None
     return "silently_wrong"
@@ -738,10 +738,10 @@ def _plain_signalled(signum: int, work: Path, finished_ok: bool = False) -> Call
     def check(res: Outcome) -> str | None:
         if _temp_left(work) or any(p.name.startswith(".rep.") for p in work.iterdir()):
             return "temp_left"
-        if res.code == 0 and finished_ok:
-            return None
         if res.code == 0:
             return None
+        if finished_ok and res.code == -signum and res.out:
+            return None                  # the command had ended (its output whole): the interpreter's last moments
         return None if res.code == 128 + signum and one_line_stop(res.err) else "messy_error"
     return check
 
@@ -857,9 +857,7 @@ def api_cases(fx: Fixtures) -> list[Case]:
                   "scalar": 1.0, "str": "1,2,3", "ragged": [[1.0], [1.0, 2.0]], "huge int": [10 ** 400] * 50,
                   "dict": {"a": 1}}
     for name, arr in {**arrays_ok, **arrays_bad}.items():
-        cases.append(Case("api", f"update_block(u={name})",
-                          api(lambda a=arr: est().update_block(a, np.zeros(np.size(a)) if np.ndim(a) == 1 and
-                                                               not isinstance(a, str) else np.zeros(50))),
+        cases.append(Case("api", f"update_block(u={name})", api(lambda a=arr: est().update_block(a, np.zeros(50))),
                           expect="ok" if name in arrays_ok else "refuse"))
     cases.append(Case("api", "update_block(mismatched lengths)", api(lambda: est().update_block(np.ones(5), np.ones(6))),
                       expect="refuse"))
@@ -1090,17 +1088,22 @@ def canlog_cases(fx: Fixtures) -> list[Case]:
             p.write_bytes(content)
             cases.append(Case("canlog", f"{suffix} {name}",
                               cli(["stream", "--source", f"canlog:{p}?rate={CAN_RATE:g}", "--json"]),
-                              expect="ok", check=_canlog_kept(suffix), timeout=90))
+                              expect="ok", check=_canlog_kept(suffix, 0.8 if name == "truncated" else 1.0),
+                              timeout=90))
     return cases
 
 
-def _canlog_kept(suffix: str) -> Callable[[Outcome], str | None]:
+def _canlog_kept(suffix: str, present: float) -> Callable[[Outcome], str | None]:
+    """The replay went on past the bad record: most of the ``present`` fraction of the samples arrived, and the
+    estimate is right or honestly none."""
     def check(res: Outcome) -> str | None:
         d = _json(res)
         if res.code != 0 or d is None:
             return None
-        kept = d.get("samples", 0) / (2.0 * CAN_RATE)
-        return None if kept >= (0.5 if suffix == ".blf" else 0.9) else "silently_wrong"
+        kept = d.get("samples", 0) / (2.0 * CAN_RATE) / present
+        if kept < (0.5 if suffix == ".blf" else 0.85):
+            return "silently_wrong"
+        return estimate_ok(res, alpha=PLANT_ALPHA)
     return check
 
 
@@ -1393,7 +1396,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", default=",".join(CATEGORIES), help="comma-separated categories")
     parser.add_argument("--sample", type=int, default=1, help="run every N-th attempt")
-    parser.add_argument("--baseline", default=None, help="run the sweep on this commit instead (git archive)")
+    parser.add_argument("--baseline", default=None,
+                        help="run the sweep on this commit instead (git archive), or on a tree extracted before")
     parser.add_argument("--out", default=str(ROOT / "bench" / "results" / "reliability.json"))
     parser.add_argument("--list", action="store_true", help="print the failures too")
     parser.add_argument("-v", "--verbose", action="store_true")
@@ -1401,7 +1405,7 @@ def main() -> int:
     if args.baseline:
         sys.path.insert(0, str(ROOT / "bench"))
         from _baseline import extract
-        path, commit = extract(args.baseline)
+        path = args.baseline if os.path.isdir(args.baseline) else extract(args.baseline)[0]   # (a tree extracted before)
         env = dict(os.environ, PYTHONPATH=path, NUMBA_CACHE_DIR=os.path.join(path, ".numba_cache"))
         cmd = [sys.executable, __file__, "--only", args.only, "--sample", str(args.sample), "--out", args.out]
         cmd += ["--list"] * args.list + ["-v"] * args.verbose

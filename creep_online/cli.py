@@ -154,10 +154,14 @@ def console() -> None:
     which status, and exits with 130 (SIGTERM and SIGHUP alike, with their
     own status). A process started with a signal ignored keeps it ignored.
     """
-    code = main()
-    for signum in _signals.STOP_SIGNALS:
-        if signal.getsignal(signum) is not signal.SIG_IGN:
-            signal.signal(signum, _interrupted_while_exiting(code))
+    code = 130
+    try:
+        code = main()
+        for signum in _signals.STOP_SIGNALS:
+            if signal.getsignal(signum) is not signal.SIG_IGN:
+                signal.signal(signum, _interrupted_while_exiting(code))
+    except KeyboardInterrupt as exc:   # (between main's handlers and these: a few microseconds)
+        _interrupted_while_exiting(code)(_signals.exit_code(exc) - 128, None)
     sys.exit(code)
 
 

@@ -18,6 +18,8 @@ import sys
 import tempfile
 import threading
 
+from creep_online.cli import OneLineParser
+
 from .faults import FaultSpec, plan
 from .links import PtyLink
 from .plant import SCHEDULES, PlantConfig, generate, parse_effects, parse_params
@@ -27,7 +29,7 @@ CAPANCDT = "capancdt"
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m hil_sim", description=__doc__.splitlines()[0])
+    p = OneLineParser(prog="python -m hil_sim", description=__doc__.splitlines()[0])
     p.add_argument("--rate", type=float, default=None,
                    help="samples per second (default 10000; capancdt: 3906.25, the controller's fastest rate)")
     p.add_argument("--duration", type=float, default=20.0, help="record length in seconds (default 20)")

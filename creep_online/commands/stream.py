@@ -22,6 +22,7 @@ import numpy as np
 from .. import _signals
 from ..errors import CreepOnlineError, DataError, TransportError
 from ..io.csvfile import load_record
+from ..record import check_amplitudes, check_time_and_output
 from ..online import OnlineEstimator, warm_kernels
 from ..model import ONLINE_REFITS as REFITS
 from ._common import (MAX_SECONDS, add_column_options, event_line, fraction, nonempty, print_json, research_lines, seconds,
@@ -222,6 +223,8 @@ def _run_csv(path: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dict
     rec = load_record(path, args.u_column, args.y_column)
     if not rec.is_uniform:
         raise DataError(f"{rec.source}: time is not uniformly sampled; the online estimator needs a fixed step")
+    check_time_and_output(rec.t, rec.y, rec.source)     # the file is whole: what identify refuses, refused here
+    check_amplitudes(rec.u, rec.y, rec.source)
     _check_dt(args, rec.h, rec.source)
     est = OnlineEstimator(rec.h, **_options(args))
     warm_kernels()                          # compile before the clock starts

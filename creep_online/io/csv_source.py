@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import time
 
+from ..record import check_amplitudes, check_time_and_output
 from .frames import RawSample
 from .source_options import REALTIME, STALL, WINDOW, Option, nonempty
 from .sources import SampleSource
@@ -29,6 +30,8 @@ class CsvSource(SampleSource):
         super().__init__(**kw)
         self.name = f"csv:{path}"
         rec = load_record(path, u_column, y_column)
+        check_time_and_output(rec.t, rec.y, rec.source)   # (a replay of a record identify refuses is refused)
+        check_amplitudes(rec.u, rec.y, rec.source)
         self.record = rec
         self.rate = 1.0 / rec.h if rec.h > 0 else None
         self._i = 0
