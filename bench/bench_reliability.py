@@ -298,10 +298,7 @@ class Fixtures:
         y = simulate(CreepModel(**TRUE), t, u) + 1e-4 * rng.standard_normal(n)
         self.rec = self.csv("rec.csv", t, u, y)
         self.n = n
-        tb = np.arange(60000) * h
-        ub = np.where((tb % 4.0) > 2.0, 1.0, 0.0)
-        yb = simulate(CreepModel(**TRUE), tb, ub) + 1e-4 * rng.standard_normal(tb.size)
-        self.big = self.csv("big.csv", tb, ub, yb)
+        self._big: Path | None = None
         (root / "tu.csv").write_text("t,u\n" + "".join(f"{a!r},{b!r}\n" for a, b in zip(t.tolist(), u.tolist())))
         self.tu = root / "tu.csv"
         self.gz = root / "rec.csv.gz"
@@ -312,6 +309,17 @@ class Fixtures:
         self.gcs.write_text(gcs_text(u, y, h))
         self.dbc = str(ROOT / "creep_online" / "data" / "amplifier.dbc")
         self.canlogs = write_canlogs(root)
+
+    @property
+    def big(self) -> Path:
+        """A 60 s record (written on first use: the signal cases' long streams)."""
+        if self._big is None:
+            from creep_online import CreepModel, simulate
+            tb = np.arange(60000) * 1e-3
+            ub = np.where((tb % 4.0) > 2.0, 1.0, 0.0)
+            yb = simulate(CreepModel(**TRUE), tb, ub) + 1e-4 * np.random.default_rng(2).standard_normal(tb.size)
+            self._big = self.csv("big.csv", tb, ub, yb)
+        return self._big
 
     def csv(self, name: str, t, u, y) -> Path:
         path = self.root / name

@@ -635,8 +635,8 @@ def _sweep(only: str, sample: int) -> dict:
 
 
 def test_a_sample_of_the_sweep_is_clean():
-    """A representative sample of bench/bench_reliability.py (every 25th attempt of the fast categories)."""
-    report = _sweep("flags,specs,files,api,canlog,scheduler", 25)
+    """A representative sample of bench/bench_reliability.py (every 20th attempt of its fast categories)."""
+    report = _sweep("specs,files,api,canlog", 20)
     assert report["attempts"] >= 25
     assert report["totals"]["clean"] == report["attempts"], report["failures"]
 
