@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import importlib
+import json
 import os
 import signal
 import sys
@@ -23,7 +24,7 @@ from typing import Iterator, TextIO
 from . import _signals
 from .errors import CreepOnlineError, CreepOnlineWarning, one_line as _one_line, printable
 
-COMMANDS = ("identify", "simulate", "stream", "diagnose", "fit", "demo", "batch")
+COMMANDS = ("identify", "simulate", "stream", "diagnose", "fit", "compare", "demo", "batch")
 #: One-line help of each command for the top-level listing, so that ``--help`` imports no command
 #: (their modules load scipy and numba); tests check they match what the commands register.
 SUMMARIES = {
@@ -32,15 +33,24 @@ SUMMARIES = {
     "stream": "run the online estimator on a stream (csv:FILE, serial:PORT, can:..., canlog:FILE, pi:PORT)",
     "diagnose": "find which catalogue effect the creep model is missing",
     "fit": "fit the creep model extended by catalogue effects",
+    "compare": "fit percent and residual of a saved model on a record",
     "demo": "stream the simulated plant over a pty and identify it live",
     "batch": "identify a fleet of records (folder, glob or long id,t,u,y CSV) on Dask",
 }
 
 
 class OneLineParser(argparse.ArgumentParser):
-    """argparse's parser whose errors are one line (``creep-online CMD: error: ...``) with exit status 2."""
+    """argparse's parser whose errors are one line (``creep-online CMD: error: ...``) with exit status 2, or
+    one JSON object on stderr when ``--json`` was asked for."""
+
+    json_errors = False
+    command = ""
 
     def error(self, message: str):  # type: ignore[override]
+        if self.json_errors:
+            _print_error({"command": self.command or None, "error": printable(message, keep_return=False),
+                          "type": "UsageError", "exit_code": 2}, as_json=True)
+            self.exit(2)
         self.exit(2, f"{self.prog}: error: {printable(message, keep_return=False)} (see {self.prog} --help)\n")
 
 
@@ -50,6 +60,9 @@ class TerminalText:
 
     def __init__(self, stream: TextIO) -> None:
         self._stream = stream
+        #: the wrapped stream, for a writer whose own escape sequences must reach the terminal (the status
+        #: line drawn by rich); what it writes of untrusted text it escapes itself
+        self.unescaped = stream
 
     def write(self, text: str) -> int:
         self._stream.write(printable(text))
@@ -75,6 +88,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     parser = OneLineParser(
         prog="creep-online",
         description="Identify the fractional-order creep model b / (s^alpha (1 + a1 s + a2 s^2)), batch or online.")
+    parser.add_argument("--version", action="version", version=f"creep-online {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS:
         if only is not None and name != only:
@@ -106,14 +120,36 @@ def _warning_printer(command: str):
     return show
 
 
+def _version() -> str:
+    """The installed creep_online's version (the package's own when it is not installed)."""
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        return version("creep_online")
+    except PackageNotFoundError:
+        from . import __version__
+        return __version__
+
+
+def _print_error(error: dict, as_json: bool) -> None:
+    """One line on stderr: ``creep-online CMD: error: MESSAGE``, or (``--json``) the error as one JSON object."""
+    if as_json:
+        print(json.dumps(error), file=sys.stderr)
+    else:
+        kind = "internal error" if error["exit_code"] == 3 else "error"
+        print(f"creep-online {error['command']}: {kind}: {error['error']}", file=sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code (0 ok, 1 failed check, 2 bad input, 3 internal error, 128 + N ended
     by signal N: 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP).
 
-    ``creep-online stream`` has its own codes for how a stream ended (see its --help).
+    ``creep-online stream`` has its own codes for how a stream ended (see its --help). With ``--json``
+    an error is one JSON object on stderr: {"command", "error", "type", "exit_code"}.
     """
-    argv = sys.argv[1:] if argv is None else list(argv)
+    argv = sys.argv[1:] if argv is None else list(map(str, argv))
     command = _requested(argv) or "creep-online"
+    OneLineParser.json_errors, OneLineParser.command = "--json" in argv, _requested(argv)
+    as_json = False
     with _signals.stop_signals(), _terminal_text():
         try:
             parser = build_parser(only=_requested(argv))
@@ -122,11 +158,13 @@ def main(argv: list[str] | None = None) -> int:
             except SystemExit as stop:     # --help, --version, or a bad flag (its one line already printed)
                 return stop.code if isinstance(stop.code, int) else 2
             command = args.command
+            as_json = bool(getattr(args, "json", False))
             with warnings.catch_warnings():
                 warnings.showwarning = _warning_printer(args.command)
                 return int(args.func(args) or 0)
         except CreepOnlineError as exc:
-            print(f"creep-online {command}: error: {_one_line(exc)}", file=sys.stderr)
+            _print_error({"command": command, "error": _one_line(exc), "type": type(exc).__name__,
+                          "exit_code": 2}, as_json)
             return 2
         except BrokenPipeError:
             # the reader (e.g. `| head`) went away: not an error of ours
@@ -139,8 +177,9 @@ def main(argv: list[str] | None = None) -> int:
         except Exception as exc:  # noqa: BLE001 - a bug of ours: one line, not a traceback
             if os.environ.get("CREEP_ONLINE_DEBUG"):
                 raise
-            print(f"creep-online {command}: internal error: {type(exc).__name__}: {_one_line(exc)} "
-                  f"(please report it; CREEP_ONLINE_DEBUG=1 shows the traceback)", file=sys.stderr)
+            _print_error({"command": command, "error": f"{type(exc).__name__}: {_one_line(exc)} (please report "
+                          "it; CREEP_ONLINE_DEBUG=1 shows the traceback)", "type": type(exc).__name__,
+                          "exit_code": 3}, as_json)
             return 3
 
 
