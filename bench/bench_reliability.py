@@ -329,6 +329,16 @@ class Fixtures:
                 fh.write(f"{a!r},{b!r},{c!r}\n")
         return path
 
+    def model(self) -> Path:
+        """A model file identified from ``rec`` (written on first use)."""
+        path = self.root / "model.json"
+        if not path.exists():
+            from creep_online import identify, save_model
+            from creep_online.io.csvfile import load_record
+            rec = load_record(self.rec)
+            save_model(identify(rec.t, rec.u, rec.y), path)
+        return path
+
     def workdir(self, name: str) -> Path:
         d = self.root / "work" / name
         d.mkdir(parents=True, exist_ok=True)
@@ -410,14 +420,16 @@ def flag_cases(fx: Fixtures) -> list[Case]:
     """Every flag of every command with every hostile value: exit 0 with a right result, or exit 2, one line."""
     rec, tu = str(fx.rec), str(fx.tu)
     templates = {
-        "identify": (["identify", rec, "--json"], ["--t-c", "--alpha0", "--layer1-step"], on_exit0(identified_ok)),
+        "identify": (["identify", rec, "--json"], ["--t-c", "--alpha0", "--layer1-step", "-o", "--t-column"],
+                     on_exit0(identified_ok)),
         "stream": (["stream", "--source", f"csv:{rec}", "--json"],
                    ["--t-c", "--alpha0", "--window", "--dt", "--max-samples", "--duration"], None),
         "simulate": (["simulate", "--input", tu, "--params", "alpha=0.3,a1=0.01,a2=1e-4,b=2", "-o", "OUT"],
                      ["--memory", "--method"], None),
         "diagnose": (["diagnose", rec, "--json", "--effects", "delay", "--workers", "1"],
                      ["--effects", "--workers", "--report", "--u-column"], None),
-        "fit": (["fit", rec, "--json", "--effects", "delay"], ["--window", "--effects"], None),
+        "fit": (["fit", rec, "--json", "--effects", "delay"], ["--window", "--effects", "-o"], None),
+        "compare": (["compare", str(fx.model()), rec, "--json"], ["--initial", "--report", "--t-column"], None),
         "demo": (["demo", "--duration", "0.5", "--rate", "2000", "--json", "--quiet", "--report", "REPORT"],
                  ["--duration", "--rate", "--bandwidth", "--period", "--amplitude", "--u-min", "--seed",
                   "--report"], None),
@@ -627,6 +639,54 @@ def output_cases(fx: Fixtures) -> list[Case]:
     cases.append(Case("outputs", "batch --html over a record",
                       cli(["batch", fleet, "--workers", "1", "--html", r1]), expect="refuse", protect=(r1,),
                       timeout=150))
+    cases += model_output_cases(fx, d, fresh)
+    return cases
+
+
+def model_output_cases(fx: Fixtures, d: Path, fresh: Callable[[str, Path], Path]) -> list[Case]:
+    """The model file (identify/fit -o), simulate's formats and compare's report: never over what the run reads."""
+    cases = []
+    model = fresh("model.json", fx.model())
+    as_json = fresh("rec_as.json", fx.rec)                  # a record whose name ends like a model file's
+    os.symlink(as_json, d / "rec_link.json")
+    for spelling in (str(as_json), f"{d}/./rec_as.json", str(d / "rec_link.json")):
+        cases.append(Case("outputs", f"identify -o {spelling[-22:]} (the data)",
+                          cli(["identify", as_json, "-o", spelling]), expect="refuse", protect=(as_json,)))
+        cases.append(Case("outputs", f"fit -o {spelling[-22:]} (the data)",
+                          cli(["fit", as_json, "--effects", "delay", "-o", spelling]), expect="refuse",
+                          protect=(as_json,), timeout=120))
+    m = d / "m.csv"
+    cases.append(Case("outputs", "identify -o m.csv (the data, not .json)", cli(["identify", m, "-o", m]),
+                      expect="refuse", protect=(m,)))
+    cases.append(Case("outputs", "identify -o ''", cli(["identify", m, "-o", ""]), expect="refuse", protect=(m,)))
+    cases.append(Case("outputs", "identify -o a folder.json", cli(["identify", m, "-o", d / "rep_user"]),
+                      expect="refuse", protect=(m,)))
+    for flag in ("--model", "--params"):
+        for spelling in (str(model), f"{d}/./model.json"):
+            cases.append(Case("outputs", f"simulate {flag} model.json -o {spelling[-18:]}",
+                              cli(["simulate", "--input", fx.tu, flag, model, "-o", spelling]), expect="refuse",
+                              protect=(model,)))
+    cases.append(Case("outputs", "simulate -o x.xlsx (unknown format)",
+                      cli(["simulate", "--input", fx.tu, "--model", model, "-o", d / "x.xlsx"]), expect="refuse"))
+    cases.append(Case("outputs", "simulate -o sim.parquet", cli(["simulate", "--input", fx.tu, "--model", model,
+                                                                  "-o", d / "sim.parquet"]),
+                      expect="ok", protect=(model, fx.tu)))
+    for name in ("rep_user", "rep_mixed", "holder"):
+        folder = d / name
+        cases.append(Case("outputs", f"compare --report {name}",
+                          cli(["compare", model, fx.rec, "--report", folder]), expect="refuse",
+                          protect=(folder, model), timeout=120))
+    cases.append(Case("outputs", "compare --report over the model file",
+                      cli(["compare", model, fx.rec, "--report", model]), expect="refuse", protect=(model,)))
+    cases.append(Case("outputs", "compare --report ''", cli(["compare", model, fx.rec, "--report", ""]),
+                      expect="refuse", protect=(model,)))
+    rep = d / "cmp_rep"
+    cases.append(Case("outputs", "compare --report NEW (marker written)",
+                      cli(["compare", model, fx.rec, "--report", rep]), expect="ok", protect=(model,),
+                      check=lambda res, rep=rep: None if res.code != 0 or (rep / ".creep-online-report").is_file()
+                      else "silently_wrong", timeout=120))
+    cases.append(Case("outputs", "compare --report NEW again (its own earlier report)",
+                      cli(["compare", model, fx.rec, "--report", rep]), expect="ok", protect=(model,), timeout=120))
     return cases
 
 
@@ -663,6 +723,18 @@ def signal_cases(fx: Fixtures, plant: "PlantServers") -> list[Case]:
                           signalled([*_creep(), "diagnose", str(fx.rec), "--workers", "1", "--report",
                                      str(work / "rep")], signum, 5.0),
                           expect="custom", check=_plain_signalled(signum, work), timeout=120))
+        work = fx.workdir(f"sig-compare-{sname}")
+        cases.append(Case("signals", f"compare --report {sname}",
+                          signalled([*_creep(), "compare", str(fx.model()), str(fx.big), "--report",
+                                     str(work / "rep")], signum, 4.0),
+                          expect="custom", check=_plain_signalled(signum, work), timeout=120))
+        if signum == signal.SIGTERM:
+            work = fx.workdir(f"sig-parquet-{sname}")
+            cases.append(Case("signals", f"simulate -o .parquet {sname}",
+                              signalled([*_creep(), "simulate", "--input", str(big_tu), "--params",
+                                         "alpha=0.3,a1=0.01,a2=1e-4", "--method", "paper", "-o",
+                                         str(work / "out.parquet")], signum, 4.0),
+                              expect="custom", check=_plain_signalled(signum, work), timeout=120))
     for after in (0.05, 0.15, 0.3, 0.6, 1.0, 1.6):
         work = fx.workdir(f"sig-startup-{after}")
         cases.append(Case("signals", f"identify Ctrl-C at start-up +{after} s",

@@ -171,7 +171,7 @@ def research_lines(researches: list[dict]) -> list[str]:
 
 def add_model_output(parser) -> None:
     """``-o/--output MODEL.json``: save the fitted model as a model file (``creep_online.io.model_file``)."""
-    parser.add_argument("-o", "--output", default=None, metavar="MODEL.json",
+    parser.add_argument("-o", "--output", default=None, metavar="MODEL.json", type=nonempty,
                         help="save the model (parameters, effects, offsets, units) as a JSON model file, for "
                              "'creep-online compare' and 'simulate --model' (written atomically, never over the data)")
 

@@ -47,14 +47,22 @@ def _model(args: argparse.Namespace):
     if args.model is not None:
         return load_model(args.model)
     text = args.params.strip()
-    if text.lower().endswith(".json") or Path(text).is_file():
+    if text.lower().endswith(".json") or _names_file(text):
         return read_model_json(text)
     return parse_params(text)
 
 
+def _names_file(text: str) -> bool:
+    """Does ``text`` name an existing file (False for parameter text, even one too long to be a name)?"""
+    try:
+        return Path(text).exists()
+    except (OSError, ValueError):
+        return False
+
+
 def run(args: argparse.Namespace) -> int:
     model = _model(args)
-    read = [args.input] + [f for f in (args.model, args.params) if f is not None and Path(f.strip()).exists()]
+    read = [args.input] + [f for f in (args.model, args.params) if f is not None and _names_file(f.strip())]
     out = check_signal_output(args.output, inputs=read)     # never over a file this run reads
     cols, units = read_table(args.input, ("t", "u"))
     t, _ = in_seconds(args.input, cols["t"], units["t"])
