@@ -791,6 +791,9 @@ def _stream_signalled(signum: int, work: Path) -> Callable[[Outcome], str | None
     def check(res: Outcome) -> str | None:
         if res.code == 0 and "alpha" in res.out:
             return None                              # the stream had ended before the signal
+        if res.code == 128 + signum and one_line_stop(res.err) and ("before the first sample arrived" in res.err
+                                                                      or "while starting" in res.err):
+            return None                              # stopped while starting (a busy machine): said so, on one line
         if res.code not in (128 + signum, -signum) or "alpha" not in res.out:
             return "no_estimate" if res.code in (128 + signum, -signum) or "alpha" not in res.out else "messy_error"
         if _temp_left(work):
@@ -1472,6 +1475,23 @@ def sweep(only: set[str], sample: int = 1, offset: int = 0, verbose: bool = Fals
         shutil.rmtree(root, ignore_errors=True)
 
 
+def combine(parts: list[dict]) -> dict:
+    """One report from sweeps of disjoint categories (their counts summed, their wall times side by side)."""
+    report = {"attempts": 0, "seconds": 0.0, "totals": dict.fromkeys(OUTCOMES, 0), "categories": {}, "failures": [],
+              "parts": []}
+    for part in parts:
+        report["attempts"] += part["attempts"]
+        report["seconds"] = max(report["seconds"], part["seconds"])
+        for k, v in part["totals"].items():
+            report["totals"][k] += v
+        report["categories"].update(part["categories"])
+        report["failures"] += part["failures"]
+        report["parts"].append({"categories": sorted(part["categories"]), "attempts": part["attempts"],
+                                "seconds": part["seconds"]})
+        report["code"] = part.get("code")
+    return report
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", default=",".join(CATEGORIES), help="comma-separated categories")
@@ -1481,7 +1501,14 @@ def main() -> int:
     parser.add_argument("--out", default=str(ROOT / "bench" / "results" / "reliability.json"))
     parser.add_argument("--list", action="store_true", help="print the failures too")
     parser.add_argument("-v", "--verbose", action="store_true")
+    parser.add_argument("--combine", nargs="+", metavar="PART.json", default=None,
+                        help="write the sum of sweeps run in parts (disjoint --only sets, run side by side) to --out")
     args = parser.parse_args()
+    if args.combine:
+        report = combine([json.loads(Path(p).read_text()) for p in args.combine])
+        Path(args.out).write_text(json.dumps(report, indent=1) + "\n")
+        print(json.dumps({k: v for k, v in report.items() if k != "failures"}, indent=1))
+        return 0
     if args.baseline:
         sys.path.insert(0, str(ROOT / "bench"))
         from _baseline import extract

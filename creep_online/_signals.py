@@ -45,16 +45,18 @@ STOP_SIGNALS = {signal.SIGINT: "interrupted (Ctrl-C)", signal.SIGTERM: "terminat
 class Interrupted(KeyboardInterrupt):
     """A stop signal received: ``signum`` and the exit status it gives (128 + signum)."""
 
-    def __init__(self, signum: int = signal.SIGINT) -> None:
+    def __init__(self, signum: int = signal.SIGINT, note: str = "") -> None:
         super().__init__(STOP_SIGNALS.get(signum, f"signal {signum}"))
         self.signum = int(signum)
+        self.note = note                     # what the stop left undone, e.g. "before the first sample"
 
     @property
     def exit_code(self) -> int:
         return 128 + self.signum
 
     def __str__(self) -> str:
-        return STOP_SIGNALS.get(self.signum, f"signal {self.signum}")
+        name = STOP_SIGNALS.get(self.signum, f"signal {self.signum}")
+        return f"{name} {self.note}" if self.note else name
 
 
 def exit_code(exc: BaseException) -> int:

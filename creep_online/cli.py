@@ -149,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(map(str, argv))
     command = _requested(argv) or "creep-online"
     OneLineParser.json_errors, OneLineParser.command = "--json" in argv, _requested(argv)
-    as_json = False
+    as_json = running = False
     with _signals.stop_signals(), _terminal_text():
         try:
             parser = build_parser(only=_requested(argv))
@@ -161,6 +161,7 @@ def main(argv: list[str] | None = None) -> int:
             as_json = bool(getattr(args, "json", False))
             with warnings.catch_warnings():
                 warnings.showwarning = _warning_printer(args.command)
+                running = True
                 return int(args.func(args) or 0)
         except CreepOnlineError as exc:
             _print_error({"command": command, "error": _one_line(exc), "type": type(exc).__name__,
@@ -171,7 +172,7 @@ def main(argv: list[str] | None = None) -> int:
             _quietly(sys.stderr.close)
             return 0
         except KeyboardInterrupt as exc:    # Ctrl-C, SIGTERM, SIGHUP (``_signals.Interrupted``)
-            said = f"creep-online {command}: {_signals.describe(exc)}"
+            said = f"creep-online {command}: {_signals.describe(exc)}" + ("" if running else " while starting")
             _quietly(lambda: print(said, file=sys.stderr))
             return _signals.exit_code(exc)
         except Exception as exc:  # noqa: BLE001 - a bug of ours: one line, not a traceback

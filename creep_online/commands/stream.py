@@ -14,6 +14,7 @@ import argparse
 import importlib
 import math
 import os
+import signal
 import sys
 import time
 
@@ -173,10 +174,16 @@ def run(args: argparse.Namespace) -> int:
         raise DataError(f"--max-samples must be at least 1, got {args.max_samples}")
     if args.duration is not None and not args.duration > 0:
         raise DataError(f"--duration must be > 0 s, got {args.duration:g}")
-    if spec.startswith("csv:") and not _has_options(spec[4:]):
-        est, latency, extra = _run_csv(spec[4:], args)
-    else:
-        est, latency, extra = _run_live(spec, args)
+    try:
+        if spec.startswith("csv:") and not _has_options(spec[4:]):
+            est, latency, extra = _run_csv(spec[4:], args)
+        else:
+            est, latency, extra = _run_live(spec, args)
+    except KeyboardInterrupt as exc:        # stopped while opening or loading: say that there is no estimate yet
+        if isinstance(exc, _signals.Interrupted) and exc.note:
+            raise
+        raise _signals.Interrupted(getattr(exc, "signum", signal.SIGINT),
+                                   note="before the first sample arrived: no estimate yet") from None
     with _signals.deferred():    # the stream has ended: its report is printed whole, a signal now waits for it
         return _print_report(spec, args, est, latency, extra)
 
@@ -378,7 +385,8 @@ def _run_live(spec: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dic
         end = feed.End("interrupted", _signals.STOP_SIGNALS[signum], _signals.Interrupted(signum))
     if est is None:
         if end.reason == "interrupted":
-            raise end.error if end.error is not None else _signals.Interrupted()
+            signum = getattr(end.error, "signum", signal.SIGINT)
+            raise _signals.Interrupted(signum, note="before the first sample arrived: no estimate yet")
         why = end.message or "fewer than 2 samples arrived; cannot tell the sampling step (use --dt)"
         raise (TransportError if end.reason == "link_lost" else DataError)(f"{spec}: no estimate: {why}")
     extra = {"source_stats": stats.as_dict() if stats is not None and hasattr(stats, "as_dict") else {},
