@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import select
 import signal
 import subprocess
@@ -419,3 +420,127 @@ def test_every_warning_is_one_line(files, capsys, tmp_path):
                          "-o", tmp_path / "o.csv"], capsys)
     assert code == 2
     assert all(ln.startswith("creep-online simulate: ") for ln in err.splitlines() if ln.strip()), err
+
+
+# ------------------------------------------------------------------ model files, compare reports, simulate formats
+@pytest.fixture(scope="module")
+def model_file(files, tmp_path_factory) -> Path:
+    from creep_online import save_model
+    t, u, y = _record()
+    path = tmp_path_factory.mktemp("model") / "model.json"
+    save_model(identify(t, u, y), path)
+    return path
+
+
+def test_a_model_output_is_never_the_data(files, capsys, tmp_path):
+    """identify -o and fit -o compare the model file with the record by identity, whatever the spelling."""
+    data = tmp_path / "rec.json"                      # a record named like a model file
+    data.write_bytes(files["good"].read_bytes())
+    before = data.read_bytes()
+    (tmp_path / "link.json").symlink_to(data)
+    for out in (data, tmp_path / "." / "rec.json", tmp_path / "link.json"):
+        code, _, err = _cli(["identify", data, "-o", out], capsys)
+        _assert_one_line_error(code, err, "refusing to overwrite the input")
+    code, _, err = _cli(["fit", data, "--effects", "delay", "-o", tmp_path / "link.json"], capsys)
+    _assert_one_line_error(code, err, "refusing to overwrite the input")
+    for out, words in ((files["good"], [".json"]), ("", ["must not be empty"])):
+        code, _, err = _cli(["identify", files["good"], "-o", out], capsys)
+        _assert_one_line_error(code, err, *words)
+    assert data.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["link.json", "rec.json"]
+
+
+def test_simulate_never_writes_over_the_model_it_reads(files, model_file, capsys, tmp_path):
+    before = model_file.read_bytes()
+    for flag in ("--model", "--params"):
+        code, _, err = _cli(["simulate", "--input", files["good"], flag, model_file, "-o", model_file], capsys)
+        _assert_one_line_error(code, err, "refusing to overwrite the input")
+    code, _, err = _cli(["simulate", "--input", files["good"], "--model", model_file, "-o", tmp_path / "x.xlsx"],
+                        capsys)
+    _assert_one_line_error(code, err, "unknown output format")
+    assert model_file.read_bytes() == before and not list(tmp_path.iterdir())
+
+
+def test_simulate_parquet_is_written_whole(files, model_file, capsys, tmp_path):
+    pq = pytest.importorskip("pyarrow.parquet")
+    out = tmp_path / "sim.parquet"
+    out.write_text("old")
+    assert _cli(["simulate", "--input", files["good"], "--model", model_file, "-o", out], capsys)[0] == 0
+    assert pq.read_table(out).num_rows == 1500 and [p.name for p in tmp_path.iterdir()] == ["sim.parquet"]
+
+
+def test_compare_report_keeps_the_users_folders(files, model_file, capsys, tmp_path):
+    """compare --report: a foreign folder, the model file itself and '' are refused; a new folder gets the marker
+    and can be replaced by the next compare."""
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "calibration.json").write_text("{}")
+    for target, words in ((mine, ["not an earlier creep-online report"]), (model_file, ["not a folder"]),
+                          ("", ["must not be empty"])):
+        code, _, err = _cli(["compare", model_file, files["good"], "--report", target], capsys)
+        _assert_one_line_error(code, err, *words)
+    assert (mine / "calibration.json").read_text() == "{}" and [p.name for p in mine.iterdir()] == ["calibration.json"]
+    rep = tmp_path / "rep"
+    for _ in range(2):                                 # the second run replaces its own earlier report
+        assert _cli(["compare", model_file, files["good"], "--report", rep], capsys)[0] == 0
+    from creep_online.io.safe_files import REPORT_MARKER
+    assert sorted(p.name for p in rep.iterdir()) == sorted(["compare.json", "compare.png", "report.html",
+                                                            REPORT_MARKER])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mine", "rep"]    # no temporary sibling left
+
+
+def test_a_model_file_that_is_a_fifo_is_not_waited_on(files, capsys, tmp_path, monkeypatch):
+    monkeypatch.setenv("CREEP_ONLINE_READ_TIMEOUT", "0.5")
+    fifo = tmp_path / "model.json"
+    os.mkfifo(fifo)
+    for argv in (["compare", fifo, files["good"]],
+                 ["simulate", "--input", files["good"], "--model", fifo, "-o", tmp_path / "o.csv"]):
+        code, _, err = _cli(argv, capsys)
+        _assert_one_line_error(code, err, "nothing to read")
+
+
+def test_parameter_text_too_long_for_a_file_name_is_parameter_text(files, capsys, tmp_path):
+    code, _, err = _cli(["simulate", "--input", files["good"], "--params", "alpha=" + "x" * 5000,
+                         "-o", tmp_path / "o.csv"], capsys)
+    _assert_one_line_error(code, err, "not a number")
+
+
+def test_a_json_usage_error_is_one_json_object(capsys):
+    code, out, err = _cli(["identify", "--json", "--t-c", "nan", "x.csv"], capsys)
+    assert code == 2 and not out
+    error = json.loads(err)
+    assert error["type"] == "UsageError" and "--t-c" in error["error"] and error["exit_code"] == 2
+
+
+def test_the_status_line_escapes_what_it_shows():
+    from creep_online.commands._progress import Progress
+    progress = Progress(False)
+    progress._text = "diagnose rec\x1b]0;pwned\x07.csv: loading"
+    assert "\x1b" not in progress.line() and "\\x1b" in progress.line()
+
+
+# ------------------------------------------------------------------ the sweep: categories and counts
+SWEEP = REPO / "bench" / "results" / "reliability.json"
+#: Outcomes the recorded sweep must not contain (bench/bench_reliability.py's classes besides "clean").
+NONE_OF = ("traceback", "outside_contract", "internal_error", "hang", "file_lost", "silently_wrong",
+           "valid_refused", "injection", "messy_error", "no_estimate", "temp_left")
+
+
+def test_the_recorded_sweep_meets_its_numbers():
+    """At least 800 attempts over every category; not one traceback, exception outside the contract, internal
+    error, hang, lost file, silently wrong answer, injection, or signalled stream without its estimate."""
+    report = json.loads(SWEEP.read_text())
+    assert report["attempts"] >= 800
+    assert set(report["categories"]) == {"flags", "specs", "files", "outputs", "signals", "pipes", "api", "pickle",
+                                         "canlog", "security", "scheduler", "hil_sim", "bounded"}
+    assert {k: report["totals"][k] for k in NONE_OF if report["totals"][k]} == {}, report["failures"]
+    assert sum(per["clean"] for per in report["categories"].values()) == report["attempts"]
+
+
+def test_the_guide_shows_the_recorded_counts():
+    """docs/reliability.md's table has one row per category with the recorded sweep's numbers."""
+    report = json.loads(SWEEP.read_text())
+    page = (REPO / "docs" / "reliability.md").read_text()
+    for name, per in report["categories"].items():
+        attempts = sum(per.values())
+        assert re.search(rf"^\| {name} +\| +{attempts} +\| +{per['clean']} +\|", page, re.MULTILINE), name
+    assert re.search(rf"^\| \*\*all\*\* +\| +\*\*{report['attempts']}\*\* +\|", page, re.MULTILINE)
