@@ -16,6 +16,8 @@ in a forked child) under a timeout, and its outcome is classified:
   messy_error       exit 2 but not one line (or another exit status than documented)
   no_estimate       a stream ended by a signal without printing its estimate
   temp_left         a temporary file left behind
+  python_startup    a Ctrl-C in the interpreter's own start-up, before the package's first line runs: Python's
+                    KeyboardInterrupt (no frame of creep_online in it), which no code of the package can catch
 
 Categories: flags (every flag of every command with hostile values), specs
 (every source option), files (malformed inputs), outputs (user files and
@@ -61,7 +63,7 @@ def code_root() -> Path:
     import creep_online
     return Path(creep_online.__file__).resolve().parents[1]
 OUTCOMES = ("clean", "traceback", "outside_contract", "internal_error", "hang", "file_lost", "silently_wrong",
-            "valid_refused", "injection", "messy_error", "no_estimate", "temp_left")
+            "valid_refused", "injection", "messy_error", "no_estimate", "temp_left", "python_startup")
 CATEGORIES = ("flags", "specs", "files", "outputs", "signals", "pipes", "api", "pickle", "canlog", "security",
               "scheduler", "hil_sim", "bounded")
 #: Values every flag and option is tried with.
@@ -223,7 +225,7 @@ def classify(case: Case, res: Outcome) -> str:
             return "file_lost"
     text = res.out + res.err
     if "Traceback (most recent call last)" in text:
-        return "traceback"
+        return "python_startup" if case.data.get("startup") and _before_the_package(res.err) else "traceback"
     if res.api is not None:
         return _classify_api(case, res.api)
     if res.code == 3 or "internal error" in res.err:
@@ -257,6 +259,13 @@ def _classify_api(case: Case, rep: dict) -> str:
     if rep.get("problem"):
         return rep["problem"]
     return "silently_wrong" if case.expect == "refuse" else "clean"
+
+
+def _before_the_package(err: str) -> bool:
+    """A KeyboardInterrupt traceback with no frame of the package: it came before the package's first line."""
+    frames = re.findall(r'^  File "([^"]*)"', err, re.MULTILINE)
+    return err.rstrip().endswith("KeyboardInterrupt") and not any(
+        "creep_online" in f or "hil_sim" in f for f in frames)
 
 
 def one_error_line(err: str) -> bool:
@@ -739,7 +748,8 @@ def signal_cases(fx: Fixtures, plant: "PlantServers") -> list[Case]:
         work = fx.workdir(f"sig-startup-{after}")
         cases.append(Case("signals", f"identify Ctrl-C at start-up +{after} s",
                           signalled([*_creep(), "identify", str(fx.rec)], signal.SIGINT, after),
-                          expect="custom", check=_plain_signalled(signal.SIGINT, work, finished_ok=True), timeout=90))
+                          expect="custom", check=_plain_signalled(signal.SIGINT, work, finished_ok=True), timeout=90,
+                          data={"startup": True}))
     for sname, signum in sigs.items():
         work = fx.workdir(f"sig-batch-{sname}")
         many = work / "many"
