@@ -409,6 +409,8 @@ def estimate_ok(res: Outcome, samples: int | None = None, alpha: float = TRUE["a
         return None                                  # an honest "no estimate" (the reason says why)
     if d.get("phase") == "tracking" and abs(d.get("alpha", 0) - alpha) < 0.05:
         return None
+    if d.get("quality") == "provisional" and d.get("reason") and abs(d.get("alpha", 0) - alpha) < 0.05:
+        return None                                  # restarting after an outage: the estimate before it, said so
     return "silently_wrong"
 
 

@@ -221,24 +221,3 @@ def flagged() -> Iterator[Callable[[], int | None]]:
             yield lambda: _state.pending
         finally:
             _state.mode, _state.count, _state.pending = mode, count, None
-
-
-def guard_cli_start() -> None:
-    """In the ``creep-online`` program only: a Ctrl-C while the package still loads (before ``cli.main`` takes
-    the signals over) ends it with one line, not a KeyboardInterrupt traceback. Called first thing by the
-    package; a library user's process (any other program) is left alone."""
-    argv0 = os.path.basename(sys.argv[0]) if sys.argv else ""
-    orig = list(getattr(sys, "orig_argv", []))
-    as_module = any(a == "-m" and b == "creep_online" for a, b in zip(orig, orig[1:]))
-    if argv0 not in ("creep-online", "creep-online.exe") and not as_module:
-        return
-    previous = sys.excepthook
-
-    def one_line(kind, value, tb) -> None:
-        if issubclass(kind, KeyboardInterrupt):
-            with contextlib.suppress(Exception):
-                sys.stderr.write("creep-online: interrupted while starting\n")
-                sys.stderr.flush()
-            os._exit(128 + signal.SIGINT)
-        previous(kind, value, tb)
-    sys.excepthook = one_line

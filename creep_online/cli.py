@@ -120,6 +120,18 @@ def _warning_printer(command: str):
     return show
 
 
+def _stop_inside(exc: BaseException) -> KeyboardInterrupt | None:
+    """The stop signal an exception wraps: a signal handled while compiled code ran (a numba kernel) comes back
+    as ``SystemError: ... returned a result with an exception set`` whose cause is the KeyboardInterrupt."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
 def _version() -> str:
     """The installed creep_online's version (the package's own when it is not installed)."""
     from importlib.metadata import PackageNotFoundError, version
@@ -176,6 +188,11 @@ def main(argv: list[str] | None = None) -> int:
             _quietly(lambda: print(said, file=sys.stderr))
             return _signals.exit_code(exc)
         except Exception as exc:  # noqa: BLE001 - a bug of ours: one line, not a traceback
+            stop = _stop_inside(exc)
+            if stop is not None:            # a signal raised inside compiled code, wrapped (numba: SystemError)
+                said = f"creep-online {command}: {_signals.describe(stop)}"
+                _quietly(lambda: print(said, file=sys.stderr))
+                return _signals.exit_code(stop)
             if os.environ.get("CREEP_ONLINE_DEBUG"):
                 raise
             _print_error({"command": command, "error": f"{type(exc).__name__}: {_one_line(exc)} (please report "
