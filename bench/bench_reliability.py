@@ -39,6 +39,7 @@ import math
 import os
 import pickle
 import re
+import shlex
 import shutil
 import signal
 import socket
@@ -1455,14 +1456,17 @@ def warm() -> None:
     OnlineEstimator(1e-3).update_block(u, y)
 
 
-def sweep(only: set[str], sample: int = 1, offset: int = 0, verbose: bool = False) -> dict:
+def sweep(only: set[str], sample: int = 1, offset: int = 0, verbose: bool = False, match: str | None = None) -> dict:
     """Run the chosen categories; the JSON report (counts per category and outcome, and the failures)."""
     root = Path(tempfile.mkdtemp(prefix="creep_sweep_"))
     servers = FakeServers()
     try:
         fx = Fixtures(root)
         warm()
-        cases = build(fx, only, servers)[offset::sample]
+        cases = build(fx, only, servers)
+        if match:
+            cases = [c for c in cases if re.search(match, c.name)]
+        cases = cases[offset::sample]
         counts: dict[str, dict[str, int]] = {}
         failures = []
         start = time.monotonic()
@@ -1496,10 +1500,13 @@ def combine(parts: list[dict]) -> dict:
         report["seconds"] = max(report["seconds"], part["seconds"])
         for k, v in part["totals"].items():
             report["totals"][k] += v
-        report["categories"].update(part["categories"])
+        for name, per in part["categories"].items():
+            into = report["categories"].setdefault(name, dict.fromkeys(OUTCOMES, 0))
+            for k, v in per.items():
+                into[k] = into.get(k, 0) + v
         report["failures"] += part["failures"]
         report["parts"].append({"categories": sorted(part["categories"]), "attempts": part["attempts"],
-                                "seconds": part["seconds"]})
+                                "seconds": part["seconds"], "command": part.get("command")})
         report["code"] = part.get("code")
     return report
 
@@ -1512,6 +1519,9 @@ def main() -> int:
                         help="run the sweep on this commit instead (git archive), or on a tree extracted before")
     parser.add_argument("--out", default=str(ROOT / "bench" / "results" / "reliability.json"))
     parser.add_argument("--list", action="store_true", help="print the failures too")
+    parser.add_argument("--match", default=None, metavar="REGEX",
+                        help="only attempts whose name matches (e.g. '^batch ' for the batch flags); parts that "
+                             "together cover a category can be summed with --combine")
     parser.add_argument("-v", "--verbose", action="store_true")
     parser.add_argument("--combine", nargs="+", metavar="PART.json", default=None,
                         help="write the sum of sweeps run in parts (disjoint --only sets, run side by side) to --out")
@@ -1530,9 +1540,10 @@ def main() -> int:
         cmd += ["--list"] * args.list + ["-v"] * args.verbose
         return subprocess.call(cmd, env=env, cwd=path)
     only = {c.strip() for c in args.only.split(",") if c.strip()}
-    report = sweep(only, args.sample, verbose=args.verbose)
+    report = sweep(only, args.sample, verbose=args.verbose, match=args.match)
     import creep_online
     report["code"] = str(Path(creep_online.__file__).resolve().parents[1])
+    report["command"] = " ".join(["python bench/bench_reliability.py", *map(shlex.quote, sys.argv[1:])])
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(report, indent=1) + "\n")
     shown = report if args.list else {k: v for k, v in report.items() if k != "failures"}
