@@ -64,7 +64,12 @@ def _one_line_error(code: int, err: str, *words: str) -> None:
     assert "Traceback" not in err
     lines = [ln for ln in err.splitlines() if ln.strip() and ": warning: " not in ln
              and not ln.startswith("creep-online: ")]     # (a stream's events: a source says what it saw)
-    assert len(lines) == 1 and ": error: " in lines[0], err
+    assert len(lines) == 1, err
+    if lines[0].startswith("{"):                      # --json: the error as one JSON object
+        error = json.loads(lines[0])
+        assert error["exit_code"] == 2 and error["error"], err
+    else:
+        assert ": error: " in lines[0], err
     for w in words:
         assert w in lines[0], (w, lines[0])
 
