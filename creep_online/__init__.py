@@ -5,6 +5,34 @@ two-layer batch identification and the online estimator. Hardware transports
 and plots are optional extras.
 """
 import os
+import sys
+
+
+def _guard_cli_start() -> None:
+    """In the ``creep-online`` program only: a Ctrl-C while the package still loads (before ``cli.main`` takes
+    the signals over) ends it with one line and status 130, not a KeyboardInterrupt traceback. It runs before
+    any import of the package (os and sys are loaded with the interpreter), so that the window where Python's
+    own traceback can show is as short as it can be; a library user's process (any other program) is left alone."""
+    argv0 = os.path.basename(sys.argv[0]) if sys.argv else ""
+    orig = list(getattr(sys, "orig_argv", []))
+    as_module = any(a == "-m" and b == "creep_online" for a, b in zip(orig, orig[1:]))
+    if argv0 not in ("creep-online", "creep-online.exe") and not as_module:
+        return
+    previous = sys.excepthook
+
+    def one_line(kind, value, tb) -> None:
+        if issubclass(kind, KeyboardInterrupt):
+            try:
+                sys.stderr.write("creep-online: interrupted while starting\n")
+                sys.stderr.flush()
+            except Exception:  # noqa: BLE001 - a closed stderr: the status says it
+                pass
+            os._exit(130)           # 128 + SIGINT
+        previous(kind, value, tb)
+    sys.excepthook = one_line
+
+
+_guard_cli_start()     # the creep-online program: Ctrl-C while this package loads is one line, never a traceback
 
 # The matrices here are tiny (2x2 to 10x10); multi-threaded BLAS only adds
 # synchronisation (measured: identification 13x slower on 2 cores). Respect a

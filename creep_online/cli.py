@@ -2,19 +2,27 @@
 
 Each sub-command lives in ``creep_online.commands.<name>`` and exposes
 ``register(subparsers)``, which adds its parser and sets ``func``. Any
-CreepOnlineError becomes one line on stderr and exit code 2, never a traceback.
+CreepOnlineError becomes one line on stderr and exit code 2, never a traceback;
+so does a bad flag (argparse's usage block is replaced by one line). Ctrl-C,
+SIGTERM and SIGHUP end any command the same way (``creep_online._signals``):
+the work done is kept, one line says so, the exit status is 128 + the signal.
+Everything printed goes through ``TerminalText``: control characters from a
+file name or a header reach the terminal escaped, never raw.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
 import os
 import signal
 import sys
 import warnings
+from typing import Iterator, TextIO
 
-from .errors import CreepOnlineError, CreepOnlineWarning, one_line as _one_line
+from . import _signals
+from .errors import CreepOnlineError, CreepOnlineWarning, one_line as _one_line, printable
 
 COMMANDS = ("identify", "simulate", "stream", "diagnose", "fit", "compare", "demo", "batch")
 #: One-line help of each command for the top-level listing, so that ``--help`` imports no command
@@ -31,23 +39,53 @@ SUMMARIES = {
 }
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse with its usage errors as one JSON line on stderr when ``--json`` was asked for (exit 2)."""
+class OneLineParser(argparse.ArgumentParser):
+    """argparse's parser whose errors are one line (``creep-online CMD: error: ...``) with exit status 2, or
+    one JSON object on stderr when ``--json`` was asked for."""
 
     json_errors = False
     command = ""
 
-    def error(self, message: str):
+    def error(self, message: str):  # type: ignore[override]
         if self.json_errors:
-            _print_error({"command": self.command or None, "error": message, "type": "UsageError",
-                          "exit_code": 2}, as_json=True)
-            sys.exit(2)
-        super().error(message)
+            _print_error({"command": self.command or None, "error": printable(message, keep_return=False),
+                          "type": "UsageError", "exit_code": 2}, as_json=True)
+            self.exit(2)
+        self.exit(2, f"{self.prog}: error: {printable(message, keep_return=False)} (see {self.prog} --help)\n")
+
+
+class TerminalText:
+    """A text stream that writes control characters escaped (``errors.printable``): what a record's name or a
+    CSV header holds is shown, never acted on by the terminal. Everything else is the wrapped stream's."""
+
+    def __init__(self, stream: TextIO) -> None:
+        self._stream = stream
+        #: the wrapped stream, for a writer whose own escape sequences must reach the terminal (the status
+        #: line drawn by rich); what it writes of untrusted text it escapes itself
+        self.unescaped = stream
+
+    def write(self, text: str) -> int:
+        self._stream.write(printable(text))
+        return len(text)
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
+
+
+@contextlib.contextmanager
+def _terminal_text() -> Iterator[None]:
+    """sys.stdout and sys.stderr through ``TerminalText`` for the command's run."""
+    saved = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = (s if s is None or isinstance(s, TerminalText) else TerminalText(s) for s in saved)
+    try:
+        yield
+    finally:
+        sys.stdout, sys.stderr = saved
 
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The full parser; with ``only``, just that command is imported and the others are listed by name."""
-    parser = _Parser(
+    parser = OneLineParser(
         prog="creep-online",
         description="Identify the fractional-order creep model b / (s^alpha (1 + a1 s + a2 s^2)), batch or online.")
     parser.add_argument("--version", action="version", version=f"creep-online {_version()}")
@@ -67,15 +105,31 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
 
 
 def _warning_printer(command: str):
-    """showwarning replacement: our warnings as one line, anything else as Python prints it."""
+    """showwarning replacement: every warning on one line (ours as they are, others with their kind and where
+    they came from); ``CREEP_ONLINE_DEBUG=1`` shows the others as Python prints them."""
     default = warnings.showwarning
 
     def show(message, category, filename, lineno, file=None, line=None):
         if issubclass(category, CreepOnlineWarning):
-            print(f"creep-online {command}: warning: {message}", file=sys.stderr)
-        else:
+            print(f"creep-online {command}: warning: {_one_line(message)}", file=sys.stderr)
+        elif os.environ.get("CREEP_ONLINE_DEBUG"):
             default(message, category, filename, lineno, file, line)
+        else:
+            print(f"creep-online {command}: warning: {category.__name__}: {_one_line(message)} "
+                  f"({os.path.basename(str(filename))}:{lineno})", file=sys.stderr)
     return show
+
+
+def _stop_inside(exc: BaseException) -> KeyboardInterrupt | None:
+    """The stop signal an exception wraps: a signal handled while compiled code ran (a numba kernel) comes back
+    as ``SystemError: ... returned a result with an exception set`` whose cause is the KeyboardInterrupt."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
 
 
 def _version() -> str:
@@ -98,38 +152,53 @@ def _print_error(error: dict, as_json: bool) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point; returns the exit code (0 ok, 1 failed check, 2 bad input, 3 internal error).
+    """Entry point; returns the exit code (0 ok, 1 failed check, 2 bad input, 3 internal error, 128 + N ended
+    by signal N: 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP).
 
     ``creep-online stream`` has its own codes for how a stream ended (see its --help). With ``--json``
     an error is one JSON object on stderr: {"command", "error", "type", "exit_code"}.
     """
     argv = sys.argv[1:] if argv is None else list(map(str, argv))
-    _Parser.json_errors, _Parser.command = "--json" in argv, _requested(argv)
-    parser = build_parser(only=_requested(argv))
-    args = parser.parse_args(argv)
-    as_json = bool(getattr(args, "json", False))
-    try:
-        with warnings.catch_warnings():
-            warnings.showwarning = _warning_printer(args.command)
-            return int(args.func(args) or 0)
-    except CreepOnlineError as exc:
-        _print_error({"command": args.command, "error": _one_line(exc), "type": type(exc).__name__,
-                      "exit_code": 2}, as_json)
-        return 2
-    except BrokenPipeError:
-        # the reader (e.g. `| head`) went away: not an error of ours
-        sys.stderr.close()
-        return 0
-    except KeyboardInterrupt:
-        print(f"creep-online {args.command}: interrupted", file=sys.stderr)
-        return 130
-    except Exception as exc:  # noqa: BLE001 - a bug of ours: one line, not a traceback
-        if os.environ.get("CREEP_ONLINE_DEBUG"):
-            raise
-        _print_error({"command": args.command, "error": f"{type(exc).__name__}: {_one_line(exc)} (please report it; "
-                      "CREEP_ONLINE_DEBUG=1 shows the traceback)", "type": type(exc).__name__, "exit_code": 3},
-                     as_json)
-        return 3
+    command = _requested(argv) or "creep-online"
+    OneLineParser.json_errors, OneLineParser.command = "--json" in argv, _requested(argv)
+    as_json = running = False
+    with _signals.stop_signals(), _terminal_text():
+        try:
+            parser = build_parser(only=_requested(argv))
+            try:
+                args = parser.parse_args(argv)
+            except SystemExit as stop:     # --help, --version, or a bad flag (its one line already printed)
+                return stop.code if isinstance(stop.code, int) else 2
+            command = args.command
+            as_json = bool(getattr(args, "json", False))
+            with warnings.catch_warnings():
+                warnings.showwarning = _warning_printer(args.command)
+                running = True
+                return int(args.func(args) or 0)
+        except CreepOnlineError as exc:
+            _print_error({"command": command, "error": _one_line(exc), "type": type(exc).__name__,
+                          "exit_code": 2}, as_json)
+            return 2
+        except BrokenPipeError:
+            # the reader (e.g. `| head`) went away: not an error of ours
+            _quietly(sys.stderr.close)
+            return 0
+        except KeyboardInterrupt as exc:    # Ctrl-C, SIGTERM, SIGHUP (``_signals.Interrupted``)
+            said = f"creep-online {command}: {_signals.describe(exc)}" + ("" if running else " while starting")
+            _quietly(lambda: print(said, file=sys.stderr))
+            return _signals.exit_code(exc)
+        except Exception as exc:  # noqa: BLE001 - a bug of ours: one line, not a traceback
+            stop = _stop_inside(exc)
+            if stop is not None:            # a signal raised inside compiled code, wrapped (numba: SystemError)
+                said = f"creep-online {command}: {_signals.describe(stop)}"
+                _quietly(lambda: print(said, file=sys.stderr))
+                return _signals.exit_code(stop)
+            if os.environ.get("CREEP_ONLINE_DEBUG"):
+                raise
+            _print_error({"command": command, "error": f"{type(exc).__name__}: {_one_line(exc)} (please report "
+                          "it; CREEP_ONLINE_DEBUG=1 shows the traceback)", "type": type(exc).__name__,
+                          "exit_code": 3}, as_json)
+            return 3
 
 
 def console() -> None:
@@ -139,22 +208,28 @@ def console() -> None:
     cluster, threads, buffered output); a Ctrl-C then used to end the process
     by the signal with no word (seen after ``batch``). From that point a Ctrl-C
     flushes the output, says in one line that the command had ended and with
-    which status, and exits with 130. A process started with Ctrl-C ignored
-    keeps it ignored.
+    which status, and exits with 130 (SIGTERM and SIGHUP alike, with their
+    own status). A process started with a signal ignored keeps it ignored.
     """
-    code = main()
-    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
-        signal.signal(signal.SIGINT, _interrupted_while_exiting(code))
+    code = 130
+    try:
+        code = main()
+        for signum in _signals.STOP_SIGNALS:
+            if signal.getsignal(signum) is not signal.SIG_IGN:
+                signal.signal(signum, _interrupted_while_exiting(code))
+    except KeyboardInterrupt as exc:   # (between main's handlers and these: a few microseconds)
+        _interrupted_while_exiting(code)(_signals.exit_code(exc) - 128, None)
     sys.exit(code)
 
 
 def _interrupted_while_exiting(code: int):
-    """A SIGINT handler for the interpreter's shutdown after the command ended with ``code``."""
+    """A stop-signal handler for the interpreter's shutdown after the command ended with ``code``."""
     def handler(signum, frame) -> None:
         _quietly(sys.stdout.flush)
-        _quietly(lambda: print(f"creep-online: interrupted while exiting (the command had ended, exit status "
-                               f"{code})", file=sys.stderr, flush=True))
-        os._exit(130)
+        what = "interrupted" if signum == signal.SIGINT else _signals.STOP_SIGNALS.get(signum, "stopped")
+        _quietly(lambda: print(f"creep-online: {what} while exiting (the "
+                               f"command had ended, exit status {code})", file=sys.stderr, flush=True))
+        os._exit(128 + signum)
     return handler
 
 

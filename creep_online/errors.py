@@ -1,6 +1,8 @@
 """Exception types: every user-facing failure is one of these, with a one-line message."""
 from __future__ import annotations
 
+import re
+
 
 class CreepOnlineError(Exception):
     """Base class: the CLI prints the message on one line and exits with code 2."""
@@ -38,7 +40,26 @@ class DataWarning(CreepOnlineWarning):
     """A doubtful but usable data file (e.g. a last line without end-of-line)."""
 
 
+#: Characters a terminal may act on (C0 but tab/newline/return, DEL, C1, bidirectional overrides) and the lone
+#: surrogates that stand for undecodable bytes of a file name: never shown raw.
+_CONTROL = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069\ud800-\udfff]")
+
+
+def _escape(match: re.Match) -> str:
+    code = ord(match.group())
+    return f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}"
+
+
+def printable(text: str, *, keep_return: bool = True) -> str:
+    """``text`` with every control character a terminal would act on written as ``\\xNN`` (a file name or a
+    CSV header may hold escape sequences that set the window title or clear the screen). Tab and newline
+    stay; carriage return too unless ``keep_return`` is False."""
+    text = _CONTROL.sub(_escape, text)
+    return text if keep_return else text.replace("\r", "\\x0d")
+
+
 def one_line(exc: BaseException) -> str:
-    """The exception's message on one line (first line, at most 300 characters): how every error is shown."""
+    """The exception's message on one line (first line, at most 300 characters, control characters escaped):
+    how every error is shown."""
     text = str(exc).strip().splitlines()
-    return (text[0] if text else type(exc).__name__)[:300]
+    return printable((text[0] if text else type(exc).__name__)[:300], keep_return=False)

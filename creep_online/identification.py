@@ -35,6 +35,7 @@ from scipy.special import digamma, rgamma
 from . import kernels
 from ._threads import single_threaded
 from .discretize import foh_matrices_batch, step_response_grid, step_response_sensitivity
+from .checks import is_real, number, positive
 from .errors import DataError, IdentificationError
 from .global_fit import GRID_ZETAS, GlobalFit, at_floor, floor_ratio, global_fit, global_uncertainty, n_bic
 from .metrics import fit_percent, long_run_variance_factor, noise_std_estimate, rms
@@ -534,6 +535,11 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
         raise DataError(f"{source}: {exc} (identify simulates on a uniform grid; "
                         "'creep-online diagnose' fits non-uniform records)") from None
     check_ranges(rec, h)
+    span = rec.duration
+    if layer1_step is not None and not layer1_step < span:
+        raise DataError(f"{source}: layer1_step ({layer1_step:g} s) must be shorter than the record ({span:g} s)")
+    if t_c is not None and not t_c < span:
+        raise DataError(f"{source}: t_c ({t_c:g} s) must lie inside the record ({span:g} s)")
     su, sy = amplitude_scales(rec.u, rec.y)
     if su != 1.0 or sy != 1.0:
         scaled = _identify_scaled(rec, su, sy, t_c=t_c, alpha0=alpha0, resonance0=resonance0,
@@ -676,16 +682,15 @@ def _escalate(u: np.ndarray, y_raw: np.ndarray, h: float, model: CreepModel, fas
 
 
 def _positive(name: str, value: float | None) -> None:
-    if value is not None and not (isinstance(value, (int, float, np.integer, np.floating))
-                                  and math.isfinite(value) and value > 0):
-        raise DataError(f"{name} must be a positive finite number, got {value!r}")
+    if value is not None:
+        positive(value, name)
 
 
 def check_options(*, t_c=None, alpha0=None, resonance0=None, layer1_step=None, offset=None) -> None:
     """DataError naming the first invalid identification setting."""
     _positive("t_c (end of the transient, s)", t_c)
     _positive("layer1_step (s)", layer1_step)
-    if alpha0 is not None and not (isinstance(alpha0, (int, float, np.integer, np.floating)) and 0 < alpha0 < 1):
+    if alpha0 is not None and not (is_real(alpha0) and 0 < alpha0 < 1):
         raise DataError(f"alpha0 must lie in (0, 1), got {alpha0!r}")
     if resonance0 is not None:
         try:
@@ -694,7 +699,7 @@ def check_options(*, t_c=None, alpha0=None, resonance0=None, layer1_step=None, o
             raise DataError(f"resonance0 must be (fn_hz, zeta), got {resonance0!r}") from None
         _positive("resonance0 fn_hz", fn)
         _positive("resonance0 zeta", zeta)
-    if offset is not None and not (isinstance(offset, (int, float, np.integer, np.floating)) and math.isfinite(offset)):
+    if offset is not None and not (is_real(offset) and math.isfinite(number(offset, "offset"))):
         raise DataError(f"offset must be a finite number, got {offset!r}")
 
 

@@ -14,7 +14,11 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .effects.base import check_effect_names
+from .checks import is_real
 from .errors import ModelError
+
+#: a1 (s) and a2 (s^2) beyond these make the resonance's poles overflow or underflow double precision.
+COEFFICIENT_RANGE = {"a1": (1e-100, 1e100), "a2": (1e-200, 1e200)}
 
 # --------------------------------------------------------------------------- alpha search bounds
 # alpha lives in the open interval (0, 1) (``CreepModel`` rejects the ends). Each estimator searches a
@@ -56,9 +60,15 @@ class CreepModel:
     def __post_init__(self) -> None:
         for name in ("alpha", "a1", "a2", "b"):
             value = getattr(self, name)
-            if not isinstance(value, (int, float, np.floating, np.integer)) or not math.isfinite(value):
+            if not is_real(value):
                 raise ModelError(f"{name} must be a finite number, got {value!r}")
-            object.__setattr__(self, name, float(value))
+            try:
+                value = float(value)
+            except OverflowError:
+                raise ModelError(f"{name} must be a finite number, got {value!r}") from None
+            if not math.isfinite(value):
+                raise ModelError(f"{name} must be a finite number, got {value!r}")
+            object.__setattr__(self, name, value)
         if not 0.0 < self.alpha < 1.0:
             raise ModelError(f"alpha must satisfy 0 < alpha < 1, got {self.alpha}")
         if self.a1 <= 0.0:
@@ -67,15 +77,23 @@ class CreepModel:
             raise ModelError(f"a2 must be > 0, got {self.a2}")
         if self.b == 0.0:
             raise ModelError("b must be non-zero")
+        for name, (lo, hi) in COEFFICIENT_RANGE.items():
+            if not lo <= getattr(self, name) <= hi:
+                raise ModelError(f"{name} = {getattr(self, name):g} is outside {lo:g}..{hi:g}: the model's poles "
+                                 f"would not be representable in floating point (are the units seconds?)")
 
     # ------------------------------------------------------------------ derived
     @classmethod
     def from_resonance(cls, alpha: float, fn: float, zeta: float, b: float = 1.0) -> "CreepModel":
         """Build the model from the natural frequency ``fn`` (Hz) and damping ``zeta``."""
-        if fn <= 0 or zeta <= 0:
-            raise ModelError(f"fn and zeta must be > 0, got fn={fn}, zeta={zeta}")
-        wn = 2.0 * math.pi * fn
-        return cls(alpha=alpha, a1=2.0 * zeta / wn, a2=1.0 / wn**2, b=b)
+        if not (is_real(fn) and is_real(zeta) and math.isfinite(fn) and math.isfinite(zeta) and fn > 0 and zeta > 0):
+            raise ModelError(f"fn and zeta must be > 0 and finite, got fn={fn!r}, zeta={zeta!r}")
+        wn = 2.0 * math.pi * float(fn)
+        try:
+            a1, a2 = 2.0 * float(zeta) / wn, 1.0 / wn**2
+        except (OverflowError, ZeroDivisionError):
+            raise ModelError(f"fn = {fn:g} Hz is outside the range a model can represent") from None
+        return cls(alpha=alpha, a1=a1, a2=a2, b=b)
 
     @property
     def wn(self) -> float:

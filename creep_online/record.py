@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .checks import real_array
 from .errors import DataError
 
 #: Fewest samples any identification is attempted on.
@@ -24,9 +25,13 @@ class Record:
     units: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
-        self.t = np.ascontiguousarray(self.t, dtype=float)
-        self.u = np.ascontiguousarray(self.u, dtype=float)
-        self.y = np.ascontiguousarray(self.y, dtype=float)
+        if not isinstance(self.source, str):
+            raise DataError(f"source must be a text naming the record, got {type(self.source).__name__}")
+        try:   # numbers only: no text, bool, complex or date arrays read as numbers
+            self.t, self.u, self.y = (np.ascontiguousarray(real_array(v, name, ndim=None))
+                                      for v, name in ((self.t, "t"), (self.u, "u"), (self.y, "y")))
+        except DataError as exc:
+            raise DataError(f"{self.source}: {exc}") from None
         if not (self.t.shape == self.u.shape == self.y.shape) or self.t.ndim != 1:
             raise DataError(f"{self.source}: t, u and y must be 1-D and of equal length "
                             f"(got {self.t.shape}, {self.u.shape}, {self.y.shape})")

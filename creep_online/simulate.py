@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 
+from .checks import count, real_array
 from .errors import DataError
 from .model import CreepModel
 
@@ -41,6 +42,8 @@ def uniform_step(t: np.ndarray, rtol: float = UNIFORM_RTOL) -> float:
     t = np.asarray(t, dtype=float)
     if t.ndim != 1 or t.size < 2:
         raise DataError("need at least 2 time samples")
+    if not np.all(np.isfinite(t)):
+        raise DataError("time contains NaN or inf")
     dt = np.diff(t)
     if np.any(dt <= 0):
         raise DataError(f"time is not strictly increasing (first at sample {int(np.argmax(dt <= 0)) + 1})")
@@ -149,7 +152,16 @@ def superpose_rows(step_responses: np.ndarray, u: np.ndarray) -> np.ndarray:
 def simulate(model: CreepModel, t: np.ndarray, u: np.ndarray, method: str = "exact",
              memory: int | None = None) -> np.ndarray:
     """Output y(t) of ``model`` for the input u sampled on the uniform grid t (zero initial state)."""
-    u = np.ascontiguousarray(u, dtype=float)
+    if not isinstance(model, CreepModel):
+        raise DataError(f"simulate() needs a CreepModel, got {type(model).__name__}")
+    if not (isinstance(method, str) and method in METHODS):
+        raise DataError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    if memory is not None:
+        memory = count(memory, "memory (samples of fractional memory)")
+        if method == "exact":
+            raise DataError("the exact method has full memory; 'memory' applies to paper and split")
+    t = real_array(t, "t")
+    u = np.ascontiguousarray(real_array(u, "u"))
     h = uniform_step(t)
     if u.shape != np.shape(t):
         raise DataError(f"t and u differ in length ({np.size(t)} vs {u.size})")
@@ -193,5 +205,7 @@ def split_form(model: CreepModel, h: float, u: np.ndarray, memory: int | None = 
 def step_response(model: CreepModel, t: np.ndarray) -> np.ndarray:
     """Exact unit-step response on a uniform grid t starting at 0."""
     from .discretize import step_response_grid
-    h = uniform_step(t)
+    if not isinstance(model, CreepModel):
+        raise DataError(f"step_response() needs a CreepModel, got {type(model).__name__}")
+    h = uniform_step(real_array(t, "t"))
     return model.b * step_response_grid(model.alpha, model.a1, model.a2, h, np.size(t))

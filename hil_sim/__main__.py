@@ -11,11 +11,14 @@ the ledger as JSON.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import signal
 import sys
 import tempfile
 import threading
+
+from creep_online.cli import OneLineParser
 
 from .faults import FaultSpec, plan
 from .links import PtyLink
@@ -26,7 +29,7 @@ CAPANCDT = "capancdt"
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m hil_sim", description=__doc__.splitlines()[0])
+    p = OneLineParser(prog="python -m hil_sim", description=__doc__.splitlines()[0])
     p.add_argument("--rate", type=float, default=None,
                    help="samples per second (default 10000; capancdt: 3906.25, the controller's fastest rate)")
     p.add_argument("--duration", type=float, default=20.0, help="record length in seconds (default 20)")
@@ -80,8 +83,31 @@ def _payload(text: str) -> tuple[float, float] | None:
     try:
         at, mass = (float(v) for v in text.split(":"))
     except ValueError:
-        raise SystemExit(f"hil_sim: --payload expects T:M (seconds:mass fraction), got {text!r}") from None
+        raise ValueError(f"--payload expects T:M (seconds:mass fraction), got {text!r}") from None
     return at, mass
+
+
+def _check_args(args: argparse.Namespace) -> None:
+    """ValueError naming the first flag the plant cannot run with (the plant's own settings: ``PlantConfig``)."""
+    def number(flag: str, value, low: float, high: float, low_open: bool = False) -> None:
+        if value is None:
+            return
+        if not (math.isfinite(value) and (value > low if low_open else value >= low) and value <= high):
+            raise ValueError(f"{flag} must be a finite number {'>' if low_open else '>='} {low:g} and <= {high:g}, "
+                             f"got {value!r}")
+    number("--command-rate", args.command_rate, 0.0, 1e6, low_open=True)
+    number("--frames-per-packet", args.frames_per_packet, 1, 1 << 16)
+    number("--sensor-range", args.sensor_range, 0.0, 1e9, low_open=True)
+    number("--sensor-offset", args.sensor_offset, -1e9, 1e9)
+    number("--sensor-channels", args.sensor_channels, 1, 8)
+    number("--sensor-channel", args.sensor_channel, 1, args.sensor_channels if args.sensor_channels >= 1 else 1)
+    number("--counter-start", args.counter_start, 0, (1 << 32) - 1)
+    number("--port", args.port, 0, 65535)
+    number("--linger", args.linger, 0.0, 3600.0)
+    number("--seed", args.seed, 0, 2 ** 32 - 1)
+    for flag, text in (("--link", args.link), ("--ledger", args.ledger), ("--command-file", args.command_file)):
+        if text is not None and not text.strip():
+            raise ValueError(f"{flag} must not be empty")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -89,24 +115,23 @@ def main(argv: list[str] | None = None) -> int:
     if args.rate is None:
         args.rate = 3906.25 if args.transport == CAPANCDT else 10_000.0
     try:
+        _check_args(args)
         model = parse_params(args.params)
         spec = FaultSpec.parse(args.faults)
         effects = parse_effects(args.effects)
-    except ValueError as exc:
-        print(f"hil_sim: {exc}", file=sys.stderr)
-        return 2
-    try:
         drift = _drift(args.drift)
+        if args.command_input:
+            PlantConfig(model=model, rate=args.rate, duration=args.duration, noise=args.noise,
+                        adc_bits=args.adc_bits, adc_range=args.adc_range, seed=args.seed, drift=drift)
+            return _closed_loop(args, model, drift, spec, effects)
+        cfg = PlantConfig(model=model, rate=args.rate, duration=args.duration, schedule=args.schedule,
+                          amplitude=args.amplitude, period=args.period, t_start=args.t_start, noise=args.noise,
+                          adc_bits=args.adc_bits, adc_range=args.adc_range, effects=effects,
+                          payload=_payload(args.payload),
+                          seed=args.seed, drift=drift)
     except ValueError as exc:
-        print(f"hil_sim: {exc}", file=sys.stderr)
+        print(f"hil_sim: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}", file=sys.stderr)
         return 2
-    if args.command_input:
-        return _closed_loop(args, model, drift, spec, effects)
-    cfg = PlantConfig(model=model, rate=args.rate, duration=args.duration, schedule=args.schedule,
-                      amplitude=args.amplitude, period=args.period, t_start=args.t_start, noise=args.noise,
-                      adc_bits=args.adc_bits, adc_range=args.adc_range, effects=effects,
-                      payload=_payload(args.payload),
-                      seed=args.seed, drift=drift)
     if args.transport == CAPANCDT:
         from .capancdt_server import serve
         return serve(args, cfg, spec)
@@ -114,7 +139,11 @@ def main(argv: list[str] | None = None) -> int:
     link_path = args.link
     if link_path is None and "disconnect" in spec.counts:
         link_path = os.path.join(tempfile.mkdtemp(prefix="hil_sim_"), "amp")
-    link = PtyLink(link_path)
+    try:
+        link = PtyLink(link_path)
+    except OSError as exc:
+        print(f"hil_sim: cannot open the pseudo-terminal or its link {link_path}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
     stop = threading.Event()
 
     def on_signal(signum, frame):  # noqa: ARG001 - signal handler signature
@@ -170,7 +199,10 @@ def _drift(text: str) -> tuple[float, float]:
         key, _, value = item.partition("=")
         if key.strip() not in out:
             raise ValueError(f"--drift takes alpha=..,b=.. (fractions over the record), got {item!r}")
-        out[key.strip()] = float(value)
+        try:
+            out[key.strip()] = float(value)
+        except ValueError:
+            raise ValueError(f"--drift: {key.strip()} must be a number, got {value!r}") from None
     return out["alpha"], out["b"]
 
 
@@ -185,7 +217,11 @@ def _closed_loop(args, model, drift: tuple[float, float], spec, effects) -> int:
     if refused:
         print(f"hil_sim: --command-input cannot be combined with {', '.join(refused)}", file=sys.stderr)
         return 2
-    link = PtyLink(args.link)
+    try:
+        link = PtyLink(args.link)
+    except OSError as exc:
+        print(f"hil_sim: cannot open the pseudo-terminal or its link {args.link}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())

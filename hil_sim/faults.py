@@ -11,6 +11,8 @@ with the ledger.
 """
 from __future__ import annotations
 
+import math
+
 import json
 from dataclasses import dataclass, field
 
@@ -36,12 +38,22 @@ class FaultSpec:
             if "=" not in item:
                 raise ValueError(f"--faults: expected kind=value, got {item!r}")
             k, v = (s.strip() for s in item.split("=", 1))
+            try:
+                value = float(v)
+            except ValueError:
+                raise ValueError(f"--faults: {k} must be a number, got {v!r}") from None
+            if not (math.isfinite(value) and value >= 0 and value <= 1e9):
+                raise ValueError(f"--faults: {k} must be a finite number >= 0, got {v!r}")
             if k in ("stall_s", "disconnect_s"):
-                setattr(spec, k, float(v))
+                if value <= 0:
+                    raise ValueError(f"--faults: {k} must be > 0 s, got {v!r}")
+                setattr(spec, k, value)
             elif k == "drop_frames":
-                spec.drop_frames = int(v)
+                if not value.is_integer() or value < 1:
+                    raise ValueError(f"--faults: drop_frames must be a whole number >= 1, got {v!r}")
+                spec.drop_frames = int(value)
             elif k in KINDS:
-                spec.counts[k] = float(v)
+                spec.counts[k] = value
             else:
                 raise ValueError(f"--faults: unknown fault {k!r}; choose from {', '.join(KINDS)}, stall_s, disconnect_s, "
                                  "drop_frames")

@@ -9,6 +9,7 @@ is present; this package keeps no copy of the effect models.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -17,6 +18,9 @@ from creep_online import CreepModel, simulate
 from creep_online.io.params import parse_params as _parse_params
 
 SCHEDULES = ("step", "staircase", "updown", "square")
+#: The plant's limits: sample rates from 1 Hz to 1 MHz, at most 5e7 samples (the record is computed in memory).
+MIN_RATE, MAX_RATE = 1.0, 1e6
+MAX_SAMPLES = 5e7
 
 #: The demo plant: a stacked piezo with marked creep, first mode at 420 Hz (no estimator default or grid point).
 DEFAULT_PARAMS = {"alpha": 0.12, "fn": 420.0, "zeta": 0.08, "b": 2.5}
@@ -82,7 +86,11 @@ def parse_effects(text: str | None) -> dict[str, dict]:
         return {}
     if text.startswith("{"):
         import json
-        return {k: dict(v) for k, v in json.loads(text).items()}
+        try:
+            loaded = json.loads(text)
+            return {str(k): dict(v) for k, v in loaded.items()}
+        except (ValueError, TypeError, AttributeError) as exc:
+            raise ValueError(f"--effects: not a JSON object of effect parameters ({str(exc)[:80]})") from None
     out: dict[str, dict] = {}
     for item in text.split(";"):
         item = item.strip()
@@ -93,10 +101,33 @@ def parse_effects(text: str | None) -> dict[str, dict]:
         params = dict(EFFECT_DEFAULTS.get(name, {})) if not rest.strip() else {}
         for kv in filter(None, (x.strip() for x in rest.split(","))):
             k, _, v = kv.partition("=")
-            vals = [float(x) for x in v.split("/")]
+            try:
+                vals = [float(x) for x in v.split("/")]
+            except ValueError:
+                raise ValueError(f"--effects: {name}: {k.strip()} must be numbers, got {v!r}") from None
             params[k.strip()] = vals if len(vals) > 1 else vals[0]
         out[name] = params
     return out
+
+
+def check_effects(effects: dict) -> None:
+    """ValueError unless every effect is in the catalogue and its parameters are finite numbers."""
+    if not isinstance(effects, dict):
+        raise ValueError(f"effects must be a mapping name -> parameters, got {type(effects).__name__}")
+    try:
+        from creep_online.effects import effect_names
+        known = effect_names()
+    except ImportError:          # (a build without the catalogue: apply_effects says so)
+        known = tuple(effects)
+    for name, params in effects.items():
+        if name not in known:
+            raise ValueError(f"unknown effect {name!r}; choose from {', '.join(known)}")
+        if not isinstance(params, dict):
+            raise ValueError(f"effect {name}: parameters must be key=value pairs, got {params!r}")
+        for key, value in params.items():
+            values = value if isinstance(value, list) else [value]
+            if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values):
+                raise ValueError(f"effect {name}: {key} must be finite numbers, got {value!r}")
 
 
 def apply_effects(model: CreepModel, t: np.ndarray, u: np.ndarray, effects: dict[str, dict]) -> np.ndarray:
@@ -127,6 +158,36 @@ class PlantConfig:
     seed: int = 0
     payload: tuple[float, float] | None = None   # (time s, added mass fraction): a2 *= 1 + m from then on
     drift: tuple[float, float] = (0.0, 0.0)      # relative drift of (alpha, b) over the record, linear in time
+
+    def __post_init__(self) -> None:
+        """ValueError naming the first setting the plant cannot run with (one line, as ``python -m hil_sim``
+        prints it): every number finite and in its range, a known schedule and known effects."""
+        def number(name: str, value, low: float, high: float, low_open: bool = False) -> None:
+            ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) \
+                and math.isfinite(value) and (value > low if low_open else value >= low) and value <= high
+            if not ok:
+                bound = f"> {low:g}" if low_open else f">= {low:g}"
+                raise ValueError(f"{name} must be a finite number {bound} and <= {high:g}, got {value!r}")
+        number("rate (Hz)", self.rate, MIN_RATE, MAX_RATE)
+        number("duration (s)", self.duration, 0.0, MAX_SAMPLES, low_open=True)
+        if self.duration * self.rate > MAX_SAMPLES:
+            raise ValueError(f"duration x rate is {self.duration * self.rate:.3g} samples, more than {MAX_SAMPLES:.0e}")
+        if self.schedule not in SCHEDULES:
+            raise ValueError(f"unknown schedule {self.schedule!r}; choose one of {', '.join(SCHEDULES)}")
+        number("amplitude", self.amplitude, -1e6, 1e6)
+        number("period (s)", self.period, 0.0, 1e9, low_open=True)
+        number("t_start (s)", self.t_start, 0.0, 1e9)
+        number("noise (std)", self.noise, 0.0, 1e6)
+        if not (isinstance(self.adc_bits, (int, np.integer)) and 2 <= self.adc_bits <= 32):
+            raise ValueError(f"adc_bits must be a whole number from 2 to 32, got {self.adc_bits!r}")
+        number("adc_range", self.adc_range, 0.0, 1e9, low_open=True)
+        check_effects(self.effects)
+        if self.payload is not None:
+            at, mass = self.payload
+            number("payload time (s)", at, 0.0, 1e9)
+            number("payload mass fraction", mass, -1.0, 1e6, low_open=True)
+        for name, value in zip(("alpha drift", "b drift"), self.drift):
+            number(name, value, -1.0, 1e6, low_open=True)
 
 
 @dataclass

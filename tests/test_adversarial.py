@@ -1,16 +1,21 @@
-"""Adversarial inputs (issue 14): no traceback, one-line errors with exit 2, inputs never destroyed.
+"""Adversarial inputs: no traceback, one-line errors with exit 2, inputs never destroyed.
 
-Categories (docs/reliability.md has the table): files the CSV reader is given,
-numbers out of range, invalid settings, outputs that would destroy data,
-report folders, frame encoders, and streams that end (link lost, Ctrl-C,
-corrupt CAN log). Real files, real subprocesses and real pseudo-terminals;
-the frame parsers themselves are fuzzed in test_fuzz_frames.py, the
-read-only install in test_readonly_install.py.
+Categories (docs/reliability.md, "Measured", has the counts of the sweep over
+all of them): files the CSV reader is given, numbers out of range, invalid
+settings, outputs that would destroy data, report folders, frame encoders,
+streams that end (link lost, Ctrl-C, corrupt CAN log), and below: source
+options, spellings of a spec, pipes and `-`, names that would reach a terminal
+raw. Signals, FIFOs, checkpoints, the API's number contract, CAN logs of every
+format and a sample of the sweep itself (``bench/bench_reliability.py``) are
+in test_reliability.py. Real files, real subprocesses and real
+pseudo-terminals; the frame parsers themselves are fuzzed in
+test_fuzz_frames.py, the read-only install in test_readonly_install.py.
 """
 from __future__ import annotations
 
 import json
 import os
+import re
 import select
 import signal
 import subprocess
@@ -75,7 +80,8 @@ def _cli(argv: list[str], capsys) -> tuple[int, str, str]:
 def _assert_one_line_error(code: int, err: str, *words: str) -> None:
     assert code == 2, err
     assert "Traceback" not in err
-    lines = [ln for ln in err.splitlines() if ln.strip() and ": warning: " not in ln]
+    lines = [ln for ln in err.splitlines() if ln.strip() and ": warning: " not in ln
+             and not ln.startswith("creep-online: ")]     # (a stream's events: a source says what it saw)
     assert len(lines) == 1 and ": error: " in lines[0], err
     for w in words:
         assert w in lines[0], (w, lines[0])
@@ -157,8 +163,8 @@ def test_diagnose_refuses_extreme_amplitudes(files, capsys, name):
 
 
 @pytest.mark.parametrize("flags, words", [
-    (["--t-c", "-1"], ["t_c"]), (["--t-c", "0"], ["t_c"]), (["--t-c", "nan"], ["t_c"]),
-    (["--layer1-step", "0"], ["layer1_step"]), (["--alpha0", "1.5"], ["alpha0"]),
+    (["--t-c", "-1"], ["--t-c"]), (["--t-c", "0"], ["--t-c"]), (["--t-c", "nan"], ["--t-c"]),
+    (["--layer1-step", "0"], ["--layer1-step"]), (["--alpha0", "1.5"], ["--alpha0"]),
 ])
 def test_identify_settings_are_checked(files, capsys, flags, words):
     code, _, err = _cli(["identify", files["good"], *flags], capsys)
@@ -200,7 +206,7 @@ def test_simulate_bad_output_paths(files, capsys, tmp_path, target, words):
 def test_simulate_failure_leaves_the_old_output_intact(files, capsys, tmp_path):
     out = tmp_path / "out.csv"
     out.write_text("precious\n")
-    code, _, err = _cli(["simulate", "--params", "alpha=0.3,a1=0.01,a2=1e-300", "--input", files["good"],
+    code, _, err = _cli(["simulate", "--params", "alpha=0.3,a1=0.01,a2=1e-4,b=1e300", "--input", files["u_huge"],
                          "-o", out], capsys)
     _assert_one_line_error(code, err, "not finite")
     assert out.read_text() == "precious\n"
@@ -228,15 +234,15 @@ def test_report_folder_with_other_files_is_refused(files, capsys, tmp_path):
     folder.mkdir()
     (folder / "notes.txt").write_text("mine")
     code, _, err = _cli(["diagnose", files["good"], "--report", folder], capsys)
-    _assert_one_line_error(code, err, "other files")
+    _assert_one_line_error(code, err, "not an earlier creep-online report")
     assert (folder / "notes.txt").read_text() == "mine"
 
 
 def test_report_folder_is_all_or_nothing(tmp_path):
     from creep_online.io.safe_files import report_dir
     folder = tmp_path / "rep"
-    folder.mkdir()
-    (folder / "index.html").write_text("old report")
+    with report_dir(folder) as tmp:
+        (tmp / "index.html").write_text("old report")
     with pytest.raises(KeyboardInterrupt):
         with report_dir(folder) as tmp:
             (tmp / "index.html").write_text("half")
@@ -246,7 +252,7 @@ def test_report_folder_is_all_or_nothing(tmp_path):
     with report_dir(folder) as tmp:
         (tmp / "index.html").write_text("new report")
         (tmp / "plot.png").write_bytes(b"png")
-    assert sorted(p.name for p in folder.iterdir()) == ["index.html", "plot.png"]
+    assert sorted(p.name for p in folder.iterdir()) == [".creep-online-report", "index.html", "plot.png"]
     assert (folder / "index.html").read_text() == "new report"
     assert [p.name for p in tmp_path.iterdir()] == ["rep"]
 
@@ -367,3 +373,180 @@ def test_canlog_bad_records_are_counted_and_skipped(tmp_path):
     samples = list(src)
     assert src.ended and src.stats.parser.malformed == 1
     assert len(samples) >= 398
+
+
+# ------------------------------------------------------------------ source options and spellings
+HOSTILE = ("nan", "inf", "-1", "1e300", "", "abc")
+OPTIONS = {"csv": ("csv:{good}", ("window", "stall", "realtime", "u_column")),
+           "canlog": ("canlog:{good}", ("rate", "window", "dbc")),
+           "capancdt": ("capancdt:127.0.0.1:9?command={good}", ("rate", "range", "channel", "timeout", "counter0",
+                                                              "reconnect_timeout", "idle_timeout")),
+           "serial": ("serial:/dev/creep-online-no-port", ("rate", "baud", "scale_u", "window", "stall"))}
+
+
+@pytest.mark.parametrize("kind, option", [(k, o) for k, (_, opts) in OPTIONS.items() for o in opts])
+def test_every_source_option_refuses_hostile_values_in_one_line(files, capsys, kind, option):
+    base = OPTIONS[kind][0].format(good=files["good"])
+    for value in HOSTILE:
+        spec = base + ("&" if "?" in base else "?") + f"{option}={value}"
+        code, _, err = _cli(["stream", "--source", spec], capsys)
+        assert "Traceback" not in err and "internal error" not in err, err
+        if code != 0:                              # (a long stall, a bare ``realtime``: valid)
+            _assert_one_line_error(code, err)
+
+
+@pytest.mark.parametrize("spec", ["CSV:{good}", "Csv:{good}", " csv:{good}", "csv:", "nosuch:{good}", "{good}"])
+def test_spec_spellings_that_are_not_a_kind_are_refused(files, capsys, spec):
+    code, _, err = _cli(["stream", "--source", spec.format(good=files["good"])], capsys)
+    _assert_one_line_error(code, err)
+
+
+def test_stdin_as_dash_is_read_like_a_file(files):
+    res = subprocess.run([sys.executable, "-m", "creep_online", "identify", "-", "--json"], capture_output=True,
+                         text=True, stdin=open(files["good"]), timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["samples"] == 1500
+
+
+def test_an_output_name_the_system_cannot_use_is_one_line(files, capsys, tmp_path):
+    for name in ("x" * 5000, str(tmp_path / ("y" * 300) / "out.csv")):
+        code, _, err = _cli(["simulate", "--params", PARAMS, "--input", files["good"], "-o", name], capsys)
+        _assert_one_line_error(code, err)
+    code, _, err = _cli(["diagnose", files["good"], "--report", "x" * 5000], capsys)
+    _assert_one_line_error(code, err)
+
+
+def test_every_warning_is_one_line(files, capsys, tmp_path):
+    """A numpy RuntimeWarning printed its source line too (two lines beside the error)."""
+    code, _, err = _cli(["simulate", "--params", "alpha=0.3,a1=0.01,a2=1e-4,b=1e300", "--input", files["u_huge"],
+                         "-o", tmp_path / "o.csv"], capsys)
+    assert code == 2
+    assert all(ln.startswith("creep-online simulate: ") for ln in err.splitlines() if ln.strip()), err
+
+
+# ------------------------------------------------------------------ model files, compare reports, simulate formats
+@pytest.fixture(scope="module")
+def model_file(files, tmp_path_factory) -> Path:
+    from creep_online import save_model
+    t, u, y = _record()
+    path = tmp_path_factory.mktemp("model") / "model.json"
+    save_model(identify(t, u, y), path)
+    return path
+
+
+def test_a_model_output_is_never_the_data(files, capsys, tmp_path):
+    """identify -o and fit -o compare the model file with the record by identity, whatever the spelling."""
+    data = tmp_path / "rec.json"                      # a record named like a model file
+    data.write_bytes(files["good"].read_bytes())
+    before = data.read_bytes()
+    (tmp_path / "link.json").symlink_to(data)
+    for out in (data, tmp_path / "." / "rec.json", tmp_path / "link.json"):
+        code, _, err = _cli(["identify", data, "-o", out], capsys)
+        _assert_one_line_error(code, err, "refusing to overwrite the input")
+    code, _, err = _cli(["fit", data, "--effects", "delay", "-o", tmp_path / "link.json"], capsys)
+    _assert_one_line_error(code, err, "refusing to overwrite the input")
+    for out, words in ((files["good"], [".json"]), ("", ["must not be empty"])):
+        code, _, err = _cli(["identify", files["good"], "-o", out], capsys)
+        _assert_one_line_error(code, err, *words)
+    assert data.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["link.json", "rec.json"]
+
+
+def test_simulate_never_writes_over_the_model_it_reads(files, model_file, capsys, tmp_path):
+    before = model_file.read_bytes()
+    for flag in ("--model", "--params"):
+        code, _, err = _cli(["simulate", "--input", files["good"], flag, model_file, "-o", model_file], capsys)
+        _assert_one_line_error(code, err, "refusing to overwrite the input")
+    code, _, err = _cli(["simulate", "--input", files["good"], "--model", model_file, "-o", tmp_path / "x.xlsx"],
+                        capsys)
+    _assert_one_line_error(code, err, "unknown output format")
+    assert model_file.read_bytes() == before and not list(tmp_path.iterdir())
+
+
+def test_simulate_parquet_is_written_whole(files, model_file, capsys, tmp_path):
+    pq = pytest.importorskip("pyarrow.parquet")
+    out = tmp_path / "sim.parquet"
+    out.write_text("old")
+    assert _cli(["simulate", "--input", files["good"], "--model", model_file, "-o", out], capsys)[0] == 0
+    assert pq.read_table(out).num_rows == 1500 and [p.name for p in tmp_path.iterdir()] == ["sim.parquet"]
+
+
+def test_compare_report_keeps_the_users_folders(files, model_file, capsys, tmp_path):
+    """compare --report: a foreign folder, the model file itself and '' are refused; a new folder gets the marker
+    and can be replaced by the next compare."""
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "calibration.json").write_text("{}")
+    for target, words in ((mine, ["not an earlier creep-online report"]), (model_file, ["not a folder"]),
+                          ("", ["must not be empty"])):
+        code, _, err = _cli(["compare", model_file, files["good"], "--report", target], capsys)
+        _assert_one_line_error(code, err, *words)
+    assert (mine / "calibration.json").read_text() == "{}" and [p.name for p in mine.iterdir()] == ["calibration.json"]
+    rep = tmp_path / "rep"
+    for _ in range(2):                                 # the second run replaces its own earlier report
+        assert _cli(["compare", model_file, files["good"], "--report", rep], capsys)[0] == 0
+    from creep_online.io.safe_files import REPORT_MARKER
+    assert sorted(p.name for p in rep.iterdir()) == sorted(["compare.json", "compare.png", "report.html",
+                                                            REPORT_MARKER])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mine", "rep"]    # no temporary sibling left
+
+
+def test_a_model_file_that_is_a_fifo_is_not_waited_on(files, capsys, tmp_path, monkeypatch):
+    monkeypatch.setenv("CREEP_ONLINE_READ_TIMEOUT", "0.5")
+    fifo = tmp_path / "model.json"
+    os.mkfifo(fifo)
+    for argv in (["compare", fifo, files["good"]],
+                 ["simulate", "--input", files["good"], "--model", fifo, "-o", tmp_path / "o.csv"]):
+        code, _, err = _cli(argv, capsys)
+        _assert_one_line_error(code, err, "nothing to read")
+
+
+def test_parameter_text_too_long_for_a_file_name_is_parameter_text(files, capsys, tmp_path):
+    code, _, err = _cli(["simulate", "--input", files["good"], "--params", "alpha=" + "x" * 5000,
+                         "-o", tmp_path / "o.csv"], capsys)
+    _assert_one_line_error(code, err, "not a number")
+
+
+def test_a_json_usage_error_is_one_json_object(capsys):
+    code, out, err = _cli(["identify", "--json", "--t-c", "nan", "x.csv"], capsys)
+    assert code == 2 and not out
+    error = json.loads(err)
+    assert error["type"] == "UsageError" and "--t-c" in error["error"] and error["exit_code"] == 2
+
+
+def test_the_status_line_escapes_what_it_shows():
+    from creep_online.commands._progress import Progress
+    progress = Progress(False)
+    progress._text = "diagnose rec\x1b]0;pwned\x07.csv: loading"
+    assert "\x1b" not in progress.line() and "\\x1b" in progress.line()
+
+
+# ------------------------------------------------------------------ the sweep: categories and counts
+SWEEP = REPO / "bench" / "results" / "reliability.json"
+#: Outcomes the recorded sweep must not contain (bench/bench_reliability.py's classes besides "clean").
+NONE_OF = ("traceback", "outside_contract", "internal_error", "hang", "file_lost", "silently_wrong",
+           "valid_refused", "injection", "messy_error", "no_estimate", "temp_left")
+
+
+def test_the_recorded_sweep_meets_its_numbers():
+    """At least 800 attempts over every category; not one traceback, exception outside the contract, internal
+    error, hang, lost file, silently wrong answer, injection, or signalled stream without its estimate."""
+    report = json.loads(SWEEP.read_text())
+    assert report["attempts"] >= 800
+    assert set(report["categories"]) == {"flags", "specs", "files", "outputs", "signals", "pipes", "api", "pickle",
+                                         "canlog", "security", "scheduler", "hil_sim", "bounded"}
+    assert {k: report["totals"][k] for k in NONE_OF if report["totals"][k]} == {}, report["failures"]
+    # a Ctrl-C inside the interpreter's own start-up (before the package's first line) is Python's; it is
+    # counted apart and only start-up attempts may end that way
+    startup = [f for f in report["failures"] if f["outcome"] == "python_startup"]
+    assert all(f["category"] == "signals" and "start-up" in f["case"] for f in startup), startup
+    assert sum(per["clean"] for per in report["categories"].values()) + len(startup) == report["attempts"]
+
+
+def test_the_guide_shows_the_recorded_counts():
+    """docs/reliability.md's table has one row per category with the recorded sweep's numbers."""
+    report = json.loads(SWEEP.read_text())
+    page = (REPO / "docs" / "reliability.md").read_text()
+    for name, per in report["categories"].items():
+        attempts = sum(per.values())
+        assert re.search(rf"^\| {name} +\| +{attempts} +\| +{per['clean']} +\|", page, re.MULTILINE), name
+    assert re.search(rf"^\| \*\*all\*\* +\| +\*\*{report['attempts']}\*\* +\|", page, re.MULTILINE)

@@ -241,23 +241,25 @@ def test_an_earlier_table_is_not_a_record_and_no_record_is_overwritten(fleet, cl
         assert [r["id"] for r in summary["rows"]] == [u.id for u in units[:2]]
 
 
-def test_the_first_ctrl_c_only_sets_the_batchs_flag_and_a_second_one_interrupts():
-    """``ctrl_c_flag``: the batch asks a flag between records rather than take a KeyboardInterrupt wherever its
-    main thread is (inside Dask's client code it left the loop a half-done call); a second Ctrl-C still
-    interrupts, and the handler before is back afterwards."""
-    from creep_online.commands.batch import ctrl_c_flag
-    before = signal.getsignal(signal.SIGINT)
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_the_first_stop_signal_only_sets_the_batchs_flag_and_a_second_one_interrupts(signum):
+    """``_signals.flagged``: the batch asks a flag between records rather than take a KeyboardInterrupt wherever
+    its main thread is (inside Dask's client code it left the loop a half-done call); a second signal still
+    interrupts, and the handler before is back afterwards. SIGTERM (a service manager's stop) alike."""
+    from creep_online import _signals
+    before = signal.getsignal(signum)
     if before is signal.SIG_IGN:
-        pytest.skip("SIGINT is ignored in this process (a background job)")
-    with ctrl_c_flag() as pressed:
-        assert not pressed()
-        os.kill(os.getpid(), signal.SIGINT)
+        pytest.skip(f"{signum} is ignored in this process (a background job)")
+    with _signals.flagged() as pressed:
+        assert pressed() is None
+        os.kill(os.getpid(), signum)
         time.sleep(0.01)                       # (the handler runs between bytecodes of the main thread)
-        assert pressed()
-        with pytest.raises(KeyboardInterrupt):
-            os.kill(os.getpid(), signal.SIGINT)
+        assert pressed() == signum
+        with pytest.raises(KeyboardInterrupt) as raised:
+            os.kill(os.getpid(), signum)
             time.sleep(0.5)
-    assert signal.getsignal(signal.SIGINT) is before
+        assert _signals.exit_code(raised.value) == 128 + signum
+    assert signal.getsignal(signum) is before
 
 
 def test_ctrl_c_stops_cleanly_and_keeps_the_rows_done(fleet, tmp_path):

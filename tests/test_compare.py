@@ -20,6 +20,7 @@ from creep_online.cli import main
 from creep_online.diagnostics.extended import fit_extended, prepare
 from creep_online.effects import EFFECTS, simulate_with_effects
 from creep_online.io import save_csv
+from creep_online.io.safe_files import REPORT_MARKER
 
 BENCH = load_bench("bench_model_compare")
 TOL = BENCH.TOLERANCE
@@ -194,7 +195,8 @@ def test_compare_command_and_report(tmp_path):
     out = _cli_json(["compare", tmp_path / "m.json", data, "--report", tmp_path / "rep"])
     assert out["fit_percent"] == pytest.approx(ident["fit_percent"], abs=TOL)
     assert out["initial"]["free_response_terms"] > 0 and out["residual"]["white"] in (True, False)
-    assert {p.name for p in (tmp_path / "rep").iterdir()} == {"report.html", "compare.png", "compare.json"}
+    assert {p.name for p in (tmp_path / "rep").iterdir()} == {"report.html", "compare.png", "compare.json",
+                                                              REPORT_MARKER}
     text = io.StringIO()
     with contextlib.redirect_stdout(text):
         assert main(["compare", str(tmp_path / "m.json"), str(data)]) == 0

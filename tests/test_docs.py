@@ -29,7 +29,7 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
 #: Pages whose history and examples another piece of work owns (rewritten beside this one).
-NOT_OURS = {DOCS / "reliability.md"}
+NOT_OURS: set[Path] = set()
 RUN_MARK = "<!-- run -->"
 NOT_RUN = re.compile(r"^\*Not run by the (documentation )?tests: (?P<reason>.+)\*$")
 FENCE = re.compile(r"^(?P<indent> *)```(?P<lang>[\w-]*)[^\n]*$")

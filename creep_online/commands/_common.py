@@ -1,16 +1,26 @@
-"""Helpers shared by the sub-commands: JSON output, parameter parsing, column flags, model files."""
+"""Helpers shared by the sub-commands: JSON output, parameter parsing, column flags, model files, and the
+flag types that check values.
+
+Every flag that takes a number or a name is parsed by one of the types below
+(``type=seconds`` ...): NaN, inf, a negative or zero value where a positive one
+is meant, 1e300 where the quantity has a physical range, an empty name, are
+refused by argparse with one line and exit 2 before any work (``cli.OneLineParser``).
+"""
 from __future__ import annotations
 
+import argparse
+import math
 import sys
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from ..io.jsonable import json_text
 from ..io.params import parse_params
 
 __all__ = ["print_json", "parse_params", "add_column_options", "moves_text", "research_lines", "add_model_output",
-           "check_model_output", "save_fitted", "warn_time_unit"]
+           "check_model_output", "save_fitted", "warn_time_unit", "seconds", "positive_number", "finite_number",
+           "fraction", "whole", "nonempty"]
 
 #: A record whose header names no time unit, sampled at this step (s) or slower, ...
 MS_STEP_S = 0.01
@@ -18,18 +28,88 @@ MS_STEP_S = 0.01
 #: piezo actuator's or sensor's first resonance lies above it, and such records are sampled 1000x faster.
 MS_RESONANCE_HZ = 5.0
 
+#: The longest time any flag may give (s): ~30 years; beyond it a value is a unit mistake, not a setting.
+MAX_SECONDS = 1e9
+#: The largest frequency (Hz) or rate any flag may give.
+MAX_HZ = 1e9
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text[:40]!r}") from None
+
+
+def seconds(text: str) -> float:
+    """A time in s: finite, > 0, at most MAX_SECONDS."""
+    value = _number(text)
+    if not (math.isfinite(value) and 0 < value <= MAX_SECONDS):
+        raise argparse.ArgumentTypeError(f"must be a time in seconds, > 0 and at most {MAX_SECONDS:g}, "
+                                         f"got {text[:40]!r}")
+    return value
+
+
+def positive_number(maximum: float = math.inf, what: str = "number") -> Callable[[str], float]:
+    """A flag type: a finite number > 0 (and <= ``maximum``)."""
+    def convert(text: str) -> float:
+        value = _number(text)
+        if not (math.isfinite(value) and 0 < value <= maximum):
+            limit = f" and at most {maximum:g}" if math.isfinite(maximum) else ""
+            raise argparse.ArgumentTypeError(f"must be a positive finite {what}{limit}, got {text[:40]!r}")
+        return value
+    convert.__name__ = what
+    return convert
+
+
+def finite_number(text: str) -> float:
+    """Any finite number (a level, an amplitude)."""
+    value = _number(text)
+    if not (math.isfinite(value) and abs(value) <= 1e100):
+        raise argparse.ArgumentTypeError(f"must be a finite number (|x| <= 1e100), got {text[:40]!r}")
+    return value
+
+
+def fraction(text: str) -> float:
+    """A number strictly between 0 and 1 (alpha)."""
+    value = _number(text)
+    if not 0 < value < 1:
+        raise argparse.ArgumentTypeError(f"must lie strictly between 0 and 1, got {text[:40]!r}")
+    return value
+
+
+def whole(minimum: int = 1, maximum: int = 1 << 31) -> Callable[[str], int]:
+    """A flag type: a whole number in ``minimum..maximum``."""
+    def convert(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a whole number: {text[:40]!r}") from None
+        if not minimum <= value <= maximum:
+            raise argparse.ArgumentTypeError(f"must be a whole number from {minimum} to {maximum}, got {text[:40]!r}")
+        return value
+    convert.__name__ = "whole number"
+    return convert
+
+
+def nonempty(text: str) -> str:
+    """A name or a list that must not be empty."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("must not be empty")
+    return text
+
 
 def add_column_options(parser, time: bool = True) -> None:
     """``--t-column`` / ``--u-column`` / ``--y-column``: the same flags in every command that reads a record file
     (``time`` False: no --t-column, for a source whose time is not a column)."""
     if time:
-        parser.add_argument("--t-column", default=None, metavar="NAME",
+        parser.add_argument("--t-column", default=None, metavar="NAME", type=nonempty,
                             help="time column: a CSV header name (default t or time; a unit in the header such as "
                                  "'t [ms]' converts it to seconds)")
-    parser.add_argument("--u-column", default=None, metavar="NAME",
+    parser.add_argument("--u-column", default=None, metavar="NAME", type=nonempty,
                         help="input column: a CSV header name (default u) or, in a PI GCS data-recorder file, "
                              "a NAMEi text or NAMEi itself (default NAME0)")
-    parser.add_argument("--y-column", default=None, metavar="NAME",
+    parser.add_argument("--y-column", default=None, metavar="NAME", type=nonempty,
                         help="output column: a CSV header name (default y) or a GCS NAMEi (default NAME1)")
 
 
@@ -91,7 +171,7 @@ def research_lines(researches: list[dict]) -> list[str]:
 
 def add_model_output(parser) -> None:
     """``-o/--output MODEL.json``: save the fitted model as a model file (``creep_online.io.model_file``)."""
-    parser.add_argument("-o", "--output", default=None, metavar="MODEL.json",
+    parser.add_argument("-o", "--output", default=None, metavar="MODEL.json", type=nonempty,
                         help="save the model (parameters, effects, offsets, units) as a JSON model file, for "
                              "'creep-online compare' and 'simulate --model' (written atomically, never over the data)")
 

@@ -17,6 +17,8 @@ import threading
 import time
 from typing import TextIO
 
+from ..errors import printable
+
 #: Refreshes per second on a terminal, and the period of plain lines elsewhere (s).
 REFRESH_PER_SECOND = 4
 PLAIN_PERIOD = 2.0
@@ -62,6 +64,7 @@ class Progress:
         """The status line as drawn now: the text and, within a stage, its elapsed time."""
         with self._lock:
             text, t0 = self._text, self._stage_t0
+        text = printable(text, keep_return=False)
         return text if t0 is None else f"{text} {time.monotonic() - t0:5.1f} s"
 
     def _start(self) -> None:
@@ -71,7 +74,8 @@ class Progress:
             return
         from rich.console import Console
         from rich.live import Live
-        console = Console(file=self.stream, force_terminal=True, highlight=False, soft_wrap=False, width=self.width)
+        # rich's cursor moves must reach the terminal: past the CLI's escaping, the line itself escaped (line())
+        console = Console(file=getattr(self.stream, "unescaped", self.stream), force_terminal=True, highlight=False, soft_wrap=False, width=self.width)
         self._live = Live(_StatusLine(self), console=console, transient=True, auto_refresh=True,
                           refresh_per_second=REFRESH_PER_SECOND, redirect_stdout=False, redirect_stderr=False)
         self._live.start()

@@ -2,24 +2,25 @@
 
 One row per record to ``--out`` (CSV or Parquet), an HTML summary, ``--json``
 for machines. A bad record is a row with its error, never the end of the
-batch; Ctrl-C keeps the rows done. Exit codes: 0 every record identified,
-1 the batch ran but some records failed (their rows say why), 2 bad
-arguments or input, 130 interrupted (the rows done are written).
+batch; Ctrl-C, SIGTERM or SIGHUP keeps the rows done. Exit codes: 0 every
+record identified, 1 the batch ran but some records failed (their rows say
+why), 2 bad arguments or input, 128 + N stopped by signal N (130 Ctrl-C,
+143 SIGTERM, 129 SIGHUP; the rows done are written).
 """
 from __future__ import annotations
 
 import argparse
-import contextlib
 import signal
 import sys
-import threading
 import time
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any, Callable
 
+from .._signals import STOP_SIGNALS, exit_code
+from .. import _signals
 from ..errors import CreepOnlineError
 from ._progress import for_command
-from ._common import print_json
+from ._common import nonempty, print_json, whole
 
 SUMMARY = "identify a fleet of records (folder, glob or long id,t,u,y CSV) on Dask"
 
@@ -32,19 +33,19 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "record (parameters, uncertainties, fit, warnings, verdict, error, time); "
                                    "outliers are flagged by a robust z-score (median/MAD of log10|x| > 3.5). "
                                    "Needs the fleet extra: pip install 'creep_online[fleet]'.")
-    p.add_argument("records", metavar="DIR|GLOB|LONG.csv",
+    p.add_argument("records", metavar="DIR|GLOB|LONG.csv", type=nonempty,
                    help="a folder of t,u,y CSV files, a glob of them (quote it), or one CSV with columns "
                         "id,t,u,y (one record per id)")
-    p.add_argument("--out", metavar="TABLE", default=None,
+    p.add_argument("--out", metavar="TABLE", default=None, type=nonempty,
                    help="write the table here (.csv, or .parquet with pyarrow)")
-    p.add_argument("--html", metavar="FILE", default=None,
+    p.add_argument("--html", metavar="FILE", default=None, type=nonempty,
                    help="write the HTML summary here (default: beside --out, same name with .html)")
     p.add_argument("--json", action="store_true",
                    help="print the machine summary as JSON (counts, distributions, outliers, failures, rows)")
     p.add_argument("--diagnose", action="store_true", help="also diagnose every record (the verdict column)")
-    p.add_argument("--workers", type=int, default=None,
+    p.add_argument("--workers", type=whole(1, 1024), default=None,
                    help="worker processes of the local cluster (default: one per core)")
-    p.add_argument("--scheduler", metavar="ADDRESS", default=None,
+    p.add_argument("--scheduler", metavar="ADDRESS", default=None, type=nonempty,
                    help="use an existing Dask scheduler (e.g. tcp://host:8786); its workers need creep_online "
                         "and must see the record files")
     p.add_argument("--no-retune", action="store_true", help="as identify: skip the eq. 12 retune of alpha")
@@ -56,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     from ..fleet.runner import distributed
     from ..fleet.table import check_table_path
     from ..io.fleet_records import find_records
-    from ..io.safe_files import check_output
+    from ..io.safe_files import check_default_output, check_output
     if args.scheduler and args.workers is not None:
         raise CreepOnlineError("--workers sizes the local cluster; with --scheduler the cluster has its own workers")
     outputs = _outputs(args)
@@ -67,10 +68,13 @@ def run(args: argparse.Namespace) -> int:
     if not jobs:
         raise CreepOnlineError(f"{args.records}: holds only batch tables, no records")
     inputs = [j.path for j in jobs if j.path] + ([args.records] if Path(args.records).is_file() else [])
-    for path in outputs:
-        if path is not None:
-            check_output(path, inputs)   # never over a record
-    with ctrl_c_flag() as pressed:   # (held while the rows are written too: a Ctrl-C then waits for them)
+    table, page = outputs
+    if table is not None:
+        check_output(table, inputs)   # never over a record
+    if page is not None:              # the page's default name: never over a file of the user's
+        (check_output if args.html else check_default_output)(page, inputs, **({} if args.html else
+                                                                               {"flag": "--html"}))
+    with _signals.flagged() as pressed:   # (held while the rows are written too: a signal then waits for them)
         rows, times, interrupted = _run(args, jobs, pressed)
         return _finish(args, jobs, rows, times, interrupted, outputs)
 
@@ -97,14 +101,19 @@ def _outputs(args: argparse.Namespace) -> tuple[Path | None, Path | None]:
 
 
 def _run(args: argparse.Namespace, jobs: list,
-         pressed: Callable[[], bool]) -> tuple[list[dict[str, Any]], dict[str, float], bool]:
+         pressed: Callable[[], int | None]) -> tuple[list[dict[str, Any]], dict[str, float], int | None]:
     """The rows (input order), the times (startup_s: cluster up and workers warm; elapsed_s: the records)
-    and whether Ctrl-C (``pressed``, ``ctrl_c_flag``'s) stopped the batch."""
+    and the stop signal that ended the batch early, if any (``pressed``: ``_signals.flagged``'s flag).
+
+    The first Ctrl-C, SIGTERM or SIGHUP only sets the flag, which the batch asks between records: a
+    KeyboardInterrupt raised wherever the main thread happens to be could land inside Dask's client code
+    (a submit, a future's release) and leave its event loop a half-done call, whose traceback Dask's loop
+    thread then printed. A second signal raises as usual."""
     from ..fleet.runner import dask_client, run_on_dask
     options = {"retune": not args.no_retune, "polish": not args.no_polish}
     rows: list[dict[str, Any]] = []
     start = t0 = time.perf_counter()
-    interrupted = False
+    signum = pressed()
     with for_command(args.json) as progress:
         try:   # start-up takes seconds; Ctrl-C is taken once the workers run (docs/fleet.md)
             where = f"connecting to {args.scheduler}" if args.scheduler else "starting the local Dask cluster"
@@ -114,55 +123,27 @@ def _run(args: argparse.Namespace, jobs: list,
                 progress.stage(bar_text(0, len(jobs), 0, 0.0))
                 failed = 0
                 for row in run_on_dask(jobs, client, diagnose_it=args.diagnose, identify_options=options,
-                                       stop=pressed):
+                                       stop=lambda: pressed() is not None):
                     rows.append(row)
                     failed += bool(row["error"])
                     progress.show(bar_text(len(rows), len(jobs), failed, time.perf_counter() - t0))
-        except KeyboardInterrupt:   # (a second Ctrl-C)
-            interrupted = True
-        interrupted = interrupted or (pressed() and len(rows) < len(jobs))
+        except KeyboardInterrupt as exc:   # (a second signal)
+            signum = exit_code(exc) - 128
+        else:
+            signum = pressed() if len(rows) < len(jobs) else None
     order = {job.id: i for i, job in enumerate(jobs)}
     rows.sort(key=lambda r: order[r["id"]])
-    return rows, {"startup_s": t0 - start, "elapsed_s": time.perf_counter() - t0}, interrupted
-
-
-@contextlib.contextmanager
-def ctrl_c_flag() -> Iterator[Callable[[], bool]]:
-    """Within: the first Ctrl-C (SIGINT) only sets a flag, which the yielded function reads; a second one raises
-    KeyboardInterrupt as usual.
-
-    A KeyboardInterrupt raised wherever the main thread happens to be can land
-    inside Dask's client code (a submit, a future's release) and leave its event
-    loop a half-done call, whose traceback Dask's loop thread then printed (seen
-    once in a few runs). The batch asks the flag between records instead. A
-    process started with SIGINT ignored (a shell's background job) keeps it
-    ignored; off the main thread no handler can be set and the flag stays False.
-    """
-    pressed: list[bool] = []
-
-    def first_sets_flag(signum: int, frame: Any) -> None:
-        if pressed:
-            raise KeyboardInterrupt
-        pressed.append(True)
-
-    previous = signal.getsignal(signal.SIGINT)
-    if threading.current_thread() is not threading.main_thread() or previous is signal.SIG_IGN:
-        yield lambda: False
-        return
-    signal.signal(signal.SIGINT, first_sets_flag)
-    try:
-        yield lambda: bool(pressed)
-    finally:
-        signal.signal(signal.SIGINT, previous)
+    return rows, {"startup_s": t0 - start, "elapsed_s": time.perf_counter() - t0}, signum
 
 
 def _finish(args: argparse.Namespace, jobs: list, rows: list[dict[str, Any]], times: dict[str, float],
-            interrupted: bool, outputs: tuple[Path | None, Path | None]) -> int:
+            signum: int | None, outputs: tuple[Path | None, Path | None]) -> int:
     """Write the table and the page, print the summary; the exit code."""
     from ..fleet import summarize, write_table
     from ..reports.fleet_report import write_fleet_report
     summary = summarize(rows)
     elapsed = times["elapsed_s"]
+    interrupted = signum is not None
     summary.update(planned=len(jobs), interrupted=interrupted, **times,
                    records_per_s=len(rows) / elapsed if elapsed > 0 else None,
                    scheduler=args.scheduler or "local")
@@ -177,9 +158,10 @@ def _finish(args: argparse.Namespace, jobs: list, rows: list[dict[str, Any]], ti
     else:
         print(format_summary(summary))
     if interrupted:
-        print(f"creep-online batch: interrupted after {len(rows)} of {len(jobs)} records"
+        what = "interrupted" if signum == signal.SIGINT else STOP_SIGNALS.get(signum, "stopped")
+        print(f"creep-online batch: {what} after {len(rows)} of {len(jobs)} records"
               f"{'; their rows are in ' + summary['table'] if 'table' in summary else ''}", file=sys.stderr)
-        return 130
+        return 128 + signum
     return 1 if summary["failed"] else 0
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 
 from ..diagnostics.compare import INITIAL_CHOICES
-from ._common import add_column_options, print_json
+from ._common import add_column_options, nonempty, print_json
 from ._progress import for_command
 
 
@@ -16,14 +16,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "and the initial state are estimated for the record the way the model's own fit "
                                    "estimated them, so on the record it was fitted on compare gives the fit's own "
                                    "fit percent again.")
-    p.add_argument("model", help="model file (JSON) written by 'identify -o' or 'fit -o'")
-    p.add_argument("data", help="CSV file with header t,u,y, or a PI GCS data-recorder file")
+    p.add_argument("model", type=nonempty, help="model file (JSON) written by 'identify -o' or 'fit -o'")
+    p.add_argument("data", type=nonempty, help="CSV file with header t,u,y, or a PI GCS data-recorder file")
     add_column_options(p)
     p.add_argument("--initial", choices=INITIAL_CHOICES, default="estimate",
                    help="estimate (default): the offset and the initial state estimated for this record; "
                         "zero: the plant at rest at the model's input offset, only the offset estimated")
     p.add_argument("--json", action="store_true", help="print JSON (fit_percent residual offset initial model ...)")
-    p.add_argument("--report", metavar="DIR", default=None,
+    p.add_argument("--report", metavar="DIR", default=None, type=nonempty,
                    help="write report.html with compare.png (model against measurement, and the residual) into "
                         "DIR (needs matplotlib; built beside DIR and swapped in whole; an existing DIR may hold "
                         "only an earlier report)")
@@ -34,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
     from ..diagnostics.compare import compare
     from ..diagnostics.loading import load_for_diagnosis
     from ..io.model_file import load_model
-    if args.report:
+    if args.report is not None:
         from ..io.safe_files import check_report_dir
         check_report_dir(args.report)   # before the work, not after it
     model = load_model(args.model)

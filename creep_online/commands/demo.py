@@ -19,10 +19,16 @@ import numpy as np
 from ..errors import CreepOnlineError
 from ..model import ONLINE_REFITS as REFITS
 from ..reports.demo_report import plant_truth
-from ._common import event_line, print_json, research_lines
+from ._common import (MAX_HZ, event_line, finite_number, nonempty, positive_number, print_json, research_lines,
+                      seconds, whole)
 from ._progress import Progress
 
 SCENARIOS = ("stationary", "payload", "drift")
+#: The demo's limits: an hour of plant at up to 100 kHz, and a record between these many samples (the simulated
+#: plant generates its record in memory; fewer samples than the minimum cannot show an identification).
+DEMO_MAX_S = 3600.0
+DEMO_MAX_RATE = 100_000.0
+DEMO_SAMPLES = (1000, 50_000_000)
 #: The payload scenario's added mass fraction (a2 *= 1 + PAYLOAD_MASS at half the duration).
 PAYLOAD_MASS = 0.5
 #: The drift scenario: alpha and b grow by these fractions over the run (temperature).
@@ -32,8 +38,8 @@ DRIFT = (0.2, 0.1)
 def register(subparsers) -> None:
     p = subparsers.add_parser("demo", help="stream the simulated plant over a pty and identify it live",
                               description=__doc__.splitlines()[0] + " Starts hil_sim at --rate over a real pty.")
-    p.add_argument("--duration", type=float, default=20.0, help="seconds of plant record to stream (default 20)")
-    p.add_argument("--rate", type=float, default=10_000.0, help="sample rate in Hz (default 10000)")
+    p.add_argument("--duration", type=positive_number(DEMO_MAX_S, "duration in s"), default=20.0, help="seconds of plant record to stream (default 20)")
+    p.add_argument("--rate", type=positive_number(DEMO_MAX_RATE, "rate in Hz"), default=10_000.0, help="sample rate in Hz (default 10000)")
     p.add_argument("--transport", choices=("serial-binary", "serial-ascii"), default="serial-binary")
     p.add_argument("--params", default="", help="true plant alpha=..,fn=..,zeta=..,b=.. (default 0.12, 420 Hz, 0.08, 2.5)")
     p.add_argument("--schedule", default=None, help="input schedule: step, staircase, updown, square "
@@ -45,18 +51,18 @@ def register(subparsers) -> None:
     p.add_argument("--compensate", action="store_true",
                    help="close the loop: a CreepCompensator turns a staircase reference into the plant's commands "
                         "(sent over the pty; hil_sim --command-input) and takes the live estimate (docs/compensation.md)")
-    p.add_argument("--bandwidth", type=float, default=None,
+    p.add_argument("--bandwidth", type=positive_number(MAX_HZ, "frequency in Hz"), default=None,
                    help="--compensate: reference filter corner in Hz (default: half the plant's natural frequency)")
-    p.add_argument("--u-min", type=float, default=None, help="--compensate: actuator range, lower end (default none)")
-    p.add_argument("--u-max", type=float, default=None, help="--compensate: actuator range, upper end (default none)")
-    p.add_argument("--amplitude", type=float, default=1.0, help="--compensate: reference staircase height (default 1)")
-    p.add_argument("--period", type=float, default=None, help="--compensate: hold of each level in s (default 2)")
+    p.add_argument("--u-min", type=finite_number, default=None, help="--compensate: actuator range, lower end (default none)")
+    p.add_argument("--u-max", type=finite_number, default=None, help="--compensate: actuator range, upper end (default none)")
+    p.add_argument("--amplitude", type=finite_number, default=1.0, help="--compensate: reference staircase height (default 1)")
+    p.add_argument("--period", type=seconds, default=None, help="--compensate: hold of each level in s (default 2)")
     p.add_argument("--refit", choices=REFITS, default=None,
                    help="the estimator's Remark-3 strategy: window (default) or recursive (docs/online.md)")
     p.add_argument("--effects", default="", help="hidden effects for the plant (see python -m hil_sim --help)")
     p.add_argument("--faults", default="", help="fault injection, e.g. drop=5,bitflip=5,garbage=5,reorder=3")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--report", default="creep_online_report", help="report folder (default ./creep_online_report)")
+    p.add_argument("--seed", type=whole(0, 2**32 - 1), default=0)
+    p.add_argument("--report", default="creep_online_report", type=nonempty, help="report folder (default ./creep_online_report)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON instead of text (no live progress)")
     p.add_argument("--quiet", action="store_true", help="no live progress")
     p.set_defaults(func=run)
@@ -106,8 +112,10 @@ def run(args: argparse.Namespace) -> int:
     from ..model import CreepModel
     from ..online import OnlineEstimator, warm_kernels
     open_source = hardware_extras()
-    if not args.duration > 0 or not args.rate > 0:
-        raise CreepOnlineError("--duration and --rate must be > 0")
+    samples = args.duration * args.rate
+    if not DEMO_SAMPLES[0] <= samples <= DEMO_SAMPLES[1]:
+        raise CreepOnlineError(f"--duration x --rate gives {samples:.3g} samples; the demo needs "
+                               f"{DEMO_SAMPLES[0]} to {DEMO_SAMPLES[1]:.0e}")
     out_dir = Path(args.report)
     from ..io.safe_files import check_report_dir
     check_report_dir(out_dir)   # before the run, not after it

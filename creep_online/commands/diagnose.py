@@ -6,7 +6,7 @@ import argparse
 from ..diagnostics import diagnose
 from ..diagnostics.loading import load_for_diagnosis
 from ..effects import effect_names
-from ._common import add_column_options, print_json
+from ._common import add_column_options, nonempty, print_json, whole
 from ._progress import for_command
 
 
@@ -16,16 +16,16 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "bands, input regimes), fits each catalogue effect as an extension "
                                    f"({', '.join(effect_names())}), ranks them by evidence (BIC drop) and names the "
                                    "missing one, or 'none'. Non-uniform (e.g. log-spaced) time is supported.")
-    p.add_argument("data", help="CSV file with header t,u,y, or a PI GCS data-recorder file")
+    p.add_argument("data", type=nonempty, help="CSV file with header t,u,y, or a PI GCS data-recorder file")
     add_column_options(p)
     p.add_argument("--json", action="store_true",
                    help="print JSON (fit_percent residual_rms noise_rms verdict missing_effects ...)")
-    p.add_argument("--report", metavar="DIR", default=None,
+    p.add_argument("--report", metavar="DIR", default=None, type=nonempty,
                    help="write an HTML report with PNG plots into DIR (needs matplotlib; built beside DIR "
                         "and swapped in whole; an existing DIR may hold only an earlier report)")
-    p.add_argument("--effects", default=None,
+    p.add_argument("--effects", default=None, type=nonempty,
                    help="comma-separated candidates to try (default: the whole catalogue)")
-    p.add_argument("--workers", type=int, default=None, metavar="N",
+    p.add_argument("--workers", type=whole(1, 1024), default=None, metavar="N",
                    help="threads for the candidate fits (default: the available cores, or "
                         "$CREEP_ONLINE_DIAGNOSE_WORKERS; 1 = one after the other); the result does not depend on it")
     p.set_defaults(func=run)
@@ -34,7 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..diagnostics.extended import check_effects
     candidates = check_effects(args.effects) if args.effects else effect_names()
-    if args.report:
+    if args.report is not None:
         from ..io.safe_files import check_report_dir
         check_report_dir(args.report)   # before the work, not after it
     with for_command(args.json) as progress:

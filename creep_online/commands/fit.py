@@ -8,7 +8,8 @@ from ..diagnostics.loading import load_for_diagnosis
 from ..diagnostics.start import fit_base_by_rule
 from ..effects import effect_names
 from ..metrics import noise_std_estimate
-from ._common import add_column_options, add_model_output, check_model_output, print_json, save_fitted, warn_time_unit
+from ._common import (add_column_options, add_model_output, check_model_output, nonempty, print_json, save_fitted,
+                      seconds, warn_time_unit)
 from ._progress import for_command
 
 
@@ -17,21 +18,30 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Fits b / (s^alpha (1 + a1 s + a2 s^2)) plus the named effects "
                                    f"({', '.join(effect_names())}; one or several) and prints the parameters and "
                                    "the fit before and after.")
-    p.add_argument("data", help="CSV file with header t,u,y, or a PI GCS data-recorder file")
+    p.add_argument("data", type=nonempty, help="CSV file with header t,u,y, or a PI GCS data-recorder file")
     add_column_options(p)
-    p.add_argument("--effects", required=True, help="comma-separated catalogue names, e.g. delay,drift")
+    p.add_argument("--effects", required=True, type=nonempty, help="comma-separated catalogue names, e.g. delay,drift")
     p.add_argument("--json", action="store_true", help="print JSON")
     add_model_output(p)
     p.add_argument("--online", action="store_true",
                    help="also stream the record through the online estimator, plain and with the fitted effects "
                         "compensated sample by sample, each given its batch fit's alpha as a hint, and show "
                         "the live prediction error of both (uniform time)")
-    p.add_argument("--window", type=float, default=1.0, help="window of the live error display in s (default 1)")
+    p.add_argument("--window", type=seconds, default=1.0, help="window of the live error display in s (default 1)")
     p.set_defaults(func=run)
+
+
+#: Most catalogue effects fitted jointly: the joint fit's cost grows steeply with their number (on a 4000-sample
+#: record four took 5 s, six 56 s, eight did not end in 900 s) while one record rarely determines more.
+MAX_JOINT_EFFECTS = 4
 
 
 def run(args: argparse.Namespace) -> int:
     effects = check_effects(args.effects)
+    if len(effects) > MAX_JOINT_EFFECTS:
+        from ..errors import DataError
+        raise DataError(f"{len(effects)} effects fitted jointly is more than one record determines in bounded time "
+                        f"(at most {MAX_JOINT_EFFECTS}); 'creep-online diagnose' ranks them, then fit the best few")
     out_path = check_model_output(args.output, args.data)
     with for_command(args.json) as progress:
         progress.stage(f"fit {args.data}: loading")

@@ -5,7 +5,8 @@ import argparse
 
 from ..identification import identify
 from ..io.csvfile import load_record
-from ._common import add_column_options, add_model_output, check_model_output, print_json, save_fitted, warn_time_unit
+from ._common import (add_column_options, add_model_output, check_model_output, fraction, nonempty, print_json,
+                      save_fitted, seconds, warn_time_unit)
 from ._progress import for_command
 
 
@@ -16,13 +17,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "optional joint polish; if the fit misses the noise floor, a multi-start global fit, "
                                    "which also estimates the initial state of a record taken in operation. "
                                    "u is held between samples.")
-    p.add_argument("data", help="CSV file with header t,u,y (uniform sampling), or a PI GCS data-recorder file")
+    p.add_argument("data", type=nonempty, help="CSV file with header t,u,y (uniform sampling), or a PI GCS data-recorder file")
     add_column_options(p)
     p.add_argument("--json", action="store_true", help="print JSON (alpha a1 a2 b fit_percent elapsed_s ...)")
     add_model_output(p)
-    p.add_argument("--t-c", type=float, default=None, help="end of the transient in s (default: from the data)")
-    p.add_argument("--alpha0", type=float, default=None, help="starting alpha (default: coarse creep fit)")
-    p.add_argument("--layer1-step", type=float, default=None, help="coarse step of layer 1 in s")
+    p.add_argument("--t-c", type=seconds, default=None, help="end of the transient in s (default: from the data)")
+    p.add_argument("--alpha0", type=fraction, default=None, help="starting alpha (default: coarse creep fit)")
+    p.add_argument("--layer1-step", type=seconds, default=None, help="coarse step of layer 1 in s")
     p.add_argument("--no-retune", action="store_true", help="skip the eq. 12 retune of alpha")
     p.add_argument("--no-polish", action="store_true", help="skip the joint 4-parameter polish (and the global fit)")
     p.set_defaults(func=run)

@@ -11,7 +11,7 @@ from ..io.csvfile import in_seconds, read_table
 from ..io.signal_file import check_signal_output, save_signals
 from ..record import Record
 from ..simulate import METHODS, simulate
-from ._common import parse_params, print_json
+from ._common import nonempty, parse_params, print_json, whole
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -24,17 +24,18 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "file (--model) is simulated with its effects, offset and input offset "
                                    "(exact method).")
     given = p.add_mutually_exclusive_group(required=True)
-    given.add_argument("--params", help="alpha=..,a1=..,a2=..,b=.. or alpha=..,fn=..,zeta=..,b=.. (fn in Hz; b "
-                                        "defaults to 1), or a JSON file: the --json output of identify or fit "
-                                        "(its offsets and effects included) or a model file")
-    given.add_argument("--model", metavar="MODEL.json",
+    given.add_argument("--params", type=nonempty,
+                       help="alpha=..,a1=..,a2=..,b=.. or alpha=..,fn=..,zeta=..,b=.. (fn in Hz; b "
+                            "defaults to 1), or a JSON file: the --json output of identify or fit "
+                            "(its offsets and effects included) or a model file")
+    given.add_argument("--model", metavar="MODEL.json", type=nonempty,
                        help="a model file written by 'identify -o' or 'fit -o' (effects and offsets included)")
-    p.add_argument("--input", required=True, help="CSV with header t,u (uniform sampling for --params)")
-    p.add_argument("-o", "--output", required=True,
+    p.add_argument("--input", required=True, type=nonempty, help="CSV with header t,u (uniform sampling for --params)")
+    p.add_argument("-o", "--output", required=True, type=nonempty,
                    help="file to write (t,u,y): .csv (or no suffix), .tsv, or .parquet (pyarrow); written "
                         "atomically, never over the input")
     p.add_argument("--method", choices=METHODS, default="exact", help="simulator (default: exact)")
-    p.add_argument("--memory", type=int, default=None, help="truncate the fractional memory to L samples "
+    p.add_argument("--memory", type=whole(1), default=None, help="truncate the fractional memory to L samples "
                                                              "(paper and split only)")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.set_defaults(func=run)
@@ -46,14 +47,23 @@ def _model(args: argparse.Namespace):
     if args.model is not None:
         return load_model(args.model)
     text = args.params.strip()
-    if text.lower().endswith(".json") or Path(text).is_file():
+    if text.lower().endswith(".json") or _names_file(text):
         return read_model_json(text)
     return parse_params(text)
 
 
+def _names_file(text: str) -> bool:
+    """Does ``text`` name an existing file (False for parameter text, even one too long to be a name)?"""
+    try:
+        return Path(text).exists()
+    except (OSError, ValueError):
+        return False
+
+
 def run(args: argparse.Namespace) -> int:
     model = _model(args)
-    out = check_signal_output(args.output, inputs=[args.input])
+    read = [args.input] + [f for f in (args.model, args.params) if f is not None and _names_file(f.strip())]
+    out = check_signal_output(args.output, inputs=read)     # never over a file this run reads
     cols, units = read_table(args.input, ("t", "u"))
     t, _ = in_seconds(args.input, cols["t"], units["t"])
     rec = Record(t, cols["u"], t * 0.0, source=args.input)

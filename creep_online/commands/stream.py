@@ -13,21 +13,26 @@ from __future__ import annotations
 import argparse
 import importlib
 import math
+import os
+import signal
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
+from .. import _signals
 from ..errors import CreepOnlineError, DataError, TransportError
 from ..io.csvfile import load_record
+from ..record import check_amplitudes, check_time_and_output
 from ..online import OnlineEstimator, warm_kernels
 from ..model import ONLINE_REFITS as REFITS
-from ._common import add_column_options, event_line, print_json, research_lines
+from ._common import (MAX_SECONDS, add_column_options, event_line, fraction, nonempty, print_json, research_lines,
+                      seconds, whole)
 from ._progress import for_command
 
 
-#: How a stream ended -> exit code. Every end after the first sample prints the estimate and the counters.
+#: How a stream ended -> exit code (interrupted: 128 + the signal). Every end after the first sample prints the
+#: estimate and the counters.
 END_CODES = {"end_of_stream": 0, "limit": 0, "link_lost": 4, "error": 5, "interrupted": 130}
 EXIT_CODES_HELP = """exit codes (the estimate reached so far and the link counters are printed in every case
 once samples have arrived):
@@ -36,7 +41,9 @@ once samples have arrived):
        2 samples arrived (no estimate)
   4    the link was lost for good (reconnect=0, or past reconnect_timeout)
   5    an unrecoverable error while streaming (the message says which)
-  130  interrupted (Ctrl-C)"""
+  130  interrupted (Ctrl-C)
+  143  terminated (SIGTERM, what systemd, Docker and Kubernetes send)
+  129  hung up (SIGHUP, the terminal closed)"""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -46,29 +53,30 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "plant, detects abrupt changes and gates outliers (docs/online.md). Prints the "
                                    "final estimate, its quality and the per-sample update() latency.",
                        epilog=EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--source", required=True, help="csv:FILE | serial:PORT | can:IFACE:CHANNEL | canlog:FILE | pi:PORT | "
+    p.add_argument("--source", required=True, type=nonempty, help="csv:FILE | serial:PORT | can:IFACE:CHANNEL | canlog:FILE | pi:PORT | "
                                                     "capancdt:HOST:PORT?command=FILE | "
                                                     "KIND:... of an installed plug-in (docs/transports.md)")
     p.add_argument("--json", action="store_true",
                    help="print JSON (alpha a1 a2 b samples latency_us{p50,p99,max} phase quality ...)")
-    p.add_argument("--t-c", type=float, default=None, help="start-up search window after the first input change, s "
+    p.add_argument("--t-c", type=seconds, default=None, help="start-up search window after the first input change, s "
                                                             "(default: chosen from the data, at most 2 s)")
-    p.add_argument("--alpha0", type=float, default=None, help="optional alpha hint added to the search grid "
+    p.add_argument("--alpha0", type=fraction, default=None, help="optional alpha hint added to the search grid "
                                                                "(default: none needed)")
     p.add_argument("--window", default=None,
                    help="forgetting time constant in s (default: the estimator's, 10 s); 'none' keeps everything")
     p.add_argument("--refit", choices=REFITS, default=None,
                    help="Remark 3's strategy: window re-fits over the forgetting window (default), recursive "
                         "carries on with the newest estimate (constant work per sample; docs/online.md)")
-    p.add_argument("--trace", default=None, metavar="FILE",
+    p.add_argument("--trace", default=None, metavar="FILE", type=nonempty,
                    help="write the estimate's trajectory as CSV (t, alpha, a1, a2, b, fn_hz, zeta, quality, "
                         "reason, events, researches: the re-searches that replaced the resonance), every 10 ms "
                         "of stream time")
-    p.add_argument("--dt", type=float, default=None, help="sampling step in s (live sources; default: from the stream)")
+    p.add_argument("--dt", type=seconds, default=None, help="sampling step in s (live sources; default: from the stream)")
     p.add_argument("--block", action="store_true", help="csv: feed the whole file with update_block (throughput)")
     add_column_options(p, time=False)
-    p.add_argument("--max-samples", type=int, default=None, help="stop after this many samples (live sources)")
-    p.add_argument("--duration", type=float, default=None, help="stop after this many seconds (live sources)")
+    p.add_argument("--max-samples", type=whole(1, 1 << 62), default=None, help="stop after this many samples")
+    p.add_argument("--duration", type=seconds, default=None,
+                   help="stop after this many seconds of wall time")
     p.set_defaults(func=run)
 
 
@@ -87,9 +95,10 @@ def _options(args: argparse.Namespace) -> dict:
             opts["window_s"] = None
         else:
             try:
-                opts["window_s"] = float(text)
-            except ValueError:
-                raise DataError(f"--window must be a number of seconds or 'none', got {args.window!r}") from None
+                opts["window_s"] = seconds(text)
+            except argparse.ArgumentTypeError:
+                raise DataError(f"--window must be a time in seconds (> 0, at most {MAX_SECONDS:g}) or 'none', "
+                                f"got {args.window[:40]!r}") from None
     return opts
 
 
@@ -134,7 +143,9 @@ def _cell(v) -> str:
     if v is None:
         return ""
     if isinstance(v, str):
-        return '"' + v.replace('"', "'") + '"' if ("," in v or '"' in v) else v
+        from ..io.safe_files import spreadsheet_text
+        v = spreadsheet_text(v)
+        return '"' + v.replace('"', "'") + '"' if ("," in v or '"' in v or "\n" in v) else v
     return repr(float(v))
 
 
@@ -178,10 +189,22 @@ def run(args: argparse.Namespace) -> int:
         raise DataError(f"--max-samples must be at least 1, got {args.max_samples}")
     if args.duration is not None and not args.duration > 0:
         raise DataError(f"--duration must be > 0 s, got {args.duration:g}")
-    if spec.lower().startswith("csv:") and not _has_options(spec[4:]):
-        est, latency, extra = _run_csv(spec[4:], args)
-    else:
-        est, latency, extra = _run_live(spec, args)
+    try:
+        if spec.startswith("csv:") and not _has_options(spec[4:]):
+            est, latency, extra = _run_csv(spec[4:], args)
+        else:
+            est, latency, extra = _run_live(spec, args)
+    except KeyboardInterrupt as exc:        # stopped while opening or loading: say that there is no estimate yet
+        if isinstance(exc, _signals.Interrupted) and exc.note:
+            raise
+        raise _signals.Interrupted(getattr(exc, "signum", signal.SIGINT),
+                                   note="before the first sample arrived: no estimate yet") from None
+    with _signals.deferred():    # the stream has ended: its report is printed whole, a signal now waits for it
+        return _print_report(spec, args, est, latency, extra)
+
+
+def _print_report(spec: str, args: argparse.Namespace, est: OnlineEstimator, latency: dict, extra: dict) -> int:
+    """The estimate, the counters and how the stream ended (JSON or text); the exit code."""
     end = extra.setdefault("end", _end("end_of_stream"))
     out = _report(est, latency, extra)
     if end["message"]:
@@ -220,49 +243,80 @@ def run(args: argparse.Namespace) -> int:
 def _run_csv(path: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dict, dict]:
     if not path:
         raise DataError("csv: missing file name after 'csv:'")
-    rec = load_record(path, args.u_column, args.y_column)
-    if not rec.is_uniform:
-        raise DataError(f"{rec.source}: time is not uniformly sampled; the online estimator needs a fixed step")
-    _check_dt(args, rec.h, rec.source)
     if args.trace is not None:
         from ..io.safe_files import check_output
         check_output(args.trace, inputs=[path])
+    rec = load_record(path, args.u_column, args.y_column)
+    if not rec.is_uniform:
+        raise DataError(f"{rec.source}: time is not uniformly sampled; the online estimator needs a fixed step")
+    check_time_and_output(rec.t, rec.y, rec.source)     # the file is whole: what identify refuses, refused here
+    check_amplitudes(rec.u, rec.y, rec.source)
+    _check_dt(args, rec.h, rec.source)
     est = OnlineEstimator(rec.h, **_options(args))
     warm_kernels()                          # compile before the clock starts
     trace = Trace(args.trace, rec.h)
-    u, y = rec.u, rec.y
-    if args.block:
-        start = time.perf_counter()
-        step = trace.every if args.trace else u.size
-        for i in range(0, u.size, step):
-            est.update_block(u[i:i + step], y[i:i + step])
-            if args.trace:
-                trace.add(est)
-        elapsed = time.perf_counter() - start
-        trace.write()
-        return est, _latency(np.empty(0)), {"throughput_sps": u.size / max(elapsed, 1e-12), "file": rec.source}
+    n = rec.u.size if args.max_samples is None else min(rec.u.size, args.max_samples)
+    u, y = rec.u[:n], rec.y[:n]
+    deadline = math.inf if args.duration is None else time.monotonic() + args.duration
+    with _signals.flagged() as stopped:     # a stop signal ends the loop between two samples, never inside one
+        if args.block:
+            k, elapsed = _feed_blocks(est, u, y, trace, stopped, deadline)
+            extra = {"throughput_sps": k / max(elapsed, 1e-12), "file": rec.source}
+            latency = _latency(np.empty(0))
+        else:
+            k, ns = _feed_samples(est, u, y, trace, stopped, deadline)
+            extra = {"file": rec.source}
+            latency = _latency(ns[:k] / 1e3)
+        signum = stopped()
+    trace.write()
+    if signum is not None:
+        extra["end"] = _end("interrupted", _signals.STOP_SIGNALS[signum], 128 + signum)
+    elif k < rec.u.size:
+        extra["end"] = _end("limit")
+    return est, latency, extra
+
+
+#: Samples between two looks at the stop signal and the deadline in the CSV replay.
+CHECK_EVERY = 256
+
+
+def _feed_samples(est: OnlineEstimator, u: np.ndarray, y: np.ndarray, trace: Trace, stopped, deadline: float):
+    """update() sample by sample, each call timed; (samples fed, ns per call). Stops early on a stop signal or
+    past the deadline (checked every CHECK_EVERY samples, outside the timed calls)."""
     ns = np.empty(u.size, dtype=np.int64)
     clock = time.perf_counter_ns
     update = est.update
     ul, yl = u.tolist(), y.tolist()
-    k, end = 0, None
-    try:
-        for k in range(u.size):
+    k = 0
+    while k < u.size:
+        if stopped() is not None or time.monotonic() > deadline:
+            break
+        for k in range(k, min(k + CHECK_EVERY, u.size)):
             t0 = clock()
             update(ul[k], yl[k])
             ns[k] = clock() - t0
             if trace.due(k + 1):
                 trace.add(est)
-        k = u.size
-    except KeyboardInterrupt:
-        end = _end("interrupted", "interrupted (Ctrl-C)")
-    trace.write()
-    return est, _latency(ns[:k] / 1e3), {"file": rec.source, **({"end": end} if end else {})}
+        k += 1
+    return k, ns
+
+
+def _feed_blocks(est: OnlineEstimator, u: np.ndarray, y: np.ndarray, trace: Trace, stopped, deadline: float):
+    """update_block() over the file in slices (a trace row per slice when tracing); (samples fed, seconds)."""
+    start = time.perf_counter()
+    step = trace.every if trace.path else 1 << 16
+    k = 0
+    while k < u.size and stopped() is None and time.monotonic() <= deadline:
+        est.update_block(u[k:k + step], y[k:k + step])
+        k = min(k + step, u.size)
+        if trace.path:
+            trace.add(est)
+    return k, time.perf_counter() - start
 
 
 def _has_options(path: str) -> bool:
     """``FILE?key=value``: a CSV replayed through its source (e.g. ``?realtime=1``), unless FILE has a '?'."""
-    return "?" in path and not Path(path).exists()
+    return "?" in path and not os.path.exists(path)
 
 
 def _column_options(spec: str, args: argparse.Namespace) -> dict:
@@ -281,9 +335,9 @@ def _check_dt(args: argparse.Namespace, h: float, source: str) -> None:
                         f"drop --dt or fix the file")
 
 
-def _end(reason: str, message: str = "") -> dict:
-    """How the stream ended, for the report and the exit code."""
-    return {"reason": reason, "exit_code": END_CODES[reason], "message": message}
+def _end(reason: str, message: str = "", exit_code: int | None = None) -> dict:
+    """How the stream ended, for the report and the exit code (``exit_code``: a stop signal's 128 + N)."""
+    return {"reason": reason, "exit_code": END_CODES[reason] if exit_code is None else exit_code, "message": message}
 
 
 def status_line(spec: str, loop) -> str:
@@ -312,7 +366,7 @@ def _run_live(spec: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dic
         raise CreepOnlineError(f"{spec}: live sources are not available in this build ({exc.name} missing)") from None
     if args.trace is not None:
         from ..io.safe_files import check_output
-        check_output(args.trace)
+        check_output(args.trace, inputs=registry.spec_files(spec))   # never over a file the source reads
     warm_kernels()                          # compile before the first sample arrives
     source = registry.open_source(spec, **_column_options(spec, args))
     trace = Trace(None, 1.0)
@@ -328,10 +382,11 @@ def _run_live(spec: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dic
             trace.add(loop.estimator)
 
     def enough(loop) -> bool:
-        return (loop.estimator is not None and args.max_samples is not None
-                and loop.estimator.samples >= args.max_samples)
+        return stopped() is not None or (loop.estimator is not None and args.max_samples is not None
+                                         and loop.estimator.samples >= args.max_samples)
 
-    with for_command(args.json) as progress:
+    with _signals.flagged() as stopped, for_command(args.json) as progress:
+        # a stop signal ends the feed between two batches
         progress.stage(f"stream {spec}: waiting for samples")
         loop = feed.FeedLoop(source, make_estimator, dt=args.dt, duration=args.duration, stop_when=enough,
                              on_sample=add_to_trace if args.trace is not None else None,
@@ -340,14 +395,20 @@ def _run_live(spec: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dic
             end = loop.run()
         finally:
             source.close()
+        signum = stopped()
     stats = getattr(source, "stats", None)
     trace.write()
     est = loop.estimator
+    if signum is not None:
+        end = feed.End("interrupted", _signals.STOP_SIGNALS[signum], _signals.Interrupted(signum))
     if est is None:
+        if end.reason == "interrupted":
+            signum = getattr(end.error, "signum", signal.SIGINT)
+            raise _signals.Interrupted(signum, note="before the first sample arrived: no estimate yet")
         why = end.message or "fewer than 2 samples arrived; cannot tell the sampling step (use --dt)"
         raise (TransportError if end.reason == "link_lost" else DataError)(f"{spec}: no estimate: {why}")
     extra = {"source_stats": stats.as_dict() if stats is not None and hasattr(stats, "as_dict") else {},
-             "end": _end(end.reason, end.message)}
+             "end": _end(end.reason, end.message, end.exit_code)}
     if stats is not None and hasattr(stats, "summary"):
         extra["link"] = stats.summary()
     return est, _latency(loop.latency_us()), extra

@@ -35,6 +35,9 @@ from .row import empty_row
 
 #: Seconds to wait for an existing scheduler before giving up with a one-line error.
 CONNECT_TIMEOUT_S = 10.0
+#: Worker deaths a task may see before Dask fails it (KilledWorker) on the local cluster (Dask's default: 3, each
+#: death of a record too large for memory costing a worker's restart).
+ALLOWED_FAILURES = 1
 #: Records in flight per worker thread.
 WINDOW_PER_THREAD = 4
 #: Seconds between two looks at ``run_on_dask``'s ``stop`` while no record has finished.
@@ -67,22 +70,53 @@ def dask_client(scheduler: str | None = None, workers: int | None = None) -> Ite
     """
     dd = distributed()
     if scheduler:
-        try:
-            client = dd.Client(scheduler, timeout=CONNECT_TIMEOUT_S)
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise CreepOnlineError(f"cannot reach the Dask scheduler at {scheduler}: {one_line(exc)}") from None
+        client = _connect(dd, scheduler)
         with contextlib.closing(client):
             warm_up_workers(client, scheduler)
             yield client
         return
     if workers is not None and workers < 1:
         raise CreepOnlineError(f"--workers must be at least 1 (got {workers})")
-    with _workers_ignore_ctrl_c():
+    import dask
+    with _workers_ignore_ctrl_c(), dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES}):
         cluster = dd.LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
                                   host="127.0.0.1", dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
     with contextlib.closing(cluster), contextlib.closing(dd.Client(cluster)) as client:
         warm_up_workers(client, "the local cluster")
         yield client
+
+
+def _connect(dd: Any, scheduler: str) -> Any:
+    """A ``Client`` of the scheduler at ``scheduler``, or one CreepOnlineError within ``CONNECT_TIMEOUT_S`` (+5 s).
+
+    Whatever answers there decides how the connection fails: nothing listening
+    (Dask's own timeout), a service that is not Dask (an HTTP server made
+    Dask's reader allocate exabytes, an echo server failed its assertions) or
+    a port that accepts and stays silent (Dask's handshake waited without
+    end). The client is built in a helper thread and waited for at most the
+    timeout; every failure is the same one line.
+    """
+    result: dict[str, Any] = {}
+
+    def attempt() -> None:
+        try:
+            result["client"] = dd.Client(scheduler, timeout=CONNECT_TIMEOUT_S)
+        except BaseException as exc:  # noqa: BLE001 - reported below, on the caller's thread
+            result["error"] = exc
+
+    helper = threading.Thread(target=attempt, name="dask-connect", daemon=True)
+    helper.start()
+    helper.join(CONNECT_TIMEOUT_S + 5.0)
+    if "client" in result:
+        return result["client"]
+    if "error" not in result:
+        raise CreepOnlineError(f"no Dask scheduler answered at {scheduler} within {CONNECT_TIMEOUT_S + 5:g} s "
+                               f"(is it a Dask scheduler's address, tcp://HOST:8786?)")
+    exc = result["error"]
+    if isinstance(exc, (OSError, TimeoutError)):
+        raise CreepOnlineError(f"cannot reach the Dask scheduler at {scheduler}: {one_line(exc)}")
+    raise CreepOnlineError(f"{scheduler} did not answer as a Dask scheduler ({type(exc).__name__}: "
+                           f"{one_line(exc)[:120]})")
 
 
 @contextlib.contextmanager
@@ -121,7 +155,8 @@ def warm_up_workers(client: Any, where: str) -> dict[str, float]:
 
 def run_on_dask(jobs: Iterable[RecordJob], client: Any, *, diagnose_it: bool = False,
                 identify_options: dict[str, Any] | None = None,
-                stop: Callable[[], bool] | None = None) -> Iterator[dict[str, Any]]:
+                stop: Callable[[], bool] | None = None, task: Callable[..., dict] | None = None
+                ) -> Iterator[dict[str, Any]]:
     """Yield one row per job, in the order they finish (``run_record`` on the cluster's workers).
 
     A record that was bad before any work (``job.error``) gets its row here at
@@ -132,9 +167,17 @@ def run_on_dask(jobs: Iterable[RecordJob], client: Any, *, diagnose_it: bool = F
     come and what is queued is cancelled (the batch command's Ctrl-C: a flag
     its SIGINT handler sets, so that no KeyboardInterrupt lands inside Dask's
     client code, which then printed a callback's traceback on the way out).
+
+    One bad record never fails its neighbours: when a worker dies (a record
+    too large for its memory), Dask fails every task that was on it with
+    ``KilledWorker``, the healthy ones queued behind the culprit too. Those
+    records are run again at the end, one at a time, so only the record that
+    kills a worker on its own gets the error row. ``task`` replaces
+    ``run_record`` (tests: a task that kills its worker).
     """
     from .job import run_record
     dd = distributed()
+    task = task or run_record
     options = {"diagnose_it": diagnose_it, "identify_options": identify_options}
     pending = []
     for job in jobs:
@@ -142,13 +185,25 @@ def run_on_dask(jobs: Iterable[RecordJob], client: Any, *, diagnose_it: bool = F
             yield run_record(job, **options)
         else:
             pending.append(job)
+    suspects: list[RecordJob] = []
+    yield from _run_window(dd, client, task, pending, options, stop, suspects)
+    for job in suspects:                   # alone now: a worker that dies is this record's doing
+        if stop is not None and stop():
+            return
+        yield from _run_window(dd, client, task, [job], options, stop, None)
+
+
+def _run_window(dd: Any, client: Any, task: Callable[..., dict], pending: list[RecordJob], options: dict,
+                stop: Callable[[], bool] | None, suspects: list[RecordJob] | None) -> Iterator[dict[str, Any]]:
+    """The rows of ``pending`` run in a bounded window; with ``suspects`` a list, the records whose worker died
+    go there instead of getting an error row."""
     queue = iter(pending)
     in_flight: dict[str, tuple[Any, RecordJob]] = {}
     done = dd.as_completed()
 
     def submit(n: int) -> None:
         for job in islice(queue, n):
-            future = client.submit(run_record, job, pure=False, **options)
+            future = client.submit(task, job, pure=False, **options)
             in_flight[future.key] = (future, job)
             done.add(future)
 
@@ -161,8 +216,14 @@ def run_on_dask(jobs: Iterable[RecordJob], client: Any, *, diagnose_it: bool = F
             try:
                 row = future.result()
             except Exception as exc:  # noqa: BLE001 - the cluster failed this one record; go on
+                if suspects is not None and type(exc).__name__ == "KilledWorker":
+                    suspects.append(job)   # perhaps only queued behind the record that killed the worker
+                    future.release()
+                    continue
                 row = empty_row(job)
-                row["error"] = f"the cluster could not run it: {type(exc).__name__}: {one_line(exc)}"
+                why = " (its worker died running it alone: too large for a worker's memory?)" \
+                    if type(exc).__name__ == "KilledWorker" else ""
+                row["error"] = f"the cluster could not run it: {type(exc).__name__}: {one_line(exc)}{why}"
             future.release()
             yield row
     finally:

@@ -2,7 +2,9 @@
 
 Both are written atomically (temporary file, then rename), so an interrupted
 batch never leaves half a table. A failed record's numbers are empty cells in
-CSV and nulls in Parquet.
+CSV and nulls in Parquet. Text cells of the CSV (a record's name, its error)
+that a spreadsheet would read as a formula are written as text
+(``safe_files.spreadsheet_text``).
 """
 from __future__ import annotations
 
@@ -10,8 +12,8 @@ import csv
 from pathlib import Path
 from typing import Any
 
-from ..errors import CreepOnlineError, OutputError
-from ..io.safe_files import atomic_write, check_output
+from ..errors import CreepOnlineError, OutputError, printable
+from ..io.safe_files import atomic_write, check_output, spreadsheet_text
 from .row import COLUMNS
 
 FORMATS = (".csv", ".parquet")
@@ -47,8 +49,16 @@ def write_table(rows: list[dict[str, Any]], path: str | Path) -> Path:
             writer = csv.DictWriter(fh, fieldnames=COLUMNS, extrasaction="ignore", lineterminator="\n")
             writer.writeheader()
             for r in rows:
-                writer.writerow({k: "" if r.get(k) is None else r[k] for k in COLUMNS})
+                writer.writerow({k: _cell(r.get(k)) for k in COLUMNS})
     return out
+
+
+def _cell(value: Any) -> Any:
+    """A CSV cell: empty for a missing number; text with control characters escaped (a carriage return in a
+    record's name would split its row) and neutralised for spreadsheets (record names, errors)."""
+    if value is None:
+        return ""
+    return spreadsheet_text(printable(value, keep_return=False)) if isinstance(value, str) else value
 
 
 def _write_parquet(rows: list[dict[str, Any]], out: Path) -> None:

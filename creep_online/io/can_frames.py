@@ -26,6 +26,8 @@ from .frames import ParserStats, RawSample
 ID_SAMPLE, ID_PAIR, ID_INPUT, ID_BLOCK = 0x100, 0x101, 0x102, 0x200
 BLOCK_SAMPLES = 7
 COUNTER_MODULUS = 1 << 16   # all counters are compared modulo 2**16
+#: Largest DBC file read (a vehicle's whole network description is a few MB).
+MAX_DBC_BYTES = 64 << 20
 
 
 def dbc_path() -> Path:
@@ -76,11 +78,13 @@ class CanDecoder:
         except ImportError:  # pragma: no cover - depends on the environment
             from ..errors import TransportError
             raise TransportError("CAN sources need cantools: pip install 'creep_online[can]'") from None
+        from ..errors import DataError
+        from .input_files import read_input
         path = Path(dbc) if dbc else dbc_path()
+        text = read_input(path, what="DBC file", limit=MAX_DBC_BYTES, max_line=1 << 16)
         try:
-            self.db = cantools.database.load_file(str(path))
+            self.db = cantools.database.load_string(text.decode("utf-8", errors="replace"), database_format="dbc")
         except Exception as exc:  # noqa: BLE001 - any parse failure is a bad file
-            from ..errors import DataError
             raise DataError(f"{path}: not a usable DBC file ({str(exc).splitlines()[0][:100]})") from None
         self.stats = stats if stats is not None else ParserStats()
         self._msgs = {m.frame_id: m for m in self.db.messages}

@@ -18,7 +18,7 @@ from typing import Any
 from ..errors import DataError, TransportError
 from .can_frames import COUNTER_MODULUS, CanDecoder
 from .frames import RawSample
-from .source_options import DBC, RATE, WINDOW, Option, flag
+from .source_options import DBC, RATE, RECONNECT_TIMEOUT_S, WINDOW, Option, flag, whole
 from .sources import ReconnectingSource
 
 #: Frames taken from the bus per read() call at most (bounds the work per call).
@@ -40,7 +40,7 @@ class CanSource(ReconnectingSource):
     options = tuple(WINDOW.with_default(32) if o is WINDOW else o for o in ReconnectingSource.options) + (
         RATE,
         DBC,
-        Option("bitrate", int, None, "bus bit rate (slcan default 1 Mbit/s)"),
+        Option("bitrate", whole(1), None, "bus bit rate (slcan default 1 Mbit/s)"),
         Option("fd", flag, False, "CAN FD"),
     )
     target_label = "interface and channel"
@@ -55,7 +55,7 @@ class CanSource(ReconnectingSource):
 
     def __init__(self, interface: str, channel: str, *, rate: float | None = None, dbc: str | None = None,
                  bitrate: int | None = None, fd: bool = False, reconnect: bool = True,
-                 reconnect_timeout: float | None = None, window: int = 32, stall: float = 0.5,
+                 reconnect_timeout: float | None = RECONNECT_TIMEOUT_S, window: int = 32, stall: float = 0.5,
                  bus_kwargs: dict | None = None, **kw) -> None:
         super().__init__(window=window, modulus=COUNTER_MODULUS, rate=rate, t_from_seq=True, stall=stall,
                          reconnect=reconnect, reconnect_timeout=reconnect_timeout, **kw)

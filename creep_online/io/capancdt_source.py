@@ -25,7 +25,8 @@ from ..errors import DataError, TransportError
 from .capancdt_frames import COUNTER_MODULUS, CapancdtParser, Identity, Packet, channel_list, scale
 from .command_schedule import CommandSchedule
 from .frames import RawSample
-from .source_options import RECONNECT, RECONNECT_TIMEOUT, STALL, WINDOW, Option
+from .source_options import (IDLE_TIMEOUT, RECONNECT, RECONNECT_TIMEOUT, RECONNECT_TIMEOUT_S, STALL, WINDOW, Option,
+                             nonempty, positive, whole)
 from .sources import ReconnectingSource
 
 #: The controller's data port (as public DT6220 scripts use it) and fastest data rate (sample time 256 us).
@@ -39,13 +40,13 @@ class CapancdtSource(ReconnectingSource):
     """Samples (u from the command schedule, y = distance in um) from a capaNCDT-style TCP stream."""
 
     link = "connection"
-    options = (WINDOW.with_default(0), STALL, RECONNECT, RECONNECT_TIMEOUT) + (
-        Option("command", str, None, "t,u file of the actuator command, zero-order held (required)"),
-        Option("rate", float, DATA_RATE, "the controller's data rate in Hz (frames carry a counter, not a time)"),
-        Option("channel", int, 1, "the channel that measures the actuator (1-based)"),
-        Option("range", float, RANGE_UM, "the sensor's measuring range in um", keyword="range_um"),
-        Option("counter0", int, None, "frame counter at the command's t = 0 (default: the first frame received)"),
-        Option("timeout", float, 2.0, "seconds to wait for the TCP connection", keyword="connect_timeout"),
+    options = (WINDOW.with_default(0), STALL, RECONNECT, RECONNECT_TIMEOUT, IDLE_TIMEOUT) + (
+        Option("command", nonempty, None, "t,u file of the actuator command, zero-order held (required)", path=True),
+        Option("rate", positive, DATA_RATE, "the controller's data rate in Hz (frames carry a counter, not a time)"),
+        Option("channel", whole(1), 1, "the channel that measures the actuator (1-based)"),
+        Option("range", positive, RANGE_UM, "the sensor's measuring range in um", keyword="range_um"),
+        Option("counter0", whole(0), None, "frame counter at the command's t = 0 (default: the first frame received)"),
+        Option("timeout", positive, 2.0, "seconds to wait for the TCP connection", keyword="connect_timeout"),
     )
     target_label = "host"
 
@@ -64,7 +65,7 @@ class CapancdtSource(ReconnectingSource):
     def __init__(self, host: str, port: int = DATA_PORT, *, command: str | CommandSchedule | None = None,
                  rate: float = DATA_RATE, channel: int = 1, range_um: float = RANGE_UM,
                  counter0: int | None = None, connect_timeout: float = 2.0, reconnect: bool = True,
-                 reconnect_timeout: float | None = None, window: int = 0, stall: float = 0.5, **kw) -> None:
+                 reconnect_timeout: float | None = RECONNECT_TIMEOUT_S, window: int = 0, stall: float = 0.5, **kw) -> None:
         name = f"capancdt:{host}:{port}"
         if command is None:
             raise DataError(f"{name}: the sensor streams only the position; give the actuator command as a t,u "

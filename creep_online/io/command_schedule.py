@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError
+from .input_files import read_input
 
 
 class CommandSchedule:
@@ -40,9 +41,11 @@ class CommandSchedule:
         """Read a ``t,u`` CSV file (an optional header line, comment lines starting with '#')."""
         name = str(path)
         try:
-            text = Path(path).read_text()
-        except OSError as exc:
-            raise DataError(f"{name}: cannot read the command schedule ({exc.strerror or exc})") from None
+            text = read_input(path, what="command schedule (t,u file)", max_line=4096).decode("utf-8-sig")
+        except DataError as exc:
+            raise DataError(f"cannot read the command schedule: {exc}") from None
+        except UnicodeDecodeError as exc:
+            raise DataError(f"{name}: not a text file (undecodable byte at offset {exc.start})") from None
         t: list[float] = []
         u: list[float] = []
         for number, line in enumerate(text.splitlines(), 1):

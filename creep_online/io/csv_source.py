@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import time
 
+from ..record import check_amplitudes, check_time_and_output
 from .frames import RawSample
-from .source_options import REALTIME, STALL, WINDOW, Option
+from .source_options import REALTIME, STALL, WINDOW, Option, nonempty
 from .sources import SampleSource
 
 
@@ -18,9 +19,10 @@ class CsvSource(SampleSource):
     """A ``t,u,y`` CSV file as a stream (sequence = row index), optionally paced in real time."""
 
     options = (REALTIME, WINDOW, STALL,
-               Option("u_column", str, None, "input column (CSV header name or GCS NAMEi)"),
-               Option("y_column", str, None, "output column (CSV header name or GCS NAMEi)"))
+               Option("u_column", nonempty, None, "input column (CSV header name or GCS NAMEi)"),
+               Option("y_column", nonempty, None, "output column (CSV header name or GCS NAMEi)"))
     target_label = "file"
+    target_is_file = True
 
     def __init__(self, path: str, *, realtime: bool = False, chunk: int = 1000,
                  u_column: str | None = None, y_column: str | None = None, **kw) -> None:
@@ -28,6 +30,8 @@ class CsvSource(SampleSource):
         super().__init__(**kw)
         self.name = f"csv:{path}"
         rec = load_record(path, u_column, y_column)
+        check_time_and_output(rec.t, rec.y, rec.source)   # (a replay of a record identify refuses is refused)
+        check_amplitudes(rec.u, rec.y, rec.source)
         self.record = rec
         self.rate = 1.0 / rec.h if rec.h > 0 else None
         self._i = 0

@@ -13,9 +13,7 @@ from __future__ import annotations
 import csv
 import io
 import math
-import os
 import re
-import stat
 import warnings
 from pathlib import Path
 
@@ -23,57 +21,22 @@ import numpy as np
 
 from ..errors import DataError, DataWarning
 from ..record import MIN_SAMPLES, Record
+from .input_files import check_kind, read_input
 
 
 #: Longest line accepted (bytes): a t,u,y row is ~60; a file of one endless line is not a CSV.
 MAX_LINE_BYTES = 65536
-_CHUNK = 1 << 20
 
 
 def _check_kind(path: Path) -> None:
-    """DataError unless ``path`` is a regular file or a pipe (devices, sockets, folders cannot be a CSV)."""
-    try:
-        mode = path.stat().st_mode
-    except FileNotFoundError:
-        raise DataError(f"{path}: no such file") from None
-    except OSError as exc:
-        raise DataError(f"{path}: cannot read ({exc.strerror})") from None
-    if stat.S_ISDIR(mode):
-        raise DataError(f"{path}: is a directory, not a CSV file")
-    if not (stat.S_ISREG(mode) or stat.S_ISFIFO(mode)):
-        kind = "a character device" if stat.S_ISCHR(mode) else "a block device" if stat.S_ISBLK(mode) \
-            else "a socket" if stat.S_ISSOCK(mode) else "not a regular file"
-        raise DataError(f"{path}: is {kind}, not a CSV file")
-
-
-def _read_bytes(path: Path) -> bytes:
-    """The whole file, read in chunks; DataError as soon as one line exceeds MAX_LINE_BYTES."""
-    chunks: list[bytes] = []
-    since_newline = 0
-    with path.open("rb") as fh:
-        size0 = os.fstat(fh.fileno()).st_size
-        while chunk := fh.read(_CHUNK):
-            chunks.append(chunk)
-            nl = chunk.rfind(b"\n")
-            since_newline = since_newline + len(chunk) if nl < 0 else len(chunk) - nl - 1
-            if since_newline > MAX_LINE_BYTES:
-                raise DataError(f"{path}: a line longer than {MAX_LINE_BYTES} bytes: not a t,u,y CSV file")
-        grown = os.fstat(fh.fileno()).st_size
-    data = b"".join(chunks)
-    if stat.S_ISREG(path.stat().st_mode) and (grown != size0 or grown != len(data)):
-        warnings.warn(f"{path}: the file changed size while it was read (still being written?); "
-                      f"used the {len(data)} bytes read", DataWarning, stacklevel=4)
-    return data
+    """DataError unless ``path`` is a regular file, a pipe or a FIFO (``-``: standard input)."""
+    check_kind(path, "CSV file")
 
 
 def _read_text(path: Path) -> str:
-    _check_kind(path)
-    try:
-        data = _read_bytes(path)
-    except IsADirectoryError:
-        raise DataError(f"{path}: is a directory, not a CSV file") from None
-    except OSError as exc:
-        raise DataError(f"{path}: cannot read ({exc.strerror})") from None
+    """The file's text, read once whatever it is (``input_files.read_input``: bounded, pipes never waited on
+    forever, a pipe's content remembered for a second look)."""
+    data = read_input(path, what="CSV file", max_line=MAX_LINE_BYTES)
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:

@@ -22,6 +22,7 @@ from typing import Any, Callable, Iterable, Iterator, Protocol
 
 import numpy as np
 
+from .._signals import describe, exit_code
 from ..errors import TransportError
 
 #: How a feed can end (``End.reason``).
@@ -41,6 +42,11 @@ class End:
     reason: str
     message: str = ""
     error: BaseException | None = None
+
+    @property
+    def exit_code(self) -> int | None:
+        """128 + the signal that interrupted the feed (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP); None otherwise."""
+        return exit_code(self.error) if self.reason == "interrupted" and self.error is not None else None
 
 
 class CallLatency:
@@ -124,8 +130,8 @@ class FeedLoop:
                 if (self.stop_when is not None and self.stop_when(self)) or time.monotonic() > deadline:
                     end = End("limit")
                     break
-        except KeyboardInterrupt as exc:
-            end = End("interrupted", "interrupted (Ctrl-C)", exc)
+        except KeyboardInterrupt as exc:    # Ctrl-C, SIGTERM, SIGHUP (``creep_online._signals``)
+            end = End("interrupted", describe(exc), exc)
         except TransportError as exc:
             end = End("link_lost", str(exc), exc)
         except Exception as exc:  # noqa: BLE001 - keep the work done so far; say what stopped it

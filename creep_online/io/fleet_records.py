@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import csv
 import glob
+import io
 import math
 from array import array
 from dataclasses import dataclass
@@ -23,7 +24,8 @@ import numpy as np
 from ..errors import DataError
 from ..record import MIN_SAMPLES, Record
 # the CSV module's own file checks and header rule, so a long-format file fails exactly like a t,u,y one
-from .csvfile import _check_kind, _header, load_csv
+from .csvfile import _check_kind, _header, _read_text, load_csv
+from .input_files import is_stream
 
 #: Columns of a long-format file (any order; other columns are ignored).
 LONG_COLUMNS = ("id", "t", "u", "y")
@@ -90,6 +92,8 @@ def _jobs_of_file(path: Path) -> list[RecordJob]:
     once); a record's samples cost 24 bytes a row.
     """
     _check_kind(path)
+    if is_stream(path):   # a pipe or FIFO: read once here, its records carry their samples to the workers
+        return _jobs_of_stream(path)
     try:
         with path.open(encoding="utf-8-sig", newline="") as fh:
             lineno, header = 0, ""
@@ -108,6 +112,22 @@ def _jobs_of_file(path: Path) -> list[RecordJob]:
         raise DataError(f"{path}: not a CSV file ({exc})") from None
     except OSError as exc:
         raise DataError(f"{path}: cannot read ({exc.strerror})") from None
+
+
+def _jobs_of_stream(path: Path) -> list[RecordJob]:
+    """A pipe's records: long format, or one t,u,y record (read here, not by a worker that cannot reopen it)."""
+    text = _read_text(path)
+    first = next((line for line in text.splitlines() if line.strip()), "")
+    names = [c.strip().lower() for c in next(csv.reader([first]), [])]
+    if "id" not in names:
+        rec = load_csv(path)
+        return [RecordJob(path.name, str(path), samples=(rec.t, rec.u, rec.y))]
+    body = io.StringIO(text)
+    lineno = 0
+    for lineno, line in enumerate(body, start=1):
+        if line.strip():
+            break
+    return read_long(path, body, _header(path, first, LONG_COLUMNS), lineno + 1)
 
 
 def read_long(path: Path, body: Iterable[str], cols: list[int], first_lineno: int) -> list[RecordJob]:

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import re
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +34,7 @@ import numpy as np
 from ..errors import DataError
 from ..record import MIN_SAMPLES, Record
 from .csvfile import _read_text
+from .input_files import is_stream
 
 __all__ = ["is_gcs_file", "read_gcs_header", "load_gcs", "column_names", "column_index"]
 
@@ -41,11 +43,17 @@ _NAME_KEY = re.compile(r"NAME(\d+)$")
 
 def is_gcs_file(path: str | Path) -> bool:
     """True when the file starts like a GCS data file (a ``#`` header line or ``[GCS_ARRAY``)."""
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(512).lstrip(b"\xef\xbb\xbf \t\r\n")
-    except OSError:
-        return False
+    if is_stream(path):       # a pipe is read once: look at the text kept from that read
+        try:
+            head = _read_text(Path(path))[:512].lstrip("\ufeff \t\r\n").encode()
+        except DataError:
+            return False
+    else:
+        try:
+            with open(path, "rb") as fh:
+                head = fh.read(512).lstrip(b"\xef\xbb\xbf \t\r\n")
+        except OSError:
+            return False
     return head.startswith((b"#", b"[GCS_ARRAY"))
 
 
@@ -80,15 +88,24 @@ def read_gcs_header(path: str | Path) -> tuple[dict[str, str], int]:
     return header, first_data
 
 
+#: What a GCS header may say (a data recorder has a few dozen channels; SEPARATOR is a character code).
+HEADER_LIMITS = {"DIM": (1, 1024), "SEPARATOR": (1, 255)}
+
+
 def _number(path: Path, header: dict[str, str], key: str, kind=float) -> float:
     if key not in header:
         raise DataError(f"{path}: GCS header has no {key} line (need SAMPLE_TIME, DIM, SEPARATOR and NAME0..)")
     try:
-        value = kind(float(header[key]))
+        value = float(header[key])
     except ValueError:
-        raise DataError(f"{path}: GCS header {key} = {header[key]!r} is not a number") from None
+        raise DataError(f"{path}: GCS header {key} = {header[key][:40]!r} is not a number") from None
     if not (math.isfinite(value) and value > 0):
-        raise DataError(f"{path}: GCS header {key} = {header[key]!r} must be positive")
+        raise DataError(f"{path}: GCS header {key} = {header[key][:40]!r} must be positive")
+    if kind is int:
+        lo, hi = HEADER_LIMITS.get(key, (1, 1 << 31))
+        if not value.is_integer() or not lo <= value <= hi:
+            raise DataError(f"{path}: GCS header {key} = {header[key][:40]!r} must be a whole number in {lo}..{hi}")
+        return int(value)
     return value
 
 
@@ -146,6 +163,16 @@ def _first_bad_row(path: Path, first_line: int, sep: str, dim: int) -> str:
     return "unreadable data"
 
 
+def _read_data(readgcsarray, path: Path):
+    """pipython's reader on ``path``; a pipe (already read) goes to it as a temporary copy of its text."""
+    if not is_stream(path):
+        return readgcsarray(str(path))
+    with tempfile.TemporaryDirectory(prefix="creep_online_gcs_") as folder:
+        copy = Path(folder) / "data.gcs"
+        copy.write_text(_read_text(path))
+        return readgcsarray(str(copy))
+
+
 def load_gcs(path: str | Path, u_column: str | None = None, y_column: str | None = None,
              min_samples: int = MIN_SAMPLES) -> Record:
     """A GCS data-recorder file as a validated Record (t from SAMPLE_TIME; u, y by column name)."""
@@ -160,8 +187,8 @@ def load_gcs(path: str | Path, u_column: str | None = None, y_column: str | None
     iy = column_index(path, names, y_column, "output") if y_column else 1
     readgcsarray = _pipython_reader()
     try:
-        _, data = readgcsarray(str(path))
-    except (ValueError, IndexError, KeyError, UnicodeDecodeError):
+        _, data = _read_data(readgcsarray, path)
+    except (ValueError, IndexError, KeyError, UnicodeDecodeError, OverflowError):
         raise DataError(f"{path}: {_first_bad_row(path, first_data, sep, len(names))}") from None
     u = np.asarray(data[iu], dtype=float)
     y = np.asarray(data[iy], dtype=float)

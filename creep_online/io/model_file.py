@@ -106,16 +106,9 @@ def save_model(model, path: str | Path, *, units: dict | None = None, inputs=(),
 
 def load_model(path: str | Path) -> FittedModel:
     """The model a model file holds, validated; ``DataError`` naming the file and the first problem."""
+    from .input_files import read_input
     path = Path(path)
-    try:
-        with path.open("rb") as fh:
-            raw = fh.read(MAX_BYTES + 1)
-    except FileNotFoundError:
-        raise DataError(f"{path}: no such file") from None
-    except OSError as exc:
-        raise DataError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    if len(raw) > MAX_BYTES:
-        raise DataError(f"{path}: larger than {MAX_BYTES} bytes: not a creep_online model file")
+    raw = read_input(path, what="model file", limit=MAX_BYTES)   # bounded; a pipe or FIFO never waited on forever
     try:
         doc = json.loads(raw.decode("utf-8-sig"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
@@ -212,12 +205,12 @@ def _checked_effects(base: CreepModel, effects: dict) -> dict:
 def read_model_json(path: str | Path) -> FittedModel:
     """A model from a JSON file: a model file, or the ``--json`` output of ``identify`` or ``fit`` (its alpha,
     a1, a2, b, offset, input_offset and effect_params); DataError naming the file and the problem."""
+    from .input_files import read_input
     path = Path(path)
-    if not path.is_file():
-        raise DataError(f"{path}: no such file")
+    raw = read_input(path, what="JSON file", limit=MAX_BYTES)
     try:
-        doc = json.loads(path.read_text(encoding="utf-8-sig"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        doc = json.loads(raw.decode("utf-8-sig"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise DataError(f"{path}: not JSON ({exc})") from None
     if isinstance(doc, dict) and "schema" in doc:
         return load_model(path)

@@ -38,7 +38,7 @@ from typing import Any
 
 from ..errors import TransportError
 from .frames import RawSample
-from .source_options import Option, flag
+from .source_options import RECONNECT_TIMEOUT_S, Option, flag, nonempty, positive, whole
 from .sources import ReconnectingSource
 
 #: GCS record options used by default (pipython.datarectools.RecordOptions).
@@ -85,20 +85,20 @@ class PiSource(ReconnectingSource):
     link = "controller"
     target_label = "port"
     options = ReconnectingSource.options + (
-        Option("baud", int, 115200, "RS-232 baud rate", keyword="baudrate"),
-        Option("rtr", int, 1, "record table rate: servo cycles per recorded point (RTR)"),
-        Option("axis", str, None, "axis / output channel recorded (default: the first axis of SAI?)"),
-        Option("u_record", int, PIEZO_VOLTAGE, "record option of the input (7 piezo voltage, 14 open-loop value)"),
-        Option("y_record", int, ACTUAL_POSITION, "record option of the output (2 current position)"),
-        Option("chunk", int, 2000, "most points read per DRR? query"),
-        Option("timeout", float, 2.0, "seconds without a reply before the link counts as lost"),
+        Option("baud", whole(1), 115200, "RS-232 baud rate", keyword="baudrate"),
+        Option("rtr", whole(1), 1, "record table rate: servo cycles per recorded point (RTR)"),
+        Option("axis", nonempty, None, "axis / output channel recorded (default: the first axis of SAI?)"),
+        Option("u_record", whole(0), PIEZO_VOLTAGE, "record option of the input (7 piezo voltage, 14 open-loop value)"),
+        Option("y_record", whole(0), ACTUAL_POSITION, "record option of the output (2 current position)"),
+        Option("chunk", whole(1), 2000, "most points read per DRR? query"),
+        Option("timeout", positive, 2.0, "seconds without a reply before the link counts as lost"),
         Option("wait", flag, True, "wait for reply bytes with select (0: pipython's stock gateway, which spins)"),
     )
 
     def __init__(self, port: str, *, baudrate: int = 115200, rtr: int = 1, axis: str | None = None,
                  u_record: int = PIEZO_VOLTAGE, y_record: int = ACTUAL_POSITION, chunk: int = 2000,
                  timeout: float = 2.0, wait: bool = True, reconnect: bool = True,
-                 reconnect_timeout: float | None = None, window: int = 16, stall: float = 0.5, **kw: Any) -> None:
+                 reconnect_timeout: float | None = RECONNECT_TIMEOUT_S, window: int = 16, stall: float = 0.5, **kw: Any) -> None:
         GCSDevice, PISerial, GCSError = _pipython()
         self._gcs = (GCSDevice, _waiting_gateway(PISerial) if wait else PISerial, GCSError)
         super().__init__(window=window, rate=None, t_from_seq=True, stall=stall, reconnect=reconnect,

@@ -122,13 +122,7 @@ def open_source(spec: str, **options: Any) -> "SampleSource":
     declares; keyword ``options`` (e.g. ``on_event``) go to the constructor
     as they are and win over the spec's.
     """
-    if ":" not in spec:
-        raise DataError(f"{spec!r}: not a source spec (use {_kinds_hint()})")
-    kind, rest = spec.split(":", 1)
-    try:
-        cls = source_class(kind)
-    except DataError as exc:
-        raise DataError(f"{spec!r}: {exc}") from None
+    cls, kind, rest = _spec_class(spec)
     target, pairs = split_query(rest)
     keywords, unknown = convert_options(spec, cls.options, pairs, keep_unknown=cls.keeps_unknown_options)
     if unknown:   # stays part of the target (pyserial URL options)
@@ -136,6 +130,34 @@ def open_source(spec: str, **options: Any) -> "SampleSource":
     if not target:
         raise DataError(f"{spec!r}: missing {cls.target_label} after '{_kind(kind)}:'")
     return cls.from_spec(spec, target, **{**keywords, **options})
+
+
+def _spec_class(spec: str) -> tuple["type[SampleSource]", str, str]:
+    """(class, kind, rest after 'KIND:') of a spec; DataError for a spec without a known, lower-case kind."""
+    if not isinstance(spec, str) or ":" not in spec:
+        raise DataError(f"{spec!r}: not a source spec (use {_kinds_hint()})")
+    kind, rest = spec.split(":", 1)
+    if kind != kind.strip().lower():
+        raise DataError(f"{spec!r}: source kinds are written in lower case ({_kind(kind)}:...)")
+    try:
+        return source_class(kind), kind, rest
+    except DataError as exc:
+        raise DataError(f"{spec!r}: {exc}") from None
+
+
+def spec_files(spec: str) -> list[str]:
+    """The files a spec's source reads (a file target, ``?dbc=``, ``?command=``): outputs of the same run must
+    not be any of them. Empty for a spec that does not open (``open_source`` says why)."""
+    try:
+        cls, _, rest = _spec_class(spec)
+    except (DataError, TransportError):
+        return []
+    target, pairs = split_query(rest)
+    paths = {o.name for o in cls.options if o.path}
+    files = [value for key, value in pairs if key in paths and value]
+    if cls.target_is_file and target:
+        files.insert(0, target)
+    return files
 
 
 def _kinds_hint() -> str:

@@ -16,7 +16,7 @@ from typing import Any
 
 from ..errors import DataError, TransportError
 from .frames import SCALE_U, SCALE_Y, RawSample, make_parser
-from .source_options import RATE, Option, choice
+from .source_options import RATE, RECONNECT_TIMEOUT_S, Option, choice, nonempty, nonzero, whole
 from .sources import ReconnectingSource
 
 
@@ -39,11 +39,11 @@ class SerialSource(ReconnectingSource):
     options = ReconnectingSource.options + (
         Option("format", choice("auto", "ascii", "binary"), "auto", "frame format (auto-detected by default)"),
         RATE,
-        Option("baud", int, 921600, "baud rate", keyword="baudrate"),
+        Option("baud", whole(1), 921600, "baud rate", keyword="baudrate"),
         Option("checksum", choice("auto", "required", "none"), "auto", "ASCII line checksum policy"),
-        Option("scale_u", float, SCALE_U, "binary input LSB"),
-        Option("scale_y", float, SCALE_Y, "binary output LSB"),
-        Option("start", str, None, "text sent after opening (e.g. a recorder's start command)"),
+        Option("scale_u", nonzero, SCALE_U, "binary input LSB"),
+        Option("scale_y", nonzero, SCALE_Y, "binary output LSB"),
+        Option("start", nonempty, None, "text sent after opening (e.g. a recorder's start command)"),
     )
     keeps_unknown_options = True
     target_label = "port"
@@ -60,7 +60,7 @@ class SerialSource(ReconnectingSource):
     def __init__(self, port: str, *, baudrate: int = 921600, format: str = "auto",
                  rate: float | None = None, checksum: str = "auto",
                  scale_u: float = SCALE_U, scale_y: float = SCALE_Y,
-                 reconnect: bool = True, reconnect_timeout: float | None = None,
+                 reconnect: bool = True, reconnect_timeout: float | None = RECONNECT_TIMEOUT_S,
                  start: str | bytes | None = None, window: int = 16, stall: float = 0.5,
                  chunk: int = 1 << 16, **kw) -> None:
         fmt = format.lower()

@@ -9,6 +9,7 @@ source").
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable
 from urllib.parse import parse_qsl
@@ -27,6 +28,45 @@ def flag(text: str) -> bool:
     if value in _TRUE:
         return True
     raise ValueError(f"expected 0 or 1, got {text!r}")
+
+
+#: The largest number an option of a source takes (a rate in Hz, a time in s, a range): beyond it a value is a
+#: unit mistake (and a socket's timeout or a sample step would overflow).
+OPTION_MAX = 1e9
+
+
+def positive(text: str) -> float:
+    """A finite number > 0 and at most OPTION_MAX (a rate, a time, a range)."""
+    value = float(text)
+    if not (math.isfinite(value) and 0 < value <= OPTION_MAX):
+        raise ValueError(f"expected a positive number up to {OPTION_MAX:g}")
+    return value
+
+
+def nonzero(text: str) -> float:
+    """A finite non-zero number (a scale)."""
+    value = float(text)
+    if not (math.isfinite(value) and value != 0 and abs(value) <= OPTION_MAX):
+        raise ValueError(f"expected a non-zero number up to {OPTION_MAX:g} in size")
+    return value
+
+
+def whole(minimum: int) -> Callable[[str], int]:
+    """A converter for a whole number >= ``minimum`` (a count, a channel)."""
+    def convert(text: str) -> int:
+        value = int(text)
+        if value < minimum or value > 1 << 31:
+            raise ValueError(f"expected a whole number from {minimum} to {1 << 31}")
+        return value
+    convert.__name__ = "int"
+    return convert
+
+
+def nonempty(value: str) -> str:
+    """Any non-empty text (a file name, a column name)."""
+    if not value.strip():
+        raise ValueError("expected a non-empty value")
+    return value
 
 
 def choice(*allowed: str) -> Callable[[str], str]:
@@ -55,6 +95,7 @@ class Option:
     default: Any = None
     help: str = ""
     keyword: str | None = None
+    path: bool = False      # the value names a file the source reads (never an output of the same run)
 
     @property
     def argument(self) -> str:
@@ -63,22 +104,31 @@ class Option:
 
     def with_default(self, default: Any) -> "Option":
         """The same option with another default (e.g. a larger reorder window for CAN)."""
-        return Option(self.name, self.convert, default, self.help, self.keyword)
+        return Option(self.name, self.convert, default, self.help, self.keyword, self.path)
 
     def describe(self) -> str:
         """``name=TYPE (default D): help`` for listings."""
-        kind = getattr(self.convert, "__name__", "text").replace("str", "text")
+        kind = getattr(self.convert, "__name__", "text").replace("str", "text").replace("positive", "float") \
+            .replace("nonzero", "float")
         return f"{self.name}={kind} (default {self.default!r}): {self.help}"
 
 
 # Options shared by several sources (each source lists the ones it takes).
-RATE = Option("rate", float, None, "sample rate in Hz (frames that carry a counter, not a time)")
-WINDOW = Option("window", int, 16, "reorder window in samples")
-STALL = Option("stall", float, 0.5, "seconds of silence counted as a stall")
+RATE = Option("rate", positive, None, "sample rate in Hz (frames that carry a counter, not a time)")
+WINDOW = Option("window", whole(0), 16, "reorder window in samples")
+STALL = Option("stall", positive, 0.5, "seconds of silence counted as a stall")
 RECONNECT = Option("reconnect", flag, True, "reopen a lost link with backoff (0: give up at once)")
-RECONNECT_TIMEOUT = Option("reconnect_timeout", float, None, "give up reconnecting after this many seconds")
+#: How long a lost link is reopened before the stream ends with "link lost" (a device that never comes back
+#: must not hold a stream, or the service running it, forever).
+RECONNECT_TIMEOUT_S = 60.0
+RECONNECT_TIMEOUT = Option("reconnect_timeout", positive, RECONNECT_TIMEOUT_S,
+                           "give up reconnecting after this many seconds")
+#: How long a live link may deliver nothing at all before the stream ends with "link lost".
+IDLE_TIMEOUT_S = 60.0
+IDLE_TIMEOUT = Option("idle_timeout", positive, IDLE_TIMEOUT_S,
+                      "end the stream after this many seconds without a sample on a connected link")
 REALTIME = Option("realtime", flag, False, "pace a replay in real time")
-DBC = Option("dbc", str, None, "DBC file with the amplifier's messages (default: the packaged one)")
+DBC = Option("dbc", nonempty, None, "DBC file with the amplifier's messages (default: the packaged one)", path=True)
 
 
 def split_query(rest: str) -> tuple[str, list[tuple[str, str]]]:

@@ -18,10 +18,12 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, ClassVar, Iterator, NamedTuple
 
+from ..checks import count, positive
 from ..errors import TransportError
 from .frames import ParserStats, RawSample
 from .sequence import SequenceStats, SequenceTracker
-from .source_options import RECONNECT, RECONNECT_TIMEOUT, STALL, WINDOW, Option
+from .source_options import (IDLE_TIMEOUT, IDLE_TIMEOUT_S, OPTION_MAX, RECONNECT, RECONNECT_TIMEOUT, RECONNECT_TIMEOUT_S, STALL,
+                             WINDOW, Option)
 
 __all__ = ["Sample", "SourceStats", "SampleSource", "ReconnectingSource", "TransportError", "open_source"]
 
@@ -103,6 +105,7 @@ class SampleSource:
     name = "source"
     options: ClassVar[tuple[Option, ...]] = (WINDOW, STALL)
     target_label: ClassVar[str] = "target"
+    target_is_file: ClassVar[bool] = False     # TARGET names a file the source reads (csv:, canlog:)
     keeps_unknown_options: ClassVar[bool] = False
 
     @classmethod
@@ -113,6 +116,10 @@ class SampleSource:
     def __init__(self, *, window: int = 16, modulus: int | None = None, rate: float | None = None,
                  t_from_seq: bool = False, stall: float = 0.5,
                  on_event: Callable[[str], None] | None = _stderr_event) -> None:
+        window = count(window, "window (reorder window, samples)", minimum=0, maximum=1 << 20)
+        stall = positive(stall, "stall (s of silence)", maximum=OPTION_MAX) if stall != float("inf") else stall
+        if rate is not None:
+            rate = positive(rate, "rate (Hz)", maximum=OPTION_MAX)
         self.stats = SourceStats()
         self.tracker: SequenceTracker = SequenceTracker(window=window, modulus=modulus,
                                                         stats=self.stats.sequence)
@@ -215,13 +222,38 @@ class ReconnectingSource(SampleSource):
     """
 
     link = "link"  # what the messages call it
-    options = SampleSource.options + (RECONNECT, RECONNECT_TIMEOUT)
+    options = SampleSource.options + (RECONNECT, RECONNECT_TIMEOUT, IDLE_TIMEOUT)
     target_label = "port"
 
-    def __init__(self, *, reconnect: bool = True, reconnect_timeout: float | None = None, **kw) -> None:
+    def __init__(self, *, reconnect: bool = True, reconnect_timeout: float | None = RECONNECT_TIMEOUT_S,
+                 idle_timeout: float | None = IDLE_TIMEOUT_S, **kw) -> None:
         super().__init__(**kw)
         self.reconnect = bool(reconnect)
-        self.reconnect_timeout = reconnect_timeout
+        self.reconnect_timeout = None if reconnect_timeout is None else \
+            positive(reconnect_timeout, "reconnect_timeout (s)", maximum=OPTION_MAX)
+        self.idle_timeout = None if idle_timeout is None else \
+            positive(idle_timeout, "idle_timeout (s)", maximum=OPTION_MAX)
+        self._idle_since = time.monotonic()
+
+    def read(self, timeout: float = 0.1) -> list[Sample]:
+        """``SampleSource.read``; a connected link that delivers no sample for ``idle_timeout`` s ends the stream
+        (TransportError: "link lost"), so a device that never sends holds no stream, or its service, forever.
+        While the link is down ``reconnect_timeout`` rules instead."""
+        out = super().read(timeout)
+        now = time.monotonic()
+        if out or not self.link_up:
+            self._idle_since = now
+        elif self.idle_timeout is not None and not self.ended and now - self._idle_since > self.idle_timeout:
+            self.ended = True
+            raise TransportError(f"{self.name}: no data for {self.idle_timeout:g} s on the {self.link} "
+                                 f"(idle_timeout)")
+        return out
+        if self.idle_timeout is not None and not self.ended and now - max(self._idle_since, self._last_data or 0.0) \
+                > self.idle_timeout:
+            self.ended = True
+            raise TransportError(f"{self.name}: no data for {self.idle_timeout:g} s on the {self.link} "
+                                 f"(idle_timeout)")
+        return out
         self._down_since: float | None = None
         self._next_try = 0.0
         self._backoff = 0.05

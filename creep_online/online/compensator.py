@@ -47,9 +47,11 @@ from collections import deque
 
 import numpy as np
 
+from ..checks import is_real, number, positive, real_array
 from ..errors import DataError, ModelError
 from ..model import CreepModel, ExtendedModel
 from . import compensator_kernels as CK
+from .checkpoint import Checkpointable
 from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SoeBasis
 from .stored_params import StoredParams
 
@@ -64,7 +66,7 @@ MAX_REPLAY = 1 << 22
 REPLAY_CHUNK = 16
 
 
-class CreepCompensator(StoredParams):
+class CreepCompensator(StoredParams, Checkpointable):
     """Command u for reference r, sample by sample, inverting creep, resonance (and hysteresis).
 
     Every constructor argument is stored verbatim (``get_params``).
@@ -114,7 +116,7 @@ class CreepCompensator(StoredParams):
                                 f"({0.5 / self.dt:g} Hz)")
         for name in ("u_min", "u_max"):
             v = getattr(self, name)
-            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v)):
+            if v is not None and (not is_real(v) or math.isnan(number(v, name))):
                 raise DataError(f"{name} must be a number or None, got {v!r}")
         if self.u_min is not None and self.u_max is not None and not self.u_min < self.u_max:
             raise DataError(f"u_min must be below u_max, got {self.u_min} and {self.u_max}")
@@ -263,7 +265,8 @@ class CreepCompensator(StoredParams):
     # ------------------------------------------------------------------ commands
     def command(self, r: float) -> float:
         """The command for this sample's reference r (held by the DAC until the next sample)."""
-        r = float(r)
+        if r.__class__ is not float:
+            r = number(r, "command(): reference r")
         if not math.isfinite(r):
             raise DataError(f"reference must be finite, got {r!r}")
         self.samples += 1
@@ -275,7 +278,7 @@ class CreepCompensator(StoredParams):
 
     def command_block(self, r: np.ndarray) -> np.ndarray:
         """Commands for a block of references with the current model (same numbers as ``command`` in a loop)."""
-        r = np.ascontiguousarray(r, dtype=float)
+        r = np.ascontiguousarray(real_array(r, "command_block(): reference r"))
         if not np.all(np.isfinite(r)):
             raise DataError("reference contains NaN or inf")
         u = np.empty_like(r)
@@ -410,8 +413,7 @@ def _split(model: CreepModel | ExtendedModel) -> tuple[CreepModel, float, dict |
 
 
 def _positive(name: str, value) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-        raise DataError(f"{name} must be a positive finite number, got {value!r}")
+    positive(value, name)
 
 
 def warm_kernels() -> None:

@@ -52,11 +52,12 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Generator
 
 import numpy as np
 
+from ..checks import count, is_real, number, real_array
 from ..errors import DataError, one_line
 from ..model import ONLINE_ALPHA_BOUNDS, ONLINE_REFITS, CreepModel
 from . import refit as RF
@@ -67,6 +68,7 @@ from . import recursive as R
 from .recursive import RecursiveTracker
 from . import rest
 from .tracker import DETERMINED, FREE_RATES, PERIODIC_JOBS, WindowTracker
+from .checkpoint import Checkpointable
 from .stored_params import StoredParams
 
 PHASES = ("buffering", "searching", "tracking")
@@ -75,6 +77,11 @@ QUALITIES = ("none", "provisional", "good", "changing", "degraded")
 MAX_SEARCH_SAMPLES = 1 << 15
 #: Start-up buffer (samples): the search window plus what arrives while the search runs.
 BUFFER_SAMPLES = 1 << 17
+#: Longest run of lost samples gap() replays (held input, no output; ~1.6 us each); a longer outage restarts the
+#: tracker in constant time (``_outage``): the plant's state after it is unknown anyway.
+GAP_REPLAY_MAX = 4096
+#: Fewest samples a forgetting window may hold: a shorter one cannot determine the four parameters.
+MIN_WINDOW_SAMPLES = 50
 #: Largest history kept for replays (samples).
 MAX_HISTORY = 1 << 19
 #: alpha within this relative distance of an end of ``alpha_bounds`` is held by the bound, not determined.
@@ -199,7 +206,7 @@ class _GridPlan:
     search: ResonanceSearch | None = None
 
 
-class OnlineEstimator(StoredParams):
+class OnlineEstimator(StoredParams, Checkpointable):
     """Fractional creep model identified sample by sample (scikit-learn / river style).
 
     Every constructor argument is stored verbatim (``get_params``); derived
@@ -265,8 +272,7 @@ class OnlineEstimator(StoredParams):
         def positive(name: str, value, allow_none: bool = False) -> None:
             if value is None and allow_none:
                 return
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                    or value <= 0:
+            if not is_real(value) or not _finite_float(value) or value <= 0:
                 raise DataError(f"{name} must be a positive finite number{' or None' if allow_none else ''}, "
                                 f"got {value!r}")
         positive("dt", self.dt)
@@ -277,7 +283,7 @@ class OnlineEstimator(StoredParams):
         positive("soe_dx", self.soe_dx)
         positive("t_c_max", self.t_c_max)
         positive("burst_s", self.burst_s)
-        if self.alpha0 is not None and not (isinstance(self.alpha0, (int, float)) and 0 < self.alpha0 < 1):
+        if self.alpha0 is not None and not (is_real(self.alpha0) and 0 < self.alpha0 < 1):
             raise DataError(f"alpha0 must satisfy 0 < alpha0 < 1 or be None, got {self.alpha0!r}")
         try:
             lo, hi = (float(v) for v in self.alpha_bounds)
@@ -285,12 +291,14 @@ class OnlineEstimator(StoredParams):
             raise DataError(f"alpha_bounds must be two numbers (lo, hi), got {self.alpha_bounds!r}") from None
         if not 0 < lo < hi < 1:
             raise DataError(f"alpha_bounds must satisfy 0 < lo < hi < 1, got {self.alpha_bounds!r}")
-        if not isinstance(self.outlier_gate, (int, float)) or not self.outlier_gate >= 0:
+        if self.alpha0 is not None and not lo <= self.alpha0 <= hi:
+            raise DataError(f"alpha0 ({self.alpha0:g}) must lie within alpha_bounds ({lo:g}, {hi:g})")
+        if not is_real(self.outlier_gate) or not _finite_float(self.outlier_gate) or not self.outlier_gate >= 0:
             raise DataError(f"outlier_gate must be >= 0 (0 disables it), got {self.outlier_gate!r}")
-        if isinstance(self.input_gate, bool) or not isinstance(self.input_gate, (int, float)) \
-                or not self.input_gate >= 0:
+        if not is_real(self.input_gate) or not _finite_float(self.input_gate) or not self.input_gate >= 0:
             raise DataError(f"input_gate must be >= 0 (0 disables it), got {self.input_gate!r}")
-        if self.work_units is not None and not (isinstance(self.work_units, int) and self.work_units >= 1):
+        if self.work_units is not None and not (isinstance(self.work_units, (int, np.integer))
+                                                and not isinstance(self.work_units, bool) and 1 <= self.work_units <= 1 << 20):
             raise DataError(f"work_units must be a positive integer or None, got {self.work_units!r}")
         if not isinstance(self.track_drift, bool):
             raise DataError(f"track_drift must be True or False, got {self.track_drift!r}")
@@ -298,6 +306,12 @@ class OnlineEstimator(StoredParams):
             raise DataError(f"refit must be one of {', '.join(REFITS)}, got {self.refit!r}")
         if self.horizon_s <= self.dt:
             raise DataError(f"horizon_s ({self.horizon_s}) must exceed dt ({self.dt})")
+        if self.window_s is not None and self.window_s < MIN_WINDOW_SAMPLES * self.dt:
+            raise DataError(f"window_s ({self.window_s:g} s) must hold at least {MIN_WINDOW_SAMPLES} samples "
+                            f"({MIN_WINDOW_SAMPLES * self.dt:g} s at dt = {self.dt:g} s)")
+        if self.t_c is not None and self.t_c > (BUFFER_SAMPLES // 2) * self.dt:
+            raise DataError(f"t_c ({self.t_c:g} s) is longer than the start-up buffer holds "
+                            f"({(BUFFER_SAMPLES // 2) * self.dt:g} s at dt = {self.dt:g} s)")
 
     # ------------------------------------------------------------------ lifecycle
     def reset(self) -> "OnlineEstimator":
@@ -318,6 +332,7 @@ class OnlineEstimator(StoredParams):
         self._fault_fit_after = 0          # ... a window fit after this tracker sample is one after the recovery
         self._startup_faults = 0           # consecutive faults of the start-up (``STARTUP_FAULTS``)
         self._restarted = False            # restarted in operation after a fault: the plant was not at rest
+        self._kept: OnlineEstimate | None = None   # the estimate before a long outage (``_outage``), until live again
         self._hint: tuple | None = None    # (alpha, a1, a2) before a fault's restart: a candidate of the search
         self._n_shift = 0                  # stream samples before the tracker's first (a restart's; 0 otherwise)
         self._past_events: list[dict] = []     # events and re-searches of trackers a restart dropped, in stream time
@@ -392,6 +407,33 @@ class OnlineEstimator(StoredParams):
         self.frozen = False
         if self._tracker is not None:
             self._tracker.sc[W.SC_ACC] = 1.0
+
+    # ------------------------------------------------------------------ checkpoint (pickle, deepcopy)
+    def _checkpoint(self) -> None:
+        """Finish the background work under way now (``checkpoint``: generators cannot be pickled): the grid's
+        frequencies, the start-up search with all its rows in and the tracker's start and replay, the tracker's
+        queued jobs. The prepared search of a buffer still filling is dropped (it is built again, the same, when
+        the buffer is ready). An internal fault meanwhile is caught and recovered from as in update()."""
+        try:
+            plan = self._grid_plan
+            if plan is not None:
+                if plan.freqs is None and plan.steps is not None:
+                    try:
+                        while True:
+                            next(plan.steps)
+                    except StopIteration as done:
+                        plan.freqs = done.value
+                plan.steps = None
+                plan.search = None
+            if self._phase == "searching" or self._starting is not None or self._catchup:
+                self._advance_start(1 << 30)
+            tr = self._tracker
+            if isinstance(tr, WindowTracker):
+                tr.drain()
+        except PASS_THROUGH:
+            raise
+        except Exception as exc:  # noqa: BLE001 - the error contract, as in update()
+            self._fault(exc, "checkpoint")
 
     # ------------------------------------------------------------------ public API
     @property
@@ -469,6 +511,10 @@ class OnlineEstimator(StoredParams):
 
     def _estimate(self) -> OnlineEstimate:
         tr = self._tracker
+        if self._kept is not None and self._live is None:   # after a long outage, until the new tracker is live
+            return replace(self._kept, phase=self._phase, t=self.samples * self._h, samples=self.samples,
+                           skipped=self.skipped_nonfinite, input_outliers=self.input_outliers, events=self.events,
+                           internal_faults=self.internal_faults)
         quality, reason, determined = self._assess()
         if tr is None:
             return self._bare_estimate(quality, reason)
@@ -513,11 +559,8 @@ class OnlineEstimator(StoredParams):
         Raises only ``DataError`` (u or y not a number); NaN and inf are skipped and counted. Any internal fault
         is caught, counted and recovered from (module docstring: error contract): the guard is one ``try``
         around the whole body, free in Python 3.11 while nothing is raised."""
-        try:
-            u = float(u)
-            y = float(y)
-        except (TypeError, ValueError):
-            raise DataError(f"update(): u and y must be numbers, got {u!r}, {y!r}") from None
+        if u.__class__ is not float or y.__class__ is not float:   # (the common case costs two type checks)
+            u, y = number(u, "update(): u"), number(y, "update(): y")
         if u - u != 0.0 or y - y != 0.0:          # NaN or inf
             self.skipped_nonfinite += 1
             return
@@ -630,8 +673,11 @@ class OnlineEstimator(StoredParams):
         """n samples were lost (sequence counter): time advances with the input held, no output used.
 
         Internal faults are caught as in update() (one per lost sample at most)."""
-        n = int(n)
-        if n <= 0:
+        n = count(n, "gap(): n (lost samples)", minimum=0, maximum=1 << 62)
+        if n == 0:
+            return
+        if n > GAP_REPLAY_MAX:
+            self._outage(n)
             return
         self.gaps += n
         if self._deferred:
@@ -648,6 +694,37 @@ class OnlineEstimator(StoredParams):
                 raise
             except Exception as exc:  # noqa: BLE001 - the error contract: an internal fault never reaches the loop
                 self._fault(exc, "gap")
+
+    def _outage(self, n: int) -> None:
+        """A stretch of ``n`` > GAP_REPLAY_MAX lost samples: a restart, not a replay (work independent of n).
+
+        The plant's state after a long outage is unknown, so the tracker is dropped and the search starts again
+        on new samples, in operation, with the estimate before the outage as a candidate; until the new tracker
+        is live that estimate is reported (quality provisional, the reason says why)."""
+        self.gaps += n
+        self.samples += n
+        if self._held:                       # glitch candidates before the outage: the input went on unknown
+            self.input_outliers += len(self._held)
+            self._held = []
+        self._backlog.clear()
+        self._deferred = False
+        kept = self._estimate() if self._tracker is not None and self._phase == "tracking" else self._kept
+        tr = self._tracker
+        if tr is not None:
+            hint = (tr.alpha, tr.a1, tr.a2)
+            if all(math.isfinite(v) for v in hint) and hint[1] > 0.0 and hint[2] > 0.0:
+                self._hint = hint
+        self._drop_tracker()
+        self._restarted = self._restarted or self._first_change is not None or tr is not None
+        self._nbuf = 0
+        self._first_change = None
+        self._n_shift = self.samples
+        self._startup_faults = 0
+        if kept is not None:
+            why = (f"restarting after {n} lost samples ({n * self._h:.3g} s): the estimate before the outage, "
+                   f"until the search on new samples ends")
+            self._kept = replace(kept, quality="provisional" if kept.quality != "none" else "none", reason=why,
+                                 determined=[])
 
     @property
     def _live(self) -> WindowTracker | RecursiveTracker | None:
@@ -1121,6 +1198,7 @@ class OnlineEstimator(StoredParams):
                 units -= 1
                 tr.work(1 if units < (1 << 29) else 1 << 30)
         if self._replayed >= total:
+            self._kept = None
             self._startup_faults = 0
             self._catchup = 0
             self._nbuf = 0
@@ -1412,21 +1490,16 @@ class OnlineEstimator(StoredParams):
 _DONE = object()
 
 
-def _number(x, name: str) -> float:
+def _finite_float(x) -> bool:
+    """Is the real number ``x`` finite as a float (a huge int is not)?"""
     try:
-        return float(x)
-    except (TypeError, ValueError):
-        raise DataError(f"update(): {name} must be a number, got {x!r}") from None
+        return math.isfinite(float(x))
+    except OverflowError:
+        return False
 
 
 def _array(x, name: str) -> np.ndarray:
-    try:
-        a = np.asarray(x, dtype=float)
-    except (TypeError, ValueError):
-        raise DataError(f"update_block(): {name} must be numeric") from None
-    if a.ndim != 1:
-        raise DataError(f"update_block(): {name} must be one-dimensional, got shape {a.shape}")
-    return a
+    return real_array(x, f"update_block(): {name}")
 
 
 def _shifted(item: dict, shift: float, kind: str | None = None) -> dict:

@@ -68,6 +68,7 @@ import numpy as np
 from numba import njit
 
 from . import window as W
+from .checkpoint import Checkpointable
 from .soe import SoeBasis
 from .tracker import CHANGE_MOVE, CHANGE_SIGMAS, FREE_RATES, Fit, ParameterView, _largest_move
 
@@ -471,7 +472,7 @@ def block(u: np.ndarray, y: np.ndarray, st: np.ndarray, P: np.ndarray, CT: np.nd
     return end - start
 
 
-class RecursiveTracker(ParameterView):
+class RecursiveTracker(ParameterView, Checkpointable):
     """Gauss-Newton RPEM on the window tracker's regressor: constant work per sample, no replay.
 
     The estimator reads the same names as from ``WindowTracker``: ``alpha``,

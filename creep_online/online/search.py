@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+import inspect
 from typing import Generator
 
 import numpy as np
@@ -29,6 +30,7 @@ from numba import njit
 
 from ..model import ONLINE_ALPHA_BOUNDS
 from . import kernels
+from .checkpoint import Checkpointable
 from .soe import SoeBasis
 from .window import resonance_step
 
@@ -666,7 +668,14 @@ def _judge_reset(f: np.ndarray, e: np.ndarray, G: np.ndarray) -> None:
     G[:, :] = 0.0
 
 
-class ResonanceSearch:
+def _finished() -> Generator:
+    """A generator that has run to its end (a restored search's finished work)."""
+    gen = (x for x in ())
+    next(gen, None)
+    return gen
+
+
+class ResonanceSearch(Checkpointable):
     """Resumable global search on a buffer (input deviations u, outputs y; NaN = unusable).
 
     ``zeta0`` is the node state before the buffer (zero for a start from
@@ -715,6 +724,23 @@ class ResonanceSearch:
         self._judged_rows: int | None = None
         self._passes: dict[int, int] = {}     # passes over the rows per stride (``_start_pass``)
         self._gen = self._run()
+
+    def _state(self) -> dict:
+        """The state to pickle: the work generator as "not started" (rebuilt on load) or "done"; a search
+        half-way is finished first by its owner (``OnlineEstimator._checkpoint``)."""
+        state = dict(self.__dict__)
+        progress = inspect.getgeneratorstate(self._gen)
+        if progress not in (inspect.GEN_CREATED, inspect.GEN_CLOSED):
+            while not self.step():         # (a search pickled on its own: run it to its result)
+                pass
+            progress = inspect.GEN_CLOSED
+        state["_gen"] = progress
+        return state
+
+    def _restore_state(self, state: dict) -> None:
+        progress = state.pop("_gen")
+        self.__dict__.update(state)
+        self._gen = self._run() if progress == inspect.GEN_CREATED else _finished()
 
     def _bind(self) -> None:
         """The construction's second half, on first use (the first ``step`` is a unit of its own; ``_history``,

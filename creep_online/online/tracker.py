@@ -41,6 +41,7 @@ import numpy as np
 
 from . import refit as RF
 from . import window as W
+from .checkpoint import Checkpointable
 from .search import ZETA_BOX, ResonanceSearch, SearchScratch
 from .soe import SoeBasis
 
@@ -325,7 +326,7 @@ class ParameterView:
         return float(self.theta[4])
 
 
-class WindowTracker(ParameterView):
+class WindowTracker(ParameterView, Checkpointable):
     """Exponentially forgotten output-error statistics and the jobs that fit them."""
 
     def __init__(self, basis: SoeBasis, theta: np.ndarray, *, window_s: float | None, free: bool,
@@ -385,6 +386,7 @@ class WindowTracker(ParameterView):
         self.fitting = True              # False while the start-up buffer is replayed: no refits yet
         self.converged = False           # a refit has barely moved since the start: the change test may judge
         self._jobs: list[Generator] = []
+        self._draining = False             # a checkpoint runs the jobs to their end: no job waits (``drain``)
         #: the re-fit or change test under way (``refit.sample_work`` advances it): its index among the
         #: context's work arrays (``MACHINE_REFIT``, ``MACHINE_TEST``), or None
         self.machine: int | None = None
@@ -682,6 +684,21 @@ class WindowTracker(ParameterView):
             elif not self.work(1 << 30) and self.machine is None:
                 break
 
+    def drain(self) -> None:
+        """Run every queued job to its end now; one that waits for samples goes on with those already here.
+
+        For a checkpoint (pickle, deepcopy: ``checkpoint.Checkpointable``): jobs are generators, which cannot be
+        pickled, so none may remain; the original is drained too, and original and copy go on alike."""
+        self._draining = True
+        try:
+            self.finish()
+        finally:
+            self._draining = False
+
+    def _checkpoint(self) -> None:
+        if self._jobs or self.machine is not None:
+            self.drain()
+
     def _refit_job(self) -> Generator:
         """A re-fit of the window: ``_begin_refit``, its slices in the per-sample kernel, then the result swapped in
         (``_accept``) and what it triggers (``_after_accept``), each on its own call: with cold caches each of these
@@ -801,7 +818,8 @@ class WindowTracker(ParameterView):
         """
         if after_test:
             due = self._test_after(self.n)
-            while self.n <= due or self.machine == MACHINE_TEST or self._queued("_snapshot_job", "_change_job"):
+            while not self._draining and (self.n <= due or self.machine == MACHINE_TEST
+                                          or self._queued("_snapshot_job", "_change_job")):
                 yield WAIT
         yield                              # (a caller's last work and the arrays below were 23 us cold in one)
         a1, a2 = self.a1, self.a2
@@ -1062,7 +1080,8 @@ class WindowTracker(ParameterView):
         # at least one settling time, at most what the search holds: the old resonance may be a wrong one (a
         # 0.27 Hz, zeta 0.005 estimate set a wait of 437 s, and the window stopped fitting for good)
         wait = min(max(int(RESEARCH_S / self.h), settle // 2), cap)
-        while self.n < n_from + wait or (not self._input_moved(n_from) and self.n < n_from + 3 * wait):
+        while not self._draining and (self.n < n_from + wait
+                                      or (not self._input_moved(n_from) and self.n < n_from + 3 * wait)):
             yield WAIT
         oldest = int(self.sc[W.SC_RSTART])
         n0 = max(n_from - settle if n_from < n_detect else n_from, oldest)
@@ -1073,7 +1092,7 @@ class WindowTracker(ParameterView):
         for _ in range(RESEARCH_PASSES):
             starts = None
             if search is not None:         # another pass on twice the samples, from the last one's basins
-                while self.n < n0 + min(2 * seg, cap):
+                while not self._draining and self.n < n0 + min(2 * seg, cap):
                     yield WAIT
                 starts = [c[1:] for c in search.candidates]
             u, y = yield from self._ring_segment(n0, min(self.n, n0 + cap))

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from ..fleet.summary import SUMMARY_PARAMETERS, Z_THRESHOLD, identified
-from ..io.safe_files import atomic_write
+from ..io.safe_files import WRITTEN_BY, atomic_write
 
 LABELS = {"alpha": "alpha", "fn_hz": "fn (Hz)", "zeta": "zeta", "b": "|b|"}
 #: Rows with warnings listed at most (the table holds them all).
@@ -37,7 +37,7 @@ def render(rows: list[dict[str, Any]], summary: dict[str, Any], title: str) -> s
     """The page's HTML."""
     good = identified(rows)
     esc = html.escape
-    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>{esc(title)}</title>",
+    parts = [f"<!doctype html><!-- {WRITTEN_BY} --><html><head><meta charset='utf-8'><title>{esc(title)}</title>",
              "<style>body{font-family:sans-serif;margin:2em;max-width:1000px}"
              "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:2px 8px;"
              "text-align:right}td.l,th.l{text-align:left}.plots{display:flex;flex-wrap:wrap;gap:12px}"
