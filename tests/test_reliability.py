@@ -160,10 +160,10 @@ def test_a_stream_stopped_by_any_signal_prints_its_estimate_and_writes_its_trace
     The signal is sent some seconds after the command took the signals over; if the stream had not started by
     then (a busy machine: it was still loading its kernels) the answer is one line with nothing to print, and
     the attempt is repeated later in the stream."""
-    t, u, y = _record(60000)
+    t, u, y = _record(120000)      # (two minutes in real time: longer than the longest wait below)
     save_csv(tmp_path / "r.csv", t, u, y)
     trace = tmp_path / "trace.csv"
-    for delay in (6.0, 15.0, 30.0):
+    for delay in (6.0, 15.0, 30.0, 60.0):
         trace.write_text("old trace\n")
         p = subprocess.Popen([*CREEP, "stream", "--source", f"csv:{tmp_path / 'r.csv'}?realtime=1", "--trace", trace],
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_no_default_signals)
