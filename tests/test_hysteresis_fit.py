@@ -239,3 +239,26 @@ def test_fit_json_says_which_thresholds_the_data_determine(tmp_path, capsys):
     assert main(["fit", str(path), "--effects", "hysteresis"]) == 0
     text = capsys.readouterr().out
     assert "opened = 24" in text and "determined = " in text
+
+
+def test_the_compensator_inverts_a_fitted_loop():
+    """A fitted model (its loop from the record's plays, pinned operators included) goes into ``CreepCompensator``
+    as it is: the commands drive that model onto the shaped reference (``pi_inverse`` on the fitted weights)."""
+    from creep_online.online.compensator import CreepCompensator
+    from test_compensator import shaped_reference
+    rec = hysteresis_record("random_staircase", 3, n=N)
+    _, fit = _fit(rec)
+    model = ExtendedModel(fit.model, {"hysteresis": fit.effect_params["hysteresis"]})
+    h = rec.t[1] - rec.t[0]
+    t = np.arange(5000) * h
+    span = float(np.ptp(fit.y_hat))
+    ref = np.zeros_like(t)
+    for start, level in ((0.01, 0.6), (0.15, 0.2), (0.3, 0.8), (0.4, 0.5)):
+        ref[t >= start] = level * span * np.sign(fit.model.b)
+    comp = CreepCompensator(h, model)
+    y = model.simulate(t, comp.command_block(ref))
+    shaped = shaped_reference(t, ref, comp.tau)
+    settled = np.ones(t.size, bool)
+    for start in (0.01, 0.15, 0.3, 0.4):
+        settled &= ~((t >= start) & (t < start + 0.01))
+    assert np.max(np.abs(y - shaped)[settled]) < 1e-4 * span

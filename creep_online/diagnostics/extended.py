@@ -1161,26 +1161,26 @@ def _reported_variant(design: Design, fit: ExtendedFit, theta: np.ndarray, max_n
     2.4x the noise where the true ascending state reaches it (a random staircase at 10 kHz); with the data
     equal, the prior prefers the loop that needs no +-1 weights (the centred state's width 0.02 % of the stroke,
     the true descending one's 14 %)."""
-    def objective(d: Design, th: np.ndarray) -> float:
-        rep = _reported(d, th)
+    def objective(rep: tuple) -> float:
         return float(rep[3] @ rep[3]) + sum(f.get("penalty", 0.0) for f in rep[4].values())
 
-    if _reported(design, theta) is None:
+    own = _reported(design, theta)
+    if own is None:
         return fit
-    best, best_theta, best_obj = design, theta, objective(design, theta)
+    best, best_theta, best_obj = design, theta, objective(own)
     for e, _ in design.inputs:
-        if e.reported_solution(design.data, None) is None:
+        if e.name not in own[4]:
             continue
         for variant in e.variants:
             if variant != design.variants[e.name]:
                 other = Design(design.data, design.effects, design.harmonics, {**design.variants, e.name: variant})
-                obj = objective(other, theta)
+                obj = objective(_reported(other, theta))
                 if obj < best_obj:
                     best, best_obj = other, obj
     if best is design:
         return fit
     th = _polish(best.explored(), best, theta, max_nfev)
-    return _result(best, th if objective(best, th) < best_obj else best_theta)
+    return _result(best, th if objective(_reported(best, th)) < best_obj else best_theta)
 
 
 def _short_polishes(explore: Design, design: Design, chosen: list[np.ndarray], workers: int) -> list[np.ndarray]:
