@@ -255,56 +255,62 @@ def solve_pi_weights(a: np.ndarray, wy: np.ndarray, gain: int, cols: np.ndarray,
     noise_var = max(noise_var, float(PRIOR_FLOOR ** 2 * np.mean(np.square(wy))))
     cols = np.asarray(cols, dtype=int)
     live = cols[np.asarray(opened, dtype=bool)]
-    m = live.size
     others = np.setdiff1d(np.arange(p), np.concatenate(([gain], cols)))
-    # [b, b w_live] = D q (b = q_0, b w_j = q_j - q_(j-1)) and q = s (I + c 1 n^T) z: [b, b w_live] = s M z
-    first = np.flatnonzero(np.asarray(opened, dtype=bool))
-    counts = np.diff(np.concatenate(([0], first + 1, [cols.size + 1])))       # branches per distinct slope
-    D = np.eye(m + 1) - np.eye(m + 1, k=-1)
-    c = SLOPE_FLOOR / ((cols.size + 1) * (1.0 - SLOPE_FLOOR))
-    M = D @ (np.eye(m + 1) + c * np.outer(np.ones(m + 1), counts))
+    M = _slope_basis(np.asarray(opened, dtype=bool))
+    k = M.shape[0]
     slopes = a[:, np.concatenate(([gain], live))] @ M
-    free = a[:, others]
     scale_b = abs(gain_estimate) if gain_estimate != 0.0 and np.isfinite(gain_estimate) else 1.0
     for _ in range(PRIOR_ITERATIONS):
-        strength = np.sqrt(noise_var) / (WEIGHT_SCALE * scale_b)
-        (obj, z, penalty, s) = min((_slopes_solve(s * slopes, free, s * strength * M[1:], wy) + (s,)
-                                    for s in (1.0, -1.0)), key=lambda sol: sol[0])
-        bw = s * (M @ z[:m + 1])
+        prior = np.sqrt(noise_var) / (WEIGHT_SCALE * scale_b) * M[1:]
+        z, s = _bounded_solve(np.hstack([slopes, a[:, others]]), prior, wy, k)
+        bw = s * (M @ z[:k])
         if bw[0] == 0.0 or abs(abs(bw[0]) - scale_b) <= PRIOR_RTOL * scale_b:
             break
         scale_b = abs(bw[0])
     x = np.zeros(p)
     x[gain] = bw[0]
     x[live] = bw[1:]
-    x[others] = z[m + 1:]
+    x[others] = z[k:]
+    penalty = prior @ z[:k]
     return x, {"determined": _determined(a, gain, live, others, noise_var / (WEIGHT_SCALE * scale_b) ** 2),
-               "penalty": penalty}
+               "penalty": float(penalty @ penalty)}
 
 
-def _slopes_solve(slopes: np.ndarray, free: np.ndarray, prior: np.ndarray,
-                  wy: np.ndarray) -> tuple[float, np.ndarray, float]:
-    """(objective, z, penalty): least squares of [slopes free] z ~ wy plus the rows ``prior`` on z's slope part,
-    with that part >= 0 (bounded least squares when the plain solution breaks a bound)."""
+def _slope_basis(opened: np.ndarray) -> np.ndarray:
+    """M with [b, b w_opened] = s M z (``solve_pi_weights``): z = s (q - SLOPE_FLOOR mean(q)) for the branch slopes
+    q (b = q_0, b w_j = q_j - q_(j-1)); q = s (I + c 1 n^T) z, n the branches each distinct slope holds."""
+    k = int(opened.sum()) + 1
+    first = np.flatnonzero(opened)
+    counts = np.diff(np.concatenate(([0], first + 1, [opened.size + 1])))
+    c = SLOPE_FLOOR / ((opened.size + 1) * (1.0 - SLOPE_FLOOR))
+    return (np.eye(k) - np.eye(k, k=-1)) @ (np.eye(k) + c * np.outer(np.ones(k), counts))
+
+
+def _bounded_solve(design: np.ndarray, prior: np.ndarray, wy: np.ndarray, k: int) -> tuple[np.ndarray, float]:
+    """(z, s): least squares of ``s design[:, :k] z[:k] + design[:, k:] z[k:] ~ wy`` plus the rows ``prior`` on
+    z[:k], with z[:k] >= 0, for the better sign s (bounded least squares only where the plain solution breaks a
+    bound). One QR for both signs: the other sign negates R's first k columns."""
     from scipy.linalg import qr              # scipy on first use: importing the effects stays light
     from scipy.optimize import lsq_linear
-    k = slopes.shape[1]
-    design = np.hstack([slopes, free])
-    stacked = np.vstack([design, np.hstack([prior, np.zeros((prior.shape[0], free.shape[1]))])])
+    stacked = np.vstack([design, np.hstack([prior, np.zeros((prior.shape[0], design.shape[1] - k))])])
     norms = np.linalg.norm(stacked, axis=0)
     norms[norms == 0.0] = 1.0
     q, rr = qr(stacked / norms, mode="economic", check_finite=False)
     rhs = q[:wy.size].T @ wy
-    z = np.linalg.lstsq(rr, rhs, rcond=None)[0]
-    if np.any(z[:k] < 0.0):
-        lo = np.full(z.size, -np.inf)
-        lo[:k] = 0.0
-        z = lsq_linear(rr, rhs, bounds=(lo, np.inf), method="bvls", tol=1e-12).x
-        z[:k] = np.maximum(z[:k], 0.0)
-    z = z / norms
-    res = wy - design @ z
-    pen = prior @ z[:k]
-    return float(res @ res + pen @ pen), z, float(pen @ pen)
+    best = None
+    for s in (1.0, -1.0):
+        r_s = rr.copy()
+        r_s[:, :k] *= s
+        z = np.linalg.lstsq(r_s, rhs, rcond=None)[0]
+        if np.any(z[:k] < 0.0):
+            lo = np.full(z.size, -np.inf)
+            lo[:k] = 0.0
+            z = lsq_linear(r_s, rhs, bounds=(lo, np.inf), method="bvls", tol=1e-12).x
+            z[:k] = np.maximum(z[:k], 0.0)
+        miss = r_s @ z - rhs
+        if best is None or miss @ miss < best[0]:
+            best = (float(miss @ miss), z / norms, s)
+    return best[1], best[2]
 
 
 def _determined(a: np.ndarray, gain: int, live: np.ndarray, others: np.ndarray, prior_var_ratio: float) -> float:
