@@ -22,18 +22,20 @@ from ._numba_cache import configure as _configure_numba_cache
 _configure_numba_cache()
 
 from .errors import CreepOnlineError, DataError, IdentificationError, ModelError, OutputError
-from .model import CreepModel
+from .model import CreepModel, ExtendedModel, FittedModel
 from .record import Record
 from .simulate import simulate, step_response  # light: the module loads numba and scipy on first call
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "CreepModel", "Record", "simulate", "step_response", "identify", "OnlineEstimator", "diagnose",
+    "CreepModel", "ExtendedModel", "FittedModel", "Record", "simulate", "step_response", "identify",
+    "OnlineEstimator", "diagnose", "compare", "save_model", "load_model",
     "CreepOnlineError", "DataError", "IdentificationError", "ModelError", "OutputError",
 ]
 
 # The API mirrors the CLI; the heavier layers load on first use, not on import.
 # identify loads scipy and numba (~1 s): the CLI's --help must not pay for them.
-_LAZY = {"OnlineEstimator": "online", "diagnose": "diagnostics", "identify": "identification"}
+_LAZY = {"OnlineEstimator": "online", "diagnose": "diagnostics", "identify": "identification",
+         "compare": "diagnostics.compare", "save_model": "io.model_file", "load_model": "io.model_file"}
 __getattr__ = _lazy_attributes(__name__, _LAZY)

@@ -39,7 +39,8 @@ from .errors import DataError, IdentificationError
 from .global_fit import GRID_ZETAS, GlobalFit, at_floor, floor_ratio, global_fit, global_uncertainty, n_bic
 from .metrics import fit_percent, long_run_variance_factor, noise_std_estimate
 from .model import IDENTIFY_ALPHA_BOUNDS as ALPHA_BOUNDS  # alpha search interval of layer 1 and the polish
-from .model import CreepModel
+from .initial_state import FreeResponse
+from .model import CreepModel, ExtendedModel, FittedModel
 from .record import SAFE_AMPLITUDE, Record, check_time_and_output
 from .simulate import fractional_integral, increments, input_changes, superpose, superpose_rows, uniform_step
 from .timing import TimingCheck, check_timing
@@ -69,6 +70,30 @@ class IdentificationResult:
     uncertainty: dict[str, float] = field(default_factory=dict)
     noise_std: float = float("nan")
     y_hat: np.ndarray | None = field(default=None, repr=False)
+    #: The fitted free response of the state the record started in (None: it started at rest).
+    initial_response: FreeResponse | None = field(default=None, repr=False)
+
+    def simulate(self, t: np.ndarray, u: np.ndarray, initial: str = "fitted") -> np.ndarray:
+        """The fitted model's output for input u at times t, in the fit's conventions: ``y_hat`` again on the record.
+
+        offset + b G[u - input_offset] (the plant at rest at ``input_offset`` before t[0]), plus with
+        ``initial="fitted"`` the free response of the initial state the fit estimated, as a function of
+        t - t[0]; ``initial="zero"`` leaves it out (the plant at rest). Any time vector (non-uniform too).
+        """
+        if initial not in ("fitted", "zero"):
+            raise DataError(f"initial must be 'fitted' or 'zero', got {initial!r}")
+        t = np.asarray(t, dtype=float)
+        y = self.fitted_model().simulate(t, np.asarray(u, dtype=float))
+        if initial == "fitted" and self.initial_response is not None:
+            y = y + self.initial_response(t - t[0])
+        return y
+
+    def fitted_model(self, **provenance) -> FittedModel:
+        """This result as a ``FittedModel`` (what ``save_model`` writes); ``provenance`` adds to its ``fitted``."""
+        fitted = {"command": "identify", "fit_percent": self.fit_percent,
+                  "initial_state_estimated": self.initial_response is not None, **provenance}
+        return FittedModel(ExtendedModel(self.model, {}, self.offset), input_offset=self.input_offset,
+                           initial_state="free_response", fitted=fitted)
 
     def to_dict(self) -> dict:
         """JSON-ready summary: the stable keys first (the ``identify --json`` keys, tests/test_cli.py)."""
@@ -550,6 +575,7 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
         y_hat = model.b * model_output(model.alpha, model.a1, model.a2, h, u)
     residual = y - y_hat
     found = None
+    initial_response = None
     final_noise = noise_std_estimate(residual)
     if polish and not at_floor(residual, final_noise):
         found = _escalate(rec.u, y_raw, h, model, residual, user_offset, stages)
@@ -561,6 +587,8 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
             residual = y - y_hat
             final_noise = noise_std_estimate(residual)
             if found.problem.init:
+                initial_response = FreeResponse.from_weights(model.alpha, model.a1, model.a2, h, u.size,
+                                                             found.coef[1 + int(found.problem.offset):])
                 warnings.append("the record starts in operation (the plant moves at the first sample): its initial "
                                 f"state was estimated with {found.problem.linear_count - 1 - int(found.problem.offset)} "
                                 "free-response terms (past steps, resonance modes)")
@@ -587,7 +615,7 @@ def identify(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, t_c: float | None =
     return IdentificationResult(
         model=model, fit_percent=fit_percent(y, y_hat), elapsed_s=time.perf_counter() - start,
         t_c=t_c, offset=offset, input_offset=u0, warnings=warnings, stages=stages,
-        uncertainty=uncertainty, noise_std=noise, y_hat=y_hat + offset)
+        uncertainty=uncertainty, noise_std=noise, y_hat=y_hat + offset, initial_response=initial_response)
 
 
 def _timing(model: CreepModel, h: float, u: np.ndarray, residual: np.ndarray,
@@ -691,6 +719,8 @@ def _identify_scaled(rec: Record, su: float, sy: float, **kw) -> "Identification
     res.input_offset *= su
     res.noise_std *= sy
     res.y_hat = res.y_hat * sy
+    if res.initial_response is not None:
+        res.initial_response = res.initial_response.scaled(sy)
     res.warnings.append(f"u and y were rescaled by 1/{su:g} and 1/{sy:g} for the computation "
                         f"(amplitudes outside {SAFE_AMPLITUDE[0]:g}..{SAFE_AMPLITUDE[1]:g})")
     return res

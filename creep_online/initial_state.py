@@ -19,6 +19,8 @@ All are linear in their unknown weights and are projected out of the fit
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .discretize import resonance_poles
@@ -66,3 +68,69 @@ def creep_columns(alpha: float, h: float, n: int) -> np.ndarray:
     t = np.arange(n) * h
     m = past_offsets(n)
     return np.column_stack([(t + k * h) ** alpha for k in m[1:]])
+
+
+@dataclass(frozen=True)
+class FreeResponse:
+    """The fitted free response of the state a record started in, as a function of time since its first sample.
+
+    ``sum_k past_weights[k] S(tau + past_s[k]) + mode_weights . modes(tau)``: the weighted columns of
+    ``free_columns`` (S the unit-gain step response of (alpha, a1, a2), the modes those of the
+    resonance), so that a result can give its fitted output again for any time vector. On the grid it
+    was fitted on (step ``h``) the columns are computed exactly as the fit computed them; elsewhere
+    the step response is evaluated at arbitrary times.
+    """
+
+    alpha: float
+    a1: float
+    a2: float
+    h: float
+    past_s: tuple[float, ...]
+    past_weights: tuple[float, ...]
+    mode_weights: tuple[float, float]
+
+    @classmethod
+    def from_weights(cls, alpha: float, a1: float, a2: float, h: float, n: int, weights: np.ndarray) -> "FreeResponse":
+        """From the weights of ``free_columns(.., n)`` (past steps first, then the two modes) fitted on n samples."""
+        offsets = past_offsets(n)
+        weights = np.asarray(weights, dtype=float)
+        return cls(alpha, a1, a2, h, tuple(float(m * h) for m in offsets),
+                   tuple(float(w) for w in weights[:offsets.size]), (float(weights[-2]), float(weights[-1])))
+
+    def scaled(self, factor: float) -> "FreeResponse":
+        """The same response times ``factor`` (an output rescaled)."""
+        return FreeResponse(self.alpha, self.a1, self.a2, self.h, self.past_s,
+                            tuple(w * factor for w in self.past_weights),
+                            (self.mode_weights[0] * factor, self.mode_weights[1] * factor))
+
+    def __call__(self, tau: np.ndarray) -> np.ndarray:
+        """The free response at times ``tau`` (s) since the record's first sample."""
+        tau = np.asarray(tau, dtype=float)
+        offsets = np.rint(np.asarray(self.past_s) / self.h).astype(np.int64)
+        k = np.rint(tau / self.h)
+        if tau.size and np.allclose(tau, k * self.h, rtol=0.0, atol=1e-9 * self.h) and k.min() >= 0:
+            from .discretize import step_response_grid
+            idx = k.astype(np.int64)
+            step = step_response_grid(self.alpha, self.a1, self.a2, self.h, int(idx.max() + offsets.max()) + 1)
+            cols = np.column_stack([step[idx + m] for m in offsets])
+            tau = idx * self.h
+        else:
+            from .effects.responses import base_step_at
+            cols = np.column_stack([base_step_at(self.alpha, self.a1, self.a2, tau + s) for s in self.past_s])
+        return cols @ np.asarray(self.past_weights) + modes_at(self.a1, self.a2, tau) @ np.asarray(self.mode_weights)
+
+    def to_dict(self) -> dict:
+        """JSON-ready: the past step instants (s before the first sample), their weights, the modes' weights."""
+        return {"past_s": list(self.past_s), "past_weights": list(self.past_weights),
+                "mode_weights": list(self.mode_weights), "h": self.h}
+
+
+def modes_at(a1: float, a2: float, tau: np.ndarray) -> np.ndarray:
+    """``homogeneous_columns`` at arbitrary times tau (s), shape (len(tau), 2)."""
+    slow, fast = resonance_poles(a1, a2)
+    tau = np.asarray(tau, dtype=float)
+    if abs(slow.imag) > 0.0:
+        e = np.exp(np.clip(slow.real * tau, -700.0, 700.0)) * np.exp(1j * slow.imag * tau)
+        return np.column_stack((e.real, e.imag))
+    return np.column_stack((np.exp(np.clip(slow.real * tau, -700.0, 700.0)),
+                            np.exp(np.clip(fast.real * tau, -700.0, 700.0))))

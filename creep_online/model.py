@@ -162,3 +162,57 @@ def with_effects(model: CreepModel, **effects: dict) -> ExtendedModel:
     """``with_effects(model, delay={"delay_s": 2e-3})``: the model extended by effects (ModelError if unknown)."""
     check_effect_names(effects)
     return ExtendedModel(model, dict(effects))
+
+
+#: How a fit treats a record that does not start at rest (``FittedModel.initial_state``): ``identify`` adds
+#: the free response of an unknown initial state (``creep_online.initial_state``) where the data call for
+#: it; the extended fit (``fit``, ``diagnose``) reads the record as starting from rest or in equilibrium at
+#: its first input, whichever the start rule (``creep_online.diagnostics.start``) picks.
+INITIAL_STATE_METHODS = ("free_response", "reading")
+
+
+@dataclass(frozen=True)
+class FittedModel:
+    """A model as a fit found it: the extended model and the conventions of the record it was fitted under.
+
+    ``model`` holds the base parameters, the effects and ``offset``, the output at rest.
+    ``input_offset`` is the input the plant rests at before a record (the jump to the first input
+    happens at the first sample); None: the plant rests at the record's own first input (the model
+    sees u - u[0]). ``initial_state`` says how the fit treated a record that did not start at rest
+    (``INITIAL_STATE_METHODS``); ``compare`` estimates a new record's initial state the same way.
+    ``units`` names the units of t, u and y where the data said them; ``fitted`` describes the fit
+    (its command, record, samples and fit percent); ``version`` the creep_online that made it.
+    """
+
+    model: ExtendedModel
+    input_offset: float | None = 0.0
+    initial_state: str = "reading"
+    units: dict = field(default_factory=dict)
+    fitted: dict = field(default_factory=dict)
+    version: str = ""
+
+    def __post_init__(self) -> None:
+        if self.initial_state not in INITIAL_STATE_METHODS:
+            raise ModelError(f"initial_state must be one of {', '.join(INITIAL_STATE_METHODS)}, "
+                             f"got {self.initial_state!r}")
+        if self.input_offset is not None and not (isinstance(self.input_offset, (int, float, np.floating))
+                                                  and math.isfinite(self.input_offset)):
+            raise ModelError(f"input_offset must be a finite number or None, got {self.input_offset!r}")
+
+    @property
+    def base(self) -> CreepModel:
+        return self.model.base
+
+    @property
+    def effects(self) -> dict:
+        return self.model.effects
+
+    @property
+    def offset(self) -> float:
+        return self.model.offset
+
+    def simulate(self, t: np.ndarray, u: np.ndarray, t_pre: float | None = None) -> np.ndarray:
+        """The output for input u at times t under the model's conventions: the plant at rest at
+        ``input_offset`` before the first sample (or in equilibrium at u[0] when it is None), output
+        ``offset`` there. ``t_pre``: when the input jumped to u[0], if before t[0]."""
+        return self.model.simulate(t, u, u_pre=self.input_offset, t_pre=t_pre)

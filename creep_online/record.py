@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -14,12 +14,14 @@ MIN_SAMPLES = 20
 
 @dataclass
 class Record:
-    """Samples t (s), u (input units), y (output units) of one experiment."""
+    """Samples t (s), u (input units), y (output units) of one experiment; ``units``: the units of t, u and y
+    where the file named them (e.g. {"u": "V", "y": "um"})."""
 
     t: np.ndarray
     u: np.ndarray
     y: np.ndarray
     source: str = "<array>"
+    units: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
         self.t = np.ascontiguousarray(self.t, dtype=float)
@@ -75,7 +77,7 @@ class Record:
 
     def slice(self, start: int, stop: int) -> "Record":
         """Samples start..stop-1 as a new record (views, not copies)."""
-        return Record(self.t[start:stop], self.u[start:stop], self.y[start:stop], self.source)
+        return Record(self.t[start:stop], self.u[start:stop], self.y[start:stop], self.source, self.units)
 
 
 #: Time steps and spans the model can be computed on (a2 ~ t^2 must stay far from overflow).

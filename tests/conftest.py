@@ -1,12 +1,80 @@
-"""Shared fixtures: the reference data the tests need lives in tests/data (each folder with its source and licence)."""
+"""Shared fixtures and session set-up.
+
+* The reference data the tests need lives in tests/data (each folder with its source and licence).
+* Run in parallel (``pytest -n auto``, pytest-xdist; each test file on one worker, see pyproject),
+  the numba kernels are compiled once, in the controller, so that two workers never compile the
+  same kernel at once (on a fresh clone that is about a minute of CPU); the workers load them from
+  numba's cache. The files of long diagnoses go out first: they need only the batch kernels
+  (compiled before the workers start), so the online kernels compile beside them, and the short
+  files at the end let the workers finish together.
+"""
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = Path(__file__).resolve().parent / "data"
+
+#: The batch kernels (simulation, identification, diagnosis): compiled before the workers start.
+BATCH_KERNELS = (
+    "import numpy as np, creep_online as c\n"
+    "from creep_online.diagnostics import diagnose\n"
+    "t = np.arange(2000) * 1e-3; u = (t > 0.1) * 1.0\n"
+    "y = c.simulate(c.CreepModel(0.3, 0.01, 1e-4), t, u) + 1e-3 * np.random.default_rng(0).standard_normal(t.size)\n"
+    "c.identify(t, u, y); diagnose((t, u, y), candidates=('drift', 'delay'), workers=1)\n"
+)
+#: The online kernels (estimator, recursive tracker, compensator): compiled while the first tests run.
+ONLINE_KERNELS = (
+    "from creep_online.online import compensator, estimator, recursive\n"
+    "estimator.warm_kernels(); recursive.warm(); compensator.warm_kernels()\n"
+)
+#: Test files of long diagnoses, longest tests first; under -n they run before the rest.
+RUN_FIRST = ("test_real_data.py", "test_diagnose_pairs.py", "test_diagnostics.py")
+
+_warming: list[subprocess.Popen] = []
+
+
+def _runs_workers(config: pytest.Config) -> bool:
+    """True in the pytest-xdist controller of a parallel run (not in a worker, not in a serial run)."""
+    return bool(getattr(config.option, "numprocesses", None)) and not hasattr(config, "workerinput")
+
+
+def _warm(code: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-c", code], cwd=REPO, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def _reap(proc: subprocess.Popen) -> None:
+    _, err = proc.communicate(timeout=900)
+    if proc.returncode != 0:      # the tests that use the kernels say what is wrong; this says why they compiled
+        sys.stderr.write(f"conftest: compiling the numba kernels failed:\n{err[-2000:]}\n")
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_sessionstart(session: pytest.Session) -> None:
+    if not _runs_workers(session.config):
+        return
+    reporter = session.config.pluginmanager.get_plugin("terminalreporter")
+    if reporter is not None:
+        reporter.write_line("loading the numba kernels for the workers (compiling them takes about a minute "
+                            "of CPU on a fresh clone)")
+    _warming.append(_warm(ONLINE_KERNELS))
+    _reap(_warm(BATCH_KERNELS))
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    while _warming:
+        _reap(_warming.pop())
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    if hasattr(config, "workerinput"):      # an xdist worker: every worker sorts alike
+        items.sort(key=lambda item: RUN_FIRST.index(item.path.name) if item.path.name in RUN_FIRST
+                   else len(RUN_FIRST))
 
 
 @pytest.fixture(scope="session")

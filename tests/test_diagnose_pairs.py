@@ -20,7 +20,17 @@ def _bench():
     return load_bench("bench_diagnose_pairs")
 
 
-@pytest.mark.parametrize("pair, band", [(("second_mode", "hysteresis"), "3-10x"), (("hysteresis", "drift"), "10-100x")])
+@pytest.fixture(scope="module")
+def weak_mode_beside_hysteresis():
+    """Second mode + hysteresis (1.3-3x, seed 10) and its diagnosis, read by the two score-test cases below."""
+    bench = _bench()
+    rec = bench.make_pair_record(("second_mode", "hysteresis"), bench.BANDS["1.3-3x"], 10)
+    return bench, rec, diagnose((rec["t"], rec["u"], rec["y"]))
+
+
+# the second record takes the same path as the first (the two best single fits are the pair): -m slow
+@pytest.mark.parametrize("pair, band", [(("second_mode", "hysteresis"), "3-10x"),
+                                        pytest.param(("hysteresis", "drift"), "10-100x", marks=pytest.mark.slow)])
 def test_two_hidden_effects_are_both_named_and_their_combination_reaches_the_noise_floor(pair, band):
     bench = _bench()
     rec = bench.make_pair_record(pair, bench.BANDS[band], 0)
@@ -34,7 +44,8 @@ def test_two_hidden_effects_are_both_named_and_their_combination_reaches_the_noi
 
 
 @pytest.mark.parametrize("pair, band, seed, stand_in", [
-    (("leakage", "drift"), "10-100x", 0, "second_creep"),   # second creep alone imitates both slow effects
+    pytest.param(("leakage", "drift"), "10-100x", 0, "second_creep",   # second creep alone imitates both slow
+                 marks=pytest.mark.slow),                             # effects (the same path as the next: -m slow)
     (("delay", "drift"), "3-10x", 1, "hysteresis"),         # the delay is 5th alone: only given the drift (an
     #                                                          overdamped second mode ranked first until contradicted)
 ])
@@ -212,17 +223,16 @@ def test_a_partner_near_the_score_tests_threshold_is_fitted_for_real(monkeypatch
     assert old.combination is None or "delay" not in old.combination.effect.split("+")
 
 
-def test_a_weak_second_effect_the_residual_does_not_show_is_found_by_the_partners_score_test(monkeypatch):
+def test_a_weak_second_effect_the_residual_does_not_show_is_found_by_the_partners_score_test(
+        weak_mode_beside_hysteresis, monkeypatch):
     """Second mode + hysteresis (1.3-3x, seed 10): hysteresis alone fits to 1.03x the noise with a white residual and
     the two best single fits together (hysteresis + drift) add nothing, so the search never ran and the mode (0.22x
     the noise alone) went unnamed, though the hidden pair, fitted, beats hysteresis alone by a BIC drop of ~300.
     The score test of every partner at the hysteresis fit (``score.partner_scores``, no fit) sees the mode: the
     search runs and names both at the floor. With the score test switched off the record is answered as before."""
     from creep_online.diagnostics import pairs
-    bench = _bench()
-    rec = bench.make_pair_record(("second_mode", "hysteresis"), bench.BANDS["1.3-3x"], 10)
+    bench, rec, d = weak_mode_beside_hysteresis
     data = (rec["t"], rec["u"], rec["y"])
-    d = diagnose(data)
     assert d.candidates[0].effect == "hysteresis"
     assert d.candidates[0].fit.residual_rms <= 1.08 * d.noise_rms          # one effect "explains" the record
     assert len(d.pairs_tried) > 1
@@ -239,14 +249,13 @@ def test_a_weak_second_effect_the_residual_does_not_show_is_found_by_the_partner
     assert old.combination is None or "second_mode" not in old.combination.effect.split("+")
 
 
-def test_the_partners_score_test_sees_the_hidden_partner_and_nothing_beside_a_single_effect():
+def test_the_partners_score_test_sees_the_hidden_partner_and_nothing_beside_a_single_effect(
+        weak_mode_beside_hysteresis):
     """The score statistic itself (``score.partner_scores``): at hysteresis' fit of the record above the second mode
     passes the evidence threshold by far; at the fit of a single-effect record (leakage, 3-10x, seed 7 of the bands
     bench) no partner comes near it, so the record is not searched and stays single."""
     from creep_online.diagnostics import extended as ext, pairs, score
-    bench = _bench()
-    rec = bench.make_pair_record(("second_mode", "hysteresis"), bench.BANDS["1.3-3x"], 10)
-    d = diagnose((rec["t"], rec["u"], rec["y"]))
+    _, _, d = weak_mode_beside_hysteresis
     first = d.candidates[0]
     others = [c.effect for c in d.candidates[1:]]
     scores = score.partner_scores(d.data, first.effect, first.fit, others,
@@ -375,7 +384,8 @@ def test_a_pair_without_the_best_single_effect_is_found_by_the_runner_ups_score_
     assert d.verdict in ("leakage", "drift")
 
 
-@pytest.mark.parametrize("effect, seed", [("drift", 58), ("hysteresis", 77)])
+# both records take the same path (the single fit refitted from the pair's values): the first with -m slow
+@pytest.mark.parametrize("effect, seed", [pytest.param("drift", 58, marks=pytest.mark.slow), ("hysteresis", 77)])
 def test_a_pair_that_only_beats_the_single_fits_basin_is_not_significant(effect, seed):
     """Single-effect records of the bands table (1.3-3x): the single fit lost a well-damped resonance (drift alone
     1.022x the noise, the true model 1.010x; hysteresis 1.0066x against 0.9956x) and effect + delay, with the

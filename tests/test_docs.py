@@ -118,7 +118,7 @@ HISTORY = re.compile(r"\b(round \d|this round|previous round|issue \d+|latest \(
 
 #: The two quick-start commands: the README shows them exactly, and .ci/run runs exactly these.
 QUICK_START = ('python3 -m venv .venv && .venv/bin/pip install -q -e ".[all]" && .venv/bin/creep-online demo',
-               ".venv/bin/python -m pytest -q")
+               ".venv/bin/python -m pytest -q -n auto")
 
 
 def test_readme_is_a_front_page():

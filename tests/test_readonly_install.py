@@ -1,17 +1,22 @@
-"""A read-only install runs for another user (issue 14, item 4): no numba cache error at import.
+"""A read-only install runs for another user: no numba cache error at import.
 
 The package is copied (without any __pycache__) into a directory the test user
 cannot write, and run by an unprivileged user (``setpriv`` to nobody when the
-tests run as root; as root, permissions are not enforced). HOME is a writable
-temporary directory in one run and missing in the other (a service account).
+tests run as root; as root, permissions are not enforced). Its runtime
+dependencies (the closure of the package's base requirements, no extras) are
+installed from this environment into the same world-readable temporary tree, so
+the test does not depend on where the clone and its virtual environment live
+(a private home directory with mode 700 included). HOME is a writable temporary
+directory in one run and missing in the other (a service account).
 """
 from __future__ import annotations
 
+import importlib.metadata as metadata
 import os
+import re
 import shutil
 import subprocess
 import sys
-import sysconfig
 import tempfile
 from pathlib import Path
 
@@ -28,7 +33,8 @@ SCRIPT = ("import os, numpy as np, creep_online as c; t = np.arange(200) * 1e-3;
 def _interpreter_for_others() -> str | None:
     """A Python of this minor version that another user can execute (the venv's may live under /root)."""
     here = Path(sys.executable).resolve()
-    candidates = [here, Path("/usr/bin/python3"), Path("/usr/local/bin/python3")]
+    version = "%d.%d" % sys.version_info[:2]
+    candidates = [here, *(Path(d) / f"python{v}" for d in ("/usr/bin", "/usr/local/bin") for v in (version, "3"))]
     for exe in candidates:
         if not exe.exists():
             continue
@@ -46,6 +52,53 @@ def _as_nobody(cmd: list[str], env: dict[str, str]) -> subprocess.CompletedProce
     return subprocess.run(prefix + cmd, capture_output=True, text=True, env=full_env, timeout=600)
 
 
+def _base_requirements(dist: metadata.Distribution) -> list[str]:
+    """Names of what a distribution needs without extras (markers other than ``extra`` taken as true)."""
+    names = []
+    for req in dist.requires or []:
+        if "extra" in req.partition(";")[2]:
+            continue
+        names.append(re.match(r"[A-Za-z0-9._-]+", req).group(0))
+    return names
+
+
+def _runtime_closure(name: str) -> list[metadata.Distribution]:
+    """The installed distributions ``name`` needs to run, recursively, without itself."""
+    seen: dict[str, metadata.Distribution] = {}
+    todo = _base_requirements(metadata.distribution(name))
+    while todo:
+        dep = todo.pop()
+        key = re.sub(r"[-_.]+", "-", dep).lower()
+        if key in seen:
+            continue
+        seen[key] = metadata.distribution(dep)
+        todo.extend(_base_requirements(seen[key]))
+    return list(seen.values())
+
+
+def _install_copy(dist: metadata.Distribution, target: Path) -> None:
+    """Put an installed distribution's files (its RECORD, scripts outside site-packages left out) under target.
+
+    A file others can already read is hard-linked (fast, no space; its mode is never changed);
+    anything else, or across file systems, is copied and made readable by all.
+    """
+    for rel in dist.files or []:
+        if ".." in rel.parts:
+            continue
+        src = Path(dist.locate_file(rel))
+        if not src.is_file():
+            continue
+        dst = target / rel
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            if not src.stat().st_mode & 0o004:
+                raise PermissionError("not readable by others")
+            os.link(src, dst)
+        except OSError:
+            shutil.copyfile(src, dst)
+            dst.chmod(0o644)
+
+
 @pytest.fixture(scope="module")
 def readonly_install():
     if os.geteuid() == 0 and shutil.which("setpriv") is None:
@@ -60,6 +113,12 @@ def readonly_install():
     home.mkdir()
     for p in [root, *root.rglob("*")]:
         p.chmod(0o755 if p.is_dir() else 0o644)   # readable by all, writable by the owner only
+    deps = root / "deps"
+    for dist in _runtime_closure("creep_online"):
+        _install_copy(dist, deps)
+    for p in [deps, *deps.rglob("*")]:
+        if p.is_dir():
+            p.chmod(0o755)
     if os.geteuid() == 0:
         os.chown(home, NOBODY, NOBODY)
     else:
@@ -70,7 +129,6 @@ def readonly_install():
     if exe is None:
         shutil.rmtree(root, ignore_errors=True)
         pytest.skip("no Python of this version executable by an unprivileged user")
-    deps = sysconfig.get_paths()["purelib"]
     yield exe, f"{site}{os.pathsep}{deps}", home
     for p in [root, *root.rglob("*")]:
         if p.is_dir():

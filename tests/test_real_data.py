@@ -63,8 +63,14 @@ def test_fine_steering_mirror_has_a_second_mode(level):
     assert 800 < modes[0] < 1100 and 1900 < modes[1] < 2300, modes
 
 
-def test_polymer_creep_needs_a_second_power_law():
-    d = _diagnose("pe-melt-creep-reptate/pe_cm3_creep_10Pa.csv")
+@pytest.fixture(scope="module")
+def polymer_creep():
+    """The polymer creep record's diagnosis (both tests below read the same one)."""
+    return _diagnose("pe-melt-creep-reptate/pe_cm3_creep_10Pa.csv")
+
+
+def test_polymer_creep_needs_a_second_power_law(polymer_creep):
+    d = polymer_creep
     assert d.data.weights is not None  # log-spaced: relative fit
     assert d.verdict == "second_creep"
     fit = d.candidates[0].fit
@@ -73,10 +79,10 @@ def test_polymer_creep_needs_a_second_power_law():
     assert fit.residual_rms < 0.3 * d.base.residual_rms
 
 
-def test_polymer_creep_one_hold_leaves_the_physics_inconclusive_and_the_bic_decides():
+def test_polymer_creep_one_hold_leaves_the_physics_inconclusive_and_the_bic_decides(polymer_creep):
     """A creep test is a single hold: whether the extra motion follows the input (second creep) or ignores it
     (drift) cannot be seen in one hold, so the hold physics says so and the verdict rests on the BIC ranking."""
-    d = _diagnose("pe-melt-creep-reptate/pe_cm3_creep_10Pa.csv")
+    d = polymer_creep
     assert d.verdict == "second_creep"
     assert d.physics["verdict"] == "inconclusive" and "too few" in d.physics["reason"]
     basis = d.to_dict()["verdict_basis"]

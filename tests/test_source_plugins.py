@@ -94,9 +94,9 @@ def test_entry_point_source_is_listed_and_cannot_shadow_a_builtin(tmp_path, monk
 def test_entry_point_whose_module_is_missing_is_a_one_line_error(tmp_path):
     site = _installed_distribution(tmp_path, "ghost = no_such_module_here:Ghost")
     proc = _stream_in_subprocess(site, "ghost:x")
-    assert proc.returncode == 2
-    assert proc.stderr.strip() == ("creep-online stream: error: source kind 'ghost' needs no_such_module_here, "
-                                   "which is not installed")
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1     # with --json: one JSON object
+    assert json.loads(proc.stderr) == {"command": "stream", "type": "TransportError", "exit_code": 2,
+                                       "error": "source kind 'ghost' needs no_such_module_here, which is not installed"}
 
 
 # ------------------------------------------------------------------ options are the source's own

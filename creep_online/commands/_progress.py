@@ -1,11 +1,14 @@
-"""Progress on the terminal for runs that take a while (``diagnose``, ``fit``, ``identify``, ``demo``).
+"""Progress on the terminal for runs that take a while (``identify``, ``fit``, ``diagnose``, ``compare``, ``batch``,
+``demo``, a live ``stream``).
 
-A status line on stderr: rewritten in place on a terminal, or one plain line
-every few seconds when asked for on a non-terminal (the demo's CI logs). The
-batch commands show it only when stdout is a terminal and ``--json`` is off
-(``for_command``), so scripts and pipes see nothing but their output. While a
-stage runs, a background ticker refreshes the elapsed time, so a single long
-fit still shows that the program is alive; the line is erased when the work ends.
+On a terminal: one status line on stderr, drawn by rich (``rich.live.Live``),
+cut to the terminal's width (asked of the terminal, on every refresh, so a
+resized window is followed), a spinner and the stage's elapsed time refreshed
+in the background while a long fit runs, and erased when the work ends, so the
+command's output starts clean. Elsewhere, when asked for (the demo's CI logs):
+one plain line every few seconds. The commands show it only when stdout and
+stderr are terminals and ``--json`` is off (``for_command``): scripts and pipes
+see nothing but their output.
 """
 from __future__ import annotations
 
@@ -14,74 +17,70 @@ import threading
 import time
 from typing import TextIO
 
-#: Default width of the status line (characters).
-WIDTH = 100
-#: Refresh period on a terminal and of plain lines elsewhere (s).
-TTY_PERIOD = 0.25
+#: Refreshes per second on a terminal, and the period of plain lines elsewhere (s).
+REFRESH_PER_SECOND = 4
 PLAIN_PERIOD = 2.0
 
 
 class Progress:
-    """A status line: rewritten in place on a terminal, one line every few seconds otherwise."""
+    """A status line: redrawn in place on a terminal (fitted to its width), one line every few seconds otherwise."""
 
-    def __init__(self, enabled: bool, stream: TextIO | None = None, width: int = WIDTH) -> None:
+    def __init__(self, enabled: bool, stream: TextIO | None = None, width: int | None = None) -> None:
         self.enabled = enabled
-        self.width = width
+        self.width = width              # None: the terminal's, asked on every refresh
         self.stream = sys.stderr if stream is None else stream
         self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
-        self.period = TTY_PERIOD if self.tty else PLAIN_PERIOD
-        self._last = 0.0
-        self._lock = threading.Lock()
         self._text = ""
-        self._stage_t0 = 0.0
-        self._ticker: threading.Thread | None = None
-        self._stop = threading.Event()
+        self._stage_t0: float | None = None
+        self._last_plain = 0.0
+        self._live = None
+        self._lock = threading.Lock()
 
     def show(self, text: str, force: bool = False) -> None:
-        """Make ``text`` the status line (written at most once per period unless ``force``)."""
+        """Make ``text`` the status line (a plain line at most once per PLAIN_PERIOD unless ``force``)."""
         if not self.enabled:
             return
-        self._text = text
-        now = time.monotonic()
-        if force or now - self._last >= self.period:
-            self._write(text, now)
+        with self._lock:
+            self._text = text
+        if self.tty:
+            self._start()
+        else:
+            now = time.monotonic()
+            if force or now - self._last_plain >= PLAIN_PERIOD:
+                self._last_plain = now
+                self.stream.write(text + "\n")
+                self.stream.flush()
 
     def stage(self, text: str) -> None:
-        """Start a named stage: shown at once; on a terminal a ticker then adds its elapsed time."""
+        """Start a named stage: shown at once; on a terminal its elapsed time follows it."""
         if not self.enabled:
             return
         self._stage_t0 = time.monotonic()
         self.show(text, force=True)
-        if self.tty and self._ticker is None:
-            self._ticker = threading.Thread(target=self._tick, name="progress", daemon=True)
-            self._ticker.start()
 
-    def _tick(self) -> None:
-        while not self._stop.wait(self.period):
-            now = time.monotonic()
-            self._write(f"{self._text} {now - self._stage_t0:5.1f} s", now)
-
-    def _write(self, text: str, now: float) -> None:
+    def line(self) -> str:
+        """The status line as drawn now: the text and, within a stage, its elapsed time."""
         with self._lock:
-            self._last = now
-            if self.tty:
-                self.stream.write("\r" + text[:self.width].ljust(self.width))
-            else:
-                self.stream.write(text + "\n")
-            self.stream.flush()
+            text, t0 = self._text, self._stage_t0
+        return text if t0 is None else f"{text} {time.monotonic() - t0:5.1f} s"
+
+    def _start(self) -> None:
+        """The live display, started on the first line (rich's own thread refreshes it)."""
+        if self._live is not None:
+            self._live.refresh()
+            return
+        from rich.console import Console
+        from rich.live import Live
+        console = Console(file=self.stream, force_terminal=True, highlight=False, soft_wrap=False, width=self.width)
+        self._live = Live(_StatusLine(self), console=console, transient=True, auto_refresh=True,
+                          refresh_per_second=REFRESH_PER_SECOND, redirect_stdout=False, redirect_stderr=False)
+        self._live.start()
 
     def close(self) -> None:
-        """Stop the ticker and erase the line (a terminal) so the command's output starts clean."""
-        if not self.enabled:
-            return
-        self._stop.set()
-        if self._ticker is not None:
-            self._ticker.join()
-            self._ticker = None
-        if self.tty:
-            with self._lock:
-                self.stream.write("\r" + " " * self.width + "\r")
-                self.stream.flush()
+        """Stop the refreshes and erase the line (a terminal) so the command's output starts clean."""
+        if self._live is not None:
+            self._live.stop()
+            self._live = None
 
     def __enter__(self) -> "Progress":
         return self
@@ -90,8 +89,25 @@ class Progress:
         self.close()
 
 
+class _StatusLine:
+    """The renderable the live display redraws: a spinner and ``Progress.line()``, one line cut to the width."""
+
+    def __init__(self, progress: Progress) -> None:
+        from rich.spinner import Spinner
+        self.progress = progress
+        self.spinner = Spinner("dots")
+
+    def __rich_console__(self, console, options):
+        from rich.text import Text
+        line = Text.assemble(self.spinner.render(console.get_time()), " ", self.progress.line())
+        line.no_wrap = True
+        line.overflow = "ellipsis"
+        line.truncate(options.max_width, overflow="ellipsis")
+        yield line
+
+
 def for_command(json_output: bool) -> Progress:
-    """The batch commands' progress: on only when stdout and stderr are terminals and the output is not JSON."""
+    """The commands' progress: on only when stdout and stderr are terminals and the output is not JSON."""
     def tty(stream) -> bool:
         return bool(getattr(stream, "isatty", lambda: False)())
     return Progress(tty(sys.stdout) and tty(sys.stderr) and not json_output)

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..errors import CreepOnlineError
 from ..model import ONLINE_REFITS as REFITS
+from ..reports.demo_report import plant_truth
 from ._common import event_line, print_json, research_lines
 from ._progress import Progress
 
@@ -59,6 +60,18 @@ def register(subparsers) -> None:
     p.add_argument("--json", action="store_true", help="print the summary as JSON instead of text (no live progress)")
     p.add_argument("--quiet", action="store_true", help="no live progress")
     p.set_defaults(func=run)
+
+
+def scenario_plan(name: str, plant: dict, duration: float, t_last: float) -> dict:
+    """What the simulated plant does over the run (JSON-ready, ``reports.demo_report.plant_truth`` reads it):
+    its parameters at the start, the abrupt changes (time, parameter factors, words) and any drift."""
+    plan = {"name": name, "start": dict(plant), "changes": [], "drift": None, "t_last": t_last}
+    if name == "payload":
+        plan["changes"].append({"t": duration / 2, "factors": {"a2": 1.0 + PAYLOAD_MASS},
+                                "what": f"payload: moving mass +{100 * PAYLOAD_MASS:.0f} %"})
+    if name == "drift":
+        plan["drift"] = {"alpha": DRIFT[0], "b": DRIFT[1]}
+    return plan
 
 
 def _errors(model, truth) -> dict:
@@ -112,16 +125,15 @@ def run(args: argparse.Namespace) -> int:
     for flag, value in (("--params", args.params), ("--effects", args.effects), ("--faults", args.faults)):
         if value:
             plant_args += [flag, value]
-    progress = Progress(_live(args), width=160)
+    progress = Progress(_live(args))
     plant = start_plant(plant_args, progress, f"the simulated plant (hil_sim, {args.rate:g} Hz, {args.transport})")
     with plant:
         ready = plant.ready
-        truth = CreepModel(**ready["model"])
-        if payload:        # the estimate is judged against the plant as it ends
-            truth = CreepModel(truth.alpha, truth.a1, truth.a2 * (1.0 + PAYLOAD_MASS), truth.b)
-        if args.scenario == "drift":
-            truth = CreepModel(truth.alpha * (1 + DRIFT[0]), truth.a1, truth.a2, truth.b * (1 + DRIFT[1]))
         n_total = int(ready["samples"])
+        scenario = scenario_plan(args.scenario, ready["model"], args.duration, (n_total - 1) / args.rate)
+
+        def truth(t: float) -> CreepModel:      # the plant valid at plant time t
+            return CreepModel(**plant_truth(scenario, t))
         warm_kernels()
         est = OnlineEstimator(1.0 / args.rate, **({} if args.refit is None else {"refit": args.refit}))
         events: list[str] = []
@@ -137,7 +149,7 @@ def run(args: argparse.Namespace) -> int:
             ledger = None
         src.close()
     result.update(port=plant.port, tty=ready["tty"], transport=args.transport, rate_hz=args.rate,
-                  truth=truth.describe(), link_events=events, plant_ledger=ledger,
+                  truth=truth(result["t_end"]).describe(), scenario=scenario, link_events=events, plant_ledger=ledger,
                   source_stats=src.stats.as_dict())
     from ..reports.demo_report import write_report
     result["report"] = write_report(out_dir, result)
@@ -164,8 +176,11 @@ def _run_compensated(args: argparse.Namespace, out_dir: Path) -> int:
 
 
 def _stream(src, est, truth, n_total: int, args, t0: float, progress: Progress, on_batch=None) -> dict:
+    """Feed the plant's stream to the estimator; ``truth``: the plant (a CreepModel), or the plant valid at
+    each plant time (a function of t), which the live line and the final errors are measured against."""
     from ..io.feed import FeedLoop, SampleAge
     dt = 1.0 / args.rate
+    truth_at = truth if callable(truth) else (lambda _t: truth)
     trace: list[dict] = []
     next_trace = 0.0
 
@@ -178,7 +193,7 @@ def _stream(src, est, truth, n_total: int, args, t0: float, progress: Progress, 
                           "phase": e.phase, "quality": e.quality, "events": len(e.events),
                           "wall": time.monotonic() - loop.started})
             next_trace = t_plant + 0.1
-        progress.show(_status(loop, truth))
+        progress.show(_status(loop, truth_at((loop.last_seq or 0) * dt)))
         if on_batch is not None:        # --compensate: adapt and send the next commands
             on_batch(loop)
 
@@ -190,11 +205,12 @@ def _stream(src, est, truth, n_total: int, args, t0: float, progress: Progress, 
         raise end.error
     lat = loop.latency_us()
     e = est.estimate
-    trace.append({"t": (loop.last_seq or 0) * dt, "alpha": e.alpha, "a1": e.a1, "a2": e.a2, "b": e.b,
+    t_end = (loop.last_seq or 0) * dt
+    trace.append({"t": t_end, "alpha": e.alpha, "a1": e.a1, "a2": e.a2, "b": e.b,
                   "phase": e.phase, "quality": e.quality, "wall": loop.wall_s})
     return {
-        "estimate": e.to_dict(), "model": est.model.describe() if est.model else None,
-        "errors": _errors(est.model, truth), "samples_received": loop.fed, "samples_sent_by_plant": n_total,
+        "estimate": e.to_dict(), "model": est.model.describe() if est.model else None, "t_end": t_end,
+        "errors": _errors(est.model, truth_at(t_end)), "samples_received": loop.fed, "samples_sent_by_plant": n_total,
         "wall_s": loop.wall_s, "achieved_rate_sps": loop.fed / loop.wall_s if loop.wall_s > 0 else 0.0,
         "latency_us": _dist(lat), "gaps_not_fed": loop.lost_not_fed,
         "trace": trace, "_seq": np.asarray(loop.seqs), "_u": np.asarray(loop.us), "_y": np.asarray(loop.ys),
@@ -256,6 +272,13 @@ def _print_summary(r: dict, as_json: bool) -> None:
     if led.get("late_max_s", 0) > 0.05:
         print(f"  note    : the plant fell behind real time by up to {led['late_max_s'] * 1e3:.0f} ms "
               "(machine busy); samples were delivered late, none lost")
+    for change in (r.get("scenario") or {}).get("changes", []):
+        print(f"  change  : at t = {change['t']:.4g} s, {change['what']} (errors are measured against the plant "
+              "valid at each moment)")
+    if (r.get("scenario") or {}).get("drift"):
+        d = r["scenario"]["drift"]
+        print(f"  drift   : alpha {100 * d['alpha']:+.0f} %, b {100 * d['b']:+.0f} % over the run (errors are measured "
+              "against the plant valid at each moment)")
     lat = r["latency_us"]
     print(f"  latency : plant sample time -> estimator updated: p50 {lat['p50']:.0f} us, p99 {lat['p99']:.0f} us, "
           f"max {lat['max']:.0f} us")

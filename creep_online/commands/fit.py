@@ -3,11 +3,12 @@ from __future__ import annotations
 
 import argparse
 
-from ..diagnostics.extended import check_effects, fit_base, fit_extended, prepare
+from ..diagnostics.extended import check_effects, fit_extended
 from ..diagnostics.loading import load_for_diagnosis
+from ..diagnostics.start import fit_base_by_rule
 from ..effects import effect_names
 from ..metrics import noise_std_estimate
-from ._common import print_json
+from ._common import add_column_options, add_model_output, check_model_output, print_json, save_fitted, warn_time_unit
 from ._progress import for_command
 
 
@@ -16,9 +17,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Fits b / (s^alpha (1 + a1 s + a2 s^2)) plus the named effects "
                                    f"({', '.join(effect_names())}; one or several) and prints the parameters and "
                                    "the fit before and after.")
-    p.add_argument("data", help="CSV file with header t,u,y")
+    p.add_argument("data", help="CSV file with header t,u,y, or a PI GCS data-recorder file")
+    add_column_options(p)
     p.add_argument("--effects", required=True, help="comma-separated catalogue names, e.g. delay,drift")
     p.add_argument("--json", action="store_true", help="print JSON")
+    add_model_output(p)
     p.add_argument("--online", action="store_true",
                    help="also stream the record through the online estimator, plain and with the fitted effects "
                         "compensated sample by sample, each given its batch fit's alpha as a hint, and show "
@@ -29,18 +32,21 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     effects = check_effects(args.effects)
+    out_path = check_model_output(args.output, args.data)
     with for_command(args.json) as progress:
         progress.stage(f"fit {args.data}: loading")
-        inp = load_for_diagnosis(args.data)
+        inp = load_for_diagnosis(args.data, args.u_column, args.y_column, args.t_column)
         rec = inp.record
-        data = prepare(rec.t, rec.u, rec.y, source=rec.source, u_pre=inp.u_pre, t_pre=inp.t_pre)
-        progress.stage(f"fit {args.data}: base model")
-        base = fit_base(data)
+        notes: list[str] = []
+        data, base = fit_base_by_rule(rec.t, rec.u, rec.y, source=rec.source, u_pre=inp.u_pre, t_pre=inp.t_pre,
+                                      warnings=notes, report=lambda stage: progress.stage(f"fit {args.data}: {stage}"))
         progress.stage(f"fit {args.data}: base model + {', '.join(effects)}")
         fit = fit_extended(data, effects, base)
+    warn_time_unit(rec, fit.model)
+    saved = save_fitted(fit, out_path, rec) if out_path else None
     noise = noise_std_estimate(fit.residual)
     out = {**fit.to_dict(), "fit_percent_before": base.fit_percent, "residual_rms_before": base.residual_rms,
-           "noise_rms": noise, "samples": data.n, "file": rec.source, "notes": inp.notes + data.notes}
+           "noise_rms": noise, "samples": data.n, "file": rec.source, "notes": inp.notes + notes}
     live = None
     if args.online:
         from ..diagnostics.online import live_error
@@ -52,6 +58,8 @@ def run(args: argparse.Namespace) -> int:
             live = live_error(data.t - data.t[0], data.u, data.y, fit.effect_params, window_s=args.window,
                               base_model=base.model, extended_model=fit.model)
         out["online_live_error"] = live
+    if saved:
+        out["model_file"] = str(saved)
     if args.json:
         print_json(out)
         return 0
@@ -66,6 +74,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"  RMS    {base.residual_rms:.4g} -> {fit.residual_rms:.4g} (noise floor ~{noise:.4g})")
     for n in out["notes"]:
         print(f"  note: {n}")
+    if saved:
+        print(f"  model: {saved}")
     if live is not None:
         from ..diagnostics.online import format_live_error
         print("  live prediction error of the online estimator (RMS per window):")

@@ -5,7 +5,7 @@ import argparse
 
 from ..identification import identify
 from ..io.csvfile import load_record
-from ._common import add_column_options, print_json
+from ._common import add_column_options, add_model_output, check_model_output, print_json, save_fitted, warn_time_unit
 from ._progress import for_command
 
 
@@ -19,6 +19,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("data", help="CSV file with header t,u,y (uniform sampling), or a PI GCS data-recorder file")
     add_column_options(p)
     p.add_argument("--json", action="store_true", help="print JSON (alpha a1 a2 b fit_percent elapsed_s ...)")
+    add_model_output(p)
     p.add_argument("--t-c", type=float, default=None, help="end of the transient in s (default: from the data)")
     p.add_argument("--alpha0", type=float, default=None, help="starting alpha (default: coarse creep fit)")
     p.add_argument("--layer1-step", type=float, default=None, help="coarse step of layer 1 in s")
@@ -28,16 +29,21 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    out_path = check_model_output(args.output, args.data)
     with for_command(args.json) as progress:
         progress.stage(f"identify {args.data}: loading")
-        rec = load_record(args.data, args.u_column, args.y_column)
+        rec = load_record(args.data, args.u_column, args.y_column, t_column=args.t_column)
         progress.stage(f"identify {args.data}: {len(rec)} samples, fitting")
         res = identify(rec.t, rec.u, rec.y, t_c=args.t_c, alpha0=args.alpha0, layer1_step=args.layer1_step,
                        retune=not args.no_retune, polish=not args.no_polish, source=rec.source)
+    warn_time_unit(rec, res.model)
+    saved = save_fitted(res, out_path, rec) if out_path else None
     if args.json:
         out = res.to_dict()
         out["samples"] = len(rec)
         out["file"] = rec.source
+        if saved:
+            out["model_file"] = str(saved)
         print_json(out)
         return 0
     m, sd = res.model, res.uncertainty
@@ -49,4 +55,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"  fit    = {res.fit_percent:.2f} % (NRMSE), elapsed {res.elapsed_s * 1e3:.1f} ms")
     for w in res.warnings:
         print(f"  warning: {w}")
+    if saved:
+        print(f"  model  : {saved}")
     return 0

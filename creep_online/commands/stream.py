@@ -24,6 +24,7 @@ from ..io.csvfile import load_record
 from ..online import OnlineEstimator, warm_kernels
 from ..model import ONLINE_REFITS as REFITS
 from ._common import add_column_options, event_line, print_json, research_lines
+from ._progress import for_command
 
 
 #: How a stream ended -> exit code. Every end after the first sample prints the estimate and the counters.
@@ -65,7 +66,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "of stream time")
     p.add_argument("--dt", type=float, default=None, help="sampling step in s (live sources; default: from the stream)")
     p.add_argument("--block", action="store_true", help="csv: feed the whole file with update_block (throughput)")
-    add_column_options(p)
+    add_column_options(p, time=False)
     p.add_argument("--max-samples", type=int, default=None, help="stop after this many samples (live sources)")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds (live sources)")
     p.set_defaults(func=run)
@@ -267,6 +268,24 @@ def _end(reason: str, message: str = "") -> dict:
     return {"reason": reason, "exit_code": END_CODES[reason], "message": message}
 
 
+def status_line(spec: str, loop) -> str:
+    """The live status line of a stream on a terminal: samples, stream time, rate, phase, estimate, link trouble."""
+    est = loop.estimator
+    if est is None:
+        return f"stream {spec}: waiting for samples"
+    e = est.estimate
+    wall = time.monotonic() - loop.started
+    text = (f"stream {spec}: {loop.fed} samples, t = {e.t:.2f} s, {loop.fed / max(wall, 1e-9) / 1e3:.1f} kS/s, "
+            f"{e.phase}/{e.quality}")
+    if est.model is not None:
+        text += f", alpha {e.alpha:.4g}, fn {e.fn_hz:.4g} Hz, zeta {e.zeta:.3g}, b {e.b:.4g}"
+    if e.events:
+        text += f", {len(e.events)} change(s)"
+    if loop.lost:
+        text += f", {loop.lost} lost"
+    return text
+
+
 def _run_live(spec: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dict, dict]:
     try:
         registry = importlib.import_module("creep_online.io.registry")
@@ -294,12 +313,15 @@ def _run_live(spec: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dic
         return (loop.estimator is not None and args.max_samples is not None
                 and loop.estimator.samples >= args.max_samples)
 
-    loop = feed.FeedLoop(source, make_estimator, dt=args.dt, duration=args.duration, stop_when=enough,
-                         on_sample=add_to_trace if args.trace is not None else None)
-    try:
-        end = loop.run()
-    finally:
-        source.close()
+    with for_command(args.json) as progress:
+        progress.stage(f"stream {spec}: waiting for samples")
+        loop = feed.FeedLoop(source, make_estimator, dt=args.dt, duration=args.duration, stop_when=enough,
+                             on_sample=add_to_trace if args.trace is not None else None,
+                             on_batch=lambda loop: progress.show(status_line(spec, loop)))
+        try:
+            end = loop.run()
+        finally:
+            source.close()
     stats = getattr(source, "stats", None)
     trace.write()
     est = loop.estimator

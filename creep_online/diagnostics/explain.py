@@ -39,6 +39,7 @@ from .locate import locate
 from .pairs import choose_pair, contradicts
 from .pool import ordered_map, resolve_workers
 from .residuals import autocorrelation, cross_correlation, parameter_uncertainty
+from .start import fit_base_by_rule
 
 #: ... and the relative drop of the residual RMS it must achieve.
 MIN_RMS_DROP = 0.02
@@ -184,20 +185,6 @@ def _as_arrays(record_or_t_u_y, step_before: bool = False) -> tuple[np.ndarray, 
     return rec.t, rec.u, rec.y, rec.source
 
 
-def _start_from_identify(data: ext.Prepared, warnings: list[str]):
-    """identify()'s model as one start of the base fit (uniform records); None if it cannot run."""
-    if not data.uniform:
-        return None
-    try:
-        from ..identification import identify
-        return identify(data.t, data.u, data.y, polish=False).model
-    except CreepOnlineError as exc:
-        warnings.append(f"identify() gave no start ({exc}); grid start used")
-    except Exception as exc:  # noqa: BLE001 - identify is a starting point only; its failure must not stop diagnosis
-        warnings.append(f"identify() failed ({type(exc).__name__}: {exc}); grid start used")
-    return None
-
-
 def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_identify: bool = True,
              u_pre: float | None = None, t_pre: float | None = None, combine: bool = True,
              max_nfev: int = ext.MAX_NFEV, progress: Callable[[str], None] | None = None,
@@ -206,8 +193,9 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
 
     ``record_or_t_u_y`` is a ``Record`` or a ``(t, u, y)`` tuple. ``u_pre`` /
     ``t_pre`` describe an input step before the first sample (e.g. a creep
-    test logged from t > 0); by default the record starts in equilibrium at
-    u[0]. ``combine`` also fits the two best significant effects together.
+    test logged from t > 0); by default the start rule decides (from rest for a
+    step experiment, in equilibrium at u[0] otherwise, the other reading when it
+    fits clearly better: ``creep_online.diagnostics.start``). ``combine`` also fits the two best significant effects together.
     ``candidates``: the effects to try (default: every registered one,
     ``creep_online.effects.effect_names()``). ``progress`` is called with the
     name of each stage as it starts (the CLI shows it on a terminal).
@@ -226,20 +214,9 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
     n_workers = resolve_workers(workers)
     for name in candidates:
         ext.check_effects([name])
-    data = ext.prepare(t, u, y, source=source, u_pre=u_pre, t_pre=t_pre)
-    warnings = pre_notes + list(data.notes)
-    report("base model: two-layer identification" if use_identify else "base model")
-    start_model = _start_from_identify(data, warnings) if use_identify else None
-    report("base model: joint fit")
-    base = ext.fit_base(data, start=start_model, max_nfev=max_nfev)
-    if u_pre is None and t_pre is None and u[0] != 0.0:
-        # equilibrium at u[0] (default) or at rest with a jump 0 -> u[0] at t[0]: let the fit decide
-        rest = ext.prepare(t, u, y, source=source, u_pre=0.0)
-        base_rest = ext.fit_base(rest, start=base.model, max_nfev=max_nfev, grid=False)
-        if base_rest.rss < 0.9 * base.rss:
-            data, base = rest, base_rest
-            warnings.append(f"the record starts from rest: input read as a jump 0 -> {u[0]:g} at t = {t[0]:g} s "
-                            "(fits better than equilibrium at u[0])")
+    warnings = pre_notes
+    data, base = fit_base_by_rule(t, u, y, source=source, u_pre=u_pre, t_pre=t_pre, use_identify=use_identify,
+                                  max_nfev=max_nfev, warnings=warnings, report=report)
     noise = noise_std_estimate(base.residual)
     settle = min(base.model.settling_time, 0.25 * (data.t[-1] - data.t[0]))
     where = locate(data.t, data.u, base.residual, noise, settle)

@@ -33,16 +33,15 @@ from scipy.optimize import least_squares
 from .. import effects as fx
 from ..effects import FitView, InputEffect, ParallelEffect, ParamSpec, Stage, check_effect_names, effect_names, get_effect
 from ..discretize import step_response_sensitivity
+from ..effects.forward import SNAP_RTOL, snapped_time  # noqa: F401 - SNAP_RTOL: the snapping rule, re-exported
 from ..errors import DataError, ModelError
 from ..metrics import fit_percent, noise_std_estimate, rms
 from ..model import EXTENDED_FIT_ALPHA_BOUNDS as ALPHA_BOUNDS
-from ..model import CreepModel, ExtendedModel, with_effects
+from ..model import CreepModel, ExtendedModel, FittedModel, with_effects
 from ..record import check_amplitudes, check_time_and_output
 from .pool import ordered_map
 from .varpro import projected_jacobian
 
-#: Time stamps whose step varies by less than this (relative) are snapped to a uniform grid.
-SNAP_RTOL = 1e-2
 #: Bounds of the base model's damping (alpha's are ``model.EXTENDED_FIT_ALPHA_BOUNDS``).
 ZETA_BOUNDS = (1e-3, 20.0)
 #: Evaluations allowed per least-squares fit.
@@ -294,10 +293,9 @@ def prepare(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, source: str = "<arra
     check_amplitudes(np.asarray(u, dtype=float), y, source)
     w = None
     notes: list[str] = []
-    if not fx.is_uniform(t) and fx.is_uniform(t, rtol=SNAP_RTOL):
+    t, jitter = snapped_time(t)
+    if jitter > 0.0:
         h = (t[-1] - t[0]) / (t.size - 1)
-        jitter = float(np.max(np.abs(np.diff(t) - h)) / h)
-        t = t[0] + np.arange(t.size) * h
         notes.append(f"time stamps jitter by up to {100 * jitter:.2g} % of the step: treated as uniform (h = {h:.6g} s)")
     if isinstance(weights, str):
         if weights != "auto":
@@ -730,9 +728,18 @@ class ExtendedFit:
     names: list = field(default_factory=list, repr=False)         # names of theta's entries
 
     def simulate(self, t: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """This model's output for another input (same conventions as the fitted record)."""
+        """This model's output for input u at times t, in the fitted record's conventions (``y_hat`` again on it).
+
+        Time stamps that jitter around a uniform grid are read on that grid, as the fit read them.
+        """
         return fx.simulate_with_effects(self.model, t, u, self.effect_params, offset=self.offset,
                                         u_pre=self.u_pre, t_pre=self.t_pre)
+
+    def fitted_model(self, **provenance) -> FittedModel:
+        """This fit as a ``FittedModel`` (what ``save_model`` writes); ``provenance`` adds to its ``fitted``."""
+        fitted = {"command": "fit", "fit_percent": self.fit_percent, "effects": list(self.effects), **provenance}
+        return FittedModel(ExtendedModel(self.model, dict(self.effect_params), self.offset), input_offset=self.u_pre,
+                           initial_state="reading", fitted=fitted)
 
     def to_dict(self) -> dict:
         return {"effects": list(self.effects), **self.model.describe(), "offset": self.offset,

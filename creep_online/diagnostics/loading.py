@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError, DataWarning
-from ..io.csvfile import load_record, read_columns
+from ..io.csvfile import in_seconds, load_record, read_table
 from ..io.gcsfile import is_gcs_file
 from ..record import MIN_SAMPLES, Record
 
@@ -47,22 +47,23 @@ def merge_repeated_times(t: np.ndarray, u: np.ndarray, y: np.ndarray) -> tuple[n
 
 
 def load_for_diagnosis(path: str | Path, u_column: str | None = None,
-                       y_column: str | None = None) -> DiagnosisInput:
+                       y_column: str | None = None, t_column: str | None = None) -> DiagnosisInput:
     """Load a record for diagnosis (see the module notes); DataError naming file and problem otherwise.
 
-    ``u_column``/``y_column`` choose the input and output columns by name (``load_record``).
+    ``t_column``/``u_column``/``y_column`` choose the columns by name (``load_record``).
     A GCS file's time comes from its sample time, so only the CSV readings apply to CSV files.
     """
     try:
-        return DiagnosisInput(load_record(path, u_column, y_column))
+        return DiagnosisInput(load_record(path, u_column, y_column, t_column=t_column))
     except DataError as first:
         if is_gcs_file(path):
             raise
-        names = ("t", (u_column or "u").strip().lower(), (y_column or "y").strip().lower())
+        names = tuple(c.strip().lower() for c in (t_column or "t", u_column or "u", y_column or "y"))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", DataWarning)   # already said by load_record
-            cols = read_columns(path, names)  # raises the file-level errors itself
-        t, u, y = cols["t"], cols[names[1]], cols[names[2]]
+            cols, units = read_table(path, names)  # raises the file-level errors itself
+        t, units[names[0]] = in_seconds(path, cols[names[0]], units[names[0]])
+        u, y = cols[names[1]], cols[names[2]]
         notes = []
         if t.size >= 2 and np.all(np.diff(t) >= 0) and np.any(np.diff(t) == 0):
             try:
@@ -70,7 +71,8 @@ def load_for_diagnosis(path: str | Path, u_column: str | None = None,
             except DataError as exc:
                 raise DataError(f"{path}: {exc}") from None
             notes.append(f"{merged} sample(s) with repeated time stamps merged (mean output)")
-        rec = Record(t, u, y, source=str(path))
+        found = {"t": units[names[0]], "u": units[names[1]], "y": units[names[2]]}
+        rec = Record(t, u, y, source=str(path), units={k: v for k, v in found.items() if v})
         u_pre = t_pre = None
         if t.size and np.ptp(u) == 0.0 and u[0] != 0.0 and t[0] > 0.0:
             u_pre, t_pre = 0.0, 0.0

@@ -14,6 +14,7 @@ import csv
 import io
 import math
 import os
+import re
 import stat
 import warnings
 from pathlib import Path
@@ -79,22 +80,94 @@ def _read_text(path: Path) -> str:
         raise DataError(f"{path}: not a text file (undecodable byte at offset {exc.start})") from None
 
 
-def _header(path: Path, line: str, required: tuple[str, ...]) -> list[int]:
-    names = [c.strip().lower() for c in next(csv.reader([line]))]
-    missing = [c for c in required if c not in names]
+#: Delimiters a header is sniffed for (the most frequent one in the header line wins; comma on a tie).
+DELIMITERS = (",", ";", "\t")
+#: Other names of the three columns (case-insensitive; a unit may follow, ``t [s]``, ``t (s)``, ``t / s``).
+ALIASES = {"time": "t", "input": "u", "output": "y"}
+#: Time units the time column may name, as factors to seconds (it is converted to seconds on reading).
+TIME_UNITS = {"s": 1.0, "sec": 1.0, "ms": 1e-3, "us": 1e-6, "\u00b5s": 1e-6, "\u03bcs": 1e-6, "ns": 1e-9}
+_UNIT = re.compile(r"^(?P<name>.*?)\s*(?:\[(?P<b>[^\]]*)\]|\((?P<p>[^)]*)\)|/\s*(?P<s>[^/\s]+))$")
+#: What a missing-column message suggests.
+NAMING_HINT = ("name the columns t/time, u/input, y/output (units allowed, e.g. 't [s]'), "
+               "or choose them with --t-column/--u-column/--y-column")
+
+
+def sniff_delimiter(line: str) -> str:
+    """The header's delimiter: the most frequent of ``DELIMITERS`` (comma when none or a tie)."""
+    counts = [line.count(d) for d in DELIMITERS]
+    best = max(range(len(DELIMITERS)), key=lambda k: (counts[k], -k))
+    return DELIMITERS[best] if counts[best] > 0 else ","
+
+
+def split_name(cell: str) -> tuple[str, str]:
+    """(name, unit) of a header cell: ``'t [ms]'`` -> ('t', 'ms'); no unit -> (name, ''); lower-case name."""
+    cell = cell.strip()
+    m = _UNIT.match(cell)
+    if m and m.group("name"):
+        unit = next(g for g in (m.group("b"), m.group("p"), m.group("s")) if g is not None)
+        return m.group("name").strip().lower(), unit.strip()
+    return cell.lower(), ""
+
+
+def _matches(cell: str, wanted: str) -> bool:
+    """Whether header cell ``cell`` names column ``wanted`` (its full text, its name, or the name's alias)."""
+    name, _ = split_name(cell)
+    return cell.strip().lower() == wanted or name == wanted or ALIASES.get(name) == wanted
+
+
+def _header(path: Path, line: str, required: tuple[str, ...], delimiter: str = ",") -> list[int]:
+    """Indices of the ``required`` columns in the header ``line``; DataError naming what is missing or doubled."""
+    return _header_units(path, line, required, delimiter)[0]
+
+
+def _header_units(path: Path, line: str, required: tuple[str, ...],
+                  delimiter: str = ",") -> tuple[list[int], dict[str, str]]:
+    """(indices, units by required name) of the required columns in the header ``line``."""
+    cells = next(csv.reader([line], delimiter=delimiter))
+    found = {c: [i for i, cell in enumerate(cells) if _matches(cell, c)] for c in required}
+    missing = [c for c in required if not found[c]]
     if missing:
-        shown = ",".join(names)[:80]
-        raise DataError(f"{path}: missing column(s) {','.join(missing)} in header '{shown}' (need {','.join(required)})")
+        shown = delimiter.join(c.strip() for c in cells)[:80]
+        other = [d for d in DELIMITERS if d != delimiter and d in line]
+        hint = f"the header is {_delimiter_name(delimiter)}-separated" + (
+            f" and also holds {_delimiter_name(other[0])}s" if other else "")
+        raise DataError(f"{path}: missing column(s) {','.join(missing)} in header '{shown}' (need "
+                        f"{','.join(required)}); {hint}: {NAMING_HINT}")
     for c in required:
-        if names.count(c) > 1:
-            where = [i + 1 for i, n in enumerate(names) if n == c]
+        if len(found[c]) > 1:
+            where = [i + 1 for i in found[c]]
             raise DataError(f"{path}: column {c} appears {len(where)} times in the header "
                             f"(columns {', '.join(map(str, where))}); which one is meant is ambiguous")
-    return [names.index(c) for c in required]
+    idx = [found[c][0] for c in required]
+    return idx, {c: split_name(cells[i])[1] for c, i in zip(required, idx)}
+
+
+def _delimiter_name(d: str) -> str:
+    return {",": "comma", ";": "semicolon", "\t": "tab"}[d]
+
+
+def _number(cell: str, delimiter: str) -> float:
+    """A cell as a float; with a semicolon or tab delimiter a decimal comma is accepted too."""
+    try:
+        return float(cell)
+    except ValueError:
+        if delimiter != "," and cell.count(",") == 1 and "." not in cell:
+            return float(cell.replace(",", "."))
+        raise
 
 
 def read_columns(path: str | Path, required: tuple[str, ...] = ("t", "u", "y")) -> dict[str, np.ndarray]:
     """The named columns of a CSV file as float arrays; DataError on any malformed cell."""
+    return read_table(path, required)[0]
+
+
+def read_table(path: str | Path, required: tuple[str, ...] = ("t", "u", "y")) -> tuple[dict[str, np.ndarray],
+                                                                                       dict[str, str]]:
+    """(columns, units): the named columns as float arrays and the unit each header cell names ('' if none).
+
+    The delimiter is sniffed from the header (comma, semicolon or tab); columns match by name, alias
+    or ``name [unit]`` (``_matches``). DataError on any malformed cell.
+    """
     path = Path(path)
     text = _read_text(path)
     lines = text.splitlines()
@@ -104,15 +177,17 @@ def read_columns(path: str | Path, required: tuple[str, ...] = ("t", "u", "y")) 
     first = next((i for i, ln in enumerate(lines) if ln.strip()), None)
     if first is None:
         raise DataError(f"{path}: empty file (expected a header {','.join(required)})")
-    cols = _header(path, lines[first], required)
-    _check_last_line(path, text, lines[first + 1:], cols, first + 1)
-    fast = _fast_parse(lines[first + 1:], cols)
+    delimiter = sniff_delimiter(lines[first])
+    cols, units = _header_units(path, lines[first], required, delimiter)
+    _check_last_line(path, text, lines[first + 1:], cols, first + 1, delimiter)
+    fast = _fast_parse(lines[first + 1:], cols, delimiter)
     if fast is not None:
-        return {name: fast[:, k].copy() for k, name in enumerate(required)}
+        return {name: fast[:, k].copy() for k, name in enumerate(required)}, units
     width = max(cols) + 1
     out = np.empty((len(lines) - first - 1, len(cols)))
     n = 0
-    for lineno, row in enumerate(csv.reader(io.StringIO("\n".join(lines[first + 1:]))), start=first + 2):
+    rows = csv.reader(io.StringIO("\n".join(lines[first + 1:])), delimiter=delimiter)
+    for lineno, row in enumerate(rows, start=first + 2):
         if not row or all(not c.strip() for c in row):
             continue
         if len(row) < width:
@@ -120,17 +195,18 @@ def read_columns(path: str | Path, required: tuple[str, ...] = ("t", "u", "y")) 
         for k, c in enumerate(cols):
             cell = row[c].strip()
             try:
-                value = float(cell)
+                value = _number(cell, delimiter)
             except ValueError:
                 raise DataError(f"{path}: line {lineno}, column {required[k]}: not a number: {cell[:30]!r}") from None
             if not math.isfinite(value):
                 raise DataError(f"{path}: line {lineno}, column {required[k]}: {cell!r} (NaN/inf not allowed)")
             out[n, k] = value
         n += 1
-    return {name: out[:n, k].copy() for k, name in enumerate(required)}
+    return {name: out[:n, k].copy() for k, name in enumerate(required)}, units
 
 
-def _check_last_line(path: Path, text: str, body: list[str], cols: list[int], offset: int) -> None:
+def _check_last_line(path: Path, text: str, body: list[str], cols: list[int], offset: int,
+                     delimiter: str = ",") -> None:
     """A last line without end-of-line was perhaps cut (file copied or still being written): say so.
 
     Cut mid-row (too few fields, or a cell that is not a number): DataError.
@@ -139,9 +215,9 @@ def _check_last_line(path: Path, text: str, body: list[str], cols: list[int], of
     if not body or text.endswith(("\n", "\r")) or not body[-1].strip():
         return
     lineno = offset + len(body)
-    cells = next(csv.reader([body[-1]]), [])
+    cells = next(csv.reader([body[-1]], delimiter=delimiter), [])
     try:
-        ok = len(cells) > max(cols) and all(math.isfinite(float(cells[c])) for c in cols)
+        ok = len(cells) > max(cols) and all(math.isfinite(_number(cells[c].strip(), delimiter)) for c in cols)
     except ValueError:
         ok = False
     if not ok:
@@ -151,12 +227,12 @@ def _check_last_line(path: Path, text: str, body: list[str], cols: list[int], of
                   f"written, its last number may be incomplete", DataWarning, stacklevel=3)
 
 
-def _fast_parse(body: list[str], cols: list[int]) -> np.ndarray | None:
+def _fast_parse(body: list[str], cols: list[int], delimiter: str = ",") -> np.ndarray | None:
     """numpy's parser for the clean common case; None sends the file to the careful path."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # "input contained no data": reported by the careful path
-            arr = np.loadtxt(io.StringIO("\n".join(body)), delimiter=",", usecols=cols, ndmin=2, dtype=float)
+            arr = np.loadtxt(io.StringIO("\n".join(body)), delimiter=delimiter, usecols=cols, ndmin=2, dtype=float)
     except (ValueError, IndexError):
         return None
     if arr.shape[0] == 0 or not np.all(np.isfinite(arr)):
@@ -167,29 +243,48 @@ def _fast_parse(body: list[str], cols: list[int]) -> np.ndarray | None:
 def load_csv(path: str | Path, min_samples: int = MIN_SAMPLES, need_output: bool = True) -> Record:
     """Load and validate a ``t,u,y`` record; raise DataError with a one-line reason."""
     required = ("t", "u", "y") if need_output else ("t", "u")
-    cols = read_columns(path, required)
+    cols, units = read_table(path, required)
+    t, units["t"] = in_seconds(path, cols["t"], units["t"])
     y = cols.get("y", np.zeros_like(cols["t"]))
-    rec = Record(cols["t"], cols["u"], y, source=str(path))
+    rec = Record(t, cols["u"], y, source=str(path), units={k: v for k, v in units.items() if v})
     return rec.validate(min_samples)
 
 
-def load_record(path: str | Path, u_column: str | None = None, y_column: str | None = None,
-                min_samples: int = MIN_SAMPLES) -> Record:
-    """A ``t,u,y`` CSV or a GCS data-recorder file (told apart by content), input/output columns by name.
+def in_seconds(path, t: np.ndarray, unit: str) -> tuple[np.ndarray, str]:
+    """(time in seconds, its unit): a time column whose header names ms, us or ns is converted; no unit: as is."""
+    if not unit:
+        return t, ""
+    factor = TIME_UNITS.get(unit) or TIME_UNITS.get(unit.lower())
+    if factor is None:
+        raise DataError(f"{path}: time unit {unit!r} in the header is not one of {', '.join(TIME_UNITS)}")
+    return (t * factor if factor != 1.0 else t), "s"
 
-    CSV: ``u_column``/``y_column`` name header columns (default ``u``, ``y``;
-    time is always ``t``). GCS: they name NAMEi columns (default NAME0, NAME1).
+
+def load_record(path: str | Path, u_column: str | None = None, y_column: str | None = None,
+                min_samples: int = MIN_SAMPLES, t_column: str | None = None) -> Record:
+    """A ``t,u,y`` CSV or a GCS data-recorder file (told apart by content), columns chosen by name.
+
+    CSV: ``t_column``/``u_column``/``y_column`` name header columns (default ``t``, ``u``, ``y``, or
+    their aliases ``time``, ``input``, ``output``; a unit may follow the name). A time column in
+    ms/us/ns (named in its header) is converted to seconds. GCS: ``u_column``/``y_column`` name NAMEi
+    columns (default NAME0, NAME1); its time comes from the sample time. The record's ``units`` holds
+    the units the header named.
     """
     from .gcsfile import is_gcs_file, load_gcs
     if is_gcs_file(path):
+        if t_column is not None:
+            raise DataError(f"{path}: a PI GCS data-recorder file has no time column to choose "
+                            "(its time comes from the sample time): drop --t-column")
         return load_gcs(path, u_column, y_column, min_samples)
-    if u_column is None and y_column is None:
+    if u_column is None and y_column is None and t_column is None:
         return load_csv(path, min_samples)
-    names = ("t", (u_column or "u").strip().lower(), (y_column or "y").strip().lower())
+    names = tuple(c.strip().lower() for c in (t_column or "t", u_column or "u", y_column or "y"))
     if len(set(names)) < 3:
         raise DataError(f"{path}: time, input and output must be three different columns (got {','.join(names)})")
-    cols = read_columns(path, names)
-    rec = Record(cols["t"], cols[names[1]], cols[names[2]], source=str(path))
+    cols, units = read_table(path, names)
+    t, t_unit = in_seconds(path, cols[names[0]], units[names[0]])
+    found = {"t": t_unit, "u": units[names[1]], "y": units[names[2]]}
+    rec = Record(t, cols[names[1]], cols[names[2]], source=str(path), units={k: v for k, v in found.items() if v})
     return rec.validate(min_samples)
 
 

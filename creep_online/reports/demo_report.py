@@ -2,7 +2,10 @@
 
 Plots: measured output against the identified model's simulation (whole run
 and the first resonance transient), the convergence of each parameter towards
-the plant's true value, and the latency distribution.
+the plant's true value, and the latency distribution. In a scenario where the
+plant changes (``demo --scenario payload``, ``drift``) every error is measured
+against the plant valid at that moment (``plant_truth``), each segment between
+changes is drawn with the estimate made for it, and the changes are marked.
 """
 from __future__ import annotations
 
@@ -12,6 +15,32 @@ from pathlib import Path
 import numpy as np
 
 from ..io.jsonable import json_text
+
+
+def plant_truth(scenario: dict, t: float) -> dict[str, float]:
+    """The plant's (alpha, a1, a2, b) at plant time t in a scenario (``commands.demo.scenario_plan``): its start
+    values, times the factors of every change up to t, plus a drift linear in t over the run (as hil_sim makes it)."""
+    p = {k: float(scenario["start"][k]) for k in ("alpha", "a1", "a2", "b")}
+    for change in scenario.get("changes", []):
+        if t >= change["t"]:
+            for k, factor in change["factors"].items():
+                p[k] *= factor
+    drift = scenario.get("drift")
+    if drift:
+        frac = min(max(t / scenario["t_last"], 0.0), 1.0) if scenario["t_last"] > 0 else 1.0
+        p["alpha"] *= 1.0 + drift["alpha"] * frac
+        p["b"] *= 1.0 + drift["b"] * frac
+    return p
+
+
+def _change_times(r: dict) -> list[float]:
+    return [float(c["t"]) for c in (r.get("scenario") or {}).get("changes", [])]
+
+
+def _mark_changes(ax, r: dict, scale: float = 1.0) -> None:
+    """A vertical line at every change of the plant, labelled with what changed."""
+    for k, change in enumerate((r.get("scenario") or {}).get("changes", [])):
+        ax.axvline(change["t"] * scale, color="tab:red", lw=1.0, ls="--", label=change["what"] if k == 0 else None)
 
 
 def write_report(out_dir: str | Path, r: dict) -> str:
@@ -48,8 +77,6 @@ def _plot_fit(plt, out: Path, r: dict) -> str | None:
     seq, u, y = r["_seq"], r["_u"], r["_y"]
     if r.get("model") is None or seq.size < 10:
         return None
-    m = r["model"]
-    model = CreepModel(m["alpha"], m["a1"], m["a2"], m["b"])
     dt = 1.0 / r["rate_hz"]
     n = int(seq[-1]) + 1
     # the input on the full grid (zero-order hold across any lost samples)
@@ -57,20 +84,31 @@ def _plot_fit(plt, out: Path, r: dict) -> str | None:
     u_full = np.where(idx >= 0, u[np.clip(idx, 0, None)], 0.0)
     t = np.arange(n) * dt
     offset = float(r["estimate"].get("offset", 0.0))
-    y_hat = simulate(model, t, u_full) + offset
+    segments = _segments(r, t)
+    y_hat = np.empty(n)
+    first_model = None
+    for (a, b), m in segments:
+        model = CreepModel(m["alpha"], m["a1"], m["a2"], m["b"])
+        first_model = first_model or model
+        y_hat[a:b] = simulate(model, t[:b], u_full[:b])[a:b] + offset
     t_meas = seq * dt
     fig, axes = plt.subplots(2, 1, figsize=(9, 6.5))
     step = max(1, seq.size // 20000)
     axes[0].plot(t_meas[::step], y[::step], lw=0.6, label="measured (received)")
-    axes[0].plot(t[::step], y_hat[::step], lw=1.0, label="identified model")
-    axes[0].set(xlabel="t (s)", ylabel="y", title="Output: measured vs identified model")
+    label = "identified model" if len(segments) == 1 else "estimate made for each segment"
+    axes[0].plot(t[::step], y_hat[::step], lw=1.0, label=label)
+    _mark_changes(axes[0], r)
+    title = "Output: measured vs identified model"
+    if (r.get("scenario") or {}).get("drift"):
+        title += " (the plant drifts: the final estimate, valid at the end)"
+    axes[0].set(xlabel="t (s)", ylabel="y", title=title)
     axes[0].legend()
     first = int(np.argmax(u_full != 0)) if np.any(u_full != 0) else 0
-    span = max(int(6 * model.settling_time / dt), 200)
+    span = max(int(6 * first_model.settling_time / dt), 200)
     win = slice(first, min(n, first + span))
     sel = (seq >= win.start) & (seq < win.stop)
     axes[1].plot(t_meas[sel] * 1e3, y[sel], ".", ms=2, label="measured")
-    axes[1].plot(t[win] * 1e3, y_hat[win], lw=1.0, label="identified model")
+    axes[1].plot(t[win] * 1e3, y_hat[win], lw=1.0, label=label)
     axes[1].set(xlabel="t (ms)", ylabel="y", title="First step: the resonance transient")
     axes[1].legend()
     fig.tight_layout()
@@ -78,6 +116,23 @@ def _plot_fit(plt, out: Path, r: dict) -> str | None:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path.name
+
+
+def _segments(r: dict, t: np.ndarray) -> list[tuple[tuple[int, int], dict]]:
+    """(sample range, estimate) for each stretch between the plant's changes: the estimate of the trace's last
+    point before the stretch ends (the final estimate for the last stretch)."""
+    edges = [0] + [int(np.searchsorted(t, c)) for c in _change_times(r)] + [t.size]
+    out = []
+    for k, (a, b) in enumerate(zip(edges[:-1], edges[1:])):
+        if b <= a:
+            continue
+        if k == len(edges) - 2:
+            est = r["model"]
+        else:
+            before = [p for p in r["trace"] if p["t"] < t[b - 1] and p["quality"] != "none"]
+            est = before[-1] if before else r["model"]
+        out.append(((a, b), est))
+    return out
 
 
 def _plot_compensation(plt, out: Path, r: dict) -> str | None:
@@ -112,19 +167,16 @@ def _plot_convergence(plt, out: Path, r: dict) -> str | None:
     tr = [p for p in r["trace"] if p["phase"] == "tracking" or p["quality"] != "none"]
     if len(tr) < 2:
         return None
-    truth = r["truth"]
     t = np.array([p["t"] for p in tr])
-    alpha = np.array([p["alpha"] for p in tr])
-    a1 = np.array([p["a1"] for p in tr])
-    a2 = np.array([p["a2"] for p in tr])
-    b = np.array([p["b"] for p in tr])
-    fn = 1.0 / (2 * np.pi * np.sqrt(a2))
-    zeta = a1 / (2 * np.sqrt(a2))
+    est = _derived({k: np.array([p[k] for p in tr]) for k in ("alpha", "a1", "a2", "b")})
+    truth = _truth_over(r, t)
     fig, ax = plt.subplots(figsize=(9, 4))
-    for name, val, ref in (("alpha", alpha, truth["alpha"]), ("fn", fn, truth["fn_hz"]),
-                           ("zeta", zeta, truth["zeta"]), ("b", b, truth["b"])):
-        ax.semilogy(t, np.abs(val / ref - 1) + 1e-9, label=name)
-    ax.set(xlabel="plant time (s)", ylabel="|relative error|", title="Convergence of the online estimate")
+    for name in ("alpha", "fn", "zeta", "b"):
+        ax.semilogy(t, np.abs(est[name] / truth[name] - 1) + 1e-9, label=name)
+    _mark_changes(ax, r)
+    changing = (r.get("scenario") or {}).get("name", "stationary") != "stationary"
+    what = " (against the plant valid at each moment)" if changing else ""
+    ax.set(xlabel="plant time (s)", ylabel="|relative error|", title=f"Convergence of the online estimate{what}")
     ax.legend()
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
@@ -132,6 +184,21 @@ def _plot_convergence(plt, out: Path, r: dict) -> str | None:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path.name
+
+
+def _derived(p: dict) -> dict:
+    """alpha, fn, zeta, b from alpha, a1, a2, b (arrays)."""
+    return {"alpha": p["alpha"], "fn": 1.0 / (2 * np.pi * np.sqrt(p["a2"])), "zeta": p["a1"] / (2 * np.sqrt(p["a2"])),
+            "b": p["b"]}
+
+
+def _truth_over(r: dict, t: np.ndarray) -> dict:
+    """The plant's alpha, fn, zeta, b at each time of ``t`` (the scenario's plan; the final truth without one)."""
+    if r.get("scenario"):
+        rows = [plant_truth(r["scenario"], float(x)) for x in t]
+        return _derived({k: np.array([row[k] for row in rows]) for k in ("alpha", "a1", "a2", "b")})
+    truth = r["truth"]
+    return {"alpha": truth["alpha"], "fn": truth["fn_hz"], "zeta": truth["zeta"], "b": truth["b"]}
 
 
 def _plot_latency(plt, out: Path, r: dict) -> str | None:
@@ -164,6 +231,19 @@ def _compensation_html(r: dict) -> str:
             f"rms {un['rms']:.2e}.</p>")
 
 
+def _scenario_html(r: dict) -> str:
+    """What the plant did over the run, and what the errors are measured against."""
+    sc = r.get("scenario") or {}
+    parts = [f"at t = {c['t']:.4g} s, {html.escape(c['what'])}" for c in sc.get("changes", [])]
+    if sc.get("drift"):
+        parts.append(f"alpha {100 * sc['drift']['alpha']:+.0f} % and b {100 * sc['drift']['b']:+.0f} % over the run")
+    if not parts:
+        return ""
+    return (f"<p>Scenario {html.escape(sc['name'])}: {'; '.join(parts)}. The table compares the final estimate with "
+            "the plant at the end of the run; the plots measure every error against the plant valid at its "
+            "moment, and mark the changes.</p>")
+
+
 def _html(r: dict, pngs: list[str]) -> str:
     rows = []
     m, t, e = r.get("model"), r["truth"], r.get("errors", {})
@@ -183,7 +263,7 @@ def _html(r: dict, pngs: list[str]) -> str:
 {r['samples_received']} of {r['samples_sent_by_plant']} samples received in {r['wall_s']:.1f} s
 ({r['achieved_rate_sps'] / 1e3:.1f} kS/s). Latency (plant sample time to estimator updated):
 p50 {lat['p50']:.0f} us, p99 {lat['p99']:.0f} us, max {lat['max']:.0f} us.</p>
-<h2>Estimate vs truth</h2><p>phase {html.escape(r['estimate']['phase'])}, quality {html.escape(r['estimate']['quality'])}</p>
+<h2>Estimate vs truth</h2>{_scenario_html(r)}<p>phase {html.escape(r['estimate']['phase'])}, quality {html.escape(r['estimate']['quality'])}</p>
 <table><tr><th>parameter</th><th>estimate</th><th>true</th><th>error</th></tr>{''.join(rows)}</table>
 {_compensation_html(r)}{imgs}
 <h2>Transport counters</h2><table>{counters}</table>
