@@ -18,7 +18,13 @@ Prandtl-Ishlinskii loop (loop width 2-20 % of the stroke, alpha 0.01-0.3,
   the fit reported before its weights were solved as a model) and, with
   ``--previous REF`` (default main), of the previous code on the same record
   (its own weights and simulate, in its own interpreter);
-* ``inverse_error``: max |invert(forward(u)) - u| over the stroke, fitted weights.
+* ``inverse_error``: max |invert(forward(u)) - u| over the stroke, fitted weights;
+* ``loop_error``: the fitted loop against the true one on another input
+  (``other_input``: a full-stroke cycle that wipes the operators' memory, then
+  decaying minor loops and a random walk), once its memory is wiped: RMS of
+  ``v_true - (c v_fit + d)`` (c, d by least squares: gain and offset belong
+  to the linear path) over the true loop's opening (sum w_i 2 r_i); the same for
+  the previous code's weights (``previous.loop_error``).
 
 Prints one JSON document and writes it to ``bench/results/`` (``--out``).
 Usage: ``PYTHONPATH=. python bench/bench_hysteresis.py [--records 20] [--families sine,few_levels] [--previous main]``
@@ -62,11 +68,37 @@ for line in sys.stdin:
     fit = fit_extended(data, ("hysteresis",), fit_base(data))
     w = np.asarray(fit.effect_params["hysteresis"]["w"])
     sim = fit.simulate(z["t"], z["u"])
-    print(json.dumps({"fit_percent": fit.fit_percent, "residual_rms": fit.residual_rms,
+    hp = fit.effect_params["hysteresis"]
+    print(json.dumps({"r": list(hp["r"]), "w": w.tolist(), "initial": hp.get("initial", "centred"),
+                      "fit_percent": fit.fit_percent, "residual_rms": fit.residual_rms,
                       "w_max": float(np.max(np.abs(w))), "simulate_rms": float(np.sqrt(np.mean((sim - fit.y_hat) ** 2))),
                       "flattest_branch": float(np.min(s := np.concatenate(([1.0], 1 + np.cumsum(w)))) / np.mean(s))}),
           flush=True)
 """
+
+
+def other_input(stroke: float, n: int = 4000, seed: int = 0) -> tuple[np.ndarray, int]:
+    """(u, start): 0 -> stroke -> 0 (every operator below half the stroke then has a state set by u alone), then
+    minor loops decaying from the full stroke and a bounded random walk; ``start``: the first sample after the wipe."""
+    rng = np.random.default_rng(seed)
+    wipe = np.concatenate([np.linspace(0.0, stroke, n // 8), np.linspace(stroke, 0.0, n // 8)])
+    k = np.arange(n // 2)
+    amp = stroke * (1.0 - k / k.size)
+    minor = amp * (1.0 - np.abs(2.0 * ((k / 250.0) % 1.0) - 1.0))
+    walk = np.clip(np.cumsum(rng.normal(0.0, 0.02 * stroke, n - wipe.size - minor.size)) + 0.5 * stroke, 0.0, stroke)
+    return np.concatenate([wipe, minor, walk]), wipe.size
+
+
+def loop_error(true: dict, fitted: dict, stroke: float) -> float:
+    """RMS of the true loop's output minus the best affine map of the fitted one on ``other_input``, over the true
+    loop's opening (sum_i w_i 2 r_i, the units of v)."""
+    u, start = other_input(stroke)
+    v_true = hysteresis_input(u, true["r"], true["w"], "centred")[start:]
+    v_fit = hysteresis_input(u, fitted["r"], fitted["w"], "centred")[start:]
+    a = np.column_stack([v_fit, np.ones_like(v_fit)])
+    miss = v_true - a @ np.linalg.lstsq(a, v_true, rcond=None)[0]
+    r, w = np.asarray(true["r"]), np.asarray(true["w"])
+    return float(rms(miss) / np.sum(w * 2.0 * np.minimum(r, stroke / 2.0)))
 
 
 def dist(x: list[float]) -> dict:
@@ -114,6 +146,7 @@ def run_one(family: str, seed: int, n: int, worker=None) -> dict:
            "search_fit_percent": fit_percent(rec.y, y_search),
            "search_residual_over_noise": float(rms(rec.y - y_search) / rec.noise_std),
            "search_w_max": float(np.max(np.abs(w_search))),
+           "w_min": float(np.min(w)), "loop_error": loop_error(rec.params, hp, 2 * max(rec.params["r"])),
            "inverse_error": float(np.max(np.abs(back - u_test)) / max(np.ptp(u_test), 1e-300)),
            "seconds": seconds, "cpu_seconds": cpu}
     row["reproduces"] = row["simulate_over_noise"] <= REPRODUCES
@@ -128,7 +161,8 @@ def run_one(family: str, seed: int, n: int, worker=None) -> dict:
             os.unlink(fh.name)
         row["previous"] = {"fit_percent": prev["fit_percent"], "residual_over_noise": prev["residual_rms"] / rec.noise_std,
                            "w_max": prev["w_max"], "simulate_over_noise": prev["simulate_rms"] / rec.noise_std,
-                           "flattest_branch": prev["flattest_branch"]}
+                           "flattest_branch": prev["flattest_branch"], "w_min": float(np.min(prev["w"])),
+                           "loop_error": loop_error(rec.params, prev, 2 * max(rec.params["r"]))}
     return row
 
 
@@ -136,7 +170,8 @@ def summary(rows: list[dict]) -> dict:
     def col(key, sub=None):
         return [(r[sub][key] if sub else r[key]) for r in rows if sub is None or sub in r]
     out = {"records": len(rows), "reproduces": sum(r["reproduces"] for r in rows) / len(rows),
-           "w_max": dist(col("w_max")), "flattest_branch": dist(col("flattest_branch")),
+           "w_max": dist(col("w_max")), "w_min": dist(col("w_min")),
+           "loop_error": dist(col("loop_error")), "flattest_branch": dist(col("flattest_branch")),
            "simulate_over_noise": dist(col("simulate_over_noise")),
            "residual_over_noise": dist(col("residual_over_noise")),
            "search_residual_over_noise": dist(col("search_residual_over_noise")),
@@ -146,7 +181,8 @@ def summary(rows: list[dict]) -> dict:
            "inverse_error": dist(col("inverse_error")), "cpu_seconds": dist(col("cpu_seconds"))}
     prev = [r for r in rows if "previous" in r]
     if prev:
-        out["previous"] = {"w_max": dist(col("w_max", "previous")),
+        out["previous"] = {"w_max": dist(col("w_max", "previous")), "w_min": dist(col("w_min", "previous")),
+                           "loop_error": dist(col("loop_error", "previous")),
                            "simulate_over_noise": dist(col("simulate_over_noise", "previous")),
                            "reproduces": sum(r["previous"]["simulate_over_noise"] <= REPRODUCES for r in prev) / len(prev),
                            "residual_over_noise": dist(col("residual_over_noise", "previous")),
