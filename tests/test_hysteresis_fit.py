@@ -29,6 +29,11 @@ N = 6000
 SEEDS = range(3)
 #: simulate reproduces the fit: the two sum the same responses in another order (rounding, ~1e-13 of the noise).
 REPRODUCES = 1e-6
+#: inverse(forward(u)) = u: the analytic inverse is exact algebra; what is left is rounding in the plays, amplified
+#: at most 1 / SLOPE_FLOOR = 20x by the flattest branch (~1e-15 of the stroke); 1e-12 of the stroke leaves a margin.
+INVERTS = 1e-12
+#: fit -o then compare: the fit percent again within this many points (the saved-model bench's tolerance).
+SAVED_TOL = 0.05
 
 
 def _fit(rec, effects=("hysteresis",)):
@@ -36,11 +41,26 @@ def _fit(rec, effects=("hysteresis",)):
     return data, fit_extended(data, effects, fit_base(data))
 
 
+def _inverts(hp: dict, u: np.ndarray) -> bool:
+    """The analytic inverse composed with the fitted loop is the identity on u (``INVERTS``)."""
+    v = hysteresis_input(u, hp["r"], hp["w"], hp["initial"])
+    return bool(np.max(np.abs(invert_hysteresis(v, hp) - u)) <= INVERTS * max(np.ptp(u), 1.0))
+
+
+def _other_input(u: np.ndarray) -> np.ndarray:
+    """A bounded random walk over the record's stroke (minor loops the record may not hold)."""
+    stroke = max(float(np.ptp(u)), float(np.max(np.abs(u))), 1.0)
+    walk = np.cumsum(np.random.default_rng(0).normal(0.0, 0.03 * stroke, 3000))
+    return float(np.min(u)) + np.abs((walk % (2 * stroke)) - stroke)
+
+
 def _checks(rec, data, fit) -> dict:
     hp = fit.effect_params["hysteresis"]
     w = np.asarray(hp["w"])
     model = ExtendedModel(fit.model, fit.effect_params, fit.offset)
     return {
+        "inverts": _inverts(hp, rec.u) and _inverts(hp, _other_input(rec.u)),
+        "says_what_is_determined": 0.0 <= hp["determined"] <= hp["opened"] + 1e-9 and hp["opened"] <= len(w),
         "reproduces": rms(fit.simulate(rec.t, rec.u) - fit.y_hat) <= REPRODUCES * rec.noise_std,
         "model_reproduces": rms(model.simulate(rec.t, rec.u, u_pre=data.u_pre) - fit.y_hat) <= REPRODUCES * rec.noise_std,
         "invertible": flattest_branch(hp["r"], w) >= SLOPE_FLOOR * (1 - 1e-9) and hp["flattest_branch"] > 0,
@@ -52,7 +72,9 @@ def _checks(rec, data, fit) -> dict:
 
 def test_fitted_models_reproduce_their_fit_on_every_input_family():
     """Every family x 3 seeds: simulate (the fit's and ExtendedModel's) equals y_hat, no branch flatter than the
-    floor, |w| <= 1, the residual at the noise; the fraction that pass is printed (it must be 1)."""
+    floor, |w| <= 1, the analytic inverse undoes the loop (on the record's input and a random walk), the
+    determined combinations at most the opened operators, the residual at the noise; the fraction that pass is
+    printed (it must be 1)."""
     failed, total = [], 0
     for family in INPUT_FAMILIES:
         for seed in SEEDS:
@@ -262,3 +284,22 @@ def test_the_compensator_inverts_a_fitted_loop():
     for start in (0.01, 0.15, 0.3, 0.4):
         settled &= ~((t >= start) & (t < start + 0.01))
     assert np.max(np.abs(y - shaped)[settled]) < 1e-4 * span
+
+
+@pytest.mark.parametrize("family", ["few_levels", "triangle"])
+def test_a_saved_hysteresis_model_is_the_fit(family, tmp_path, capsys):
+    """``fit --effects hysteresis -o m.json`` writes the constrained thresholds and weights (the fit's, bit for
+    bit; its loop invertible); ``compare m.json DATA`` gives the fit's percent again within SAVED_TOL points."""
+    from creep_online import load_model
+    rec = hysteresis_record(family, 2, n=N)
+    csv, model = tmp_path / "rec.csv", tmp_path / "m.json"
+    save_csv(csv, rec.t, rec.u, rec.y)
+    assert main(["fit", str(csv), "--effects", "hysteresis", "-o", str(model), "--json"]) == 0
+    fitted = json.loads(capsys.readouterr().out)
+    hp = fitted["effect_params"]["hysteresis"]
+    saved = load_model(model).effects["hysteresis"]
+    assert saved["r"] == hp["r"] and saved["w"] == hp["w"] and saved["initial"] == hp["initial"]
+    assert np.max(np.abs(saved["w"])) <= 1.0 and flattest_branch(saved["r"], saved["w"]) >= SLOPE_FLOOR * (1 - 1e-9)
+    assert main(["compare", str(model), str(csv), "--json"]) == 0
+    compared = json.loads(capsys.readouterr().out)
+    assert abs(compared["fit_percent"] - fitted["fit_percent"]) <= SAVED_TOL
