@@ -30,8 +30,9 @@ from .base import (BUILTIN_EFFECTS, ENTRY_POINT_GROUP, AdditiveEffect, Compensat
                    InputCompensator, InputEffect, OutputCompensator, OutputFilterEffect, ParallelEffect, ParamSpec,
                    Stage, check_effect_names, discover_entry_points, effect_names, get_effect, in_forward_order,
                    register_effect, unregister_effect)
-from .hysteresis import (HYSTERESIS_COMPONENTS, HYSTERESIS_THRESHOLDS, INITIAL_STATES, hysteresis_input,
-                         last_direction, loop_width, play_operators)
+from .hysteresis import (HYSTERESIS_COMPONENTS, HYSTERESIS_THRESHOLDS, INITIAL_STATES, SLOPE_FLOOR, hysteresis_input,
+                         inverse_params, invert_hysteresis, last_direction, loop_width, partial_slopes, pi_inverse,
+                         play_operators)
 from .nonlinear_gain import polynomial_input
 from .periodic_disturbance import periodic_columns
 
@@ -54,7 +55,8 @@ __all__ = [
     "ENTRY_POINT_GROUP", "BUILTIN_EFFECTS", "effect_names", "get_effect", "register_effect", "unregister_effect",
     "discover_entry_points", "check_effect_names", "in_forward_order",
     "HYSTERESIS_COMPONENTS", "HYSTERESIS_THRESHOLDS", "INITIAL_STATES", "play_operators", "hysteresis_input",
-    "loop_width", "last_direction",
+    "loop_width", "last_direction", "SLOPE_FLOOR", "partial_slopes", "pi_inverse", "inverse_params",
+    "invert_hysteresis",
     "polynomial_input", "leakage_filter", "periodic_columns",
     "MAX_PAIRS", "MULTIGRID_POINTS", "MULTIGRID_RATIO", "StepFn", "Superposer", "is_uniform", "creep_step",
     "resonance_step", "base_step_grid", "base_step_at", "delayed_grid", "delayed_grid_slope",

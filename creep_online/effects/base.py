@@ -100,6 +100,7 @@ class FitView:
     data: Any
     variant: str | None = None
     harmonics: int = 1
+    solution: dict = field(default_factory=dict)
 
 
 # --------------------------------------------------------------------------- online compensators
@@ -278,6 +279,15 @@ class InputEffect(Effect):
     @abstractmethod
     def column_names(self) -> list[str]:
         """Names of the linear coefficients of ``design_rows``' rows."""
+
+    def reported_solution(self, data, variant: str | None) -> Any:
+        """None (default): the fit reports the search's linear solution. Otherwise an object whose ``rows(u,
+        before=False)`` are the effect's input rows in the reported solution (``design_rows``' rows may be a
+        reduced basis of them), ``names`` their coefficients' names, and ``solve(a, wy, gain, cols, gain_estimate,
+        noise_var) -> (x, found)`` the weighted least squares ``a x ~ wy`` with the effect's own constraints and
+        prior on its columns ``cols`` (``gain``: the base path's column on u); ``found`` reaches ``fitted_params``
+        as ``FitView.solution[name]`` (hysteresis: the plays, an invertible loop, ``PlayWeights``)."""
+        return None
 
 
 class ParallelEffect(Effect):

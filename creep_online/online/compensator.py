@@ -48,6 +48,7 @@ from collections import deque
 import numpy as np
 
 from ..checks import is_real, number, positive, real_array
+from ..effects.hysteresis import pi_inverse
 from ..errors import DataError, ModelError
 from ..model import CreepModel, ExtendedModel
 from . import compensator_kernels as CK
@@ -361,30 +362,6 @@ def node_discretization(lam: np.ndarray, tau: float, h: float) -> tuple:
 
 
 # --------------------------------------------------------------------------- hysteresis
-def pi_inverse(r: np.ndarray, w: np.ndarray, w0: float = 1.0) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
-    """Analytic inverse of ``v = w0 u + sum_i w_i play_{r_i}[u]`` (thresholds r_i > 0, any order).
-
-    With thresholds sorted and the partial slopes ``S_j = w0 + w_1 + .. + w_j``
-    all positive (a monotone loop), the inverse is again a PI operator:
-    ``u = v/w0 + sum_j wh_j play_{rh_j}[v]``, ``rh_j = w0 r_j + sum_{i<j} w_i (r_j - r_i)``,
-    ``wh_j = -w_j / (S_j S_(j-1))``. Returns (rh, wh, 1/w0, order): sorted by threshold.
-    """
-    order = np.argsort(r, kind="stable")
-    r = np.asarray(r, dtype=float)[order]
-    w = np.asarray(w, dtype=float)[order]
-    if np.any(r <= 0):
-        raise ModelError("hysteresis thresholds must be > 0 (the identity term is the w0 = 1 path)")
-    S = w0 + np.cumsum(w)
-    S_prev = np.concatenate(([w0], S[:-1]))
-    if w0 <= 0 or np.any(S <= 0):
-        j = int(np.argmax(S <= 0)) if w0 > 0 else -1
-        raise ModelError("hysteresis cannot be inverted: the loop is not monotone (partial slope "
-                         f"{S[j] if j >= 0 else w0:.3g} <= 0{'' if j < 0 else f' at threshold {r[j]:.4g}'})")
-    rh = w0 * r + np.array([np.sum(w[:j] * (r[j] - r[:j])) for j in range(r.size)])
-    wh = -w / (S * S_prev)
-    return rh, wh, 1.0 / w0, order
-
-
 def pack_hysteresis(params: dict) -> np.ndarray:
     """The ``hy`` array of ``compensator_kernels._hysteresis``: inverse and forward PI, initial offsets."""
     from ..effects.hysteresis import INITIAL_STATES

@@ -1,0 +1,227 @@
+"""Hysteresis fits that are models: weights, simulate against the fit, fit percent, determined thresholds, inverse.
+
+For every input family of ``hil_sim.hysteresis_plants`` (a step, the plain step
+at the first sample, staircases with few levels, sines, triangles, random
+staircases) and ``--records`` seeds: a random plant with a random
+Prandtl-Ishlinskii loop (loop width 2-20 % of the stroke, alpha 0.01-0.3,
+10 kHz), fitted with ``fit_extended(data, ("hysteresis",))``. Per record:
+
+* ``w_max``: the largest |weight| reported; ``flattest_branch``: the flattest
+  branch's slope over the mean (``hysteresis.flattest_branch``; <= 0: the loop
+  cannot be inverted); ``opened`` / ``determined``: operators the
+  record opens and weight combinations the data determine;
+* ``simulate_over_noise``: RMS of ``ExtendedFit.simulate(t, u)`` minus the
+  fit's ``y_hat``, over the noise; it *reproduces* the fit when below
+  ``REPRODUCES`` (rounding: the two sum the same responses in another order);
+* ``fit_percent`` and ``residual_over_noise`` of the reported model, of the
+  search's unconstrained solution at the same plant parameters (``search_*``: what
+  the fit reported before its weights were solved as a model) and, with
+  ``--previous REF`` (default main), of the previous code on the same record
+  (its own weights and simulate, in its own interpreter);
+* ``inverse_error``: max |invert(forward(u)) - u| over the stroke, fitted weights;
+* ``loop_error``: the fitted loop against the true one on another input
+  (``other_input``: a full-stroke cycle that wipes the operators' memory, then
+  decaying minor loops and a random walk), once its memory is wiped: RMS of
+  ``v_true - (c v_fit + d)`` (c, d by least squares: gain and offset belong
+  to the linear path) over the true loop's opening (sum w_i 2 r_i); the same for
+  the previous code's weights (``previous.loop_error``).
+
+Prints one JSON document and writes it to ``bench/results/`` (``--out``).
+Usage: ``PYTHONPATH=. python bench/bench_hysteresis.py [--records 20] [--families sine,few_levels] [--previous main]``
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import creep_online  # noqa: E402,F401  (before numpy: one BLAS thread)
+import numpy as np  # noqa: E402
+
+from creep_online.diagnostics.extended import Design, fit_base, fit_extended, prepare  # noqa: E402
+from creep_online.effects import hysteresis_input, invert_hysteresis  # noqa: E402
+from creep_online.effects.hysteresis import Hysteresis, flattest_branch  # noqa: E402
+from creep_online.metrics import fit_percent, rms  # noqa: E402
+from hil_sim.hysteresis_plants import INPUT_FAMILIES, hysteresis_record  # noqa: E402
+
+#: simulate reproduces the fit when the RMS of their difference is below this fraction of the noise.
+REPRODUCES = 1e-6
+RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
+
+#: The previous code's worker: fits the record in each .npz named on stdin, prints its weights and simulate's miss.
+PREVIOUS_WORKER = """
+import json, sys
+import numpy as np
+from creep_online.diagnostics.extended import fit_base, fit_extended, prepare
+print("ready", flush=True)
+for line in sys.stdin:
+    z = np.load(line.strip())
+    u_pre = None if np.isnan(z["u_pre"]) else float(z["u_pre"])
+    data = prepare(z["t"], z["u"], z["y"], u_pre=u_pre)
+    fit = fit_extended(data, ("hysteresis",), fit_base(data))
+    w = np.asarray(fit.effect_params["hysteresis"]["w"])
+    sim = fit.simulate(z["t"], z["u"])
+    hp = fit.effect_params["hysteresis"]
+    print(json.dumps({"r": list(hp["r"]), "w": w.tolist(), "initial": hp.get("initial", "centred"),
+                      "fit_percent": fit.fit_percent, "residual_rms": fit.residual_rms,
+                      "w_max": float(np.max(np.abs(w))), "simulate_rms": float(np.sqrt(np.mean((sim - fit.y_hat) ** 2))),
+                      "flattest_branch": float(np.min(s := np.concatenate(([1.0], 1 + np.cumsum(w)))) / np.mean(s))}),
+          flush=True)
+"""
+
+
+def other_input(stroke: float, n: int = 4000, seed: int = 0) -> tuple[np.ndarray, int]:
+    """(u, start): 0 -> stroke -> 0 (every operator below half the stroke then has a state set by u alone), then
+    minor loops decaying from the full stroke and a bounded random walk; ``start``: the first sample after the wipe."""
+    rng = np.random.default_rng(seed)
+    wipe = np.concatenate([np.linspace(0.0, stroke, n // 8), np.linspace(stroke, 0.0, n // 8)])
+    k = np.arange(n // 2)
+    amp = stroke * (1.0 - k / k.size)
+    minor = amp * (1.0 - np.abs(2.0 * ((k / 250.0) % 1.0) - 1.0))
+    walk = np.clip(np.cumsum(rng.normal(0.0, 0.02 * stroke, n - wipe.size - minor.size)) + 0.5 * stroke, 0.0, stroke)
+    return np.concatenate([wipe, minor, walk]), wipe.size
+
+
+def loop_error(true: dict, fitted: dict, stroke: float) -> float:
+    """RMS of the true loop's output minus the best affine map of the fitted one on ``other_input``, over the true
+    loop's opening (sum_i w_i 2 r_i, the units of v)."""
+    u, start = other_input(stroke)
+    v_true = hysteresis_input(u, true["r"], true["w"], "centred")[start:]
+    v_fit = hysteresis_input(u, fitted["r"], fitted["w"], "centred")[start:]
+    a = np.column_stack([v_fit, np.ones_like(v_fit)])
+    miss = v_true - a @ np.linalg.lstsq(a, v_true, rcond=None)[0]
+    r, w = np.asarray(true["r"]), np.asarray(true["w"])
+    return float(rms(miss) / np.sum(w * 2.0 * np.minimum(r, stroke / 2.0)))
+
+
+def dist(x: list[float]) -> dict:
+    a = np.asarray([v for v in x if v is not None and np.isfinite(v)], dtype=float)
+    if a.size == 0:
+        return {"runs": 0}
+    return {"p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)), "max": float(a.max()),
+            "min": float(a.min()), "runs": int(a.size)}
+
+
+def _previous_worker(ref: str):
+    import _baseline
+    path, commit = _baseline.extract(ref)
+    env = dict(os.environ, PYTHONPATH=path, NUMBA_CACHE_DIR=os.path.join(path, ".numba_cache"))
+    proc = subprocess.Popen([sys.executable, "-c", PREVIOUS_WORKER], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            text=True, env=env, cwd=path)
+    if proc.stdout.readline().strip() != "ready":
+        raise RuntimeError("the previous code's worker did not start")
+    return proc, commit
+
+
+def run_one(family: str, seed: int, n: int, worker=None) -> dict:
+    rec = hysteresis_record(family, seed, n=n)
+    data = prepare(rec.t, rec.u, rec.y, u_pre=rec.u_pre)
+    t0, c0 = time.perf_counter(), time.process_time()
+    fit = fit_extended(data, ("hysteresis",), fit_base(data))
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+    hp = fit.effect_params["hysteresis"]
+    w = np.asarray(hp["w"])
+    sim = fit.simulate(rec.t, rec.u)
+    # the search's own (unconstrained, reduced-basis) solution at the same plant parameters
+    design = Design(data, ("hysteresis",), 1, {"hysteresis": hp["initial"]})
+    coef, y_search, _ = design.project(fit.theta)
+    comps = Hysteresis().components(data, hp["initial"])
+    w_search = comps @ (np.asarray(coef[1:1 + comps.shape[1]]) / coef[0])
+    u_test = rec.u if np.ptp(rec.u) > 0 else np.linspace(0.0, 1.0, 100)
+    back = invert_hysteresis(hysteresis_input(u_test, hp["r"], w, hp["initial"]), hp)
+    row = {"family": family, "seed": seed, "loop_width_rel_true": rec.notes["loop_width_rel"],
+           "alpha_true": rec.model.alpha, "alpha": fit.model.alpha, "initial_true": rec.params["initial"],
+           "initial": hp["initial"], "w_max": float(np.max(np.abs(w))), "flattest_branch": flattest_branch(hp["r"], w),
+           "opened": hp["opened"], "determined": hp["determined"], "thresholds": len(w),
+           "loop_width_rel": hp["loop_width_rel"],
+           "simulate_over_noise": float(rms(sim - fit.y_hat) / rec.noise_std),
+           "fit_percent": fit.fit_percent, "residual_over_noise": fit.residual_rms / rec.noise_std,
+           "search_fit_percent": fit_percent(rec.y, y_search),
+           "search_residual_over_noise": float(rms(rec.y - y_search) / rec.noise_std),
+           "search_w_max": float(np.max(np.abs(w_search))),
+           "w_min": float(np.min(w)), "loop_error": loop_error(rec.params, hp, 2 * max(rec.params["r"])),
+           "inverse_error": float(np.max(np.abs(back - u_test)) / max(np.ptp(u_test), 1e-300)),
+           "seconds": seconds, "cpu_seconds": cpu}
+    row["reproduces"] = row["simulate_over_noise"] <= REPRODUCES
+    if worker is not None:
+        with tempfile.NamedTemporaryFile(suffix=".npz", delete=False) as fh:
+            np.savez(fh, t=rec.t, u=rec.u, y=rec.y, u_pre=np.nan if rec.u_pre is None else rec.u_pre)
+        try:
+            worker.stdin.write(fh.name + "\n")
+            worker.stdin.flush()
+            prev = json.loads(worker.stdout.readline())
+        finally:
+            os.unlink(fh.name)
+        row["previous"] = {"fit_percent": prev["fit_percent"], "residual_over_noise": prev["residual_rms"] / rec.noise_std,
+                           "w_max": prev["w_max"], "simulate_over_noise": prev["simulate_rms"] / rec.noise_std,
+                           "flattest_branch": prev["flattest_branch"], "w_min": float(np.min(prev["w"])),
+                           "loop_error": loop_error(rec.params, prev, 2 * max(rec.params["r"]))}
+    return row
+
+
+def summary(rows: list[dict]) -> dict:
+    def col(key, sub=None):
+        return [(r[sub][key] if sub else r[key]) for r in rows if sub is None or sub in r]
+    out = {"records": len(rows), "reproduces": sum(r["reproduces"] for r in rows) / len(rows),
+           "w_max": dist(col("w_max")), "w_min": dist(col("w_min")),
+           "loop_error": dist(col("loop_error")), "flattest_branch": dist(col("flattest_branch")),
+           "simulate_over_noise": dist(col("simulate_over_noise")),
+           "residual_over_noise": dist(col("residual_over_noise")),
+           "search_residual_over_noise": dist(col("search_residual_over_noise")),
+           "fit_percent_minus_search": dist([r["fit_percent"] - r["search_fit_percent"] for r in rows]),
+           "search_w_max": dist(col("search_w_max")),
+           "opened": dist(col("opened")), "determined": dist(col("determined")),
+           "inverse_error": dist(col("inverse_error")), "cpu_seconds": dist(col("cpu_seconds"))}
+    prev = [r for r in rows if "previous" in r]
+    if prev:
+        out["previous"] = {"w_max": dist(col("w_max", "previous")), "w_min": dist(col("w_min", "previous")),
+                           "loop_error": dist(col("loop_error", "previous")),
+                           "simulate_over_noise": dist(col("simulate_over_noise", "previous")),
+                           "reproduces": sum(r["previous"]["simulate_over_noise"] <= REPRODUCES for r in prev) / len(prev),
+                           "residual_over_noise": dist(col("residual_over_noise", "previous")),
+                           "fit_percent_minus_previous": dist([r["fit_percent"] - r["previous"]["fit_percent"]
+                                                               for r in prev]),
+                           "flattest_branch": dist(col("flattest_branch", "previous"))}
+    return out
+
+
+def main() -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--records", type=int, default=20, help="seeds per input family")
+    ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--samples", type=int, default=10_000, help="samples per record (10 kHz)")
+    ap.add_argument("--families", default=",".join(INPUT_FAMILIES), help="comma-separated input families")
+    ap.add_argument("--previous", default="main", help="git ref of the previous code fitted on the same records ('' to skip)")
+    ap.add_argument("--out", default=None, help="JSON path (default: bench/results/hysteresis_fit_<families>_<seeds>.json)")
+    a = ap.parse_args()
+    families = [f.strip() for f in a.families.split(",") if f.strip()]
+    worker, commit = _previous_worker(a.previous) if a.previous else (None, None)
+    t0 = time.time()
+    rows = {f: [run_one(f, s, a.samples, worker) for s in range(a.first_seed, a.first_seed + a.records)]
+            for f in families}
+    if worker is not None:
+        worker.stdin.close()
+        worker.wait()
+    doc = {"samples": a.samples, "h": 1e-4, "first_seed": a.first_seed, "records_per_family": a.records,
+           "reproduces_below": REPRODUCES, "previous_commit": commit,
+           "table": {f: summary(r) for f, r in rows.items()},
+           "all": summary([r for rs in rows.values() for r in rs]), "rows": rows,
+           "elapsed_s": time.time() - t0, "load_average": os.getloadavg()}
+    out = a.out or os.path.join(RESULTS, f"hysteresis_fit_{'all' if len(families) == len(INPUT_FAMILIES) else '-'.join(families)}"
+                                         f"_{a.first_seed}-{a.first_seed + a.records - 1}.json")
+    with open(out, "w") as fh:
+        json.dump(doc, fh, indent=1, default=float)
+    json.dump({k: v for k, v in doc.items() if k != "rows"}, sys.stdout, indent=1, default=float)
+    sys.stdout.write("\n")
+    return doc
+
+
+if __name__ == "__main__":
+    main()
