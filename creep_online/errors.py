@@ -39,6 +39,7 @@ class DataWarning(CreepOnlineWarning):
 
 
 def one_line(exc: BaseException) -> str:
-    """The exception's message on one line (first line, at most 300 characters): how every error is shown."""
+    """The exception's message on one line (first line, at most 500 characters: room for a file's path and the
+    list of its channels or columns): how every error is shown."""
     text = str(exc).strip().splitlines()
-    return (text[0] if text else type(exc).__name__)[:300]
+    return (text[0] if text else type(exc).__name__)[:500]
