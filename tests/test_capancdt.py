@@ -428,3 +428,17 @@ def test_no_rate_and_no_control_port_is_one_line(tmp_path):
 @pytest.mark.slow
 def test_random_configurations_at_scale(tmp_path):
     check_configurations(range(1, 21), tmp_path)
+
+
+def test_the_emulator_exits_after_its_record_when_the_reader_left_early(tmp_path):
+    cmd = tmp_path / "cmd.csv"
+    with PlantProcess(["--transport", "capancdt", "--duration", "1", "--linger", "0.5", "--command-file",
+                       str(cmd)]) as plant:
+        with open_source(f"capancdt:{plant.port}?command={cmd}&rate={RATE}", on_event=None) as src:
+            deadline = time.monotonic() + 30
+            while src.stats.samples < 200 and time.monotonic() < deadline:
+                src.read(0.05)
+        left = time.monotonic()
+        end = plant.wait_event("end", timeout=30)
+        assert plant.proc.wait(10) == 0 and time.monotonic() - left < 10
+    assert end["stopped"] is False and plant.events[-1]["event"] == "end"
