@@ -331,3 +331,40 @@ def test_the_emulator_exits_after_its_record():
         end = proc.wait_event("end", timeout=30)
         assert proc.proc.wait(10) == 0 and time.monotonic() - started < 10
     assert end["recorded"] == 1000
+
+
+def test_a_tcp_controller_that_goes_away_is_a_lost_link_and_exit_4(capsys):
+    proc, _ = controller(["--tcp", "--rate", "5000", "--duration", "5", "--disconnect-after", "0.8"])
+    with proc:
+        code = main(["stream", "--source", f"pi:tcp:{proc.port}?reconnect=0&timeout=0.5", "--duration", "20",
+                     "--json"])
+        proc.wait_event("disconnect", timeout=5)
+    captured = capsys.readouterr()
+    out = json.loads(captured.out)
+    lines = captured.err.strip().splitlines()
+    assert code == 4 and out["samples"] > 1000 and out["source_stats"]["disconnects"] == 1
+    assert lines[-1].startswith(f"creep-online stream: link lost: pi:tcp:{proc.port}: controller disappeared (")
+    assert lines[-1].endswith("reconnect is off") and "Traceback" not in captured.err
+
+
+def test_a_tcp_controller_that_comes_back_is_reconnected():
+    rate = 5000.0
+    args = ["--tcp", "--rate", f"{rate:g}", "--duration", "4", "--params", random_params(10),
+            "--disconnect-after", "0.6", "--back-after", "0.4"]
+    proc, plant = controller(args)
+    with proc:
+        src = open_source(f"pi:tcp:{proc.port}?timeout=0.3", on_event=None)
+        got = []
+        deadline = time.monotonic() + 60
+        while src.stats.reconnects < 1 or len(got) < 5000:
+            got += src.read(0.05)
+            assert time.monotonic() < deadline, src.stats.summary()
+        src.close()
+        triggers = [e["cycle"] for e in proc.events if e.get("event") == "trigger"]
+    assert src.stats.disconnects == 1 and len(triggers) == 2
+    seq = np.array([s.seq for s in got])
+    first_after = int(np.flatnonzero(np.diff(seq) > 1)[0]) + 1
+    after = got[first_after:]
+    np.testing.assert_allclose([s.y for s in after], plant.y[triggers[1] + np.arange(len(after))], rtol=1e-9,
+                               atol=1e-12)
+    assert src.stats.missing == after[0].seq - got[first_after - 1].seq - 1 > 0.4 * rate
