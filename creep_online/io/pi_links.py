@@ -190,5 +190,6 @@ def _open_usb(serial: str, pid: int | None) -> Any:
 
 
 def _reason(exc: BaseException) -> str:
+    """The first line of what went wrong (an OSError's strerror, else the message), at most 160 characters."""
     msg = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
     return str(msg).strip().splitlines()[0][:160]

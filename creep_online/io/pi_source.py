@@ -43,7 +43,7 @@ from typing import Any
 
 from ..errors import DataError, TransportError
 from .frames import RawSample
-from .pi_links import gateway_factory, parse_connection
+from .pi_links import _reason, gateway_factory, parse_connection
 from .source_options import Option, flag
 from .sources import ReconnectingSource
 
@@ -336,8 +336,3 @@ class PiSource(ReconnectingSource):
 def _squeezed(name: str) -> str:
     """A controller name compared without case, spaces and dashes (E-727 = e727)."""
     return "".join(c for c in name.upper() if c.isalnum())
-
-
-def _reason(exc: BaseException) -> str:
-    msg = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
-    return str(msg).strip().splitlines()[0][:160]
