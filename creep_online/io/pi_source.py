@@ -77,6 +77,11 @@ def axis_list(text: str) -> tuple[str, ...]:
 axis_list.__name__ = "axes"
 
 
+def product_id(text: str) -> int:
+    """A USB product id, decimal or ``0x`` hexadecimal."""
+    return int(text, 0)
+
+
 class PiSource(ReconnectingSource):
     """Samples from a PI controller's data recorder (``pi:tcp:HOST?rtr=1``, ``pi:/dev/ttyUSB0?baudrate=115200``).
 
@@ -97,7 +102,7 @@ class PiSource(ReconnectingSource):
         Option("y_record", int, ACTUAL_POSITION, "record option of the output (2 current position)"),
         Option("chunk", int, 2000, "most points read per DRR? query"),
         Option("timeout", float, 2.0, "seconds without a reply before the link counts as lost"),
-        Option("pid", lambda text: int(text, 0), None, "USB product id (default: found by the serial number)"),
+        Option("pid", product_id, None, "USB product id (default: found by the serial number)"),
         Option("wait", flag, True, "wait for reply bytes with select (0: pipython's stock gateway, which spins)"),
     )
 
