@@ -40,8 +40,7 @@ once samples have arrived):
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("stream", help="run the online estimator on a stream (csv:FILE, serial:PORT, can:..., canlog:FILE, "
-                                      "pi:..., capancdt:...)",
+    p = sub.add_parser("stream", help="run the online estimator on a stream (csv:FILE, serial:PORT, can:..., canlog:FILE, pi:PORT)",
                        description="Online identification of all four parameters: a global search over "
                                    "(alpha, fn, zeta) on the first samples, then a window fit that follows the "
                                    "plant, detects abrupt changes and gates outliers (docs/online.md). Prints the "
