@@ -66,7 +66,7 @@ def stream(seconds: float, faults: str = "") -> dict:
         n_total = plant.ready["samples"]
         est = OnlineEstimator(1.0 / RATE)
         timed = ThreadCpu(est)
-        src = open_source(f"capancdt:{plant.port}?command={cmd}", on_event=None)
+        src = open_source(f"capancdt:{plant.port}?command={cmd}&control={plant.ready['control_port']}", on_event=None)
         t0 = plant.wait_event("start")["t0_monotonic"]
         seqs: list[int] = []
         loop = FeedLoop(src, lambda _dt: timed, dt=1.0 / RATE, latency=SampleAge(t0, 1.0 / RATE),

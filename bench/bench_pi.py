@@ -20,6 +20,11 @@
   shared monotonic clock) to the return of ``update()``, p50/p99/max. Baseline
   in the same run: 10 kSa/s with pipython's stock ``PISerial`` gateway
   (``?wait=0``), whose reply polling spins instead of waiting in ``select``.
+* TCP: the same throughput (chunk 2000) and real-time (10 kSa/s) runs with the
+  emulator on a loopback TCP port (``--tcp``) and the source as
+  ``pi:tcp:127.0.0.1:PORT`` (pipython's ``PISocket``), with the select-waiting
+  socket gateway and, as the baseline in the same run, pipython's stock one.
+  ``--tcp-only`` runs just this part.
 """
 from __future__ import annotations
 
@@ -48,14 +53,19 @@ def controller(args: list[str]):
     return PlantProcess(args, module="hil_sim.pi_controller"), plant
 
 
-def throughput_source(points: int, chunk: int) -> dict:
+def spec(proc: PlantProcess, tcp: bool) -> str:
+    """The source spec of the emulator: ``pi:tcp:127.0.0.1:PORT`` over TCP, ``pi:PTY`` otherwise."""
+    return f"pi:tcp:{proc.port}" if tcp else f"pi:{proc.port}"
+
+
+def throughput_source(points: int, chunk: int, tcp: bool = False, wait: bool = True) -> dict:
     rate = 10_000.0
     args = ["--rate", f"{rate:g}", "--duration", f"{points / rate:g}", "--fast", "--table-points", str(points),
-            "--t-start", "0.01"]
+            "--t-start", "0.01"] + (["--tcp"] if tcp else [])
     proc, plant = controller(args)
     with proc:
         cpu0, th0, t0 = time.process_time(), time.thread_time(), time.perf_counter()
-        src = open_source(f"pi:{proc.port}?chunk={chunk}", on_event=None)
+        src = open_source(f"{spec(proc, tcp)}?chunk={chunk}&wait={int(wait)}", on_event=None)
         got = []
         while len(got) < points and time.perf_counter() - t0 < 600:
             got += src.read(0.05)
@@ -64,7 +74,8 @@ def throughput_source(points: int, chunk: int) -> dict:
         src.close()
     seq = np.array([s.seq for s in got])
     wrong = int(np.count_nonzero(np.abs(np.array([s.y for s in got]) - plant.y[seq]) > 1e-9 * (1 + np.abs(plant.y[seq]))))
-    return {"chunk": chunk, "points": points, "samples": len(got), "missing": src.stats.missing,
+    return {"link": "tcp" if tcp else "pty", "wait": wait, "chunk": chunk, "points": points, "samples": len(got),
+            "missing": src.stats.missing,
             "values_wrong": wrong, "drr_queries": src.stats.parser.frames, "wall_s": wall,
             "samples_per_s": len(got) / wall, "process_cpu_us_per_sample": cpu / max(len(got), 1) * 1e6,
             "main_thread_cpu_us_per_sample": th / max(len(got), 1) * 1e6}
@@ -126,16 +137,16 @@ def random_plants(n: int, points: int = 20_000) -> dict:
             "cases": cases}
 
 
-def realtime(rate: float, seconds: float, wait: bool = True) -> dict:
+def realtime(rate: float, seconds: float, wait: bool = True, tcp: bool = False) -> dict:
     from creep_online.online import OnlineEstimator, warm_kernels
     warm_kernels()
     args = ["--rate", f"{rate:g}", "--duration", f"{seconds + 5:g}", "--t-start", "0.2", "--schedule", "square",
-            "--period", "1", "--table-points", str(int(rate * (seconds + 5)))]
+            "--period", "1", "--table-points", str(int(rate * (seconds + 5)))] + (["--tcp"] if tcp else [])
     proc, plant = controller(args)
     n_target = int(rate * seconds)
     with proc:
         est = OnlineEstimator(1.0 / rate)
-        src = open_source(f"pi:{proc.port}?wait={int(wait)}", on_event=None)
+        src = open_source(f"{spec(proc, tcp)}?wait={int(wait)}", on_event=None)
         trigger = proc.wait_event("trigger", timeout=30)
         cpu0, th0, t0 = time.process_time(), time.thread_time(), time.perf_counter()
         loop = FeedLoop(src, lambda _dt: est, dt=1.0 / rate, latency=SampleAge(trigger["t_monotonic"], 1.0 / rate),
@@ -149,7 +160,9 @@ def realtime(rate: float, seconds: float, wait: bool = True) -> dict:
             raise end.error
     model = proc.ready["model"]
     e = est.estimate
-    return {"rate_sps": rate, "seconds": seconds, "gateway": "select-waiting" if wait else "stock PISerial (spins)",
+    stock = "stock PISocket (spins)" if tcp else "stock PISerial (spins)"
+    return {"rate_sps": rate, "seconds": seconds, "link": "tcp" if tcp else "pty",
+            "gateway": "select-waiting" if wait else stock,
             "samples": loop.fed, "recorded": n_target,
             "missing": src.stats.missing, "gaps": src.stats.sequence.gaps, "stalls": src.stats.stalls,
             "drr_queries": src.stats.parser.frames, "latency_us": dist(loop.latency_us()),
@@ -161,17 +174,26 @@ def realtime(rate: float, seconds: float, wait: bool = True) -> dict:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="shorter runs (5 s real time instead of 20 s)")
+    ap.add_argument("--tcp-only", action="store_true", help="only the TCP runs")
     args = ap.parse_args()
     points = 50_000 if args.quick else 200_000
+    seconds = 5.0 if args.quick else 20.0
     out: dict = {"machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
                              "load_avg_1m": os.getloadavg()[0]}, "quick": args.quick}
+    out["tcp"] = {"throughput": [throughput_source(points, 2000, tcp=True),
+                                 throughput_source(points, 2000, tcp=True, wait=False)],
+                  "realtime": realtime(10_000.0, seconds, tcp=True),
+                  "realtime_baseline_stock_gateway": realtime(10_000.0, seconds, wait=False, tcp=True)}
+    if args.tcp_only:
+        out["machine"]["load_avg_1m_end"] = os.getloadavg()[0]
+        print(json.dumps(out, indent=2))
+        return 0
     base = throughput_baseline(points)
     runs = [throughput_source(points, chunk) for chunk in (500, 2000, 8000)]
     for r in runs:
         r["ratio_vs_baseline"] = r["samples_per_s"] / base["samples_per_s"]
     out["throughput"] = {"baseline_one_qdrr": base, "pi_source": runs}
     out["random_plants"] = random_plants(5 if args.quick else 12)
-    seconds = 5.0 if args.quick else 20.0
     out["realtime"] = [realtime(rate, seconds) for rate in (5_000.0, 10_000.0, 20_000.0)]
     out["realtime_baseline_stock_gateway"] = realtime(10_000.0, seconds, wait=False)
     out["machine"]["load_avg_1m_end"] = os.getloadavg()[0]

@@ -59,7 +59,7 @@ def printable(text: str, *, keep_return: bool = True) -> str:
 
 
 def one_line(exc: BaseException) -> str:
-    """The exception's message on one line (first line, at most 300 characters, control characters escaped):
-    how every error is shown."""
+    """The exception's message on one line (first line, at most 500 characters: room for a file's path and the
+    list of its channels or columns; control characters escaped): how every error is shown."""
     text = str(exc).strip().splitlines()
-    return printable((text[0] if text else type(exc).__name__)[:300], keep_return=False)
+    return printable((text[0] if text else type(exc).__name__)[:500], keep_return=False)

@@ -73,6 +73,11 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--sensor-channel", type=int, default=1, help="the channel that measures the actuator (default 1)")
     g.add_argument("--counter-start", type=int, default=0, help="frame counter of the first frame (default 0)")
     g.add_argument("--port", type=int, default=0, help="TCP port (default: an ephemeral one)")
+    g.add_argument("--control-port", type=int, default=0,
+                   help="control port answering the sample-time query $STI? (default: an ephemeral one; "
+                        "the ready event names it)")
+    g.add_argument("--size-first", action="store_true",
+                   help="write bytes per frame before the frame count in the packet header (the other order)")
     return p
 
 

@@ -78,7 +78,7 @@ class CapancdtServer:
 
     def __init__(self, record: SensorRecord, rate: float, plan: dict[int, str], spec: FaultSpec, events, *,
                  frames_per_packet: int = FRAMES_PER_PACKET, counter_start: int = 0, realtime: bool = True,
-                 seed: int = 0, port: int = 0, stop: threading.Event | None = None) -> None:
+                 seed: int = 0, port: int = 0, stop: threading.Event | None = None, size_first: bool = False) -> None:
         bad = sorted(set(plan.values()) - FAULTS)
         if bad:
             raise ValueError(f"faults {', '.join(bad)} are not supported on transport capancdt "
@@ -86,6 +86,7 @@ class CapancdtServer:
         self.record, self.rate, self.plan, self.spec, self.events = record, float(rate), plan, spec, events
         self.m = int(frames_per_packet)
         self.counter_start = int(counter_start)
+        self.size_first = size_first
         self.realtime = realtime
         self.rng = np.random.default_rng(seed + 15485863)
         self.stop = stop or threading.Event()
@@ -123,7 +124,8 @@ class CapancdtServer:
     # ------------------------------------------------------------ packets
     def packet(self, n: int, m: int) -> bytes:
         rec = self.record
-        return encode_packet(self.counter_start + n, rec.raw[n:n + m], channels=rec.channel_bits)
+        return encode_packet(self.counter_start + n, rec.raw[n:n + m], channels=rec.channel_bits,
+                             size_first=self.size_first)
 
     def corrupt(self, data: bytes, which: int) -> bytes:
         """The packet with one header field made impossible (in turn: magic, frame size, frame count, channels)."""
@@ -132,7 +134,7 @@ class CapancdtServer:
         if kind == 0:
             b[0:4] = b"MEAX"
         elif kind == 1:
-            b[26] ^= 0x02                      # bytes per frame no longer 4 * channels
+            b[24 if self.size_first else 26] ^= 0x02    # bytes per frame no longer 4 * channels
         elif kind == 2:
             b[24:26] = b"\x00\x00"             # zero frames
         else:
@@ -208,10 +210,16 @@ class CapancdtServer:
         if out and self.client is not None:
             try:
                 self.client.sendall(b"".join(out))
-            except OSError:                    # the reader went away: wait for it like the controller does
+            except OSError:                    # the reader went away: wait for it, at most until the record ends
                 self._hang_up()
                 self.events("client_lost")
-                self.accept(timeout=30.0)
+                self.accept(timeout=self._left())
+
+    def _left(self) -> float:
+        """Seconds of the record still to be played (0 when not paced in real time)."""
+        if not self.realtime:
+            return 0.0
+        return max(0.0, self.t0 + self.n_frames / self.rate - time.monotonic())
 
     def _outage(self, p: int, n: int) -> int:
         """Hang up, stay away ``disconnect_s``, accept the reader again; the frames meanwhile are lost."""
@@ -235,6 +243,49 @@ class CapancdtServer:
                 pass
         self.stop.wait(linger)
 
+
+
+class ControlPort:
+    """The controller's control port on 127.0.0.1: ``$CMD\r\n`` text commands, of which the sample-time query
+    ``$STI?`` is answered (``$STI?256OK``: the sample time in us) and anything else with ``$UNKNOWN COMMAND``."""
+
+    def __init__(self, rate: float, port: int = 0) -> None:
+        self.sample_time_us = 1e6 / float(rate)
+        self.listener = socket.create_server(("127.0.0.1", port))
+        self.port = self.listener.getsockname()[1]
+        threading.Thread(target=self._serve, daemon=True).start()
+
+    def answer(self, line: str) -> str:
+        command = line.strip().lstrip("$").strip()
+        if command.upper() == "STI?":
+            return f"$STI?{self.sample_time_us:.6g}OK\r\n"
+        return f"${command}$UNKNOWN COMMAND\r\n"
+
+    def _serve(self) -> None:
+        while True:
+            try:
+                conn, _ = self.listener.accept()
+            except OSError:
+                return
+            threading.Thread(target=self._session, args=(conn,), daemon=True).start()
+
+    def _session(self, conn: socket.socket) -> None:
+        with conn:
+            buf = b""
+            while True:
+                try:
+                    data = conn.recv(1024)
+                except OSError:
+                    return
+                if not data:
+                    return
+                buf += data
+                while b"\n" in buf:
+                    line, buf = buf.split(b"\n", 1)
+                    conn.sendall(self.answer(line.decode("ascii", "replace")).encode("ascii"))
+
+    def close(self) -> None:
+        self.listener.close()
 
 
 class _Stopped(Exception):
@@ -269,7 +320,9 @@ def serve(args, cfg: PlantConfig, spec: FaultSpec) -> int:
         n_packets = -(-rec.raw.shape[0] // m)
         server = CapancdtServer(rec, args.rate, plan(spec, n_packets, args.seed, frame_rate=args.rate / m), spec,
                                 emit_event, frames_per_packet=m, counter_start=args.counter_start,
-                                realtime=not args.fast, seed=args.seed, port=args.port, stop=stop)
+                                realtime=not args.fast, seed=args.seed, port=args.port, stop=stop,
+                                size_first=args.size_first)
+        control = ControlPort(args.rate, args.control_port)
     except (ValueError, OSError) as exc:
         print(f"hil_sim: {exc}", flush=True, file=__import__("sys").stderr)
         return 2
@@ -278,6 +331,7 @@ def serve(args, cfg: PlantConfig, spec: FaultSpec) -> int:
                frames_per_packet=m, model=cfg.model.params(), schedule=cfg.schedule, amplitude=cfg.amplitude,
                command_rate=args.command_rate, command_file=args.command_file, range_um=rec.range_um,
                channels=args.sensor_channels, channel=args.sensor_channel, counter_start=args.counter_start,
+               control_port=control.port, size_first=args.size_first,
                noise=cfg.noise, effects=cfg.effects, faults=spec.counts, pid=os.getpid())
     try:
         while not stop.is_set() and not server.accept(timeout=0.2):
@@ -295,4 +349,5 @@ def serve(args, cfg: PlantConfig, spec: FaultSpec) -> int:
     except BrokenPipeError:
         pass
     server.close()
+    control.close()
     return 0

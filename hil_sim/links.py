@@ -1,4 +1,4 @@
-"""Where the plant's frames go: a pseudo-terminal (serial or SLCAN) or python-can's virtual bus.
+"""Where the plant's frames go: a pseudo-terminal (serial or SLCAN), a loopback TCP port or python-can's virtual bus.
 
 A pty pair is opened with ``os.openpty``; the slave is put in raw mode and kept
 open here too, so the line never hangs up while the reader (pyserial, in
@@ -12,6 +12,7 @@ import array
 import fcntl
 import os
 import select
+import socket
 import termios
 import time
 import tty
@@ -142,3 +143,72 @@ class VirtualLink:
 
     def close(self) -> None:
         self.bus.shutdown()
+
+
+class TcpLink:
+    """A loopback TCP port standing for a controller's Ethernet interface: one client at a time.
+
+    Offers what the emulators use of :class:`PtyLink` (``read_available``,
+    ``write``, ``close``, ``reopen``, ``port``); a client that goes away is
+    dropped and the next one accepted. ``close`` also closes the listening
+    port (a pulled cable: new connections are refused), ``reopen`` listens on
+    the same port again.
+    """
+
+    def __init__(self, port: int = 0, host: str = "127.0.0.1") -> None:
+        self.host = host
+        self._number = int(port)
+        self.listener: socket.socket | None = None
+        self.client: socket.socket | None = None
+        self.open()
+
+    def open(self) -> None:
+        self.listener = socket.create_server((self.host, self._number))
+        self._number = self.listener.getsockname()[1]
+        self.tty = f"{self.host}:{self._number}"
+
+    @property
+    def port(self) -> str:
+        return self.tty
+
+    def read_available(self, timeout: float = 0.0) -> bytes:
+        if self.client is None:
+            ready, _, _ = select.select([self.listener], [], [], timeout)
+            if ready:
+                self.client, _ = self.listener.accept()
+                self.client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            return b""
+        ready, _, _ = select.select([self.client], [], [], timeout)
+        if not ready:
+            return b""
+        try:
+            data = self.client.recv(4096)
+        except OSError:
+            data = b""
+        if not data:
+            self._drop_client()
+        return data
+
+    def write(self, data: bytes) -> None:
+        if self.client is not None:
+            try:
+                self.client.sendall(data)
+            except OSError:
+                self._drop_client()
+
+    def _drop_client(self) -> None:
+        if self.client is not None:
+            try:
+                self.client.close()
+            except OSError:
+                pass
+        self.client = None
+
+    def close(self) -> None:
+        self._drop_client()
+        if self.listener is not None:
+            self.listener.close()
+            self.listener = None
+
+    def reopen(self) -> None:
+        self.open()

@@ -1,10 +1,13 @@
-"""``python -m hil_sim.pi_controller``: a PI piezo controller's GCS 2 command subset over a pseudo-terminal.
+"""``python -m hil_sim.pi_controller``: a PI piezo controller's GCS 2 command subset over a pty or TCP.
 
 Stands in for an E-727-like digital piezo controller so that PI's own library,
-``pipython`` (``GCSDevice`` over its ``PISerial`` gateway), can be the client,
-unchanged. Behind the commands is hil_sim's simulated plant
-(``hil_sim.plant.generate``): its input schedule is the piezo voltage, its
-output the sensor position, one sample per servo cycle (``--rate``).
+``pipython`` (``GCSDevice`` over its ``PISerial`` or ``PISocket`` gateway), can
+be the client, unchanged: over a pseudo-terminal (RS-232) by default, or on a
+loopback TCP port with ``--tcp [PORT]`` (the controller's Ethernet interface).
+Behind the commands is hil_sim's simulated plant (``hil_sim.plant.generate``),
+one per axis (``--axes N``; ``--params`` may give one ``;``-separated set per
+axis): its input schedule is the piezo voltage, its output the sensor
+position, one sample per servo cycle (``--rate``).
 
 The commands and the replies pipython expects (one command per line, ``\\n``
 ended; a multi-line reply ends every line but the last with a space before the
@@ -14,7 +17,7 @@ line feed; a query's error is collected by pipython with ``ERR?``):
 ``*IDN?``          identification line
 ``CSV?``           ``2.0`` (GCS 2 syntax: pipython then uses its GCS 2 classes)
 ``ERR?``           the last error code, then resets it to 0
-``SAI?``           the axis identifiers (one axis, ``1``)
+``SAI?``           the axis identifiers (``1`` .. ``N``)
 ``TNR?``           number of data recorder tables
 ``RTR n``/``RTR?`` record table rate: servo cycles per recorded point
 ``DRC t s o``      table t records option o of axis/channel s; ``DRC?`` reads it
@@ -38,7 +41,12 @@ system monotonic clock: servo cycle c happens at ``t0 + c / rate``, t0 being
 the first trigger; ``--fast`` instead makes every recording complete at once
 and start where the previous one ended (throughput measurements).
 
-stdout: line 1 the port; then JSON events ``ready`` (model, rate, samples),
+The record is ``--duration`` seconds long from the first trigger; the
+emulator exits ``--linger`` seconds after it ends (with ``--fast``, when
+stopped).
+
+stdout: line 1 the port (``127.0.0.1:PORT`` with ``--tcp``); then JSON events
+``ready`` (model, models: one per axis, rate, samples),
 ``trigger`` (servo cycle where a recording starts, its points), ``disconnect``,
 ``reconnect``, ``end``. ``--disconnect-after S`` closes the port S seconds after
 the first trigger (a pulled cable) and exits, or with ``--back-after S2`` opens a
@@ -55,11 +63,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .links import PtyLink
+from .links import PtyLink, TcpLink
 from .plant import SCHEDULES, PlantConfig, PlantRecord, generate, parse_params
 
 IDN = "Physik Instrumente (PI) GmbH & Co. KG, E-727 (hil_sim emulation), 0000000000, 01.000"
-AXES = ("1",)
 TABLES = 8
 
 #: Record options emulated: option id -> (name pattern of the header's NAMEi, whether the source is an axis).
@@ -96,7 +103,7 @@ class Recording:
 class Controller:
     """The command interpreter; ``handle(line)`` returns the reply text (or None) for one command."""
 
-    plant: PlantRecord
+    plant: PlantRecord | list[PlantRecord]
     rate: float
     table_points: int
     fast: bool = False
@@ -106,6 +113,11 @@ class Controller:
     triggers: dict[int, tuple[int, str]] = field(default_factory=dict)
     recording: Recording | None = None
     t0: float | None = None
+
+    def __post_init__(self) -> None:
+        self.plants = self.plant if isinstance(self.plant, list) else [self.plant]
+        self.plant = self.plants[0]
+        self.axes = tuple(str(k + 1) for k in range(len(self.plants)))
 
     # ------------------------------------------------------------------ time and data
     def cycle_now(self) -> int:
@@ -137,10 +149,16 @@ class Controller:
             return 0
         return min(self.table_points, (last - rec.start) // self.rtr + 1)
 
-    def present(self, option: int) -> float:
+    def present(self, option: int, axis: str = "1") -> float:
         """The signal's value at the present servo cycle (VOL?, POS?)."""
         k = min(self.cycle_now(), self.plant.u.size - 1) if self.recording else 0
-        return float(self._column(option, np.array([k]))[0])
+        return float(self._column(option, np.array([k]), axis)[0])
+
+    def finished(self, linger: float) -> bool:
+        """The record has been played (``linger`` s ago) in real time; never in --fast mode."""
+        if self.fast or self.t0 is None:
+            return False
+        return time.monotonic() - self.t0 > self.plant.u.size / self.rate + linger
 
     # ------------------------------------------------------------------ commands
     def handle(self, line: str) -> str | None:
@@ -169,7 +187,7 @@ class Controller:
         return f"{err}\n"
 
     def q_sai(self, args):
-        return gcs_reply(list(AXES))
+        return gcs_reply(list(self.axes))
 
     def q_tnr(self, args):
         return f"{TABLES}\n"
@@ -209,7 +227,7 @@ class Controller:
             if not 1 <= table <= TABLES or (option not in RECORD_OPTIONS and option != 0):
                 self.error = OUT_OF_RANGE
                 return None
-            if option and source not in AXES:
+            if option and source not in self.axes:
                 self.error = INVALID_AXIS
                 return None
         for table, source, option in triples:
@@ -258,28 +276,29 @@ class Controller:
                    for i, t in enumerate(tables)]
         header += ["#", "# END_HEADER"]
         cycles = rec.start + (offset - 1 + np.arange(count)) * self.rtr
-        columns = [self._column(rec.config[t][1], cycles) for t in tables]
+        columns = [self._column(rec.config[t][1], cycles, rec.config[t][0]) for t in tables]
         rows = [" ".join(f"{v:.10g}" for v in values) for values in zip(*columns)]
         return gcs_reply(header + rows)
 
-    def _column(self, option: int, cycles: np.ndarray) -> list[float]:
-        """Option ``option`` at the given servo cycles (the target is the voltage at unit gain)."""
-        u, y = self.plant.u[cycles], self.plant.y[cycles]
+    def _column(self, option: int, cycles: np.ndarray, axis: str) -> list[float]:
+        """Option ``option`` of ``axis`` at the given servo cycles (the target is the voltage at unit gain)."""
+        plant = self.plants[int(axis) - 1]
+        u, y = plant.u[cycles], plant.y[cycles]
         return {1: u, 2: y, 3: u - y, 7: u, 14: u}[option].tolist()
 
     def q_vol(self, args):
         channels = args or ["1"]
-        if any(c not in AXES for c in channels):
+        if any(c not in self.axes for c in channels):
             self.error = INVALID_AXIS
             return None
-        return gcs_reply([f"{c}={self.present(7):.10g}" for c in channels])
+        return gcs_reply([f"{c}={self.present(7, c):.10g}" for c in channels])
 
     def q_pos(self, args):
-        axes = args or list(AXES)
-        if any(a not in AXES for a in axes):
+        axes = args or list(self.axes)
+        if any(a not in self.axes for a in axes):
             self.error = INVALID_AXIS
             return None
-        return gcs_reply([f"{a}={self.present(2):.10g}" for a in axes])
+        return gcs_reply([f"{a}={self.present(2, a):.10g}" for a in axes])
 
 
 COMMANDS = {"*IDN?": Controller.q_idn, "CSV?": Controller.q_csv, "ERR?": Controller.q_err,
@@ -289,15 +308,17 @@ COMMANDS = {"*IDN?": Controller.q_idn, "CSV?": Controller.q_csv, "ERR?": Control
             "DRR?": Controller.q_drr, "VOL?": Controller.q_vol, "POS?": Controller.q_pos}
 
 
-def serve(link: PtyLink, ctl: Controller, disconnect_after: float | None, back_after: float | None) -> None:
-    """Answer commands line by line until stopped (SIGTERM) or the simulated cable is pulled for good.
+def serve(link: PtyLink | TcpLink, ctl: Controller, disconnect_after: float | None, back_after: float | None,
+          linger: float = 1.0) -> None:
+    """Answer commands line by line until stopped (SIGTERM), the record is over (``linger`` s after its end)
+    or the simulated cable is pulled for good.
 
     The cable is pulled ``disconnect_after`` s after the first trigger; with ``back_after``
     it is plugged in again that many seconds later (a new pty behind ``--link``) and the
     controller, which kept running, answers again.
     """
     buf = b""
-    while True:
+    while not ctl.finished(linger):
         if disconnect_after is not None and ctl.t0 is not None and time.monotonic() - ctl.t0 > disconnect_after:
             emit("disconnect", after_s=disconnect_after, recorded=ctl.recorded())
             link.close()
@@ -336,28 +357,48 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--back-after", type=float, default=None,
                    help="with --disconnect-after: plug the cable in again this many seconds later (needs --link)")
     p.add_argument("--link", default=None, help="stable symlink to the pty")
+    p.add_argument("--tcp", type=int, nargs="?", const=0, default=None, metavar="PORT",
+                   help="serve on 127.0.0.1:PORT instead of a pty (no PORT: a free one)")
+    p.add_argument("--axes", type=int, default=1, help="axes, each with its own plant (1..4, default 1)")
+    p.add_argument("--linger", type=float, default=1.0,
+                   help="seconds to keep answering after the record has been played (default 1)")
     return p
 
 
+def plant_configs(args: argparse.Namespace) -> list[PlantConfig]:
+    """The plant of each axis, sampled once per servo cycle (tests rebuild them from the same args).
+
+    Axis k takes the k-th ``;``-separated set of ``--params`` (the last set when there are fewer)
+    and noise seed ``seed + k - 1``.
+    """
+    sets = args.params.split(";")
+    return [PlantConfig(parse_params(sets[min(k, len(sets) - 1)]), rate=args.rate, duration=args.duration,
+                        schedule=args.schedule, amplitude=args.amplitude, period=args.period, t_start=args.t_start,
+                        noise=args.noise, seed=args.seed + k) for k in range(args.axes)]
+
+
 def plant_config(args: argparse.Namespace) -> PlantConfig:
-    """The plant behind the controller, sampled once per servo cycle (tests rebuild it from the same args)."""
-    return PlantConfig(parse_params(args.params), rate=args.rate, duration=args.duration, schedule=args.schedule,
-                       amplitude=args.amplitude, period=args.period, t_start=args.t_start, noise=args.noise,
-                       seed=args.seed)
+    """The plant of axis 1."""
+    return plant_configs(args)[0]
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    plant = generate(plant_config(args))
-    link = PtyLink(args.link)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not 1 <= args.axes <= TABLES // 2:
+        parser.error(f"--axes must be 1..{TABLES // 2}")
+    if args.tcp is not None and args.link:
+        parser.error("--link names a pty; a --tcp port stays the same across --back-after")
+    configs = plant_configs(args)
+    plants = [generate(cfg) for cfg in configs]
+    link = TcpLink(args.tcp) if args.tcp is not None else PtyLink(args.link)
     print(link.port, flush=True)
-    model = parse_params(args.params)
-    emit("ready", model={"alpha": model.alpha, "a1": model.a1, "a2": model.a2, "b": model.b},
-         rate=args.rate, samples=int(plant.u.size), tty=link.tty)
-    ctl = Controller(plant, args.rate, args.table_points, fast=args.fast)
+    models = [{"alpha": c.model.alpha, "a1": c.model.a1, "a2": c.model.a2, "b": c.model.b} for c in configs]
+    emit("ready", model=models[0], models=models, rate=args.rate, samples=int(plants[0].u.size), tty=link.tty)
+    ctl = Controller(plants, args.rate, args.table_points, fast=args.fast)
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
     try:
-        serve(link, ctl, args.disconnect_after, args.back_after)
+        serve(link, ctl, args.disconnect_after, args.back_after, args.linger)
     finally:
         emit("end", recorded=ctl.recorded())
         link.close()

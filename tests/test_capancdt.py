@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import socket
 import subprocess
 import sys
 import time
@@ -25,6 +26,7 @@ from hypothesis import strategies as st
 from creep_online.errors import DataError, TransportError
 from creep_online.io.capancdt_frames import (FULL_SCALE, CapancdtParser, channel_field, channel_list, encode_packet,
                                              scale)
+from creep_online.io.capancdt_source import read_data_rate
 from creep_online.io.command_schedule import CommandSchedule
 from creep_online.io.sources import open_source
 from hil_sim.capancdt_server import sensor_record
@@ -39,17 +41,19 @@ PLANT = ["--transport", "capancdt", "--duration", str(DURATION), "--t-start", "0
          "--period", "0.4", "--seed", "5", "--counter-start", str(COUNTER_START), "--linger", "5"]
 
 
-def manual_header(counter: int, frames: int, channels: list[int], order: int = 6230, serial: int = 4711) -> bytes:
-    """The 32-byte header spelled out field by field from the manual's table."""
+def manual_header(counter: int, frames: int, channels: list[int], order: int = 6230, serial: int = 4711,
+                  size_first: bool = False) -> bytes:
+    """The 32-byte header spelled out field by field from the manual's table (``size_first``: the two u16
+    fields the other way round, as a public DT6220 client reads them)."""
     bits = sum(1 << (2 * (c - 1)) for c in channels)
+    pair = [frames.to_bytes(2, "little"), (4 * len(channels)).to_bytes(2, "little")]
     return (b"MEAS" + order.to_bytes(4, "little") + serial.to_bytes(4, "little") + bits.to_bytes(8, "little")
-            + bytes(4) + frames.to_bytes(2, "little") + (4 * len(channels)).to_bytes(2, "little")
-            + counter.to_bytes(4, "little"))
+            + bytes(4) + b"".join(pair[::-1] if size_first else pair) + counter.to_bytes(4, "little"))
 
 
-def manual_packet(counter: int, rows: list[list[int]], channels: list[int]) -> bytes:
+def manual_packet(counter: int, rows: list[list[int]], channels: list[int], size_first: bool = False) -> bytes:
     body = b"".join(v.to_bytes(4, "little", signed=True) for row in rows for v in row)
-    return manual_header(counter, len(rows), channels) + body
+    return manual_header(counter, len(rows), channels, size_first=size_first) + body
 
 
 # ------------------------------------------------------------------ the format
@@ -71,7 +75,9 @@ def test_scaling_matches_the_manuals_example():
     assert scale(FULL_SCALE, 200.0) == 200.0 and scale(0, 200.0) == 0.0
 
 
-def test_random_packets_in_random_chunks_come_through_exact():
+@pytest.mark.parametrize("size_first", [False, True])
+def test_random_packets_in_random_chunks_come_through_exact(size_first):
+    """Either order of the header's two u16 fields (bytes per frame = 4 x channels tells which is which)."""
     rng = np.random.default_rng(11)
     for trial in range(50):
         chans = sorted(rng.choice(np.arange(1, 9), int(rng.integers(1, 5)), replace=False).tolist())
@@ -79,7 +85,7 @@ def test_random_packets_in_random_chunks_come_through_exact():
         sent, data = [], b""
         for _ in range(int(rng.integers(2, 12))):
             rows = rng.integers(0, FULL_SCALE + 1, (int(rng.integers(1, 9)), len(chans))).tolist()
-            data += manual_packet(counter % 2**32, rows, chans)
+            data += manual_packet(counter % 2**32, rows, chans, size_first)
             sent.append((counter % 2**32, rows))
             counter += len(rows)
         cuts = np.sort(rng.integers(0, len(data), 6))
@@ -281,7 +287,8 @@ def test_faults_are_counted_exactly_and_every_sample_is_the_plants(tmp_path):
     faults = "drop=3,drop_frames=5,badheader=4,garbage=2,disconnect=1,disconnect_s=0.3"
     with PlantProcess(PLANT + ["--fast", "--command-file", str(cmd), "--sensor-channels", "2",
                                "--sensor-channel", "2", "--faults", faults]) as plant:
-        src = open_source(f"capancdt:{plant.port}?command={cmd}&channel=2", on_event=None)
+        src = open_source(f"capancdt:{plant.port}?command={cmd}&channel=2&control={plant.ready['control_port']}",
+                          on_event=None)
         with src:
             n = plant.ready["samples"]
             samples = read_all(src, COUNTER_START + n - 1)
@@ -301,7 +308,8 @@ def test_faults_are_counted_exactly_and_every_sample_is_the_plants(tmp_path):
 def test_a_disconnect_with_reconnect_off_ends_with_one_line(tmp_path):
     cmd = tmp_path / "cmd.csv"
     with PlantProcess(PLANT + ["--fast", "--command-file", str(cmd), "--faults", "disconnect=1"]) as plant:
-        with open_source(f"capancdt:{plant.port}?command={cmd}&reconnect=0", on_event=None) as src:
+        with open_source(f"capancdt:{plant.port}?command={cmd}&reconnect=0&control={plant.ready['control_port']}",
+                         on_event=None) as src:
             got = []
             with pytest.raises(TransportError) as info:
                 deadline = time.monotonic() + 60
@@ -316,7 +324,8 @@ def test_stream_command_end_to_end(tmp_path):
     with PlantProcess(PLANT + ["--command-file", str(cmd)]) as plant:
         n = plant.ready["samples"]
         out = subprocess.run([sys.executable, "-m", "creep_online", "stream", "--source",
-                              f"capancdt:{plant.port}?command={cmd}", "--json", "--max-samples", str(n)],
+                              f"capancdt:{plant.port}?command={cmd}&control={plant.ready['control_port']}", "--json",
+                               "--max-samples", str(n)],
                              capture_output=True, text=True, timeout=300, cwd=REPO,
                              env={**os.environ, "PYTHONPATH": str(REPO)})
     assert out.returncode == 0, out.stderr
@@ -334,7 +343,8 @@ def random_configuration(seed: int) -> dict:
     return {"channels": channels, "channel": int(rng.integers(1, channels + 1)),
             "frames_per_packet": int(rng.integers(1, 17)), "counter_start": int(rng.integers(0, 2**32)),
             "rate": RATE / 2 ** int(rng.integers(0, 4)), "command_rate": float(rng.uniform(50.0, 3900.0)),
-            "range": float(rng.choice([50.0, 200.0, 500.0, 1000.0, 2000.0])), "drop_frames": int(rng.integers(1, 9))}
+            "range": float(rng.choice([50.0, 200.0, 500.0, 1000.0, 2000.0])), "drop_frames": int(rng.integers(1, 9)),
+            "size_first": bool(rng.integers(0, 2)), "ask_rate": bool(rng.integers(0, 2))}
 
 
 def run_configuration(cfg: dict, tmp_path) -> None:
@@ -347,11 +357,14 @@ def run_configuration(cfg: dict, tmp_path) -> None:
             "--sensor-channel", str(cfg["channel"]), "--frames-per-packet", str(cfg["frames_per_packet"]),
             "--counter-start", str(cfg["counter_start"]), "--sensor-range", str(cfg["range"]),
             "--command-file", str(cmd), "--faults", f"drop=2,drop_frames={cfg['drop_frames']}", "--linger", "5"]
+    args += ["--size-first"] if cfg["size_first"] else []
     with PlantProcess(args) as plant:
         n = plant.ready["samples"]
-        spec = f"capancdt:{plant.port}?command={cmd}&channel={cfg['channel']}&rate={cfg['rate']}&range={cfg['range']}"
+        rate = f"control={plant.ready['control_port']}" if cfg["ask_rate"] else f"rate={cfg['rate']}"
+        spec = f"capancdt:{plant.port}?command={cmd}&channel={cfg['channel']}&{rate}&range={cfg['range']}"
         with open_source(spec, on_event=None) as src:
             samples = read_all(src, cfg["counter_start"] + n - 1)
+        assert src.rate == cfg["rate"]
         ledger = plant.wait_event("end", timeout=60)["ledger"]
     truth = sensor_record(PlantConfig(parse_params(""), rate=cfg["rate"], duration=duration, schedule="staircase",
                                       period=0.1, t_start=0.05, seed=9),
@@ -381,6 +394,51 @@ def test_random_configurations(tmp_path):
     check_configurations(range(1), tmp_path)
 
 
+def test_the_other_header_order_and_the_rate_from_the_control_port(tmp_path):
+    """A controller writing bytes per frame first, at a quarter of the fastest rate, which the source asks
+    for on the control port ($STI? -> 1024 us) instead of being told."""
+    cfg = {**random_configuration(3), "size_first": True, "ask_rate": True, "rate": RATE / 4}
+    run_configuration(cfg, tmp_path)
+
+
+def test_the_control_port_answers_the_sample_time_query():
+    with PlantProcess(["--transport", "capancdt", "--rate", str(RATE / 2), "--duration", "0.5"]) as plant:
+        port = plant.ready["control_port"]
+        assert read_data_rate("127.0.0.1", port) == RATE / 2          # $STI?512OK
+        with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
+            sock.sendall(b"$STI?\r\n$XYZ\r\n")
+            answer = b""
+            while answer.count(b"\n") < 2:
+                answer += sock.recv(256)
+        assert answer == b"$STI?512OK\r\n$XYZ$UNKNOWN COMMAND\r\n"
+
+
+def test_no_rate_and_no_control_port_is_one_line(tmp_path):
+    cmd = tmp_path / "cmd.csv"
+    with PlantProcess(PLANT + ["--command-file", str(cmd)]) as plant:
+        with socket.socket() as probe:                 # a port nobody listens on
+            probe.bind(("127.0.0.1", 0))
+            closed = probe.getsockname()[1]
+        with pytest.raises(TransportError) as info:
+            open_source(f"capancdt:{plant.port}?command={cmd}&control={closed}", on_event=None)
+    assert str(info.value) == (f"capancdt:{plant.port}: no data rate given and the control port 127.0.0.1:{closed} "
+                               "did not tell it (Connection refused); give ?rate=HZ or ?control=PORT")
+
+
 @pytest.mark.slow
 def test_random_configurations_at_scale(tmp_path):
     check_configurations(range(1, 21), tmp_path)
+
+
+def test_the_emulator_exits_after_its_record_when_the_reader_left_early(tmp_path):
+    cmd = tmp_path / "cmd.csv"
+    with PlantProcess(["--transport", "capancdt", "--duration", "1", "--linger", "0.5", "--command-file",
+                       str(cmd)]) as plant:
+        with open_source(f"capancdt:{plant.port}?command={cmd}&rate={RATE}", on_event=None) as src:
+            deadline = time.monotonic() + 30
+            while src.stats.samples < 200 and time.monotonic() < deadline:
+                src.read(0.05)
+        left = time.monotonic()
+        end = plant.wait_event("end", timeout=30)
+        assert plant.proc.wait(10) == 0 and time.monotonic() - left < 10
+    assert end["stopped"] is False and plant.events[-1]["event"] == "end"

@@ -158,3 +158,84 @@ def test_a_saved_drr_answer_reads_back(tmp_path):
     np.testing.assert_allclose(got.u, rec.u[0:5000:2], rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(got.y, rec.y[0:5000:2], rtol=1e-9, atol=1e-12)
     assert got.h == pytest.approx(2 / 5000.0)
+
+
+# ------------------------------------------------------------------ channels chosen by meaning, --dt
+E712 = ("Target Position of axis1", "Control Voltage of Output Chan 1", "Current Position of axis1")
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_an_e712_recording_takes_voltage_in_and_position_out(tmp_path, seed):
+    """Three channels, the target first (as an E-712 records them): the input is the voltage, not NAME0."""
+    _, rec = random_plant(seed)
+    target = 0.8 * rec.u + 0.01                 # a set point that is not what reaches the actuator
+    path = write_gcs(tmp_path / "e712.dat", rec, 2000.0, names=E712,
+                     columns=[target.tolist(), rec.u.tolist(), rec.y.tolist()])
+    got = load_record(path)
+    np.testing.assert_allclose(got.u, np.round(rec.u, 6), atol=5e-7)
+    np.testing.assert_allclose(got.y, np.round(rec.y, 6), atol=5e-7)
+    by_output = load_record(path, y_column="NAME2")           # one named, the other by meaning
+    np.testing.assert_array_equal(by_output.u, got.u)
+
+
+def test_identify_an_e712_file_as_with_the_columns_named(tmp_path, capsys):
+    model, rec = random_plant(5)
+    path = write_gcs(tmp_path / "e712.dat", rec, 2000.0, names=E712,
+                     columns=[(0.5 * rec.u).tolist(), rec.u.tolist(), rec.y.tolist()])
+    assert main(["identify", str(path), "--json"]) == 0
+    default = json.loads(capsys.readouterr().out)
+    assert main(["identify", str(path), "--json", "--u-column", E712[1], "--y-column", E712[2]]) == 0
+    named = json.loads(capsys.readouterr().out)
+    assert all(default[k] == named[k] for k in ("alpha", "a1", "a2", "b"))
+    assert default["alpha"] == pytest.approx(model.alpha, abs=0.01) and default["b"] == pytest.approx(model.b, rel=0.02)
+
+
+@pytest.mark.parametrize("names", [
+    ("Control Voltage of Output Chan 1", "Current Position of axis1", "Control Voltage of Output Chan 2",
+     "Current Position of axis2"),                                    # two axes: which pair?
+    ("Target Position of axis1", "Position Error of axis1", "Current Position of axis1"),   # no input
+])
+def test_channels_without_a_single_meaning_are_refused_listing_them(tmp_path, capsys, names):
+    _, rec = random_plant(1)
+    path = write_gcs(tmp_path / "many.dat", rec, 2000.0, names=names, columns=[rec.u.tolist()] * len(names))
+    assert main(["identify", str(path)]) == 2
+    listing = "; ".join(f"NAME{i} = {n!r}" for i, n in enumerate(names))
+    assert capsys.readouterr().err == (
+        f"creep-online identify: error: {path}: {len(names)} channels and no single voltage/command input and "
+        f"position/sensor output among their names: choose them with --u-column and --y-column ({listing})\n")
+
+
+def test_a_file_without_sample_time_takes_dt(tmp_path, capsys):
+    """pipython's savegcsarray(path, None, data) writes neither SAMPLE_TIME nor NAMEi lines."""
+    model, rec = random_plant(7)
+    path = tmp_path / "plain.dat"
+    pitools.savegcsarray(str(path), None, [rec.u.tolist(), rec.y.tolist()])
+    assert main(["identify", str(path)]) == 2
+    assert capsys.readouterr().err == (f"creep-online identify: error: {path}: GCS header has no SAMPLE_TIME line; "
+                                       "give the sample time with --dt SECONDS\n")
+    got = load_gcs(path, dt=1 / 2000.0)
+    np.testing.assert_allclose(got.t, np.arange(rec.u.size) / 2000.0, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(got.y, np.round(rec.y, 6), atol=5e-7)
+    assert main(["identify", str(path), "--dt", "0.0005", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["alpha"] == pytest.approx(model.alpha, abs=0.01) and out["b"] == pytest.approx(model.b, rel=0.02)
+    assert main(["stream", "--source", f"csv:{path}", "--dt", "0.0005", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["dt"] == pytest.approx(0.0005)
+    three = tmp_path / "three.dat"
+    pitools.savegcsarray(str(three), None, [rec.u.tolist(), rec.u.tolist(), rec.y.tolist()])
+    assert main(["diagnose", str(three), "--dt", "0.0005"]) == 2
+    assert "(NAME0 = 'NAME0'; NAME1 = 'NAME1'; NAME2 = 'NAME2')" in capsys.readouterr().err
+    assert main(["fit", str(three), "--dt", "0.0005", "--u-column", "NAME1", "--y-column", "NAME2",
+                 "--effects", "hysteresis", "--json"]) == 0
+
+
+def test_dt_that_contradicts_the_file_is_refused(tmp_path, capsys):
+    _, rec = random_plant(2)
+    gcs = write_gcs(tmp_path / "rec.dat", rec, 2000.0)
+    assert main(["identify", str(gcs), "--dt", "0.001"]) == 2
+    assert capsys.readouterr().err == f"creep-online identify: error: --dt 0.001 contradicts SAMPLE_TIME = 0.0005 of {gcs}; drop --dt\n"
+    csv = tmp_path / "rec.csv"
+    save_csv(csv, rec.t, rec.u, rec.y)
+    assert main(["diagnose", str(csv), "--dt", "0.001"]) == 2
+    assert "--dt 0.001 contradicts the time column of" in capsys.readouterr().err
+    assert main(["identify", str(csv), "--dt", "0.0005", "--json"]) == 0

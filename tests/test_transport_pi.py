@@ -1,4 +1,4 @@
-"""PI controllers: pipython itself, unchanged, against hil_sim's emulated controller over a real pty.
+"""PI controllers: pipython itself, unchanged, against hil_sim's emulated controller over a real pty or TCP.
 
 The emulator (``python -m hil_sim.pi_controller``) runs in its own process;
 the tests rebuild its plant from the same arguments (``plant_config``) as the
@@ -16,11 +16,13 @@ pytest.importorskip("pipython", reason="pipython is an optional extra (creep_onl
 
 from pipython import GCSDevice, GCSError  # noqa: E402
 from pipython.pidevice.interfaces.piserial import PISerial  # noqa: E402
+from pipython.pidevice.interfaces.pisocket import PISocket  # noqa: E402
 
 from creep_online.cli import main  # noqa: E402
 from creep_online.io import open_source  # noqa: E402
 from hil_sim.harness import PlantProcess  # noqa: E402
-from hil_sim.pi_controller import build_parser, plant_config  # noqa: E402
+from creep_online.io.pi_links import FORMS, Connection, parse_connection  # noqa: E402
+from hil_sim.pi_controller import build_parser, plant_config, plant_configs  # noqa: E402
 from hil_sim.plant import generate  # noqa: E402
 
 
@@ -206,3 +208,163 @@ def test_reconnect_after_a_pulled_cable_numbers_on_from_the_clock(tmp_path):
     bound = src.trigger_uncertainty_s[0] + src.trigger_uncertainty_s[1] + 1e-3
     assert abs(after[0].seq - triggers[1]) <= bound * rate
     assert src.stats.missing == after[0].seq - before[-1].seq - 1 > 0.4 * rate
+
+
+# ------------------------------------------------------------------ the connection forms
+@pytest.mark.parametrize("target, expected", [
+    ("tcp:192.168.0.10", Connection("tcp", "192.168.0.10", 50000)),
+    ("tcp:pi-e727.lab:50001", Connection("tcp", "pi-e727.lab", 50001)),
+    ("usb:0123456789", Connection("usb", "0123456789")),
+    ("rs232:/dev/ttyUSB0", Connection("rs232", "/dev/ttyUSB0")),
+    ("RS232:COM3", Connection("rs232", "COM3")),
+    ("/dev/ttyUSB0", Connection("rs232", "/dev/ttyUSB0")),
+    ("COM3", Connection("rs232", "COM3")),
+    ("/dev/serial/by-path/pci-0000:00:14.0-usb-0:1:1.0-port0",
+     Connection("rs232", "/dev/serial/by-path/pci-0000:00:14.0-usb-0:1:1.0-port0")),
+])
+def test_connection_forms(target, expected):
+    assert parse_connection(target) == expected
+
+
+@pytest.mark.parametrize("spec", ["pi:192.168.0.10:50000", "pi:tcp://192.168.0.10:50000", "pi:192.168.0.10",
+                                  "pi:usb:", "pi:tcp:", "pi:serial:/dev/ttyUSB0", "pi:tcp:host:port:1"])
+def test_an_unknown_form_is_one_line_listing_the_forms(spec, capsys):
+    code = main(["stream", "--source", spec, "--max-samples", "10"])
+    err = capsys.readouterr().err
+    assert code == 2 and err == f"creep-online stream: error: {spec}: not a PI connection; use {FORMS}\n"
+
+
+def test_a_bad_tcp_port_and_options_that_do_not_apply_are_one_line(capsys):
+    assert main(["stream", "--source", "pi:tcp:127.0.0.1:70000"]) == 2
+    assert capsys.readouterr().err == ("creep-online stream: error: pi:tcp:127.0.0.1:70000: the TCP port must be "
+                                       "a number 1..65535, got '70000'\n")
+    assert main(["stream", "--source", "pi:tcp:127.0.0.1?baudrate=9600"]) == 2
+    assert capsys.readouterr().err.endswith(": baudrate applies to RS-232 connections only\n")
+    assert main(["stream", "--source", "pi:/dev/ttyUSB0?axes=1,1"]) == 2
+    assert "option axes='1,1' is not valid" in capsys.readouterr().err
+
+
+def test_usb_goes_to_pipythons_piusb_and_fails_in_one_line(capsys):
+    """No PI USB device here: pipython's PIUSB (pyusb) finds none, or has no libusb backend; one line either way."""
+    code = main(["stream", "--source", "pi:usb:0123456789", "--max-samples", "10"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
+    assert err in ("creep-online stream: error: pi:usb:0123456789: cannot open (no USB backend: install libusb-1.0)\n",
+                   "creep-online stream: error: pi:usb:0123456789: no PI USB device with this serial number "
+                   "(found: none); a controller on a virtual COM port is pi:rs232:PORT\n")
+
+
+def test_a_refused_tcp_connection_is_one_line(capsys):
+    import socket
+    with socket.socket() as probe:               # a port nobody listens on
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    assert main(["stream", "--source", f"pi:tcp:127.0.0.1:{port}", "--max-samples", "10"]) == 2
+    assert capsys.readouterr().err == (f"creep-online stream: error: pi:tcp:127.0.0.1:{port}: cannot open "
+                                       "(Connection refused)\n")
+
+
+# ------------------------------------------------------------------ TCP, names, several axes
+# pipython's stock PISocket raises EBADF when GCSDevice closes it a second time on garbage collection
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
+def test_pipython_over_tcp_reads_the_plant():
+    """pipython's own PISocket (ConnectTCPIP) against the emulator's TCP port."""
+    args = ["--tcp", "--rate", "5000", "--duration", "1", "--params", random_params(4), "--fast",
+            "--table-points", "900"]
+    proc, plant = controller(args)
+    host, port = proc.port.split(":")
+    with proc, GCSDevice("E-727", gateway=PISocket(host, int(port))) as dev:
+        assert type(dev.gcsdevice).__name__ == "GCS2Device" and "E-727" in dev.qIDN()
+        dev.DRC([1, 2], ["1", "1"], [7, 2])
+        dev.DRT(0, 4, 0)
+        header = dev.qDRR([1, 2], 1, 900)
+        while dev.bufstate is not True:
+            time.sleep(0.001)
+        assert header["SAMPLE_TIME"] == pytest.approx(1 / 5000.0)
+        np.testing.assert_allclose(dev.bufdata[0], plant.u[:900], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(dev.bufdata[1], plant.y[:900], rtol=1e-9, atol=1e-12)
+
+
+def test_rs232_spelling_baudrate_and_controller_name(capsys):
+    proc, plant = controller(["--rate", "2000", "--duration", "3", "--params", random_params(6)])
+    with proc:
+        with open_source(f"pi:rs232:{proc.port}?baudrate=460800&controller=E-727", on_event=None) as src:
+            got = []
+            deadline = time.monotonic() + 30
+            while len(got) < 200 and time.monotonic() < deadline:
+                got += src.read(0.05)
+        assert src.connection == Connection("rs232", proc.port) and src.baudrate == 460800
+        np.testing.assert_allclose([s.y for s in got], plant.y[:len(got)], rtol=1e-9, atol=1e-12)
+        assert main(["stream", "--source", f"pi:{proc.port}?baud=9600&controller=E-709", "--max-samples", "10"]) == 2
+    assert capsys.readouterr().err == (f"creep-online stream: error: pi:{proc.port}: the controller answering is "
+                                       "not an E-709 (*IDN?: Physik Instrumente (PI) GmbH & Co. KG, E-727 (hil_sim "
+                                       "emulation), 0000000000, 01.000)\n")
+
+
+def test_several_axes_over_tcp_one_estimate_each(capsys):
+    """Two axes with different plants behind one controller: stream gives each axis its own estimate."""
+    params = f"{random_params(11)};{random_params(12)}"
+    args = ["--tcp", "--axes", "2", "--rate", "10000", "--duration", "6", "--params", params,
+            "--schedule", "square", "--period", "1", "--t-start", "0.05", "--noise", "1e-4"]
+    proc, _ = controller(args)
+    plants = [generate(cfg) for cfg in plant_configs(build_parser().parse_args(args))]
+    with proc:
+        code = main(["stream", "--source", f"pi:tcp:{proc.port}?axes=1,2", "--max-samples", "30000", "--json"])
+        truths = proc.ready["models"]
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and [a["axis"] for a in out["axes"]] == ["1", "2"]
+    assert out["alpha"] == out["axes"][0]["alpha"] and out["source_stats"]["missing"] == 0
+    assert plants[0].y[-1] != plants[1].y[-1]
+    for axis, truth in zip(out["axes"], truths):
+        assert axis["samples"] >= 30000
+        assert axis["alpha"] == pytest.approx(truth["alpha"], abs=0.01)
+        assert axis["b"] == pytest.approx(truth["b"], rel=0.02)
+        assert axis["a2"] == pytest.approx(truth["a2"], rel=0.05)
+
+
+def test_the_emulator_exits_after_its_record():
+    proc, _ = controller(["--tcp", "--rate", "2000", "--duration", "0.5", "--linger", "0.5"])
+    with proc:
+        with open_source(f"pi:tcp:{proc.port}", on_event=None) as src:
+            src.read(0.05)
+        started = time.monotonic()
+        end = proc.wait_event("end", timeout=30)
+        assert proc.proc.wait(10) == 0 and time.monotonic() - started < 10
+    assert end["recorded"] == 1000
+
+
+def test_a_tcp_controller_that_goes_away_is_a_lost_link_and_exit_4(capsys):
+    proc, _ = controller(["--tcp", "--rate", "5000", "--duration", "5", "--disconnect-after", "0.8"])
+    with proc:
+        code = main(["stream", "--source", f"pi:tcp:{proc.port}?reconnect=0&timeout=0.5", "--duration", "20",
+                     "--json"])
+        proc.wait_event("disconnect", timeout=5)
+    captured = capsys.readouterr()
+    out = json.loads(captured.out)
+    lines = captured.err.strip().splitlines()
+    assert code == 4 and out["samples"] > 1000 and out["source_stats"]["disconnects"] == 1
+    assert lines[-1].startswith(f"creep-online stream: link lost: pi:tcp:{proc.port}: controller disappeared (")
+    assert lines[-1].endswith("reconnect is off") and "Traceback" not in captured.err
+
+
+def test_a_tcp_controller_that_comes_back_is_reconnected():
+    rate = 5000.0
+    args = ["--tcp", "--rate", f"{rate:g}", "--duration", "4", "--params", random_params(10),
+            "--disconnect-after", "0.6", "--back-after", "0.4"]
+    proc, plant = controller(args)
+    with proc:
+        src = open_source(f"pi:tcp:{proc.port}?timeout=0.3", on_event=None)
+        got = []
+        deadline = time.monotonic() + 60
+        while src.stats.reconnects < 1 or len(got) < 5000:
+            got += src.read(0.05)
+            assert time.monotonic() < deadline, src.stats.summary()
+        src.close()
+        triggers = [e["cycle"] for e in proc.events if e.get("event") == "trigger"]
+    assert src.stats.disconnects == 1 and len(triggers) == 2
+    seq = np.array([s.seq for s in got])
+    first_after = int(np.flatnonzero(np.diff(seq) > 1)[0]) + 1
+    after = got[first_after:]
+    np.testing.assert_allclose([s.y for s in after], plant.y[triggers[1] + np.arange(len(after))], rtol=1e-9,
+                               atol=1e-12)
+    assert src.stats.missing == after[0].seq - got[first_after - 1].seq - 1 > 0.4 * rate

@@ -108,9 +108,15 @@ def add_column_options(parser, time: bool = True) -> None:
                                  "'t [ms]' converts it to seconds)")
     parser.add_argument("--u-column", default=None, metavar="NAME", type=nonempty,
                         help="input column: a CSV header name (default u) or, in a PI GCS data-recorder file, "
-                             "a NAMEi text or NAMEi itself (default NAME0)")
+                             "a NAMEi text or NAMEi itself (default NAME0 of two channels; of more, the one "
+                             "named as a voltage or command)")
     parser.add_argument("--y-column", default=None, metavar="NAME", type=nonempty,
-                        help="output column: a CSV header name (default y) or a GCS NAMEi (default NAME1)")
+                        help="output column: a CSV header name (default y) or a GCS NAMEi (default NAME1 of two "
+                             "channels; of more, the one named as a current position or sensor)")
+    if time:
+        parser.add_argument("--dt", type=seconds, default=None, metavar="SECONDS",
+                            help="sample time of a PI GCS file that has no SAMPLE_TIME line (for a CSV it must "
+                                 "agree with the time column)")
 
 
 def print_json(obj: Any) -> None:

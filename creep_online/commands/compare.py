@@ -40,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     model = load_model(args.model)
     with for_command(args.json) as progress:
         progress.stage(f"compare {args.data}: loading")
-        inp = load_for_diagnosis(args.data, args.u_column, args.y_column, args.t_column)
+        inp = load_for_diagnosis(args.data, args.u_column, args.y_column, args.t_column, dt=args.dt)
         progress.stage(f"compare {args.data}: {len(inp.record)} samples, simulating")
         result = compare(model, inp.record, initial=args.initial, u_pre=inp.u_pre, t_pre=inp.t_pre)
     out = {**result.to_dict(), "model_file": args.model, "notes": inp.notes}

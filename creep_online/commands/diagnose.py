@@ -39,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
         check_report_dir(args.report)   # before the work, not after it
     with for_command(args.json) as progress:
         progress.stage(f"diagnose {args.data}: loading")
-        inp = load_for_diagnosis(args.data, args.u_column, args.y_column, args.t_column)
+        inp = load_for_diagnosis(args.data, args.u_column, args.y_column, args.t_column, dt=args.dt)
         result = diagnose(inp.record, candidates=candidates, u_pre=inp.u_pre, t_pre=inp.t_pre, workers=args.workers,
                           progress=lambda stage: progress.stage(f"diagnose {args.data}: {stage}"))
     result.warnings[:0] = inp.notes

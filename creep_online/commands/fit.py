@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     out_path = check_model_output(args.output, args.data)
     with for_command(args.json) as progress:
         progress.stage(f"fit {args.data}: loading")
-        inp = load_for_diagnosis(args.data, args.u_column, args.y_column, args.t_column)
+        inp = load_for_diagnosis(args.data, args.u_column, args.y_column, args.t_column, dt=args.dt)
         rec = inp.record
         notes: list[str] = []
         data, base = fit_base_by_rule(rec.t, rec.u, rec.y, source=rec.source, u_pre=inp.u_pre, t_pre=inp.t_pre,

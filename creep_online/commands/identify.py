@@ -33,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
     out_path = check_model_output(args.output, args.data)
     with for_command(args.json) as progress:
         progress.stage(f"identify {args.data}: loading")
-        rec = load_record(args.data, args.u_column, args.y_column, t_column=args.t_column)
+        rec = load_record(args.data, args.u_column, args.y_column, t_column=args.t_column, dt=args.dt)
         progress.stage(f"identify {args.data}: {len(rec)} samples, fitting")
         res = identify(rec.t, rec.u, rec.y, t_c=args.t_c, alpha0=args.alpha0, layer1_step=args.layer1_step,
                        retune=not args.no_retune, polish=not args.no_polish, source=rec.source)

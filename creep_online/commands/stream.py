@@ -53,7 +53,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "plant, detects abrupt changes and gates outliers (docs/online.md). Prints the "
                                    "final estimate, its quality and the per-sample update() latency.",
                        epilog=EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--source", required=True, type=nonempty, help="csv:FILE | serial:PORT | can:IFACE:CHANNEL | canlog:FILE | pi:PORT | "
+    p.add_argument("--source", required=True, type=nonempty,
+                   help="csv:FILE | serial:PORT | can:IFACE:CHANNEL | canlog:FILE | "
+                        "pi:tcp:HOST[:PORT] | pi:usb:SERIAL | pi:[rs232:]PORT | "
                                                     "capancdt:HOST:PORT?command=FILE | "
                                                     "KIND:... of an installed plug-in (docs/transports.md)")
     p.add_argument("--json", action="store_true",
@@ -71,7 +73,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="write the estimate's trajectory as CSV (t, alpha, a1, a2, b, fn_hz, zeta, quality, "
                         "reason, events, researches: the re-searches that replaced the resonance), every 10 ms "
                         "of stream time")
-    p.add_argument("--dt", type=seconds, default=None, help="sampling step in s (live sources; default: from the stream)")
+    p.add_argument("--dt", type=seconds, default=None, help="sampling step in s (live sources; default: from the stream), "
+                                                            "or the sample time of a PI GCS file without SAMPLE_TIME")
     p.add_argument("--block", action="store_true", help="csv: feed the whole file with update_block (throughput)")
     add_column_options(p, time=False)
     p.add_argument("--max-samples", type=whole(1, 1 << 62), default=None, help="stop after this many samples")
@@ -168,6 +171,39 @@ def _latency(us: np.ndarray) -> dict:
             "mean": float(us.mean()), "over_1ms": int(np.count_nonzero(us > 1000.0))}
 
 
+class AxisEstimators:
+    """One estimator per axis of a multi-axis source, whose samples carry a tuple of values per axis.
+
+    What the feed loop and the status line ask of an estimator: ``update``,
+    ``gap`` (every axis loses the same samples), ``samples``, and the first
+    axis's ``estimate`` and ``model`` for the status line.
+    """
+
+    def __init__(self, axes: tuple[str, ...], estimators: list[OnlineEstimator]) -> None:
+        self.axes = axes
+        self.estimators = estimators
+
+    def update(self, u: tuple, y: tuple) -> None:
+        for est, uk, yk in zip(self.estimators, u, y):
+            est.update(uk, yk)
+
+    def gap(self, n: int) -> None:
+        for est in self.estimators:
+            est.gap(n)
+
+    @property
+    def samples(self) -> int:
+        return self.estimators[0].samples
+
+    @property
+    def estimate(self):
+        return self.estimators[0].estimate
+
+    @property
+    def model(self):
+        return self.estimators[0].model
+
+
 def _report(est: OnlineEstimator, latency: dict, extra: dict) -> dict:
     e = est.estimate
     out = {"alpha": e.alpha, "a1": e.a1, "a2": e.a2, "b": e.b, "samples": e.samples, "latency_us": latency,
@@ -206,12 +242,31 @@ def run(args: argparse.Namespace) -> int:
 def _print_report(spec: str, args: argparse.Namespace, est: OnlineEstimator, latency: dict, extra: dict) -> int:
     """The estimate, the counters and how the stream ended (JSON or text); the exit code."""
     end = extra.setdefault("end", _end("end_of_stream"))
-    out = _report(est, latency, extra)
+    per_axis = list(zip(est.axes, est.estimators)) if isinstance(est, AxisEstimators) else [(None, est)]
+    out = _report(per_axis[0][1], latency, extra)
+    if per_axis[0][0] is not None:           # several axes: the top-level keys are the first axis's
+        out["axes"] = [{"axis": axis, **_report(e, latency, {})} for axis, e in per_axis]
     if end["message"]:
         print(f"creep-online stream: {end['reason'].replace('_', ' ')}: {end['message']}", file=sys.stderr)
     if args.json:
         print_json(out)
         return end["exit_code"]
+    for axis, one in per_axis:
+        _print_estimate(spec if axis is None else f"{spec} axis {axis}", one)
+    if "throughput_sps" in extra:
+        print(f"  block mode: {extra['throughput_sps']:.4g} samples/s")
+    else:
+        print(f"  update() latency: p50 {latency['p50']:.3g} us, p99 {latency['p99']:.3g} us, "
+              f"max {latency['max']:.4g} us, {latency['over_1ms']} over 1 ms"
+              + (f" (all {len(per_axis)} axes)" if len(per_axis) > 1 else ""))
+    if "link" in extra:
+        print(f"  link: {extra['link']}")
+    print(f"  ended: {end['reason'].replace('_', ' ')} (exit {end['exit_code']})")
+    return end["exit_code"]
+
+
+def _print_estimate(spec: str, est: OnlineEstimator) -> None:
+    """The estimate's lines of the text output."""
     e = est.estimate
     sd = e.uncertainty
     why = f" ({e.reason})" if e.reason else ""
@@ -229,15 +284,6 @@ def _print_report(spec: str, args: argparse.Namespace, est: OnlineEstimator, lat
         print(f"  {event_line(ev)}")
     for line in research_lines(e.researches):
         print(f"  {line}")
-    if "throughput_sps" in extra:
-        print(f"  block mode: {extra['throughput_sps']:.4g} samples/s")
-    else:
-        print(f"  update() latency: p50 {latency['p50']:.3g} us, p99 {latency['p99']:.3g} us, "
-              f"max {latency['max']:.4g} us, {latency['over_1ms']} over 1 ms")
-    if "link" in extra:
-        print(f"  link: {extra['link']}")
-    print(f"  ended: {end['reason'].replace('_', ' ')} (exit {end['exit_code']})")
-    return end["exit_code"]
 
 
 def _run_csv(path: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dict, dict]:
@@ -246,12 +292,11 @@ def _run_csv(path: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dict
     if args.trace is not None:
         from ..io.safe_files import check_output
         check_output(args.trace, inputs=[path])
-    rec = load_record(path, args.u_column, args.y_column)
+    rec = load_record(path, args.u_column, args.y_column, dt=args.dt)
     if not rec.is_uniform:
         raise DataError(f"{rec.source}: time is not uniformly sampled; the online estimator needs a fixed step")
     check_time_and_output(rec.t, rec.y, rec.source)     # the file is whole: what identify refuses, refused here
     check_amplitudes(rec.u, rec.y, rec.source)
-    _check_dt(args, rec.h, rec.source)
     est = OnlineEstimator(rec.h, **_options(args))
     warm_kernels()                          # compile before the clock starts
     trace = Trace(args.trace, rec.h)
@@ -328,13 +373,6 @@ def _column_options(spec: str, args: argparse.Namespace) -> dict:
     return given
 
 
-def _check_dt(args: argparse.Namespace, h: float, source: str) -> None:
-    """--dt must agree with the file's own time column (a different step is refused, not ignored)."""
-    if args.dt is not None and not math.isclose(args.dt, h, rel_tol=1e-6):
-        raise DataError(f"--dt {args.dt:g} contradicts the time column of {source} (step {h:.6g} s); "
-                        f"drop --dt or fix the file")
-
-
 def _end(reason: str, message: str = "", exit_code: int | None = None) -> dict:
     """How the stream ended, for the report and the exit code (``exit_code``: a stop signal's 128 + N)."""
     return {"reason": reason, "exit_code": END_CODES[reason] if exit_code is None else exit_code, "message": message}
@@ -371,10 +409,16 @@ def _run_live(spec: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dic
     source = registry.open_source(spec, **_column_options(spec, args))
     trace = Trace(None, 1.0)
     options = _options(args)
+    axes = tuple(getattr(source, "axes", None) or ())
+    if len(axes) > 1 and args.trace is not None:
+        source.close()
+        raise DataError(f"{spec}: --trace follows one axis; stream one axis to trace it")
 
-    def make_estimator(dt: float) -> OnlineEstimator:
+    def make_estimator(dt: float) -> OnlineEstimator | AxisEstimators:
         nonlocal trace
         trace = Trace(args.trace, dt)
+        if len(axes) > 1:
+            return AxisEstimators(axes, [OnlineEstimator(dt, **options) for _ in axes])
         return OnlineEstimator(dt, **options)
 
     def add_to_trace(loop, _sample) -> None:

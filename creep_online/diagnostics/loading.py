@@ -46,17 +46,17 @@ def merge_repeated_times(t: np.ndarray, u: np.ndarray, y: np.ndarray) -> tuple[n
     return t[keep], u_first, y_m, int(t.size - keep.sum())
 
 
-def load_for_diagnosis(path: str | Path, u_column: str | None = None,
-                       y_column: str | None = None, t_column: str | None = None) -> DiagnosisInput:
+def load_for_diagnosis(path: str | Path, u_column: str | None = None, y_column: str | None = None,
+                       t_column: str | None = None, dt: float | None = None) -> DiagnosisInput:
     """Load a record for diagnosis (see the module notes); DataError naming file and problem otherwise.
 
     ``t_column``/``u_column``/``y_column`` choose the columns by name (``load_record``).
-    A GCS file's time comes from its sample time, so only the CSV readings apply to CSV files.
+    A GCS file's time comes from its sample time (or ``dt``), so only the CSV readings apply to CSV files.
     """
     try:
-        return DiagnosisInput(load_record(path, u_column, y_column, t_column=t_column))
+        return DiagnosisInput(load_record(path, u_column, y_column, t_column=t_column, dt=dt))
     except DataError as first:
-        if is_gcs_file(path):
+        if is_gcs_file(path) or dt is not None:
             raise
         names = tuple(c.strip().lower() for c in (t_column or "t", u_column or "u", y_column or "y"))
         with warnings.catch_warnings():

@@ -14,10 +14,15 @@ offset      type    field
                     ``00`` = absent, channel 1 in the lowest bits
 20          u32     status (not used)
 24          u16     M, frames in this packet (one frame = one value per channel)
-26          u16     bytes per frame (4 * N)
+26          u16     bytes per frame (4 * N); see below for the other order
 28          u32     measuring value counter of the first frame
 32          i32 *N  frame 1: the present channels, lowest first; then frames 2..M
 ==========  ======  ====================================================
+
+The manual's table puts M first; one public DT6220 client reads bytes per
+frame first. Both orders are accepted: bytes per frame must equal 4 x the
+channels the channel field names, and that decides which field is which
+(when both equal it, the packet reads the same either way).
 
 A value uses the low 24 bits: ``distance = value / 0xFFFFFF * range``, so the
 top byte of every int32 is 0x00 (0xFF for a negative result of the
@@ -62,7 +67,7 @@ MAX_JUMP = 1 << 20
 _PAIR_HIGH_BITS = 0xAAAAAAAAAAAAAAAA   # the upper bit of every 2-bit channel entry must be 0
 _VALUES = np.dtype("<i4")
 _TOP_BYTES = b"\x00\xff"              # a value's top byte: 0x00 (or 0xFF, a negative math result)
-_TAIL = struct.Struct("<HHI")         # frames, bytes per frame, counter (offset 24)
+_TAIL = struct.Struct("<HHI")         # frames and bytes per frame (either order), counter (offset 24)
 
 
 class Identity(NamedTuple):
@@ -108,26 +113,35 @@ def quantize(distance_um: np.ndarray, range_um: float) -> np.ndarray:
 
 
 def encode_packet(counter: int, values: np.ndarray, *, channels: int = 0b01, order: int = 6200,
-                  serial: int = 1, status: int = 0) -> bytes:
-    """One packet: header + ``values`` (shape (M, N), one column per present channel)."""
+                  serial: int = 1, status: int = 0, size_first: bool = False) -> bytes:
+    """One packet: header + ``values`` (shape (M, N), one column per present channel).
+
+    ``size_first`` writes bytes per frame before the frame count (the order some clients read)."""
     vals = np.asarray(values, dtype=np.int64)
     if vals.ndim == 1:
         vals = vals[:, None]
     m, n = vals.shape
+    pair = (4 * n, m) if size_first else (m, 4 * n)
     header = HEADER.pack(MAGIC, order & 0xFFFFFFFF, serial & 0xFFFFFFFF, channels, status & 0xFFFFFFFF,
-                         m, 4 * n, counter % COUNTER_MODULUS)
+                         *pair, counter % COUNTER_MODULUS)
     return header + vals.astype(_VALUES).tobytes()
+
+
+def frame_count(first: int, second: int, frame_bytes: int) -> int | None:
+    """M from the header's two u16 fields in either order: the other one must be ``frame_bytes`` (4 x channels)."""
+    frames = first if second == frame_bytes else second if first == frame_bytes else 0
+    return frames if 1 <= frames <= MAX_FRAMES else None
 
 
 def _plausible(fields: tuple) -> Identity | None:
     """The header's identity when its fields are self-consistent, else None."""
-    magic, order, serial, channels, _status, frames, frame_bytes, _counter = fields
-    if magic != MAGIC or channels & _PAIR_HIGH_BITS or not 1 <= frames <= MAX_FRAMES:
+    magic, order, serial, channels, _status, first, second, _counter = fields
+    if magic != MAGIC or channels & _PAIR_HIGH_BITS:
         return None
     n = bin(channels).count("1")
-    if n == 0 or frame_bytes != 4 * n:
+    if n == 0 or frame_count(first, second, 4 * n) is None:
         return None
-    return Identity(order, serial, channels, frame_bytes)
+    return Identity(order, serial, channels, 4 * n)
 
 
 @dataclass
@@ -163,10 +177,11 @@ class CapancdtParser:
         buf = self._buf
         if len(buf) - pos < HEADER_LEN:
             return None
-        frames, frame_bytes, counter = _TAIL.unpack_from(buf, pos + 24)
+        first, second, counter = _TAIL.unpack_from(buf, pos + 24)
+        frame_bytes = self.identity.frame_bytes
+        frames = frame_count(first, second, frame_bytes)
         # the identity, compared as bytes: magic, order, serial, channels; then the frame size
-        if buf[pos:pos + 20] != self._key or frame_bytes != self.identity.frame_bytes \
-                or not 1 <= frames <= MAX_FRAMES:
+        if buf[pos:pos + 20] != self._key or frames is None:
             return self._bad_header(pos)
         if self._next is not None and (counter - self._next) % COUNTER_MODULUS >= MAX_JUMP:
             self.locked = False             # plausible but unexpected: taken once the next header confirms it
@@ -216,7 +231,8 @@ class CapancdtParser:
         self.identity = _plausible(fields)
         self._key = bytes(buf[pos:pos + 20])
         self.locked = True
-        return end, self._accept(fields[7], self._values(fields[5], pos, end))
+        frames = frame_count(fields[5], fields[6], self.identity.frame_bytes)
+        return end, self._accept(fields[7], self._values(frames, pos, end))
 
     def _confirmed(self, pos: int) -> tuple[tuple, int] | str | None:
         """(fields, end) when the header at ``pos`` is followed at its end by one of the same identity;
@@ -231,7 +247,8 @@ class CapancdtParser:
         end = pos + HEADER_LEN + fields[5] * fields[6]
         if len(buf) < end + HEADER_LEN:
             return "wait" if self._fits(pos, min(end, len(buf))) else None
-        if _plausible(HEADER.unpack_from(buf, end)) != ident or self._values(fields[5], pos, end) is None:
+        frames = frame_count(fields[5], fields[6], ident.frame_bytes)
+        if _plausible(HEADER.unpack_from(buf, end)) != ident or self._values(frames, pos, end) is None:
             return None
         return fields, end
 

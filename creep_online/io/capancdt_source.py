@@ -1,7 +1,10 @@
 """capaNCDT source: the position stream of a Micro-Epsilon capaNCDT 6200-style controller over TCP.
 
 ``capancdt:HOST:PORT?command=FILE&range=200&channel=1`` connects to the
-controller's data port (10001 unless given), decodes its ``MEAS`` packets
+controller's data port (10001 unless given), asks its control port (Telnet,
+23 unless ``control=`` says otherwise) for the sample time (``$STI?``,
+answered as ``$STI?256OK``: 256 us) unless ``rate=`` gives the data rate,
+decodes its ``MEAS`` packets
 (``capancdt_frames``), scales the chosen channel's 24-bit values by the
 measuring range (y in um), and pairs every frame with the actuator command
 zero-order held at that frame's instant (``command_schedule``): the sensor
@@ -17,8 +20,10 @@ command stays aligned.
 """
 from __future__ import annotations
 
+import re
 import select
 import socket
+import time
 from typing import Any
 
 from ..errors import DataError, TransportError
@@ -26,12 +31,15 @@ from .capancdt_frames import COUNTER_MODULUS, CapancdtParser, Identity, Packet, 
 from .command_schedule import CommandSchedule
 from .frames import RawSample
 from .source_options import (IDLE_TIMEOUT, RECONNECT, RECONNECT_TIMEOUT, RECONNECT_TIMEOUT_S, STALL, WINDOW, Option,
-                             nonempty, positive, whole)
+                             nonempty, port_number, positive, whole)
 from .sources import ReconnectingSource
 
 #: The controller's data port (as public DT6220 scripts use it) and fastest data rate (sample time 256 us).
 DATA_PORT = 10001
 DATA_RATE = 3906.25
+#: The controller's control port (Telnet), where ``$STI?`` asks for the sample time in us.
+CONTROL_PORT = 23
+_STI_ANSWER = re.compile(r"STI\?\s*,?\s*([0-9]+(?:\.[0-9]*)?)\s*OK")
 #: Measuring range assumed when none is given: a CS02 sensor (200 um).
 RANGE_UM = 200.0
 
@@ -42,7 +50,8 @@ class CapancdtSource(ReconnectingSource):
     link = "connection"
     options = (WINDOW.with_default(0), STALL, RECONNECT, RECONNECT_TIMEOUT, IDLE_TIMEOUT) + (
         Option("command", nonempty, None, "t,u file of the actuator command, zero-order held (required)", path=True),
-        Option("rate", positive, DATA_RATE, "the controller's data rate in Hz (frames carry a counter, not a time)"),
+        Option("rate", positive, None, "the controller's data rate in Hz (default: asked on the control port)"),
+        Option("control", port_number, CONTROL_PORT, "the controller's control (Telnet) port, asked for the sample time"),
         Option("channel", whole(1), 1, "the channel that measures the actuator (1-based)"),
         Option("range", positive, RANGE_UM, "the sensor's measuring range in um", keyword="range_um"),
         Option("counter0", whole(0), None, "frame counter at the command's t = 0 (default: the first frame received)"),
@@ -63,14 +72,15 @@ class CapancdtSource(ReconnectingSource):
         return cls(host, number, **kwargs)
 
     def __init__(self, host: str, port: int = DATA_PORT, *, command: str | CommandSchedule | None = None,
-                 rate: float = DATA_RATE, channel: int = 1, range_um: float = RANGE_UM,
+                 rate: float | None = None, control: int = CONTROL_PORT, channel: int = 1,
+                 range_um: float = RANGE_UM,
                  counter0: int | None = None, connect_timeout: float = 2.0, reconnect: bool = True,
                  reconnect_timeout: float | None = RECONNECT_TIMEOUT_S, window: int = 0, stall: float = 0.5, **kw) -> None:
         name = f"capancdt:{host}:{port}"
         if command is None:
             raise DataError(f"{name}: the sensor streams only the position; give the actuator command as a t,u "
                             "schedule file, e.g. ?command=excitation.csv (docs/transports.md)")
-        if not rate > 0 or not range_um > 0 or channel < 1:
+        if (rate is not None and not rate > 0) or not range_um > 0 or channel < 1:
             raise DataError(f"{name}: rate and range must be > 0 and channel >= 1")
         super().__init__(window=window, modulus=COUNTER_MODULUS, rate=rate, t_from_seq=True, stall=stall,
                          reconnect=reconnect, reconnect_timeout=reconnect_timeout, **kw)
@@ -88,6 +98,14 @@ class CapancdtSource(ReconnectingSource):
             self._open()
         except OSError as exc:
             raise TransportError(f"{name}: cannot connect ({_reason(exc)})") from None
+        self.control = int(control)
+        if rate is None:
+            try:
+                self.rate = read_data_rate(host, self.control, self.connect_timeout)
+            except (OSError, ValueError) as exc:
+                self._close_socket()
+                raise TransportError(f"{name}: no data rate given and the control port {host}:{self.control} did "
+                                     f"not tell it ({_reason(exc)}); give ?rate=HZ or ?control=PORT") from None
 
     # -------------------------------------------------------------- link
     def _open(self) -> None:
@@ -161,6 +179,37 @@ class CapancdtSource(ReconnectingSource):
     def close(self) -> None:
         self._close_socket()
         super().close()
+
+
+def read_data_rate(host: str, port: int = CONTROL_PORT, timeout: float = 2.0) -> float:
+    """The data rate in Hz from the controller's sample time, asked on its control port (``$STI?``).
+
+    The answer echoes the command and ends with ``OK`` (``$STI?256OK``, in
+    us); anything before it (a greeting, Telnet negotiation bytes) is
+    skipped. ValueError when the answer is not that, OSError when the port
+    does not answer within ``timeout`` seconds.
+    """
+    deadline = time.monotonic() + timeout
+    with socket.create_connection((host, port), timeout=timeout) as sock:
+        sock.sendall(b"$STI?\r\n")
+        text = ""
+        while True:
+            found = _STI_ANSWER.search(text)
+            if found:
+                sample_time_us = float(found.group(1))
+                if not sample_time_us > 0:
+                    raise ValueError(f"sample time {found.group(1)} us")
+                return 1e6 / sample_time_us
+            if "UNKNOWN COMMAND" in text or "WRONG PARAMETER" in text:
+                raise ValueError(f"it answered {text.strip()[-60:]!r}")
+            sock.settimeout(max(0.01, deadline - time.monotonic()))
+            try:
+                data = sock.recv(1024)
+            except socket.timeout:
+                raise OSError("no answer to $STI?") from None
+            if not data:
+                raise OSError("closed without answering $STI?")
+            text += data.decode("ascii", errors="ignore")
 
 
 def _reason(exc: BaseException) -> str:

@@ -224,21 +224,31 @@ def in_seconds(path, t: np.ndarray, unit: str) -> tuple[np.ndarray, str]:
 
 
 def load_record(path: str | Path, u_column: str | None = None, y_column: str | None = None,
-                min_samples: int = MIN_SAMPLES, t_column: str | None = None) -> Record:
+                min_samples: int = MIN_SAMPLES, t_column: str | None = None, dt: float | None = None) -> Record:
     """A ``t,u,y`` CSV or a GCS data-recorder file (told apart by content), columns chosen by name.
 
     CSV: ``t_column``/``u_column``/``y_column`` name header columns (default ``t``, ``u``, ``y``, or
     their aliases ``time``, ``input``, ``output``; a unit may follow the name). A time column in
     ms/us/ns (named in its header) is converted to seconds. GCS: ``u_column``/``y_column`` name NAMEi
-    columns (default NAME0, NAME1); its time comes from the sample time. The record's ``units`` holds
-    the units the header named.
+    columns (by meaning when there are more than two: ``gcsfile.columns_by_meaning``); its time comes
+    from the sample time, or ``dt`` for a file without one. ``dt`` given for a CSV must agree with its
+    time column. The record's ``units`` holds the units the header named.
     """
     from .gcsfile import is_gcs_file, load_gcs
     if is_gcs_file(path):
         if t_column is not None:
             raise DataError(f"{path}: a PI GCS data-recorder file has no time column to choose "
                             "(its time comes from the sample time): drop --t-column")
-        return load_gcs(path, u_column, y_column, min_samples)
+        return load_gcs(path, u_column, y_column, min_samples, dt=dt)
+    rec = _load_csv_columns(path, u_column, y_column, min_samples, t_column)
+    if dt is not None and not (rec.is_uniform and math.isclose(dt, rec.h, rel_tol=1e-6)):
+        raise DataError(f"--dt {dt:g} contradicts the time column of {rec.source} (step {rec.h:.6g} s); "
+                        f"drop --dt or fix the file")
+    return rec
+
+
+def _load_csv_columns(path: str | Path, u_column: str | None, y_column: str | None, min_samples: int,
+                      t_column: str | None) -> Record:
     if u_column is None and y_column is None and t_column is None:
         return load_csv(path, min_samples)
     names = tuple(c.strip().lower() for c in (t_column or "t", u_column or "u", y_column or "y"))

@@ -15,12 +15,14 @@ or a ``qDRR`` answer saved to disk) writes::
     ...
 
 The header is checked here first, so that every problem is one line naming the
-file and what is wrong (no ``# END_HEADER``, no ``SAMPLE_TIME``, a column name
-that does not exist: the message lists those that do); the data are then read
-by pipython's own reader (``pipython.pitools.readgcsarray``). Time is
-``k * SAMPLE_TIME``; input and output are the columns chosen by name
-(default: NAME0 is the input, NAME1 the output, the order the ``pi:`` source
-records them in).
+file and what is wrong (no ``# END_HEADER``, a column name that does not exist:
+the message lists those that do); the data are then read by pipython's own
+reader (``pipython.pitools.readgcsarray``). Time is ``k * SAMPLE_TIME``, or
+``k * dt`` for a file without it (``pitools.savegcsarray(path, None, data)``
+writes none) when the caller gives ``dt``. Input and output are the columns
+chosen by name; by default, in a two-column file NAME0 is the input and NAME1
+the output (the order the ``pi:`` source records them in), and in a file with
+more columns they are chosen by meaning (:func:`columns_by_meaning`).
 """
 from __future__ import annotations
 
@@ -36,9 +38,15 @@ from ..record import MIN_SAMPLES, Record
 from .csvfile import _read_text
 from .input_files import is_stream
 
-__all__ = ["is_gcs_file", "read_gcs_header", "load_gcs", "column_names", "column_index"]
+__all__ = ["is_gcs_file", "read_gcs_header", "load_gcs", "column_names", "column_index", "columns_by_meaning"]
 
 _NAME_KEY = re.compile(r"NAME(\d+)$")
+
+#: Words of a channel name that make it the input: what drives the piezo (its voltage, the open-loop
+#: control value). A target position is a set point, not what reaches the actuator, so it is neither.
+INPUT_WORDS = ("voltage", "open loop", "open-loop", "control value", "command")
+#: Words that make it the output: what the sensor measured (a position error is neither).
+OUTPUT_WORDS = ("current position", "actual position", "sensor")
 
 
 def is_gcs_file(path: str | Path) -> bool:
@@ -110,8 +118,14 @@ def _number(path: Path, header: dict[str, str], key: str, kind=float) -> float:
 
 
 def column_names(path: str | Path, header: dict[str, str]) -> list[str]:
-    """NAME0 .. NAME{DIM-1} in order; DataError if one is missing."""
+    """NAME0 .. NAME{DIM-1} in order; DataError if one is missing.
+
+    A file with no NAMEi line at all (``pitools.savegcsarray(path, None, data)``
+    writes none) has its channels called ``NAME0``, ``NAME1``, ...
+    """
     dim = int(_number(Path(path), header, "DIM", int))
+    if not any(_NAME_KEY.match(key) for key in header):
+        return [f"NAME{i}" for i in range(dim)]
     names = []
     for i in range(dim):
         if f"NAME{i}" not in header:
@@ -135,6 +149,26 @@ def column_index(path: str | Path, names: list[str], wanted: str, role: str) -> 
         raise DataError(f"{path}: {role} column {wanted!r} matches {len(matches)} columns; "
                         f"give it as NAMEi ({listing})")
     raise DataError(f"{path}: no {role} column named {wanted!r} (columns: {listing})")
+
+
+def columns_by_meaning(path: str | Path, names: list[str], iu: int | None = None,
+                       iy: int | None = None) -> tuple[int, int]:
+    """(input, output) column indices of a file with more than two channels, the missing ones chosen by name.
+
+    The input is the one channel whose name has a word of ``INPUT_WORDS``, the
+    output the one with a word of ``OUTPUT_WORDS``; when either is not exactly
+    one channel (none, or several axes recorded), DataError: one line listing
+    the names, to be chosen with --u-column / --y-column.
+    """
+    def matching(words: tuple[str, ...], taken: int | None) -> list[int]:
+        return [i for i, n in enumerate(names) if i != taken and any(w in " ".join(n.lower().split()) for w in words)]
+    u_found = [iu] if iu is not None else matching(INPUT_WORDS, iy)
+    y_found = [iy] if iy is not None else matching(OUTPUT_WORDS, iu)
+    if len(u_found) == 1 and len(y_found) == 1 and u_found != y_found:
+        return u_found[0], y_found[0]
+    listing = "; ".join(f"NAME{i} = {n!r}" for i, n in enumerate(names))
+    raise DataError(f"{path}: {len(names)} channels and no single voltage/command input and position/sensor "
+                    f"output among their names: choose them with --u-column and --y-column ({listing})")
 
 
 def _pipython_reader():
@@ -173,18 +207,36 @@ def _read_data(readgcsarray, path: Path):
         return readgcsarray(str(copy))
 
 
+def _sample_time(path: Path, header: dict[str, str], dt: float | None) -> float:
+    """SAMPLE_TIME, or ``dt`` for a file without one; a ``dt`` that contradicts the header is refused."""
+    if dt is not None and not (math.isfinite(dt) and dt > 0):
+        raise DataError(f"--dt must be a positive number of seconds, got {dt:g}")
+    if "SAMPLE_TIME" not in header:
+        if dt is None:
+            raise DataError(f"{path}: GCS header has no SAMPLE_TIME line; give the sample time with --dt SECONDS")
+        return float(dt)
+    step = _number(path, header, "SAMPLE_TIME")
+    if dt is not None and not math.isclose(dt, step, rel_tol=1e-6):
+        raise DataError(f"--dt {dt:g} contradicts SAMPLE_TIME = {step:g} of {path}; drop --dt")
+    return step
+
+
 def load_gcs(path: str | Path, u_column: str | None = None, y_column: str | None = None,
-             min_samples: int = MIN_SAMPLES) -> Record:
-    """A GCS data-recorder file as a validated Record (t from SAMPLE_TIME; u, y by column name)."""
+             min_samples: int = MIN_SAMPLES, dt: float | None = None) -> Record:
+    """A GCS data-recorder file as a validated Record (t from SAMPLE_TIME or ``dt``; u, y by column name)."""
     path = Path(path)
     header, first_data = read_gcs_header(path)
-    dt = _number(path, header, "SAMPLE_TIME")
+    step = _sample_time(path, header, dt)
     names = column_names(path, header)
     if len(names) < 2:
         raise DataError(f"{path}: GCS file has {len(names)} column; need an input and an output column")
-    sep = chr(int(_number(path, header, "SEPARATOR", int)))
-    iu = column_index(path, names, u_column, "input") if u_column else 0
-    iy = column_index(path, names, y_column, "output") if y_column else 1
+    sep = chr(int(_number(path, header, "SEPARATOR", int))) if "SEPARATOR" in header else " "
+    iu = column_index(path, names, u_column, "input") if u_column else None
+    iy = column_index(path, names, y_column, "output") if y_column else None
+    if len(names) > 2 and (iu is None or iy is None):
+        iu, iy = columns_by_meaning(path, names, iu, iy)
+    iu = 0 if iu is None else iu
+    iy = 1 if iy is None else iy
     readgcsarray = _pipython_reader()
     try:
         _, data = _read_data(readgcsarray, path)
@@ -196,5 +248,5 @@ def load_gcs(path: str | Path, u_column: str | None = None, y_column: str | None
         bad = np.flatnonzero(~np.isfinite(values))
         if bad.size:
             raise DataError(f"{path}: data row {bad[0] + 1}, {role} column {name!r}: NaN/inf not allowed")
-    rec = Record(np.arange(u.size) * dt, u, y, source=str(path))
+    rec = Record(np.arange(u.size) * step, u, y, source=str(path))
     return rec.validate(min_samples)

@@ -62,6 +62,14 @@ def whole(minimum: int) -> Callable[[str], int]:
     return convert
 
 
+def port_number(text: str) -> int:
+    """A TCP port: a whole number from 1 to 65535."""
+    value = int(text)
+    if not 1 <= value <= 65535:
+        raise ValueError("expected a TCP port from 1 to 65535")
+    return value
+
+
 def nonempty(value: str) -> str:
     """Any non-empty text (a file name, a column name)."""
     if not value.strip():
