@@ -47,6 +47,7 @@ from collections import deque
 
 import numpy as np
 
+from ..checks import number, real_array
 from ..errors import DataError, ModelError
 from ..model import CreepModel, ExtendedModel
 from . import compensator_kernels as CK
@@ -263,7 +264,8 @@ class CreepCompensator(StoredParams):
     # ------------------------------------------------------------------ commands
     def command(self, r: float) -> float:
         """The command for this sample's reference r (held by the DAC until the next sample)."""
-        r = float(r)
+        if r.__class__ is not float:
+            r = number(r, "command(): reference r")
         if not math.isfinite(r):
             raise DataError(f"reference must be finite, got {r!r}")
         self.samples += 1
@@ -275,7 +277,7 @@ class CreepCompensator(StoredParams):
 
     def command_block(self, r: np.ndarray) -> np.ndarray:
         """Commands for a block of references with the current model (same numbers as ``command`` in a loop)."""
-        r = np.ascontiguousarray(r, dtype=float)
+        r = np.ascontiguousarray(real_array(r, "command_block(): reference r"))
         if not np.all(np.isfinite(r)):
             raise DataError("reference contains NaN or inf")
         u = np.empty_like(r)

@@ -57,6 +57,7 @@ from typing import Generator
 
 import numpy as np
 
+from ..checks import number, real_array
 from ..errors import DataError, one_line
 from ..model import ONLINE_ALPHA_BOUNDS, ONLINE_REFITS, CreepModel
 from . import refit as RF
@@ -468,11 +469,8 @@ class OnlineEstimator(StoredParams):
         Raises only ``DataError`` (u or y not a number); NaN and inf are skipped and counted. Any internal fault
         is caught, counted and recovered from (module docstring: error contract): the guard is one ``try``
         around the whole body, free in Python 3.11 while nothing is raised."""
-        try:
-            u = float(u)
-            y = float(y)
-        except (TypeError, ValueError):
-            raise DataError(f"update(): u and y must be numbers, got {u!r}, {y!r}") from None
+        if u.__class__ is not float or y.__class__ is not float:   # (the common case costs two type checks)
+            u, y = number(u, "update(): u"), number(y, "update(): y")
         if u - u != 0.0 or y - y != 0.0:          # NaN or inf
             self.skipped_nonfinite += 1
             return
@@ -1182,13 +1180,7 @@ def _number(x, name: str) -> float:
 
 
 def _array(x, name: str) -> np.ndarray:
-    try:
-        a = np.asarray(x, dtype=float)
-    except (TypeError, ValueError):
-        raise DataError(f"update_block(): {name} must be numeric") from None
-    if a.ndim != 1:
-        raise DataError(f"update_block(): {name} must be one-dimensional, got shape {a.shape}")
-    return a
+    return real_array(x, f"update_block(): {name}")
 
 
 def _shifted(item: dict, shift: float, kind: str | None = None) -> dict:
