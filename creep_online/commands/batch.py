@@ -63,11 +63,14 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         check_table_path(args.out)   # suffix and pyarrow, before any work
     distributed()                    # the one-line hint before any work when Dask is missing
+    if outputs[1] is not None:
+        from ..reports.fleet_report import pyplot
+        pyplot()                     # the summary page's plots: matplotlib, before any work
     jobs = [j for j in find_records(args.records) if not _is_batch_table(j.path)]
     if not jobs:
         raise CreepOnlineError(f"{args.records}: holds only batch tables, no records")
     inputs = [j.path for j in jobs if j.path] + ([args.records] if Path(args.records).is_file() else [])
-    for path in outputs:
+    for path in (*outputs, _sidecar(outputs[0])):
         if path is not None:
             check_output(path, inputs)   # never over a record
     with ctrl_c_flag() as pressed:   # (held while the rows are written too: a Ctrl-C then waits for them)
@@ -94,6 +97,18 @@ def _outputs(args: argparse.Namespace) -> tuple[Path | None, Path | None]:
     """(table, html) paths; the HTML defaults to the table's name with .html."""
     html = args.html or (str(Path(args.out).with_suffix(".html")) if args.out else None)
     return (Path(args.out) if args.out else None, Path(html) if html else None)
+
+
+def _sidecar(table: Path | None) -> Path | None:
+    """The metadata sidecar a CSV table gets (none for Parquet: its metadata is inside)."""
+    from ..fleet.table import sidecar_path
+    return sidecar_path(table) if table is not None and table.suffix.lower() == ".csv" else None
+
+
+def table_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The batch's settings as the table's metadata records them."""
+    return {"records": args.records, "diagnose": args.diagnose, "retune": not args.no_retune,
+            "polish": not args.no_polish, "scheduler": args.scheduler, "workers": args.workers}
 
 
 def _run(args: argparse.Namespace, jobs: list,
@@ -168,7 +183,7 @@ def _finish(args: argparse.Namespace, jobs: list, rows: list[dict[str, Any]], ti
                    scheduler=args.scheduler or "local")
     table, page = outputs
     if table is not None and rows:
-        summary["table"] = str(write_table(rows, table))
+        summary["table"] = str(write_table(rows, table, table_options(args)))
     if page is not None and rows:
         summary["html"] = str(write_fleet_report(rows, summary, page, title=f"creep-online batch {args.records}"))
     if args.json:

@@ -34,6 +34,10 @@ _GLOB_CHARS = set("*?[")
 class RecordJob:
     """One record of a fleet: a ``t,u,y`` file (``path``) or samples from a long-format file (``samples``).
 
+    ``path`` is absolute (resolved where the batch runs): the workers of an
+    existing cluster run in directories of their own. ``source`` is the name
+    as the user gave it (the table's ``source`` column).
+
     ``error`` is set when the record is known to be bad before any work (a bad
     cell in a long-format file); ``load`` then raises it.
     """
@@ -74,7 +78,7 @@ def find_records(spec: str) -> list[RecordJob]:
         raise DataError(f"{spec}: no such file or folder (give a folder, a glob or a long-format id,t,u,y CSV)")
     if not files:
         raise DataError(where)
-    return [RecordJob(name, str(p), path=str(p)) for name, p in zip(_unique_ids(files), files)]
+    return [RecordJob(name, str(p), path=str(p.resolve())) for name, p in zip(_unique_ids(files), files)]
 
 
 def _unique_ids(files: list[Path]) -> list[str]:
@@ -100,7 +104,7 @@ def _jobs_of_file(path: Path) -> list[RecordJob]:
                 raise DataError(f"{path}: empty file (expected a header id,t,u,y)")
             names = [c.strip().lower() for c in next(csv.reader([header]))]
             if "id" not in names:
-                return [RecordJob(path.stem, str(path), path=str(path))]
+                return [RecordJob(path.stem, str(path), path=str(path.resolve()))]
             return read_long(path, fh, _header(path, header, LONG_COLUMNS), lineno + 1)
     except UnicodeDecodeError as exc:
         raise DataError(f"{path}: not a UTF-8 text file (undecodable byte)") from None
