@@ -111,7 +111,7 @@ def test_a_relative_folder_on_a_cluster_started_elsewhere(external_cluster, site
     assert meta[b"creep_online.version"].decode() == __version__
     options = json.loads(meta[b"creep_online.options"])
     assert options == {"records": "data", "diagnose": False, "retune": True, "polish": True,
-                       "scheduler": external_cluster, "workers": None}
+                       "scheduler": external_cluster, "workers": None, "send_records": False}
     assert json.loads(meta[b"creep_online.units"]) == {k: UNITS[k] for k in COLUMNS}
     assert table.schema.field("fn_hz").metadata == {b"unit": b"Hz"}
     assert table.schema.field("id").metadata is None
@@ -136,6 +136,39 @@ def test_a_csv_table_gets_a_metadata_sidecar_its_readers_never_see(external_clus
     assert (home / "data" / "fleet.csv.meta.json").exists()
     third = _batch(home, "data", "--scheduler", external_cluster, "--out", "data/fleet.csv", "--json")
     assert json.loads(third.stdout)["records"] == N_UNITS
+
+
+def test_records_sent_as_data_need_no_file_on_the_workers(external_cluster, site, tmp_path):
+    """``--send-records``: the same table; and jobs carrying their samples are identified with the files gone."""
+    from dask.distributed import Client
+    from creep_online.fleet.runner import run_on_dask
+    from creep_online.io.fleet_records import find_records
+    home, units = site
+    out = _batch(home, "data", "--scheduler", external_cluster, "--out", "sent.parquet", "--send-records")
+    assert out.returncode == 0, out.stderr
+    by_path = {r["id"]: r for r in pq.read_table(home / "fleet.parquet").to_pylist()}
+    table = pq.read_table(home / "sent.parquet")
+    assert json.loads(table.schema.metadata[b"creep_online.options"])["send_records"] is True
+    for row in table.to_pylist():
+        for name in ("alpha", "a1", "a2", "b", "fit_percent", "noise_std"):
+            assert row[name] == by_path[row["id"]][name], (row["id"], name)
+
+    folder = tmp_path / "gone"
+    write_fleet(units[:3], folder)
+    late = folder / f"{units[2].id}.csv"
+    late.write_text(late.read_text().rstrip("\n"))                     # no end-of-line: a warning
+    (folder / "bad.csv").write_text("t,u,y\n0,0,0\n0.001,1,nan\n")
+    jobs = [job.carrying_samples() for job in find_records(str(folder))]
+    for path in folder.iterdir():
+        path.unlink()
+    folder.rmdir()
+    assert all(job.path is None for job in jobs)
+    with Client(external_cluster, timeout=30) as client:
+        rows = {r["id"]: r for r in run_on_dask(jobs, client)}
+    assert "line 3, column y" in rows["bad"]["error"]
+    assert "has no end-of-line" in rows[units[2].id]["warnings"]
+    for unit in units[:3]:
+        assert rows[unit.id]["error"] == "" and rows[unit.id]["alpha"] == by_path[unit.id]["alpha"]
 
 
 # ------------------------------------------------------------------ the summary page's plots (no cluster)

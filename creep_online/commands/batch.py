@@ -47,6 +47,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scheduler", metavar="ADDRESS", default=None,
                    help="use an existing Dask scheduler (e.g. tcp://host:8786); its workers need creep_online "
                         "and must see the record files")
+    p.add_argument("--send-records", action="store_true",
+                   help="read each record file here and send its samples with its task (workers that cannot see "
+                        "the files: no shared file system); by default the workers read them by absolute path")
     p.add_argument("--no-retune", action="store_true", help="as identify: skip the eq. 12 retune of alpha")
     p.add_argument("--no-polish", action="store_true", help="as identify: skip the joint polish (and the global fit)")
     p.set_defaults(func=run)
@@ -108,7 +111,8 @@ def _sidecar(table: Path | None) -> Path | None:
 def table_options(args: argparse.Namespace) -> dict[str, Any]:
     """The batch's settings as the table's metadata records them."""
     return {"records": args.records, "diagnose": args.diagnose, "retune": not args.no_retune,
-            "polish": not args.no_polish, "scheduler": args.scheduler, "workers": args.workers}
+            "polish": not args.no_polish, "scheduler": args.scheduler, "workers": args.workers,
+            "send_records": args.send_records}
 
 
 def _run(args: argparse.Namespace, jobs: list,
@@ -129,7 +133,7 @@ def _run(args: argparse.Namespace, jobs: list,
                 progress.stage(bar_text(0, len(jobs), 0, 0.0))
                 failed = 0
                 for row in run_on_dask(jobs, client, diagnose_it=args.diagnose, identify_options=options,
-                                       stop=pressed):
+                                       stop=pressed, send_records=args.send_records):
                     rows.append(row)
                     failed += bool(row["error"])
                     progress.show(bar_text(len(rows), len(jobs), failed, time.perf_counter() - t0))

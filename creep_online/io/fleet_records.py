@@ -14,13 +14,14 @@ import csv
 import glob
 import math
 from array import array
-from dataclasses import dataclass
+import warnings
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Iterable
 
 import numpy as np
 
-from ..errors import DataError
+from ..errors import CreepOnlineWarning, DataError, one_line
 from ..record import MIN_SAMPLES, Record
 # the CSV module's own file checks and header rule, so a long-format file fails exactly like a t,u,y one
 from .csvfile import _check_kind, _header, load_csv
@@ -39,7 +40,8 @@ class RecordJob:
     as the user gave it (the table's ``source`` column).
 
     ``error`` is set when the record is known to be bad before any work (a bad
-    cell in a long-format file); ``load`` then raises it.
+    cell in a long-format file); ``load`` then raises it. ``notes``: warnings
+    of reading it where the batch runs (``carrying_samples``), for its row.
     """
 
     id: str
@@ -47,6 +49,21 @@ class RecordJob:
     path: str | None = None
     samples: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     error: str | None = None
+    notes: tuple[str, ...] = ()
+
+    def carrying_samples(self) -> "RecordJob":
+        """This record with its file read here, its samples to travel with its task (``batch --send-records``:
+        workers that cannot see the file); an unreadable file gives a job carrying the one-line error."""
+        if self.path is None:
+            return self
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", CreepOnlineWarning)
+            try:
+                rec = load_csv(self.path)
+            except DataError as exc:
+                return replace(self, path=None, error=one_line(exc))
+        notes = tuple(str(w.message) for w in caught if issubclass(w.category, CreepOnlineWarning))
+        return replace(self, path=None, samples=(rec.t, rec.u, rec.y), notes=self.notes + notes)
 
     def load(self) -> Record:
         """The validated record; DataError with the one-line reason otherwise."""
