@@ -13,6 +13,7 @@ import pytest
 can = pytest.importorskip("can", reason="python-can is an optional extra (creep_online[can])")
 
 from creep_online import DataError  # noqa: E402
+from creep_online.errors import TransportError  # noqa: E402
 from creep_online.io.can_listener import EstimatorListener  # noqa: E402
 from creep_online.io.can_source import CanSource  # noqa: E402
 from creep_online.online import OnlineEstimator  # noqa: E402
@@ -212,3 +213,12 @@ def test_can_source_needs_a_bus_or_an_interface():
             CanSource(bus=bus)
     finally:
         bus.shutdown()
+
+
+def test_a_lost_shared_bus_is_a_transport_error_in_one_line():
+    bus = _bus("t_source_lost")
+    source = CanSource(bus=bus, rate=RATE, on_event=None)
+    bus.shutdown()                           # the application closed (or lost) its bus
+    with pytest.raises(TransportError) as info:
+        source.read(0.01)
+    assert "application's bus disappeared" in str(info.value) and "\n" not in str(info.value)

@@ -109,7 +109,8 @@ def test_nested_parameters_as_scikit_learn_names_them():
     copy = sk_clone(outer)
     assert copy.inner is not comp and copy.inner.get_params() == comp.get_params()
     with pytest.raises(DataError, match="CreepCompensator has no parameter 'u_mx'"):
-        outer.set_params(inner__u_mx=1.0)
+        outer.set_params(gain=5.0, inner__u_mx=1.0)
+    assert outer.gain == 3.0                                   # nothing changed
 
 
 def test_repr_names_the_parameters_that_differ_from_the_defaults():

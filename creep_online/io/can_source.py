@@ -81,6 +81,7 @@ class CanSource(ReconnectingSource):
         self.owns_bus = bus is None
         self.bus = bus
         if bus is not None:
+            self.link = "application's bus"      # (lost for good: only its owner can reopen it)
             return
         try:
             self._open()

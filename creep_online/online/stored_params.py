@@ -78,12 +78,12 @@ class StoredParams:
             setattr(self, name, value)
         try:
             self._validate()
+            for name, sub in nested.items():
+                getattr(self, name).set_params(**sub)
         except Exception:
             for name, value in before.items():
                 setattr(self, name, value)
             raise
-        for name, sub in nested.items():
-            getattr(self, name).set_params(**sub)
         self.reset()
         return self
 
