@@ -4,7 +4,8 @@ Every unit is the nominal plant (a nanopositioner: alpha 0.02, fn 350 Hz,
 zeta 0.08, b 1.8) with its own manufacturing spread, log-normal with standard
 deviations of 5 % (alpha), 3 % (fn), 10 % (zeta) and 3 % (b). A few units
 are faulty in a way a fleet summary must catch: ``"loose"`` (fn 30 % low, a
-loosened mount) or ``"depoled"`` (b halved). Each unit's record is a
+loosened mount), ``"depoled"`` (b halved) or ``"reversed"`` (b of the other sign: an
+actuator wired backwards). Each unit's record is a
 staircase with a reversal (``STAIRCASE``: up, further up, back down), simulated
 exactly and sampled at ``fs`` with white noise at ``snr_db``.
 """
@@ -24,7 +25,7 @@ SPREAD = {"alpha": 0.05, "fn": 0.03, "zeta": 0.10, "b": 0.03}
 #: (fraction of the duration, level) of the input staircase: up, further up, back down.
 STAIRCASE = ((0.05, 1.0), (0.4, 1.6), (0.7, 0.6))
 #: What each kind of fault does to a unit's parameters (factors).
-FAULTS = {"loose": {"fn": 0.7}, "depoled": {"b": 0.5}}
+FAULTS = {"loose": {"fn": 0.7}, "depoled": {"b": 0.5}, "reversed": {"b": -1.0}}
 
 
 @dataclass
@@ -57,7 +58,7 @@ def make_unit(index: int, seed: int = 0, *, fault: str | None = None, fs: float 
 
 
 def make_fleet(n: int, seed: int = 0, *, faults: dict[int, str] | None = None, **kwargs) -> list[Unit]:
-    """``n`` units; ``faults`` maps unit index to a fault name (``"loose"``, ``"depoled"``)."""
+    """``n`` units; ``faults`` maps unit index to a fault name (``"loose"``, ``"depoled"``, ``"reversed"``)."""
     faults = faults or {}
     return [make_unit(i, seed, fault=faults.get(i), **kwargs) for i in range(n)]
 

@@ -48,6 +48,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scheduler", metavar="ADDRESS", default=None, type=nonempty,
                    help="use an existing Dask scheduler (e.g. tcp://host:8786); its workers need creep_online "
                         "and must see the record files")
+    p.add_argument("--send-records", action="store_true",
+                   help="read each record file here and send its samples with its task (workers that cannot see "
+                        "the files: no shared file system); by default the workers read them by absolute path")
     p.add_argument("--no-retune", action="store_true", help="as identify: skip the eq. 12 retune of alpha")
     p.add_argument("--no-polish", action="store_true", help="as identify: skip the joint polish (and the global fit)")
     p.set_defaults(func=run)
@@ -64,6 +67,9 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         check_table_path(args.out)   # suffix and pyarrow, before any work
     distributed()                    # the one-line hint before any work when Dask is missing
+    if outputs[1] is not None:
+        from ..reports.fleet_report import pyplot
+        pyplot()                     # the summary page's plots: matplotlib, before any work
     jobs = [j for j in find_records(args.records) if not _is_batch_table(j.path)]
     if not jobs:
         raise CreepOnlineError(f"{args.records}: holds only batch tables, no records")
@@ -71,6 +77,9 @@ def run(args: argparse.Namespace) -> int:
     table, page = outputs
     if table is not None:
         check_output(table, inputs)   # never over a record
+        sidecar = _sidecar(table)     # (its name is the tool's choice: never over a file of the user's)
+        if sidecar is not None:
+            check_default_output(sidecar, inputs, flag="--out")
     if page is not None:              # the page's default name: never over a file of the user's
         (check_output if args.html else check_default_output)(page, inputs, **({} if args.html else
                                                                                {"flag": "--html"}))
@@ -100,6 +109,19 @@ def _outputs(args: argparse.Namespace) -> tuple[Path | None, Path | None]:
     return (Path(args.out) if args.out else None, Path(html) if html else None)
 
 
+def _sidecar(table: Path | None) -> Path | None:
+    """The metadata sidecar a CSV table gets (none for Parquet: its metadata is inside)."""
+    from ..fleet.table import sidecar_path
+    return sidecar_path(table) if table is not None and table.suffix.lower() == ".csv" else None
+
+
+def table_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The batch's settings as the table's metadata records them."""
+    return {"records": args.records, "diagnose": args.diagnose, "retune": not args.no_retune,
+            "polish": not args.no_polish, "scheduler": args.scheduler, "workers": args.workers,
+            "send_records": args.send_records}
+
+
 def _run(args: argparse.Namespace, jobs: list,
          pressed: Callable[[], int | None]) -> tuple[list[dict[str, Any]], dict[str, float], int | None]:
     """The rows (input order), the times (startup_s: cluster up and workers warm; elapsed_s: the records)
@@ -123,7 +145,7 @@ def _run(args: argparse.Namespace, jobs: list,
                 progress.stage(bar_text(0, len(jobs), 0, 0.0))
                 failed = 0
                 for row in run_on_dask(jobs, client, diagnose_it=args.diagnose, identify_options=options,
-                                       stop=lambda: pressed() is not None):
+                                       stop=lambda: pressed() is not None, send_records=args.send_records):
                     rows.append(row)
                     failed += bool(row["error"])
                     progress.show(bar_text(len(rows), len(jobs), failed, time.perf_counter() - t0))
@@ -149,7 +171,7 @@ def _finish(args: argparse.Namespace, jobs: list, rows: list[dict[str, Any]], ti
                    scheduler=args.scheduler or "local")
     table, page = outputs
     if table is not None and rows:
-        summary["table"] = str(write_table(rows, table))
+        summary["table"] = str(write_table(rows, table, table_options(args)))
     if page is not None and rows:
         summary["html"] = str(write_fleet_report(rows, summary, page, title=f"creep-online batch {args.records}"))
     if args.json:

@@ -33,7 +33,7 @@ def run_record(job: RecordJob, *, diagnose_it: bool = False,
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", CreepOnlineWarning)
             _fill(row, job, diagnose_it, identify_options or {}, notes)
-        notes[:0] = [str(w.message) for w in caught if issubclass(w.category, CreepOnlineWarning)]
+        notes[:0] = [*job.notes, *(str(w.message) for w in caught if issubclass(w.category, CreepOnlineWarning))]
     except CreepOnlineError as exc:
         row["error"] = one_line(exc)
     except Exception as exc:  # noqa: BLE001 - a bug of ours must not stop the other records either

@@ -14,6 +14,11 @@ PARAMETERS = ("alpha", "a1", "a2", "b")
 COLUMNS = ("id", "source", "samples", "alpha", "a1", "a2", "b", "fn_hz", "zeta",
            "alpha_sd", "a1_sd", "a2_sd", "b_sd", "fit_percent", "noise_std", "warnings",
            "verdict", "outlier", "error", "seconds", "cpu_seconds")
+#: The unit of each column (the table's metadata): u and y are in the records' own units, t in seconds.
+UNITS = {"id": "", "source": "", "samples": "count", "alpha": "1", "a1": "s", "a2": "s^2",
+         "b": "y-unit / (u-unit s^alpha)", "fn_hz": "Hz", "zeta": "1", "alpha_sd": "1", "a1_sd": "s",
+         "a2_sd": "s^2", "b_sd": "y-unit / (u-unit s^alpha)", "fit_percent": "%", "noise_std": "y-unit",
+         "warnings": "", "verdict": "", "outlier": "", "error": "", "seconds": "s", "cpu_seconds": "s"}
 #: Joins a record's warnings in its one table cell.
 WARNING_SEPARATOR = " | "
 

@@ -155,9 +155,12 @@ def warm_up_workers(client: Any, where: str) -> dict[str, float]:
 
 def run_on_dask(jobs: Iterable[RecordJob], client: Any, *, diagnose_it: bool = False,
                 identify_options: dict[str, Any] | None = None,
-                stop: Callable[[], bool] | None = None, task: Callable[..., dict] | None = None
-                ) -> Iterator[dict[str, Any]]:
+                stop: Callable[[], bool] | None = None, task: Callable[..., dict] | None = None,
+                send_records: bool = False) -> Iterator[dict[str, Any]]:
     """Yield one row per job, in the order they finish (``run_record`` on the cluster's workers).
+
+    ``send_records``: read each file record here, as it is submitted, and send its samples with its task
+    (``RecordJob.carrying_samples``), for workers that cannot see the files; otherwise they read them by path.
 
     A record that was bad before any work (``job.error``) gets its row here at
     once. A task the cluster itself could not run (a worker died, creep_online
@@ -203,6 +206,8 @@ def _run_window(dd: Any, client: Any, task: Callable[..., dict], pending: list[R
 
     def submit(n: int) -> None:
         for job in islice(queue, n):
+            if send_records:
+                job = job.carrying_samples()
             future = client.submit(task, job, pure=False, **options)
             in_flight[future.key] = (future, job)
             done.add(future)

@@ -29,18 +29,42 @@ Z_THRESHOLD = 3.5
 MIN_RECORDS = 5
 
 
+#: z = MAD_SCALE (x - median) / MAD is a standard normal score for normal data.
+MAD_SCALE = 0.6745
+#: Where MAD = 0: z = (x - median) / (MEAN_DEV_SCALE mean|x - median|).
+MEAN_DEV_SCALE = 1.2533
+
+
+def _spread(values: np.ndarray) -> tuple[float, float]:
+    """(median, the deviation that is z = 1): MAD / 0.6745, else 1.2533 mean deviation, else 0 (no spread)."""
+    med = float(np.median(values))
+    dev = np.abs(values - med)
+    mad = float(np.median(dev))
+    if mad > 0:
+        return med, mad / MAD_SCALE
+    return med, MEAN_DEV_SCALE * float(np.mean(dev))
+
+
 def robust_z(values: np.ndarray) -> np.ndarray:
     """Modified z-scores of ``values`` (the module's rule, on the values as given); 0 where no spread."""
     values = np.asarray(values, dtype=float)
-    med = np.median(values)
-    dev = np.abs(values - med)
-    mad = np.median(dev)
-    if mad > 0:
-        return 0.6745 * (values - med) / mad
-    mean_dev = np.mean(dev)
-    if mean_dev > 0:
-        return (values - med) / (1.2533 * mean_dev)
+    med, unit = _spread(values)
+    if unit > 0:
+        return (values - med) / unit
     return np.zeros_like(values)
+
+
+def outlier_band(values: np.ndarray) -> tuple[float, float]:
+    """(median, half-width) of the interval of ``values`` the rule flags nothing in (|z| <= ``Z_THRESHOLD``);
+    half-width inf when the values have no spread (nothing is flagged)."""
+    med, unit = _spread(np.asarray(values, dtype=float))
+    return med, Z_THRESHOLD * unit if unit > 0 else float("inf")
+
+
+def majority_sign(values: np.ndarray) -> float:
+    """+1 or -1: the sign most values have (+1 on a tie); a gain of the other sign is an outlier on b."""
+    values = np.asarray(values, dtype=float)
+    return 1.0 if np.sum(values > 0) >= np.sum(values < 0) else -1.0
 
 
 def identified(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -61,7 +85,7 @@ def flag_outliers(rows: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
         z = robust_z(np.log10(np.abs(x)))
         if name == "b":
             sign = np.sign(x)
-            z = np.where(sign != (1.0 if np.sum(sign > 0) >= np.sum(sign < 0) else -1.0), np.inf * sign, z)
+            z = np.where(sign != majority_sign(x), np.inf * sign, z)
         for r, zi in zip(good, z):
             if abs(zi) > Z_THRESHOLD:
                 flags.setdefault(r["id"], {})[name] = float(zi)

@@ -8,6 +8,7 @@ __all__ = ["load_csv", "save_csv"]
 #: Imported on first use (``creep_online.io.open_source``); pyserial/python-can load only when a source opens.
 _LAZY = {"open_source": "registry", "register_source": "registry", "available_sources": "registry",
          "Sample": "sources", "SourceStats": "sources", "SampleSource": "sources",
-         "ReconnectingSource": "sources", "Option": "source_options", "FeedLoop": "feed"}
+         "ReconnectingSource": "sources", "Option": "source_options", "FeedLoop": "feed",
+         "EstimatorListener": "can_listener", "CanSource": "can_source"}
 
 __getattr__ = lazy_attributes(__name__, _LAZY)

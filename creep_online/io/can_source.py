@@ -9,17 +9,23 @@ sample counter, not a time, so the sample rate must be given (``?rate=HZ``).
 When the adapter disappears (python-can raises, the serial device is gone) the
 source says so once and re-creates the bus with exponential backoff, or raises
 :class:`TransportError` if ``reconnect=0``.
+
+``CanSource(bus=BUS, rate=...)`` reads a bus the application opened and owns:
+the source never shuts it down and cannot reopen it (a lost bus is a
+``TransportError``). An application that already runs a ``can.Notifier`` on
+its bus gives it ``can_listener.EstimatorListener`` instead: both decode and
+order the frames with ``CanMessages``.
 """
 from __future__ import annotations
 
 
-from typing import Any
+from typing import Any, Callable
 
 from ..errors import DataError, TransportError
 from .can_frames import COUNTER_MODULUS, CanDecoder
 from .frames import RawSample
 from .source_options import DBC, RATE, RECONNECT_TIMEOUT_S, WINDOW, Option, flag, whole
-from .sources import ReconnectingSource
+from .sources import ReconnectingSource, Sample, SampleSource
 
 #: Frames taken from the bus per read() call at most (bounds the work per call).
 BATCH = 512
@@ -53,21 +59,30 @@ class CanSource(ReconnectingSource):
         interface, channel = target.split(":", 1)
         return cls(interface, channel, **kwargs)
 
-    def __init__(self, interface: str, channel: str, *, rate: float | None = None, dbc: str | None = None,
+    def __init__(self, interface: str | None = None, channel: str | None = None, *, bus: Any = None,
+                 rate: float | None = None, dbc: str | None = None,
                  bitrate: int | None = None, fd: bool = False, reconnect: bool = True,
                  reconnect_timeout: float | None = RECONNECT_TIMEOUT_S, window: int = 32, stall: float = 0.5,
                  bus_kwargs: dict | None = None, **kw) -> None:
+        """Open ``interface``/``channel`` (``can.Bus``), or read ``bus``, a python-can bus the caller owns."""
+        if (bus is None) == (interface is None or channel is None):
+            raise DataError("CanSource needs either an interface and a channel, or bus= (a python-can bus)")
         super().__init__(window=window, modulus=COUNTER_MODULUS, rate=rate, t_from_seq=True, stall=stall,
-                         reconnect=reconnect, reconnect_timeout=reconnect_timeout, **kw)
-        self.name = f"can:{interface}:{channel}"
+                         reconnect=reconnect and bus is None, reconnect_timeout=reconnect_timeout, **kw)
+        self.name = f"can:{interface}:{channel}" if bus is None else f"can:{getattr(bus, 'channel_info', 'bus')}"
         if not rate:
+            example = f"can:{interface}:{channel}?rate=10000" if bus is None else "CanSource(bus=bus, rate=10000)"
             raise TransportError(f"{self.name}: CAN frames carry a counter, not a time: give the sample rate, "
-                                 f"e.g. can:{interface}:{channel}?rate=10000")
+                                 f"e.g. {example}")
         self.interface, self.channel = interface, channel
         self.bitrate, self.fd = bitrate, fd
         self.bus_kwargs = dict(bus_kwargs or {})
         self.decoder = CanDecoder(dbc, stats=self.stats.parser)
-        self.bus = None
+        self.owns_bus = bus is None
+        self.bus = bus
+        if bus is not None:
+            self.link = "application's bus"      # (lost for good: only its owner can reopen it)
+            return
         try:
             self._open()
         except TransportError:
@@ -91,7 +106,7 @@ class CanSource(ReconnectingSource):
         self.bus = can.Bus(interface=self.interface, channel=self.channel, **kw)
 
     def _close_link(self) -> None:
-        if self.bus is not None:
+        if self.bus is not None and self.owns_bus:
             try:
                 self.bus.shutdown()
             except Exception:  # noqa: BLE001 - a dead adapter may fail to close; it is gone either way
@@ -106,13 +121,12 @@ class CanSource(ReconnectingSource):
         if self.bus is None and not self._try_reconnect(timeout):
             return []
         out: list[RawSample] = []
-        decode = self.decoder.decode
+        decoder = self.decoder
         try:
             msg = self.bus.recv(timeout)
             n = 0
             while msg is not None:
-                if not msg.is_error_frame and not msg.is_remote_frame:
-                    out += decode(msg.arbitration_id, msg.data)
+                out += decode_message(decoder, msg)
                 n += 1
                 if n >= BATCH:
                     break
@@ -124,6 +138,46 @@ class CanSource(ReconnectingSource):
     def close(self) -> None:
         self._close_link()
         super().close()
+
+
+class CanMessages(SampleSource):
+    """Samples from CAN messages handed in one at a time (a ``can.Listener``'s), decoded and ordered as
+    ``CanSource`` does: the DBC, the counters, the reorder ``window``, lost, duplicated and late frames counted.
+
+    ``samples_of(msg)`` returns the samples that message completes (none while a reordered frame is awaited,
+    several when it fills a hole); ``flush()`` the ones still held at the end.
+    """
+
+    def __init__(self, *, rate: float, dbc: str | None = None, window: int = 32, stall: float = 0.5,
+                 name: str = "can:listener", on_event: Callable[[str], None] | None = None) -> None:
+        super().__init__(window=window, modulus=COUNTER_MODULUS, rate=rate, t_from_seq=True, stall=stall,
+                         on_event=on_event)
+        self.name = name
+        if not rate:
+            raise TransportError(f"{name}: CAN frames carry a counter, not a time: give the sample rate, "
+                                 f"e.g. rate=10000")
+        self.decoder = CanDecoder(dbc, stats=self.stats.parser)
+        self._raw: list[RawSample] = []
+
+    def samples_of(self, msg: Any) -> list[Sample]:
+        """The good samples, in order, that ``msg`` (a ``can.Message``) makes available."""
+        self._raw = decode_message(self.decoder, msg)
+        return self.read(0.0)
+
+    def flush(self) -> list[Sample]:
+        """The samples the reorder window still holds (the stream ended)."""
+        return self._deliver(self.tracker.flush(), 0.0)
+
+    def _read_raw(self, timeout: float) -> list[RawSample]:
+        raw, self._raw = self._raw, []
+        return raw
+
+
+def decode_message(decoder: CanDecoder, msg: Any) -> list[RawSample]:
+    """The raw samples of one ``can.Message`` (error and remote frames carry none)."""
+    if msg.is_error_frame or msg.is_remote_frame:
+        return []
+    return decoder.decode(msg.arbitration_id, msg.data)
 
 
 def _reason(exc: BaseException) -> str:

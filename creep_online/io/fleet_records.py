@@ -15,13 +15,14 @@ import glob
 import io
 import math
 from array import array
-from dataclasses import dataclass
+import warnings
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Iterable
 
 import numpy as np
 
-from ..errors import DataError
+from ..errors import CreepOnlineWarning, DataError, one_line
 from ..record import MIN_SAMPLES, Record
 # the CSV module's own file checks and header rule, so a long-format file fails exactly like a t,u,y one
 from .csvfile import _check_kind, _header, _read_text, load_csv
@@ -36,8 +37,13 @@ _GLOB_CHARS = set("*?[")
 class RecordJob:
     """One record of a fleet: a ``t,u,y`` file (``path``) or samples from a long-format file (``samples``).
 
+    ``path`` is absolute (resolved where the batch runs): the workers of an
+    existing cluster run in directories of their own. ``source`` is the name
+    as the user gave it (the table's ``source`` column).
+
     ``error`` is set when the record is known to be bad before any work (a bad
-    cell in a long-format file); ``load`` then raises it.
+    cell in a long-format file); ``load`` then raises it. ``notes``: warnings
+    of reading it where the batch runs (``carrying_samples``), for its row.
     """
 
     id: str
@@ -45,6 +51,21 @@ class RecordJob:
     path: str | None = None
     samples: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     error: str | None = None
+    notes: tuple[str, ...] = ()
+
+    def carrying_samples(self) -> "RecordJob":
+        """This record with its file read here, its samples to travel with its task (``batch --send-records``:
+        workers that cannot see the file); an unreadable file gives a job carrying the one-line error."""
+        if self.path is None:
+            return self
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", CreepOnlineWarning)
+            try:
+                rec = load_csv(self.path)
+            except DataError as exc:
+                return replace(self, path=None, error=one_line(exc))
+        notes = tuple(str(w.message) for w in caught if issubclass(w.category, CreepOnlineWarning))
+        return replace(self, path=None, samples=(rec.t, rec.u, rec.y), notes=self.notes + notes)
 
     def load(self) -> Record:
         """The validated record; DataError with the one-line reason otherwise."""
@@ -76,7 +97,7 @@ def find_records(spec: str) -> list[RecordJob]:
         raise DataError(f"{spec}: no such file or folder (give a folder, a glob or a long-format id,t,u,y CSV)")
     if not files:
         raise DataError(where)
-    return [RecordJob(name, str(p), path=str(p)) for name, p in zip(_unique_ids(files), files)]
+    return [RecordJob(name, str(p), path=str(p.resolve())) for name, p in zip(_unique_ids(files), files)]
 
 
 def _unique_ids(files: list[Path]) -> list[str]:
@@ -104,7 +125,7 @@ def _jobs_of_file(path: Path) -> list[RecordJob]:
                 raise DataError(f"{path}: empty file (expected a header id,t,u,y)")
             names = [c.strip().lower() for c in next(csv.reader([header]))]
             if "id" not in names:
-                return [RecordJob(path.stem, str(path), path=str(path))]
+                return [RecordJob(path.stem, str(path), path=str(path.resolve()))]
             return read_long(path, fh, _header(path, header, LONG_COLUMNS), lineno + 1)
     except UnicodeDecodeError as exc:
         raise DataError(f"{path}: not a UTF-8 text file (undecodable byte)") from None

@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 
 from ..model import CreepModel
+from .stored_params import StoredParams
 
 #: Seconds (estimate time) alpha and b must have stayed determined before a model is taken.
 DWELL_S = 0.2
@@ -44,7 +45,7 @@ RESONANCE = ("a1", "a2")
 ROUGH = 0.5
 
 
-class ModelGate:
+class ModelGate(StoredParams):
     """The model to give a compensator from each new estimate (``model``), or None: keep what it has.
 
     Remembers the last determined resonance. ``source`` says where the resonance of the last

@@ -1,28 +1,51 @@
-"""HTML summary of a fleet batch: one self-contained file, no plotting library needed.
+"""HTML summary of a fleet batch: one self-contained file, the plots drawn by matplotlib as inline SVG.
 
 For each of alpha, fn, zeta and b: a histogram over the identified records on
-the scale the outlier rule uses (log10 of the magnitude), the median, the band
-inside which a record is not an outlier (shaded), and every outlier as a red
-mark (hover: its id). Then the distribution table, the outliers with their
-z-scores, the records that failed (with their one-line error) and those with
-warnings. The plots are inline SVG, so the page opens anywhere and can be mailed.
+a logarithmic axis (the scale of the outlier rule: log10 of the magnitude),
+with a value axis and a count axis, each bar's count above it, the median
+(dashed), the band inside which a record is not an outlier (shaded; the rule's
+own ``outlier_band``) and every outlier as a red line named by its id. The gain
+is plotted signed: a symmetric-log axis shows a unit of the minority sign (an
+actuator wired backwards) on its own side of zero, away from the band, which
+lies on the majority's side. Then the distribution table, the outliers with
+their z-scores, the records that failed (with their one-line error) and those
+with warnings. The page holds everything (SVG inline), so it opens anywhere and
+can be mailed.
 """
 from __future__ import annotations
 
 import html
+import io
 import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..fleet.summary import SUMMARY_PARAMETERS, Z_THRESHOLD, identified
+from ..errors import CreepOnlineError
+from ..fleet.summary import SUMMARY_PARAMETERS, Z_THRESHOLD, identified, majority_sign, outlier_band
 from ..io.safe_files import WRITTEN_BY, atomic_write
 
-LABELS = {"alpha": "alpha", "fn_hz": "fn (Hz)", "zeta": "zeta", "b": "|b|"}
+LABELS = {"alpha": "alpha", "fn_hz": "fn (Hz)", "zeta": "zeta", "b": "b (signed)"}
 #: Rows with warnings listed at most (the table holds them all).
 MAX_LISTED = 200
-_W, _H, _PAD = 440, 190, 36
+#: Histogram bins over the plotted range; outliers named on the plot at most (the table lists them all).
+BINS = 30
+MAX_NAMED = 8
+#: Figure size (inches) and resolution of each histogram.
+FIGSIZE, DPI = (4.8, 2.9), 96
+
+
+def pyplot() -> Any:
+    """matplotlib's pyplot on the Agg backend, or a one-line error naming the extra."""
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise CreepOnlineError("the HTML summary needs matplotlib (pip install 'creep_online[fleet]'), "
+                               "or give no --out/--html") from None
+    return plt
 
 
 def write_fleet_report(rows: list[dict[str, Any]], summary: dict[str, Any], path: str | Path,
@@ -45,8 +68,10 @@ def render(rows: list[dict[str, Any]], summary: dict[str, Any], title: str) -> s
              f"<h1>{esc(title)}</h1>",
              f"<p>{summary['records']} records: {summary['identified']} identified, {summary['failed']} failed, "
              f"{summary['with_warnings']} with warnings, {len(summary['outliers'])} outliers.</p>",
-             f"<p>Outlier rule: {esc(summary['outlier_rule'])}. Shaded: the band inside which a record is "
-             f"not an outlier; red marks: outliers.</p>",
+             f"<p>Outlier rule: {esc(summary['outlier_rule'])}. Each plot: records per bin (the count above "
+             f"each bar) on a logarithmic axis; shaded: the band inside which a record is not an outlier; dashed: "
+             f"the median; red: outliers. The gain is signed: a unit wired backwards is on the other side of "
+             f"zero.</p>",
              "<div class='plots'>"]
     for name in SUMMARY_PARAMETERS:
         parts.append(_histogram(name, good))
@@ -62,57 +87,80 @@ def render(rows: list[dict[str, Any]], summary: dict[str, Any], title: str) -> s
 
 
 def _histogram(name: str, good: list[dict[str, Any]]) -> str:
-    """SVG histogram of log10|value| with the median, the non-outlier band and the outliers."""
+    """The SVG of one parameter's histogram (module docstring)."""
+    plt = pyplot()
     values = np.array([r[name] for r in good], dtype=float)
-    label = html.escape(LABELS[name])
-    if values.size == 0:
-        return f"<svg width='{_W}' height='{_H}'><text x='10' y='20'>{label}: no identified records</text></svg>"
-    x = np.log10(np.abs(values))
-    med = float(np.median(x))
-    mad = float(np.median(np.abs(x - med)))
-    half = Z_THRESHOLD * mad / 0.6745
-    lo, hi = float(min(x.min(), med - half)), float(max(x.max(), med + half))
-    if hi - lo < 1e-9:
-        lo, hi = lo - 0.01, hi + 0.01
-    span = hi - lo
-    lo, hi = lo - 0.03 * span, hi + 0.03 * span
-    counts, edges = np.histogram(x, bins=30, range=(lo, hi))
-
-    def px(v: float) -> float:
-        return _PAD + (v - lo) / (hi - lo) * (_W - 2 * _PAD)
-
-    base, top = _H - _PAD, 20
-    scale = (base - top) / max(int(counts.max()), 1)
-    out = [f"<svg width='{_W}' height='{_H}' xmlns='http://www.w3.org/2000/svg' font-size='11'>",
-           f"<text x='{_PAD}' y='14' font-weight='bold'>{label}</text>"]
-    if mad > 0:
-        out.append(f"<rect x='{px(med - half):.1f}' y='{top}' width='{px(med + half) - px(med - half):.1f}' "
-                   f"height='{base - top}' fill='#e6f4e6'/>")
-    for c, e0, e1 in zip(counts, edges[:-1], edges[1:]):
-        if c:
-            out.append(f"<rect x='{px(e0):.1f}' y='{base - c * scale:.1f}' width='{max(px(e1) - px(e0) - 1, 1):.1f}' "
-                       f"height='{c * scale:.1f}' fill='#4a78b0'/>")
-    out.append(f"<line x1='{px(med):.1f}' x2='{px(med):.1f}' y1='{top}' y2='{base}' stroke='black' "
-               f"stroke-dasharray='3,2'><title>median {10 ** med:.4g}</title></line>")
-    out.append(f"<line x1='{_PAD}' x2='{_W - _PAD}' y1='{base}' y2='{base}' stroke='black'/>")
-    for r, xv in zip(good, x):
-        if name in r.get("outlier", "").split(","):
-            out.append(f"<line x1='{px(xv):.1f}' x2='{px(xv):.1f}' y1='{base + 2}' y2='{base + 12}' stroke='red' "
-                       f"stroke-width='2'><title>{html.escape(str(r['id']))}: {r[name]:.4g}</title></line>")
-    for tick in _ticks(lo, hi):
-        out.append(f"<text x='{px(tick):.1f}' y='{base + 26}' text-anchor='middle'>{10 ** tick:.3g}</text>")
-    out.append(f"<text x='{_W - _PAD}' y='14' text-anchor='end'>{values.size} records, median "
-               f"{10 ** med:.4g}</text></svg>")
-    return "".join(out)
+    fig, ax = plt.subplots(figsize=FIGSIZE, dpi=DPI)
+    try:
+        if values.size == 0:
+            ax.set_axis_off()
+            ax.text(0.5, 0.5, f"{LABELS[name]}: no identified records", ha="center", transform=ax.transAxes)
+        else:
+            outliers = [(str(r["id"]), r[name]) for r in good if name in r.get("outlier", "").split(",")]
+            _draw(ax, name, values, outliers)
+        fig.tight_layout()
+        buf = io.StringIO()
+        fig.savefig(buf, format="svg")
+    finally:
+        plt.close(fig)
+    text = buf.getvalue()
+    return text[text.index("<svg"):]
 
 
-def _ticks(lo: float, hi: float, n: int = 4) -> list[float]:
-    """About ``n`` evenly spaced tick positions (log10 units) inside [lo, hi]."""
-    step = (hi - lo) / n
-    mag = 10 ** math.floor(math.log10(step))
-    step = min((m * mag for m in (1, 2, 5, 10) if m * mag >= step), default=step)
-    first = math.ceil(lo / step) * step
-    return [first + k * step for k in range(n + 2) if first + k * step <= hi]
+def _draw(ax: Any, name: str, values: np.ndarray, outliers: list[tuple[str, float]]) -> None:
+    from matplotlib.ticker import FixedLocator, FuncFormatter, MaxNLocator, NullLocator
+    mags = np.log10(np.abs(values))
+    med, half = outlier_band(mags)
+    sign = majority_sign(values) if name == "b" else 1.0
+    edges, ticks = [], []
+    for side in sorted({float(np.sign(v)) for v in values} | {sign}):
+        mine = mags[np.sign(values) == side]
+        lo, hi = float(mine.min(initial=med)), float(mine.max(initial=med))
+        if side == sign and math.isfinite(half):      # the majority's side: the band too
+            lo, hi = min(lo, med - half), max(hi, med + half)
+        pad = max(0.04 * (hi - lo), 0.005)
+        magnitudes = 10 ** np.linspace(lo - pad, hi + pad, BINS + 1 if side == sign else 4)
+        edges.append(side * (magnitudes[::-1] if side < 0 else magnitudes))
+        ticks += [side * t for t in _ticks(magnitudes[0], magnitudes[-1], 5)] if side == sign \
+            else [side * float(np.median(10 ** mine))]       # the minority's side: its own value
+    bins = np.concatenate(edges)
+    if name == "b" or len(edges) > 1 or sign < 0:
+        ax.set_xscale("symlog", linthresh=float(np.abs(bins).min()), linscale=0.1)
+    else:
+        ax.set_xscale("log")
+    counts, _, patches = ax.hist(values, bins=bins, color="#4a78b0", edgecolor="white", linewidth=0.5)
+    ax.bar_label(patches, labels=[str(int(c)) if c else "" for c in counts], fontsize=7, padding=1)
+    if math.isfinite(half):
+        ends = sorted(sign * 10 ** np.array([med - half, med + half]))
+        ax.axvspan(ends[0], ends[1], color="#2e8b57", alpha=0.15, lw=0,
+                   label=f"not an outlier (|z| <= {Z_THRESHOLD:g})")
+    ax.axvline(sign * 10 ** med, color="black", ls="--", lw=1, label=f"median {sign * 10 ** med:.4g}")
+    for k, (rid, value) in enumerate(outliers):
+        ax.axvline(value, color="red", lw=1.5, label="outlier" if k == 0 else None)
+        if k < MAX_NAMED:
+            ax.annotate(rid, (value, 0.97), xycoords=("data", "axes fraction"), fontsize=7, color="red",
+                        rotation=90, ha="right", va="top")
+    ax.xaxis.set_major_locator(FixedLocator(sorted(ticks)))
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:.3g}"))
+    ax.xaxis.set_minor_locator(NullLocator())
+    ax.set_xlim(bins[0], bins[-1])
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_ylim(0, max(counts.max(), 1) * 1.3)
+    ax.set_xlabel(LABELS[name], fontsize=8)
+    ax.set_ylabel("records", fontsize=8)
+    ax.tick_params(labelsize=7)
+    ax.set_title(f"{LABELS[name]}: {values.size} records, median {sign * 10 ** med:.4g}", fontsize=9)
+    ax.legend(fontsize=6, loc="best", framealpha=0.8)
+
+
+def _ticks(lo: float, hi: float, n: int) -> list[float]:
+    """About ``n`` readable values in [lo, hi] (0 < lo): 1-2-5 steps within a decade or so, decades beyond."""
+    from matplotlib.ticker import MaxNLocator
+    if hi / lo > 30:
+        first, last = math.ceil(math.log10(lo)), math.floor(math.log10(hi))
+        step = max(1, (last - first + 1) // n)
+        return [10.0 ** k for k in range(first, last + 1, step)]
+    return [float(t) for t in MaxNLocator(n).tick_values(lo, hi) if lo <= t <= hi]
 
 
 def _distribution_table(summary: dict[str, Any]) -> str:
