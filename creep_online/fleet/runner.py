@@ -189,17 +189,18 @@ def run_on_dask(jobs: Iterable[RecordJob], client: Any, *, diagnose_it: bool = F
         else:
             pending.append(job)
     suspects: list[RecordJob] = []
-    yield from _run_window(dd, client, task, pending, options, stop, suspects)
+    yield from _run_window(dd, client, task, pending, options, stop, suspects, send_records)
     for job in suspects:                   # alone now: a worker that dies is this record's doing
         if stop is not None and stop():
             return
-        yield from _run_window(dd, client, task, [job], options, stop, None)
+        yield from _run_window(dd, client, task, [job], options, stop, None, send_records)
 
 
 def _run_window(dd: Any, client: Any, task: Callable[..., dict], pending: list[RecordJob], options: dict,
-                stop: Callable[[], bool] | None, suspects: list[RecordJob] | None) -> Iterator[dict[str, Any]]:
+                stop: Callable[[], bool] | None, suspects: list[RecordJob] | None,
+                send_records: bool = False) -> Iterator[dict[str, Any]]:
     """The rows of ``pending`` run in a bounded window; with ``suspects`` a list, the records whose worker died
-    go there instead of getting an error row."""
+    go there instead of getting an error row. ``send_records``: each job carries its samples when submitted."""
     queue = iter(pending)
     in_flight: dict[str, tuple[Any, RecordJob]] = {}
     done = dd.as_completed()
