@@ -997,11 +997,18 @@ class OnlineEstimator(StoredParams, Checkpointable):
     def _compete(self, step) -> Generator:
         """Both readings of the start on the samples the step's search had (``rest``, stage 2): the buffer in the
         in-operation frame, its search (the step's result a candidate), the costs compared; the buffer in the frame
-        taken. In units; returns the search result to start the tracker at."""
+        taken. In units; returns the search result to start the tracker at.
+
+        The in-operation search refines the step's search's candidates (its ``starts``) instead of running a grid of
+        its own: both readings share the plant's resonance, only the start's free responses differ. A grid of its own
+        takes 2200-7400 units (one per sample) on the real CubeSpec multisines whatever the rows, more than a 2.56 s
+        record leaves after a 1.37 s window; refined from the step's candidates, 400-2300 units, costs within
+        0.04 % of the grid's and the same reading taken on all six."""
         rows = self._search_end            # (the step's search: from the first sample)
+        starts = [c[1:] for c in self._search.candidates] or None
         yield from self._reframe(self._jump)
         search = ResonanceSearch(self.basis, self._bu[:rows], self._by[:rows], extra=((step.alpha, step.a1, step.a2),),
-                                 work=self._hist_work, scratch=self._search_scratch, free=FREE_RATES)
+                                 work=self._hist_work, scratch=self._search_scratch, free=FREE_RATES, starts=starts)
         while not search.step():
             yield
         operation = search.result
