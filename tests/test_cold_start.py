@@ -1,8 +1,8 @@
 """What the program and the package import before they need it: behaviour, not timing.
 
 ``creep-online --help``, ``--version`` and ``identify --help`` print from argparse alone, so they load
-neither numpy nor scipy nor numba; ``import creep_online`` loads only its errors, and every public name
-still imports as before (bench/bench_cold_start.py measures the time this saves).
+neither numpy nor scipy nor numba (the other commands' --help: no scipy or numba); ``import creep_online``
+loads only its errors, and every public name still imports as before (bench/bench_cold_start.py measures the time this saves).
 """
 from __future__ import annotations
 
@@ -32,6 +32,12 @@ def _loaded_after(argv: list[str]) -> str:
 @pytest.mark.parametrize("argv", [["--help"], ["--version"], ["identify", "--help"], ["batch", "--help"]])
 def test_help_and_version_import_no_numpy_scipy_or_numba(argv):
     assert _loaded_after(argv) == "[]"
+
+
+@pytest.mark.parametrize("command", ["simulate", "stream", "diagnose", "fit", "demo"])
+def test_command_help_imports_no_scipy_or_numba(command):
+    loaded = _loaded_after([command, "--help"])
+    assert "scipy" not in loaded and "numba" not in loaded, loaded
 
 
 def test_the_program_prints_its_help_without_numpy():
