@@ -16,6 +16,7 @@ import json
 import os
 import platform
 import resource
+import shutil
 import statistics
 import subprocess
 import sys
@@ -98,6 +99,8 @@ def main() -> None:
               for c in commands}
     targets = {c: {"target_wall_s": lim, "best_wall_s": results["this_code"][c]["wall_s"]["best"],
                    "met": results["this_code"][c]["wall_s"]["best"] <= lim} for c, lim in TARGETS_S.items()}
+    shutil.rmtree(previous_dir, ignore_errors=True)
+    shutil.rmtree(work, ignore_errors=True)
     print(json.dumps({"bench": "cold_start", "repeats": opts.repeats, "samples": 12000,
                       "previous_commit": previous_commit, "python": platform.python_version(),
                       "cpus": os.cpu_count(), "load_average_start": load_start, "load_average_end": os.getloadavg(),
