@@ -49,10 +49,19 @@ from ._numba_cache import configure as _configure_numba_cache
 
 _configure_numba_cache()
 
+from typing import TYPE_CHECKING
+
 from .errors import CreepOnlineError, DataError, IdentificationError, ModelError, OutputError
-from .model import CreepModel, ExtendedModel, FittedModel
-from .record import Record
-from .simulate import simulate, step_response  # light: the module loads numba and scipy on first call
+
+if TYPE_CHECKING:  # for type checkers and editors; at run time these load on first use (below)
+    from .diagnostics import diagnose
+    from .diagnostics.compare import compare
+    from .identification import identify
+    from .io.model_file import load_model, save_model
+    from .model import CreepModel, ExtendedModel, FittedModel
+    from .online import OnlineEstimator
+    from .record import Record
+    from .simulate import simulate, step_response
 
 __version__ = "0.1.0"
 
@@ -62,8 +71,14 @@ __all__ = [
     "CreepOnlineError", "DataError", "IdentificationError", "ModelError", "OutputError",
 ]
 
-# The API mirrors the CLI; the heavier layers load on first use, not on import.
-# identify loads scipy and numba (~1 s): the CLI's --help must not pay for them.
-_LAZY = {"OnlineEstimator": "online", "diagnose": "diagnostics", "identify": "identification",
-         "compare": "diagnostics.compare", "save_model": "io.model_file", "load_model": "io.model_file"}
+# The API mirrors the CLI; everything but the errors loads on first use, not on import: numpy alone takes
+# ~40 ms, identify's scipy and numba ~1 s, and the CLI's --help and --version need none of them.
+_LAZY = {"CreepModel": "model", "ExtendedModel": "model", "FittedModel": "model", "Record": "record",
+         "simulate": "simulate", "step_response": "simulate", "OnlineEstimator": "online",
+         "diagnose": "diagnostics", "identify": "identification", "compare": "diagnostics.compare",
+         "save_model": "io.model_file", "load_model": "io.model_file"}
 __getattr__ = _lazy_attributes(__name__, _LAZY)
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import os
 import sys
-import tempfile
 from pathlib import Path
 
 PACKAGE_DIR = Path(__file__).resolve().parent
@@ -28,10 +27,11 @@ PACKAGE_DIR = Path(__file__).resolve().parent
 
 def _writable(directory: Path) -> bool:
     """True when ``directory`` exists (or can be created) and a file can be written in it."""
+    probe = directory / f".creep_online-probe-{os.getpid()}-{os.urandom(4).hex()}"
     try:
         directory.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=directory):
-            pass
+        os.close(os.open(probe, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600))
+        os.unlink(probe)
     except OSError:
         return False
     return True
@@ -43,6 +43,8 @@ def _private_tmp() -> Path | None:
     numba's cache files are pickles: a directory in a shared /tmp that another
     user could have created (or can write) must not be used.
     """
+    import tempfile   # here, not at the top: every start of the program runs configure()
+
     root = Path(tempfile.gettempdir()) / f"creep_online-{_user_name()}"
     try:
         root.mkdir(mode=0o700, exist_ok=True)
@@ -91,6 +93,8 @@ def configure() -> str | None:
         if _writable(directory):
             os.environ["NUMBA_CACHE_DIR"] = str(directory)
             return str(directory)
+    import tempfile
+
     private = tempfile.mkdtemp(prefix="creep_online-numba-")
     os.environ["NUMBA_CACHE_DIR"] = private
     print(f"creep_online: note: no writable cache directory (package, ~/.cache and {tempfile.gettempdir()} "

@@ -88,7 +88,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     parser = OneLineParser(
         prog="creep-online",
         description="Identify the fractional-order creep model b / (s^alpha (1 + a1 s + a2 s^2)), batch or online.")
-    parser.add_argument("--version", action="version", version=f"creep-online {_version()}")
+    parser.add_argument("--version", action=_VersionAction)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS:
         if only is not None and name != only:
@@ -130,6 +130,19 @@ def _stop_inside(exc: BaseException) -> KeyboardInterrupt | None:
         seen.add(id(exc))
         exc = exc.__cause__ or exc.__context__
     return None
+
+
+class _VersionAction(argparse.Action):
+    """``--version``: prints ``creep-online VERSION`` and exits. The version is looked up only then (the package
+    metadata takes ~25 ms to import; every other command would pay for it)."""
+
+    def __init__(self, option_strings: list[str], dest: str = argparse.SUPPRESS, **kwargs) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS,
+                         help="show program's version number and exit")
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        print(f"creep-online {_version()}")
+        parser.exit()
 
 
 def _version() -> str:

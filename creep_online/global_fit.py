@@ -24,7 +24,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from . import kernels
 from .discretize import foh_matrices_batch, step_response_grid
@@ -203,6 +202,8 @@ def _orthonormal(c: np.ndarray) -> np.ndarray:
 
 def fit_from(prob: Problem, start: CreepModel, max_nfev: int = 80) -> tuple[CreepModel, np.ndarray, np.ndarray]:
     """TRF over (alpha, log a1, log a2) from ``start``: (model, linear coefficients, residual)."""
+    from scipy.optimize import least_squares   # ~0.1 s to import: only the fits that come here pay for it
+
     p0 = np.array([min(max(start.alpha, 2e-4), 0.99), math.log(start.a1), math.log(start.a2)])
     lo = [ALPHA_RANGE[0], p0[1] - 12.0, p0[2] - 12.0]
     hi = [ALPHA_RANGE[1], p0[1] + 12.0, p0[2] + 12.0]

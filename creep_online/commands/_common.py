@@ -13,10 +13,8 @@ import math
 import sys
 import warnings
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
-from ..io.jsonable import json_text
-from ..io.params import parse_params
 
 __all__ = ["print_json", "parse_params", "add_column_options", "moves_text", "research_lines", "add_model_output",
            "check_model_output", "save_fitted", "warn_time_unit", "seconds", "positive_number", "finite_number",
@@ -121,8 +119,15 @@ def add_column_options(parser, time: bool = True) -> None:
 
 def print_json(obj: Any) -> None:
     """Write one JSON document to stdout (non-finite numbers as null: ``creep_online.io.jsonable``)."""
+    from ..io.jsonable import json_text   # numpy: imported when a command runs, not for its --help
     sys.stdout.write(json_text(obj))
     sys.stdout.write("\n")
+
+
+def parse_params(text: str | None, defaults: Mapping[str, float] | None = None, what: str = "--params"):
+    """``creep_online.io.params.parse_params`` (which loads the model and numpy when it is first called)."""
+    from ..io.params import parse_params as parse
+    return parse(text, defaults, what)
 
 
 def moves_text(relative_change: dict) -> str:

@@ -3,8 +3,6 @@ from __future__ import annotations
 
 import argparse
 
-from ..diagnostics import diagnose
-from ..diagnostics.loading import load_for_diagnosis
 from ..effects import effect_names
 from ._common import add_column_options, nonempty, print_json, whole
 from ._progress import for_command
@@ -32,7 +30,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..diagnostics import diagnose               # scipy and numba: `diagnose --help` loads neither
     from ..diagnostics.extended import check_effects
+    from ..diagnostics.loading import load_for_diagnosis
     candidates = check_effects(args.effects) if args.effects else effect_names()
     if args.report is not None:
         from ..io.safe_files import check_report_dir

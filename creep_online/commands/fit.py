@@ -3,11 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..diagnostics.extended import check_effects, fit_extended
-from ..diagnostics.loading import load_for_diagnosis
-from ..diagnostics.start import fit_base_by_rule
 from ..effects import effect_names
-from ..metrics import noise_std_estimate
 from ._common import (add_column_options, add_model_output, check_model_output, nonempty, print_json, save_fitted,
                       seconds, warn_time_unit)
 from ._progress import for_command
@@ -37,6 +33,11 @@ MAX_JOINT_EFFECTS = 4
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..diagnostics.extended import check_effects, fit_extended   # scipy and numba: not for `fit --help`
+    from ..diagnostics.loading import load_for_diagnosis
+    from ..diagnostics.start import fit_base_by_rule
+    from ..metrics import noise_std_estimate
+
     effects = check_effects(args.effects)
     if len(effects) > MAX_JOINT_EFFECTS:
         from ..errors import DataError

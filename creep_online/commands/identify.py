@@ -3,8 +3,6 @@ from __future__ import annotations
 
 import argparse
 
-from ..identification import identify
-from ..io.csvfile import load_record
 from ._common import (add_column_options, add_model_output, check_model_output, fraction, nonempty, print_json,
                       save_fitted, seconds, warn_time_unit)
 from ._progress import for_command
@@ -30,6 +28,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..identification import identify        # numpy, scipy and numba: `identify --help` loads none of them
+    from ..io.csvfile import load_record
+
     out_path = check_model_output(args.output, args.data)
     with for_command(args.json) as progress:
         progress.stage(f"identify {args.data}: loading")

@@ -17,6 +17,7 @@ import os
 import signal
 import sys
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -24,11 +25,13 @@ from .. import _signals
 from ..errors import CreepOnlineError, DataError, TransportError
 from ..io.csvfile import load_record
 from ..record import check_amplitudes, check_time_and_output
-from ..online import OnlineEstimator, warm_kernels
 from ..model import ONLINE_REFITS as REFITS
 from ._common import (MAX_SECONDS, add_column_options, event_line, fraction, nonempty, print_json, research_lines,
                       seconds, whole)
 from ._progress import for_command
+
+if TYPE_CHECKING:
+    from ..online import OnlineEstimator
 
 
 #: How a stream ended -> exit code (interrupted: 128 + the signal). Every end after the first sample prints the
@@ -287,6 +290,8 @@ def _print_estimate(spec: str, est: OnlineEstimator) -> None:
 
 
 def _run_csv(path: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dict, dict]:
+    from ..online import OnlineEstimator, warm_kernels   # numba and scipy: not for `stream --help`
+
     if not path:
         raise DataError("csv: missing file name after 'csv:'")
     if args.trace is not None:
@@ -397,6 +402,8 @@ def status_line(spec: str, loop) -> str:
 
 
 def _run_live(spec: str, args: argparse.Namespace) -> tuple[OnlineEstimator, dict, dict]:
+    from ..online import OnlineEstimator, warm_kernels
+
     try:
         registry = importlib.import_module("creep_online.io.registry")
         feed = importlib.import_module("creep_online.io.feed")
