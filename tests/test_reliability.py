@@ -597,8 +597,10 @@ FLAGS = {"identify": ["--t-c", "--alpha0", "--layer1-step", "--u-column"],
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
                                                                  HealthCheck.too_slow])
 @given(st.sampled_from(sorted((c, f) for c, fs in FLAGS.items() for f in fs)), st.sampled_from(HOSTILE))
-def test_every_flag_with_a_hostile_value_is_exit_0_right_or_exit_2_one_line(rec, tmp_path, capsys, flag, value):
+def test_every_flag_with_a_hostile_value_is_exit_0_right_or_exit_2_one_line(rec, tmp_path, capsys, monkeypatch,
+                                                                          flag, value):
     command, name = flag
+    monkeypatch.chdir(tmp_path)       # (a value taken as a file name, e.g. batch --html 0, is written here)
     base = {"identify": ["identify", rec, "--json"], "stream": ["stream", "--source", f"csv:{rec}", "--json"],
             "simulate": ["simulate", "--input", rec, "--params", "alpha=0.3,a1=0.01,a2=1e-4", "--method", "paper",
                          "-o", tmp_path / "o.csv"],
