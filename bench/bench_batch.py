@@ -35,7 +35,6 @@ import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from creep_online.fleet import summarize  # noqa: E402
 from creep_online.fleet.job import run_record, warm_up  # noqa: E402
@@ -43,12 +42,7 @@ from creep_online.fleet.runner import dask_client, run_on_dask  # noqa: E402
 from creep_online.fleet.summary import Z_THRESHOLD, robust_z  # noqa: E402
 from creep_online.io.fleet_records import find_records  # noqa: E402
 from hil_sim.fleet import make_fleet, write_fleet  # noqa: E402
-
-
-def dist(x) -> dict:
-    a = np.asarray(x, dtype=float)
-    return {"p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)), "max": float(a.max()),
-            "mean": float(a.mean()), "n": int(a.size)}
+from bench.harness import dist  # noqa: E402
 
 
 def measure(name: str, jobs, run, workers: int) -> dict:

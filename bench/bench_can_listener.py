@@ -17,13 +17,11 @@ from __future__ import annotations
 import argparse
 import json
 import platform
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import can  # noqa: E402
 
@@ -33,6 +31,7 @@ from creep_online.io.can_listener import EstimatorListener  # noqa: E402
 from creep_online.io.can_source import decode_message  # noqa: E402
 from creep_online.online import OnlineEstimator, warm_kernels  # noqa: E402
 from hil_sim import PlantConfig, generate, parse_params  # noqa: E402
+from bench.harness import dist  # noqa: E402
 
 RATE = 10_000.0
 WARM = 200       # calls not measured (first decodes, caches)
@@ -82,11 +81,6 @@ def timed(call, msgs: list[can.Message]) -> np.ndarray:
         call(msg)
         out[k] = clock() - t0
     return out[WARM:] / 1e3
-
-
-def dist(x: np.ndarray, per: float) -> dict[str, float]:
-    return {"p50": float(np.percentile(x, 50)) / per, "p99": float(np.percentile(x, 99)) / per,
-            "max": float(x.max()) / per, "mean": float(x.mean()) / per}
 
 
 def main() -> None:

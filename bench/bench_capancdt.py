@@ -37,14 +37,13 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from creep_online.io.capancdt_frames import CapancdtParser, encode_packet  # noqa: E402
 from creep_online.io.feed import FeedLoop, SampleAge  # noqa: E402
 from creep_online.io.sources import open_source  # noqa: E402
 from hil_sim.harness import PlantProcess  # noqa: E402
 
-from bench_transports import dist  # noqa: E402  (bench/ is on the path of a bench script)
+from bench.harness import dist  # noqa: E402  (p50/p99/max/mean/n)
 
 RATE = 3906.25
 PLANT = ["--transport", "capancdt", "--rate", str(RATE), "--t-start", "0.2", "--schedule", "square",

@@ -27,7 +27,6 @@ from collections import Counter
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from creep_online.diagnostics import diagnose  # noqa: E402
 from creep_online.diagnostics.extended import fit_base, prepare  # noqa: E402

@@ -58,10 +58,8 @@ from functools import lru_cache
 import numpy as np
 from scipy.stats import chi2, ncx2
 
-sys.path.insert(0, os.path.dirname(__file__))
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
-from bench_diagnose_bands import BANDS, FLOOR, H, N, draw_record, emit, merge  # noqa: E402
+from bench.bench_diagnose_bands import BANDS, FLOOR, H, N, draw_record, emit, merge  # noqa: E402
 from creep_online.diagnostics import diagnose  # noqa: E402
 from creep_online.diagnostics.explain import evidence  # noqa: E402
 from creep_online.diagnostics.bic import EVIDENCE_THRESHOLD  # noqa: E402

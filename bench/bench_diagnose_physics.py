@@ -20,10 +20,8 @@ import sys
 import time
 from collections import Counter
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
-sys.path.insert(0, os.path.dirname(__file__))
 
-from bench_diagnose_bands import BANDS, emit, make_record  # noqa: E402
+from bench.bench_diagnose_bands import BANDS, emit, make_record  # noqa: E402
 from creep_online.diagnostics import diagnose  # noqa: E402
 from creep_online.diagnostics.holds import EFFECTS  # noqa: E402
 

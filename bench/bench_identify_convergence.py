@@ -21,13 +21,12 @@ import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from creep_online.identification import identify  # noqa: E402
 from creep_online.metrics import fit_percent  # noqa: E402
 from hil_sim.validation import FAMILIES, validation_set  # noqa: E402
 
-import _baseline  # noqa: E402
+from bench import _baseline  # noqa: E402
 
 FLOOR_POINTS = 0.05
 

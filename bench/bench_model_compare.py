@@ -46,7 +46,6 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from creep_online import CreepModel, compare, load_model, save_model  # noqa: E402
 from creep_online.effects import EFFECTS, simulate_with_effects  # noqa: E402

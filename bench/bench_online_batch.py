@@ -50,7 +50,6 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 PARAMS = ("alpha", "b", "a1", "a2")
 #: The scenario tolerances (relative), as bench_online_scenarios.TOL.
 TOL = {"alpha": 0.02, "b": 0.03, "a1": 0.05, "a2": 0.05}
@@ -275,7 +274,7 @@ def main(argv: list[str] | None = None) -> dict:
         print(json.dumps({k: v for k, v in doc.items() if k != "records"}, indent=1))
         return doc
     from hil_sim import scenarios
-    from bench_online_scenarios import estimator_window_s
+    from bench.bench_online_scenarios import estimator_window_s
     scenarios.SNR_DB = args.snr_db
     families = args.families.split(",") if args.families else list(scenarios.FAMILIES)
     if args.rest_samples is not None:
@@ -303,5 +302,4 @@ def main(argv: list[str] | None = None) -> dict:
 
 
 if __name__ == "__main__":
-    sys.path.insert(0, str(ROOT / "bench"))
     main()

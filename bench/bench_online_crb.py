@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -48,7 +47,6 @@ def bounds(scen, last_s: float) -> dict:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    sys.path.insert(0, str(ROOT))
     from hil_sim.scenarios import FAMILIES, make
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--families", default="drift")

@@ -34,8 +34,6 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "bench"))
 
 #: The paper's accuracy on alpha and b (relative).
 ACCURACY = 0.003
@@ -107,7 +105,7 @@ def rel(v: float | None, truth: float) -> float:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    from bench_online_scenarios import cramer_rao_rel
+    from bench.bench_online_scenarios import cramer_rao_rel
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--plants", type=int, default=20)
     ap.add_argument("--seed-offset", type=int, default=0)

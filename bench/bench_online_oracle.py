@@ -41,7 +41,6 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMB
 import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
-import sys  # noqa: E402
 import time  # noqa: E402
 from multiprocessing import get_context  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -49,9 +48,8 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "bench"))
 
-from bench_online_scenarios import PARAMS, TOL  # noqa: E402  (the scenario bench's tolerances: the same "within")
+from bench.bench_online_scenarios import PARAMS, TOL  # noqa: E402  (the scenario bench's tolerances: the same "within")
 #: Largest |ln factor| the fit may take (a factor of e^5 ~ 150: far beyond any tolerance, keeps the simulator
 #: inside its stable range on a flat cost).
 LN_FACTOR_BOUND = 5.0
@@ -81,7 +79,6 @@ def oracle_fit(scen, last_s: float) -> dict:
 def _one(job: tuple[str, int, float | None, float]) -> dict:
     """Worker: one record (family, seed, snr_db, last_s) -> its row."""
     fam, seed, snr_db, last_s = job
-    sys.path.insert(0, str(ROOT))
     from hil_sim import scenarios
     if snr_db is not None:
         scenarios.SNR_DB = float(snr_db)
@@ -112,7 +109,6 @@ def _compared(rows: list[dict], estimator: dict | None) -> dict:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    sys.path.insert(0, str(ROOT))
     from hil_sim.scenarios import FAMILIES, SNR_DB
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--families", default=",".join(f for f in FAMILIES if f != "close_modes"))

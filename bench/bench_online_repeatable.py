@@ -33,12 +33,10 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "bench"))
 
-from _baseline import extract, run_python  # noqa: E402
-from bench_online import H, make_stream  # noqa: E402
-from bench_online_sites import site  # noqa: E402
+from bench._baseline import extract, run_python  # noqa: E402
+from bench.bench_online import H, make_stream  # noqa: E402
+from bench.bench_online_sites import site  # noqa: E402
 
 #: The measurement, as source: it runs in this process for the worktree's code and in a subprocess (the
 #: baseline's package first on sys.path) for ``--baseline``; only ``OnlineEstimator(dt)`` and ``update`` are used.

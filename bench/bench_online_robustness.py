@@ -60,7 +60,6 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from creep_online.online.estimator import OnlineEstimator, warm_kernels  # noqa: E402
 from hil_sim import scenarios  # noqa: E402

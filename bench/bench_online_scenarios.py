@@ -440,7 +440,6 @@ def git_head() -> str:
 
 def main(argv: list[str] | None = None) -> dict:
     """Generate, run current and baseline side by side, summarize, print and write the JSON."""
-    sys.path.insert(0, str(ROOT))
     from hil_sim import scenarios
     from hil_sim.scenarios import FAMILIES
     args = parse_args(argv)

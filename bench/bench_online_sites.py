@@ -39,10 +39,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "bench"))
 
-from bench_online import H, make_stream  # noqa: E402
+from bench.bench_online import H, make_stream  # noqa: E402
 
 #: Sites listed per run (the most calls over the threshold first).
 TOP_SITES = 25

@@ -38,9 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench_transports import dist  # noqa: E402 - p50/p99/max/n, the same summary as the transport bench
+from bench.harness import dist  # noqa: E402  (p50/p99/max/mean/n)
 from creep_online.io.feed import FeedLoop, SampleAge  # noqa: E402
 from creep_online.io.sources import open_source  # noqa: E402
 from hil_sim.harness import PlantProcess  # noqa: E402

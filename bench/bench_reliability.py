@@ -1532,8 +1532,7 @@ def main() -> int:
         print(json.dumps({k: v for k, v in report.items() if k != "failures"}, indent=1))
         return 0
     if args.baseline:
-        sys.path.insert(0, str(ROOT / "bench"))
-        from _baseline import extract
+        from bench._baseline import extract
         path = args.baseline if os.path.isdir(args.baseline) else extract(args.baseline)[0]   # (a tree extracted before)
         env = dict(os.environ, PYTHONPATH=path, NUMBA_CACHE_DIR=os.path.join(path, ".numba_cache"))
         cmd = [sys.executable, __file__, "--only", args.only, "--sample", str(args.sample), "--out", args.out]

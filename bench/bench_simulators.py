@@ -21,18 +21,12 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from creep_online import CreepModel, simulate  # noqa: E402
 from creep_online.simulate import fractional_integral  # noqa: E402
+from bench.harness import dist  # noqa: E402
 
 ORACLE = ROOT / "tests" / "data" / "oracle"
-
-
-def distribution(samples: list[float]) -> dict[str, float]:
-    a = np.asarray(samples)
-    return {"p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)), "max": float(a.max()),
-            "n": int(a.size)}
 
 
 def convergence() -> list[dict]:
@@ -99,7 +93,7 @@ def speed(repeats: int) -> list[dict]:
                 t0 = time.perf_counter()
                 simulate(m, t, u, method=method)
                 times.append(time.perf_counter() - t0)
-            rows.append({"samples": n, "method": method, "elapsed_s": distribution(times)})
+            rows.append({"samples": n, "method": method, "elapsed_s": dist(times)})
     return rows
 
 

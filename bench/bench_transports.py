@@ -28,22 +28,14 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from creep_online.io.feed import FeedLoop, SampleAge  # noqa: E402
 from creep_online.io.sources import open_source  # noqa: E402
 from hil_sim import PlantConfig, generate, parse_params, run_virtual_plant  # noqa: E402
 from hil_sim.harness import PlantProcess  # noqa: E402
+from bench.harness import dist  # noqa: E402
 
 RATE = 10_000.0
-
-
-def dist(x) -> dict:
-    x = np.asarray(x, dtype=float)
-    if x.size == 0:
-        return {"p50": None, "p99": None, "max": None, "n": 0}
-    return {"p50": float(np.percentile(x, 50)), "p99": float(np.percentile(x, 99)), "max": float(x.max()),
-            "n": int(x.size)}
 
 
 def _drain(src, last_seq: int, timeout: float = 300.0) -> tuple[int, float]:
