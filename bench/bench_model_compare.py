@@ -36,7 +36,6 @@ import io
 import itertools
 import json
 import math
-import os
 import sys
 import tempfile
 import time
