@@ -1,6 +1,6 @@
 """What ``EstimatorListener`` costs the application's notifier thread per CAN message (JSON on stdout).
 
-    PYTHONPATH=. python bench/bench_can_listener.py [--frames N] [--out bench/results/can_listener.json]
+    python -m bench.bench_can_listener [--frames N] [--out bench/results/can_listener.json]
 
 Thread CPU time (``time.thread_time_ns``) of each call, p50/p99/max, per frame and per sample, for the
 two-sample classic frame (``AMP_PAIR``) and the seven-sample CAN FD frame (``AMP_BLOCK``):
@@ -31,7 +31,7 @@ from creep_online.io.can_listener import EstimatorListener  # noqa: E402
 from creep_online.io.can_source import decode_message  # noqa: E402
 from creep_online.online import OnlineEstimator, warm_kernels  # noqa: E402
 from hil_sim import PlantConfig, generate, parse_params  # noqa: E402
-from bench.harness import dist  # noqa: E402
+from bench.harness import dist, write_report  # noqa: E402
 
 RATE = 10_000.0
 WARM = 200       # calls not measured (first decodes, caches)
@@ -111,10 +111,7 @@ def main() -> None:
             "listener_vs_decode_p50": float(np.percentile(own, 50) / np.percentile(base, 50)),
             "estimate": {k: getattr(live.estimate, k) for k in ("alpha", "fn_hz", "zeta", "b", "phase")},
         }
-    text = json.dumps(result, indent=1)
-    print(text)
-    if args.out:
-        Path(args.out).write_text(text + "\n")
+    write_report(result, args.out)
 
 
 if __name__ == "__main__":

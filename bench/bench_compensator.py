@@ -51,7 +51,7 @@ from creep_online.online.compensator import warm_kernels as warm_compensator  # 
 from creep_online.online import compensator_kernels as CK  # noqa: E402
 from creep_online.metrics import creep_error  # noqa: E402
 from hil_sim.closed_loop import run_closed_loop, staircase  # noqa: E402
-from bench.harness import dist  # noqa: E402
+from bench.harness import dist, write_report  # noqa: E402
 
 H = 1e-4
 PLANT = CreepModel.from_resonance(0.12, 420.0, 0.08, 2.5)
@@ -460,11 +460,7 @@ def main() -> None:
     if "cost" in cases:
         out["cost"] = cost_case()
     out["elapsed_s"] = time.perf_counter() - started
-    text = json.dumps(out, indent=1)
-    if args.out:
-        with open(args.out, "w") as fh:
-            fh.write(text + "\n")
-    print(text)
+    write_report(out, args.out)
 
 
 def parse_seeds(text: str) -> list[int]:

@@ -17,7 +17,7 @@ Prints one JSON document:
   the rank of the correct effect, the verdict, fit% and residual/noise before
   and after adding the top effect.
 
-Usage: ``PYTHONPATH=. python bench/bench_diagnose.py [--seeds 3] [--timing-records 4] [--previous REF] [--quick]``
+Usage: ``python -m bench.bench_diagnose [--seeds 3] [--timing-records 4] [--previous REF] [--quick]``
 """
 from __future__ import annotations
 
@@ -38,7 +38,7 @@ from creep_online.diagnostics import extended as ext  # noqa: E402
 from creep_online.diagnostics.pool import default_workers  # noqa: E402
 from creep_online.effects import EFFECTS  # noqa: E402
 from hil_sim.hidden_effects import hidden_dataset  # noqa: E402
-from bench.harness import dist  # noqa: E402
+from bench.harness import dist, write_report  # noqa: E402
 
 
 def dist_min(x: list[float]) -> dict:
@@ -191,8 +191,7 @@ def main() -> None:
     out = {"timing": timing(a.timing_records, a.repeats, a.previous or None)}
     if not a.timing_only:
         out["detection"] = detection(list(range(101, 101 + a.seeds)), a.samples)
-    json.dump(out, sys.stdout, indent=1, default=float)
-    sys.stdout.write("\n")
+    write_report(out)
 
 
 if __name__ == "__main__":

@@ -10,7 +10,7 @@ alternative rule -- the hold check overturns the BIC verdict when the BIC lead
 is below 10 and the check is decisive -- would have done. Clean records: the
 check's verdicts.
 
-    PYTHONPATH=. python bench/bench_diagnose_physics.py --records 30 [--first-seed 0] [--out F]
+    python -m bench.bench_diagnose_physics --records 30 [--first-seed 0] [--out F]
 """
 from __future__ import annotations
 

@@ -27,7 +27,7 @@ Prandtl-Ishlinskii loop (loop width 2-20 % of the stroke, alpha 0.01-0.3,
   the previous code's weights (``previous.loop_error``).
 
 Prints one JSON document and writes it to ``bench/results/`` (``--out``).
-Usage: ``PYTHONPATH=. python bench/bench_hysteresis.py [--records 20] [--families sine,few_levels] [--previous main]``
+Usage: ``python -m bench.bench_hysteresis [--records 20] [--families sine,few_levels] [--previous main]``
 """
 from __future__ import annotations
 
@@ -48,11 +48,10 @@ from creep_online.effects import hysteresis_input, invert_hysteresis  # noqa: E4
 from creep_online.effects.hysteresis import Hysteresis, flattest_branch  # noqa: E402
 from creep_online.metrics import fit_percent, rms  # noqa: E402
 from hil_sim.hysteresis_plants import INPUT_FAMILIES, hysteresis_record  # noqa: E402
-from bench.harness import dist  # noqa: E402
+from bench.harness import dist, results_path, write_report  # noqa: E402
 
 #: simulate reproduces the fit when the RMS of their difference is below this fraction of the noise.
 REPRODUCES = 1e-6
-RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
 
 #: The previous code's worker: fits the record in each .npz named on stdin, prints its weights and simulate's miss.
 PREVIOUS_WORKER = """
@@ -211,10 +210,9 @@ def main() -> dict:
            "table": {f: summary(r) for f, r in rows.items()},
            "all": summary([r for rs in rows.values() for r in rs]), "rows": rows,
            "elapsed_s": time.time() - t0, "load_average": os.getloadavg()}
-    out = a.out or os.path.join(RESULTS, f"hysteresis_fit_{'all' if len(families) == len(INPUT_FAMILIES) else '-'.join(families)}"
-                                         f"_{a.first_seed}-{a.first_seed + a.records - 1}.json")
-    with open(out, "w") as fh:
-        json.dump(doc, fh, indent=1, default=float)
+    out = a.out or results_path(f"hysteresis_fit_{'all' if len(families) == len(INPUT_FAMILIES) else '-'.join(families)}"
+                                f"_{a.first_seed}-{a.first_seed + a.records - 1}")
+    write_report(doc, out, echo=False)
     json.dump({k: v for k, v in doc.items() if k != "rows"}, sys.stdout, indent=1, default=float)
     sys.stdout.write("\n")
     return doc

@@ -17,7 +17,7 @@
   and the wall time of fresh ``creep-online --help`` and ``creep-online identify``
   (12,000 samples) processes.
 
-Usage: python bench/bench_identify.py [--quick] [--speed-only [--previous REF]]   (--quick: fewer repeats; the 100,000-sample
+Usage: python -m bench.bench_identify [--quick] [--speed-only [--previous REF]]   (--quick: fewer repeats; the 100,000-sample
 baseline is then estimated from one eq. 13 simulation instead of run, which takes minutes)
 """
 from __future__ import annotations
@@ -39,7 +39,7 @@ from creep_online.identification import identify, layer1_alpha  # noqa: E402
 from creep_online.kernels import gl_paper  # noqa: E402
 from creep_online.metrics import noise_floor_fit  # noqa: E402
 from hil_sim.experiments import LOAD_CELL, NANOPOSITIONER, RECOVERY_CASES  # noqa: E402
-from bench.harness import dist  # noqa: E402
+from bench.harness import dist, write_report  # noqa: E402
 
 
 def distribution(samples: list[float]) -> dict[str, float]:
@@ -274,8 +274,7 @@ def main() -> None:
                   "warm": speed_vs_previous(5 if args.quick else 15, args.previous),
                   "exponentials": exponential_parts(5 if args.quick else 10, args.previous),
                   "cold_cli": cold_cli(5 if args.quick else 10), "load_average_end": os.getloadavg()}
-        json.dump(report, sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        write_report(report, indent=2)
         return
     report = {
         "bench": "identify", "machine": {"cpus": os.cpu_count(), "python": platform.python_version()},
@@ -283,8 +282,7 @@ def main() -> None:
         "speed": speed(5 if args.quick else 30, full_baseline=not args.quick),
         "remark4": remark4(),
     }
-    json.dump(report, sys.stdout, indent=2)
-    sys.stdout.write("\n")
+    write_report(report, indent=2)
 
 
 if __name__ == "__main__":

@@ -2,11 +2,11 @@
 
 Usage (from the repository root)::
 
-    .venv/bin/python bench/bench_online.py                      # latency only, ~4-6 min
-    .venv/bin/python bench/bench_online.py --gc freeze          # one latency run per estimator, not two
-    .venv/bin/python bench/bench_online.py --baseline none      # current code only
-    .venv/bin/python bench/bench_online.py --current HEAD       # a committed revision, not the checkout
-    .venv/bin/python bench/bench_online.py --sections latency,memory,accuracy,naive,memory_kernels,drift,stationary_window [--quick]
+    .venv/bin/python -m bench.bench_online                      # latency only, ~4-6 min
+    .venv/bin/python -m bench.bench_online --gc freeze          # one latency run per estimator, not two
+    .venv/bin/python -m bench.bench_online --baseline none      # current code only
+    .venv/bin/python -m bench.bench_online --current HEAD       # a committed revision, not the checkout
+    .venv/bin/python -m bench.bench_online --sections latency,memory,accuracy,naive,memory_kernels,drift,stationary_window [--quick]
 
 Latency section (the default; prints one JSON document and writes it to ``--out``,
 default ``bench/results/online_latency.json``; ``--in-operation-s S`` cuts the stream from
@@ -79,7 +79,7 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
-from bench.harness import dist  # noqa: E402
+from bench.harness import dist, results_path, write_report  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PARAMS = ("alpha", "a1", "a2", "b")
@@ -706,7 +706,7 @@ def main(argv: list[str] | None = None) -> dict:
                              "python": platform.python_version(), "numpy": np.__version__,
                              "platform": platform.platform(),
                              "note": "shared 2-core machine, other jobs may run: read distributions"},
-                 "command": " ".join([Path(sys.executable).name, "bench/bench_online.py", *(argv or sys.argv[1:])])}
+                 "command": " ".join([Path(sys.executable).name, "-m", "bench.bench_online", *(argv or sys.argv[1:])])}
     try:
         import numba
         doc["machine"]["numba"] = numba.__version__
@@ -722,12 +722,8 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"[bench_online] {name} done in {doc[name + '_wall_s']:.1f} s", file=sys.stderr)
     doc["machine"]["loadavg_after"] = os.getloadavg()
     doc["elapsed_s"] = time.perf_counter() - start
-    text = json.dumps(doc, indent=1, default=float)
-    print(text)
-    out = args.out or (str(ROOT / "bench" / "results" / "online_latency.json") if "latency" in chosen else None)
-    if out:
-        Path(out).parent.mkdir(parents=True, exist_ok=True)
-        Path(out).write_text(text + "\n")
+    out = args.out or (results_path("online_latency") if "latency" in chosen else None)
+    write_report(doc, out, argv=argv)
     return doc
 
 

@@ -2,7 +2,7 @@
 
 Usage (repository root)::
 
-    python bench/bench_online_oracle.py [--families drift,payload] [--plants 20] [--seed-offset 0]
+    python -m bench.bench_online_oracle [--families drift,payload] [--plants 20] [--seed-offset 0]
         [--snr-db 40] [--last 10] [--compare bench/results/online_scenarios_single_40db_X.json]
         [--processes 2] [--from ORACLE.json] [--out bench/results/online_oracle.json]
 
@@ -50,6 +50,7 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 
 from bench.bench_online_scenarios import PARAMS, TOL  # noqa: E402  (the scenario bench's tolerances: the same "within")
+from bench.harness import results_path, write_report  # noqa: E402
 #: Largest |ln factor| the fit may take (a factor of e^5 ~ 150: far beyond any tolerance, keeps the simulator
 #: inside its stable range on a flat cost).
 LN_FACTOR_BOUND = 5.0
@@ -119,7 +120,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--compare", default=None, help="a bench_online_scenarios.py JSON of the same seeds and SNR")
     ap.add_argument("--processes", type=int, default=2)
     ap.add_argument("--from", dest="source", default=None, help="this bench's JSON: its fits, cross-tabulated anew")
-    ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "online_oracle.json"))
+    ap.add_argument("--out", default=str(results_path("online_oracle")))
     args = ap.parse_args(argv)
     families = [f for f in args.families.split(",") if f in FAMILIES and f != "close_modes"]
     estimator = json.loads(Path(args.compare).read_text())["current"]["families"] if args.compare else {}
@@ -142,10 +143,7 @@ def main(argv: list[str] | None = None) -> dict:
         mine = [r for r in rows if r["family"] == fam]
         doc["families"][fam] = {**_compared(mine, estimator.get(fam)), "runs_detail": mine}
     doc["elapsed_s"] = time.perf_counter() - start
-    text = json.dumps(doc, indent=1)
-    print(text)
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(text + "\n")
+    write_report(doc, args.out)
     return doc
 
 

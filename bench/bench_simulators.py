@@ -7,7 +7,7 @@
   whole model, for several alpha and N/L.
 * speed: each simulator on 12,000 and 100,000 samples, p50/p99/max over repeats.
 
-Usage: python bench/bench_simulators.py [--quick]
+Usage: python -m bench.bench_simulators [--quick]
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 from creep_online import CreepModel, simulate  # noqa: E402
 from creep_online.simulate import fractional_integral  # noqa: E402
-from bench.harness import dist  # noqa: E402
+from bench.harness import dist, write_report  # noqa: E402
 
 ORACLE = ROOT / "tests" / "data" / "oracle"
 
@@ -103,8 +103,7 @@ def main() -> None:
     args = ap.parse_args()
     out = {"bench": "simulators", "convergence": convergence(), "truncation": truncation(),
            "speed": speed(3 if args.quick else 15)}
-    json.dump(out, sys.stdout, indent=2)
-    sys.stdout.write("\n")
+    write_report(out, indent=2)
 
 
 if __name__ == "__main__":

@@ -49,11 +49,14 @@ def run_info(argv: list[str] | None = None) -> dict[str, Any]:
             "load_average": list(os.getloadavg()), "utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
 
 
-def write_report(doc: dict, out: str | os.PathLike | None, *, indent: int = 1, argv: list[str] | None = None,
-                 echo: bool = True) -> str:
-    """Stamp ``doc`` with :func:`run_info` (key ``"run"``), print it (``echo``) and write it to ``out`` if given."""
+def write_report(doc: dict, out: str | os.PathLike | None = None, *, indent: int = 1, default: Any = float,
+                 echo: bool = True, argv: list[str] | None = None) -> str:
+    """Stamp ``doc`` with :func:`run_info` (key ``"run"``), print it (``echo``) and write it to ``out`` if given.
+
+    ``default`` converts what json cannot (numpy scalars by default). Returns the JSON text.
+    """
     doc.setdefault("run", run_info(argv))
-    text = json.dumps(doc, indent=indent, default=float)
+    text = json.dumps(doc, indent=indent, default=default)
     if echo:
         print(text)
     if out:
