@@ -21,7 +21,7 @@ The configurations run in ``--rounds`` interleaved rounds (they see the same
 machine load); rates and start-ups are the medians over the rounds, the
 per-record distributions pool all rounds.
 
-Usage: ``PYTHONPATH=. python bench/bench_batch.py [--records 200] [--rounds 2] [--out bench/results/batch.json]``
+Usage: ``python -m bench.bench_batch [--records 200] [--rounds 2] [--out bench/results/batch.json]``
 """
 from __future__ import annotations
 
@@ -35,7 +35,6 @@ import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from creep_online.fleet import summarize  # noqa: E402
 from creep_online.fleet.job import run_record, warm_up  # noqa: E402
@@ -43,12 +42,7 @@ from creep_online.fleet.runner import dask_client, run_on_dask  # noqa: E402
 from creep_online.fleet.summary import Z_THRESHOLD, robust_z  # noqa: E402
 from creep_online.io.fleet_records import find_records  # noqa: E402
 from hil_sim.fleet import make_fleet, write_fleet  # noqa: E402
-
-
-def dist(x) -> dict:
-    a = np.asarray(x, dtype=float)
-    return {"p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)), "max": float(a.max()),
-            "mean": float(a.mean()), "n": int(a.size)}
+from bench.harness import dist, write_report  # noqa: E402
 
 
 def measure(name: str, jobs, run, workers: int) -> dict:
@@ -194,11 +188,7 @@ def main() -> None:
     if "threads_2" in results and "processes_2" in results:
         doc["threads_2_vs_processes_2"] = results["threads_2"]["records_per_s"] / results["processes_2"]["records_per_s"]
     doc["outlier_rule"] = outlier_rule()
-    text = json.dumps(doc, indent=2)
-    print(text)
-    if args.out:
-        with open(args.out, "w") as fh:
-            fh.write(text + "\n")
+    write_report(doc, args.out, indent=2)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """What ``EstimatorListener`` costs the application's notifier thread per CAN message (JSON on stdout).
 
-    PYTHONPATH=. python bench/bench_can_listener.py [--frames N] [--out bench/results/can_listener.json]
+    python -m bench.bench_can_listener [--frames N] [--out bench/results/can_listener.json]
 
 Thread CPU time (``time.thread_time_ns``) of each call, p50/p99/max, per frame and per sample, for the
 two-sample classic frame (``AMP_PAIR``) and the seven-sample CAN FD frame (``AMP_BLOCK``):
@@ -17,13 +17,11 @@ from __future__ import annotations
 import argparse
 import json
 import platform
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import can  # noqa: E402
 
@@ -33,6 +31,7 @@ from creep_online.io.can_listener import EstimatorListener  # noqa: E402
 from creep_online.io.can_source import decode_message  # noqa: E402
 from creep_online.online import OnlineEstimator, warm_kernels  # noqa: E402
 from hil_sim import PlantConfig, generate, parse_params  # noqa: E402
+from bench.harness import dist, write_report  # noqa: E402
 
 RATE = 10_000.0
 WARM = 200       # calls not measured (first decodes, caches)
@@ -84,11 +83,6 @@ def timed(call, msgs: list[can.Message]) -> np.ndarray:
     return out[WARM:] / 1e3
 
 
-def dist(x: np.ndarray, per: float) -> dict[str, float]:
-    return {"p50": float(np.percentile(x, 50)) / per, "p99": float(np.percentile(x, 99)) / per,
-            "max": float(x.max()) / per, "mean": float(x.mean()) / per}
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=4000)
@@ -117,10 +111,7 @@ def main() -> None:
             "listener_vs_decode_p50": float(np.percentile(own, 50) / np.percentile(base, 50)),
             "estimate": {k: getattr(live.estimate, k) for k in ("alpha", "fn_hz", "zeta", "b", "phase")},
         }
-    text = json.dumps(result, indent=1)
-    print(text)
-    if args.out:
-        Path(args.out).write_text(text + "\n")
+    write_report(result, args.out)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """capaNCDT-style TCP stream benchmark: 3.9 kSa/s sustained, injected drops counted, latency and CPU (JSON).
 
-    PYTHONPATH=. python bench/bench_capancdt.py [--quick] [--out bench/results/capancdt.json]
+    python -m bench.bench_capancdt [--quick] [--out bench/results/capancdt.json]
 
 * sustained: ``python -m hil_sim --transport capancdt`` (its own process, real
   time, 3906.25 frames/s in packets of 4, loopback TCP) for 60 s (10 s with
@@ -37,14 +37,13 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from creep_online.io.capancdt_frames import CapancdtParser, encode_packet  # noqa: E402
 from creep_online.io.feed import FeedLoop, SampleAge  # noqa: E402
 from creep_online.io.sources import open_source  # noqa: E402
 from hil_sim.harness import PlantProcess  # noqa: E402
 
-from bench_transports import dist  # noqa: E402  (bench/ is on the path of a bench script)
+from bench.harness import dist, write_report  # noqa: E402  (p50/p99/max/mean/n)
 
 RATE = 3906.25
 PLANT = ["--transport", "capancdt", "--rate", str(RATE), "--t-start", "0.2", "--schedule", "square",
@@ -181,10 +180,7 @@ def main() -> int:
                                and f["missing_counted"] == led["dropped_samples"] + led["bad_header_samples"]
                                + led["disconnect_lost_samples"])
     out["machine"]["load_avg_1m_end"] = os.getloadavg()[0]
-    text = json.dumps(out, indent=2)
-    print(text)
-    if args.out:
-        Path(args.out).write_text(text + "\n")
+    write_report(out, args.out, indent=2)
     return 0
 
 

@@ -43,7 +43,6 @@ import time
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
 
 from creep_online.model import CreepModel  # noqa: E402
 from creep_online.online import OnlineEstimator, warm_kernels  # noqa: E402
@@ -52,17 +51,13 @@ from creep_online.online.compensator import warm_kernels as warm_compensator  # 
 from creep_online.online import compensator_kernels as CK  # noqa: E402
 from creep_online.metrics import creep_error  # noqa: E402
 from hil_sim.closed_loop import run_closed_loop, staircase  # noqa: E402
+from bench.harness import dist, write_report  # noqa: E402
 
 H = 1e-4
 PLANT = CreepModel.from_resonance(0.12, 420.0, 0.08, 2.5)
 HOLD_S = 10.0
 LEVELS = (0.25, 0.75, 0.5, 1.0, 0.4, 0.8)
 BANDWIDTH_HZ = 210.0     # half the plant's natural frequency, as a datasheet would give it
-
-
-def dist(x: np.ndarray) -> dict:
-    return {"p50": float(np.percentile(x, 50)), "p99": float(np.percentile(x, 99)), "max": float(np.max(x)),
-            "mean": float(np.mean(x))}
 
 
 def run_mode(mode: str, t, r, alpha=None, b=None, seed: int = 0, **est_kwargs) -> dict:
@@ -465,11 +460,7 @@ def main() -> None:
     if "cost" in cases:
         out["cost"] = cost_case()
     out["elapsed_s"] = time.perf_counter() - started
-    text = json.dumps(out, indent=1)
-    if args.out:
-        with open(args.out, "w") as fh:
-            fh.write(text + "\n")
-    print(text)
+    write_report(out, args.out)
 
 
 def parse_seeds(text: str) -> list[int]:

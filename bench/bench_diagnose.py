@@ -17,7 +17,7 @@ Prints one JSON document:
   the rank of the correct effect, the verdict, fit% and residual/noise before
   and after adding the top effect.
 
-Usage: ``PYTHONPATH=. python bench/bench_diagnose.py [--seeds 3] [--timing-records 4] [--previous REF] [--quick]``
+Usage: ``python -m bench.bench_diagnose [--seeds 3] [--timing-records 4] [--previous REF] [--quick]``
 """
 from __future__ import annotations
 
@@ -27,8 +27,6 @@ import os
 import sys
 import time
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 # creep_online before numpy, as in the command line and the previous code's worker: its default of one BLAS
 # thread applies only if set before numpy loads BLAS (imported after numpy, diagnose ran ~25 % slower here)
@@ -40,12 +38,12 @@ from creep_online.diagnostics import extended as ext  # noqa: E402
 from creep_online.diagnostics.pool import default_workers  # noqa: E402
 from creep_online.effects import EFFECTS  # noqa: E402
 from hil_sim.hidden_effects import hidden_dataset  # noqa: E402
+from bench.harness import dist, write_report  # noqa: E402
 
 
-def dist(x: list[float]) -> dict:
-    a = np.asarray(x, dtype=float)
-    return {"p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)), "max": float(a.max()),
-            "min": float(a.min()), "runs": int(a.size)}
+def dist_min(x: list[float]) -> dict:
+    """The harness summary with the fastest run."""
+    return {**dist(x), "min": float(np.min(x))}
 
 
 #: Runs in the previous code's interpreter: a worker that times diagnose on the record named on each stdin line.
@@ -69,7 +67,7 @@ def _previous_worker(ref: str):
     """(worker process, commit): the previous code (``git archive`` of ``ref``) timing diagnose on request."""
     import subprocess
 
-    import _baseline
+    from bench import _baseline
     path, commit = _baseline.extract(ref)
     env = dict(os.environ, PYTHONPATH=path, NUMBA_CACHE_DIR=os.path.join(path, ".numba_cache"))
     proc = subprocess.Popen([sys.executable, "-c", PREVIOUS_WORKER], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
@@ -124,20 +122,20 @@ def timing(records: int, repeats: int, previous: str | None = "main") -> dict:
             base_runs.append(time.perf_counter() - t0)
     finally:
         ext.EXPLORE_SAMPLES = saved
-    ours = dist(runs)
-    base = dist(base_runs)
+    ours = dist_min(runs)
+    base = dist_min(base_runs)
     same = [r for r, v in zip(runs, verdicts) if v["hidden"] in [k or "none" for k in kinds[:2]]]
     out = {"samples": 30_000, "candidates": len(EFFECTS), "workers": default_workers(), "seconds": ours,
-           "cpu_seconds": dist(cpu),
-           "serial": {"seconds": dist(serial_runs), "cpu_seconds": dist(serial_cpu),
+           "cpu_seconds": dist_min(cpu),
+           "serial": {"seconds": dist_min(serial_runs), "cpu_seconds": dist_min(serial_cpu),
                       "same_candidates_bit_for_bit": all(serial_same)},
            "per_record": verdicts,
            "baseline_full_record_seconds": base,
            "speedup_vs_baseline_p50": base["p50"] / float(np.percentile(same, 50)),
            "goal_s": 3.0, "meets_goal_p50": ours["p50"] <= 3.0, "load_average": loads}
     if worker is not None:
-        prev = dist(prev_runs)
-        out["previous"] = {"commit": commit, "seconds": prev, "cpu_seconds": dist(prev_cpu),
+        prev = dist_min(prev_runs)
+        out["previous"] = {"commit": commit, "seconds": prev, "cpu_seconds": dist_min(prev_cpu),
                            "per_record": prev_verdicts,
                            "same_verdicts": [v["verdict"] for v in verdicts] == [v["verdict"] for v in prev_verdicts],
                            "speedup_p50": prev["p50"] / ours["p50"],
@@ -175,7 +173,7 @@ def detection(seeds: list[int], n: int) -> dict:
         e["max_residual_over_noise_after"] = max(e["max_residual_over_noise_after"], r["residual_over_noise_after"])
     ok = all(all(k == 1 for k in v["ranks"]) and v["max_residual_over_noise_after"] <= 1.3 for v in table.values())
     return {"samples": n, "seeds": seeds, "table": table, "rows": rows, "all_pass": ok,
-            "seconds": dist([r["seconds"] for r in rows])}
+            "seconds": dist_min([r["seconds"] for r in rows])}
 
 
 def main() -> None:
@@ -193,8 +191,7 @@ def main() -> None:
     out = {"timing": timing(a.timing_records, a.repeats, a.previous or None)}
     if not a.timing_only:
         out["detection"] = detection(list(range(101, 101 + a.seeds)), a.samples)
-    json.dump(out, sys.stdout, indent=1, default=float)
-    sys.stdout.write("\n")
+    write_report(out)
 
 
 if __name__ == "__main__":

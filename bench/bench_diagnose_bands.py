@@ -12,8 +12,8 @@ noise, the verdicts (a confusion row) and the seconds per diagnosis.
 Prints one JSON document (``--out`` also writes it). The plants are drawn here,
 not taken from the tests. Usage::
 
-    PYTHONPATH=. python bench/bench_diagnose_bands.py --records 10 [--first-seed 0] [--effects leakage,drift] [--out F]
-    PYTHONPATH=. python bench/bench_diagnose_bands.py --merge A.json B.json --out F    # runs over consecutive seeds
+    python -m bench.bench_diagnose_bands --records 10 [--first-seed 0] [--effects leakage,drift] [--out F]
+    python -m bench.bench_diagnose_bands --merge A.json B.json --out F    # runs over consecutive seeds
 """
 from __future__ import annotations
 
@@ -27,13 +27,13 @@ from collections import Counter
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from creep_online.diagnostics import diagnose  # noqa: E402
 from creep_online.diagnostics.extended import fit_base, prepare  # noqa: E402
 from creep_online.effects import effect_names, get_effect, simulate_with_effects  # noqa: E402
 from creep_online.model import CreepModel  # noqa: E402
 from hil_sim.hidden_effects import staircase  # noqa: E402
+from bench.harness import write_report  # noqa: E402
 
 #: Base misfit over the noise: the issue's range 1.3-100x in three bands.
 BANDS = {"1.3-3x": (1.3, 3.0), "3-10x": (3.0, 10.0), "10-100x": (10.0, 100.0)}
@@ -159,11 +159,7 @@ def main() -> dict:
 
 def emit(doc: dict, out: str | None) -> dict:
     """Print the document as JSON (and write it to ``out``)."""
-    text = json.dumps(doc, indent=1, default=float)
-    print(text)
-    if out:
-        with open(out, "w") as f:
-            f.write(text + "\n")
+    write_report(doc, out)
     return doc
 
 

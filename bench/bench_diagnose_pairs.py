@@ -33,11 +33,11 @@ Prints one JSON document (``--out`` also writes it) with the command line, a
 table per pair and band (counts and fractions, what was named when wrong) and
 every record. Usage::
 
-    PYTHONPATH=. python bench/bench_diagnose_pairs.py --records 30 [--first-seed 0] [--pairs hysteresis+drift]
+    python -m bench.bench_diagnose_pairs --records 30 [--first-seed 0] [--pairs hysteresis+drift]
         [--bands 3-10x,10-100x] [--forward [--partners all]] [--out F]
-    PYTHONPATH=. python bench/bench_diagnose_pairs.py --merge A.json B.json --out F   # consecutive seeds
-    PYTHONPATH=. python bench/bench_diagnose_pairs.py --recheck OLD.json --which missed|above|unsearched --out F
-    PYTHONPATH=. python bench/bench_diagnose_pairs.py --given RUN.json [--which missed|all] --out F
+    python -m bench.bench_diagnose_pairs --merge A.json B.json --out F   # consecutive seeds
+    python -m bench.bench_diagnose_pairs --recheck OLD.json --which missed|above|unsearched --out F
+    python -m bench.bench_diagnose_pairs --given RUN.json [--which missed|all] --out F
 
 ``--recheck`` reruns only an earlier run's misses, each beside its earlier row: a fix's effect on exactly the
 records it was aimed at (a change that can move other records still needs the full table). OLD.json may be
@@ -58,10 +58,8 @@ from functools import lru_cache
 import numpy as np
 from scipy.stats import chi2, ncx2
 
-sys.path.insert(0, os.path.dirname(__file__))
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
-from bench_diagnose_bands import BANDS, FLOOR, H, N, draw_record, emit, merge  # noqa: E402
+from bench.bench_diagnose_bands import BANDS, FLOOR, H, N, draw_record, emit, merge  # noqa: E402
 from creep_online.diagnostics import diagnose  # noqa: E402
 from creep_online.diagnostics.explain import evidence  # noqa: E402
 from creep_online.diagnostics.bic import EVIDENCE_THRESHOLD  # noqa: E402

@@ -10,7 +10,7 @@ alternative rule -- the hold check overturns the BIC verdict when the BIC lead
 is below 10 and the check is decisive -- would have done. Clean records: the
 check's verdicts.
 
-    PYTHONPATH=. python bench/bench_diagnose_physics.py --records 30 [--first-seed 0] [--out F]
+    python -m bench.bench_diagnose_physics --records 30 [--first-seed 0] [--out F]
 """
 from __future__ import annotations
 
@@ -20,10 +20,8 @@ import sys
 import time
 from collections import Counter
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
-sys.path.insert(0, os.path.dirname(__file__))
 
-from bench_diagnose_bands import BANDS, emit, make_record  # noqa: E402
+from bench.bench_diagnose_bands import BANDS, emit, make_record  # noqa: E402
 from creep_online.diagnostics import diagnose  # noqa: E402
 from creep_online.diagnostics.holds import EFFECTS  # noqa: E402
 

@@ -27,7 +27,7 @@ Prandtl-Ishlinskii loop (loop width 2-20 % of the stroke, alpha 0.01-0.3,
   the previous code's weights (``previous.loop_error``).
 
 Prints one JSON document and writes it to ``bench/results/`` (``--out``).
-Usage: ``PYTHONPATH=. python bench/bench_hysteresis.py [--records 20] [--families sine,few_levels] [--previous main]``
+Usage: ``python -m bench.bench_hysteresis [--records 20] [--families sine,few_levels] [--previous main]``
 """
 from __future__ import annotations
 
@@ -39,8 +39,6 @@ import sys
 import tempfile
 import time
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import creep_online  # noqa: E402,F401  (before numpy: one BLAS thread)
 import numpy as np  # noqa: E402
@@ -50,10 +48,10 @@ from creep_online.effects import hysteresis_input, invert_hysteresis  # noqa: E4
 from creep_online.effects.hysteresis import Hysteresis, flattest_branch  # noqa: E402
 from creep_online.metrics import fit_percent, rms  # noqa: E402
 from hil_sim.hysteresis_plants import INPUT_FAMILIES, hysteresis_record  # noqa: E402
+from bench.harness import dist, results_path, write_report  # noqa: E402
 
 #: simulate reproduces the fit when the RMS of their difference is below this fraction of the noise.
 REPRODUCES = 1e-6
-RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
 
 #: The previous code's worker: fits the record in each .npz named on stdin, prints its weights and simulate's miss.
 PREVIOUS_WORKER = """
@@ -101,16 +99,14 @@ def loop_error(true: dict, fitted: dict, stroke: float) -> float:
     return float(rms(miss) / np.sum(w * 2.0 * np.minimum(r, stroke / 2.0)))
 
 
-def dist(x: list[float]) -> dict:
-    a = np.asarray([v for v in x if v is not None and np.isfinite(v)], dtype=float)
-    if a.size == 0:
-        return {"runs": 0}
-    return {"p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)), "max": float(a.max()),
-            "min": float(a.min()), "runs": int(a.size)}
+def dist_finite(x: list[float]) -> dict:
+    """The harness summary of the finite values, with the smallest."""
+    a = [v for v in x if v is not None and np.isfinite(v)]
+    return {**dist(a), "min": float(min(a)) if a else None}
 
 
 def _previous_worker(ref: str):
-    import _baseline
+    from bench import _baseline
     path, commit = _baseline.extract(ref)
     env = dict(os.environ, PYTHONPATH=path, NUMBA_CACHE_DIR=os.path.join(path, ".numba_cache"))
     proc = subprocess.Popen([sys.executable, "-c", PREVIOUS_WORKER], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
@@ -170,25 +166,25 @@ def summary(rows: list[dict]) -> dict:
     def col(key, sub=None):
         return [(r[sub][key] if sub else r[key]) for r in rows if sub is None or sub in r]
     out = {"records": len(rows), "reproduces": sum(r["reproduces"] for r in rows) / len(rows),
-           "w_max": dist(col("w_max")), "w_min": dist(col("w_min")),
-           "loop_error": dist(col("loop_error")), "flattest_branch": dist(col("flattest_branch")),
-           "simulate_over_noise": dist(col("simulate_over_noise")),
-           "residual_over_noise": dist(col("residual_over_noise")),
-           "search_residual_over_noise": dist(col("search_residual_over_noise")),
-           "fit_percent_minus_search": dist([r["fit_percent"] - r["search_fit_percent"] for r in rows]),
-           "search_w_max": dist(col("search_w_max")),
-           "opened": dist(col("opened")), "determined": dist(col("determined")),
-           "inverse_error": dist(col("inverse_error")), "cpu_seconds": dist(col("cpu_seconds"))}
+           "w_max": dist_finite(col("w_max")), "w_min": dist_finite(col("w_min")),
+           "loop_error": dist_finite(col("loop_error")), "flattest_branch": dist_finite(col("flattest_branch")),
+           "simulate_over_noise": dist_finite(col("simulate_over_noise")),
+           "residual_over_noise": dist_finite(col("residual_over_noise")),
+           "search_residual_over_noise": dist_finite(col("search_residual_over_noise")),
+           "fit_percent_minus_search": dist_finite([r["fit_percent"] - r["search_fit_percent"] for r in rows]),
+           "search_w_max": dist_finite(col("search_w_max")),
+           "opened": dist_finite(col("opened")), "determined": dist_finite(col("determined")),
+           "inverse_error": dist_finite(col("inverse_error")), "cpu_seconds": dist_finite(col("cpu_seconds"))}
     prev = [r for r in rows if "previous" in r]
     if prev:
-        out["previous"] = {"w_max": dist(col("w_max", "previous")), "w_min": dist(col("w_min", "previous")),
-                           "loop_error": dist(col("loop_error", "previous")),
-                           "simulate_over_noise": dist(col("simulate_over_noise", "previous")),
+        out["previous"] = {"w_max": dist_finite(col("w_max", "previous")), "w_min": dist_finite(col("w_min", "previous")),
+                           "loop_error": dist_finite(col("loop_error", "previous")),
+                           "simulate_over_noise": dist_finite(col("simulate_over_noise", "previous")),
                            "reproduces": sum(r["previous"]["simulate_over_noise"] <= REPRODUCES for r in prev) / len(prev),
-                           "residual_over_noise": dist(col("residual_over_noise", "previous")),
-                           "fit_percent_minus_previous": dist([r["fit_percent"] - r["previous"]["fit_percent"]
+                           "residual_over_noise": dist_finite(col("residual_over_noise", "previous")),
+                           "fit_percent_minus_previous": dist_finite([r["fit_percent"] - r["previous"]["fit_percent"]
                                                                for r in prev]),
-                           "flattest_branch": dist(col("flattest_branch", "previous"))}
+                           "flattest_branch": dist_finite(col("flattest_branch", "previous"))}
     return out
 
 
@@ -214,10 +210,9 @@ def main() -> dict:
            "table": {f: summary(r) for f, r in rows.items()},
            "all": summary([r for rs in rows.values() for r in rs]), "rows": rows,
            "elapsed_s": time.time() - t0, "load_average": os.getloadavg()}
-    out = a.out or os.path.join(RESULTS, f"hysteresis_fit_{'all' if len(families) == len(INPUT_FAMILIES) else '-'.join(families)}"
-                                         f"_{a.first_seed}-{a.first_seed + a.records - 1}.json")
-    with open(out, "w") as fh:
-        json.dump(doc, fh, indent=1, default=float)
+    out = a.out or results_path(f"hysteresis_fit_{'all' if len(families) == len(INPUT_FAMILIES) else '-'.join(families)}"
+                                f"_{a.first_seed}-{a.first_seed + a.records - 1}")
+    write_report(doc, out, echo=False)
     json.dump({k: v for k, v in doc.items() if k != "rows"}, sys.stdout, indent=1, default=float)
     sys.stdout.write("\n")
     return doc

@@ -17,7 +17,7 @@
   and the wall time of fresh ``creep-online --help`` and ``creep-online identify``
   (12,000 samples) processes.
 
-Usage: python bench/bench_identify.py [--quick] [--speed-only [--previous REF]]   (--quick: fewer repeats; the 100,000-sample
+Usage: python -m bench.bench_identify [--quick] [--speed-only [--previous REF]]   (--quick: fewer repeats; the 100,000-sample
 baseline is then estimated from one eq. 13 simulation instead of run, which takes minutes)
 """
 from __future__ import annotations
@@ -33,20 +33,18 @@ import time
 import numpy as np
 from scipy.optimize import least_squares
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from creep_online import CreepModel  # noqa: E402
 from creep_online.identification import identify, layer1_alpha  # noqa: E402
 from creep_online.kernels import gl_paper  # noqa: E402
 from creep_online.metrics import noise_floor_fit  # noqa: E402
 from hil_sim.experiments import LOAD_CELL, NANOPOSITIONER, RECOVERY_CASES  # noqa: E402
+from bench.harness import dist, write_report  # noqa: E402
 
 
 def distribution(samples: list[float]) -> dict[str, float]:
-    a = np.asarray(samples)
-    return {"min": float(a.min()), "p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)),
-            "max": float(a.max()), "n": int(a.size)}
+    """The harness summary with the fastest run."""
+    return {"min": float(np.min(samples)), **dist(samples)}
 
 
 def recovery(seeds: int) -> list[dict]:
@@ -173,7 +171,7 @@ print(json.dumps(out))
 def speed_vs_previous(repeats: int, ref: str, rounds: int = 3) -> dict:
     """Warm times of this code and of ``ref`` (git archive, own interpreter), alternating in rounds so
     both see the same machine load: p50/p99/max of each, ratio = previous p50 / ours, load averages."""
-    import _baseline
+    from bench import _baseline
     path, commit = _baseline.extract(ref)
     _baseline.run_python(path, PREVIOUS_CODE, "1")           # compile its numba cache once
     ours = {c.name: [] for c in (LOAD_CELL, NANOPOSITIONER)}
@@ -236,7 +234,7 @@ print(json.dumps(out))
 def exponential_parts(repeats: int, ref: str) -> dict:
     """Time per warm identify inside the Van Loan exponentials, this code and ``ref`` (each in its own
     interpreter): the saving where it happens, less exposed to machine load than the whole identify."""
-    import _baseline
+    from bench import _baseline
     path, commit = _baseline.extract(ref)
     here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     return {"previous_commit": commit, "load_average_start": os.getloadavg(),
@@ -276,8 +274,7 @@ def main() -> None:
                   "warm": speed_vs_previous(5 if args.quick else 15, args.previous),
                   "exponentials": exponential_parts(5 if args.quick else 10, args.previous),
                   "cold_cli": cold_cli(5 if args.quick else 10), "load_average_end": os.getloadavg()}
-        json.dump(report, sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        write_report(report, indent=2)
         return
     report = {
         "bench": "identify", "machine": {"cpus": os.cpu_count(), "python": platform.python_version()},
@@ -285,8 +282,7 @@ def main() -> None:
         "speed": speed(5 if args.quick else 30, full_baseline=not args.quick),
         "remark4": remark4(),
     }
-    json.dump(report, sys.stdout, indent=2)
-    sys.stdout.write("\n")
+    write_report(report, indent=2)
 
 
 if __name__ == "__main__":

@@ -7,7 +7,7 @@ noisy record (its history included for records taken in operation). A record is
 records are identified by the baseline code (``git archive`` of --baseline-ref,
 in a subprocess) for a before/after table.
 
-Usage: python bench/bench_identify_convergence.py [--per-family 30] [--baseline-ref main]
+Usage: python -m bench.bench_identify_convergence [--per-family 30] [--baseline-ref main]
            [--no-baseline] [--out bench/results/identify_convergence.json]
 """
 from __future__ import annotations
@@ -21,13 +21,13 @@ import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from creep_online.identification import identify  # noqa: E402
 from creep_online.metrics import fit_percent  # noqa: E402
 from hil_sim.validation import FAMILIES, validation_set  # noqa: E402
 
-import _baseline  # noqa: E402
+from bench import _baseline  # noqa: E402
+from bench.harness import write_report  # noqa: E402
 
 FLOOR_POINTS = 0.05
 
@@ -134,11 +134,7 @@ def main() -> None:
     if not args.no_baseline:
         base, commit = run_baseline(records, args.baseline_ref)
         report["before"] = {"commit": commit, **table(records, base)}
-    text = json.dumps(report, indent=2, default=float)
-    print(text)
-    if args.out:
-        with open(args.out, "w") as f:
-            f.write(text + "\n")
+    write_report(report, args.out, indent=2)
 
 
 if __name__ == "__main__":

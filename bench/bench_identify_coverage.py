@@ -5,22 +5,20 @@ coloured: AR(1) with coefficient 0.9, the same variance); a parameter is
 "covered" when |estimate - truth| <= its reported 1-sigma. Honest intervals
 cover about 68 %; much less means they are optimistic.
 
-Usage: python bench/bench_identify_coverage.py [--seeds 100] [--out FILE]
+Usage: python -m bench.bench_identify_coverage [--seeds 100] [--out FILE]
 """
 from __future__ import annotations
 
 import argparse
 import json
-import os
-import sys
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from creep_online import CreepModel, simulate  # noqa: E402
 from creep_online.identification import identify  # noqa: E402
 from hil_sim.experiments import FOUR_STEP, LOAD_CELL, STRONG_CREEP  # noqa: E402
+from bench.harness import write_report  # noqa: E402
 
 PARAMS = ("alpha", "a1", "a2", "b")
 
@@ -65,11 +63,7 @@ def main() -> None:
     report = {"bench": "identify_coverage", "seeds": args.seeds, "snr_db": 40.0, "cases": {}}
     for case in (LOAD_CELL, STRONG_CREEP, FOUR_STEP):
         report["cases"][case.name] = {kind: coverage(case, kind, args.seeds) for kind in ("white", "ar1_0.9")}
-    text = json.dumps(report, indent=2)
-    print(text)
-    if args.out:
-        with open(args.out, "w") as f:
-            f.write(text + "\n")
+    write_report(report, args.out, indent=2)
 
 
 if __name__ == "__main__":

@@ -25,7 +25,7 @@ lead-in, with a step at its first sample, or cut out of operation, in turn over 
 class ``real:micromanipulator`` is the 10 s excerpt starting at 10 x seed s of
 tests/data/real/piezo-micromanipulator-1Hz, fitted with hysteresis and nonlinear gain.
 
-Usage: nice -n 10 python bench/bench_model_compare.py [--seeds 3] [--classes a,b | --set plain|combinations]
+Usage: nice -n 10 python -m bench.bench_model_compare [--seeds 3] [--classes a,b | --set plain|combinations]
        [--no-cli] [--out FILE]
 """
 from __future__ import annotations
@@ -36,7 +36,6 @@ import io
 import itertools
 import json
 import math
-import os
 import sys
 import tempfile
 import time
@@ -46,12 +45,12 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from creep_online import CreepModel, compare, load_model, save_model  # noqa: E402
 from creep_online.effects import EFFECTS, simulate_with_effects  # noqa: E402
 from creep_online.identification import identify  # noqa: E402
 from creep_online.io import save_csv  # noqa: E402
+from bench.harness import write_report  # noqa: E402
 
 #: Largest difference (fit-percent points) between a fit's own fit percent and compare's on its record.
 TOLERANCE = 0.05
@@ -285,12 +284,9 @@ def main() -> None:
             case = run_case(kind, seed, not args.no_cli)
             cases.append(case)
             print(f"{kind} seed {seed}: worst {case['worst']:.3g} points, {case['elapsed_s']:.1f} s", file=sys.stderr)
-    out = {"bench": "model_compare", "command": " ".join(["python", "bench/bench_model_compare.py", *sys.argv[1:]]),
+    out = {"bench": "model_compare", "command": " ".join(["python", "-m", "bench.bench_model_compare", *sys.argv[1:]]),
            "summary": summarise(cases), "cases": cases}
-    text = json.dumps(out, indent=2)
-    print(text)
-    if args.out:
-        Path(args.out).write_text(text)
+    write_report(out, args.out, indent=2)
 
 
 if __name__ == "__main__":

@@ -2,11 +2,11 @@
 
 Usage (from the repository root)::
 
-    .venv/bin/python bench/bench_online.py                      # latency only, ~4-6 min
-    .venv/bin/python bench/bench_online.py --gc freeze          # one latency run per estimator, not two
-    .venv/bin/python bench/bench_online.py --baseline none      # current code only
-    .venv/bin/python bench/bench_online.py --current HEAD       # a committed revision, not the checkout
-    .venv/bin/python bench/bench_online.py --sections latency,memory,accuracy,naive,memory_kernels,drift,stationary_window [--quick]
+    .venv/bin/python -m bench.bench_online                      # latency only, ~4-6 min
+    .venv/bin/python -m bench.bench_online --gc freeze          # one latency run per estimator, not two
+    .venv/bin/python -m bench.bench_online --baseline none      # current code only
+    .venv/bin/python -m bench.bench_online --current HEAD       # a committed revision, not the checkout
+    .venv/bin/python -m bench.bench_online --sections latency,memory,accuracy,naive,memory_kernels,drift,stationary_window [--quick]
 
 Latency section (the default; prints one JSON document and writes it to ``--out``,
 default ``bench/results/online_latency.json``; ``--in-operation-s S`` cuts the stream from
@@ -79,6 +79,7 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
+from bench.harness import dist, results_path, write_report  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PARAMS = ("alpha", "a1", "a2", "b")
@@ -134,13 +135,11 @@ def make_stream(seconds: float = SECONDS, seed: int = 8, in_operation_s: float =
 
 
 # --------------------------------------------------------------------------- measurement (both processes)
-def dist(x_us: np.ndarray) -> dict:
-    """Distribution of per-call times (us)."""
-    q = np.percentile(x_us, [50, 90, 99, 99.9])
-    return {"p50": float(q[0]), "p90": float(q[1]), "p99": float(q[2]), "p99_9": float(q[3]),
-            "max": float(np.max(x_us)), "mean": float(np.mean(x_us)),
-            "over_25us": int(np.count_nonzero(x_us > 25.0)), "over_100us": int(np.count_nonzero(x_us > 100.0)),
-            "n": int(x_us.size)}
+def latency_dist(x_us: np.ndarray) -> dict:
+    """Distribution of per-call times (us): the harness summary, p90, p99.9 and the counts over 25 and 100 us."""
+    q = np.percentile(x_us, [90, 99.9])
+    return {**dist(x_us), "p90": float(q[0]), "p99_9": float(q[1]),
+            "over_25us": int(np.count_nonzero(x_us > 25.0)), "over_100us": int(np.count_nonzero(x_us > 100.0))}
 
 
 def timer_overhead(n: int = 200_000) -> dict:
@@ -169,7 +168,7 @@ def timer_overhead(n: int = 200_000) -> dict:
                 w1 = wall_clock()
             cpu[k] = c1 - c0
             wall[k] = w1 - w0
-        out[label] = {"cpu_us": dist(cpu / 1e3), "wall_us": dist(wall / 1e3), "loop_s": time.perf_counter() - start}
+        out[label] = {"cpu_us": latency_dist(cpu / 1e3), "wall_us": latency_dist(wall / 1e3), "loop_s": time.perf_counter() - start}
     out["note"] = ("wall encloses the two thread_time_ns() calls, CPU encloses one of them (roughly): "
                    "subtract the p50 of 'empty' (or 'noop_call' for the Python call itself) from the update() numbers")
     return out
@@ -243,11 +242,11 @@ def latency_run(make_estimator, u: np.ndarray, y: np.ndarray, gc_mode: str, trut
     order = np.argsort(cpu_us)[::-1]
     return {
         "gc": gc_mode, "gc_collections_during_run": collections, "loop_s": loop_s,
-        "cpu_us": dist(cpu_us), "wall_us": dist(wall_us),
+        "cpu_us": latency_dist(cpu_us), "wall_us": latency_dist(wall_us),
         "background_calls": {"threshold_us": 3 * med, "count": int(np.count_nonzero(background)),
                              "share": float(np.mean(background)),
-                             "cpu_us": dist(cpu_us[background]) if background.any() else None},
-        "refit_calls_cpu_us": dist(cpu_us[refits]) if refits.any() else None,
+                             "cpu_us": latency_dist(cpu_us[background]) if background.any() else None},
+        "refit_calls_cpu_us": latency_dist(cpu_us[refits]) if refits.any() else None,
         # where the cost is: the adaptation after a change vs settled tracking (the stream's changes)
         "cpu_us_p99_per_second": [round(float(np.percentile(cpu_us[k:k + SECOND], 99)), 1)
                                   for k in range(0, n, SECOND)],
@@ -333,14 +332,13 @@ def worker_main(spec_path: str) -> None:
 
 def run_archived(rev: str, label: str, stream: Path, gc_modes: list[str], truth_end: dict, work: Path) -> dict:
     """Revision rev's estimator measured by this file's functions, in a subprocess (waits for it)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from bench_online_scenarios import baseline_tree
+    from bench.bench_online_scenarios import baseline_tree
     tree = baseline_tree(rev, work / f"{label}_src")
     spec = work / f"{label}_spec.json"
     out = work / f"{label}_out.json"
     spec.write_text(json.dumps({"h": H, "stream": str(stream), "gc_modes": gc_modes, "truth_end": truth_end,
                                 "out": str(out)}))
-    env = {**os.environ, "PYTHONPATH": str(tree)}
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tree), str(ROOT)])}   # its package first; bench from here
     log = work / f"{label}_stderr.txt"
     try:
         with open(log, "w") as err:
@@ -689,7 +687,6 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--out", default=None,
                     help="JSON file (default with the latency section: bench/results/online_latency.json)")
     args = ap.parse_args(argv)
-    sys.path.insert(0, str(ROOT))
     gc_modes = ["freeze", "nofreeze"] if args.gc == "both" else [args.gc]
     sections = {
         "latency": lambda: latency_section(args.baseline, gc_modes, args.seconds, args.current,
@@ -709,7 +706,7 @@ def main(argv: list[str] | None = None) -> dict:
                              "python": platform.python_version(), "numpy": np.__version__,
                              "platform": platform.platform(),
                              "note": "shared 2-core machine, other jobs may run: read distributions"},
-                 "command": " ".join([Path(sys.executable).name, "bench/bench_online.py", *(argv or sys.argv[1:])])}
+                 "command": " ".join([Path(sys.executable).name, "-m", "bench.bench_online", *(argv or sys.argv[1:])])}
     try:
         import numba
         doc["machine"]["numba"] = numba.__version__
@@ -725,12 +722,8 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"[bench_online] {name} done in {doc[name + '_wall_s']:.1f} s", file=sys.stderr)
     doc["machine"]["loadavg_after"] = os.getloadavg()
     doc["elapsed_s"] = time.perf_counter() - start
-    text = json.dumps(doc, indent=1, default=float)
-    print(text)
-    out = args.out or (str(ROOT / "bench" / "results" / "online_latency.json") if "latency" in chosen else None)
-    if out:
-        Path(out).parent.mkdir(parents=True, exist_ok=True)
-        Path(out).write_text(text + "\n")
+    out = args.out or (results_path("online_latency") if "latency" in chosen else None)
+    write_report(doc, out, argv=argv)
     return doc
 
 

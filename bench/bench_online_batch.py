@@ -2,9 +2,9 @@
 
 Usage (from the repository root, with the package installed or ``PYTHONPATH=.``)::
 
-    python bench/bench_online_batch.py [--plants 20] [--seed-offset 0] [--snr-db 40] [--families payload,drift]
+    python -m bench.bench_online_batch [--plants 20] [--seed-offset 0] [--snr-db 40] [--families payload,drift]
         [--rest-samples 0] [--out bench/results/online_vs_batch_40db.json]
-    python bench/bench_online_batch.py --real [--out bench/results/online_divergence_real.json]
+    python -m bench.bench_online_batch --real [--out bench/results/online_divergence_real.json]
 
 Scenario records (``hil_sim.scenarios``; ``--rest-samples`` as in ``bench_online_scenarios.py``): each is fed to
 ``OnlineEstimator`` sample by sample (``update()``), its live prediction error (the output minus
@@ -48,9 +48,9 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
+from bench.harness import results_path, write_report  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 PARAMS = ("alpha", "b", "a1", "a2")
 #: The scenario tolerances (relative), as bench_online_scenarios.TOL.
 TOL = {"alpha": 0.02, "b": 0.03, "a1": 0.05, "a2": 0.05}
@@ -58,7 +58,7 @@ TOL = {"alpha": 0.02, "b": 0.03, "a1": 0.05, "a2": 0.05}
 WINDOW_S = 1.0
 def command_line() -> str:
     """The command line that made a results document (recorded in it)."""
-    return " ".join(["python bench/bench_online_batch.py", *sys.argv[1:]])
+    return " ".join(["python -m bench.bench_online_batch", *sys.argv[1:]])
 
 
 #: Windows this long after a plant change are reported apart (the change test's half second, the post-change
@@ -252,7 +252,7 @@ def real_main(out: Path) -> dict:
     ratios = [r["max_window_ratio"] for r in rows if r["max_window_ratio"] is not None]
     doc = {"command": command_line(), "records": rows, "max_window_ratio": max(ratios),
            "divergent_records": sum(r["divergent_windows"] > 0 for r in rows)}
-    out.write_text(json.dumps(doc, indent=1, default=str) + "\n")
+    write_report(doc, out, default=str, echo=False)
     return doc
 
 
@@ -271,11 +271,11 @@ def main(argv: list[str] | None = None) -> dict:
         print(table(json.loads(Path(args.table).read_text())))
         return {}
     if args.real:
-        doc = real_main(Path(args.out or ROOT / "bench" / "results" / "online_divergence_real.json"))
+        doc = real_main(Path(args.out or results_path("online_divergence_real")))
         print(json.dumps({k: v for k, v in doc.items() if k != "records"}, indent=1))
         return doc
     from hil_sim import scenarios
-    from bench_online_scenarios import estimator_window_s
+    from bench.bench_online_scenarios import estimator_window_s
     scenarios.SNR_DB = args.snr_db
     families = args.families.split(",") if args.families else list(scenarios.FAMILIES)
     if args.rest_samples is not None:
@@ -296,12 +296,11 @@ def main(argv: list[str] | None = None) -> dict:
                       "rest_samples": args.rest_samples, "tolerances": TOL, "window_s": WINDOW_S},
            "summary": summary, "records": rows, "elapsed_s": time.perf_counter() - start}
     rest = "" if args.rest_samples is None else f"_rest{args.rest_samples}"
-    out = Path(args.out or ROOT / "bench" / "results" / f"online_vs_batch_{args.snr_db:g}db{rest}.json")
-    out.write_text(json.dumps(doc, indent=1, default=str) + "\n")
+    out = Path(args.out or results_path(f"online_vs_batch_{args.snr_db:g}db{rest}"))
+    write_report(doc, out, default=str, echo=False)
     print(json.dumps(summary, indent=1, default=str))
     return doc
 
 
 if __name__ == "__main__":
-    sys.path.insert(0, str(ROOT / "bench"))
     main()

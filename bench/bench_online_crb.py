@@ -2,7 +2,7 @@
 
 Usage (repository root)::
 
-    python bench/bench_online_crb.py [--families drift] [--plants 20] [--seed-offset 0] [--last 10]
+    python -m bench.bench_online_crb [--families drift] [--plants 20] [--seed-offset 0] [--last 10]
         [--out bench/results/online_crb.json]
 
 For each record of ``hil_sim.scenarios`` (the same seeds as
@@ -23,10 +23,10 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
+from bench.harness import results_path, write_report  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PARAMS = ("alpha", "a1", "a2", "b")
@@ -48,14 +48,13 @@ def bounds(scen, last_s: float) -> dict:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    sys.path.insert(0, str(ROOT))
     from hil_sim.scenarios import FAMILIES, make
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--families", default="drift")
     ap.add_argument("--plants", type=int, default=20)
     ap.add_argument("--seed-offset", type=int, default=0)
     ap.add_argument("--last", type=float, default=10.0, help="seconds at the end of the record (the window)")
-    ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "online_crb.json"))
+    ap.add_argument("--out", default=str(results_path("online_crb")))
     args = ap.parse_args(argv)
     families = [f for f in args.families.split(",") if f in FAMILIES and f != "close_modes"]
     doc = {"config": {"last_s": args.last, "plants": args.plants, "seed_offset": args.seed_offset,
@@ -67,9 +66,7 @@ def main(argv: list[str] | None = None) -> dict:
             rows[seed] = {"input": scen.params.get("input"), "fn": scen.params.get("fn"),
                           "zeta": scen.params.get("zeta"), **bounds(scen, args.last)}
         doc["families"][fam] = rows
-    text = json.dumps(doc, indent=1)
-    print(text)
-    Path(args.out).write_text(text + "\n")
+    write_report(doc, args.out)
     return doc
 
 

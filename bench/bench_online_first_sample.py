@@ -2,7 +2,7 @@
 
 Usage (from the repository root, with the package installed or ``PYTHONPATH=.``)::
 
-    python bench/bench_online_first_sample.py [--plants 20] [--seed-offset 0] [--snr-db 80]
+    python -m bench.bench_online_first_sample [--plants 20] [--seed-offset 0] [--snr-db 80]
         [--rest 0,1,10] [--modes block,single] [--out bench/results/online_first_sample_80db.json]
 
 Each plant is drawn over the ranges of the scenario families (``hil_sim.scenarios``): even seeds from
@@ -32,10 +32,9 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
+from bench.harness import results_path, write_report  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "bench"))
 
 #: The paper's accuracy on alpha and b (relative).
 ACCURACY = 0.003
@@ -107,7 +106,7 @@ def rel(v: float | None, truth: float) -> float:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    from bench_online_scenarios import cramer_rao_rel
+    from bench.bench_online_scenarios import cramer_rao_rel
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--plants", type=int, default=20)
     ap.add_argument("--seed-offset", type=int, default=0)
@@ -150,13 +149,12 @@ def main(argv: list[str] | None = None) -> dict:
                                                  / len(det)) if det else None,
                 "max_rel_error": {k: max(r["rel_error"][k] for r in sel) for k in ("alpha", "b")},
                 "starts": sorted({r["start"] for r in sel})}
-    doc = {"command": " ".join(["python bench/bench_online_first_sample.py", *sys.argv[1:]]),
+    doc = {"command": " ".join(["python -m bench.bench_online_first_sample", *sys.argv[1:]]),
            "config": {"plants": args.plants, "seed_offset": args.seed_offset, "snr_db": args.snr_db,
                       "rest_samples": rests, "modes": modes, "accuracy": ACCURACY, "after_t_c_s": AFTER_TC_S},
            "summary": summary, "runs": rows, "elapsed_s": time.perf_counter() - start}
-    text = json.dumps(doc, indent=1, default=lambda x: str(x))
-    out = args.out or str(ROOT / "bench" / "results" / f"online_first_sample_{args.snr_db:g}db.json")
-    Path(out).write_text(text + "\n")
+    out = args.out or results_path(f"online_first_sample_{args.snr_db:g}db")
+    write_report(doc, out, default=str, echo=False)
     print(json.dumps(summary, indent=1))
     return doc
 

@@ -2,7 +2,7 @@
 
 Usage (repository root)::
 
-    python bench/bench_online_oracle.py [--families drift,payload] [--plants 20] [--seed-offset 0]
+    python -m bench.bench_online_oracle [--families drift,payload] [--plants 20] [--seed-offset 0]
         [--snr-db 40] [--last 10] [--compare bench/results/online_scenarios_single_40db_X.json]
         [--processes 2] [--from ORACLE.json] [--out bench/results/online_oracle.json]
 
@@ -41,7 +41,6 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMB
 import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
-import sys  # noqa: E402
 import time  # noqa: E402
 from multiprocessing import get_context  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -49,9 +48,9 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "bench"))
 
-from bench_online_scenarios import PARAMS, TOL  # noqa: E402  (the scenario bench's tolerances: the same "within")
+from bench.bench_online_scenarios import PARAMS, TOL  # noqa: E402  (the scenario bench's tolerances: the same "within")
+from bench.harness import results_path, write_report  # noqa: E402
 #: Largest |ln factor| the fit may take (a factor of e^5 ~ 150: far beyond any tolerance, keeps the simulator
 #: inside its stable range on a flat cost).
 LN_FACTOR_BOUND = 5.0
@@ -81,7 +80,6 @@ def oracle_fit(scen, last_s: float) -> dict:
 def _one(job: tuple[str, int, float | None, float]) -> dict:
     """Worker: one record (family, seed, snr_db, last_s) -> its row."""
     fam, seed, snr_db, last_s = job
-    sys.path.insert(0, str(ROOT))
     from hil_sim import scenarios
     if snr_db is not None:
         scenarios.SNR_DB = float(snr_db)
@@ -112,7 +110,6 @@ def _compared(rows: list[dict], estimator: dict | None) -> dict:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    sys.path.insert(0, str(ROOT))
     from hil_sim.scenarios import FAMILIES, SNR_DB
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--families", default=",".join(f for f in FAMILIES if f != "close_modes"))
@@ -123,7 +120,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--compare", default=None, help="a bench_online_scenarios.py JSON of the same seeds and SNR")
     ap.add_argument("--processes", type=int, default=2)
     ap.add_argument("--from", dest="source", default=None, help="this bench's JSON: its fits, cross-tabulated anew")
-    ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "online_oracle.json"))
+    ap.add_argument("--out", default=str(results_path("online_oracle")))
     args = ap.parse_args(argv)
     families = [f for f in args.families.split(",") if f in FAMILIES and f != "close_modes"]
     estimator = json.loads(Path(args.compare).read_text())["current"]["families"] if args.compare else {}
@@ -146,10 +143,7 @@ def main(argv: list[str] | None = None) -> dict:
         mine = [r for r in rows if r["family"] == fam]
         doc["families"][fam] = {**_compared(mine, estimator.get(fam)), "runs_detail": mine}
     doc["elapsed_s"] = time.perf_counter() - start
-    text = json.dumps(doc, indent=1)
-    print(text)
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(text + "\n")
+    write_report(doc, args.out)
     return doc
 
 

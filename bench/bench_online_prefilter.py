@@ -14,7 +14,7 @@ about half a sample late (at 10 kHz 50 us: 0.08 rad at 258 Hz, a damping bias of
 filter's own phase enters every held step. A prefilter consistent with the exact model would filter the
 regressors and the output (the residual), not the input (not built).
 
-Usage: ``PYTHONPATH=. python bench/bench_online_prefilter.py [--family close_modes] [--seeds 0-19]
+Usage: ``python -m bench.bench_online_prefilter [--family close_modes] [--seeds 0-19]
 [--factors 0,1.5,3] [--out F]``; prints (and writes) one JSON document.
 """
 from __future__ import annotations
@@ -27,6 +27,7 @@ import time
 
 import numpy as np
 from scipy import signal
+from bench.harness import write_report  # noqa: E402
 
 TOL = {"alpha": 0.02, "b": 0.03, "a1": 0.05, "a2": 0.05}
 
@@ -73,13 +74,9 @@ def main(argv: list[str] | None = None) -> dict:
                          "good": sum(r["quality"] == "good" for r in mine),
                          "good_outside": sum(r["good_outside"] for r in mine),
                          "median_abs_error": {k: float(np.median([abs(r["rel_error"][k]) for r in mine])) for k in TOL}}
-    doc = {"command": "python bench/bench_online_prefilter.py " + shlex.join(argv or sys.argv[1:]),
+    doc = {"command": "python -m bench.bench_online_prefilter " + shlex.join(argv or sys.argv[1:]),
            "family": args.family, "tolerances": TOL, "table": table, "rows": rows}
-    text = json.dumps(doc, indent=1)
-    print(text)
-    if args.out:
-        with open(args.out, "w") as fh:
-            fh.write(text + "\n")
+    write_report(doc, args.out, argv=argv)
     return doc
 
 

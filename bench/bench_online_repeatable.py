@@ -2,7 +2,7 @@
 
 Usage (from the repository root)::
 
-    .venv/bin/python bench/bench_online_repeatable.py [--in-operation-s 10.05] [--seconds 100] [--runs 5]
+    .venv/bin/python -m bench.bench_online_repeatable [--in-operation-s 10.05] [--seconds 100] [--runs 5]
         [--baseline REV] [--threshold 25] [--out bench/results/online_repeatable.json]
 
 ``bench_online.py`` times each update() of the latency stream (``bench_online.make_stream``: 10^6 samples at
@@ -33,12 +33,11 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "bench"))
 
-from _baseline import extract, run_python  # noqa: E402
-from bench_online import H, make_stream  # noqa: E402
-from bench_online_sites import site  # noqa: E402
+from bench._baseline import extract, run_python  # noqa: E402
+from bench.bench_online import H, make_stream  # noqa: E402
+from bench.bench_online_sites import site  # noqa: E402
+from bench.harness import results_path, write_report  # noqa: E402
 
 #: The measurement, as source: it runs in this process for the worktree's code and in a subprocess (the
 #: baseline's package first on sys.path) for ``--baseline``; only ``OnlineEstimator(dt)`` and ``update`` are used.
@@ -142,7 +141,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--baseline", default=None, help="git revision measured the same way (a subprocess)")
     ap.add_argument("--threshold", type=float, default=25.0, help="us of own CPU time (issue 8's max)")
-    ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "online_repeatable.json"))
+    ap.add_argument("--out", default=str(results_path("online_repeatable")))
     args = ap.parse_args(argv)
     stream = make_stream(args.seconds, in_operation_s=args.in_operation_s)
     u, y = stream["u"].tolist(), stream["y"].tolist()
@@ -172,10 +171,7 @@ def main(argv: list[str] | None = None) -> dict:
                                     for k in ("p50_us", "p99_us", "max_us", "over_5us", "over_15us", "over_threshold")}
         print(f"[repeatable] baseline {commit[:7]}: max {old['max_us']:.1f} us, {old['over_threshold']} calls over "
               f"{args.threshold:g} us", file=sys.stderr)
-    text = json.dumps(doc, indent=1)
-    print(text)
-    if args.out:
-        Path(args.out).write_text(text + "\n")
+    write_report(doc, args.out)
     return doc
 
 

@@ -2,7 +2,7 @@
 
 Usage (from the repository root, with the package installed or ``PYTHONPATH=.``)::
 
-    python bench/bench_online_robustness.py [--plants 9] [--variants 9] [--single 20]
+    python -m bench.bench_online_robustness [--plants 9] [--variants 9] [--single 20]
         [--faults 4] [--out bench/results/online_robustness.json]
 
 Plants: ``--plants`` seeds (0..plants-1) of each stationary family of
@@ -60,10 +60,10 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from creep_online.online.estimator import OnlineEstimator, warm_kernels  # noqa: E402
 from hil_sim import scenarios  # noqa: E402
+from bench.harness import results_path, write_report  # noqa: E402
 
 FAMILIES = ("strong_creep", "controller", "mid_operation")
 PARAMS = ("alpha", "b", "a1", "a2")
@@ -292,7 +292,7 @@ def main() -> None:
     ap.add_argument("--single", type=int, default=20, help="outlier cases repeated with update() per sample")
     ap.add_argument("--faults", type=int, default=4, help="frozen/clipped cases per plant")
     ap.add_argument("--families", default=",".join(FAMILIES))
-    ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "online_robustness.json"))
+    ap.add_argument("--out", default=str(results_path("online_robustness")))
     args = ap.parse_args()
     start = time.perf_counter()
     warm_kernels()
@@ -393,10 +393,7 @@ def main() -> None:
         "seconds": round(time.perf_counter() - start, 1),
     }
     doc = jsafe(doc)
-    text = json.dumps(doc, indent=1)
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(text + "\n")
-    print(text)
+    write_report(doc, args.out)
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 
 Usage (from the repository root, with the package installed or ``PYTHONPATH=.``)::
 
-    python bench/bench_online_scenarios.py [--plants 20] [--seed-offset 0] [--families payload,drift]
+    python -m bench.bench_online_scenarios [--plants 20] [--seed-offset 0] [--families payload,drift]
         [--baseline 773e268|none] [--mode block|single] [--kwargs '{"window_s": 5}']
         [--refit window|recursive] [--out bench/results/online_scenarios.json]
 
@@ -426,7 +426,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                          "families' 0.05-0.3 s); mid_operation, taken in operation, is left out")
     ap.add_argument("--refit", choices=("window", "recursive"), default=None,
                     help="Remark 3's strategy of the current estimator (default: the estimator's default)")
-    ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "online_scenarios.json"))
+    ap.add_argument("--out", default=str(results_path("online_scenarios")))
     return ap.parse_args(argv)
 
 
@@ -440,7 +440,7 @@ def git_head() -> str:
 
 def main(argv: list[str] | None = None) -> dict:
     """Generate, run current and baseline side by side, summarize, print and write the JSON."""
-    sys.path.insert(0, str(ROOT))
+    from bench.harness import results_path, write_report   # here: the --worker mode runs without bench
     from hil_sim import scenarios
     from hil_sim.scenarios import FAMILIES
     args = parse_args(argv)
@@ -473,10 +473,7 @@ def main(argv: list[str] | None = None) -> dict:
             doc["baseline"] = collect_baseline(*base, args.baseline, truth)
     doc["generate_s"] = gen_s
     doc["elapsed_s"] = time.perf_counter() - start
-    text = json.dumps(_jsonable(doc), indent=1)
-    print(text)
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(text + "\n")
+    write_report(_jsonable(doc), args.out, argv=argv)
     return doc
 
 

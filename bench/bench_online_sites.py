@@ -2,7 +2,7 @@
 
 Usage (from the repository root)::
 
-    .venv/bin/python bench/bench_online_sites.py [--in-operation-s 10.05] [--seconds 100] [--runs 3]
+    .venv/bin/python -m bench.bench_online_sites [--in-operation-s 10.05] [--seconds 100] [--runs 3]
         [--threshold 25] [--out bench/results/online_sites.json]
 
 ``bench_online.py`` measures update()'s own CPU time (``time.thread_time_ns``) over the latency stream
@@ -39,10 +39,9 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "bench"))
 
-from bench_online import H, make_stream  # noqa: E402
+from bench.bench_online import H, make_stream  # noqa: E402
+from bench.harness import results_path, write_report  # noqa: E402
 
 #: Sites listed per run (the most calls over the threshold first).
 TOP_SITES = 25
@@ -135,7 +134,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--seconds", type=float, default=100.0)
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--threshold", type=float, default=25.0, help="us of own CPU time (issue 8's max)")
-    ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "online_sites.json"))
+    ap.add_argument("--out", default=str(results_path("online_sites")))
     args = ap.parse_args(argv)
     from creep_online.online.estimator import warm_kernels
     s = make_stream(args.seconds, in_operation_s=args.in_operation_s)
@@ -159,10 +158,7 @@ def main(argv: list[str] | None = None) -> dict:
            "stream": {"seconds": args.seconds, "in_operation_s": args.in_operation_s, "fs_hz": 1 / H},
            "threshold_us": args.threshold, "machine": {"cpu_count": os.cpu_count(), "loadavg": os.getloadavg()},
            "over_threshold_by_site_across_runs": across, "runs": runs}
-    text = json.dumps(doc, indent=1)
-    print(text)
-    if args.out:
-        Path(args.out).write_text(text + "\n")
+    write_report(doc, args.out)
     return doc
 
 

@@ -1,6 +1,6 @@
 """PI controller benchmark: the ``pi:`` source through pipython and the emulated controller (JSON on stdout).
 
-    PYTHONPATH=. python bench/bench_pi.py [--quick] > bench/results/pi.json
+    python -m bench.bench_pi [--quick] > bench/results/pi.json
 
 * throughput: samples/s from ``python -m hil_sim.pi_controller --fast`` (its own
   process; a recording is complete at once) through a real pty, pipython's
@@ -34,13 +34,11 @@ import os
 import platform
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench_transports import dist  # noqa: E402 - p50/p99/max/n, the same summary as the transport bench
+from bench.harness import dist, write_report  # noqa: E402  (p50/p99/max/mean/n)
 from creep_online.io.feed import FeedLoop, SampleAge  # noqa: E402
 from creep_online.io.sources import open_source  # noqa: E402
 from hil_sim.harness import PlantProcess  # noqa: E402
@@ -186,7 +184,7 @@ def main() -> int:
                   "realtime_baseline_stock_gateway": realtime(10_000.0, seconds, wait=False, tcp=True)}
     if args.tcp_only:
         out["machine"]["load_avg_1m_end"] = os.getloadavg()[0]
-        print(json.dumps(out, indent=2))
+        write_report(out, indent=2)
         return 0
     base = throughput_baseline(points)
     runs = [throughput_source(points, chunk) for chunk in (500, 2000, 8000)]
@@ -197,7 +195,7 @@ def main() -> int:
     out["realtime"] = [realtime(rate, seconds) for rate in (5_000.0, 10_000.0, 20_000.0)]
     out["realtime_baseline_stock_gateway"] = realtime(10_000.0, seconds, wait=False)
     out["machine"]["load_avg_1m_end"] = os.getloadavg()[0]
-    print(json.dumps(out, indent=2))
+    write_report(out, indent=2)
     return 0
 
 

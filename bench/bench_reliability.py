@@ -22,7 +22,7 @@ in a forked child) under a timeout, and its outcome is classified:
 Categories: flags (every flag of every command with hostile values), specs
 (every source option), files (malformed inputs), outputs (user files and
 folders), signals, pipes, api, pickle, canlog, security, scheduler, hil_sim,
-bounded. ``python bench/bench_reliability.py`` prints JSON counts per category
+bounded. ``python -m bench.bench_reliability`` prints JSON counts per category
 and outcome (and writes bench/results/reliability.json); ``--only CAT,...``
 runs some categories, ``--sample N`` every N-th attempt, ``--baseline REF``
 runs the same sweep on an earlier commit (``git archive``), ``--list`` prints
@@ -1532,8 +1532,7 @@ def main() -> int:
         print(json.dumps({k: v for k, v in report.items() if k != "failures"}, indent=1))
         return 0
     if args.baseline:
-        sys.path.insert(0, str(ROOT / "bench"))
-        from _baseline import extract
+        from bench._baseline import extract
         path = args.baseline if os.path.isdir(args.baseline) else extract(args.baseline)[0]   # (a tree extracted before)
         env = dict(os.environ, PYTHONPATH=path, NUMBA_CACHE_DIR=os.path.join(path, ".numba_cache"))
         cmd = [sys.executable, __file__, "--only", args.only, "--sample", str(args.sample), "--out", args.out]
@@ -1543,7 +1542,7 @@ def main() -> int:
     report = sweep(only, args.sample, verbose=args.verbose, match=args.match)
     import creep_online
     report["code"] = str(Path(creep_online.__file__).resolve().parents[1])
-    report["command"] = " ".join(["python bench/bench_reliability.py", *map(shlex.quote, sys.argv[1:])])
+    report["command"] = " ".join(["python -m bench.bench_reliability", *map(shlex.quote, sys.argv[1:])])
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(report, indent=1) + "\n")
     shown = report if args.list else {k: v for k, v in report.items() if k != "failures"}

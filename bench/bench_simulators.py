@@ -7,7 +7,7 @@
   whole model, for several alpha and N/L.
 * speed: each simulator on 12,000 and 100,000 samples, p50/p99/max over repeats.
 
-Usage: python bench/bench_simulators.py [--quick]
+Usage: python -m bench.bench_simulators [--quick]
 """
 from __future__ import annotations
 
@@ -21,18 +21,12 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from creep_online import CreepModel, simulate  # noqa: E402
 from creep_online.simulate import fractional_integral  # noqa: E402
+from bench.harness import dist, write_report  # noqa: E402
 
 ORACLE = ROOT / "tests" / "data" / "oracle"
-
-
-def distribution(samples: list[float]) -> dict[str, float]:
-    a = np.asarray(samples)
-    return {"p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)), "max": float(a.max()),
-            "n": int(a.size)}
 
 
 def convergence() -> list[dict]:
@@ -99,7 +93,7 @@ def speed(repeats: int) -> list[dict]:
                 t0 = time.perf_counter()
                 simulate(m, t, u, method=method)
                 times.append(time.perf_counter() - t0)
-            rows.append({"samples": n, "method": method, "elapsed_s": distribution(times)})
+            rows.append({"samples": n, "method": method, "elapsed_s": dist(times)})
     return rows
 
 
@@ -109,8 +103,7 @@ def main() -> None:
     args = ap.parse_args()
     out = {"bench": "simulators", "convergence": convergence(), "truncation": truncation(),
            "speed": speed(3 if args.quick else 15)}
-    json.dump(out, sys.stdout, indent=2)
-    sys.stdout.write("\n")
+    write_report(out, indent=2)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Transport benchmark: throughput, end-to-end latency and a sustained 10 kHz run (JSON on stdout).
 
-    PYTHONPATH=. python bench/bench_transports.py [--quick]
+    python -m bench.bench_transports [--quick]
 
 * throughput: frames/s and samples/s from the simulated plant (``hil_sim --fast``,
   its own process) through a real pty into ``SerialSource`` (binary and ASCII),
@@ -24,26 +24,17 @@ import os
 import platform
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from creep_online.io.feed import FeedLoop, SampleAge  # noqa: E402
 from creep_online.io.sources import open_source  # noqa: E402
 from hil_sim import PlantConfig, generate, parse_params, run_virtual_plant  # noqa: E402
 from hil_sim.harness import PlantProcess  # noqa: E402
+from bench.harness import dist, write_report  # noqa: E402
 
 RATE = 10_000.0
-
-
-def dist(x) -> dict:
-    x = np.asarray(x, dtype=float)
-    if x.size == 0:
-        return {"p50": None, "p99": None, "max": None, "n": 0}
-    return {"p50": float(np.percentile(x, 50)), "p99": float(np.percentile(x, 99)), "max": float(x.max()),
-            "n": int(x.size)}
 
 
 def _drain(src, last_seq: int, timeout: float = 300.0) -> tuple[int, float]:
@@ -203,7 +194,7 @@ def main() -> int:
                                      "crc_errors": r["crc_errors"], "latency_us": r["latency_us"],
                                      "plant_late_max_ms": r["plant_late_max_ms"]}
     out["machine"]["load_avg_1m_end"] = os.getloadavg()[0]
-    print(json.dumps(out, indent=2))
+    write_report(out, indent=2)
     return 0
 
 

@@ -6,13 +6,13 @@ from pathlib import Path
 
 import pytest
 
-from bench_loader import load_bench
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _bench():
-    return load_bench("bench_diagnose_bands")
+    from bench import bench_diagnose_bands
+    return bench_diagnose_bands
 
 
 def _run(first: int, n: int, elapsed: float, miss: int | None = None) -> dict:

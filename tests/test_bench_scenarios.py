@@ -10,11 +10,11 @@ from creep_online.online import OnlineEstimator
 from hil_sim import scenarios
 from hil_sim.scenarios import simulate_tv
 
-from bench_loader import load_bench
 
 
 def _bench():
-    return load_bench("bench_online_scenarios")
+    from bench import bench_online_scenarios
+    return bench_online_scenarios
 
 
 def test_the_gain_alone_has_the_closed_form_bound_and_more_unknowns_only_widen_it():
@@ -96,7 +96,8 @@ def test_the_oracle_fit_lands_within_its_cramer_rao_bound_and_at_the_noise_floor
     that bound's size (within 4 sigma each), and its window error the noise (a ratio of 1 within the chi-square
     spread of 100,000 samples). Payload 1 determines all four; drift 1 does not determine a1 (bound over 200 %),
     and there the oracle too ends far outside the tolerance: no estimator is expected within it."""
-    scen_bench, oracle = _bench(), load_bench("bench_online_oracle")
+    from bench import bench_online_oracle as oracle
+    scen_bench = _bench()
     for family, seed in (("payload", 1), ("drift", 1)):
         scen = scenarios.make(family, seed)
         crb = scen_bench.cramer_rao_rel(scen)

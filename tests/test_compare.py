@@ -14,7 +14,6 @@ import warnings
 import numpy as np
 import pytest
 
-from bench_loader import load_bench
 from creep_online import CreepModel, DataError, FittedModel, compare, identify, load_model, save_model, simulate
 from creep_online.cli import main
 from creep_online.diagnostics.extended import fit_extended, prepare
@@ -22,7 +21,7 @@ from creep_online.effects import EFFECTS, simulate_with_effects
 from creep_online.io import save_csv
 from creep_online.io.safe_files import REPORT_MARKER
 
-BENCH = load_bench("bench_model_compare")
+from bench import bench_model_compare as BENCH
 TOL = BENCH.TOLERANCE
 
 

@@ -13,11 +13,11 @@ import pytest
 from creep_online.diagnostics import diagnose
 from creep_online.effects import HYSTERESIS_COMPONENTS
 
-from bench_loader import load_bench
 
 
 def _bench():
-    return load_bench("bench_diagnose_pairs")
+    from bench import bench_diagnose_pairs
+    return bench_diagnose_pairs
 
 
 @pytest.fixture(scope="module")
@@ -69,7 +69,7 @@ def test_the_pair_search_finds_a_pair_the_single_fits_rank_apart(pair, band, see
 
 def test_a_record_one_effect_explains_to_the_noise_is_not_searched_for_a_pair():
     """The bands bench's single-effect records end at ~1.0x the noise: the pair search would only cost."""
-    bands = load_bench("bench_diagnose_bands")
+    from bench import bench_diagnose_bands as bands
     rec = bands.make_record("hysteresis", bands.BANDS["10-100x"], 3)
     d = diagnose((rec["t"], rec["u"], rec["y"]))
     assert d.verdict == "hysteresis" and not d.standing_in
@@ -263,7 +263,7 @@ def test_the_partners_score_test_sees_the_hidden_partner_and_nothing_beside_a_si
     best = score.fires(scores, pairs.SCORE_THRESHOLD)
     assert best is not None and best.effect == "second_mode"
     assert next(s for s in scores if s.effect == "second_mode").evidence > 10 * pairs.SCORE_THRESHOLD
-    bands = load_bench("bench_diagnose_bands")
+    from bench import bench_diagnose_bands as bands
     rec = bands.make_record("leakage", bands.BANDS["3-10x"], 7)
     d = diagnose((rec["t"], rec["u"], rec["y"]))
     first = d.candidates[0]
@@ -391,7 +391,7 @@ def test_a_pair_that_only_beats_the_single_fits_basin_is_not_significant(effect,
     1.022x the noise, the true model 1.010x; hysteresis 1.0066x against 0.9956x) and effect + delay, with the
     resonance kept, was a significant pair (BIC drops 145, 150): a false pair. The best single effect is now refitted
     from the pair's values with its base searched again, and the pair's evidence is weighed over that fit."""
-    bands = load_bench("bench_diagnose_bands")
+    from bench import bench_diagnose_bands as bands
     rec = bands.make_record(effect, (1.3, 3.0), seed)
     d = diagnose((rec["t"], rec["u"], rec["y"]))
     assert d.verdict == effect

@@ -25,7 +25,6 @@ from creep_online.diagnostics.locate import input_regimes, spectrum_peaks
 from creep_online.effects import EFFECTS, get_effect, simulate_with_effects
 from hil_sim.hidden_effects import hidden_dataset, save, staircase
 
-from bench_loader import load_bench
 
 ROOT = Path(__file__).resolve().parents[1]
 CASES = [None, *EFFECTS]
@@ -308,7 +307,7 @@ def test_an_alias_fit_hands_over_to_the_mode_above_nyquist_through_a_polished_im
     with the alias fit's damping, ranked below it unpolished: 1.55x and 1.34x the noise. Each finalist's cheapest
     image is short-polished too, and reaches the mode. The images compete for the final polish apart: 10-100x
     seed 75's mode at 60 Hz had its polished image (940 Hz, the same sampled poles) crowd it out: 1.51x."""
-    bench = load_bench("bench_diagnose_bands")
+    from bench import bench_diagnose_bands as bench
     rec = bench.make_record("second_mode", bench.BANDS[band], seed)
     data = prepare(rec["t"], rec["u"], rec["y"])
     fit = fit_extended(data, ("second_mode",), fit_base(data))
@@ -336,7 +335,7 @@ def test_the_exchanged_creep_exponents_are_polished_even_when_the_grid_around_th
     (alpha 0.19, alpha2 0.59; true 0.61 and 0.26) at 22.6x the noise. The restart ranked the exchanged starts
     with the grid around that fit, which always costs less, and polished only the two cheapest; the best
     exchanged start is now polished too."""
-    bench = load_bench("bench_diagnose_bands")
+    from bench import bench_diagnose_bands as bench
     rec = bench.make_record("second_creep", bench.BANDS["10-100x"], 95)
     d = diagnose((rec["t"], rec["u"], rec["y"]), candidates=("second_creep",), combine=False)
     fit = d.candidates[0].fit

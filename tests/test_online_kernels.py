@@ -23,7 +23,6 @@ from creep_online.online.soe import SOE_TOP, SoeBasis, resonance_zoh
 from creep_online.online.tracker import WindowTracker
 from creep_online.simulate import fractional_integral, simulate
 
-from bench_loader import load_bench
 
 
 def _tracker(model: CreepModel, h: float, lin: tuple[float, float] | None = None, free: bool = False,
@@ -850,7 +849,7 @@ def test_a_long_stream_taken_in_operation_runs_through_its_replays():
     change leaves the fastest free responses' columns zero over the window; update() raised ZeroDivisionError
     at 46.7 s. It runs to the end, follows the change and ends within 1 % of the plant."""
     from creep_online.online.estimator import OnlineEstimator
-    bench = load_bench("bench_online")
+    from bench import bench_online as bench
     s = bench.make_stream(100.0, in_operation_s=10.05)
     n = int(52.0 / bench.H)
     est = OnlineEstimator(bench.H)

@@ -29,9 +29,8 @@ from creep_online.cli import main
 from creep_online.errors import DataError
 from creep_online.io import save_csv
 
-from bench_loader import load_bench
 
-SWEEP = load_bench("bench_reliability")
+from bench import bench_reliability as SWEEP
 
 REPO = Path(__file__).resolve().parents[1]
 TRUE = CreepModel(0.3, 0.01, 1e-4, 2.0)
