@@ -7,12 +7,12 @@ warm too). The two versions alternate run by run, so load on the machine hits bo
 the process's own CPU time (user + sys, from the child's rusage) are reported: on a shared machine the
 CPU time is the steadier figure. Targets: ``--help`` <= 0.15 s, ``identify`` <= 0.6 s (best of 5 wall).
 
-Usage: python bench/bench_cold_start.py [--repeats 5] [--previous REF]   (prints one JSON document)
+Usage: python -m bench.bench_cold_start [--repeats 5] [--previous REF] [--out FILE]
+(prints one JSON document; --out writes it too, e.g. bench/results/cold_start.json)
 """
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import resource
@@ -25,12 +25,11 @@ import time
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from bench import _baseline
+from bench.harness import write_report
+from hil_sim.experiments import LOAD_CELL
 
-import _baseline  # noqa: E402
-from hil_sim.experiments import LOAD_CELL  # noqa: E402
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 TARGETS_S = {"help": 0.15, "identify_12000": 0.6}
 
@@ -71,6 +70,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--previous", default="main", help="git ref of the previous code (the baseline)")
+    ap.add_argument("--out", default=None, help="also write the JSON document to this file")
     opts = ap.parse_args()
 
     previous_dir, previous_commit = _baseline.extract(opts.previous)
@@ -101,10 +101,10 @@ def main() -> None:
                    "met": results["this_code"][c]["wall_s"]["best"] <= lim} for c, lim in TARGETS_S.items()}
     shutil.rmtree(previous_dir, ignore_errors=True)
     shutil.rmtree(work, ignore_errors=True)
-    print(json.dumps({"bench": "cold_start", "repeats": opts.repeats, "samples": 12000,
+    write_report({"bench": "cold_start", "repeats": opts.repeats, "samples": 12000,
                       "previous_commit": previous_commit, "python": platform.python_version(),
                       "cpus": os.cpu_count(), "load_average_start": load_start, "load_average_end": os.getloadavg(),
-                      "results": results, "ratio_previous_over_this": ratios, "targets": targets}, indent=2))
+                      "results": results, "ratio_previous_over_this": ratios, "targets": targets}, opts.out, indent=2)
 
 
 if __name__ == "__main__":
