@@ -32,7 +32,7 @@ from creep_online.fleet import COLUMNS, summarize, write_table  # noqa: E402
 from creep_online.fleet.job import run_record  # noqa: E402
 from creep_online.fleet.runner import run_on_dask  # noqa: E402
 from creep_online.fleet.summary import robust_z  # noqa: E402
-from ptyio import read_until_closed  # noqa: E402
+from ptyio import read_until_exit  # noqa: E402
 from creep_online.identification import identify  # noqa: E402
 from creep_online.io import load_csv  # noqa: E402
 from creep_online.io.fleet_records import find_records  # noqa: E402
@@ -276,7 +276,8 @@ def test_ctrl_c_stops_cleanly_and_keeps_the_rows_done(fleet, tmp_path):
                             # SIGINT back to its default: a suite started in the background by a shell
                             # has it ignored, and the child would inherit that (no KeyboardInterrupt)
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    os.close(slave)
+    # (the slave stays open here until the end: when every holder has closed it, Linux may report EIO on the
+    # master before the last lines written reach it, and the tail of the output was lost on a loaded machine)
     seen, done = b"", 0
     deadline = time.monotonic() + 90
     while done < 2 and time.monotonic() < deadline and proc.poll() is None:
@@ -285,20 +286,20 @@ def test_ctrl_c_stops_cleanly_and_keeps_the_rows_done(fleet, tmp_path):
             counts = re.findall(rb"\] (\d+)/40 records", seen)
             done = int(counts[-1]) if counts else 0
     os.killpg(proc.pid, signal.SIGINT)
-    shown = read_until_closed(master)    # what the terminal shows after Ctrl-C, until the process closes it
-    proc.wait(timeout=60)
+    shown = read_until_exit(master, proc, timeout=60)    # what the terminal shows after Ctrl-C
+    os.close(slave)
     os.close(master)
     assert done >= 2, seen[-300:]
     assert proc.returncode == 130, shown
-    lines = [ln.strip() for ln in shown.decode(errors="replace").replace("\r", "\n").splitlines() if ln.strip()]
-    assert "Traceback" not in shown.decode(errors="replace")
-    # the message is the last line but for the status line's own redraw and erase (at load 30 its refresh
-    # thread once drew after the message: a cosmetic race of the terminal display, the message is intact)
-    said = [ln for ln in lines if ln.startswith("creep-online batch:")]
-    assert len(said) == 1 and re.fullmatch(r"creep-online batch: interrupted after (\d+) of 40 records; their "
-                                           r"rows are in .*t\.csv", said[0]), lines[-3:]
-    assert all("records" in ln or ln.startswith("\x1b") for ln in lines[lines.index(said[0]) + 1:]), lines[-3:]
-    kept = int(re.search(r"after (\d+)", said[0]).group(1))
+    text = shown.decode(errors="replace")
+    assert "Traceback" not in text
+    # the terminal's text without cursor moves: the status line's refresh thread and its erase may interleave
+    # with the last lines on a loaded machine (a display race; the words are intact)
+    plain = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", text).replace("\r", "\n")
+    said = re.findall(r"creep-online batch: interrupted after (\d+) of 40 records; their rows are in \S*t\.csv",
+                      plain)
+    assert len(said) == 1, plain[-600:]
+    kept = int(said[0])
     with open(tmp_path / "t.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert 2 <= kept < 40 and len(rows) == kept and all(r["alpha"] for r in rows)
