@@ -336,6 +336,7 @@ def test_help_imports_neither_dask_nor_pyarrow():
             "    with contextlib.redirect_stdout(io.StringIO()):\n"
             "        try: main(argv)\n"
             "        except SystemExit: pass\n"
-            "print(sorted(m for m in ('dask', 'distributed', 'pyarrow', 'scipy', 'numba') if m in sys.modules))")
+            "sys.__stdout__.write(str(sorted(m for m in ('dask', 'distributed', 'pyarrow', 'scipy', 'numba') "
+                "if m in sys.modules)) + '\\n')")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
