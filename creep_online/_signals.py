@@ -31,11 +31,14 @@ import shutil
 import signal
 import sys
 import threading
+import time
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
 #: Seconds a stop signal may wait for Python to handle it before the watchdog ends the process.
 GRACE_S = 3.0
+#: How often the watchdog looks whether the handler has run while it waits.
+POLL_S = 0.02
 
 #: The signals that stop a run, and how the one-line message names them.
 STOP_SIGNALS = {signal.SIGINT: "interrupted (Ctrl-C)", signal.SIGTERM: "terminated (SIGTERM)",
@@ -152,6 +155,7 @@ class _Watchdog:
         self._thread.start()
 
     def _watch(self) -> None:
+        answered = _state.handled    # the Python handler's count when the signals read so far were answered
         while True:
             try:
                 data = os.read(self._read, 64)
@@ -162,10 +166,14 @@ class _Watchdog:
             stops = [b for b in data if b in STOP_SIGNALS]
             if not stops:
                 continue
-            seen = _state.handled
-            waited = threading.Event()
-            if not waited.wait(GRACE_S) and _state.handled == seen and _state.installed:
+            # The handler may already have run (the main thread is often faster than this thread to wake):
+            # a count above ``answered`` is the answer, whenever it came.
+            deadline = time.monotonic() + GRACE_S
+            while _state.handled == answered and time.monotonic() < deadline:
+                time.sleep(POLL_S)
+            if _state.handled == answered and _state.installed:
                 self._end(stops[0])
+            answered = _state.handled
 
     @staticmethod
     def _end(signum: int) -> None:

@@ -262,10 +262,6 @@ def test_the_first_stop_signal_only_sets_the_batchs_flag_and_a_second_one_interr
     assert signal.getsignal(signum) is before
 
 
-# Open bug, run with -m slow until fixed: when the whole suite loads the machine, this batch has ended with
-# exit 130 and its summary but without the "interrupted after N of 40 records" line (2 runs of 3 in a
-# fresh clone); alone it passes every time. The rows kept and the exit code were right in every run.
-@pytest.mark.slow
 def test_ctrl_c_stops_cleanly_and_keeps_the_rows_done(fleet, tmp_path):
     """A terminal: the progress bar shows; Ctrl-C (SIGINT to the process group) after the first records."""
     root, _ = fleet

@@ -215,6 +215,26 @@ def test_sigterm_during_a_long_computation_leaves_no_temporary_file_and_the_old_
     assert sorted(q.name for q in tmp_path.iterdir()) == ["out.csv", "tu.csv"]
 
 
+@pytest.mark.parametrize("mode", ["flagged", "deferred"])
+def test_a_signal_the_handler_answered_at_once_is_never_taken_for_a_stuck_computation(mode):
+    """The watchdog ended a batch whose first Ctrl-C only set the flag ("... while busy in a computation"):
+    the main thread had run the handler before the watchdog thread woke to read the signal, so the watchdog
+    waited for an answer that had already come. Here the handler always runs first (the signal is sent to the
+    process by its own main thread); the process must outlive the grace time and report the signal itself."""
+    code = f"""
+import os, signal, time
+from creep_online import _signals
+with _signals.{mode}() as pressed:
+    os.kill(os.getpid(), signal.SIGINT)
+    time.sleep(_signals.GRACE_S + 1.0)
+    print("alive", _signals.pending_signal() if pressed is None else pressed(), flush=True)
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                         preexec_fn=_no_default_signals)
+    assert "busy in a computation" not in out.stderr, out.stderr
+    assert out.stdout.split() == ["alive", str(int(signal.SIGINT))], (out.returncode, out.stdout, out.stderr)
+
+
 @pytest.mark.parametrize("marker", ["creep_online._signals", "numpy", "creep_online.model", "creep_online.cli",
                                     "scipy"])
 def test_ctrl_c_at_start_up_is_one_line_never_a_traceback(rec, marker):
