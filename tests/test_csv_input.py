@@ -1,4 +1,5 @@
 """CSV input: every malformed file gives one line naming file and problem (docs/reliability.md)."""
+import gzip
 import subprocess
 import sys
 
@@ -33,6 +34,8 @@ CASES = {
     "too_short": ("t,u,y\n0,1,0\n0.1,1,1\n", "too few samples"),
     "no_excitation": (GOOD.replace(",1,", ",0,"), "no excitation"),
     "binary": (b"\x89PNG\r\n\x1a\n\xff\xfe", "not a text file"),
+    "gzip_cut_short": (gzip.compress(GOOD.encode())[:40], "a gzip file that cannot be decompressed"),
+    "gzip_of_binary": (gzip.compress(b"\xff\xfe\x00garbage"), "not a text file"),
 }
 
 
@@ -57,6 +60,20 @@ def test_extra_columns_any_order_and_bom_are_accepted(tmp_path):
     text = "\ufeffy, note ,t,u\n" + "".join(f"{0.1 * k},x{k},{k * 0.01},1\n" for k in range(30))
     rec = load_csv(write(tmp_path, text))
     assert len(rec) == 30 and rec.t[-1] == pytest.approx(0.29) and rec.y[3] == pytest.approx(0.3)
+
+
+def test_a_gzipped_csv_reads_as_the_csv_it_holds_within_the_input_bound(tmp_path, monkeypatch):
+    """``x.csv.gz`` is read like ``x.csv`` (identify and stream share the reader); its decompressed size is bounded
+    like any input, so a small file that inflates to gigabytes is refused, not read."""
+    plain = load_csv(write(tmp_path, GOOD))
+    packed = load_csv(write(tmp_path, gzip.compress(GOOD.encode()), "data.csv.gz"))
+    for column in ("t", "u", "y"):
+        np.testing.assert_array_equal(getattr(plain, column), getattr(packed, column))
+    monkeypatch.setenv("CREEP_ONLINE_MAX_INPUT_BYTES", "5000")
+    bomb = write(tmp_path, gzip.compress(GOOD.encode() + b"0,0,0\n" * 100_000), "bomb.csv.gz")
+    assert bomb.stat().st_size < 5000
+    with pytest.raises(DataError, match="decompresses to more than the 5000 bytes"):
+        load_csv(bomb)
 
 
 def test_round_trip_keeps_full_precision(tmp_path):

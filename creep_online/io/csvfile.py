@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import DataError, DataWarning
 from ..record import MIN_SAMPLES, Record
-from .input_files import check_kind, read_input
+from .input_files import check_kind, read_text
 
 
 #: Longest line accepted (bytes): a t,u,y row is ~60; a file of one endless line is not a CSV.
@@ -34,13 +34,8 @@ def _check_kind(path: Path) -> None:
 
 
 def _read_text(path: Path) -> str:
-    """The file's text, read once whatever it is (``input_files.read_input``: bounded, pipes never waited on
-    forever, a pipe's content remembered for a second look)."""
-    data = read_input(path, what="CSV file", max_line=MAX_LINE_BYTES)
-    try:
-        return data.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise DataError(f"{path}: not a text file (undecodable byte at offset {exc.start})") from None
+    """The CSV file's text (``input_files.read_text``)."""
+    return read_text(path, what="CSV file", max_line=MAX_LINE_BYTES)
 
 
 #: Delimiters a header is sniffed for (the most frequent one in the header line wins; comma on a tie).

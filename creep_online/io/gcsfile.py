@@ -35,8 +35,7 @@ import numpy as np
 
 from ..errors import DataError
 from ..record import MIN_SAMPLES, Record
-from .csvfile import _read_text
-from .input_files import is_stream
+from .input_files import is_stream, read_text
 
 __all__ = ["is_gcs_file", "read_gcs_header", "load_gcs", "column_names", "column_index", "columns_by_meaning"]
 
@@ -53,7 +52,7 @@ def is_gcs_file(path: str | Path) -> bool:
     """True when the file starts like a GCS data file (a ``#`` header line or ``[GCS_ARRAY``)."""
     if is_stream(path):       # a pipe is read once: look at the text kept from that read
         try:
-            head = _read_text(Path(path))[:512].lstrip("\ufeff \t\r\n").encode()
+            head = _text(Path(path))[:512].lstrip("\ufeff \t\r\n").encode()
         except DataError:
             return False
     else:
@@ -85,7 +84,7 @@ def _header_lines(path: Path, text: str) -> tuple[list[str], int]:
 def read_gcs_header(path: str | Path) -> tuple[dict[str, str], int]:
     """``{KEY: value text}`` of the header and the first data line number; DataError if malformed."""
     path = Path(path)
-    lines, first_data = _header_lines(path, _read_text(path))
+    lines, first_data = _header_lines(path, _text(path))
     header: dict[str, str] = {}
     for line in lines:
         body = line.lstrip("#").strip()
@@ -181,7 +180,7 @@ def _pipython_reader():
 
 def _first_bad_row(path: Path, first_line: int, sep: str, dim: int) -> str:
     """Where pipython's reader failed, found again line by line for the message."""
-    lines = _read_text(path).splitlines()
+    lines = _text(path).splitlines()
     for number in range(first_line, len(lines) + 1):
         row = lines[number - 1].strip()
         if not row:
@@ -203,7 +202,7 @@ def _read_data(readgcsarray, path: Path):
         return readgcsarray(str(path))
     with tempfile.TemporaryDirectory(prefix="creep_online_gcs_") as folder:
         copy = Path(folder) / "data.gcs"
-        copy.write_text(_read_text(path))
+        copy.write_text(_text(path))
         return readgcsarray(str(copy))
 
 
@@ -250,3 +249,12 @@ def load_gcs(path: str | Path, u_column: str | None = None, y_column: str | None
             raise DataError(f"{path}: data row {bad[0] + 1}, {role} column {name!r}: NaN/inf not allowed")
     rec = Record(np.arange(u.size) * step, u, y, source=str(path))
     return rec.validate(min_samples)
+
+
+#: Longest line accepted in a GCS file (bytes): a data row is short; a file of one endless line is not a record.
+MAX_LINE_BYTES = 65536
+
+
+def _text(path: str | Path) -> str:
+    """The GCS file's text (``input_files.read_text``)."""
+    return read_text(path, what="GCS file", max_line=MAX_LINE_BYTES)

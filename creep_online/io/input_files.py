@@ -112,6 +112,40 @@ def read_input(path: str | Path, *, what: str = "file", max_line: int | None = N
     return _remembered[key]
 
 
+def read_text(path: str | Path, *, what: str = "file", max_line: int | None = None) -> str:
+    """The text of ``path`` read once whatever it is (``read_input``: bounded, pipes never waited on forever, a
+    pipe's content remembered for a second look); a gzip file is read as the text it holds, bounded the same
+    way. DataError for bytes that are not UTF-8 text."""
+    data = read_input(path, what=what, max_line=max_line)
+    if data[:2] == GZIP_MAGIC:
+        data = _gunzip(path, data)
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise DataError(f"{path}: not a text file (undecodable byte at offset {exc.start})") from None
+
+
+#: The first two bytes of a gzip file: ``run.csv.gz`` is read as the CSV it holds.
+GZIP_MAGIC = b"\x1f\x8b"
+
+
+def _gunzip(path: str | Path, data: bytes) -> bytes:
+    """The bytes inside a gzip file, at most ``max_input_bytes``; DataError if it is corrupt or larger."""
+    import gzip
+    import io
+    import zlib
+    limit = max_input_bytes()
+    try:
+        with gzip.GzipFile(fileobj=io.BytesIO(data)) as fh:
+            text = fh.read(limit + 1)
+    except (OSError, EOFError, zlib.error) as exc:
+        raise DataError(f"{path}: a gzip file that cannot be decompressed ({exc})") from None
+    if len(text) > limit:
+        raise DataError(f"{path}: decompresses to more than the {limit} bytes this tool reads "
+                        f"(CREEP_ONLINE_MAX_INPUT_BYTES)")
+    return text
+
+
 def _read_regular(path: str | Path, name: str, max_line: int | None, limit: int) -> bytes:
     chunks: list[bytes] = []
     since_newline = total = 0
