@@ -40,7 +40,7 @@ import numpy as np
 
 from creep_online.io.capancdt_frames import CapancdtParser, encode_packet  # noqa: E402
 from creep_online.io.feed import FeedLoop, SampleAge  # noqa: E402
-from creep_online.io.sources import open_source  # noqa: E402
+from creep_online.io import open_source  # noqa: E402
 from hil_sim.harness import PlantProcess  # noqa: E402
 
 from bench.harness import dist, write_report  # noqa: E402  (p50/p99/max/mean/n)

@@ -40,7 +40,7 @@ import numpy as np
 
 from bench.harness import dist, write_report  # noqa: E402  (p50/p99/max/mean/n)
 from creep_online.io.feed import FeedLoop, SampleAge  # noqa: E402
-from creep_online.io.sources import open_source  # noqa: E402
+from creep_online.io import open_source  # noqa: E402
 from hil_sim.harness import PlantProcess  # noqa: E402
 from hil_sim.pi_controller import build_parser, plant_config  # noqa: E402
 from hil_sim.plant import generate  # noqa: E402

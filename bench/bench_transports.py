@@ -29,7 +29,7 @@ import numpy as np
 
 
 from creep_online.io.feed import FeedLoop, SampleAge  # noqa: E402
-from creep_online.io.sources import open_source  # noqa: E402
+from creep_online.io import open_source  # noqa: E402
 from hil_sim import PlantConfig, generate, parse_params, run_virtual_plant  # noqa: E402
 from hil_sim.harness import PlantProcess  # noqa: E402
 from bench.harness import dist, write_report  # noqa: E402

@@ -356,7 +356,7 @@ def test_stream_ctrl_c_prints_the_estimate_and_exits_130():
 def test_canlog_bad_records_are_counted_and_skipped(tmp_path):
     can = pytest.importorskip("can", reason="python-can is an optional extra (creep_online[can])")
     from creep_online.io import can_frames as cf
-    from creep_online.io.sources import open_source
+    from creep_online.io import open_source
     good = tmp_path / "s.asc"
     with can.Logger(str(good)) as log:
         ts = 1000.0

@@ -28,7 +28,7 @@ from creep_online.io.capancdt_frames import (FULL_SCALE, CapancdtParser, channel
                                              scale)
 from creep_online.io.capancdt_source import read_data_rate
 from creep_online.io.command_schedule import CommandSchedule
-from creep_online.io.sources import open_source
+from creep_online.io import open_source
 from hil_sim.capancdt_server import sensor_record
 from hil_sim.harness import REPO, PlantProcess
 from hil_sim.plant import PlantConfig, make_input, parse_params

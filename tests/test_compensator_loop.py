@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from creep_online.io.frames import encode_command
-from creep_online.io.sources import open_source
+from creep_online.io import open_source
 from creep_online.model import CreepModel
 from creep_online.online.compensator import CreepCompensator
 from creep_online.simulate import simulate

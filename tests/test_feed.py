@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from creep_online.io.feed import FeedLoop, SampleAge
-from creep_online.io.sources import Sample, open_source
+from creep_online.io import Sample, open_source
 from creep_online.online import OnlineEstimator
 
 sys.path.insert(0, str(Path(__file__).parent / "plugins"))

@@ -13,7 +13,7 @@ import time
 import numpy as np
 import pytest
 
-from creep_online.io.sources import open_source
+from creep_online.io import open_source
 from hil_sim.harness import PlantProcess
 from hil_sim.plant import PlantConfig, generate, parse_params
 

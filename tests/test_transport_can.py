@@ -9,7 +9,7 @@ import pytest
 can = pytest.importorskip("can", reason="python-can is an optional extra (creep_online[can])")
 
 from creep_online.io import can_frames as cf  # noqa: E402
-from creep_online.io.sources import TransportError, open_source  # noqa: E402
+from creep_online.io import TransportError, open_source  # noqa: E402
 from creep_online.errors import DataError  # noqa: E402
 from hil_sim import PlantConfig, generate, parse_params, run_virtual_plant  # noqa: E402
 from hil_sim.harness import PlantProcess  # noqa: E402

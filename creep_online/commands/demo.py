@@ -91,7 +91,7 @@ def hardware_extras():
     """``open_source``, once the demo's extras (pyserial, hil_sim) import; a one-line error if they do not."""
     try:
         import hil_sim.harness  # noqa: F401
-        from ..io.sources import open_source
+        from ..io import open_source
     except ImportError as exc:
         raise CreepOnlineError(f"demo needs the hardware extras ({exc.name} missing): "
                                "pip install 'creep_online[hardware]'") from None

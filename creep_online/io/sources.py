@@ -295,5 +295,3 @@ class ReconnectingSource(SampleSource):
         self._down_since = None
         return True
 
-
-from .registry import open_source  # noqa: E402 - the historical import path of open_source
