@@ -5,6 +5,11 @@ Usage (from the repository root, with the package installed or ``PYTHONPATH=.``)
     python -m bench.bench_online_batch [--plants 20] [--seed-offset 0] [--snr-db 40] [--families payload,drift]
         [--rest-samples 0] [--out bench/results/online_vs_batch_40db.json]
     python -m bench.bench_online_batch --real [--out bench/results/online_divergence_real.json]
+    python -m bench.bench_online_batch --merge A.json B.json ... --snr-db 40 [--out bench/results/online_vs_batch_40db.json]
+    python -m bench.bench_online_batch --table bench/results/online_vs_batch_40db.json
+
+A run writes its results file after every record (a run that is stopped keeps the records it finished); runs of
+one family each, in turn, are merged into one file per SNR with ``--merge``.
 
 Scenario records (``hil_sim.scenarios``; ``--rest-samples`` as in ``bench_online_scenarios.py``): each is fed to
 ``OnlineEstimator`` sample by sample (``update()``), its live prediction error (the output minus
@@ -265,8 +270,14 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--rest-samples", type=int, default=None)
     ap.add_argument("--real", action="store_true", help="the divergence check on tests/data/real instead")
     ap.add_argument("--table", default=None, metavar="JSON", help="print the table of a results file and exit")
+    ap.add_argument("--merge", nargs="+", default=None, metavar="JSON",
+                    help="merge results files of one SNR into --out (its table printed) and exit")
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
+    if args.merge:
+        doc = merge(args.merge, Path(args.out or results_path(f"online_vs_batch_{args.snr_db:g}db")))
+        print(table(doc))
+        return doc
     if args.table:
         print(table(json.loads(Path(args.table).read_text())))
         return {}
@@ -282,6 +293,10 @@ def main(argv: list[str] | None = None) -> dict:
         families = [f for f in families if f in scenarios.FROM_REST]
     window_s = estimator_window_s()
     start = time.perf_counter()
+    rest = "" if args.rest_samples is None else f"_rest{args.rest_samples}"
+    out = Path(args.out or results_path(f"online_vs_batch_{args.snr_db:g}db{rest}"))
+    config = {"plants": args.plants, "seed_offset": args.seed_offset, "snr_db": args.snr_db,
+              "rest_samples": args.rest_samples, "tolerances": TOL, "window_s": WINDOW_S}
     rows: dict[str, list] = {}
     for fam in families:
         for seed in range(args.seed_offset, args.seed_offset + args.plants):
@@ -289,16 +304,34 @@ def main(argv: list[str] | None = None) -> dict:
             rows.setdefault(fam, []).append(row)
             b = row["batch"]
             print(f"{fam} {seed}: batch floor {b.get('floor_ratio', float('nan')):.2f} agrees {row.get('agrees')} "
-                  f"window ratio {row['max_window_ratio']} divergent {row['divergent_windows']} {row['quality']}",
-                  file=sys.stderr, flush=True)
-    summary = {fam: family_summary(r) for fam, r in rows.items()}
-    doc = {"command": command_line(), "config": {"plants": args.plants, "seed_offset": args.seed_offset, "snr_db": args.snr_db,
-                      "rest_samples": args.rest_samples, "tolerances": TOL, "window_s": WINDOW_S},
-           "summary": summary, "records": rows, "elapsed_s": time.perf_counter() - start}
-    rest = "" if args.rest_samples is None else f"_rest{args.rest_samples}"
-    out = Path(args.out or results_path(f"online_vs_batch_{args.snr_db:g}db{rest}"))
+                  f"window ratio {row['max_window_ratio']} divergent {row['divergent_windows']} {row['quality']} "
+                  f"{row['elapsed_s']:.1f} s", file=sys.stderr, flush=True)
+            doc = results_doc(config, rows, time.perf_counter() - start)
+            write_report(doc, out, default=str, echo=False)  # after every record: a stopped run keeps its rows
+    print(json.dumps(doc["summary"], indent=1, default=str))
+    return doc
+
+
+def results_doc(config: dict, rows: dict[str, list], elapsed_s: float) -> dict:
+    """The results document of ``rows`` (per family, the records so far)."""
+    return {"command": command_line(), "config": config,
+            "summary": {fam: family_summary(r) for fam, r in rows.items()}, "records": rows, "elapsed_s": elapsed_s}
+
+
+def merge(paths: list[str], out: Path) -> dict:
+    """One results document of several runs at the same SNR (one family each, say): their records per family."""
+    docs = [json.loads(Path(p).read_text()) for p in paths]
+    snrs = {d["config"]["snr_db"] for d in docs}
+    if len(snrs) != 1:
+        raise SystemExit(f"merge: runs at different SNRs {sorted(snrs)}")
+    rows: dict[str, list] = {}
+    for d in docs:
+        for fam, r in d["records"].items():
+            rows.setdefault(fam, []).extend(r)
+    config = {**docs[0]["config"], "plants": None, "seed_offset": None, "merged": list(paths)}
+    doc = results_doc(config, rows, sum(d.get("elapsed_s", 0.0) for d in docs))
+    doc["command"] = "python -m bench.bench_online_batch --merge " + " ".join(paths) + f" --out {out}"
     write_report(doc, out, default=str, echo=False)
-    print(json.dumps(summary, indent=1, default=str))
     return doc
 
 
