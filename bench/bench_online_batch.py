@@ -6,7 +6,7 @@ Usage (from the repository root, with the package installed or ``PYTHONPATH=.``)
         [--rest-samples 0] [--out bench/results/online_vs_batch_40db.json]
     python -m bench.bench_online_batch --real [--out bench/results/online_divergence_real.json]
     python -m bench.bench_online_batch --merge A.json B.json ... --snr-db 40 [--out bench/results/online_vs_batch_40db.json]
-    python -m bench.bench_online_batch --table bench/results/online_vs_batch_40db.json
+    python -m bench.bench_online_batch --table bench/results/online_vs_batch_40db.json bench/results/online_vs_batch_80db.json
 
 A run writes its results file after every record (a run that is stopped keeps the records it finished); runs of
 one family each, in turn, are merged into one file per SNR with ``--merge``.
@@ -225,6 +225,26 @@ def table(doc: dict) -> str:
     return "\n".join(lines)
 
 
+def markdown(docs: list[dict]) -> str:
+    """The docs table of results documents (one per SNR): per family and SNR, the records, those ``identify`` fits
+    at the noise floor, those of them where online and batch agree, and the records with a divergent window."""
+    snrs = [d["config"]["snr_db"] for d in docs]
+    head = "| family | " + " | ".join(f"{s:g} dB: records, at floor, agree, divergent" for s in snrs) + " |"
+    lines = [head, "|---|" + "---|" * len(docs)]
+    families = list(dict.fromkeys(f for d in docs for f in d["summary"]))
+    for fam in families:
+        cells = []
+        for d in docs:
+            m = d["summary"].get(fam)
+            if m is None:
+                cells.append("not run")
+                continue
+            agree = sum(r["agrees"] for r in d["records"][fam] if r["batch"].get("at_floor"))
+            cells.append(f"{m['records']}, {m['at_batch_floor']}, {agree}, {m['divergent_records']}")
+        lines.append(f"| {fam.replace('_', ' ')} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def real_records() -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
     """(name, t, u, y) of every uniformly sampled record in tests/data/real (its t, u, y columns: the SISO view)."""
     import gzip
@@ -269,7 +289,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--families", default=None)
     ap.add_argument("--rest-samples", type=int, default=None)
     ap.add_argument("--real", action="store_true", help="the divergence check on tests/data/real instead")
-    ap.add_argument("--table", default=None, metavar="JSON", help="print the table of a results file and exit")
+    ap.add_argument("--table", nargs="+", default=None, metavar="JSON",
+                    help="print the tables of results files (one per SNR) and the docs table, and exit")
     ap.add_argument("--merge", nargs="+", default=None, metavar="JSON",
                     help="merge results files of one SNR into --out (its table printed) and exit")
     ap.add_argument("--out", default=None)
@@ -279,7 +300,8 @@ def main(argv: list[str] | None = None) -> dict:
         print(table(doc))
         return doc
     if args.table:
-        print(table(json.loads(Path(args.table).read_text())))
+        docs = [json.loads(Path(p).read_text()) for p in args.table]
+        print("\n\n".join(table(d) for d in docs) + "\n\n" + markdown(docs))
         return {}
     if args.real:
         doc = real_main(Path(args.out or results_path("online_divergence_real")))
