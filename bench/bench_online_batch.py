@@ -229,7 +229,7 @@ def markdown(docs: list[dict]) -> str:
     """The docs table of results documents (one per SNR): per family and SNR, the records, those ``identify`` fits
     at the noise floor, those of them where online and batch agree, and the records with a divergent window."""
     snrs = [d["config"]["snr_db"] for d in docs]
-    head = "| family | " + " | ".join(f"{s:g} dB: records, at floor, agree, divergent" for s in snrs) + " |"
+    head = "| family | " + " | ".join(f"{s:g} dB: records, at floor, agree, diverged" for s in snrs) + " |"
     lines = [head, "|---|" + "---|" * len(docs)]
     families = list(dict.fromkeys(f for d in docs for f in d["summary"]))
     for fam in families:
@@ -350,7 +350,8 @@ def merge(paths: list[str], out: Path) -> dict:
     for d in docs:
         for fam, r in d["records"].items():
             rows.setdefault(fam, []).extend(r)
-    config = {**docs[0]["config"], "plants": None, "seed_offset": None, "merged": list(paths)}
+    config = {**docs[0]["config"], "plants": None, "seed_offset": None,
+              "runs": [d["run"]["command"] if "run" in d else d["command"] for d in docs]}
     doc = results_doc(config, rows, sum(d.get("elapsed_s", 0.0) for d in docs))
     doc["command"] = "python -m bench.bench_online_batch --merge " + " ".join(paths) + f" --out {out}"
     write_report(doc, out, default=str, echo=False)
