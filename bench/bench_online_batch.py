@@ -5,6 +5,11 @@ Usage (from the repository root, with the package installed or ``PYTHONPATH=.``)
     python -m bench.bench_online_batch [--plants 20] [--seed-offset 0] [--snr-db 40] [--families payload,drift]
         [--rest-samples 0] [--out bench/results/online_vs_batch_40db.json]
     python -m bench.bench_online_batch --real [--out bench/results/online_divergence_real.json]
+    python -m bench.bench_online_batch --merge A.json B.json ... --snr-db 40 [--out bench/results/online_vs_batch_40db.json]
+    python -m bench.bench_online_batch --table bench/results/online_vs_batch_40db.json bench/results/online_vs_batch_80db.json
+
+A run writes its results file after every record (a run that is stopped keeps the records it finished); runs of
+one family each, in turn, are merged into one file per SNR with ``--merge``.
 
 Scenario records (``hil_sim.scenarios``; ``--rest-samples`` as in ``bench_online_scenarios.py``): each is fed to
 ``OnlineEstimator`` sample by sample (``update()``), its live prediction error (the output minus
@@ -220,6 +225,26 @@ def table(doc: dict) -> str:
     return "\n".join(lines)
 
 
+def markdown(docs: list[dict]) -> str:
+    """The docs table of results documents (one per SNR): per family and SNR, the records, those ``identify`` fits
+    at the noise floor, those of them where online and batch agree, and the records with a divergent window."""
+    snrs = [d["config"]["snr_db"] for d in docs]
+    head = "| family | " + " | ".join(f"{s:g} dB: records, at floor, agree, diverged" for s in snrs) + " |"
+    lines = [head, "|---|" + "---|" * len(docs)]
+    families = list(dict.fromkeys(f for d in docs for f in d["summary"]))
+    for fam in families:
+        cells = []
+        for d in docs:
+            m = d["summary"].get(fam)
+            if m is None:
+                cells.append("not run")
+                continue
+            agree = sum(r["agrees"] for r in d["records"][fam] if r["batch"].get("at_floor"))
+            cells.append(f"{m['records']}, {m['at_batch_floor']}, {agree}, {m['divergent_records']}")
+        lines.append(f"| {fam.replace('_', ' ')} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def real_records() -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
     """(name, t, u, y) of every uniformly sampled record in tests/data/real (its t, u, y columns: the SISO view)."""
     import gzip
@@ -264,11 +289,19 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--families", default=None)
     ap.add_argument("--rest-samples", type=int, default=None)
     ap.add_argument("--real", action="store_true", help="the divergence check on tests/data/real instead")
-    ap.add_argument("--table", default=None, metavar="JSON", help="print the table of a results file and exit")
+    ap.add_argument("--table", nargs="+", default=None, metavar="JSON",
+                    help="print the tables of results files (one per SNR) and the docs table, and exit")
+    ap.add_argument("--merge", nargs="+", default=None, metavar="JSON",
+                    help="merge results files of one SNR into --out (its table printed) and exit")
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
+    if args.merge:
+        doc = merge(args.merge, Path(args.out or results_path(f"online_vs_batch_{args.snr_db:g}db")))
+        print(table(doc))
+        return doc
     if args.table:
-        print(table(json.loads(Path(args.table).read_text())))
+        docs = [json.loads(Path(p).read_text()) for p in args.table]
+        print("\n\n".join(table(d) for d in docs) + "\n\n" + markdown(docs))
         return {}
     if args.real:
         doc = real_main(Path(args.out or results_path("online_divergence_real")))
@@ -282,6 +315,10 @@ def main(argv: list[str] | None = None) -> dict:
         families = [f for f in families if f in scenarios.FROM_REST]
     window_s = estimator_window_s()
     start = time.perf_counter()
+    rest = "" if args.rest_samples is None else f"_rest{args.rest_samples}"
+    out = Path(args.out or results_path(f"online_vs_batch_{args.snr_db:g}db{rest}"))
+    config = {"plants": args.plants, "seed_offset": args.seed_offset, "snr_db": args.snr_db,
+              "rest_samples": args.rest_samples, "tolerances": TOL, "window_s": WINDOW_S}
     rows: dict[str, list] = {}
     for fam in families:
         for seed in range(args.seed_offset, args.seed_offset + args.plants):
@@ -289,16 +326,35 @@ def main(argv: list[str] | None = None) -> dict:
             rows.setdefault(fam, []).append(row)
             b = row["batch"]
             print(f"{fam} {seed}: batch floor {b.get('floor_ratio', float('nan')):.2f} agrees {row.get('agrees')} "
-                  f"window ratio {row['max_window_ratio']} divergent {row['divergent_windows']} {row['quality']}",
-                  file=sys.stderr, flush=True)
-    summary = {fam: family_summary(r) for fam, r in rows.items()}
-    doc = {"command": command_line(), "config": {"plants": args.plants, "seed_offset": args.seed_offset, "snr_db": args.snr_db,
-                      "rest_samples": args.rest_samples, "tolerances": TOL, "window_s": WINDOW_S},
-           "summary": summary, "records": rows, "elapsed_s": time.perf_counter() - start}
-    rest = "" if args.rest_samples is None else f"_rest{args.rest_samples}"
-    out = Path(args.out or results_path(f"online_vs_batch_{args.snr_db:g}db{rest}"))
+                  f"window ratio {row['max_window_ratio']} divergent {row['divergent_windows']} {row['quality']} "
+                  f"{row['elapsed_s']:.1f} s", file=sys.stderr, flush=True)
+            doc = results_doc(config, rows, time.perf_counter() - start)
+            write_report(doc, out, default=str, echo=False)  # after every record: a stopped run keeps its rows
+    print(json.dumps(doc["summary"], indent=1, default=str))
+    return doc
+
+
+def results_doc(config: dict, rows: dict[str, list], elapsed_s: float) -> dict:
+    """The results document of ``rows`` (per family, the records so far)."""
+    return {"command": command_line(), "config": config,
+            "summary": {fam: family_summary(r) for fam, r in rows.items()}, "records": rows, "elapsed_s": elapsed_s}
+
+
+def merge(paths: list[str], out: Path) -> dict:
+    """One results document of several runs at the same SNR (one family each, say): their records per family."""
+    docs = [json.loads(Path(p).read_text()) for p in paths]
+    snrs = {d["config"]["snr_db"] for d in docs}
+    if len(snrs) != 1:
+        raise SystemExit(f"merge: runs at different SNRs {sorted(snrs)}")
+    rows: dict[str, list] = {}
+    for d in docs:
+        for fam, r in d["records"].items():
+            rows.setdefault(fam, []).extend(r)
+    config = {**docs[0]["config"], "plants": None, "seed_offset": None,
+              "runs": [d["run"]["command"] if "run" in d else d["command"] for d in docs]}
+    doc = results_doc(config, rows, sum(d.get("elapsed_s", 0.0) for d in docs))
+    doc["command"] = "python -m bench.bench_online_batch --merge " + " ".join(paths) + f" --out {out}"
     write_report(doc, out, default=str, echo=False)
-    print(json.dumps(summary, indent=1, default=str))
     return doc
 
 
