@@ -1,10 +1,13 @@
 """Shared fixtures and session set-up.
 
 * The reference data the tests need lives in tests/data (each folder with its source and licence).
-* Run in parallel (``pytest -n auto``, pytest-xdist; each test file on one worker, see pyproject),
-  the numba kernels are compiled once, in the controller, so that two workers never compile the
-  same kernel at once (on a fresh clone that is about a minute of CPU); the workers load them from
-  numba's cache. The files of long diagnoses go out first: they need only the batch kernels
+* Run in parallel (``pytest -n auto``, pytest-xdist), the numba kernels are compiled once, in the
+  controller, so that two workers never compile the same kernel at once (on a fresh clone that is
+  about a minute of CPU); the workers load them from numba's cache.
+* Units of work (``FileOrTestScheduling``): a test file goes to one worker whole, so that its
+  module fixtures are computed once; in the files of long diagnoses (``SPLIT``) each test (or
+  test class: tests that read one fixture are a class) is a unit of its own, so both workers
+  share them. The longest units go out first (``RUN_FIRST``): they need only the batch kernels
   (compiled before the workers start), so the online kernels compile beside them, and the short
   files at the end let the workers finish together.
 """
@@ -32,8 +35,12 @@ ONLINE_KERNELS = (
     "from creep_online.online import compensator, estimator, recursive\n"
     "estimator.warm_kernels(); recursive.warm(); compensator.warm_kernels()\n"
 )
-#: Test files of long diagnoses, longest tests first; under -n they run before the rest.
-RUN_FIRST = ("test_real_data.py", "test_diagnose_pairs.py", "test_diagnostics.py")
+#: Files whose tests are each a long diagnosis: under -n every test (or test class) is a unit of work.
+SPLIT = ("test_real_data.py", "test_diagnose_pairs.py", "test_diagnostics.py")
+#: Under -n these files go out first, in this order (the longest first; the rest follow in collection order).
+RUN_FIRST = (*SPLIT, "test_online.py", "test_hil_faults.py", "test_bench_scenarios.py", "test_hold_physics.py",
+             "test_scenarios.py", "test_diagnose_parallel.py", "test_readonly_install.py", "test_transport_pi.py",
+             "test_identify_convergence.py", "test_online_kernels.py", "test_transport_can.py", "test_capancdt.py")
 
 _warming: list[subprocess.Popen] = []
 
@@ -75,6 +82,29 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     if hasattr(config, "workerinput"):      # an xdist worker: every worker sorts alike
         items.sort(key=lambda item: RUN_FIRST.index(item.path.name) if item.path.name in RUN_FIRST
                    else len(RUN_FIRST))
+
+
+def _unit_of_work(nodeid: str) -> str:
+    """A test file, or in a ``SPLIT`` file one test or test class ("file::Class"), goes to one worker whole."""
+    path, _, rest = nodeid.partition("::")
+    if Path(path).name not in SPLIT:
+        return path
+    first = rest.split("::")[0]
+    return f"{path}::{first}" if "::" in rest else nodeid
+
+
+@pytest.hookimpl(tryfirst=True, optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log):
+    """pytest-xdist's file-at-a-time scheduling with the long diagnoses' files taken test by test."""
+    if config.getvalue("dist") != "loadscope":      # another --dist asked for on the command line: xdist's own
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class FileOrTestScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return _unit_of_work(nodeid)
+
+    return FileOrTestScheduling(config, log)
 
 
 @pytest.fixture(scope="session")

@@ -46,8 +46,10 @@ def _diagnosed(effect, ratio, seed, **kw):
     return diagnose((t, u, y), candidates=EFFECTS, workers=1, combine=False)
 
 
+# the weakest and the strongest by default; the strengths between (the weak band's 2.5, a clear 5.0) with -m slow
 @pytest.mark.parametrize("effect", EFFECTS)
-@pytest.mark.parametrize("ratio", [1.5, 2.5, 5.0, 30.0])
+@pytest.mark.parametrize("ratio", [1.5, pytest.param(2.5, marks=pytest.mark.slow),
+                                   pytest.param(5.0, marks=pytest.mark.slow), 30.0])
 def test_the_holds_name_the_hidden_effect_at_every_strength(effect, ratio):
     d = _diagnosed(effect, ratio, 1)
     assert d.physics["verdict"] == effect, d.physics["reason"]

@@ -91,21 +91,24 @@ def polymer_creep():
     return _diagnose("pe-melt-creep-reptate/pe_cm3_creep_10Pa.csv")
 
 
-def test_polymer_creep_needs_a_second_power_law(polymer_creep):
-    d = polymer_creep
-    assert d.data.weights is not None  # log-spaced: relative fit
-    assert d.verdict == "second_creep"
-    fit = d.candidates[0].fit
-    lo, hi = sorted([fit.model.alpha, fit.effect_params["second_creep"]["alpha2"]])
-    assert lo < 0.7 and hi > 0.8  # short-time slope ~0.6, terminal flow ~1
-    assert fit.residual_rms < 0.3 * d.base.residual_rms
+class TestPolymerCreep:
+    """Two tests of one diagnosis (fixture ``polymer_creep``): a class, so that a parallel run keeps them on one
+    worker."""
 
+    def test_polymer_creep_needs_a_second_power_law(self, polymer_creep):
+        d = polymer_creep
+        assert d.data.weights is not None  # log-spaced: relative fit
+        assert d.verdict == "second_creep"
+        fit = d.candidates[0].fit
+        lo, hi = sorted([fit.model.alpha, fit.effect_params["second_creep"]["alpha2"]])
+        assert lo < 0.7 and hi > 0.8  # short-time slope ~0.6, terminal flow ~1
+        assert fit.residual_rms < 0.3 * d.base.residual_rms
 
-def test_polymer_creep_one_hold_leaves_the_physics_inconclusive_and_the_bic_decides(polymer_creep):
-    """A creep test is a single hold: whether the extra motion follows the input (second creep) or ignores it
-    (drift) cannot be seen in one hold, so the hold physics says so and the verdict rests on the BIC ranking."""
-    d = polymer_creep
-    assert d.verdict == "second_creep"
-    assert d.physics["verdict"] == "inconclusive" and "too few" in d.physics["reason"]
-    basis = d.to_dict()["verdict_basis"]
-    assert basis["decided_by"] == "bic_ranking" and basis["agrees"] is None
+    def test_polymer_creep_one_hold_leaves_the_physics_inconclusive_and_the_bic_decides(self, polymer_creep):
+        """A creep test is a single hold: whether the extra motion follows the input (second creep) or ignores it
+        (drift) cannot be seen in one hold, so the hold physics says so and the verdict rests on the BIC ranking."""
+        d = polymer_creep
+        assert d.verdict == "second_creep"
+        assert d.physics["verdict"] == "inconclusive" and "too few" in d.physics["reason"]
+        basis = d.to_dict()["verdict_basis"]
+        assert basis["decided_by"] == "bic_ranking" and basis["agrees"] is None
