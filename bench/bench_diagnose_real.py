@@ -132,7 +132,13 @@ def main() -> None:
                             "peak_rss_mb": row["previous"]["peak_rss_mb"] / row["this"]["peak_rss_mb"]}
         rows[name] = row
         loads.append(os.getloadavg())
-    out = {"records": rows, "workers": a.workers or "default", "load_average": loads,
+        write_report(summary(rows, a.workers, loads, codes), a.out, echo=False)   # each record as it is done
+    write_report(summary(rows, a.workers, loads, codes), a.out)
+
+
+def summary(rows: dict, workers: str, loads: list, codes: dict) -> dict:
+    """The JSON document of the records done so far."""
+    out = {"records": rows, "workers": workers or "default", "load_average": loads,
            "previous_commit": codes.get("previous", (None, None))[1]}
     if "piezo_150V" in rows:
         r = rows["piezo_150V"]["this"]
@@ -140,7 +146,7 @@ def main() -> None:
                        "meets_seconds": r["seconds"] <= GOAL_SECONDS, "meets_rss": r["peak_rss_mb"] <= GOAL_MB}
     if "previous" in codes:
         out["all_same_verdicts"] = all(r["same"]["verdict"] for r in rows.values())
-    write_report(out, a.out)
+    return out
 
 
 if __name__ == "__main__":

@@ -1175,27 +1175,27 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
             best, best_cost = th, cost
             fit = _result(design, th)
     if above and fit.residual_rms < RESTART_EXPLAINED * base.residual_rms:
-        fit, design, best = _other_variants(design, fit, best, best_cost, max_nfev)
+        fit, design, best = _other_variants(design, fit, best, best_cost, max_nfev, workers)
     return _reported_variant(design, fit, best, max_nfev)
 
 
 def _other_variants(design: Design, fit: ExtendedFit, best: np.ndarray, best_cost: float,
-                    max_nfev: int) -> tuple[ExtendedFit, Design, np.ndarray]:
+                    max_nfev: int, workers: int = 1) -> tuple[ExtendedFit, Design, np.ndarray]:
     """``fit``, or the fit with another variant of an effect (e.g. hysteresis' initial state) polished from its
     parameters if that goes lower: the variant is chosen by short polishes before the fit, which can rank the
     states wrongly (hysteresis + second creep 10-100x seed 1: the descending state stopped at 1.73x the noise,
     the centred one from the same parameters reaches 0.99x). Only for fits above the floor that explain most
     of the base's misfit, as the base's restart. Returns (fit, its design, its parameters)."""
     chosen, theta = design, best
-    for name in design.effects:
-        for variant in get_effect(name).variants:
-            if variant == design.variants.get(name):
-                continue
-            other = Design(design.data, design.effects, design.harmonics, {**design.variants, name: variant})
-            th = _polish(other.explored(), other, best, max_nfev)
-            cost = other.cost(th)
-            if cost < best_cost:
-                fit, best_cost, chosen, theta = _result(other, th), cost, other, th
+    others = [Design(design.data, design.effects, design.harmonics, {**design.variants, name: variant})
+              for name in design.effects for variant in get_effect(name).variants
+              if variant != design.variants.get(name)]
+    # each variant's own designs: on the fit's workers, the same polishes and counts as one after the other
+    done = ordered_map(lambda other: _polish(other.explored(), other, best, max_nfev), others, workers)
+    for other, th in zip(others, done):
+        cost = other.cost(th)
+        if cost < best_cost:
+            fit, best_cost, chosen, theta = _result(other, th), cost, other, th
     return fit, chosen, theta
 
 
