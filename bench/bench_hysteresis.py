@@ -18,6 +18,9 @@ Prandtl-Ishlinskii loop (loop width 2-20 % of the stroke, alpha 0.01-0.3,
   the fit reported before its weights were solved as a model) and, with
   ``--previous REF`` (default main), of the previous code on the same record
   (its own weights and simulate, in its own interpreter);
+* ``invertible``: every partial slope of the fitted loop positive (``flattest_branch`` > 0);
+* ``errors``: the creep and resonance parameters' relative errors (alpha, b, a1, a2) and ``within``: all
+  inside the scenario bench's tolerances (``TOL``: alpha 2 %, b 3 %, a1 5 %, a2 5 %);
 * ``inverse_error``: max |invert(forward(u)) - u| over the stroke, fitted weights;
 * ``loop_error``: the fitted loop against the true one on another input
   (``other_input``: a full-stroke cycle that wipes the operators' memory, then
@@ -26,7 +29,8 @@ Prandtl-Ishlinskii loop (loop width 2-20 % of the stroke, alpha 0.01-0.3,
   to the linear path) over the true loop's opening (sum w_i 2 r_i); the same for
   the previous code's weights (``previous.loop_error``).
 
-Prints one JSON document and writes it to ``bench/results/`` (``--out``).
+The summary gives each fraction per input family, over all records, and per band of the true loop width
+(``WIDTH_BANDS``). Prints one JSON document and writes it to ``bench/results/`` (``--out``).
 Usage: ``python -m bench.bench_hysteresis [--records 20] [--families sine,few_levels] [--previous main]``
 """
 from __future__ import annotations
@@ -52,6 +56,10 @@ from bench.harness import dist, results_path, write_report  # noqa: E402
 
 #: simulate reproduces the fit when the RMS of their difference is below this fraction of the noise.
 REPRODUCES = 1e-6
+#: Relative error tolerances of the creep and resonance parameters (those of ``bench_online_scenarios``).
+TOL = {"alpha": 0.02, "b": 0.03, "a1": 0.05, "a2": 0.05}
+#: Bands of the true loop width over the stroke (the plants draw 2-20 %, log-uniformly).
+WIDTH_BANDS = ((0.02, 0.05), (0.05, 0.1), (0.1, 0.2001))
 
 #: The previous code's worker: fits the record in each .npz named on stdin, prints its weights and simulate's miss.
 PREVIOUS_WORKER = """
@@ -146,6 +154,9 @@ def run_one(family: str, seed: int, n: int, worker=None) -> dict:
            "inverse_error": float(np.max(np.abs(back - u_test)) / max(np.ptp(u_test), 1e-300)),
            "seconds": seconds, "cpu_seconds": cpu}
     row["reproduces"] = row["simulate_over_noise"] <= REPRODUCES
+    row["invertible"] = row["flattest_branch"] > 0.0
+    row["errors"] = {p: abs(getattr(fit.model, p) / getattr(rec.model, p) - 1.0) for p in TOL}
+    row["within"] = all(row["errors"][p] <= TOL[p] for p in TOL)
     if worker is not None:
         with tempfile.NamedTemporaryFile(suffix=".npz", delete=False) as fh:
             np.savez(fh, t=rec.t, u=rec.u, y=rec.y, u_pre=np.nan if rec.u_pre is None else rec.u_pre)
@@ -166,6 +177,10 @@ def summary(rows: list[dict]) -> dict:
     def col(key, sub=None):
         return [(r[sub][key] if sub else r[key]) for r in rows if sub is None or sub in r]
     out = {"records": len(rows), "reproduces": sum(r["reproduces"] for r in rows) / len(rows),
+           "invertible": sum(r["invertible"] for r in rows) / len(rows),
+           "within_tolerances": sum(r["within"] for r in rows) / len(rows),
+           "within_per_parameter": {p: sum(r["errors"][p] <= TOL[p] for r in rows) / len(rows) for p in TOL},
+           "relative_errors": {p: dist_finite([r["errors"][p] for r in rows]) for p in TOL},
            "w_max": dist_finite(col("w_max")), "w_min": dist_finite(col("w_min")),
            "loop_error": dist_finite(col("loop_error")), "flattest_branch": dist_finite(col("flattest_branch")),
            "simulate_over_noise": dist_finite(col("simulate_over_noise")),
@@ -207,8 +222,11 @@ def main() -> dict:
         worker.wait()
     doc = {"samples": a.samples, "h": 1e-4, "first_seed": a.first_seed, "records_per_family": a.records,
            "reproduces_below": REPRODUCES, "previous_commit": commit,
-           "table": {f: summary(r) for f, r in rows.items()},
-           "all": summary([r for rs in rows.values() for r in rs]), "rows": rows,
+           "tolerances": TOL, "table": {f: summary(r) for f, r in rows.items()},
+           "all": summary(every := [r for rs in rows.values() for r in rs]),
+           "width_bands": {f"{lo:.2f}-{min(hi, 0.2):.2f}": summary(band) for lo, hi in WIDTH_BANDS
+                           if (band := [r for r in every if lo <= r["loop_width_rel_true"] < hi])},
+           "rows": rows,
            "elapsed_s": time.time() - t0, "load_average": os.getloadavg()}
     out = a.out or results_path(f"hysteresis_fit_{'all' if len(families) == len(INPUT_FAMILIES) else '-'.join(families)}"
                                 f"_{a.first_seed}-{a.first_seed + a.records - 1}")

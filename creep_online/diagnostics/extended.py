@@ -65,12 +65,17 @@ EXPLORE_SAMPLES = 6000
 EXPLORE_EXCITATION = 0.3
 #: Relative step of the finite differences (the effects' own parameters; every parameter on non-uniform records).
 DIFF_STEP = 1e-7
-#: Solutions remembered per design (``Design.project``).
+#: Solutions remembered per design (``Design.project``) ...
 SOLVED_CACHE = 8
-#: Base-path responses remembered per record (parameter sets; ``Prepared.base_path``).
+#: Base-path responses remembered per record (parameter sets; ``Prepared.base_path``) ...
 BASE_PATH_CACHE = 8
-#: Parallel-effect paths remembered per record (``Prepared.parallel_path``).
+#: Parallel-effect paths remembered per record (``Prepared.parallel_path``) ...
 PARALLEL_PATH_CACHE = 16
+#: ... and at most this many bytes in each of those memories (the most recent entry always kept). The counts
+#: suit the explore window; on a long record one entry of a hysteresis fit (13 input rows, or a coupled design's
+#: tangent of 27 columns) is 5-11 MB at 50,000 samples, and eight to sixteen of each, per record and per design,
+#: held a diagnosis near 1 GB. Every remembered value is exact reuse, so the bound changes no result.
+CACHE_BYTES = 24 * 2**20
 #: Gauss-Newton steps of a coupled design's gain ratios (``Design._coupled_project``), and their relative tolerance.
 COUPLING_STEPS = 8
 COUPLING_RTOL = 1e-10
@@ -272,9 +277,16 @@ def _remembered(cache: dict, key: tuple, size: int, make: Callable[[], np.ndarra
     value.setflags(write=False)
     with _CACHE_LOCK:
         cache[key] = value
-        while len(cache) > size:
-            cache.pop(next(iter(cache)))
+        _evict(cache, size, lambda v: v.nbytes)
     return value
+
+
+def _evict(cache: dict, size: int, nbytes: Callable[[object], int]) -> None:
+    """Drop the least recently used entries (first in ``cache``) beyond ``size`` entries or ``CACHE_BYTES``
+    bytes (``nbytes`` of an entry), keeping the most recent one."""
+    total = sum(nbytes(v) for v in cache.values())
+    while len(cache) > 1 and (len(cache) > size or total > CACHE_BYTES):
+        total -= nbytes(cache.pop(next(iter(cache))))
 
 
 def prepare(t: np.ndarray, u: np.ndarray, y: np.ndarray, *, source: str = "<array>",
@@ -363,6 +375,7 @@ class Design:
         self.nfev = 0
         self._solved: dict[bytes, tuple] = {}    # theta -> (coefficients, output, weighted residual), recent ones
         self._weighted: tuple[bytes, np.ndarray] | None = None   # (theta, weighted design) of the last evaluation
+        self._reported: tuple[bytes, tuple | None] | None = None  # (theta, ``_reported``) of the last one asked
 
     def copy(self) -> "Design":
         """The same design with its own (empty) solution cache and evaluation counter (for another thread)."""
@@ -475,8 +488,7 @@ class Design:
             a.setflags(write=False)
         self._weighted = (key, wphi[0] if self.coupled else wphi)
         self._solved[key] = (coef, y_hat, wres, wphi if self.coupled else None)
-        while len(self._solved) > SOLVED_CACHE:
-            self._solved.pop(next(iter(self._solved)))
+        _evict(self._solved, SOLVED_CACHE, _solution_bytes)
         return coef, y_hat, wres
 
     def _coupled_project(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
@@ -505,8 +517,7 @@ class Design:
         rows, npar, w = base.shape[0], len(par), self.data.weights
         basis = np.vstack([base, *par, static])                 # rows B, P_1, ..., P_J, static
         wbasis = basis if w is None else basis * w
-        q, r = qr(wbasis.T, mode="economic", check_finite=False)
-        qy = q.T @ self.data.wy
+        r, qy = _triangular(wbasis, self.data.wy)
         m, nstat = basis.shape[0], static.shape[0]
         tail = np.zeros((m, nstat))
         tail[m - nstat:] = np.eye(nstat)
@@ -696,6 +707,28 @@ class Design:
         return float(r @ r)
 
 
+def _solution_bytes(entry: tuple) -> int:
+    """Bytes of one remembered solution (``Design.project``): its arrays and a coupled design's tangent."""
+    coef, y_hat, wres, extra = entry
+    return coef.nbytes + y_hat.nbytes + wres.nbytes + (0 if extra is None else extra[0].nbytes + extra[1].nbytes)
+
+
+def _triangular(rows: np.ndarray, wy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(R, Q^T wy) of the QR factorisation rows^T = Q R (economic), without forming Q.
+
+    One Householder QR of [rows^T, wy]: its last column comes out as Q^T wy
+    (the same reflectors applied to it), so Q, n x m, is neither built nor
+    multiplied (half the work of ``qr(mode="economic")`` and its product).
+    """
+    m, n = rows.shape
+    aug = np.empty((n, m + 1), order="F")
+    aug[:, :m] = rows.T
+    aug[:, m] = wy
+    raw = qr(aug, mode="raw", overwrite_a=True, check_finite=False)[1]
+    k = min(m, n)
+    return raw[:k, :m], raw[:k, m]
+
+
 def _solve(wphi: np.ndarray, wy: np.ndarray) -> np.ndarray:
     """Least-squares coefficients of the weighted design (columns scaled to unit norm; gelsy, as identify)."""
     scale = np.linalg.norm(wphi, axis=0)
@@ -762,6 +795,7 @@ def _result(design: Design, theta: np.ndarray) -> ExtendedFit:
     reported = _reported(design, theta)
     if reported is not None:
         coef, names, y_hat, wres, found = reported
+        coef, y_hat, wres = coef.copy(), y_hat.copy(), wres.copy()
     p = dict(zip(design.names, theta))
     c = dict(zip(names, coef))
     b = c["b"]
@@ -788,6 +822,14 @@ def _reported(design: Design, theta: np.ndarray) -> tuple[np.ndarray, list[str],
     with those rows; a coupled design keeps the search's gain ratios of the
     parallel paths. One effect with a reported solution per design.
     """
+    key = np.asarray(theta, dtype=float).tobytes()
+    if design._reported is None or design._reported[0] != key:      # asked again at the same point: remembered
+        design._reported = (key, _reported_solution(design, theta))
+    return design._reported[1]
+
+
+def _reported_solution(design: Design, theta: np.ndarray) -> tuple | None:
+    """``_reported`` computed."""
     data = design.data
     solutions = [(e, variant, e.reported_solution(data, variant)) for e, variant in design.inputs]
     own = [(e, sol) for e, _, sol in solutions if sol is not None]
@@ -1127,33 +1169,33 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     above = RESTART_ABOVE_FLOOR * noise_std_estimate(fit.residual) < fit.residual_rms
     if restart or (above and (fit.residual_rms < RESTART_EXPLAINED * base.residual_rms
                               or _on_a_bound(design, base.theta[:3]))):
-        th = _restart_base(design, explore, best, max_nfev)
+        th = _restart_base(design, explore, best, max_nfev, workers)
         cost = design.cost(th)
         if cost < best_cost:
             best, best_cost = th, cost
             fit = _result(design, th)
     if above and fit.residual_rms < RESTART_EXPLAINED * base.residual_rms:
-        fit, design, best = _other_variants(design, fit, best, best_cost, max_nfev)
+        fit, design, best = _other_variants(design, fit, best, best_cost, max_nfev, workers)
     return _reported_variant(design, fit, best, max_nfev)
 
 
 def _other_variants(design: Design, fit: ExtendedFit, best: np.ndarray, best_cost: float,
-                    max_nfev: int) -> tuple[ExtendedFit, Design, np.ndarray]:
+                    max_nfev: int, workers: int = 1) -> tuple[ExtendedFit, Design, np.ndarray]:
     """``fit``, or the fit with another variant of an effect (e.g. hysteresis' initial state) polished from its
     parameters if that goes lower: the variant is chosen by short polishes before the fit, which can rank the
     states wrongly (hysteresis + second creep 10-100x seed 1: the descending state stopped at 1.73x the noise,
     the centred one from the same parameters reaches 0.99x). Only for fits above the floor that explain most
     of the base's misfit, as the base's restart. Returns (fit, its design, its parameters)."""
     chosen, theta = design, best
-    for name in design.effects:
-        for variant in get_effect(name).variants:
-            if variant == design.variants.get(name):
-                continue
-            other = Design(design.data, design.effects, design.harmonics, {**design.variants, name: variant})
-            th = _polish(other.explored(), other, best, max_nfev)
-            cost = other.cost(th)
-            if cost < best_cost:
-                fit, best_cost, chosen, theta = _result(other, th), cost, other, th
+    others = [Design(design.data, design.effects, design.harmonics, {**design.variants, name: variant})
+              for name in design.effects for variant in get_effect(name).variants
+              if variant != design.variants.get(name)]
+    # each variant's own designs: on the fit's workers, the same polishes and counts as one after the other
+    done = ordered_map(lambda other: _polish(other.explored(), other, best, max_nfev), others, workers)
+    for other, th in zip(others, done):
+        cost = other.cost(th)
+        if cost < best_cost:
+            fit, best_cost, chosen, theta = _result(other, th), cost, other, th
     return fit, chosen, theta
 
 
@@ -1218,7 +1260,7 @@ def _on_a_bound(design: Design, base: np.ndarray) -> bool:
     return bool(np.any(np.minimum(base - design.lo[:3], design.hi[:3] - base) < 1e-6 * span))
 
 
-def _restart_base(design: Design, explore: Design, best: np.ndarray, max_nfev: int) -> np.ndarray:
+def _restart_base(design: Design, explore: Design, best: np.ndarray, max_nfev: int, workers: int = 1) -> np.ndarray:
     """The best of a grid over alpha, fn, zeta with the effects' parameters of ``best`` kept, polished.
 
     Global convergence of an extended fit: the warm starts come from the base
@@ -1260,12 +1302,29 @@ def _restart_base(design: Design, explore: Design, best: np.ndarray, max_nfev: i
         g = j * per + int(np.argmin(costs[j * per:(j + 1) * per]))
         if g not in picks:
             picks.append(g)
-    for i in picks:
-        th = _polish(explore, design, starts[i], max_nfev)
-        c = design.cost(th)
+    for th, c in _polished_apart(explore, design, [starts[i] for i in picks], max_nfev, workers):
         if c < out_cost:
             out, out_cost = th, c
     return out
+
+
+def _polished_apart(explore: Design, design: Design, starts: list[np.ndarray], max_nfev: int,
+                    workers: int) -> list[tuple[np.ndarray, float]]:
+    """(polished parameters, cost on the record) of each start (``_polish``), in order; on ``workers`` threads.
+
+    Each polish runs on its own copies of the designs (as ``_short_polishes``,
+    whatever the threads: a copy only misses remembered solutions, which are
+    exact reuse), and their evaluations of the record are added to
+    ``design``'s count in the starts' order, so neither the parameters nor
+    the count the fit reports depend on the threads.
+    """
+    def one(theta: np.ndarray) -> tuple[np.ndarray, float, int]:
+        whole = design.copy()
+        th = _polish(whole if explore is design else explore.copy(), whole, theta, max_nfev)
+        return th, whole.cost(th), whole.nfev
+    done = list(ordered_map(one, starts, workers))
+    design.nfev += sum(count for _, _, count in done)
+    return [(th, c) for th, c, _ in done]
 
 
 def _polish(explore: Design, design: Design, theta: np.ndarray, max_nfev: int) -> np.ndarray:

@@ -260,7 +260,8 @@ class Superposer:
         if self.uniform:
             s = step(self.grid_tau) if callable(step) else np.asarray(step, dtype=float)
             fs = rfft(s, self.nfft, axis=-1)
-            return irfft(self.spectra * fs[..., None, :], self.nfft, axis=-1)[..., : self.n]
+            # a copy of the first n samples: a view would keep the whole padded transform (twice the size) alive
+            return np.ascontiguousarray(irfft(self.spectra * fs[..., None, :], self.nfft, axis=-1)[..., : self.n])
         if not callable(step):
             raise ValueError("non-uniform records need the step response as a function of time")
         if self.change.size == 0:
