@@ -57,7 +57,7 @@ def test_stream_reports_internal_faults(record, capsys, monkeypatch):
     """A fault injected into the re-fit job (its first call after 5 s of stream raises; the kernels' warm-up runs
     3 s): the stream ends normally, the JSON counts it and lists its event, the human summary names it
     (docs/online.md, "Error contract")."""
-    from creep_online.online import tracker as tracker_module
+    from creep_online.online.trackers import window as tracker_module
     original = tracker_module.WindowTracker._after_accept
 
     def faulty(self, raw):

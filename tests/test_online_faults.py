@@ -15,11 +15,11 @@ import pytest
 from creep_online.errors import DataError
 from creep_online.model import CreepModel
 from creep_online.online import OnlineEstimator
-from creep_online.online import recursive as recursive_module
-from creep_online.online import refit as refit_module
+from creep_online.online._kernels import recursive as recursive_module
+from creep_online.online._kernels import fit_machine as refit_module
 from creep_online.online import search as search_module
-from creep_online.online import tracker as tracker_module
-from creep_online.online import window as window_module
+from creep_online.online.trackers import window as tracker_module
+from creep_online.online._kernels import window as window_module
 from creep_online.simulate import simulate
 from hil_sim import scenarios
 

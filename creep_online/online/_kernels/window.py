@@ -49,13 +49,13 @@ import math
 import numpy as np
 from numba import njit
 
-from . import kernels
-from .kernels import model_coefficients
+from . import coefficients as kernels
+from .coefficients import model_coefficients
 
 CACHE = True
 
 #: A mask value of ``trial_point``: the parameter moves with LINEAR_DAMPING x the others' damping. For the offset
-#: and free responses of a stream in operation (``refit.allocate``): the output is linear in them and their
+#: and free responses of a stream in operation (``fit_machine.allocate``): the output is linear in them and their
 #: columns are nearly collinear over a window (rates 0.01-30 /s against the constant), so the Marquardt damping
 #: of the others (mu >= 1e-7 x the diagonal) held their weakest combinations for seconds (mid_operation seed
 #: 13 at 80 dB: the window at 1.4-1.5x the floor where the exact optimum at the same estimate was 1.0x). It
@@ -1001,7 +1001,7 @@ def cost_of(theta: np.ndarray, a1l: float, a2l: float, lam: np.ndarray, dx: floa
 def cost_rows(F: np.ndarray, fy: np.ndarray, m: np.ndarray, i0: int, i1: int, partial: float) -> float:
     """``partial`` plus rows i0..i1 of the window cost's sum m_i ((F m)_i - 2 fy_i): started at fyy and
     run over all rows, the cost at coefficients m. In row slices, it is the same sum in the same order
-    (the re-fit spreads it over samples, ``refit.refit_unit``)."""
+    (the re-fit spreads it over samples, ``fit_machine.fit_unit``)."""
     p = fy.shape[0]
     c = partial
     for i in range(i0, i1):
