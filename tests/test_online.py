@@ -276,7 +276,7 @@ def test_at_80_db_the_first_search_pass_is_reported_at_once(family, seed, monkey
     """At 80 dB the post-change search's own cost (the resonance at rest at its segment's start) sat above
     1.5x the floor with the right resonance, and the estimate waited for two longer passes (re-convergence
     3.3 s on both records). A pass's result that is clearly better than the live estimate is reported at
-    once (``WindowTracker._take_if_better``): re-convergence within 2 s, and it stays."""
+    once (``Researcher.take_if_better``): re-convergence within 2 s, and it stays."""
     monkeypatch.setattr(scenarios, "SNR_DB", 80.0)
     sc = scenarios.make(family, seed)
     est = OnlineEstimator(sc.h)

@@ -20,6 +20,7 @@ from creep_online.online._kernels import window as W
 from hil_sim.varying_plant import simulate_varying
 from creep_online.online.search import ResonanceSearch
 from creep_online.online.soe import SOE_TOP, SoeBasis, resonance_zoh
+from creep_online.online.trackers import workspace as WS
 from creep_online.online.trackers.settings import DEFAULT
 from creep_online.online.trackers.window import WindowTracker
 from creep_online.simulate import fractional_integral, simulate
@@ -191,7 +192,7 @@ def test_replay_reproduces_the_statistics():
     y = simulate(model, np.arange(n) * h, u)
     tr = _tracker(model, h)
     _feed(tr, u, y)
-    job = tr._relinearize_job(None)
+    job = tr.replayer.relinearize_job(tr, None)
     for _ in job:
         pass
     fresh = _tracker(model, h, lin=(tr.a1l, tr.a2l))
@@ -219,7 +220,7 @@ def test_replays_swap_two_state_arrays_in_turn_and_each_equals_a_tracker_fed_liv
         _feed(tr, u[done:upto], y[done:upto])
         _feed(fresh, u[done:upto], y[done:upto])
         done = upto
-        for _ in tr._relinearize_job(None):
+        for _ in tr.replayer.relinearize_job(tr, None):
             pass
         arrays.append((tr.st, tr.S))
         assert (tr.a1l, tr.a2l) == (fresh.a1l, fresh.a2l)
@@ -249,7 +250,7 @@ def test_replay_snapshots_equal_the_statistics_at_their_instants_and_survive_the
     tr.detect, tr.test_every = True, every
     _feed(tr, u, y)
     tr._jobs.clear()                               # (the live snapshots' jobs: not what is tested)
-    for _ in tr._relinearize_job(None):
+    for _ in tr.replayer.relinearize_job(tr, None):
         pass
     snaps = tr._snaps
     assert [s[0] for s in snaps] == [2000, 2500, 3000]
@@ -281,7 +282,7 @@ def test_replay_snapshots_equal_the_statistics_at_their_instants_and_survive_the
         RF.run(st, S, shift, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)
         outcomes.append(np.array(RF.test_outcome(wk, tr.theta)))
     assert outcomes[0][0] > 0 and np.allclose(outcomes[0], outcomes[1], rtol=1e-12, atol=0)
-    for _ in tr._relinearize_job(None):            # the next replay: the first one's snapshots untouched
+    for _ in tr.replayer.relinearize_job(tr, None):            # the next replay: the first one's snapshots untouched
         pass
     for (i, S0, sy0, *_), (S_then, sy_then) in zip(snaps, kept):
         assert np.array_equal(S0[upper], S_then) and np.array_equal(sy0, sy_then)
@@ -320,7 +321,7 @@ def test_blocked_replay_equals_one_rank_one_update_per_sample(window_s, drift, s
     y[[7, 8, 40, 41, 42, 1500]] = np.nan
     tr = _tracker(model, h, window_s=window_s, drift=drift)
     _feed(tr, u, y)
-    st0, S0 = tr._fresh(tr.a1l, tr.a2l)
+    st0, S0 = WS.fresh(tr, tr.a1l, tr.a2l)
     st0[tr.lay["m"]:tr.lay["sy"]] = tr.m          # the drift columns' coefficients of the estimate
     st0[tr.lay["md"]:] = tr.md
     start = tr._ring_position(0)

@@ -1,7 +1,7 @@
 """The tracker's re-search trigger, its resonance bounds and the search's row sampling (issue 8).
 
 The local re-fits never leave a wrong resonance basin; the re-search trigger
-(``tracker._watch``) searches the resonance again when the window's error
+(``Researcher.watch``) searches the resonance again when the window's error
 stays above the noise floor. The plants are built here, not taken from the
 bench's seeds.
 """

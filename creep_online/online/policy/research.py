@@ -80,11 +80,10 @@ class ResearchRule:
         """A re-fit that ends a misfit run (the window back at the floor)."""
         return not above(rms, floor, self.clear_ratio)
 
-    def sudden(self, rms: float, floor: float, since_floor: int | None, within: int, determined: bool) -> bool:
-        """Did the misfit come suddenly (``since_floor`` samples after a window at the floor that determined
-        the resonance and alpha)?"""
-        return (rms >= self.sudden_ratio * floor and since_floor is not None and since_floor <= within
-                and determined)
+    def sudden(self, rms: float, floor: float, since_floor: int, within: int) -> bool:
+        """Did the misfit come suddenly, ``since_floor`` samples after a window at the floor (at most ``within``)?
+        (The caller also requires that window to have determined the resonance and alpha.)"""
+        return rms >= self.sudden_ratio * floor and since_floor <= within
 
     def gross(self, rms: float, floor: float, broken: bool) -> bool:
         """Does the live estimate misfit so grossly that its gain's sign is no reference?"""
@@ -100,9 +99,10 @@ class ResearchRule:
         return 1.0 / self.gain_ratio < abs(gain_ratio) < self.gain_ratio and (gain_ratio > 0 or gross)
 
     def switch(self, lr: float, moved: list[str], cost: float, gain_ratio: float, gross: bool,
-               drifting: bool, alpha_change: float, at_bound: bool) -> bool:
-        """Does the re-search's result replace the live estimate? Clearly better (``lr``), a real move, a
-        finite cost, a plausible gain, alpha not moved by a drift's trends, and not on the search box's edge."""
+               drifting: bool, alpha_change: float) -> bool:
+        """Does the re-search's result replace the live estimate? Clearly better (``lr``), a real move, a finite
+        cost, a plausible gain, and alpha not moved by a drift's trends (with them projected out the segment
+        hardly determines alpha). (The caller also refuses a result on the search box's edge.)"""
         alpha_held = drifting and abs(alpha_change) > self.drifting_alpha_move
         return (lr > self.lr and bool(moved) and math.isfinite(cost) and self.plausible_gain(gain_ratio, gross)
-                and not alpha_held and not at_bound)
+                and not alpha_held)

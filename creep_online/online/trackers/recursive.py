@@ -67,14 +67,14 @@ import math
 import numpy as np
 
 from .._kernels import window as W
-from .._kernels.recursive import (GLR_HISTORY, R_ALARMN, R_ALARMS, R_CHECKN, R_COSTK, R_COST, R_COSTW, R_DX, R_EVERY,
+from .._kernels.recursive import (R_ALARMN, R_ALARMS, R_CHECKN, R_COSTK, R_COST, R_COSTW, R_DX, R_EVERY,
                                   R_EVLR, R_FORGET, R_HI, R_JUMPK, R_LIMIT, R_LNA2MIN, R_LO, R_NP, R_QUIETN, R_RELIN,
                                   R_MOVE_A1, R_MOVE_A2, R_MOVE_B, R_SIGMAS, R_TESTN, R_TOLA, R_TOLLN,
                                   R_UPDATES, block, layout, refresh, sample)
 from ..checkpoint import Checkpointable
 from ..soe import SoeBasis
 from .settings import DEFAULT, TrackerSettings
-from .window import Fit, ParameterView, _largest_move
+from .common import Fit, ParameterView, largest_move as _largest_move
 
 
 class RecursiveTracker(ParameterView, Checkpointable):

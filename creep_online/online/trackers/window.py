@@ -34,7 +34,6 @@ resumable jobs, one small unit per ``work()`` call:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from typing import Generator
 
 import numpy as np
@@ -42,82 +41,19 @@ import numpy as np
 from .._kernels import fit_machine as RF
 from .._kernels import window as W
 from ..checkpoint import Checkpointable
-from ..policy.change import median as _median
-from ..policy.research import likelihood_ratio as _likelihood_ratio
-from ..search import ZETA_BOX, ResonanceSearch, SearchScratch
 from ..soe import SoeBasis
+from . import workspace as WS
+from .common import (KEPT_SNAPSHOTS, MACHINE_REFIT, MACHINE_TEST, PERIODIC_JOBS, SNAP_SLOTS, WAIT,  # noqa: F401
+                     ZETA_BOUNDS, Fit, ParameterView, replay_unit as _replay_unit)   # (re-exported: estimator, tests)
+from .detection import ChangeDetection
+from .replay import Replayer
+from .research import Researcher
+from .scheduler import Scheduler
 from .settings import DEFAULT, TrackerSettings
 
-#: What a job yields while it waits for samples to arrive (the unit is not spent on it).
-WAIT = "wait"
-#: What a job yields while its re-fit or change test runs in ``machine`` (advanced by the per-sample
-#: kernel, ``fit_machine.sample_work``; in block mode by ``finish``).
-MACHINE = "machine"
-MACHINE_REFIT, MACHINE_TEST = 0, 1      # the work arrays in the tracker's context (``fit_machine.context``)
-#: Change-test snapshots kept, live and replayed: the test of the second before the last reads the oldest.
-KEPT_SNAPSHOTS = 3
-#: Snapshot slots of the change test, reused in turn (see ``WindowTracker._allocate_work``).
-SNAP_SLOTS = 6
-#: Jobs that run before the long ones (``WindowTracker._next_job``).
-PERIODIC_JOBS = ("_snapshot_job", "_refit_job", "_change_job")
 #: The defaults' free-response rates and "determined" limits (the estimator's start-up search and quality).
 FREE_RATES = DEFAULT.free_rates
 DETERMINED = DEFAULT.determined
-ZETA_BOUNDS = ZETA_BOX
-#: theta = [alpha, ln a1, ln a2, b, offset, free-response weights..., b'/b, alpha'] (the last two with drift)
-
-
-def _replay_unit(chunk: int, skip_left: int, cold_rows: int) -> int:
-    """Samples in a replay's next unit: up to eight chunks only advanced (states, no statistics: ~1/8 of the work)
-    while ``skip_left`` > 0, the last of them ending at the skip; then ``settings.cold_replay_rows`` accumulated (the
-    statistics, p x p, and the block's code come from memory after thousands of calls without a replay:
-    with 20 samples after the skip's end in the same unit the call took ~40 us, after ~90 us for 297 when
-    accumulating past the skip's end at the advance's length); then ``chunk`` accumulated."""
-    if skip_left > 0:
-        return min(skip_left, 8 * chunk)
-    return min(cold_rows, chunk) if skip_left == 0 else chunk
-
-
-def _largest_move(new: list[float], old: list[float]) -> float:
-    """Largest relative move of alpha, ln a1, ln a2, b (plain floats: numpy on 4-vectors costs ~2 us)."""
-    return max(abs(a - b) / max(abs(b), 1e-300) for a, b in zip(new[:4], old[:4]))
-
-
-@dataclass
-class Fit:
-    """The window's last fit: parameters, cost, 1-sigma std, and when."""
-
-    theta: np.ndarray | list[float]     # [alpha, ln a1, ln a2, b, ...]
-    cost: float = math.inf
-    neff: float = 0.0
-    std: dict = field(default_factory=dict)
-    sample: int = 0
-
-
-class ParameterView:
-    """The model parameters read from ``theta`` = [alpha, ln a1, ln a2, b, offset, ...] (both trackers)."""
-
-    theta: np.ndarray
-
-    @property
-    def alpha(self) -> float:
-        return float(self.theta[0])
-
-    @property
-    def a1(self) -> float:
-        return math.exp(self.theta[1])
-
-    @property
-    def a2(self) -> float:
-        return math.exp(self.theta[2])
-
-    @property
-    def b(self) -> float:
-        return float(self.theta[3])
-
-    @property
-    def offset(self) -> float:
-        return float(self.theta[4])
 
 
 class WindowTracker(ParameterView, Checkpointable):
@@ -128,6 +64,9 @@ class WindowTracker(ParameterView, Checkpointable):
                  refit_every: int, test_every: int, detect: bool, work: np.ndarray | None = None,
                  drift: int = 0, settings: TrackerSettings | None = None) -> None:
         self.settings = DEFAULT if settings is None else settings
+        #: the collaborators that run the jobs (no state of their own: they work on this tracker)
+        self.scheduler, self.replayer = Scheduler(), Replayer()
+        self.detection, self.researcher = ChangeDetection(), Researcher()
         self.basis = basis
         self.h = basis.h
         self.q = basis.size
@@ -187,7 +126,7 @@ class WindowTracker(ParameterView, Checkpointable):
         self.machine: int | None = None
         self._snaps: list[tuple] = []
         self._shift = np.zeros((self.q + W.ONE, max(self.n_rate, 1)))   # total drift-origin move (W.since_statistics)
-        self._allocate_work()
+        WS.allocate_work(self)
         self._theta_at: dict[int, np.ndarray] = {}
         self._monitors = (gate, burst, stuck)
         self._blank: tuple | None = None
@@ -218,16 +157,16 @@ class WindowTracker(ParameterView, Checkpointable):
         self._blank = None
         self.fit = fit
         self._adopt(st, S, views)
-        self._set_due(self.n)              # (``_schedule`` at sample 0: no re-fit or test is due yet)
+        self.scheduler.set_due(self, self.n)              # (``_schedule`` at sample 0: no re-fit or test is due yet)
 
     def _blank_state(self) -> tuple:
         """A fresh state array (linearized at the current estimate), its empty statistics and their views, with the
         monitors set, and the start's ``Fit`` (its theta is filled by ``start``): ``start`` re-linearizes the state
         at its theta. Built ahead: the numpy calls and the ``Fit`` from Python here cost ~90 us cold in the
         update() that ends the start-up search."""
-        st, S = self._fresh(self.a1, self.a2)
+        st, S = WS.fresh(self, self.a1, self.a2)
         W.set_monitors(st[:W.SC_SIZE], self.h, *self._monitors)
-        return st, S, self._views(st), Fit(theta=np.empty(self.theta.size))
+        return st, S, WS.views(self, st), Fit(theta=np.empty(self.theta.size))
 
     @property
     def b_rate(self) -> float:
@@ -251,88 +190,6 @@ class WindowTracker(ParameterView, Checkpointable):
         return int(self.sc[W.SC_N])
 
     # ------------------------------------------------------------------ state arrays
-    def _allocate_work(self) -> None:
-        """The periodic jobs' work arrays, allocated once.
-
-        A re-fit or a change test runs every few hundred samples: by then the
-        interpreter's and numpy's code paths are cold, and each numpy call from
-        Python (an allocation, a copy, a mask) costs 5-40 us at 10 kHz against
-        ~1 us warm. The jobs therefore call fused kernels on these arrays. Only
-        one re-fit is queued at a time (``_schedule``), and the periodic jobs
-        run one after the other (``_next_job``), so each owns its arrays.
-        """
-        p, k, r0 = self.p, self.theta.size, 5 + self.n_free
-        policy = {"LO": self.alpha_bounds[0], "HI": self.alpha_bounds[1], "DRIFT_ON": self.settings.drift_on,
-                  "DRIFT_OFF": self.settings.drift_off, "DRIFT_MAX": self.settings.drift_max, "HOLD_N": self.settings.alpha_hold_s / self.h,
-                  "DRIFT_MIN_N": self.settings.drift_min_s / self.h, "DRIFT_EVERY": self.settings.drift_test_every, "NRATE": self.n_rate,
-                  "LN_A2_MIN": 2.0 * math.log(self.h / (2.0 * math.pi * self.settings.fn_max_fs)),
-                  "LN_ZETA_LO": math.log(ZETA_BOUNDS[0]), "LN_ZETA_HI": math.log(ZETA_BOUNDS[1]),
-                  "RELINEARIZE": self.settings.relinearize, "WIDE_ON": self.settings.wide_on}
-        extra = tuple(5 + i for i, rate in enumerate(self.settings.window_free_rates[:self.n_free]) if rate not in self.settings.window_free_start)
-        works = [RF.allocate(p, k, r0, self.settings.refit_steps, {**policy, "TRUST": self.settings.trust}, extra=extra),
-                 RF.allocate(p, k, r0, self.settings.test_steps, policy, SNAP_SLOTS + 2 * KEPT_SNAPSHOTS, self._shift.shape)]
-        # one array for what the per-sample kernel's slices need (``fit_machine.context``): theta, the shift and
-        # the work arrays become views into it
-        self._ctx, self.theta, self._shift, (self._wk, self._test_wk) = RF.context(
-            self.theta, self._shift, self.basis.lam, self.basis.dx, works)
-        self._refit_queued = False
-        # the change test's snapshots, in slots reused in turn (a test holds its snapshot for ~15
-        # units, ``_theta_at`` keeps the last five estimates), inside the test's work array: its first slice reads
-        # the snapshot there, in the per-sample kernel (``fit_machine.queue_test``)
-        slots = RF.snapshot_slots(self._test_wk, p, k)
-        self._snap_slots = slots[:SNAP_SLOTS]
-        self._snap_next = 0
-        # a replay's snapshots at the test instants it passes (the last three kept), written by one kernel
-        # (``window.snapshot``: four numpy copies from cold Python cost ~20 us on a replay's unit) into slots of
-        # their own (the test on one starts in the per-sample kernel too: from Python, ``fit_machine.start_test``, it
-        # was 25-26 us cold in one update()); two sets, one per replay in turn: a change test queued on one
-        # replay's snapshot reads it after that replay swapped in, while the next replay writes the other set
-        self._replay_snaps = [[(i, *slots[i]) for i in range(SNAP_SLOTS + j * KEPT_SNAPSHOTS,
-                                                                SNAP_SLOTS + (j + 1) * KEPT_SNAPSHOTS)]
-                              for j in range(2)]
-        self._replay_set = 0
-        self._replay_work = W.replay_scratch(p)     # (a replay's unit leaves nothing in it: shared by the jobs)
-        # a search's segment (``_ring_segment``) and the states-only fast-forward before it (``_nodes_at``), made
-        # and pre-faulted here: one search at a time
-        rows = min(self.ring.shape[1], 1 << 15 if self.work_memory is None else self.work_memory.shape[0])
-        self._segment = np.zeros((2, rows))
-        self._segment.fill(0.0)
-        self._nodes_state = (np.zeros(self.lay["size"]), np.zeros((p, p)))
-        # the replays' state and statistics: a spare pair, swapped with the live one by each replay (``_replay_arrays``)
-        spare = np.full(self.lay["size"], 0.0)
-        self._spare = (spare, np.full((p, p), 0.0), self._views(spare))
-        self._search_scratch = SearchScratch(self.q)   # (one search at a time: ``_researching``)
-        self._search_scratch.prepare_judge(self._free_decays, self.basis.h)    # (``_take_if_better``'s judge)
-        self._search_scratch.prepare_judge(self.settings.research_trends, self.basis.h)   # (a drifting re-search's)
-
-    def _fresh(self, a1l: float, a2l: float, arrays: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Empty statistics and zero states for a linearization point (weight 1), in ``arrays`` (st, S) or new ones."""
-        if arrays is None:
-            st, S = np.zeros(self.lay["size"]), np.zeros((self.p, self.p))
-        else:
-            st, S = arrays
-            st.fill(0.0)
-            S.fill(0.0)
-        W.start_state(st, self.basis.decay, self.basis.gain, self._free_decay, self.forget, self.h, a1l, a2l,
-                      self.n_rate)
-        return st, S
-
-    def _replay_arrays(self, a1l: float, a2l: float) -> tuple:
-        """``_fresh`` state and statistics for a replay, with their views, in the spare pair (the one the last swap
-        retired, or made and touched at construction). One replay runs at a time (the long jobs run in order, and a
-        replay dropped by a restart never resumes), so the next replay may take the pair again. In new arrays the
-        replay's first accumulating unit wrote the statistics' pages for the first time: 60-65 us of page faults in
-        one update() (the statistics are p x p, ~28 kB at p = 59)."""
-        st, S, views = self._spare
-        self._fresh(a1l, a2l, (st, S))
-        return st, S, views
-
-    def _views(self, st: np.ndarray) -> tuple:
-        """The parts of a state array: sc, phi, m, sy, co, ztail, md."""
-        lay = self.lay
-        return (st[:W.SC_SIZE], st[lay["phi"]:lay["m"]], st[lay["m"]:lay["sy"]], st[lay["sy"]:lay["co"]],
-                st[lay["co"]:lay["ztail"]], st[lay["ztail"]:lay["md"]], st[lay["md"]:lay["size"]])
-
     def _adopt(self, st: np.ndarray, S: np.ndarray, views: tuple) -> None:
         """Make (st, S) with their ``views`` the live state and statistics (their coefficients already set)."""
         self.st, self.S = st, S
@@ -366,7 +223,7 @@ class WindowTracker(ParameterView, Checkpointable):
                 self.machine = None
                 status -= RF.MACHINE_DONE
         if status >= 8:
-            self._schedule()
+            self.scheduler.schedule(self)
         return status
 
     def feed_block(self, u: np.ndarray, y: np.ndarray, status: np.ndarray, start: int = 0, stop: int = -1) -> int:
@@ -374,202 +231,41 @@ class WindowTracker(ParameterView, Checkpointable):
         were consumed."""
         used = W.block(u, y, self.st, self.S, self.ring, status, start, stop)
         if status[used - 1] >= 8:
-            self._schedule()
+            self.scheduler.schedule(self)
         return used
 
     @property
     def prediction(self) -> float:
         return float(self.sc[W.SC_PRED])
 
-    def _schedule(self) -> bool | None:
-        """Queue the jobs that are due at this sample and set the next due count. Returns whether the state is
-        finite when a change test's snapshot was taken (its kernel checks it, ``fit_machine.snapshot``), else None."""
-        n = self.n
-        due = n >= self._next_refit
-        if due:
-            self._next_refit = n + self._refit_period
-        if due and self.fitting and not self._refit_queued:
-            self._refit_queued = True      # (a backlog would only re-fit the same statistics again)
-            self._refit_n = n
-            # started by its job's first unit, on a later call: this one has run the sample and Python already
-            self._jobs.append(self._refit_job())
-        if self.detect and n and n % self.test_every == 0:
-            return self._snapshot(n)       # (it sets the next due count too)
-        self._set_due(n)
-        return None
-
-    def _set_due(self, n: int) -> None:
-        """Set the sample at which the per-sample kernel calls back (``_due_after``)."""
-        self.sc[W.SC_DUE] = self._due_after(n)
-
-    def _due_after(self, n: int) -> int:
-        """The sample at which the per-sample kernel calls back (``_schedule``) after sample n (now): the next re-fit
-        or change test. (n passed in: ``self.n`` reads the state array, each read a numpy call from cold Python.)"""
-        return min(self._next_refit, self._test_after(n)) if self.detect else self._next_refit
-
-    def _test_after(self, n: int) -> int:
-        """The first change-test (snapshot) instant after sample n."""
-        return (n // self.test_every + 1) * self.test_every
-
-    def _pace_refits(self, calm: bool) -> None:
-        """After a re-fit: double the period while the window is calm, else back to ``refit_every`` (``settings.calm_move``)."""
-        period = min(2 * self._refit_period, max(self.refit_every, self.test_every)) if calm else self.refit_every
-        if period != self._refit_period:
-            self._refit_period = period
-            n = self.n
-            self._next_refit = max(self._refit_n + period, n + 1)
-            self._set_due(n)
-
-    # ------------------------------------------------------------------ background work
+    # ------------------------------------------------------------------ background work (``Scheduler``)
     @property
     def busy(self) -> bool:
         return bool(self._jobs)
 
-    def _queued(self, *names: str) -> bool:
-        """Is a job of one of these kinds (generator function names) queued? (A plain loop: a generator
-        expression's frame costs a few microseconds from cold Python, at every re-fit and test.)"""
-        for job in self._jobs:
-            if job.__name__ in names:
-                return True
-        return False
-
     def work(self, units: int = 1) -> bool:
-        """Run up to ``units`` units of the queued jobs in order (each unit a few microseconds).
-
-        Returns False when the job at the head waits for more samples (nothing to do now).
-        """
-        while units > 0 and self._jobs:
-            if self.machine is not None:
-                return False               # the per-sample kernel runs it (``feed``), or ``finish``
-            units -= 1
-            job = self._next_job()
-            step = next(job, StopIteration)
-            if step is StopIteration:
-                if job in self._jobs:
-                    self._jobs.remove(job)
-            elif step is WAIT:
-                return False
-        return True
-
-    def _next_job(self) -> Generator:
-        """The periodic short jobs (re-fit, change test) first, then the long ones (replay, search) in order.
-
-        A replay takes seconds of stream time in light units; meanwhile the
-        re-fits and change tests keep running on the live statistics (their
-        linearization point is a few percent off, which costs accuracy, not
-        correctness), instead of waiting behind it.
-        """
-        for job in self._jobs:
-            if job.__name__ in PERIODIC_JOBS:
-                return job
-        return self._jobs[0]
+        """Run up to ``units`` units of the queued jobs (``Scheduler.work``)."""
+        return self.scheduler.work(self, units)
 
     def finish(self) -> None:
-        """Run the queued jobs to completion, or until the one at the head waits for samples (block mode)."""
-        while self._jobs:
-            if self.machine is not None:
-                wk = (self._wk, self._test_wk)[self.machine]
-                RF.run(self.st, self.S, self._shift, self.theta, wk, self.basis.lam, self.basis.dx)
-                self.machine = None
-            elif not self.work(1 << 30) and self.machine is None:
-                break
+        """Run the queued jobs to completion or until the head waits for samples (``Scheduler.finish``)."""
+        self.scheduler.finish(self)
 
     def drain(self) -> None:
-        """Run every queued job to its end now; one that waits for samples goes on with those already here.
+        """Run every queued job to its end now (``Scheduler.drain``)."""
+        self.scheduler.drain(self)
 
-        For a checkpoint (pickle, deepcopy: ``checkpoint.Checkpointable``): jobs are generators, which cannot be
-        pickled, so none may remain; the original is drained too, and original and copy go on alike."""
-        self._draining = True
-        try:
-            self.finish()
-        finally:
-            self._draining = False
+    def _schedule(self) -> bool | None:
+        """Queue the jobs due at this sample (``Scheduler.schedule``; the estimator calls it at status flag 8)."""
+        return self.scheduler.schedule(self)
+
+    def _refit_job(self) -> Generator:
+        """A re-fit job (``Scheduler.refit_job``; the estimator queues one when the start-up replay ends)."""
+        return self.scheduler.refit_job(self)
 
     def _checkpoint(self) -> None:
         if self._jobs or self.machine is not None:
-            self.drain()
-
-    def _refit_job(self) -> Generator:
-        """A re-fit of the window: ``_begin_refit``, its slices in the per-sample kernel, then the result swapped in
-        (``_accept``) and what it triggers (``_after_accept``), each on its own call: with cold caches each of these
-        Python visits costs 10-25 us, together they were over 25 us. While it is queued no other is (``_schedule``)."""
-        try:
-            self._begin_refit()
-            yield MACHINE
-            raw = self._accept()
-            if raw is not None:
-                yield
-                self._after_accept(raw)
-        finally:
-            self._refit_queued = False
-
-    def _begin_refit(self) -> None:
-        """Start a re-fit (``fit_machine.begin``) and hand it to the per-sample kernel."""
-        RF.begin(self.st, self.S, self._shift, self._wk, self.window_start, self.drift_on, self.converged,
-                 self.refits, self._alpha_known)
-        self.machine = MACHINE_REFIT
-
-    def _accept(self) -> tuple | None:
-        """Swap a finished re-fit in (``fit_machine.accept``, one kernel) and record it; returns its numbers for
-        ``_after_accept`` (None if it was not swapped in).
-
-        Plain floats from one tuple: numpy from Python is slow here (cold code paths). The ``Fit``
-        with its 1-sigma dictionary is built when someone asks for it (``fit``), not in update().
-        """
-        raw = RF.accept(self.st, self.theta, self._wk, self.basis.lam, self.basis.dx)
-        verdict, drift, drift_stat, drift_switch = raw[0], raw[8], raw[9], raw[10]
-        if drift:
-            self.drift_stat = drift_stat
-            if drift_switch:
-                self.drift_on = drift_switch > 0.0
-        if verdict == RF.STALE:
-            return None                    # re-linearized meanwhile: the next refit decides
-        if verdict == RF.REJECTED:
-            self.rejected += 1             # a failed fit is never swapped in
-            self._pace_refits(False)
-            self._watch(math.inf, True, raw[18], raw[19])
-            return None
-        n = raw[18]
-        self.converged = self.converged or raw[7] < 0.01
-        self.refits += 1
-        self._fit, self._fit_raw, self._fit_sample = None, (raw, self.drift_on), n
-        if self._first_fit is None:
-            self._first_fit = n
-        return raw
-
-    def _after_accept(self, raw: tuple) -> None:
-        """What an accepted re-fit triggers (on the call after ``_accept``): the re-search watch, the re-fit pace,
-        a replay when the resonance left the linearization point, the settling of a change event."""
-        (_, _, _, _, _, cost, neff, move, *_, n, noise, relinearize) = raw
-        rms = math.sqrt(max(cost, 0.0) / max(neff, 1.0))
-        fine = not relinearize and self._fine_relinearization_due(rms, noise, n)
-        if not fine:
-            self._watch(rms, False, n, noise, raw)
-        self._pace_refits(self.converged and move < self.settings.calm_move and rms <= self.settings.research.clear_ratio * noise
-                          and not (relinearize or fine) and not (self.events and not self.events[-1]["settled"]))
-        if relinearize or fine:
-            if not self._queued("_relinearize_job"):
-                # a settled window whose resonance runs off is what a change looks like: the test due next
-                # decides first, and a declared change drops the replay with the old window
-                self._jobs.append(self._relinearize_job(None, after_test=self.settings.replay_after_test and self.converged
-                                                        and self.detect))
-        elif self.events:
-            self._settle_events(move)
-
-    def _fine_relinearization_due(self, rms: float, noise: float, n: int) -> bool:
-        """Replay at the estimate although it is within self.settings.relinearize of the point? When the converged window
-        misfits and a1 or a2 is more than self.settings.relinearize_fine from the point (``settings.relinearize_fine``); the
-        re-search trigger skips that re-fit (a misfit the replay removes is not a wrong basin)."""
-        if noise > 0.0 and rms <= self.settings.research.clear_ratio * noise:     # at the floor: the backoff starts over
-            self._fine_wait = int(self.settings.fine_wait_s / self.h)
-            return False
-        if not (self.converged and self.fitting and n >= self._next_fine and noise > 0.0):
-            return False
-        if max(abs(self.a1 / self.a1l - 1.0), abs(self.a2 / self.a2l - 1.0)) <= self.settings.relinearize_fine:
-            return False
-        self._next_fine = n + self._fine_wait
-        self._fine_wait = min(2 * self._fine_wait, int(self.settings.research.max_wait_s / self.h))
-        return True
+            self.scheduler.drain(self)
 
     @property
     def fit(self) -> Fit:
@@ -577,7 +273,7 @@ class WindowTracker(ParameterView, Checkpointable):
         if self._fit is None:
             raw, drift_on = self._fit_raw
             r = RF.Accepted._make(raw)
-            sigma2 = self._noise_variance(r)
+            sigma2 = WS.noise_variance(self, r)
             var = (r.var_alpha, r.var_ln_a1, r.var_ln_a2, r.var_b, r.var_offset, r.var_rate0, r.var_rate1)
             sd = [math.sqrt(abs(v) * sigma2) if math.isfinite(v) else math.inf for v in var]
             a1, a2 = math.exp(r.ln_a1), math.exp(r.ln_a2)
@@ -592,7 +288,7 @@ class WindowTracker(ParameterView, Checkpointable):
     def fit(self, value: Fit) -> None:
         self._fit, self._fit_sample = value, value.sample
 
-    # ------------------------------------------------------------------ relinearization (replay)
+    # ------------------------------------------------------------------ remembered samples
     def _ring_position(self, index: int) -> int:
         """Ring slot of the sample with this index (must be remembered). A sample keeps its slot while it is
         remembered (the oldest slot and index advance together), so jobs compute it once and count on."""
@@ -600,544 +296,3 @@ class WindowTracker(ParameterView, Checkpointable):
         count = int(self.sc[W.SC_RCOUNT])
         oldest = (int(self.sc[W.SC_RPOS]) - count) % size
         return (oldest + index - int(self.sc[W.SC_RSTART])) % size
-
-    def _relinearize_job(self, start: int | None, after_test: bool = False) -> Generator:
-        """Replay the remembered samples (from ``start``, default the oldest) for the current resonance.
-
-        ``after_test``: first wait for the change test due next to finish (``settings.replay_after_test``).
-        """
-        if after_test:
-            due = self._test_after(self.n)
-            while not self._draining and (self.n <= due or self.machine == MACHINE_TEST
-                                          or self._queued("_snapshot_job", "_change_job")):
-                yield WAIT
-        yield                              # (a caller's last work and the arrays below were 23 us cold in one)
-        a1, a2 = self.a1, self.a2
-        st, S, views = self._replay_arrays(a1, a2)
-        yield                              # (with the set-up below, ~55-65 us cold)
-        lay = self.lay
-        oldest = int(self.sc[W.SC_RSTART])
-        begin = max(self.window_start if start is None else start, oldest)
-        # the states are replayed from the oldest remembered sample, exact for the nodes; the
-        # resonance states start at zero, which is exact only at the record's start: otherwise
-        # they are not trusted before two settling times
-        skip = begin - oldest
-        if oldest > 0:
-            skip = max(skip, self._settling_samples(a1, a2))
-        # the nodes, the free responses, the drift columns' time at the oldest sample (and, after the yield, their
-        # coefficients at the new point)
-        W.replay_origin(st, self.ztail, self._free_rates, oldest, float(self.sc[W.SC_TREF]))
-        yield
-        if self.n_rate:
-            W.full_coefficients(self.theta, a1, a2, self.basis.lam, self.basis.dx, st[lay["m"]:lay["sy"]])
-            if self.n_rate > 1:
-                W.drift_coefficients(self.theta, a1, a2, self.basis.lam, self.basis.dx, st[lay["md"]:lay["size"]])
-        chunk = self.replay_chunk
-        snaps: list[tuple] = []
-        buffers, taken = self._replay_snaps[self._replay_set], 0
-        self._replay_set ^= 1
-        yield
-        lin = (a1, a2)
-        size, slot = self.ring.shape[1], self._ring_position(oldest) - oldest
-        i = oldest
-        deferred = False
-        while i < self.n:                  # the live stream keeps appending: catch up
-            n = min(_replay_unit(chunk, skip - (i - oldest), self.settings.cold_replay_rows), self.n - i)
-            if self.detect:                # stop at the change test's snapshot instants
-                n = min(n, self._test_after(i) - i)
-            W.replay(self.ring, (slot + i) % size, n, max(skip - (i - oldest), 0), st, S, *self._replay_work)
-            i += n
-            if self.detect and i % self.test_every == 0 and i - oldest > skip:
-                index, S0, sy0, shift0, theta0 = buffers[taken % KEPT_SNAPSHOTS]  # (the slot of the one dropped now)
-                taken += 1                 # shift0 stays zero: a replay's snapshots are at its own origin
-                theta_i = self._theta_at.get(i, self.theta)
-                yield                      # (the snapshot in a unit of its own: with a chunk's rows, 25-27 us)
-                syy0, g0 = W.snapshot(st, S, shift0, theta_i, S0, sy0, shift0, theta0)
-                snaps = (snaps + [(i, S0, sy0, syy0, g0, lin, theta0, shift0, index)])[-KEPT_SNAPSHOTS:]
-            if i >= self.n:                # caught up: swap now (a yield lets a new sample in) if this unit was
-                if n <= self.settings.swap_with or deferred:  # light; else on the next one, with the samples that came in
-                    break                  # (once: fed in blocks, more than settings.swap_with may come in per unit)
-                deferred = True
-            yield
-        # swap: the live scalars and tail, the replayed states and statistics; the live pair is the next spare
-        W.swap_into(self.st, st, self.theta, self.basis.lam, self.basis.dx)
-        self._spare = (self.st, self.S, (self.sc, self.phi, self.m, self.sy, self.co, self.ztail, self.md))
-        self._adopt(st, S, views)
-        self._snaps = snaps                # the change test keeps its reference through a replay
-        self._shift[:] = 0.0               # (replayed at one origin: the snapshots' and the statistics' own)
-        yield                              # (the swap and the pace below: 25 us cold in one)
-        self.relinearizations += 1
-        self._pace_refits(False)
-
-    # ------------------------------------------------------------------ change detection
-    def _snapshot(self, n: int) -> bool:
-        """The change test's snapshot of the statistics and the estimate at sample n (now): the copy at this
-        instant, the next due count (``_set_due``'s) and the state's check in one kernel, its bookkeeping on the
-        next call (``_snapshot_job``; together they were over 25 us). Returns whether the state is finite."""
-        index = self._snap_next
-        self._snap_next = (index + 1) % SNAP_SLOTS
-        syy0, g0, finite = RF.snapshot(self.st, self.S, self._ctx, MACHINE_TEST, index, self._due_after(n))
-        self._jobs.append(self._snapshot_job(n, index, syy0, g0, self.adoptions))
-        return finite
-
-    def _snapshot_job(self, n: int, index: int, syy0: float, g0: float, adoptions: int) -> Generator:
-        """Record the snapshot taken at sample n (``_snapshot``) and queue the change test of the second since
-        the one before the last. Dropped if the live state was replaced meanwhile (``adoptions`` counts: a replay's
-        swap, a restart; ``_adopt`` starts the snapshots afresh; the replays reuse two arrays in turn, so their
-        identity would not tell)."""
-        if adoptions != self.adoptions:
-            return
-        S0, sy0, shift0, theta0 = self._snap_slots[index]
-        self._snaps.append((n, S0, sy0, syy0, g0, (self.a1l, self.a2l), theta0, shift0, index))
-        self._theta_at[n] = theta0         # the estimate at each snapshot instant, the last five
-        self._theta_at.pop(n - 5 * self.test_every, None)
-        if len(self._theta_at) > 5:        # (an instant without a snapshot: not in a stream fed sample by sample)
-            for old in [k for k in self._theta_at if k < n - 4 * self.test_every]:
-                del self._theta_at[old]
-        if len(self._snaps) > KEPT_SNAPSHOTS:
-            self._snaps.pop(0)
-        if len(self._snaps) == KEPT_SNAPSHOTS:   # (the oldest is the second before the last)
-            self._jobs.append(self._change_job(self._snaps[0]))
-        yield
-
-    def _change_job(self, snap: tuple) -> Generator:
-        """Likelihood-ratio test of the samples since the snapshot against the window's estimate."""
-        n0, S0, sy0, syy0, g0, lin0, theta0, shift0, slot = snap
-        g = float(self.sc[W.SC_G])
-        if g < g0 or self._fit_sample < n0 or lin0 != (self.a1l, self.a2l) or n0 < self.window_start \
-                or not self.converged or self._researching() or self._misfit_from_start():
-            return                         # (a misfit being re-searched is not a change of the plant)
-        # the drift columns stay in, at the window's rates (the snapshot moved to the live time origin):
-        # over a second the drift is not negligible (alpha +0.7 %/s at a 2e-4 noise on a 0.5 output is ~5
-        # noise levels), and without it a drifting plant's step looked like a change
-        lin = (self.a1l, self.a2l)
-        wk = self._test_wk
-        free_rates = self.n_rate > 0 and not self.drift_on
-        RF.queue_test(wk, slot, syy0, free_rates)     # the statistics since the snapshot: the test's first slice
-        self.machine = MACHINE_TEST        # settings.test_steps Levenberg-Marquardt steps, then the covariance, in the
-        yield MACHINE                      # per-sample kernel
-        # plain floats from here on (numpy from Python is slow here)
-        r = RF.TestOutcome._make(RF.test_outcome(wk, self.theta))
-        if not (math.isfinite(r.after) and r.after > 0.0 and math.isfinite(r.before)):
-            return
-        nr = r.n - n0                      # the rows tested
-        sigma2 = r.after / max(nr - 4, 1)
-        lr = (r.before - r.after) / sigma2
-        # the test is calibrated against its own recent level: a drifting plant (or a model that is
-        # slightly off) raises the statistic slowly and evenly, a change makes it jump
-        level = _median(self._lr_recent) if len(self._lr_recent) >= 4 else 0.0
-        if lr <= self.settings.change_rule.disagree and lr < max(self.settings.change_rule.threshold, self.settings.change_rule.jump * level):
-            self.disagreement = None       # the common case, without the dictionaries below (cold Python)
-            self._lr_recent = (self._lr_recent + [lr])[-self.settings.change_rule.history:]
-            return
-        yield                              # a disagreement: what moved, on the next call (rare, cold Python: with
-        # the test's outcome in one call ~30 us)
-        moves = {"a1": math.exp(r.ln_a1 - r.live_ln_a1) - 1, "a2": math.exp(r.ln_a2 - r.live_ln_a2) - 1,
-                 "b": r.b / r.live_b - 1 if r.live_b else 0.0}
-        # relative 1-sigma of the recent fit (ln a1, ln a2 are relative already)
-        rel_sd = {"a1": math.sqrt(abs(r.var_ln_a1) * sigma2), "a2": math.sqrt(abs(r.var_ln_a2) * sigma2),
-                  "b": math.sqrt(abs(r.var_b) * sigma2) / max(abs(r.b), 1e-300)}
-        # significant on the scale the 1-sigma is on (ln a1, ln a2; b relative): for a large move of an
-        # undetermined resonance exp(d) - 1 is far larger than d (a flat compensated hold: a2 +232 % against a
-        # 40 % 1-sigma passed as 5.9 sigma, it is 3.0 in ln a2, and the window restarted on no change)
-        size = {"a1": abs(r.ln_a1 - r.live_ln_a1), "a2": abs(r.ln_a2 - r.live_ln_a2), "b": abs(moves["b"])}
-        moved = {k: v for k, v in moves.items()
-                 if abs(v) > self.settings.change_rule.move[k] and size[k] > self.settings.change_rule.sigmas * rel_sd[k]}
-        self.disagreement = {"t": self.n * self.h, "lr": float(lr), "moves": {k: float(v) for k, v in moved.items()}} \
-            if lr > self.settings.change_rule.disagree and moved else None
-        if lr < max(self.settings.change_rule.threshold, self.settings.change_rule.jump * level) or not moved or lin != (self.a1l, self.a2l):
-            self._lr_recent = (self._lr_recent + [float(lr)])[-self.settings.change_rule.history:]
-            return
-        yield                              # the event on the next calls, the restart on the one after (with the
-        settled = bool(self._settled_before(n0, theta0))      # test's result all in one call: ~90-130 us; the
-        yield                              # settled check and the event together ~30 us)
-        last = self.events[-1] if self.events else None
-        if last is not None and not last["settled"]:
-            # the same change seen again from a cleaner window: one event, restarted later
-            last["restarts"] += 1
-            last["lr"] = max(last["lr"], float(lr))
-        else:
-            # estimate_settled False: the estimate it was judged against was still moving (a start-up estimate
-            # converging): the event may correct the estimate, not the plant
-            self._open_event(n0 * self.h, sorted(moved), moves, lr, theta0, estimate_settled=settled)
-        yield
-        if settled:
-            self.theta[0] = theta0[0]      # alpha as it was before the change (the refits chased it since)
-        self._restart_window(n0, "b" in moved, alpha_known=settled)
-
-    def _open_event(self, t: float, moved: list[str], moves: dict, lr: float, before: np.ndarray,
-                    **extra) -> None:
-        """Record a change event, not yet settled (``_settle_events`` fills in what moved once the fit has stopped
-        moving): when it began (t, s) and was detected, the parameters that moved and by how much, its likelihood
-        ratio, and the estimate before it (``before[:4]``, copied)."""
-        self.events.append({"t": t, "detected_t": self.n * self.h, "moved": moved,
-                            "relative_change": {k: float(v) for k, v in moves.items()}, "lr": float(lr),
-                            "settled": False, "restarts": 1, "_before": before[:4].copy(), **extra})
-
-    def _settled_before(self, n0: int, theta0: np.ndarray) -> bool:
-        """Was the window's estimate settled over the second before the tested one? Only then is its alpha the
-        plant's before a declared change, and restored (creep does not jump with a payload or a stiffness);
-        otherwise the live alpha stays for the resonance search but is not held afterwards
-        (``_restart_window``'s ``alpha_known``): neither the unsettled estimate's alpha nor the live one is
-        known to be the plant's. Settled: the estimate at the previous snapshot instant and at ``n0`` do not
-        differ by a move that would itself count as a change (``settings.change_rule.move``, alpha ``settings.research.alpha_move``);
-        in the start-up window both must exist; after a restart the post-change estimate counts from its first
-        snapshot on.
-
-        (Seen: a start-up search in a wrong basin, alpha 0.95 at its bound and 32 Hz for an 8 Hz plant; the
-        re-fits walked toward the plant and the change test on the second after the walk declared a change
-        (right: it corrects a wrong start), but restored alpha 0.95, and the post-change search at that alpha
-        never recovered: alpha +200 % at the end. It had been masked by slower replays, whose snapshots were
-        not ready in time. Tried first: no declaration at all on such a second. Close unmodelled modes then
-        lost start-up corrections (a2 -99.5 % for 6 s until a later change). Then: the live alpha kept and
-        held; quiet start alpha 0.35, 7 Hz, seed 6 ended at alpha -5.5 %. Then: alpha searched too; on the
-        short post-correction segment fresh stiffness 1007 went to a wrong basin, a2 -99.9 % for 7 s.)
-        """
-        n_prev = n0 - self.test_every
-        if n_prev < self.window_start:
-            return self.window_start > 0       # a restarted window: its first seconds are tested
-        prev = self._theta_at.get(n_prev)
-        if prev is None or not prev[3]:
-            return False
-        return (abs(theta0[0] / prev[0] - 1.0) <= self.settings.research.alpha_move
-                and abs(math.exp(theta0[1] - prev[1]) - 1.0) <= self.settings.change_rule.move["a1"]
-                and abs(math.exp(theta0[2] - prev[2]) - 1.0) <= self.settings.change_rule.move["a2"]
-                and abs(theta0[3] / prev[3] - 1.0) <= self.settings.change_rule.move["b"])
-
-    def _restart_window(self, n0: int, gain_moved: bool, alpha_known: bool = True) -> None:
-        """A change happened between sample n0 and now: the window restarts after it.
-
-        The old window's refits are void. The parameters stay until the
-        resonance has been searched afresh on post-change samples only
-        (``_research_job``); the test's own fit is linearized around the old
-        resonance and unreliable for a large move. ``alpha_known`` False (a start-up estimate corrected,
-        ``_settled_before``): alpha is not held afterwards, and later re-searches free it.
-        """
-        self.window_start = self._post_change_start(n0, gain_moved)
-        self._alpha_known = alpha_known
-        self.converged = False
-        # a drift the old window modelled goes on through the change (a payload or a resonance change does not stop
-        # the ceramic's thermal drift): its rates stay, fitted in the new window from the start. (Zeroed, a drifting
-        # plant at 80 dB, whose first-order drift columns misfit late in the record and set off a false change, had
-        # a short window without drift that misread alpha and b, and in 2 noise seeds of 9 a re-search then took a
-        # candidate without the resonance: alpha +10-13 %, a1 -99 %; kept, alpha within 0.8 % in all 9)
-        if not self.drift_on:
-            self.theta[5 + self.n_free:] = 0.0
-        self._lr_recent = []
-        self._snaps = []
-        self._misfit_since = None
-        self._floor_at = None
-        self._first_fit = None
-        self._research_wait = int(self.settings.research.after_s / self.h)
-        self.machine = None
-        # the queued jobs are dropped; a re-fit queued but not yet started would otherwise leave its flag set (its
-        # ``finally`` never runs) and no re-fit would be queued again (seen once the restart came a few calls later)
-        self._refit_queued = False
-        self._jobs = [self._research_job(self.window_start)]
-        self._pace_refits(False)
-
-    def _settling_samples(self, a1: float, a2: float) -> int:
-        """Two settling times of the resonance (a1, a2), in samples: 16 a2 / a1 = 8 / (zeta wn)."""
-        return int(16.0 * a2 / a1 / self.h)
-
-    def _post_change_start(self, n0: int, gain_moved: bool) -> int:
-        """The first sample known to follow a change that the test saw between n0 and now.
-
-        A change of a1, a2 alone shows only in the transients an input move excites: when the input moved
-        inside the test's window, its last move came after the change, and the samples from it on are
-        post-change; otherwise only the samples after the detection are. (Seen: a payload change 0.3 s
-        before a large step, detected 0.4 s after it; the search on the samples after the detection held
-        two small steps, fitted them at the noise floor in a wrong basin, and re-convergence waited 3.5 s
-        for the next large step.) A gain change also moves the output during a hold, at any instant of
-        the window, so then only the samples after the detection are (a stiffness change 0.2 s after the
-        last step, restarted there, was fitted as one model across the jump and never re-converged).
-        """
-        moved = self.n - 1 - int(self.sc[W.SC_SINCE])      # the input's last change
-        return moved - 1 if moved - 1 > n0 and not gain_moved else self.n
-
-    def _research_job(self, n_from: int) -> Generator:
-        """Wait for post-change samples, search the resonance on them (alpha held), rebuild the window there.
-
-        Samples from ``n_from`` on are all post-change (``_post_change_start``): the search gets
-        ``settings.research_s`` seconds of them (longer if the input has not moved), starting from the exact node
-        state; before an input move inside the test's window, the hold before it settles the resonance
-        states (the search's lead).
-        """
-        self.fitting = False
-        n_detect = self.n
-        cap = min(self.ring.shape[1] // 2, 1 << 15 if self.work_memory is None else self.work_memory.shape[0])
-        settle = self._settling_samples(self.a1, self.a2)      # of the old resonance
-        # at least one settling time, at most what the search holds: the old resonance may be a wrong one (a
-        # 0.27 Hz, zeta 0.005 estimate set a wait of 437 s, and the window stopped fitting for good)
-        wait = min(max(int(self.settings.research_s / self.h), settle // 2), cap)
-        while not self._draining and (self.n < n_from + wait
-                                      or (not self._input_moved(n_from) and self.n < n_from + 3 * wait)):
-            yield WAIT
-        oldest = int(self.sc[W.SC_RSTART])
-        n0 = max(n_from - settle if n_from < n_detect else n_from, oldest)
-        zeta0 = yield from self._nodes_at(n0)
-        yield                              # (the fast-forward's end and the segment's first copy: 26-27 us cold)
-        search: ResonanceSearch | None = None
-        seg = 0
-        for _ in range(self.settings.research_passes):
-            starts = None
-            if search is not None:         # another pass on twice the samples, from the last one's basins
-                while not self._draining and self.n < n0 + min(2 * seg, cap):
-                    yield WAIT
-                starts = [c[1:] for c in search.candidates]
-            u, y = yield from self._ring_segment(n0, min(self.n, n0 + cap))
-            yield                          # (the segment's last copy and the search's construction: 24-25 us cold)
-            seg = u.size
-            lead = n_from - n0 if n_from < n_detect else min(settle, u.size // 4)
-            # the live estimate competes with the grid: the window re-fits often follow a change
-            # before the test confirms it, and the grid's best basin can be a wrong one
-            search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, fixed_alpha=self.alpha,
-                                     work=self.work_memory, extra=((self.alpha, self.a1, self.a2),),
-                                     starts=starts, scratch=self._search_scratch)
-            yield
-            yield from self._run_search(search)
-            # each pass's result is reported as soon as it is clearly better than the live estimate; a
-            # longer pass may still replace it (at 80 dB the first pass's own cost, the resonance at rest
-            # at the segment's start, sat at 1.5-2x the floor with the right resonance, and the estimate
-            # waited ~1.6 s for the third)
-            yield from self._take_if_better(search)
-            # (with a shortened lead the misfit may be the unknown resonance state at the segment's start)
-            if self._resolved(search) or u.size >= cap or lead < settle:
-                break
-        # re-fits wait for the replay from the change: until it is swapped in, the live statistics
-        # still hold the pre-change window, and a fit of them would report a second change
-        yield from self._relinearize_job(max(n_from, oldest))
-        self.fitting = True
-
-    def _take_if_better(self, search: ResonanceSearch) -> Generator:
-        """The post-change search's result replaces the estimate when clearly better on its segment (both judged
-        with the resonance state at the segment's start unknown, as a re-search): where every candidate fits at
-        the noise floor (one small step) the re-fits do better from the estimate."""
-        r = search.result
-        if r is None or not (math.isfinite(r.cost) and r.a1 > 0 and r.a2 > 0 and r.b != 0):
-            return
-        yield                              # (the search's last unit ended this call)
-        c_live = yield from search.judged_cost(self.alpha, self.a1, self.a2, self._free_decays)
-        c_new = yield from search.judged_cost(r.alpha, r.a1, r.a2, self._free_decays)
-        rows = search.judged_rows()
-        yield
-        if _likelihood_ratio(rows, c_live, c_new) > self.settings.research.lr and not search.at_bound(r):
-            self.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
-            self._take_resonance()
-            yield
-
-    @staticmethod
-    def _run_search(search: ResonanceSearch) -> Generator:
-        """A search to its result, one ``ResonanceSearch.step`` per unit of background work."""
-        while not search.step():
-            yield
-
-    def _misfit_from_start(self) -> bool:
-        """Has the window misfit (``_watch``) since its first re-fit? Then its estimate was wrong, not the plant
-        changed: the re-search trigger goes first (seen: a start-up search in a wrong basin; the change test
-        ran a few samples before the trigger and reported a2 +232 % as a change at 0.5 s)."""
-        return self._misfit_since is not None and self._first_fit is not None and self._misfit_since <= self._first_fit
-
-    def _researching(self) -> bool:
-        """Is a search of the resonance queued (after a change, or by the re-search trigger)?"""
-        return self._queued("_research_job", "_research_again_job")
-
-    def _resolved(self, search: ResonanceSearch) -> bool:
-        """Does the post-change search's result fit its samples near the noise floor? If not, the segment
-        carries too little information (a single small input step) or a transient: search a longer one.
-
-        (Tried and dropped: also searching again while another basin's candidate was within a likelihood
-        ratio of 30. On a well damped mode (zeta 0.4) neighbouring candidates are one broad valley the
-        re-fits settle, and the extra passes delayed re-convergence from 2 to 4 s.)
-        """
-        noise = float(self.sc[W.SC_NOISE])
-        return search.result.cost <= (self.settings.research.ratio * noise) ** 2
-
-    def _nodes_at(self, n0: int) -> Generator:
-        """The exact node state before remembered sample n0 (fast-forwarded from the ring's oldest, in units)."""
-        st, S = self._nodes_state          # node states only (no statistics: S is not touched)
-        st.fill(0.0)
-        W.start_state(st, self.basis.decay, self.basis.gain, self._free_decay, self.forget, self.h, self.a1l,
-                      self.a2l, self.n_rate)
-        yield                              # (with the caller's set-up and the rest below, ~28 us cold in one call)
-        oldest = int(self.sc[W.SC_RSTART])  # (the ring's oldest and its tail, read together)
-        st[self.lay["phi"]:self.lay["phi"] + self.q] = self.ztail
-        st[W.SC_N] = oldest
-        chunk = max(16, self.settings.unit_macs // (4 * self.q))         # states only: ~0.04 us per sample at Q = 42
-        size, slot = self.ring.shape[1], self._ring_position(oldest) - oldest
-        i = oldest
-        yield                              # (the set-up and a first chunk in one update(): 45-55 us)
-        while i < n0:                      # (n0 is remembered: a search's segment starts well after the oldest)
-            n = min(chunk, n0 - i)
-            W.replay(self.ring, (slot + i) % size, n, n, st, S, *self._replay_work)
-            i += n
-            yield
-        return st[self.lay["phi"]:self.lay["phi"] + self.q].copy()
-
-    # ------------------------------------------------------------------ re-search trigger
-    def _noise_variance(self, r: RF.Accepted) -> float:
-        """The noise variance an accepted re-fit's window estimates (its cost over the degrees of freedom left): the
-        scale of its parameter variances."""
-        return max(r.cost, 0.0) / max(r.neff - self.theta.size, 1.0)
-
-    def _resonance_determined(self, raw: tuple) -> bool:
-        """Did an accepted re-fit (``fit_machine.accept``'s tuple) determine alpha, a1 and a2 (``settings.determined``)?"""
-        r = RF.Accepted._make(raw)
-        sigma2 = self._noise_variance(r)
-        return (abs(r.var_alpha) * sigma2 <= (self.settings.determined["alpha"] * r.alpha) ** 2
-                and abs(r.var_ln_a1) * sigma2 <= self.settings.determined["a1"] ** 2
-                and abs(r.var_ln_a2) * sigma2 <= self.settings.determined["a2"] ** 2)
-
-    def _watch(self, rms: float, broken: bool, n: int, floor: float, raw: tuple | None = None) -> None:
-        """After each re-fit (at sample n; the output's noise level ``floor``; ``raw`` the accepted fit's tuple):
-        start a re-search once the error has sat above the noise floor (or the fit has been broken) for
-        ``settings.research.after_s``, and note the last converged fit at the floor (``settings.research.sudden_ratio``)
-        (plain floats: runs at every re-fit)."""
-        if not self.fitting or self._researching():
-            return
-        if not (broken or (floor > 0.0 and rms > self.settings.research.ratio * floor)):
-            if not (floor > 0.0 and rms > self.settings.research.clear_ratio * floor):
-                self._misfit_since = None
-                if self.converged and raw is not None:
-                    self._floor_at, self._floor_raw = n, raw     # (judged at a misfit's onset only: rare)
-            return
-        if self._misfit_since is None:
-            self._misfit_since = n
-            self._misfit_sudden = not broken and rms >= self.settings.research.sudden_ratio * floor and self._floor_at is not None \
-                and n - self._floor_at <= int(self.settings.research.sudden_within_s / self.h) and self._resonance_determined(self._floor_raw)
-        span = int(self.settings.research.after_s / self.h)
-        if n - self._misfit_since >= span and n - self.window_start >= span and n >= self._next_research:
-            reason = "fit broken" if broken else f"window error {rms / floor:.1f}x the noise floor"
-            gross = broken or rms > self.settings.research.gross_misfit * floor
-            self._jobs.append(self._research_again_job(reason, gross))
-
-    def _research_again_job(self, reason: str, gross: bool = False) -> Generator:
-        """Search the resonance (and alpha, unless it is held after a change) on the recent samples with the
-        live estimate competing; switch to the result only if its likelihood ratio says it is clearly better.
-        ``gross``: the live estimate misfits grossly (``settings.research.gross_misfit``), so its gain's sign is no reference.
-
-        The samples: those since the window start that the ring and the search's work memory hold (the
-        newest ones). Both candidates are judged by the same exact projected cost on them.
-        """
-        n1 = self.n
-        cap = min(self.work_memory.shape[0] if self.work_memory is not None else 1 << 15,
-                  int(self.settings.research_segment_s / self.h))
-        # a sudden misfit: the plant changed before the re-fit that saw it, so only the samples since are searched
-        suspect = self._misfit_since if self._misfit_sudden and self._misfit_since is not None else None
-        n0 = max(self.window_start, int(self.sc[W.SC_RSTART]), n1 - cap, suspect or 0)
-        zeta0 = yield from self._nodes_at(n0)
-        u, y = yield from self._ring_segment(n0, n1)
-        lead = min(self._settling_samples(self.a1, self.a2), u.size // 4)
-        drifting = self.drift_on and not self._free_decays
-        trends = self._free_decays or (self.settings.research_trends if drifting else ())
-        # after a change alpha was determined before it (creep does not jump): the resonance only, 7x cheaper;
-        # in operation the candidates are ranked with the unknown start projected out, as they are judged (at
-        # 80 dB a cost from rest ranked by the past input's fading memory: mid_operation seed 1000's re-searches
-        # returned candidates 25000-41000 worse in likelihood than the wrong estimate they were to replace)
-        search = ResonanceSearch(self.basis, u, y, zeta0=zeta0, lead=lead, work=self.work_memory,
-                                 fixed_alpha=self.alpha if (self.window_start and self._alpha_known) or suspect
-                                 else None,
-                                 alphas=(self.alpha,),
-                                 extra=((self.alpha, self.a1, self.a2),), scratch=self._search_scratch,
-                                 free=trends or None)
-        yield
-        yield from self._run_search(search)
-        yield                              # (the search's last unit ended this call)
-        r = search.result
-        live = (self.alpha, self.a1, self.a2)
-        # both judged with the resonance state at the segment's start unknown (``judged_cost``), trends out
-        c_live = yield from search.judged_cost(*live, trends)
-        c_new = yield from search.judged_cost(r.alpha, r.a1, r.a2, trends)
-        rows = search.judged_rows()
-        yield
-        lr = _likelihood_ratio(rows, c_live, c_new)
-        change = {"alpha": r.alpha / live[0] - 1, "a1": r.a1 / live[1] - 1, "a2": r.a2 / live[2] - 1,
-                  "b": r.b / self.b - 1 if self.b else 0.0}
-        moved = sorted(k for k in ("a1", "a2") if abs(change[k]) > self.settings.change_rule.move[k])
-        if abs(change["alpha"]) > self.settings.research.alpha_move:
-            moved = ["alpha"] + moved
-        gain_ratio = r.b / self.b if self.b else 0.0
-        plausible = 1.0 / self.settings.research.gain_ratio < abs(gain_ratio) < self.settings.research.gain_ratio and (gain_ratio > 0 or gross)
-        # with a drift's trends out the segment hardly determines alpha (slow responses are nearly creep; the window's
-        # 10 s do): a large move of it is the misfit's, not the plant's
-        alpha_held = drifting and abs(change["alpha"]) > self.settings.research.drifting_alpha_move
-        # a candidate on the search box's edge is the box's (zeta 0.003 at 2.6 Hz under a 1 Hz sine on the real
-        # micromanipulator record: its two free responses, projected out by the judge, fitted the 2 s segment as two
-        # more sinusoids; switched to, the window re-fits ran off and the live prediction missed by 3.7x the output's
-        # spread for a second)
-        switch = lr > self.settings.research.lr and bool(moved) and math.isfinite(r.cost) and plausible and not alpha_held \
-            and not search.at_bound(r)
-        self.researches = (self.researches + [{
-            "t": n1 * self.h, "done_t": self.n * self.h, "reason": reason, "segment_s": (n1 - n0) * self.h,
-            "lr": float(lr), "switched": switch, "moved": moved if switch else [],
-            "relative_change": {k: float(v) for k, v in change.items()}}])[-50:]
-        self._misfit_since = None
-        if switch and suspect is not None:
-            yield
-            yield from self._declare_found_change(suspect, r, change, moved, lr)
-            return
-        if not switch:                     # the data cannot do better here: search less often
-            self._next_research = self.n + self._research_wait
-            self._research_wait = min(2 * self._research_wait, int(self.settings.research.max_wait_s / self.h))
-            return
-        self._research_wait = int(self.settings.research.after_s / self.h)
-        self._pace_refits(False)
-        self.theta[0:4] = (r.alpha, math.log(r.a1), math.log(r.a2), r.b)
-        # the drift rates stay: no change of the plant was declared, and a drifting window fitted without them
-        # misfits (drift seed 1 at 80 dB: a switch that zeroed them left the window at 250x the noise floor,
-        # and the re-fits then pulled alpha +13 %, b -15 %)
-        self._take_resonance()
-        self.converged = False
-        self._lr_recent = []
-        self.fit = Fit(theta=self.theta.copy())   # quality: "first window fit pending" until the next re-fit
-        self._first_fit = None
-        self.fitting = False               # the old statistics belong to the old resonance: rebuild first
-        yield
-        yield from self._relinearize_job(None)
-        self.fitting = True
-
-    def _declare_found_change(self, n_seen: int, r, change: dict, moved: list[str], lr: float) -> Generator:
-        """A sudden misfit's re-search found the plant changed (``settings.research.sudden_ratio``): a change event as the change
-        test's (its time the last re-fit at the noise floor: the change came after it), the search's resonance
-        and gain taken, and the window restarted after the re-fit that saw the misfit, as for a change the test
-        found (``_restart_window``: the post-change search, with this result competing, then the replay)."""
-        t_floor = (self._floor_at if self._floor_at is not None else n_seen) * self.h
-        self._open_event(t_floor, moved, change, lr, self.theta, estimate_settled=True, found_by="re-search")
-        yield                              # (each part on its own call, as the change test's: cold Python)
-        self.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
-        self._take_resonance()
-        yield
-        self._restart_window(n_seen, abs(change["b"]) > self.settings.change_rule.move["b"], alpha_known=True)
-
-    def _ring_segment(self, n0: int, n1: int) -> Generator:
-        """Copies of the remembered u, y for samples n0..n1 (``settings.segment_chunk`` per unit); returns (u, y), views of
-        the tracker's segment buffer (``_allocate_work``: one search at a time uses it; allocating them here,
-        up to 2 x 256 kB, and numpy's fancy indexing cost ~80 us in one update())."""
-        u, y = self._segment[0, :n1 - n0], self._segment[1, :n1 - n0]
-        size, slot = self.ring.shape[1], self._ring_position(n0)
-        for k0 in range(0, n1 - n0, self.settings.segment_chunk):
-            k1 = min(n1 - n0, k0 + self.settings.segment_chunk)
-            W.ring_copy(self.ring, (slot + k0) % size, u[k0:k1], y[k0:k1])
-            yield
-        return u, y
-
-    def _input_moved(self, since: int) -> bool:
-        """Did the input change after sample ``since`` (is there something to fit)? O(1): the kernel
-        counts the samples since the last input change."""
-        return self.n - self.sc[W.SC_SINCE] > since + 1
-
-    def _settle_events(self, move: float) -> None:
-        """Once the fit after a change has stopped moving (the last re-fit's largest relative move of
-        alpha, ln a1, ln a2, b), record what moved and by how much."""
-        ev = self.events[-1] if self.events else None
-        if ev is None or ev["settled"]:
-            return
-        now = self.theta[:4].tolist()
-        if move < 0.002 and self.n * self.h - ev["detected_t"] > 1.0:
-            before = ev.pop("_before")
-            change = {"alpha": now[0] / before[0] - 1, "a1": math.exp(now[1] - before[1]) - 1,
-                      "a2": math.exp(now[2] - before[2]) - 1, "b": now[3] / before[3] - 1}
-            ev["relative_change"] = {k: float(v) for k, v in change.items()}
-            ev["moved"] = sorted(k for k, v in change.items() if abs(v) > self.settings.change_rule.move.get(k, 0.02))
-            ev["settled"] = True
-            ev["settled_t"] = self.n * self.h
