@@ -10,6 +10,7 @@ from numba import njit
 
 from ..policy import change
 from . import window as W
+from .layout import RESONANCE, co_at, co_size, md_at, resonance_in_co
 
 CACHE = True
 FAST = W.FAST
@@ -92,9 +93,7 @@ def _work_size(n: int, p: int) -> int:
 def _base(sc: np.ndarray) -> int:
     """Offset of the recursive scalars in st (the window layout's size)."""
     q = int(sc[W.SC_NQ])
-    nm = int(sc[W.SC_NM])
-    p = q + W.FREE + nm
-    return W.SC_SIZE + 3 * p + 2 * q + 18 + nm + q + q + W.ONE
+    return md_at(q, int(sc[W.SC_NM]), 0) + q + W.ONE
 
 
 @njit(cache=CACHE)
@@ -105,10 +104,10 @@ def _parts(st: np.ndarray) -> tuple:
     nm = int(sc[W.SC_NM])
     p = q + W.FREE + nm
     o = W.SC_SIZE
-    c0 = o + 3 * p
+    c0 = co_at(q, nm, 0)
     rb = _base(sc)
     r = st[rb:rb + R_SIZE]
-    return sc, q, p, st[o:o + p], st[o + p:o + 2 * p], st[c0:c0 + 2 * q + 18 + nm], r, int(r[R_NP]), rb + R_SIZE
+    return sc, q, p, st[o:o + p], st[o + p:o + 2 * p], st[c0:c0 + co_size(q, nm)], r, int(r[R_NP]), rb + R_SIZE
 
 
 @njit(cache=CACHE)
@@ -126,7 +125,8 @@ def refresh(st: np.ndarray, CT: np.ndarray) -> None:
     if d1 != 0.0 or d2 != 0.0:
         for j in range(2):
             phi[q + j] += phi[q + W.S1 + j] * d1 + phi[q + W.S2 + j] * d2
-        W.resonance_coefficients(a1, a2, sc[W.SC_H], co[2 * q:2 * q + 18])
+        res = resonance_in_co(q)
+        W.resonance_coefficients(a1, a2, sc[W.SC_H], co[res:res + RESONANCE])
         sc[W.SC_A1L] = a1
         sc[W.SC_A2L] = a2
         r[R_RELIN] += 1.0
