@@ -21,8 +21,8 @@ class ChangeDetection:
 
     def snapshot(self, tr: WindowTracker, n: int) -> bool:
         """The change test's snapshot of the statistics and the estimate at sample n (now): the copy at this
-        instant, the next due count (``_set_due``'s) and the state's check in one kernel, its bookkeeping on the
-        next call (``_snapshot_job``; together they were over 25 us). Returns whether the state is finite."""
+        instant, the next due count (``Scheduler.set_due``'s) and the state's check in one kernel, its bookkeeping on the
+        next call (``ChangeDetection.snapshot_job``; together they were over 25 us). Returns whether the state is finite."""
         index = tr._snap_next
         tr._snap_next = (index + 1) % SNAP_SLOTS
         syy0, g0, finite = RF.snapshot(tr.st, tr.S, tr._ctx, MACHINE_TEST, index, tr.scheduler.due_after(tr, n))
@@ -30,7 +30,7 @@ class ChangeDetection:
         return finite
 
     def snapshot_job(self, tr: WindowTracker, n: int, index: int, syy0: float, g0: float, adoptions: int) -> Generator:
-        """Record the snapshot taken at sample n (``_snapshot``) and queue the change test of the second since
+        """Record the snapshot taken at sample n (``ChangeDetection.snapshot``) and queue the change test of the second since
         the one before the last. Dropped if the live state was replaced meanwhile (``adoptions`` counts: a replay's
         swap, a restart; ``_adopt`` starts the snapshots afresh; the replays reuse two arrays in turn, so their
         identity would not tell)."""
@@ -116,7 +116,7 @@ class ChangeDetection:
 
     def open_event(self, tr: WindowTracker, t: float, moved: list[str], moves: dict, lr: float, before: np.ndarray,
                     **extra) -> None:
-        """Record a change event, not yet settled (``_settle_events`` fills in what moved once the fit has stopped
+        """Record a change event, not yet settled (``ChangeDetection.settle_events`` fills in what moved once the fit has stopped
         moving): when it began (t, s) and was detected, the parameters that moved and by how much, its likelihood
         ratio, and the estimate before it (``before[:4]``, copied)."""
         tr.events.append({"t": t, "detected_t": tr.n * tr.h, "moved": moved,
@@ -127,20 +127,15 @@ class ChangeDetection:
         """Was the window's estimate settled over the second before the tested one? Only then is its alpha the
         plant's before a declared change, and restored (creep does not jump with a payload or a stiffness);
         otherwise the live alpha stays for the resonance search but is not held afterwards
-        (``_restart_window``'s ``alpha_known``): neither the unsettled estimate's alpha nor the live one is
+        (``ChangeDetection.restart_window``'s ``alpha_known``): neither the unsettled estimate's alpha nor the live one is
         known to be the plant's. Settled: the estimate at the previous snapshot instant and at ``n0`` do not
         differ by a move that would itself count as a change (``settings.change_rule.move``, alpha ``settings.research.alpha_move``);
         in the start-up window both must exist; after a restart the post-change estimate counts from its first
         snapshot on.
 
-        (Seen: a start-up search in a wrong basin, alpha 0.95 at its bound and 32 Hz for an 8 Hz plant; the
-        re-fits walked toward the plant and the change test on the second after the walk declared a change
-        (right: it corrects a wrong start), but restored alpha 0.95, and the post-change search at that alpha
-        never recovered: alpha +200 % at the end. It had been masked by slower replays, whose snapshots were
-        not ready in time. Tried first: no declaration at all on such a second. Close unmodelled modes then
-        lost start-up corrections (a2 -99.5 % for 6 s until a later change). Then: the live alpha kept and
-        held; quiet start alpha 0.35, 7 Hz, seed 6 ended at alpha -5.5 %. Then: alpha searched too; on the
-        short post-correction segment fresh stiffness 1007 went to a wrong basin, a2 -99.9 % for 7 s.)
+        (Why not simpler: restoring an unsettled start-up estimate's alpha leaves the post-change search at a
+        wrong alpha for good; declaring no change on such a second loses the corrections of a wrong start;
+        holding the live alpha, or searching alpha on the short post-correction segment, ends in wrong basins.)
         """
         n_prev = n0 - tr.test_every
         if n_prev < tr.window_start:
@@ -158,18 +153,16 @@ class ChangeDetection:
 
         The old window's refits are void. The parameters stay until the
         resonance has been searched afresh on post-change samples only
-        (``_research_job``); the test's own fit is linearized around the old
+        (``Researcher.research_job``); the test's own fit is linearized around the old
         resonance and unreliable for a large move. ``alpha_known`` False (a start-up estimate corrected,
-        ``_settled_before``): alpha is not held afterwards, and later re-searches free it.
+        ``ChangeDetection.settled_before``): alpha is not held afterwards, and later re-searches free it.
         """
         tr.window_start = self.post_change_start(tr, n0, gain_moved)
         tr._alpha_known = alpha_known
         tr.converged = False
         # a drift the old window modelled goes on through the change (a payload or a resonance change does not stop
-        # the ceramic's thermal drift): its rates stay, fitted in the new window from the start. (Zeroed, a drifting
-        # plant at 80 dB, whose first-order drift columns misfit late in the record and set off a false change, had
-        # a short window without drift that misread alpha and b, and in 2 noise seeds of 9 a re-search then took a
-        # candidate without the resonance: alpha +10-13 %, a1 -99 %; kept, alpha within 0.8 % in all 9)
+        # the ceramic's thermal drift): its rates stay, fitted in the new window from the start (zeroed, a short
+        # window without drift misreads alpha and b, and a re-search may then take a candidate without the resonance)
         if not tr.drift_on:
             tr.theta[5 + tr.n_free:] = 0.0
         tr._lr_recent = []
@@ -180,7 +173,7 @@ class ChangeDetection:
         tr._research_wait = int(tr.settings.research.after_s / tr.h)
         tr.machine = None
         # the queued jobs are dropped; a re-fit queued but not yet started would otherwise leave its flag set (its
-        # ``finally`` never runs) and no re-fit would be queued again (seen once the restart came a few calls later)
+        # ``finally`` never runs) and no re-fit would be queued again
         tr._refit_queued = False
         tr._jobs = [tr.researcher.research_job(tr, tr.window_start)]
         tr.scheduler.pace_refits(tr, False)
@@ -190,12 +183,10 @@ class ChangeDetection:
 
         A change of a1, a2 alone shows only in the transients an input move excites: when the input moved
         inside the test's window, its last move came after the change, and the samples from it on are
-        post-change; otherwise only the samples after the detection are. (Seen: a payload change 0.3 s
-        before a large step, detected 0.4 s after it; the search on the samples after the detection held
-        two small steps, fitted them at the noise floor in a wrong basin, and re-convergence waited 3.5 s
-        for the next large step.) A gain change also moves the output during a hold, at any instant of
-        the window, so then only the samples after the detection are (a stiffness change 0.2 s after the
-        last step, restarted there, was fitted as one model across the jump and never re-converged).
+        post-change; otherwise only the samples after the detection are (the samples after a detection may
+        hold only small steps, which fit a wrong basin at the noise floor). A gain change also moves the output
+        during a hold, at any instant of the window, so then only the samples after the detection are (a window
+        restarted before it would fit one model across the jump).
         """
         moved = tr.n - 1 - int(tr.sc[W.SC_SINCE])      # the input's last change
         return moved - 1 if moved - 1 > n0 and not gain_moved else tr.n

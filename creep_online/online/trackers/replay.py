@@ -17,7 +17,7 @@ class Replayer:
     """The window tracker's replay jobs (no state of its own: it works on the tracker it is given)."""
 
     def arrays(self, tr: WindowTracker, a1l: float, a2l: float) -> tuple:
-        """``_fresh`` state and statistics for a replay, with their views, in the spare pair (the one the last swap
+        """``workspace.fresh`` state and statistics for a replay, with their views, in the spare pair (the one the last swap
         retired, or made and touched at construction). One replay runs at a time (the long jobs run in order, and a
         replay dropped by a restart never resumes), so the next replay may take the pair again. In new arrays the
         replay's first accumulating unit wrote the statistics' pages for the first time: 60-65 us of page faults in
@@ -117,7 +117,7 @@ class Replayer:
 
     def ring_segment(self, tr: WindowTracker, n0: int, n1: int) -> Generator:
         """Copies of the remembered u, y for samples n0..n1 (``settings.segment_chunk`` per unit); returns (u, y), views of
-        the tracker's segment buffer (``_allocate_work``: one search at a time uses it; allocating them here,
+        the tracker's segment buffer (``workspace.allocate_work``: one search at a time uses it; allocating them here,
         up to 2 x 256 kB, and numpy's fancy indexing cost ~80 us in one update())."""
         u, y = tr._segment[0, :n1 - n0], tr._segment[1, :n1 - n0]
         size, slot = tr.ring.shape[1], tr._ring_position(n0)

@@ -23,7 +23,7 @@ class Researcher:
     def research_job(self, tr: WindowTracker, n_from: int) -> Generator:
         """Wait for post-change samples, search the resonance on them (alpha held), rebuild the window there.
 
-        Samples from ``n_from`` on are all post-change (``_post_change_start``): the search gets
+        Samples from ``n_from`` on are all post-change (``ChangeDetection.post_change_start``): the search gets
         ``settings.research_s`` seconds of them (longer if the input has not moved), starting from the exact node
         state; before an input move inside the test's window, the hold before it settles the resonance
         states (the search's lead).
@@ -92,9 +92,8 @@ class Researcher:
             yield
 
     def misfit_from_start(self, tr: WindowTracker) -> bool:
-        """Has the window misfit (``_watch``) since its first re-fit? Then its estimate was wrong, not the plant
-        changed: the re-search trigger goes first (seen: a start-up search in a wrong basin; the change test
-        ran a few samples before the trigger and reported a2 +232 % as a change at 0.5 s)."""
+        """Has the window misfit (``Researcher.watch``) since its first re-fit? Then its estimate was wrong, not the plant
+        changed: the re-search trigger goes first (a start-up search in a wrong basin is not a plant change)."""
         return tr._misfit_since is not None and tr._first_fit is not None and tr._misfit_since <= tr._first_fit
 
     def researching(self, tr: WindowTracker) -> bool:
@@ -104,10 +103,8 @@ class Researcher:
     def resolved(self, tr: WindowTracker, search: ResonanceSearch) -> bool:
         """Does the post-change search's result fit its samples near the noise floor? If not, the segment
         carries too little information (a single small input step) or a transient: search a longer one.
-
-        (Tried and dropped: also searching again while another basin's candidate was within a likelihood
-        ratio of 30. On a well damped mode (zeta 0.4) neighbouring candidates are one broad valley the
-        re-fits settle, and the extra passes delayed re-convergence from 2 to 4 s.)
+        (Not also while another basin's candidate is close in likelihood: on a well damped mode neighbouring
+        candidates are one broad valley the re-fits settle, and extra passes only delay re-convergence.)
         """
         noise = float(tr.sc[W.SC_NOISE])
         return search.result.cost <= (tr.settings.research.ratio * noise) ** 2
@@ -165,9 +162,8 @@ class Researcher:
         drifting = tr.drift_on and not tr._free_decays
         trends = tr._free_decays or (tr.settings.research_trends if drifting else ())
         # after a change alpha was determined before it (creep does not jump): the resonance only, 7x cheaper;
-        # in operation the candidates are ranked with the unknown start projected out, as they are judged (at
-        # 80 dB a cost from rest ranked by the past input's fading memory: mid_operation seed 1000's re-searches
-        # returned candidates 25000-41000 worse in likelihood than the wrong estimate they were to replace)
+        # in operation the candidates are ranked with the unknown start projected out, as they are judged (a cost
+        # from rest would rank them by the past input's fading memory)
         search = ResonanceSearch(tr.basis, u, y, zeta0=zeta0, lead=lead, work=tr.work_memory,
                                  fixed_alpha=tr.alpha if (tr.window_start and tr._alpha_known) or suspect
                                  else None,
@@ -210,8 +206,7 @@ class Researcher:
         tr.scheduler.pace_refits(tr, False)
         tr.theta[0:4] = (r.alpha, math.log(r.a1), math.log(r.a2), r.b)
         # the drift rates stay: no change of the plant was declared, and a drifting window fitted without them
-        # misfits (drift seed 1 at 80 dB: a switch that zeroed them left the window at 250x the noise floor,
-        # and the re-fits then pulled alpha +13 %, b -15 %)
+        # misfits grossly, and the re-fits would then pull alpha and b
         tr._take_resonance()
         tr.converged = False
         tr._lr_recent = []
@@ -226,7 +221,7 @@ class Researcher:
         """A sudden misfit's re-search found the plant changed (``settings.research.sudden_ratio``): a change event as the change
         test's (its time the last re-fit at the noise floor: the change came after it), the search's resonance
         and gain taken, and the window restarted after the re-fit that saw the misfit, as for a change the test
-        found (``_restart_window``: the post-change search, with this result competing, then the replay)."""
+        found (``ChangeDetection.restart_window``: the post-change search, with this result competing, then the replay)."""
         t_floor = (tr._floor_at if tr._floor_at is not None else n_seen) * tr.h
         tr.detection.open_event(tr, t_floor, moved, change, lr, tr.theta, estimate_settled=True, found_by="re-search")
         yield                              # (each part on its own call, as the change test's: cold Python)

@@ -35,11 +35,11 @@ class Scheduler:
         return None
 
     def set_due(self, tr: WindowTracker, n: int) -> None:
-        """Set the sample at which the per-sample kernel calls back (``_due_after``)."""
+        """Set the sample at which the per-sample kernel calls back (``Scheduler.due_after``)."""
         tr.sc[W.SC_DUE] = self.due_after(tr, n)
 
     def due_after(self, tr: WindowTracker, n: int) -> int:
-        """The sample at which the per-sample kernel calls back (``_schedule``) after sample n (now): the next re-fit
+        """The sample at which the per-sample kernel calls back (``Scheduler.schedule``) after sample n (now): the next re-fit
         or change test. (n passed in: ``tr.n`` reads the state array, each read a numpy call from cold Python.)"""
         return min(tr._next_refit, self.test_after(tr, n)) if tr.detect else tr._next_refit
 
@@ -117,9 +117,9 @@ class Scheduler:
             tr._draining = False
 
     def refit_job(self, tr: WindowTracker) -> Generator:
-        """A re-fit of the window: ``_begin_refit``, its slices in the per-sample kernel, then the result swapped in
-        (``_accept``) and what it triggers (``_after_accept``), each on its own call: with cold caches each of these
-        Python visits costs 10-25 us, together they were over 25 us. While it is queued no other is (``_schedule``)."""
+        """A re-fit of the window: ``Scheduler.begin_refit``, its slices in the per-sample kernel, then the result swapped in
+        (``Scheduler.accept``) and what it triggers (``Scheduler.after_accept``), each on its own call: with cold caches each of these
+        Python visits costs 10-25 us, together they were over 25 us. While it is queued no other is (``Scheduler.schedule``)."""
         try:
             self.begin_refit(tr)
             yield MACHINE
@@ -138,7 +138,7 @@ class Scheduler:
 
     def accept(self, tr: WindowTracker) -> tuple | None:
         """Swap a finished re-fit in (``fit_machine.accept``, one kernel) and record it; returns its numbers for
-        ``_after_accept`` (None if it was not swapped in).
+        ``Scheduler.after_accept`` (None if it was not swapped in).
 
         Plain floats from one tuple: numpy from Python is slow here (cold code paths). The ``Fit``
         with its 1-sigma dictionary is built when someone asks for it (``fit``), not in update().
@@ -165,7 +165,7 @@ class Scheduler:
         return raw
 
     def after_accept(self, tr: WindowTracker, raw: tuple) -> None:
-        """What an accepted re-fit triggers (on the call after ``_accept``): the re-search watch, the re-fit pace,
+        """What an accepted re-fit triggers (on the call after ``Scheduler.accept``): the re-search watch, the re-fit pace,
         a replay when the resonance left the linearization point, the settling of a change event."""
         (_, _, _, _, _, cost, neff, move, *_, n, noise, relinearize) = raw
         rms = math.sqrt(max(cost, 0.0) / max(neff, 1.0))

@@ -10,11 +10,11 @@ resumable jobs, one small unit per ``work()`` call:
   with drift columns, the rates b'/b and alpha'); the drift columns' time
   origin moves to the newest sample first, so alpha and b are the values now.
   The rates are fitted only while a score test (on) / Wald test (off) says
-  the data show drift (``DRIFT_ON``, ``DRIFT_OFF``). Its steps keep the resonance near the
-  linearization point, where the statistics are the model (``TRUST``). The fit itself is a numba
+  the data show drift (``settings.drift_on``, ``drift_off``). Its steps keep the resonance near the
+  linearization point, where the statistics are the model (``settings.trust``). The fit itself is a numba
   state machine that the per-sample kernel advances in ~1 us slices
   (``_kernels/fit_machine.py``, ``fit_machine.sample_work``);
-* **relinearize** when a1 or a2 moved more than ``RELINEARIZE`` from the point
+* **relinearize** when a1 or a2 moved more than ``settings.relinearize`` from the point
   the resonance states were computed at: the remembered samples are replayed
   into fresh statistics (the nodes fast-forwarded, the resonance states
   started a settling time early), then swapped in whole;
@@ -26,10 +26,17 @@ resumable jobs, one small unit per ``work()`` call:
   a jump against the recent tests' level restarts the window at the change
   (the event names the parameters and their moves);
 * **re-search** when the window's error stays above the noise floor or the
-  fit breaks down (``_watch``): the local re-fits never leave a wrong
+  fit breaks down (``Researcher.watch``): the local re-fits never leave a wrong
   resonance basin, so the resonance is searched again on the recent samples
   with the live estimate competing, and replaces it only when clearly better
   (a likelihood ratio; ``researches`` records each one and what moved).
+
+Where each part lives: this class holds the state and the per-sample path; its collaborators run the jobs
+on it (none keeps state of its own): ``scheduler.Scheduler`` (the job queue, the re-fit jobs),
+``replay.Replayer`` (replays), ``detection.ChangeDetection`` (snapshots, the change test, events, the restart;
+its verdict from ``policy.change``), ``research.Researcher`` (the misfit watch and the searches; its verdicts
+from ``policy.research``), ``workspace`` (the arrays). Every tunable is a field of ``settings.TrackerSettings``;
+the numba kernels and the state layout are in ``online._kernels``.
 """
 from __future__ import annotations
 
@@ -72,7 +79,7 @@ class WindowTracker(ParameterView, Checkpointable):
         self.q = basis.size
         self.n_free = len(self.settings.window_free_rates) if free else 0
         self._free_rates = np.asarray(self.settings.window_free_rates[:self.n_free], dtype=float)    # the window's columns
-        self._free_decay = np.exp(-self._free_rates * self.h)   # per sample (``_fresh``)
+        self._free_decay = np.exp(-self._free_rates * self.h)   # per sample (``workspace.fresh``)
         #: the free responses' rates, also what a search's judge projects out (``ResonanceSearch.judged_cost``)
         self._free_decays = self.settings.free_rates if free else ()
         self.n_rate = int(drift)         # drift columns: 0 none, 1 gain rate, 2 gain and alpha rates
@@ -98,7 +105,7 @@ class WindowTracker(ParameterView, Checkpointable):
         self.ring = ring                 # (2, H) history, owned by the caller (pre-faulted)
         self.work_memory = work          # (N, Q) scratch for the post-change search (pre-faulted)
         self.events: list[dict] = []
-        self.researches: list[dict] = []   # re-searches of the resonance (``_research_again_job``)
+        self.researches: list[dict] = []   # re-searches of the resonance (``Researcher.research_again_job``)
         self.disagreement: dict | None = None   # the last change test, if the last second disagreed
         self._misfit_since: int | None = None   # first re-fit of the current run of misfits
         self._misfit_sudden = False             # ... and it came suddenly after a window at the floor (settings.research.sudden_ratio)
@@ -115,7 +122,7 @@ class WindowTracker(ParameterView, Checkpointable):
         self.rejected = 0                # refits discarded (non-finite or zero gain)
         self.window_start = 0            # first sample in the statistics (moved by a detected change)
         #: alpha is the plant's (held after a change) unless the last restart corrected a start-up estimate
-        #: that had not settled (``_settled_before``): then the re-fits and re-searches free it at once
+        #: that had not settled (``ChangeDetection.settled_before``): then the re-fits and re-searches free it at once
         self._alpha_known = True
         self.fitting = True              # False while the start-up buffer is replayed: no refits yet
         self.converged = False           # a refit has barely moved since the start: the change test may judge
@@ -137,7 +144,7 @@ class WindowTracker(ParameterView, Checkpointable):
         """Linearize at ``theta`` and start from empty statistics: the part of the construction that needs the
         estimate. The rest (``__init__``: allocations, ~0.3-0.4 ms with cold caches) can run before the estimate
         is known: ``OnlineEstimator`` builds its trackers before the stream, so the update() that ends the
-        start-up search does not pay it (it was the max of every latency run since f4dc43e). Of the fresh
+        start-up search does not pay it (it would be that call's largest cost). Of the fresh
         state, only the linearization point and theta's coefficients are set here (one kernel,
         ``window.start_at``): the rest was built ahead (``_blank_state``)."""
         self.start_state(theta)
@@ -157,7 +164,7 @@ class WindowTracker(ParameterView, Checkpointable):
         self._blank = None
         self.fit = fit
         self._adopt(st, S, views)
-        self.scheduler.set_due(self, self.n)              # (``_schedule`` at sample 0: no re-fit or test is due yet)
+        self.scheduler.set_due(self, self.n)              # (``Scheduler.schedule`` at sample 0: no re-fit or test is due yet)
 
     def _blank_state(self) -> tuple:
         """A fresh state array (linearized at the current estimate), its empty statistics and their views, with the
@@ -205,7 +212,7 @@ class WindowTracker(ParameterView, Checkpointable):
     def _take_resonance(self) -> None:
         """A search's resonance was written into theta: predict with it at once if the live states represent it
         (within ``settings.trust`` of their linearization point, as a re-fit's move); otherwise the prediction keeps the
-        last estimate's coefficients until the replay at the new point is swapped in (``_relinearize_job``).
+        last estimate's coefficients until the replay at the new point is swapped in (``Replayer.relinearize_job``).
         The states hold the resonance to first order around their point only: a prediction with a resonance
         far from it is no model at all (a1 x900 beyond the point predicted 1e5 times the output's span)."""
         if max(abs(self.theta[1] - math.log(self.a1l)), abs(self.theta[2] - math.log(self.a2l))) <= self.settings.trust:

@@ -22,8 +22,8 @@ def allocate_work(tr: WindowTracker) -> None:
     interpreter's and numpy's code paths are cold, and each numpy call from
     Python (an allocation, a copy, a mask) costs 5-40 us at 10 kHz against
     ~1 us warm. The jobs therefore call fused kernels on these arrays. Only
-    one re-fit is queued at a time (``_schedule``), and the periodic jobs
-    run one after the other (``_next_job``), so each owns its arrays.
+    one re-fit is queued at a time (``Scheduler.schedule``), and the periodic jobs
+    run one after the other (``Scheduler.next_job``), so each owns its arrays.
     """
     p, k, r0 = tr.p, tr.theta.size, 5 + tr.n_free
     policy = {"LO": tr.alpha_bounds[0], "HI": tr.alpha_bounds[1], "DRIFT_ON": tr.settings.drift_on,
@@ -56,17 +56,17 @@ def allocate_work(tr: WindowTracker) -> None:
                           for j in range(2)]
     tr._replay_set = 0
     tr._replay_work = W.replay_scratch(p)     # (a replay's unit leaves nothing in it: shared by the jobs)
-    # a search's segment (``_ring_segment``) and the states-only fast-forward before it (``_nodes_at``), made
+    # a search's segment (``Replayer.ring_segment``) and the states-only fast-forward before it (``Replayer.nodes_at``), made
     # and pre-faulted here: one search at a time
     rows = min(tr.ring.shape[1], 1 << 15 if tr.work_memory is None else tr.work_memory.shape[0])
     tr._segment = np.zeros((2, rows))
     tr._segment.fill(0.0)
     tr._nodes_state = (np.zeros(tr.lay["size"]), np.zeros((p, p)))
-    # the replays' state and statistics: a spare pair, swapped with the live one by each replay (``_replay_arrays``)
+    # the replays' state and statistics: a spare pair, swapped with the live one by each replay (``Replayer.arrays``)
     spare = np.full(tr.lay["size"], 0.0)
     tr._spare = (spare, np.full((p, p), 0.0), views(tr, spare))
-    tr._search_scratch = SearchScratch(tr.q)   # (one search at a time: ``_researching``)
-    tr._search_scratch.prepare_judge(tr._free_decays, tr.basis.h)    # (``_take_if_better``'s judge)
+    tr._search_scratch = SearchScratch(tr.q)   # (one search at a time: ``Researcher.researching``)
+    tr._search_scratch.prepare_judge(tr._free_decays, tr.basis.h)    # (``Researcher.take_if_better``'s judge)
     tr._search_scratch.prepare_judge(tr.settings.research_trends, tr.basis.h)   # (a drifting re-search's)
 
 
