@@ -15,7 +15,7 @@ import pytest
 from creep_online.errors import DataError
 from creep_online.model import CreepModel
 from creep_online.online import OnlineEstimator
-from creep_online.online._kernels import recursive as recursive_module
+from creep_online.online.trackers import recursive as recursive_module   # (the tracker's and the estimator's ``sample``)
 from creep_online.online._kernels import fit_machine as refit_module
 from creep_online.online import search as search_module
 from creep_online.online.trackers import window as tracker_module
