@@ -91,7 +91,8 @@ def test_import_linter_contracts():
     """The contracts in pyproject.toml hold (what `lint-imports` checks; CI runs only pytest)."""
     from importlinter.cli import lint_imports  # the `test` extra installs import-linter
 
-    assert set(CONTRACTS) == {"layers", "no-hil-sim", "effects-not-model"}
+    assert set(CONTRACTS) == {"layers", "no-hil-sim", "effects-not-model", "online-policy-pure", "online-kernels-below",
+                              "online-kernels-private"}
     saved = sys.path[:]                    # lint_imports puts the working directory on sys.path
     try:
         status = lint_imports(config_filename=str(PYPROJECT), no_cache=True, no_logo=True)

@@ -15,7 +15,10 @@ import pytest
 from creep_online.errors import CreepOnlineError, DataError
 from creep_online.model import CreepModel
 from creep_online.online import OnlineEstimate, OnlineEstimator
-from creep_online.online import tracker as tracker_module
+from dataclasses import replace
+
+from creep_online.online.trackers import window as tracker_module
+from creep_online.online.trackers.settings import DEFAULT as TRACKER_DEFAULTS
 from hil_sim.varying_plant import simulate_varying
 from creep_online.simulate import simulate
 from hil_sim import scenarios
@@ -206,7 +209,7 @@ def test_a_stream_in_operation_is_fitted_at_the_noise_floor_at_80_db(seed, monke
             e = est.estimate
             seen.append((round((k + chunk) * sc.h, 1), round(e.residual_rms / e.noise_rms, 2), e.quality))
     worst = max(seen, key=lambda v: v[1])
-    assert worst[1] < tracker_module.MISFIT_CLEAR_RATIO, worst
+    assert worst[1] < TRACKER_DEFAULTS.research.clear_ratio, worst
     assert all(q == "good" for _, _, q in seen), [v for v in seen if v[2] != "good"][:5]
     assert _within(e, sc.final_truth, scale=0.1), (sc.params, _errors(e, sc.final_truth))
     assert est._tracker.free_wide      # the score test freed the four extra free responses (at 80 dB they are needed)
@@ -258,7 +261,7 @@ def test_a_replay_triggered_by_a_change_waits_for_the_test_and_is_dropped(family
     sc = scenarios.make(family, seed)
     outcome = {}
     for wait in (False, True):
-        monkeypatch.setattr(tracker_module, "REPLAY_AFTER_TEST", wait)
+        monkeypatch.setattr(tracker_module, "DEFAULT", replace(TRACKER_DEFAULTS, replay_after_test=wait))
         est = OnlineEstimator(sc.h)
         est.update_block(sc.u, sc.y)
         e = est.estimate
@@ -273,7 +276,7 @@ def test_at_80_db_the_first_search_pass_is_reported_at_once(family, seed, monkey
     """At 80 dB the post-change search's own cost (the resonance at rest at its segment's start) sat above
     1.5x the floor with the right resonance, and the estimate waited for two longer passes (re-convergence
     3.3 s on both records). A pass's result that is clearly better than the live estimate is reported at
-    once (``WindowTracker._take_if_better``): re-convergence within 2 s, and it stays."""
+    once (``Researcher.take_if_better``): re-convergence within 2 s, and it stays."""
     monkeypatch.setattr(scenarios, "SNR_DB", 80.0)
     sc = scenarios.make(family, seed)
     est = OnlineEstimator(sc.h)
@@ -831,7 +834,8 @@ def test_a_sub_threshold_change_reads_changing_not_good(monkeypatch):
     detection threshold) now reads "changing". Without it: 2.4 s of "good" while outside. (At the
     detection threshold of 50 this change is declared at its first test; the threshold it was found at,
     100, keeps it below.)"""
-    monkeypatch.setattr(tracker_module, "CHANGE_LR", 100.0)
+    monkeypatch.setattr(tracker_module, "DEFAULT", replace(
+        TRACKER_DEFAULTS, change_rule=replace(TRACKER_DEFAULTS.change_rule, threshold=100.0)))
     sc = scenarios.make("stiffness", 13)
     est = OnlineEstimator(sc.h)
     good_outside, reasons = 0.0, []

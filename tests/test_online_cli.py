@@ -57,16 +57,16 @@ def test_stream_reports_internal_faults(record, capsys, monkeypatch):
     """A fault injected into the re-fit job (its first call after 5 s of stream raises; the kernels' warm-up runs
     3 s): the stream ends normally, the JSON counts it and lists its event, the human summary names it
     (docs/online.md, "Error contract")."""
-    from creep_online.online import tracker as tracker_module
-    original = tracker_module.WindowTracker._after_accept
+    from creep_online.online.trackers.scheduler import Scheduler
+    original = Scheduler.after_accept
 
-    def faulty(self, raw):
-        if self.n * self.h > 5.0 and not getattr(self, "_injected", False):
-            self._injected = True
+    def faulty(self, tr, raw):
+        if tr.n * tr.h > 5.0 and not getattr(tr, "_injected", False):
+            tr._injected = True
             raise ZeroDivisionError("injected")
-        return original(self, raw)
+        return original(self, tr, raw)
 
-    monkeypatch.setattr(tracker_module.WindowTracker, "_after_accept", faulty)
+    monkeypatch.setattr(Scheduler, "after_accept", faulty)
     assert main(["stream", "--source", f"csv:{record}", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["internal_faults"] == 1 and out["samples"] == 2400

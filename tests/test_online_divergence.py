@@ -12,7 +12,9 @@ import pytest
 
 from conftest import DATA
 from creep_online.online import OnlineEstimator
-from creep_online.online.tracker import TRUST
+from creep_online.online.trackers.settings import DEFAULT
+
+TRUST = DEFAULT.trust
 
 REAL = DATA / "real"
 

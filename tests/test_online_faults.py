@@ -15,11 +15,12 @@ import pytest
 from creep_online.errors import DataError
 from creep_online.model import CreepModel
 from creep_online.online import OnlineEstimator
-from creep_online.online import recursive as recursive_module
-from creep_online.online import refit as refit_module
+from creep_online.online.trackers import recursive as recursive_module   # (the tracker's and the estimator's ``sample``)
+from creep_online.online._kernels import fit_machine as refit_module
 from creep_online.online import search as search_module
-from creep_online.online import tracker as tracker_module
-from creep_online.online import window as window_module
+from creep_online.online.trackers import window as tracker_module
+from creep_online.online.trackers.scheduler import Scheduler
+from creep_online.online._kernels import window as window_module
 from creep_online.simulate import simulate
 from hil_sim import scenarios
 
@@ -93,7 +94,7 @@ def _check_recorded(est: OnlineEstimator, seen: list, error: str, where: str, re
 
 def test_a_fault_in_a_refit_job_drops_the_job(staircase, monkeypatch):
     truth, u, y = staircase
-    _fail_at(monkeypatch, tracker_module.WindowTracker, "_after_accept", {5})
+    _fail_at(monkeypatch, Scheduler, "after_accept", {5})
     est = OnlineEstimator(H)
     seen = _feed(est, u, y)
     ev = _check_recorded(est, seen, "ZeroDivisionError", "update", "dropped the refit job")
@@ -186,17 +187,17 @@ def test_a_fault_in_update_block_loses_no_sample(staircase, monkeypatch):
 def test_nan_poisoning_of_the_parameters_is_found_and_restarted_from(staircase, monkeypatch):
     """A re-fit kernel that writes NaN into the estimate (no exception): the guard checks the state itself."""
     truth, u, y = staircase
-    accept = tracker_module.WindowTracker._accept
+    accept = Scheduler.accept
     count = [0]
 
-    def poisoned(self):
+    def poisoned(self, tr):
         count[0] += 1
-        raw = accept(self)
+        raw = accept(self, tr)
         if count[0] == 8:
-            self.theta[2] = math.nan
+            tr.theta[2] = math.nan
         return raw
 
-    monkeypatch.setattr(tracker_module.WindowTracker, "_accept", poisoned)
+    monkeypatch.setattr(Scheduler, "accept", poisoned)
     est = OnlineEstimator(H)
     seen = _feed(est, u, y)
     ev = _check_recorded(est, seen, "NonFiniteState", "update", "tracker restarted")
@@ -273,7 +274,7 @@ def test_the_caller_s_errors_and_interrupts_still_raise(staircase, monkeypatch):
 
 def test_the_counter_is_in_the_estimate_dict_and_resets(staircase, monkeypatch):
     truth, u, y = staircase
-    _fail_at(monkeypatch, tracker_module.WindowTracker, "_after_accept", {2})
+    _fail_at(monkeypatch, Scheduler, "after_accept", {2})
     est = OnlineEstimator(H)
     est.update_block(u[:8000], y[:8000])
     d = est.estimate.to_dict()

@@ -13,14 +13,16 @@ import numpy as np
 import pytest
 
 from creep_online.model import ONLINE_ALPHA_BOUNDS, CreepModel
-from creep_online.online import kernels as K
-from creep_online.online import refit as RF
-from creep_online.online import tracker as T
-from creep_online.online import window as W
+from creep_online.online._kernels import coefficients as K
+from creep_online.online._kernels import fit_machine as RF
+from creep_online.online.trackers import window as T
+from creep_online.online._kernels import window as W
 from hil_sim.varying_plant import simulate_varying
 from creep_online.online.search import ResonanceSearch
 from creep_online.online.soe import SOE_TOP, SoeBasis, resonance_zoh
-from creep_online.online.tracker import WindowTracker
+from creep_online.online.trackers import workspace as WS
+from creep_online.online.trackers.settings import DEFAULT
+from creep_online.online.trackers.window import WindowTracker
 from creep_online.simulate import fractional_integral, simulate
 
 
@@ -190,7 +192,7 @@ def test_replay_reproduces_the_statistics():
     y = simulate(model, np.arange(n) * h, u)
     tr = _tracker(model, h)
     _feed(tr, u, y)
-    job = tr._relinearize_job(None)
+    job = tr.replayer.relinearize_job(tr, None)
     for _ in job:
         pass
     fresh = _tracker(model, h, lin=(tr.a1l, tr.a2l))
@@ -218,7 +220,7 @@ def test_replays_swap_two_state_arrays_in_turn_and_each_equals_a_tracker_fed_liv
         _feed(tr, u[done:upto], y[done:upto])
         _feed(fresh, u[done:upto], y[done:upto])
         done = upto
-        for _ in tr._relinearize_job(None):
+        for _ in tr.replayer.relinearize_job(tr, None):
             pass
         arrays.append((tr.st, tr.S))
         assert (tr.a1l, tr.a2l) == (fresh.a1l, fresh.a2l)
@@ -248,7 +250,7 @@ def test_replay_snapshots_equal_the_statistics_at_their_instants_and_survive_the
     tr.detect, tr.test_every = True, every
     _feed(tr, u, y)
     tr._jobs.clear()                               # (the live snapshots' jobs: not what is tested)
-    for _ in tr._relinearize_job(None):
+    for _ in tr.replayer.relinearize_job(tr, None):
         pass
     snaps = tr._snaps
     assert [s[0] for s in snaps] == [2000, 2500, 3000]
@@ -280,7 +282,7 @@ def test_replay_snapshots_equal_the_statistics_at_their_instants_and_survive_the
         RF.run(st, S, shift, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)
         outcomes.append(np.array(RF.test_outcome(wk, tr.theta)))
     assert outcomes[0][0] > 0 and np.allclose(outcomes[0], outcomes[1], rtol=1e-12, atol=0)
-    for _ in tr._relinearize_job(None):            # the next replay: the first one's snapshots untouched
+    for _ in tr.replayer.relinearize_job(tr, None):            # the next replay: the first one's snapshots untouched
         pass
     for (i, S0, sy0, *_), (S_then, sy_then) in zip(snaps, kept):
         assert np.array_equal(S0[upper], S_then) and np.array_equal(sy0, sy_then)
@@ -295,7 +297,7 @@ def test_a_replay_unit_does_at_most_one_chunk_of_work():
     for skip in (0, 1, 7, 135, 431, 432, 433, 5000):
         done, units = 0, []
         while done < skip + 3 * chunk:
-            n = T._replay_unit(chunk, skip - done)
+            n = T._replay_unit(chunk, skip - done, DEFAULT.cold_replay_rows)
             advanced = min(n, max(skip - done, 0))
             assert advanced in (0, n)                      # (advance or accumulate, not both)
             units.append((advanced, n - advanced))
@@ -303,7 +305,7 @@ def test_a_replay_unit_does_at_most_one_chunk_of_work():
         assert max(a / 8 + b for a, b in units) <= chunk
         first = next(i for i, (a, b) in enumerate(units) if b)
         assert sum(a for a, _ in units[:first]) == skip     # (the skip ends at a unit's end)
-        assert units[first][1] == T.COLD_REPLAY_ROWS and all(b == chunk for _, b in units[first + 1:])
+        assert units[first][1] == DEFAULT.cold_replay_rows and all(b == chunk for _, b in units[first + 1:])
         assert done >= skip + 3 * chunk
 
 @pytest.mark.parametrize("window_s, drift, skip", [(None, 0, 0), (1.0, 2, 100), (0.01, 2, 0)])
@@ -319,7 +321,7 @@ def test_blocked_replay_equals_one_rank_one_update_per_sample(window_s, drift, s
     y[[7, 8, 40, 41, 42, 1500]] = np.nan
     tr = _tracker(model, h, window_s=window_s, drift=drift)
     _feed(tr, u, y)
-    st0, S0 = tr._fresh(tr.a1l, tr.a2l)
+    st0, S0 = WS.fresh(tr, tr.a1l, tr.a2l)
     st0[tr.lay["m"]:tr.lay["sy"]] = tr.m          # the drift columns' coefficients of the estimate
     st0[tr.lay["md"]:] = tr.md
     start = tr._ring_position(0)
@@ -447,17 +449,17 @@ def test_refit_machine_equals_its_kernels_in_sequence(wide):
     free = np.ones(theta.size)
     free[4:5 + tr.n_free] = W.LINEAR                 # the offset and free responses of a stream in operation
     if not wide:                                     # ... four of them until the wide test frees the others
-        free[[5 + i for i, rate in enumerate(T.WINDOW_FREE_RATES) if rate not in T.WINDOW_FREE_START]] = 0.0
+        free[[5 + i for i, rate in enumerate(DEFAULT.window_free_rates) if rate not in DEFAULT.window_free_start]] = 0.0
     free[-2:] = 0.0                                  # rates off: MASK_CONSTANT
     H, g = np.empty((theta.size, theta.size)), np.empty(theta.size)
-    for _ in range(T.REFIT_STEPS):
+    for _ in range(DEFAULT.refit_steps):
         cost = W.lm_normal(theta, tr.a1l, tr.a2l, lam, dx, F, fy, fyy, H, g)
         mu = W.lm_trial(theta, free, mu, H, g, cost, tr.a1l, tr.a2l, lam, dx, F, fy, fyy, *tr.alpha_bounds, out)
     cov = np.empty_like(H)
     W.covariance(H, free, cov)
     RF.begin(tr.st, tr.S, tr._shift, tr._wk, 0, False, False, 1, True)      # (with the drift-origin move)
     units = 1
-    while not RF.refit_unit(tr.st, tr.S, tr._shift, tr.theta, tr._wk, lam, dx):
+    while not RF.fit_unit(tr.st, tr.S, tr._shift, tr.theta, tr._wk, lam, dx):
         units += 1
     normal_slices = -(-tr.p // int(tr._wk[RF.RF_NORMAL_ROWS]))
     cost_slices = -(-tr.p // int(tr._wk[RF.RF_COST_ROWS]))
@@ -467,7 +469,7 @@ def test_refit_machine_equals_its_kernels_in_sequence(wide):
     # F warmed, the drift origin's move (1), scaling (1); per step the model coefficients (two halves), their
     # resonance derivatives, the Jacobian's, the rows, the step's factor and solve, the trial's coefficients, its
     # cost; the covariance's factor and its inverse's columns
-    assert units == warm_slices + 2 + T.REFIT_STEPS * (4 + normal_slices + 3 + cost_slices) + 1 + inverse_slices
+    assert units == warm_slices + 2 + DEFAULT.refit_steps * (4 + normal_slices + 3 + cost_slices) + 1 + inverse_slices
     head, fitted, var = RF.result(tr._wk)
     assert np.array_equal(fitted, theta) and np.array_equal(var, np.diag(cov))
     assert head[RF.RF_AFTER] == out[1] and head[RF.RF_DRIFT] == 0.0
@@ -483,15 +485,15 @@ def test_the_refit_keeps_the_resonance_within_its_trust_region_and_the_change_te
     statistics' first-order expansion is not the model: close_modes 0 walked a1 to +1159 % on it); alpha, b and
     the rest are not touched. The change test's fit is not bounded: a plant change is a large move it must see."""
     tr = _fed_drifting_tracker(9)
-    assert tr._wk[RF.RF_TRUST] == T.TRUST > 0.0 and tr._test_wk[RF.RF_TRUST] == 0.0
+    assert tr._wk[RF.RF_TRUST] == DEFAULT.trust > 0.0 and tr._test_wk[RF.RF_TRUST] == 0.0
     wk = tr._wk.copy()
     wk[RF.RF_A1L], wk[RF.RF_A2L] = 2e-4, 3e-7
     c1, c2 = math.log(2e-4), math.log(3e-7)
     for d1, d2 in ((1.0, -1.0), (-0.7, 0.9), (0.1, -0.2)):
         trial = np.array([0.3, c1 + d1, c2 + d2, 1.5, 0.01])
         RF._trust(trial, wk)
-        assert trial[1] == pytest.approx(c1 + max(min(d1, T.TRUST), -T.TRUST), abs=1e-12)
-        assert trial[2] == pytest.approx(c2 + max(min(d2, T.TRUST), -T.TRUST), abs=1e-12)
+        assert trial[1] == pytest.approx(c1 + max(min(d1, DEFAULT.trust), -DEFAULT.trust), abs=1e-12)
+        assert trial[2] == pytest.approx(c2 + max(min(d2, DEFAULT.trust), -DEFAULT.trust), abs=1e-12)
         assert trial[[0, 3, 4]].tolist() == [0.3, 1.5, 0.01]
     wk[RF.RF_TRUST] = 0.0                             # none: the trial as it was
     trial = np.array([0.3, c1 + 1.0, c2 - 1.0, 1.5, 0.01])
@@ -522,7 +524,7 @@ def test_the_per_sample_kernel_runs_the_refit_machine_to_the_same_result(slices,
     while not frozen:
         W.sample(0.5, ys[before // slices], st, S, ring)
         for _ in range(slices):
-            RF.refit_unit(st, S, shift, theta, wk, lam, dx)
+            RF.fit_unit(st, S, shift, theta, wk, lam, dx)
             before += 1
             frozen = wk[RF.RF_STAGE] == RF.ST_JACOBIAN
             if frozen:
@@ -530,7 +532,7 @@ def test_the_per_sample_kernel_runs_the_refit_machine_to_the_same_result(slices,
     assert before > 2                                  # (the warming slices and the move came first)
     expected = before
     probe = wk.copy()
-    while not RF.refit_unit(st.copy(), S.copy(), shift.copy(), theta.copy(), probe, lam, dx):
+    while not RF.fit_unit(st.copy(), S.copy(), shift.copy(), theta.copy(), probe, lam, dx):
         expected += 1
     RF.run(st, S, shift, theta, wk, lam, dx)
     calls = 0
@@ -571,7 +573,7 @@ def test_the_change_test_fits_a_drift_the_window_does_not(free_rates):
         assert all(abs(v) < 0.005 for v in moves.values()), moves
         assert r.after < 1.5 * (n - 1000) * noise**2
     else:
-        assert any(abs(moves[k]) > T.CHANGE_MOVE[k] for k in moves), moves
+        assert any(abs(moves[k]) > DEFAULT.change_rule.move[k] for k in moves), moves
 
 
 def test_drift_columns_model_a_drifting_gain_and_alpha():
@@ -651,7 +653,7 @@ def test_the_free_responses_block_does_not_void_the_covariance_of_the_others():
         creep = sum(d * x ** 0.3 for d, x in zip(du, lag))
         dcreep = sum(d * x ** 0.3 * np.log(np.maximum(x, 1e-12)) for d, x in zip(du, lag))
         ring = sum(d * np.exp(-30.0 * x) * np.sin(150.0 * x) for d, x in zip(du, lag))
-        J = np.column_stack([dcreep, creep, ring, np.ones_like(t)] + [np.exp(-m * t) for m in T.WINDOW_FREE_RATES])
+        J = np.column_stack([dcreep, creep, ring, np.ones_like(t)] + [np.exp(-m * t) for m in DEFAULT.window_free_rates])
         H = J.T @ J
         n = H.shape[0]
         exact = np.sum(np.linalg.solve(np.linalg.qr(J, mode="r"), np.eye(n)) ** 2, axis=1)[:3]
@@ -879,7 +881,7 @@ def test_the_wide_test_is_the_gauss_newton_gain_of_the_extra_free_responses(past
     tr = _tracker(CreepModel.from_resonance(0.12, 33.0, 0.25, 0.9), h, free=True, drift=2)
     _feed(tr, u, y)
     assert not tr.free_wide
-    extra = [5 + i for i, rate in enumerate(T.WINDOW_FREE_RATES) if rate not in T.WINDOW_FREE_START]
+    extra = [5 + i for i, rate in enumerate(DEFAULT.window_free_rates) if rate not in DEFAULT.window_free_start]
     lam, dx = tr.basis.lam, tr.basis.dx
     RF.begin(tr.st, tr.S, tr._shift, tr._wk, 0, False, True, 0, True)      # converged, the test due
     RF.run(tr.st, tr.S, tr._shift, tr.theta, tr._wk, lam, dx)
@@ -906,4 +908,4 @@ def test_the_wide_test_is_the_gauss_newton_gain_of_the_extra_free_responses(past
     expected = (gain(narrow + extra) - gain(narrow)) / sigma2
     assert expected > 0.1                                              # (a gain to compare)
     assert head[RF.RF_WIDE_STAT] == pytest.approx(expected, rel=1e-6)
-    assert tr.free_wide == (expected > T.WIDE_ON) == (past > 0.0)      # (0.6 and 1566 here)
+    assert tr.free_wide == (expected > DEFAULT.wide_on) == (past > 0.0)      # (0.6 and 1566 here)

@@ -18,8 +18,8 @@ import pytest
 from creep_online.errors import DataError
 from creep_online.model import CreepModel
 from creep_online.online import OnlineEstimator
-from creep_online.online import recursive as R
-from creep_online.online import window as W
+from creep_online.online.trackers import recursive as R
+from creep_online.online._kernels import window as W
 from creep_online.online.soe import SOE_TOP, SoeBasis
 from creep_online.simulate import simulate
 from hil_sim import scenarios

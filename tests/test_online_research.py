@@ -1,20 +1,22 @@
 """The tracker's re-search trigger, its resonance bounds and the search's row sampling (issue 8).
 
 The local re-fits never leave a wrong resonance basin; the re-search trigger
-(``tracker._watch``) searches the resonance again when the window's error
+(``Researcher.watch``) searches the resonance again when the window's error
 stays above the noise floor. The plants are built here, not taken from the
 bench's seeds.
 """
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from creep_online.online import OnlineEstimator
-from creep_online.online import refit as RF
-from creep_online.online import tracker as T
+from creep_online.online._kernels import fit_machine as RF
+from creep_online.online.trackers import window as T
+from creep_online.online.trackers.settings import DEFAULT
 from creep_online.online.search import ResonanceSearch
 from creep_online.online.soe import SoeBasis
 from hil_sim.scenarios import simulate_tv
@@ -81,13 +83,13 @@ def test_a_wrong_basin_start_is_left_by_the_research(wrong_basin_record, single)
     assert all(err[k] <= TOL[k] for k in TOL), err
     switched = [r for r in est.estimate.researches if r["switched"]]
     assert switched and set(switched[0]["moved"]) & {"a1", "a2"}
-    assert switched[0]["lr"] > T.RESEARCH_LR and "noise floor" in switched[0]["reason"]
+    assert switched[0]["lr"] > DEFAULT.research.lr and "noise floor" in switched[0]["reason"]
     assert est.estimate.quality == "good"
 
 
 def test_without_the_research_the_wrong_basin_is_kept(wrong_basin_record, monkeypatch):
     """The same record with the trigger off: the re-fits stay in the wrong basin (what the trigger fixes)."""
-    monkeypatch.setattr(T, "RESEARCH_RATIO", math.inf)
+    monkeypatch.setattr(T, "DEFAULT", replace(DEFAULT, research=replace(DEFAULT.research, ratio=math.inf)))
     u, y, truth = wrong_basin_record
     est = _run(u, y, detect_changes=False)
     err = _errors(est, truth)
@@ -104,7 +106,7 @@ def test_resonance_bounds_keep_the_fit_representable():
     assert RF.bound_resonance(theta, tr._wk)
     fn = 1 / (2 * math.pi * math.exp(0.5 * theta[2]))
     zeta = math.exp(theta[1]) / (2 * math.exp(0.5 * theta[2]))
-    assert fn == pytest.approx(T.FN_MAX_FS / H) and T.ZETA_BOUNDS[0] <= zeta <= T.ZETA_BOUNDS[1] * (1 + 1e-12)
+    assert fn == pytest.approx(DEFAULT.fn_max_fs / H) and T.ZETA_BOUNDS[0] <= zeta <= T.ZETA_BOUNDS[1] * (1 + 1e-12)
     inside = tr.theta.copy()
     assert not RF.bound_resonance(inside, tr._wk) and np.array_equal(inside, tr.theta)
 

@@ -60,14 +60,14 @@ import numpy as np
 from ..checks import count, is_real, number, real_array
 from ..errors import DataError, one_line
 from ..model import ONLINE_ALPHA_BOUNDS, ONLINE_REFITS, CreepModel
-from . import refit as RF
-from . import window as W
+from ._kernels import fit_machine as RF
+from ._kernels import window as W
 from .search import ResonanceSearch, SearchScratch, frequency_steps, grid_ends
 from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SOE_TOP, SoeBasis
-from . import recursive as R
-from .recursive import RecursiveTracker
+from .trackers import recursive as R      # (its kernels: R.sample)
+from .trackers.recursive import RecursiveTracker
 from . import rest
-from .tracker import DETERMINED, FREE_RATES, PERIODIC_JOBS, WindowTracker
+from .trackers.window import DETERMINED, FREE_RATES, PERIODIC_JOBS, WindowTracker
 from .checkpoint import Checkpointable
 from .stored_params import StoredParams
 
@@ -1534,7 +1534,7 @@ def _known(x: float) -> float | None:
 
 def warm_kernels() -> None:
     """Compile (or load from numba's cache) every kernel that Python calls, so no update() pays for it."""
-    from . import tracker as T
+    from .trackers import window as T
     est = OnlineEstimator(1e-3, horizon_s=10.0, t_c=0.05)
     t = np.arange(3000) * 1e-3
     u = np.floor(t * 4) % 2

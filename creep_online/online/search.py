@@ -29,10 +29,10 @@ import numpy as np
 from numba import njit
 
 from ..model import ONLINE_ALPHA_BOUNDS
-from . import kernels
+from ._kernels import coefficients as kernels
 from .checkpoint import Checkpointable
 from .soe import SoeBasis
-from .window import resonance_step
+from ._kernels.window import resonance_step
 
 #: Creep exponents of the grid (log-spaced over the supported range 0.005-0.8).
 GRID_ALPHA = (0.008, 0.025, 0.07, 0.17, 0.35, 0.6)

@@ -5,7 +5,7 @@ about ten times a second at 10 kHz. As a Python generator with numpy glue betwee
 cost 20-110 us per unit: by the time a re-fit runs, the interpreter's and numpy's code paths are
 cold, and each line of glue (an array copy, a mask, a scalar read from an array) costs far more than
 its warm microsecond. Here the whole re-fit lives in one flat work array (``allocate``);
-``refit_unit`` advances it by one slice of about a microsecond (``SLICE_MACS``), and in a control
+``fit_unit`` advances it by one slice of about a microsecond (``SLICE_MACS``), and in a control
 loop the per-sample kernel itself runs the slices (``sample_work``): no Python between them. The
 tracker's Python starts a re-fit (``begin``) or a change test (``start_test``) and reads the result
 once (``accept``, ``test_outcome``).
@@ -22,7 +22,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from . import kernels
+from . import coefficients as kernels
 from . import window as W
 
 CACHE = True
@@ -273,7 +273,7 @@ def begin(st: np.ndarray, S: np.ndarray, shift: np.ndarray, wk: np.ndarray, wind
           converged: bool, refits: int, hold_alpha: bool) -> None:
     """Start a re-fit of the window: what it frees and which drift test follows (``_plan``; the tracker's
     state decides), and the drift origin to the newest sample (``window.move_origin``: alpha and b of the
-    fit are then the values now). ``refit_unit`` (or ``sample_work``) then runs it. ``hold_alpha``: the window
+    fit are then the values now). ``fit_unit`` (or ``sample_work``) then runs it. ``hold_alpha``: the window
     restarted after a plant change (alpha held for HOLD_N samples), not after a corrected start.
 
     The origin's move is the re-fit's first slice (``ST_BEGIN``): O(P^2) over statistics that are cold by the
@@ -308,7 +308,7 @@ def _plan(wk: np.ndarray, n: float, window_start: int, drift_on: bool, converged
 
 
 @njit(cache=CACHE)
-def refit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarray, wk: np.ndarray,
+def fit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarray, wk: np.ndarray,
                lam: np.ndarray, dx: float) -> bool:
     """Advance the re-fit (or change test) by one stage or slice; True when it is done (the result in
     ``wk``, see ``accept``) or idle.
@@ -549,7 +549,7 @@ def _step_done(wk: np.ndarray) -> bool:
 def run(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarray, wk: np.ndarray, lam: np.ndarray,
         dx: float) -> None:
     """The rest of a re-fit or change test in one call (block mode, where no sample waits for it)."""
-    while not refit_unit(st, S, shift, live, wk, lam, dx):
+    while not fit_unit(st, S, shift, live, wk, lam, dx):
         pass
 
 
@@ -616,7 +616,7 @@ def sample_work(u: float, y: float, st: np.ndarray, S: np.ndarray, ring: np.ndar
     status = W.sample(u, y, st, S, ring)
     theta, shift, lam, dx, wk = _unpack(ctx, which)
     for _ in range(slices):
-        if refit_unit(st, S, shift, theta, wk, lam, dx):
+        if fit_unit(st, S, shift, theta, wk, lam, dx):
             return status + MACHINE_DONE
     return status
 
@@ -625,7 +625,7 @@ def sample_work(u: float, y: float, st: np.ndarray, S: np.ndarray, ring: np.ndar
 def start_test(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, syy0: float, shift: np.ndarray,
                shift0: np.ndarray, live: np.ndarray, wk: np.ndarray, free_rates: bool) -> None:
     """Start the change test in its own work array: the statistics since a snapshot (S0, sy0, syy0,
-    shift0; ``window.since_statistics``), theta from the live estimate, fresh damping. ``refit_unit``
+    shift0; ``window.since_statistics``), theta from the live estimate, fresh damping. ``fit_unit``
     (or ``sample_work``) then fits them from the Jacobian on (``MASK_TEST``, no drift test).
 
     ``free_rates``: the window has drift columns but does not fit them yet (they wait for a converged
@@ -695,7 +695,7 @@ def _drift_test(wk: np.ndarray, theta: np.ndarray, cov: np.ndarray, k: int, drif
         return True
     r0 = int(wk[RF_R0])
     if drift == 1:
-        return False                   # the score test follows (``refit_unit``)
+        return False                   # the score test follows (``fit_unit``)
     n = k - r0
     stat = 0.0
     if not np.all(np.isfinite(cov[r0:, r0:])):

@@ -49,13 +49,13 @@ import math
 import numpy as np
 from numba import njit
 
-from . import kernels
-from .kernels import model_coefficients
+from . import coefficients as kernels
+from .coefficients import model_coefficients
 
 CACHE = True
 
 #: A mask value of ``trial_point``: the parameter moves with LINEAR_DAMPING x the others' damping. For the offset
-#: and free responses of a stream in operation (``refit.allocate``): the output is linear in them and their
+#: and free responses of a stream in operation (``fit_machine.allocate``): the output is linear in them and their
 #: columns are nearly collinear over a window (rates 0.01-30 /s against the constant), so the Marquardt damping
 #: of the others (mu >= 1e-7 x the diagonal) held their weakest combinations for seconds (mid_operation seed
 #: 13 at 80 dB: the window at 1.4-1.5x the floor where the exact optimum at the same estimate was 1.0x). It
@@ -71,8 +71,9 @@ LINEAR_DAMPING = 1e-5
 #: least squares (synthetic step responses on 3-6 s windows: alpha's -13 to -21 %; on 12 s, -0.3 %).
 LINEAR_PRIOR = 1e-9
 
-#: Offsets of the regressor entries after the Q SOE nodes.
-X0, S1, S2, ONE, FREE = 0, 2, 4, 6, 7
+#: Offsets of the regressor entries after the Q SOE nodes (``layout``).
+from .layout import (FREE, ONE, RESONANCE, S1, S2, X0, co_at, co_size, free_decay_in_co,  # noqa: E402,F401
+                     md_at, offsets, resonance_in_co, ztail_at)
 
 # indices into the scalar work array ``sc``
 SC_G = 0          # weight of the next sample (forget^-n, renormalised)
@@ -191,7 +192,7 @@ def advance(phi: np.ndarray, co: np.ndarray, q: int, u: float) -> None:
     """
     for i in range(q):
         phi[i] = co[i] * phi[i] + co[q + i] * u
-    r = 2 * q
+    r = resonance_in_co(q)
     x0 = phi[q]
     x1 = phi[q + 1]
     for j in range(2):
@@ -202,7 +203,7 @@ def advance(phi: np.ndarray, co: np.ndarray, q: int, u: float) -> None:
         phi[q + 3 + 2 * j] = co[r + 2] * s0 + co[r + 3] * s1 + co[o + 2] * x0 + co[o + 3] * x1 + co[o + 5] * u
     phi[q] = co[r] * x0 + co[r + 1] * x1 + co[r + 4] * u
     phi[q + 1] = co[r + 2] * x0 + co[r + 3] * x1 + co[r + 5] * u
-    f = r + 18
+    f = free_decay_in_co(q)
     for j in range(co.shape[0] - f):
         phi[q + FREE + j] *= co[f + j]
 
@@ -279,10 +280,12 @@ def parts(st: np.ndarray) -> tuple:
     """(Q, P, m, sy, md) of a state array (``layout``), read from its header: the node count, the
     regressor's length, the model coefficients, the statistics' sy and the alpha-derivative md."""
     q = int(st[SC_NQ])
-    p = q + FREE + int(st[SC_NM]) + int(st[SC_NR])
+    nm = int(st[SC_NM])
+    nr = int(st[SC_NR])
+    p = q + FREE + nm + nr
     o = SC_SIZE
-    c0 = o + 3 * p + 2 * q + 18 + int(st[SC_NM])        # co, then ztail (Q), then md
-    return q, p, st[o + p:o + 2 * p], st[o + 2 * p:o + 3 * p], st[c0 + q:c0 + 2 * q + ONE]
+    md = md_at(q, nm, nr)
+    return q, p, st[o + p:o + 2 * p], st[o + 2 * p:o + 3 * p], st[md:md + q + ONE]
 
 
 @njit(cache=CACHE)
@@ -619,16 +622,7 @@ def layout(q: int, n_free: int, n_rate: int = 0) -> dict:
     ztail (Q: node states before the oldest remembered sample) |
     md (Q + 6: alpha-derivative of the model coefficients, b dk/dalpha)].
     """
-    p = q + FREE + n_free + n_rate
-    o = {"sc": 0, "phi": SC_SIZE}
-    o["m"] = o["phi"] + p
-    o["sy"] = o["m"] + p
-    o["co"] = o["sy"] + p
-    o["ztail"] = o["co"] + 2 * q + 18 + n_free
-    o["md"] = o["ztail"] + q
-    o["size"] = o["md"] + q + ONE
-    o["p"] = p
-    return o
+    return offsets(q, n_free, n_rate)
 
 
 @njit(cache=CACHE)
@@ -647,10 +641,11 @@ def start_state(st: np.ndarray, decay: np.ndarray, gain: np.ndarray, free_decay:
     st[SC_FORGET] = forget
     st[SC_H] = h
     st[SC_NR] = n_rate
-    co = SC_SIZE + 3 * (q + FREE + n_free + n_rate)
+    co = co_at(q, n_free, n_rate)
     st[co:co + q] = decay
     st[co + q:co + 2 * q] = gain
-    st[co + 2 * q + 18:co + 2 * q + 18 + n_free] = free_decay
+    f = co + free_decay_in_co(q)
+    st[f:f + n_free] = free_decay
     linearize(st, a1l, a2l)
     st[SC_SIZE + q + ONE] = 1.0
     st[SC_SIZE + q + FREE:SC_SIZE + q + FREE + n_free] = 1.0
@@ -677,11 +672,10 @@ def linearize(st: np.ndarray, a1l: float, a2l: float) -> None:
     """A fresh state array's linearization point (a1l, a2l) and its resonance coefficients (``start_state``'s
     part that depends on the estimate)."""
     q = int(st[SC_NQ])
-    p = q + FREE + int(st[SC_NM]) + int(st[SC_NR])
-    co = SC_SIZE + 3 * p + 2 * q
+    res = co_at(q, int(st[SC_NM]), int(st[SC_NR])) + resonance_in_co(q)
     st[SC_A1L] = a1l
     st[SC_A2L] = a2l
-    resonance_coefficients(a1l, a2l, st[SC_H], st[co:co + 18])
+    resonance_coefficients(a1l, a2l, st[SC_H], st[res:res + RESONANCE])
 
 
 @njit(cache=CACHE)
@@ -892,8 +886,8 @@ def sample(u: float, y: float, st: np.ndarray, S: np.ndarray, ring: np.ndarray) 
     phi = st[o:o + p]
     m = st[o + p:o + 2 * p]
     sy = st[o + 2 * p:o + 3 * p]
-    c0 = o + 3 * p
-    co = st[c0:c0 + 2 * q + 18 + int(sc[SC_NM])]
+    c0 = co_at(q, int(sc[SC_NM]), nr)
+    co = st[c0:c0 + co_size(q, int(sc[SC_NM]))]
     ztail = st[c0 + co.shape[0]:c0 + co.shape[0] + q]
     pred = _drift_regressors(phi, m, st[c0 + co.shape[0] + q:c0 + co.shape[0] + 2 * q + ONE], sc, q, p, nr)
     for i in range(q + ONE, p):
@@ -1001,7 +995,7 @@ def cost_of(theta: np.ndarray, a1l: float, a2l: float, lam: np.ndarray, dx: floa
 def cost_rows(F: np.ndarray, fy: np.ndarray, m: np.ndarray, i0: int, i1: int, partial: float) -> float:
     """``partial`` plus rows i0..i1 of the window cost's sum m_i ((F m)_i - 2 fy_i): started at fyy and
     run over all rows, the cost at coefficients m. In row slices, it is the same sum in the same order
-    (the re-fit spreads it over samples, ``refit.refit_unit``)."""
+    (the re-fit spreads it over samples, ``fit_machine.fit_unit``)."""
     p = fy.shape[0]
     c = partial
     for i in range(i0, i1):
@@ -1498,8 +1492,8 @@ def _replay_views(st: np.ndarray) -> tuple:
     phi = st[o:o + p]
     m = st[o + p:o + 2 * p]
     sy = st[o + 2 * p:o + 3 * p]
-    c0 = o + 3 * p
-    co = st[c0:c0 + 2 * q + 18 + int(sc[SC_NM])]
+    c0 = co_at(q, int(sc[SC_NM]), nr)
+    co = st[c0:c0 + co_size(q, int(sc[SC_NM]))]
     md = st[c0 + co.shape[0] + q:c0 + co.shape[0] + 2 * q + ONE]
     return sc, q, nr, p, phi, m, sy, co, md
 
@@ -1606,7 +1600,7 @@ def swap_into(live: np.ndarray, replayed: np.ndarray, theta: np.ndarray, lam: np
     q = int(live[SC_NQ])
     p = q + FREE + int(live[SC_NM]) + int(live[SC_NR])
     o = SC_SIZE
-    ztail = o + 3 * p + 2 * q + 18 + int(live[SC_NM])
+    ztail = ztail_at(q, int(live[SC_NM]), int(live[SC_NR]))
     g, syy, neff = replayed[SC_G], replayed[SC_SYY], replayed[SC_NEFF]
     a1l, a2l, tref = replayed[SC_A1L], replayed[SC_A2L], replayed[SC_TREF]
     replayed[:o] = live[:o]

@@ -1,0 +1,80 @@
+"""What the trackers share: the fit record, the parameter view of theta, the job protocol's tokens."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..search import ZETA_BOX
+
+#: What a job yields while it waits for samples to arrive (the unit is not spent on it).
+WAIT = "wait"
+#: What a job yields while its re-fit or change test runs in ``machine`` (advanced by the per-sample
+#: kernel, ``fit_machine.sample_work``; in block mode by ``finish``).
+MACHINE = "machine"
+MACHINE_REFIT, MACHINE_TEST = 0, 1      # the work arrays in the tracker's context (``fit_machine.context``)
+#: Change-test snapshots kept, live and replayed: the test of the second before the last reads the oldest.
+KEPT_SNAPSHOTS = 3
+#: Snapshot slots of the change test, reused in turn (see ``workspace.allocate_work``).
+SNAP_SLOTS = 6
+#: Jobs that run before the long ones (``Scheduler.next_job``).
+PERIODIC_JOBS = ("snapshot_job", "refit_job", "change_job")
+#: Resonances the window fit may reach (those of the search).
+ZETA_BOUNDS = ZETA_BOX
+#: theta = [alpha, ln a1, ln a2, b, offset, free-response weights..., b'/b, alpha'] (the last two with drift)
+
+
+
+
+def replay_unit(chunk: int, skip_left: int, cold_rows: int) -> int:
+    """Samples in a replay's next unit: up to eight chunks only advanced (states, no statistics: ~1/8 of the work)
+    while ``skip_left`` > 0, the last of them ending at the skip; then ``settings.cold_replay_rows`` accumulated (the
+    statistics, p x p, and the block's code come from memory after thousands of calls without a replay:
+    with 20 samples after the skip's end in the same unit the call took ~40 us, after ~90 us for 297 when
+    accumulating past the skip's end at the advance's length); then ``chunk`` accumulated."""
+    if skip_left > 0:
+        return min(skip_left, 8 * chunk)
+    return min(cold_rows, chunk) if skip_left == 0 else chunk
+
+
+def largest_move(new: list[float], old: list[float]) -> float:
+    """Largest relative move of alpha, ln a1, ln a2, b (plain floats: numpy on 4-vectors costs ~2 us)."""
+    return max(abs(a - b) / max(abs(b), 1e-300) for a, b in zip(new[:4], old[:4]))
+
+
+@dataclass
+class Fit:
+    """The window's last fit: parameters, cost, 1-sigma std, and when."""
+
+    theta: np.ndarray | list[float]     # [alpha, ln a1, ln a2, b, ...]
+    cost: float = math.inf
+    neff: float = 0.0
+    std: dict = field(default_factory=dict)
+    sample: int = 0
+
+
+class ParameterView:
+    """The model parameters read from ``theta`` = [alpha, ln a1, ln a2, b, offset, ...] (both trackers)."""
+
+    theta: np.ndarray
+
+    @property
+    def alpha(self) -> float:
+        return float(self.theta[0])
+
+    @property
+    def a1(self) -> float:
+        return math.exp(self.theta[1])
+
+    @property
+    def a2(self) -> float:
+        return math.exp(self.theta[2])
+
+    @property
+    def b(self) -> float:
+        return float(self.theta[3])
+
+    @property
+    def offset(self) -> float:
+        return float(self.theta[4])

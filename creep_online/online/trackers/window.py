@@ -1,0 +1,305 @@
+"""The window tracker: all four parameters from one set of exponentially forgotten statistics.
+
+Per sample (``feed``): one numba call predicts, gates the output on its
+innovation, accumulates the statistics of the regressor (``window.py``),
+remembers the sample and advances the states. Heavy work is a queue of
+resumable jobs, one small unit per ``work()`` call:
+
+* **refit** every ``refit_every`` samples: Levenberg-Marquardt steps on the
+  exact window cost over (alpha, ln a1, ln a2, b, offset, free responses and,
+  with drift columns, the rates b'/b and alpha'); the drift columns' time
+  origin moves to the newest sample first, so alpha and b are the values now.
+  The rates are fitted only while a score test (on) / Wald test (off) says
+  the data show drift (``settings.drift_on``, ``drift_off``). Its steps keep the resonance near the
+  linearization point, where the statistics are the model (``settings.trust``). The fit itself is a numba
+  state machine that the per-sample kernel advances in ~1 us slices
+  (``_kernels/fit_machine.py``, ``fit_machine.sample_work``);
+* **relinearize** when a1 or a2 moved more than ``settings.relinearize`` from the point
+  the resonance states were computed at: the remembered samples are replayed
+  into fresh statistics (the nodes fast-forwarded, the resonance states
+  started a settling time early), then swapped in whole;
+* **change test** every ``test_every`` samples: the statistics of the last
+  second are the difference of two snapshots (exact for exponential
+  forgetting); a fit on them against the window's estimate (on the same
+  state machine; with the drift rates while the window does not fit them) is a
+  likelihood-ratio test. A significant, physically large move that is also
+  a jump against the recent tests' level restarts the window at the change
+  (the event names the parameters and their moves);
+* **re-search** when the window's error stays above the noise floor or the
+  fit breaks down (``Researcher.watch``): the local re-fits never leave a wrong
+  resonance basin, so the resonance is searched again on the recent samples
+  with the live estimate competing, and replaces it only when clearly better
+  (a likelihood ratio; ``researches`` records each one and what moved).
+
+Where each part lives: this class holds the state and the per-sample path; its collaborators run the jobs
+on it (none keeps state of its own): ``scheduler.Scheduler`` (the job queue, the re-fit jobs),
+``replay.Replayer`` (replays), ``detection.ChangeDetection`` (snapshots, the change test, events, the restart;
+its verdict from ``policy.change``), ``research.Researcher`` (the misfit watch and the searches; its verdicts
+from ``policy.research``), ``workspace`` (the arrays). Every tunable is a field of ``settings.TrackerSettings``;
+the numba kernels and the state layout are in ``online._kernels``.
+"""
+from __future__ import annotations
+
+import math
+from typing import Generator
+
+import numpy as np
+
+from .._kernels import fit_machine as RF
+from .._kernels import window as W
+from ..checkpoint import Checkpointable
+from ..soe import SoeBasis
+from . import workspace as WS
+from .common import (KEPT_SNAPSHOTS, MACHINE_REFIT, MACHINE_TEST, PERIODIC_JOBS, SNAP_SLOTS, WAIT,  # noqa: F401
+                     ZETA_BOUNDS, Fit, ParameterView, replay_unit as _replay_unit)   # (re-exported: estimator, tests)
+from .detection import ChangeDetection
+from .replay import Replayer
+from .research import Researcher
+from .scheduler import Scheduler
+from .settings import DEFAULT, TrackerSettings
+
+#: The defaults' free-response rates and "determined" limits (the estimator's start-up search and quality).
+FREE_RATES = DEFAULT.free_rates
+DETERMINED = DEFAULT.determined
+
+
+class WindowTracker(ParameterView, Checkpointable):
+    """Exponentially forgotten output-error statistics and the jobs that fit them."""
+
+    def __init__(self, basis: SoeBasis, theta: np.ndarray, *, window_s: float | None, free: bool,
+                 ring: np.ndarray, gate: float, burst: int, stuck: int, alpha_bounds: tuple[float, float],
+                 refit_every: int, test_every: int, detect: bool, work: np.ndarray | None = None,
+                 drift: int = 0, settings: TrackerSettings | None = None) -> None:
+        self.settings = DEFAULT if settings is None else settings
+        #: the collaborators that run the jobs (no state of their own: they work on this tracker)
+        self.scheduler, self.replayer = Scheduler(), Replayer()
+        self.detection, self.researcher = ChangeDetection(), Researcher()
+        self.basis = basis
+        self.h = basis.h
+        self.q = basis.size
+        self.n_free = len(self.settings.window_free_rates) if free else 0
+        self._free_rates = np.asarray(self.settings.window_free_rates[:self.n_free], dtype=float)    # the window's columns
+        self._free_decay = np.exp(-self._free_rates * self.h)   # per sample (``workspace.fresh``)
+        #: the free responses' rates, also what a search's judge projects out (``ResonanceSearch.judged_cost``)
+        self._free_decays = self.settings.free_rates if free else ()
+        self.n_rate = int(drift)         # drift columns: 0 none, 1 gain rate, 2 gain and alpha rates
+        self.lay = W.layout(self.q, self.n_free, self.n_rate)
+        self.p = self.lay["p"]
+        #: samples per light unit of a replay (each costs the P^2 statistics update, which runs as blocked
+        #: matrix products at about twice the rate of the per-sample update, and the states)
+        self.replay_chunk = max(2, self.settings.unit_macs // (self.p * self.p // 2 + 4 * self.q))
+        #: samples per unit fed live (``feed_block``: a rank-one update each, with the gate and the prediction)
+        self.feed_chunk = max(2, self.settings.unit_macs // (self.p * self.p + 4 * self.q))
+        self.alpha_bounds = alpha_bounds
+        self.refit_every = refit_every
+        self.test_every = test_every
+        self._refit_period = refit_every   # now (``settings.calm_move``): refit_every, doubled while the window is calm
+        self._next_refit = refit_every     # sample of the next re-fit
+        self._refit_n = 0                  # sample the re-fit under way started at
+        self.detect = detect
+        self._lr_recent: list[float] = []   # statistics of the last change tests (no change found)
+        self.drift_on = False            # the rates are fitted (switched by the score and Wald tests)
+        self.drift_stat = 0.0            # the last test statistic (score when off, Wald when on)
+        self.theta = np.zeros(5 + self.n_free + self.n_rate)     # (its values: ``start``)
+        self.forget = 1.0 if window_s is None else math.exp(-self.h / window_s)
+        self.ring = ring                 # (2, H) history, owned by the caller (pre-faulted)
+        self.work_memory = work          # (N, Q) scratch for the post-change search (pre-faulted)
+        self.events: list[dict] = []
+        self.researches: list[dict] = []   # re-searches of the resonance (``Researcher.research_again_job``)
+        self.disagreement: dict | None = None   # the last change test, if the last second disagreed
+        self._misfit_since: int | None = None   # first re-fit of the current run of misfits
+        self._misfit_sudden = False             # ... and it came suddenly after a window at the floor (settings.research.sudden_ratio)
+        self._floor_at: int | None = None       # the last re-fit that found the converged window at the noise floor
+        self._floor_raw: tuple | None = None    # ... its accepted fit (``fit_machine.accept``'s tuple)
+        self._first_fit: int | None = None      # first re-fit of the current window (start, change, re-search)
+        self._research_wait = int(self.settings.research.after_s / self.h)
+        self._next_research = 0            # earliest sample of the next re-search (backoff)
+        self._fine_wait = int(self.settings.fine_wait_s / self.h)
+        self._next_fine = 0                # earliest sample of the next fine relinearization (backoff)
+        self.relinearizations = 0
+        self.adoptions = 0               # live states adopted (``_adopt``: the start, each replay's swap, restarts)
+        self.refits = 0
+        self.rejected = 0                # refits discarded (non-finite or zero gain)
+        self.window_start = 0            # first sample in the statistics (moved by a detected change)
+        #: alpha is the plant's (held after a change) unless the last restart corrected a start-up estimate
+        #: that had not settled (``ChangeDetection.settled_before``): then the re-fits and re-searches free it at once
+        self._alpha_known = True
+        self.fitting = True              # False while the start-up buffer is replayed: no refits yet
+        self.converged = False           # a refit has barely moved since the start: the change test may judge
+        self._jobs: list[Generator] = []
+        self._draining = False             # a checkpoint runs the jobs to their end: no job waits (``drain``)
+        #: the re-fit or change test under way (``fit_machine.sample_work`` advances it): its index among the
+        #: context's work arrays (``MACHINE_REFIT``, ``MACHINE_TEST``), or None
+        self.machine: int | None = None
+        self._snaps: list[tuple] = []
+        self._shift = np.zeros((self.q + W.ONE, max(self.n_rate, 1)))   # total drift-origin move (W.since_statistics)
+        WS.allocate_work(self)
+        self._theta_at: dict[int, np.ndarray] = {}
+        self._monitors = (gate, burst, stuck)
+        self._blank: tuple | None = None
+        self.start(theta)
+        self._blank = self._blank_state()
+
+    def start(self, theta: np.ndarray) -> None:
+        """Linearize at ``theta`` and start from empty statistics: the part of the construction that needs the
+        estimate. The rest (``__init__``: allocations, ~0.3-0.4 ms with cold caches) can run before the estimate
+        is known: ``OnlineEstimator`` builds its trackers before the stream, so the update() that ends the
+        start-up search does not pay it (it would be that call's largest cost). Of the fresh
+        state, only the linearization point and theta's coefficients are set here (one kernel,
+        ``window.start_at``): the rest was built ahead (``_blank_state``)."""
+        self.start_state(theta)
+        self.start_adopt()
+
+    def start_state(self, theta: np.ndarray) -> None:
+        """``start``'s first half: the fresh state linearized at ``theta`` (one kernel). The estimator calls the two
+        halves on two calls: together, with cold caches, they were ~35-40 us."""
+        if self._blank is None:
+            self._blank = self._blank_state()
+        st, fit = self._blank[0], self._blank[3]
+        W.start_at(np.asarray(theta, dtype=float), self.theta, fit.theta, st, self.basis.lam, self.basis.dx)
+
+    def start_adopt(self) -> None:
+        """``start``'s second half: the state of ``start_state`` becomes the live one."""
+        st, S, views, fit = self._blank
+        self._blank = None
+        self.fit = fit
+        self._adopt(st, S, views)
+        self.scheduler.set_due(self, self.n)              # (``Scheduler.schedule`` at sample 0: no re-fit or test is due yet)
+
+    def _blank_state(self) -> tuple:
+        """A fresh state array (linearized at the current estimate), its empty statistics and their views, with the
+        monitors set, and the start's ``Fit`` (its theta is filled by ``start``): ``start`` re-linearizes the state
+        at its theta. Built ahead: the numpy calls and the ``Fit`` from Python here cost ~90 us cold in the
+        update() that ends the start-up search."""
+        st, S = WS.fresh(self, self.a1, self.a2)
+        W.set_monitors(st[:W.SC_SIZE], self.h, *self._monitors)
+        return st, S, WS.views(self, st), Fit(theta=np.empty(self.theta.size))
+
+    @property
+    def b_rate(self) -> float:
+        """Drift of b (per second) at the last fit; 0 without drift columns."""
+        return float(self.theta[5 + self.n_free] * self.theta[3]) if self.n_rate > 0 else 0.0
+
+    @property
+    def free_wide(self) -> bool:
+        """A stream in operation: the window fits all its free responses (self.settings.window_free_rates), not only the four it
+        starts with (self.settings.window_free_start; switched by the wide test, ``fit_machine._plan``)."""
+        return self.n_free > 0 and self._wk[RF.RF_WIDE] != 0.0
+
+    @property
+    def alpha_rate(self) -> float:
+        """Drift of alpha (per second) at the last fit; 0 without the alpha drift column."""
+        return float(self.theta[6 + self.n_free]) if self.n_rate > 1 else 0.0
+
+    @property
+    def n(self) -> int:
+        """Samples fed."""
+        return int(self.sc[W.SC_N])
+
+    # ------------------------------------------------------------------ state arrays
+    def _adopt(self, st: np.ndarray, S: np.ndarray, views: tuple) -> None:
+        """Make (st, S) with their ``views`` the live state and statistics (their coefficients already set)."""
+        self.st, self.S = st, S
+        self.adoptions += 1
+        self.sc, self.phi, self.m, self.sy, self.co, self.ztail, self.md = views
+        self.a1l, self.a2l = float(st[W.SC_A1L]), float(st[W.SC_A2L])
+        self._snaps = []
+
+    def _coefficients(self) -> None:
+        """The model coefficients for theta, and what the gate needs to know of the estimate."""
+        W.set_estimate(self.theta, self.st, self.basis.lam, self.basis.dx)
+
+    def _take_resonance(self) -> None:
+        """A search's resonance was written into theta: predict with it at once if the live states represent it
+        (within ``settings.trust`` of their linearization point, as a re-fit's move); otherwise the prediction keeps the
+        last estimate's coefficients until the replay at the new point is swapped in (``Replayer.relinearize_job``).
+        The states hold the resonance to first order around their point only: a prediction with a resonance
+        far from it is no model at all (a1 x900 beyond the point predicted 1e5 times the output's span)."""
+        if max(abs(self.theta[1] - math.log(self.a1l)), abs(self.theta[2] - math.log(self.a2l))) <= self.settings.trust:
+            self._coefficients()
+
+    # ------------------------------------------------------------------ per sample
+    def feed(self, u: float, y: float, slices: int = 1) -> int:
+        """One sample (u as applied, y measured; NaN y = missing), and ``slices`` slices of the re-fit or
+        change test under way. Returns the kernel's status (``window.sample``'s)."""
+        if self.machine is None:
+            status = W.sample(u, y, self.st, self.S, self.ring)
+        else:
+            status = RF.sample_work(u, y, self.st, self.S, self.ring, self._ctx, self.machine, slices)
+            if status >= RF.MACHINE_DONE:
+                self.machine = None
+                status -= RF.MACHINE_DONE
+        if status >= 8:
+            self.scheduler.schedule(self)
+        return status
+
+    def feed_block(self, u: np.ndarray, y: np.ndarray, status: np.ndarray, start: int = 0, stop: int = -1) -> int:
+        """Samples ``start`` to ``stop`` (-1: the end) up to the next scheduled job or shift; returns how many
+        were consumed."""
+        used = W.block(u, y, self.st, self.S, self.ring, status, start, stop)
+        if status[used - 1] >= 8:
+            self.scheduler.schedule(self)
+        return used
+
+    @property
+    def prediction(self) -> float:
+        return float(self.sc[W.SC_PRED])
+
+    # ------------------------------------------------------------------ background work (``Scheduler``)
+    @property
+    def busy(self) -> bool:
+        return bool(self._jobs)
+
+    def work(self, units: int = 1) -> bool:
+        """Run up to ``units`` units of the queued jobs (``Scheduler.work``)."""
+        return self.scheduler.work(self, units)
+
+    def finish(self) -> None:
+        """Run the queued jobs to completion or until the head waits for samples (``Scheduler.finish``)."""
+        self.scheduler.finish(self)
+
+    def drain(self) -> None:
+        """Run every queued job to its end now (``Scheduler.drain``)."""
+        self.scheduler.drain(self)
+
+    def _schedule(self) -> bool | None:
+        """Queue the jobs due at this sample (``Scheduler.schedule``; the estimator calls it at status flag 8)."""
+        return self.scheduler.schedule(self)
+
+    def _refit_job(self) -> Generator:
+        """A re-fit job (``Scheduler.refit_job``; the estimator queues one when the start-up replay ends)."""
+        return self.scheduler.refit_job(self)
+
+    def _checkpoint(self) -> None:
+        if self._jobs or self.machine is not None:
+            self.scheduler.drain(self)
+
+    @property
+    def fit(self) -> Fit:
+        """The window's last accepted fit with its 1-sigma (built on first access after a re-fit)."""
+        if self._fit is None:
+            raw, drift_on = self._fit_raw
+            r = RF.Accepted._make(raw)
+            sigma2 = WS.noise_variance(self, r)
+            var = (r.var_alpha, r.var_ln_a1, r.var_ln_a2, r.var_b, r.var_offset, r.var_rate0, r.var_rate1)
+            sd = [math.sqrt(abs(v) * sigma2) if math.isfinite(v) else math.inf for v in var]
+            a1, a2 = math.exp(r.ln_a1), math.exp(r.ln_a2)
+            std = {"alpha": sd[0], "a1": sd[1] * a1, "a2": sd[2] * a2, "b": sd[3], "offset": sd[4]}
+            for k, name in enumerate(("b_rate", "alpha_rate")[:self.n_rate]):
+                std[name] = (sd[5 + k] * abs(r.b) if k == 0 else sd[5 + k]) if drift_on else math.inf
+            self._fit = Fit(theta=[r.alpha, r.ln_a1, r.ln_a2, r.b], cost=r.cost, neff=r.neff, std=std,
+                            sample=self._fit_sample)
+        return self._fit
+
+    @fit.setter
+    def fit(self, value: Fit) -> None:
+        self._fit, self._fit_sample = value, value.sample
+
+    # ------------------------------------------------------------------ remembered samples
+    def _ring_position(self, index: int) -> int:
+        """Ring slot of the sample with this index (must be remembered). A sample keeps its slot while it is
+        remembered (the oldest slot and index advance together), so jobs compute it once and count on."""
+        size = self.ring.shape[1]
+        count = int(self.sc[W.SC_RCOUNT])
+        oldest = (int(self.sc[W.SC_RPOS]) - count) % size
+        return (oldest + index - int(self.sc[W.SC_RSTART])) % size
