@@ -661,6 +661,93 @@ class RecursiveTracker(ParameterView, Checkpointable):
             ev.update(relative_change={k: float(v) for k, v in change.items()}, moved=moved, settled=True,
                       settled_t=self.n * self.h)
 
+    # --- tracker protocol (online/trackers/protocol.py)
+    def advance(self, u: float, y: float, units: int, work: bool = True) -> bool:
+        """One live sample (no background work here: ``units`` and ``work`` are the window tracker's). Returns False
+        only when the check at an alarm or a settle check finds the state non-finite."""
+        status = sample(u, y, self.st, self.P, self.CT)
+        if status >= 8:
+            self._schedule()
+            return self.state_finite()
+        return True
+
+    def state_finite(self) -> bool:
+        """Are the estimate, the covariance's diagonal and the live prediction all finite?"""
+        return W.state_finite(self.theta, self.S, self.sc)
+
+    def predict_next(self, u: float) -> float:
+        """The model output at the next sample if ``u`` (as applied) is applied now; no state changes."""
+        phi = self.phi.copy()
+        W.advance(phi, self.co, self.q, u)
+        return float(phi @ self.m)
+
+    def begin_replay(self, noise: float, adapting: bool) -> None:
+        """Before the start-up buffer is replayed: the noise monitor at ``noise``."""
+        self.sc[W.SC_NOISE] = noise
+        if not adapting:
+            self.sc[W.SC_ACC] = 0.0
+        self.fitting = False
+
+    def restart_monitors(self, noise: float) -> None:
+        """The output monitors as at a stream's first sample (``window.restart_monitors``)."""
+        W.restart_monitors(self.sc, noise)
+
+    def go_live(self, outlier_gate: float) -> None:
+        """The start-up buffer replayed: the output gate open at ``outlier_gate`` (no jobs: updates are per sample)."""
+        self.sc[W.SC_GATE] = float(outlier_gate)
+        self.fitting = True
+
+    def drain(self) -> None:
+        """Nothing queued (a checkpoint's drain)."""
+
+    @property
+    def adapting(self) -> bool:
+        """Do the updates move the estimate (False: frozen)?"""
+        return bool(self.sc[W.SC_ACC])
+
+    @adapting.setter
+    def adapting(self, on: bool) -> None:
+        self.sc[W.SC_ACC] = 1.0 if on else 0.0
+
+    @property
+    def noise_level(self) -> float:
+        """The output noise monitor's standard deviation."""
+        return float(self.sc[W.SC_NOISE])
+
+    @property
+    def live_error_power(self) -> float:
+        """Mean square of the live prediction error over the last ~0.2 s."""
+        return float(self.sc[W.SC_E2])
+
+    @property
+    def outliers(self) -> int:
+        """Outputs the gate did not use."""
+        return int(self.sc[W.SC_OUTLIERS])
+
+    @property
+    def shifts(self) -> int:
+        """Runs of gated outputs longer than the burst: shifts, not outliers."""
+        return int(self.sc[W.SC_SHIFTS])
+
+    @property
+    def output_stuck(self) -> bool:
+        """Is the output frozen or clipped while the model says it moves?"""
+        return bool(self.sc[W.SC_STUCK])
+
+    @property
+    def input_held_samples(self) -> float:
+        """Samples since the input last changed."""
+        return float(self.sc[W.SC_SINCE])
+
+    def drop_failed_jobs(self) -> list[str] | None:
+        """No background jobs: a fault is never confined to one (None)."""
+        return None
+
+    remembered_window = 0                # no samples are remembered: a restart starts from new ones
+
+    def copy_recent(self, u: np.ndarray, y: np.ndarray) -> None:
+        """Nothing remembered (``remembered_window`` is 0)."""
+
 
 def warm() -> None:
     """Compile (or load from numba's cache) the recursive kernels."""

@@ -1351,3 +1351,110 @@ class WindowTracker(ParameterView, Checkpointable):
             ev["moved"] = sorted(k for k, v in change.items() if abs(v) > CHANGE_MOVE.get(k, 0.02))
             ev["settled"] = True
             ev["settled_t"] = self.n * self.h
+
+    # --- tracker protocol (online/trackers/protocol.py)
+    def advance(self, u: float, y: float, units: int, work: bool = True) -> bool:
+        """One live sample with its share of the background work: the re-fit or change test under way takes
+        ``units`` slices in the per-sample kernel (and is then this call's work), else, if ``work``, the queued jobs
+        take ``units`` units. Returns False only when a check at a scheduled re-fit or test finds the state
+        non-finite (the snapshot's kernel checks it when it takes one)."""
+        if self.machine is None:
+            status = W.sample(u, y, self.st, self.S, self.ring)
+        else:
+            status = RF.sample_work(u, y, self.st, self.S, self.ring, self._ctx, self.machine, units)
+            if status >= RF.MACHINE_DONE:
+                self.machine = None
+                status -= RF.MACHINE_DONE
+            if status < 8:
+                return True
+        if status >= 8:
+            finite = self._schedule()
+            return self.state_finite() if finite is None else finite
+        if work and self._jobs:
+            self.work(units)
+        return True
+
+    def state_finite(self) -> bool:
+        """Are the estimate, the statistics' diagonal and the live prediction all finite (``window.state_finite``)?"""
+        return W.state_finite(self.theta, self.S, self.sc)
+
+    def predict_next(self, u: float) -> float:
+        """The model output at the next sample if ``u`` (as applied) is applied now; no state changes."""
+        phi = self.phi.copy()
+        W.advance(phi, self.co, self.q, u)
+        return float(phi @ self.m)
+
+    def begin_replay(self, noise: float, adapting: bool) -> None:
+        """Before the start-up buffer is replayed: the noise monitor at ``noise``, no re-fits until ``go_live``."""
+        self.sc[W.SC_NOISE] = noise
+        if not adapting:
+            self.sc[W.SC_ACC] = 0.0
+        self.fitting = False
+
+    def restart_monitors(self, noise: float) -> None:
+        """The output monitors as at a stream's first sample (``window.restart_monitors``)."""
+        W.restart_monitors(self.sc, noise)
+
+    def go_live(self, outlier_gate: float) -> None:
+        """The start-up buffer replayed: the output gate open at ``outlier_gate``, fitting on, a first re-fit queued."""
+        self.sc[W.SC_GATE] = float(outlier_gate)
+        self.fitting = True
+        self._jobs.append(self._refit_job())
+
+    @property
+    def adapting(self) -> bool:
+        """Do the re-fits move the estimate (False: frozen)?"""
+        return bool(self.sc[W.SC_ACC])
+
+    @adapting.setter
+    def adapting(self, on: bool) -> None:
+        self.sc[W.SC_ACC] = 1.0 if on else 0.0
+
+    @property
+    def noise_level(self) -> float:
+        """The output noise monitor's standard deviation."""
+        return float(self.sc[W.SC_NOISE])
+
+    @property
+    def live_error_power(self) -> float:
+        """Mean square of the live prediction error over the last ~0.2 s."""
+        return float(self.sc[W.SC_E2])
+
+    @property
+    def outliers(self) -> int:
+        """Outputs the gate did not use."""
+        return int(self.sc[W.SC_OUTLIERS])
+
+    @property
+    def shifts(self) -> int:
+        """Runs of gated outputs longer than the burst: shifts, not outliers."""
+        return int(self.sc[W.SC_SHIFTS])
+
+    @property
+    def output_stuck(self) -> bool:
+        """Is the output frozen or clipped while the model says it moves?"""
+        return bool(self.sc[W.SC_STUCK])
+
+    @property
+    def input_held_samples(self) -> float:
+        """Samples since the input last changed."""
+        return float(self.sc[W.SC_SINCE])
+
+    def drop_failed_jobs(self) -> list[str] | None:
+        """After a fault inside the background work: if only periodic jobs (re-fit, snapshot, change test) failed
+        and no slice is under way, drop them and return their names; else None (the tracker cannot go on)."""
+        dead = [job for job in self._jobs if job.gi_frame is None]     # (a generator that raised is closed)
+        if not (dead and self.machine is None and all(job.__name__ in PERIODIC_JOBS for job in dead)):
+            return None
+        for job in dead:
+            self._jobs.remove(job)
+        return [job.__name__.strip("_").replace("_", " ") for job in dead]
+
+    @property
+    def remembered_window(self) -> int:
+        """Samples of the current window still remembered (after a detected change: the post-change ones)."""
+        return max(0, min(int(self.sc[W.SC_RCOUNT]), self.n - self.window_start))
+
+    def copy_recent(self, u: np.ndarray, y: np.ndarray) -> None:
+        """u, y = the newest remembered inputs (as applied) and outputs, as many as u holds."""
+        W.ring_copy(self.ring, self._ring_position(self.n - u.shape[0]), u, y)
