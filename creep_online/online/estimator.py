@@ -11,17 +11,14 @@ Phases (``OnlineEstimate.phase``):
     longer window, the buffer grows and the search runs again (``startup.py``).
 ``tracking``
     The tracker replays the buffer and follows the plant. Two strategies
-    (docs/online.md, "Remark 3: window vs recursive"; ``refit``): ``"window"`` (default,
-    ``tracker.py``) recomputes over the window; ``"recursive"``
-    (``recursive.py``) carries on with the newest estimate (a Gauss-Newton
-    recursive prediction-error method with a CUSUM change detector, constant
-    work per sample, no replay, no drift model). The window tracker: a Levenberg-Marquardt re-fit of all four
-    parameters on the exact exponentially forgotten window cost every ``update_every_s``, a
-    likelihood-ratio change test every half second (a change restarts the
-    window; ``estimate.events`` lists them), and a re-linearization by replay
-    when the resonance moves. With ``track_drift`` the window model also has a
-    linear drift of b and alpha, switched on when the data show it
-    (``estimate.b_rate``, ``alpha_rate``); alpha and b are then the values now.
+    (docs/online.md, "Remark 3: window vs recursive"; ``refit``): ``"window"`` (default, ``tracker.py``)
+    recomputes over the window; ``"recursive"`` (``recursive.py``) carries on with the newest estimate (a
+    Gauss-Newton recursive prediction-error method with a CUSUM change detector, constant work per sample, no
+    replay, no drift model). The window tracker: a Levenberg-Marquardt re-fit of all four parameters on the exact
+    exponentially forgotten window cost every ``update_every_s``, a likelihood-ratio change test every half second
+    (a change restarts the window; ``estimate.events`` lists them), and a re-linearization by replay when the
+    resonance moves. With ``track_drift`` the window model also has a linear drift of b and alpha, switched on
+    when the data show it (``estimate.b_rate``, ``alpha_rate``); alpha and b are then the values now.
     The estimator uses a tracker only through ``trackers.Tracker`` (``trackers/protocol.py``).
 
 Work per ``update()``: one sample of O(P^2) statistics (~1 us) plus at most

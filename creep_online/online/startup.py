@@ -125,14 +125,10 @@ class Startup:
         self.nbuf = k + 1
 
     def ready_to_search(self) -> bool:
-        if self.first_change is None:
-            return False
-        return self.nbuf - self.first_change >= self.t_search() / self.est._h
+        return self.first_change is not None and self.nbuf - self.first_change >= self.t_search() / self.est._h
 
     def t_search(self) -> float:
-        if self.est.t_c is not None:
-            return float(self.est.t_c)
-        return self.t_need
+        return self.t_need if self.est.t_c is None else float(self.est.t_c)
 
     @property
     def in_operation(self) -> bool:
