@@ -99,8 +99,10 @@ class Recovery:
 
     def settle_pending(self) -> None:
         """Record (and recover from) the fault a read of the estimate found, before the next sample is fed."""
+        est = self.est
         nonfinite, error, message = self.pending
         self.pending = None
+        est._deferred = bool(est._held or est._backlog)
         self.record(nonfinite, error, message, "estimate")
 
     def view(self) -> FaultView | None:
