@@ -149,3 +149,21 @@ def test_residual_and_floor():
     assert Q.residual(tv) == pytest.approx(2 * NOISE)
     assert Q.residual(_tracker(fit_cost=math.inf)) is None and Q.residual(_tracker(fit_neff=0.0)) is None
     assert Q.noise_floor(_tracker(noise=0.0), 2.0) == pytest.approx(1e-9 * 1.5 * 2.0)
+
+
+@pytest.mark.parametrize("determined, rel, remembered, source", [
+    ({"alpha", "b", "a1", "a2"}, {}, False, "determined"),
+    ({"alpha", "b", "a1", "a2"}, {}, True, "determined"),     # a determined resonance replaces the one held
+    ({"alpha", "b", "a1"}, {"a1": 0.1, "a2": 0.9}, True, "held"),
+    ({"alpha", "b"}, {"a1": 0.4, "a2": 0.3}, False, "rough"),
+    ({"alpha", "b"}, {"a1": 0.6, "a2": 0.1}, False, ""),      # a1 not even rough
+    ({"alpha", "b"}, {"a1": 0.5, "a2": 0.1}, False, ""),      # at the limit: not below it
+])
+def test_where_a_compensator_s_resonance_comes_from(determined, rel, remembered, source):
+    assert Q.model_source(determined, rel, remembered) == source
+
+
+def test_the_tracker_s_determined_limits_are_the_quality_rule_s():
+    """The window tracker judges a determined resonance with the same limits (its re-search trigger)."""
+    from creep_online.online import tracker
+    assert tracker.DETERMINED == Q.DETERMINED

@@ -13,8 +13,13 @@ One pure function, ``assess``, on a read-only view of the estimator (``QualityVi
 7. the window error within ``good_ratio`` x the noise floor: ``good``; else ``provisional``.
 
 ``determined`` lists the parameters within their limits once steps 1-5 pass (empty before): a ``provisional``
-estimate with alpha and b in it has a trustworthy creep part (the model gate, ``online/gate.py``). The thresholds are
-``OnlineSettings.quality`` (``online/settings.py``).
+estimate with alpha and b in it has a trustworthy creep part. The thresholds are ``OnlineSettings.quality``
+(``online/settings.py``).
+
+What a compensator may take from an estimate follows from the same verdict (``model_source``; the model gate,
+``online/gate.py``, keeps the dwell and the remembered resonance): creep compensation needs alpha and b, which
+must have stayed determined for ``DWELL_S``; the resonance is the estimate's own when determined, else the last
+determined one, else the estimate's own if the data at least show it (``ROUGH``), else none.
 """
 from __future__ import annotations
 
@@ -26,6 +31,16 @@ from ..settings import QualitySettings
 
 #: The default limits of "determined" (relative 1-sigma), by parameter, in the order the quality names them.
 DETERMINED = dict(QualitySettings().determined.items())
+#: Seconds (estimate time) alpha and b must have stayed determined before a compensator takes a model: a window fit
+#: that passes the checks for one re-fit between failing ones is a fit in transit (two re-fits at the default 0.1 s).
+DWELL_S = 0.2
+#: The creep part: a model is taken only when the estimate determines these.
+CREEP = ("alpha", "b")
+#: The resonance's coefficients.
+RESONANCE = ("a1", "a2")
+#: An undetermined resonance is used (when no determined one was seen) if each coefficient's relative 1-sigma is
+#: below this: the data show it at 2 sigma (inverting it errs by less than not inverting it would).
+ROUGH = 0.5
 
 
 @dataclass(frozen=True)
@@ -239,3 +254,17 @@ def assess(view: QualityView) -> Verdict:
                                        "data (unmodeled dynamics, or parameters moving within the window)"),
                        determined, cleared)
     return Verdict("good", "", determined, cleared)
+
+
+def model_source(determined: set, resonance_rel_std: dict, remembered: bool) -> str:
+    """Where a compensator's resonance comes from, given the estimate's ``determined`` parameters (alpha and b
+    among them), the relative 1-sigma of a1 and a2 and whether a determined resonance was seen before:
+    ``"determined"`` (the estimate's own), ``"held"`` (the last determined one), ``"rough"`` (the estimate's own,
+    shown by the data at ``ROUGH``), or "" (none yet)."""
+    if set(RESONANCE) <= determined:
+        return "determined"
+    if remembered:
+        return "held"
+    if all(resonance_rel_std[name] < ROUGH for name in RESONANCE):
+        return "rough"
+    return ""
