@@ -693,7 +693,7 @@ class RecursiveTracker(ParameterView, Checkpointable):
         W.restart_monitors(self.sc, noise)
 
     def go_live(self, outlier_gate: float) -> None:
-        """The start-up buffer replayed: the output gate open at ``outlier_gate`` (no jobs: updates are per sample)."""
+        """The start-up buffer replayed: the outlier gate open at ``outlier_gate`` (no jobs: updates are per sample)."""
         self.sc[W.SC_GATE] = float(outlier_gate)
         self.fitting = True
 

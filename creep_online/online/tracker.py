@@ -1396,7 +1396,7 @@ class WindowTracker(ParameterView, Checkpointable):
         W.restart_monitors(self.sc, noise)
 
     def go_live(self, outlier_gate: float) -> None:
-        """The start-up buffer replayed: the output gate open at ``outlier_gate``, fitting on, a first re-fit queued."""
+        """The start-up buffer replayed: the outlier gate open at ``outlier_gate``, fitting on, a first re-fit queued."""
         self.sc[W.SC_GATE] = float(outlier_gate)
         self.fitting = True
         self._jobs.append(self._refit_job())

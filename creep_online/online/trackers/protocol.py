@@ -82,7 +82,7 @@ class Tracker(Protocol):
         """Output monitors as at a stream's first sample (after a lead-in of still outputs)."""
 
     def go_live(self, outlier_gate: float) -> None:
-        """The buffer replayed: the output gate open, fitting on."""
+        """The buffer replayed: the outlier gate open, fitting on."""
 
     # ---------------------------------------------------------------- recovery
     def drop_failed_jobs(self) -> list[str] | None:
