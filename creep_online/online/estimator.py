@@ -359,7 +359,7 @@ class OnlineEstimator(StoredParams, Checkpointable):
             return
         self.samples += 1
         try:
-            tr = self._live
+            tr = self._tracker if self._catchup == 0 else None    # (``_live`` inlined: the per-sample path)
             if tr is None:
                 if self._recovery.pending is not None:
                     self._recovery.settle_pending()
