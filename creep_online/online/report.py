@@ -96,9 +96,9 @@ def quality_view(est: "OnlineEstimator") -> Q.QualityView:
     return Q.QualityView(
         settings=est._settings.quality, dt=est._h, samples=est.samples, n_shift=est._n_shift,
         window_s=est.window_s, alpha_bounds=est._bounds, u_span=est._u_hi - est._u_lo, frozen=est.frozen,
-        frozen_t=est._frozen_t,
-        start=Q.StartView(competing=st.competing, start=st.start, u_first=est._u_ref, moved=st.first_change is not None),
-        tracker=tv, fault=est._recovery.view())
+        frozen_t=est._frozen_t, tracker=tv, fault=est._recovery.view(),
+        start=Q.StartView(competing=st.competing, start=st.start, u_first=est._u_ref,
+                          moved=st.first_change is not None))
 
 
 def build_estimate(est: "OnlineEstimator") -> OnlineEstimate:
