@@ -92,7 +92,7 @@ def test_import_linter_contracts():
     from importlinter.cli import lint_imports  # the `test` extra installs import-linter
 
     assert set(CONTRACTS) == {"layers", "no-hil-sim", "effects-not-model", "online-policy-pure", "online-kernels-below",
-                              "online-kernels-private"}
+                              "online-kernels-private", "online-tracker-protocol"}
     saved = sys.path[:]                    # lint_imports puts the working directory on sys.path
     try:
         status = lint_imports(config_filename=str(PYPROJECT), no_cache=True, no_logo=True)
@@ -122,3 +122,18 @@ def test_effects_do_not_import_the_model_module():
     assert contract["forbidden_modules"] == ["creep_online.model"]
     for path in (PACKAGE / "effects").glob("*.py"):
         assert "creep_online.model" not in _imports(path), path.name
+
+
+@pytest.mark.parametrize("contract", ["online-policy-pure", "online-tracker-protocol"])
+def test_the_online_rules_and_the_estimator_import_no_tracker_module(contract):
+    """The online policy modules, and the estimator's own modules, import none of the forbidden modules in their
+    own statements (the tracker protocol's contract allows them only through the start-up, which builds trackers)."""
+    rule = CONTRACTS[contract]
+    forbidden = set(rule["forbidden_modules"])
+    for source in rule["source_modules"]:
+        base = PACKAGE.parent / Path(*source.split("."))
+        paths = sorted(base.glob("*.py")) if base.is_dir() else [base.with_suffix(".py")]
+        assert paths, source
+        for path in paths:
+            hits = {m for m in _imports(path) for f in forbidden if m == f or m.startswith(f + ".")}
+            assert not hits, f"{_module_name(path)} imports {sorted(hits)}"

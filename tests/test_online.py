@@ -17,6 +17,7 @@ from creep_online.model import CreepModel
 from creep_online.online import OnlineEstimate, OnlineEstimator
 from dataclasses import replace
 
+from creep_online.online.startup import Startup
 from creep_online.online.trackers import window as tracker_module
 from creep_online.online.trackers.settings import DEFAULT as TRACKER_DEFAULTS
 from hil_sim.varying_plant import simulate_varying
@@ -686,7 +687,8 @@ def test_a_small_model_error_is_named_and_the_creep_part_still_determined():
 def test_right_model_windows_end_within_the_good_ratio_of_the_floor():
     """The other side of GOOD_RATIO: payload and stiffness changes, a controller's staircase and a start in
     operation (one seeded plant each, 40 dB) end with the window at the floor within 1.2x and read "good"."""
-    from creep_online.online.estimator import GOOD_RATIO
+    from creep_online.online.settings import QualitySettings
+    GOOD_RATIO = QualitySettings().good_ratio
     for family, seed in (("payload", 1), ("stiffness", 2), ("controller", 3), ("mid_operation", 4)):
         sc = scenarios.make(family, seed)
         est = OnlineEstimator(sc.h)
@@ -738,7 +740,7 @@ def test_estimate_is_finite_before_any_model():
     assert est.model is None and est.last_prediction is None and est.predict_one(1.0) is None
     for _ in range(5000):
         est.update(0.0, 0.01)          # no excitation: nothing to identify, memory stays bounded
-    assert est.estimate.phase == "buffering" and est._nbuf <= 4096
+    assert est.estimate.phase == "buffering" and est._startup.nbuf <= 4096
     assert set(e.to_dict()) >= {"alpha", "a1", "a2", "b", "phase", "quality", "reason", "uncertainty", "t",
                                 "samples", "events", "outliers", "input_outliers"}
 
@@ -868,22 +870,22 @@ def test_a_slow_resonance_found_wrong_at_the_start_is_searched_again_and_followe
 def test_a_change_that_never_settles_reads_degraded_once_the_window_misses_the_data(load_cell, monkeypatch):
     """An unsettled change event said "changing" / "estimate corrected" for as long as it stayed unsettled, and
     masked a window at 115x the noise floor for 9 s (strong_creep 3016 before its fix). After its first 1.5 s
-    it yields to "degraded" when the window is above FLOOR_RATIO; below, it still names the change."""
-    from creep_online.online import estimator as estimator_module
+    it yields to "degraded" when the window is above the floor ratio; below, it still names the change."""
+    from creep_online.online.policy import quality as quality_module
     t, u, y = load_cell[1:]
     est = OnlineEstimator(t[1] - t[0])
     est.update_block(u, y)
     now = est.estimate.t
     est._tracker.events.append({"kind": "change", "t": now - 3.0, "detected_t": now - 2.0, "moved": ["a1"],
                                 "settled": False, "estimate_settled": False})
-    monkeypatch.setattr(est, "_floor_ratio", lambda: 50.0)
+    monkeypatch.setattr(quality_module, "floor_ratio", lambda view: 50.0)
     assert est.estimate.quality == "degraded" and est.estimate.reason.startswith("window error 50")
-    monkeypatch.setattr(est, "_floor_ratio", lambda: 1.1)
+    monkeypatch.setattr(quality_module, "floor_ratio", lambda view: 1.1)
     assert est.estimate.quality == "provisional" and "had not settled" in est.estimate.reason
     est._tracker.events[-1]["detected_t"] = now - 1.0             # within its first 1.5 s: the change is named
-    monkeypatch.setattr(est, "_floor_ratio", lambda: 50.0)
+    monkeypatch.setattr(quality_module, "floor_ratio", lambda view: 50.0)
     assert est.estimate.reason.startswith("estimate corrected"), est.estimate.reason
-    assert estimator_module.FLOOR_RATIO < 50.0
+    assert est._settings.quality.floor_ratio < 50.0
 
 
 def test_the_grid_planned_on_idle_calls_is_the_searchs_own_and_changes_nothing(monkeypatch):
@@ -898,15 +900,16 @@ def test_the_grid_planned_on_idle_calls_is_the_searchs_own_and_changes_nothing(m
     def run() -> tuple[OnlineEstimator, np.ndarray, bool | None]:
         est, planned = OnlineEstimator(1e-4), None
         for a, b in zip(u.tolist(), y.tolist()):
-            plan = est._grid_plan
+            plan = est._startup.grid_plan
             est.update(a, b)
-            if plan is not None and plan.freqs is not None and est._search is not None and planned is None:
-                planned = est._search._freqs is plan.freqs and est._search is plan.search
-        return est, est._search._freqs, planned
+            search = est._startup.search
+            if plan is not None and plan.freqs is not None and search is not None and planned is None:
+                planned = search._freqs is plan.freqs and search is plan.search
+        return est, est._startup.search._freqs, planned
 
     est, ahead, planned = run()
     assert planned and est.phase == "tracking"
-    monkeypatch.setattr(OnlineEstimator, "_plan_grid", lambda self: None)
+    monkeypatch.setattr(Startup, "plan_grid", lambda self: None)
     direct, computed, never = run()
     assert never is None
     assert np.array_equal(ahead, computed)

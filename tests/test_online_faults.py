@@ -15,6 +15,7 @@ import pytest
 from creep_online.errors import DataError
 from creep_online.model import CreepModel
 from creep_online.online import OnlineEstimator
+from creep_online.online.policy import quality as quality_module
 from creep_online.online.trackers import recursive as recursive_module   # (the tracker's and the estimator's ``sample``)
 from creep_online.online._kernels import fit_machine as refit_module
 from creep_online.online import search as search_module
@@ -214,10 +215,16 @@ def test_nan_poisoning_is_found_by_the_estimate_too(staircase):
     n = u.size // 2
     est.update_block(u[:n], y[:n])
     est._tracker.S[0, 0] = math.inf              # poisoned statistics, between two scheduled checks
+    tracker = est._tracker
     e = est.estimate
-    assert est.internal_faults == 1 and e.quality == "degraded" and "NonFiniteState" in e.reason, e.reason
+    assert e.quality == "degraded" and "NonFiniteState" in e.reason, e.reason
+    # a read changes nothing: the same answer again, the same tracker, the fault recorded at the next sample fed
+    assert est.estimate == e and est._tracker is tracker and est.internal_faults == 0
     est.update_block(u[n:], y[n:])
     e = est.estimate
+    ev = _fault_events(e)[0]
+    assert est.internal_faults == 1 and ev["where"] == "estimate" and ev["recovery"].startswith("tracker restarted")
+    assert ev["t"] == n * H
     assert e.quality == "good", e.reason
     assert _within(e, truth), _errors(e, truth)
 
@@ -226,9 +233,12 @@ def test_a_fault_while_the_estimate_is_built_is_reported_not_raised(staircase, m
     truth, u, y = staircase
     est = OnlineEstimator(H)
     est.update_block(u, y)
-    _fail_at(monkeypatch, OnlineEstimator, "_residual", {1}, ValueError)
+    _fail_at(monkeypatch, quality_module, "residual", {1}, ValueError)
     e = est.estimate
     assert e.quality == "degraded" and "ValueError in estimate" in e.reason, e.reason
+    assert est.internal_faults == 0                # recorded at the next sample fed, not by the read
+    est.update(float(u[-1]), float(y[-1]))
+    e = est.estimate
     assert est.internal_faults == 1
     assert _fault_events(e)[0]["recovery"].startswith("estimate reported")
 

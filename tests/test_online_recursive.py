@@ -146,7 +146,7 @@ def _run_plant(p: dict, refit: str):
     est = OnlineEstimator(h, refit=refit)
     est.update_block(u, y)
     truth = {"alpha": model.alpha, "a1": model.a1, "a2": model.a2, "b": model.b}
-    start = est._search.result
+    start = est._startup.search.result
     start_fn_error = abs(math.sqrt(model.a2 / start.a2) - 1)
     return est.estimate, truth, start_fn_error
 

@@ -409,7 +409,8 @@ def test_gap_refuses_what_is_not_a_count(n):
 def test_a_long_outage_is_a_restart_in_constant_work_keeping_the_estimate():
     """``gap(10**9)`` (a day's outage at 10 kHz) replayed every lost sample: ~20 min blocking the loop."""
     from creep_online.online import OnlineEstimator
-    from creep_online.online.estimator import GAP_REPLAY_MAX
+    from creep_online.online.settings import RecoverySettings
+    GAP_REPLAY_MAX = RecoverySettings().gap_replay_max
     t, u, y = _record(4000)
     est = OnlineEstimator(1e-3)
     est.update_block(u[:3000], y[:3000])

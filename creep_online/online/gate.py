@@ -19,11 +19,8 @@ change pending) and chooses the resonance separately:
 4. otherwise none: no model yet (the compensator keeps passing the reference
    through, or keeps the model it has).
 
-An estimate is taken only once alpha and b have stayed determined for ``DWELL_S``
-(two re-fits at the default 0.1 s period): a window fit that passes the checks for
-one re-fit between failing ones is a fit in transit (seen on random drifting plant
-13: alpha at 0.95, b 7x too small and a 14 Hz resonance for one 10 ms read, between
-``degraded`` and ``changing``).
+An estimate is taken only once alpha and b have stayed determined for ``DWELL_S``. The rule and its thresholds
+are the quality rule's (``online/policy/quality.py``: ``model_source``); this class keeps what it must remember.
 
 The estimator's ``quality`` is not touched: it still says ``provisional`` and why.
 """
@@ -32,17 +29,10 @@ from __future__ import annotations
 import math
 
 from ..model import CreepModel
+from .policy.quality import CREEP, DWELL_S, RESONANCE, ROUGH, model_source
 from .stored_params import StoredParams
 
-#: Seconds (estimate time) alpha and b must have stayed determined before a model is taken.
-DWELL_S = 0.2
-#: The creep part: a model is taken only when the estimate determines these.
-CREEP = ("alpha", "b")
-#: The resonance's coefficients.
-RESONANCE = ("a1", "a2")
-#: An undetermined resonance is used (when no determined one was seen) if each coefficient's relative
-#: 1-sigma is below this: the data show it at 2 sigma.
-ROUGH = 0.5
+__all__ = ["ModelGate", "CREEP", "DWELL_S", "RESONANCE", "ROUGH"]
 
 
 class ModelGate(StoredParams):
@@ -85,15 +75,12 @@ class ModelGate(StoredParams):
         return model
 
     def _choose(self, estimate, determined: set) -> tuple[tuple[float, float] | None, str]:
-        """(a1, a2) and where they came from, per the order in the module docstring."""
+        """(a1, a2) and where they came from (``policy.quality.model_source``)."""
         own = (float(estimate.a1), float(estimate.a2))
-        if set(RESONANCE) <= determined:
-            return own, "determined"
-        if self._resonance is not None:
-            return self._resonance, "held"
-        if all(_relative_std(estimate, name) < ROUGH for name in RESONANCE):
-            return own, "rough"
-        return None, ""
+        rel = {} if set(RESONANCE) <= determined or self._resonance is not None else \
+            {name: _relative_std(estimate, name) for name in RESONANCE}
+        source = model_source(determined, rel, self._resonance is not None)
+        return {"determined": own, "held": self._resonance, "rough": own}.get(source), source
 
 
 def _relative_std(estimate, name: str) -> float:

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._kernels import window as W
 from ..search import ZETA_BOX
 
 #: What a job yields while it waits for samples to arrive (the unit is not spent on it).
@@ -78,3 +79,77 @@ class ParameterView:
     @property
     def offset(self) -> float:
         return float(self.theta[4])
+
+
+class LiveMonitors:
+    """What both trackers report of the live stream and how the estimator starts them (``Tracker`` protocol):
+    the output monitors in the scalar slots ``sc`` and the live prediction from the states ``phi``."""
+
+    sc: np.ndarray
+    phi: np.ndarray
+    co: np.ndarray
+    m: np.ndarray
+    q: int
+    theta: np.ndarray
+    S: np.ndarray
+    fitting: bool
+
+    def state_finite(self) -> bool:
+        """Are the estimate, the statistics' diagonal and the live prediction all finite (``window.state_finite``)?"""
+        return W.state_finite(self.theta, self.S, self.sc)
+
+    def predict_next(self, u: float) -> float:
+        """The model output at the next sample if ``u`` (as applied) is applied now; no state changes."""
+        phi = self.phi.copy()
+        W.advance(phi, self.co, self.q, u)
+        return float(phi @ self.m)
+
+    def begin_replay(self, noise: float, adapting: bool) -> None:
+        """Before the start-up buffer is replayed: the noise monitor at ``noise``, no fitting until ``go_live``."""
+        self.sc[W.SC_NOISE] = noise
+        if not adapting:
+            self.sc[W.SC_ACC] = 0.0
+        self.fitting = False
+
+    def restart_monitors(self, noise: float) -> None:
+        """The output monitors as at a stream's first sample (``window.restart_monitors``)."""
+        W.restart_monitors(self.sc, noise)
+
+    @property
+    def adapting(self) -> bool:
+        """Do the fits move the estimate (False: frozen)?"""
+        return bool(self.sc[W.SC_ACC])
+
+    @adapting.setter
+    def adapting(self, on: bool) -> None:
+        self.sc[W.SC_ACC] = 1.0 if on else 0.0
+
+    @property
+    def noise_level(self) -> float:
+        """The output noise monitor's standard deviation."""
+        return float(self.sc[W.SC_NOISE])
+
+    @property
+    def live_error_power(self) -> float:
+        """Mean square of the live prediction error over the last ~0.2 s."""
+        return float(self.sc[W.SC_E2])
+
+    @property
+    def outliers(self) -> int:
+        """Outputs the gate did not use."""
+        return int(self.sc[W.SC_OUTLIERS])
+
+    @property
+    def shifts(self) -> int:
+        """Runs of gated outputs longer than the burst: shifts, not outliers."""
+        return int(self.sc[W.SC_SHIFTS])
+
+    @property
+    def output_stuck(self) -> bool:
+        """Is the output frozen or clipped while the model says it moves?"""
+        return bool(self.sc[W.SC_STUCK])
+
+    @property
+    def input_held_samples(self) -> float:
+        """Samples since the input last changed."""
+        return float(self.sc[W.SC_SINCE])

@@ -74,10 +74,10 @@ from .._kernels.recursive import (R_ALARMN, R_ALARMS, R_CHECKN, R_COSTK, R_COST,
 from ..checkpoint import Checkpointable
 from ..soe import SoeBasis
 from .settings import DEFAULT, TrackerSettings
-from .common import Fit, ParameterView, largest_move as _largest_move
+from .common import Fit, LiveMonitors, ParameterView, largest_move as _largest_move
 
 
-class RecursiveTracker(ParameterView, Checkpointable):
+class RecursiveTracker(ParameterView, LiveMonitors, Checkpointable):
     """Gauss-Newton RPEM on the window tracker's regressor: constant work per sample, no replay.
 
     The estimator reads the same names as from ``WindowTracker``: ``alpha``,
@@ -180,6 +180,32 @@ class RecursiveTracker(ParameterView, Checkpointable):
         if status >= 8:
             self._schedule()
         return status
+
+    def advance(self, u: float, y: float, units: int, work: bool = True) -> bool:
+        """One live sample (no background work here: ``units`` and ``work`` are the window tracker's). Returns False
+        only when the check at an alarm or a settle check finds the state non-finite."""
+        status = sample(u, y, self.st, self.P, self.CT)
+        if status >= 8:
+            self._schedule()
+            return self.state_finite()
+        return True
+
+    def go_live(self, outlier_gate: float) -> None:
+        """The start-up buffer replayed: the outlier gate open at ``outlier_gate`` (no jobs: updates are per sample)."""
+        self.sc[W.SC_GATE] = float(outlier_gate)
+        self.fitting = True
+
+    def drain(self) -> None:
+        """Nothing queued (a checkpoint's drain)."""
+
+    def drop_failed_jobs(self) -> list[str] | None:
+        """No background jobs: a fault is never confined to one (None)."""
+        return None
+
+    remembered_window = 0                # no samples are remembered: a restart starts from new ones
+
+    def copy_recent(self, u: np.ndarray, y: np.ndarray) -> None:
+        """Nothing remembered (``remembered_window`` is 0)."""
 
     def feed_block(self, u: np.ndarray, y: np.ndarray, status: np.ndarray, start: int = 0, stop: int = -1) -> int:
         """Samples ``start`` to ``stop`` (-1: the end) up to the next publication or alarm; returns how many were

@@ -14,11 +14,12 @@ from dataclasses import dataclass, field, fields
 from typing import Mapping
 
 from ..policy.change import GeneralizedLikelihoodRatio, LikelihoodRatioTest
+from ..policy.quality import DETERMINED
 from ..policy.research import ResearchRule
 
 
 def _determined() -> dict[str, float]:
-    return {"alpha": 0.01, "b": 0.015, "a1": 0.025, "a2": 0.025}
+    return dict(DETERMINED)     # (the quality rule's limits: one definition)
 
 
 def _start_sd() -> dict[str, float]:

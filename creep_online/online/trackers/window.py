@@ -50,7 +50,7 @@ from .._kernels import window as W
 from ..checkpoint import Checkpointable
 from ..soe import SoeBasis
 from . import workspace as WS
-from .common import (KEPT_SNAPSHOTS, MACHINE_REFIT, MACHINE_TEST, PERIODIC_JOBS, SNAP_SLOTS, WAIT,  # noqa: F401
+from .common import (LiveMonitors, KEPT_SNAPSHOTS, MACHINE_REFIT, MACHINE_TEST, PERIODIC_JOBS, SNAP_SLOTS, WAIT,  # noqa: F401
                      ZETA_BOUNDS, Fit, ParameterView, replay_unit as _replay_unit)   # (re-exported: estimator, tests)
 from .detection import ChangeDetection
 from .replay import Replayer
@@ -63,7 +63,7 @@ FREE_RATES = DEFAULT.free_rates
 DETERMINED = DEFAULT.determined
 
 
-class WindowTracker(ParameterView, Checkpointable):
+class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
     """Exponentially forgotten output-error statistics and the jobs that fit them."""
 
     def __init__(self, basis: SoeBasis, theta: np.ndarray, *, window_s: float | None, free: bool,
@@ -233,6 +233,33 @@ class WindowTracker(ParameterView, Checkpointable):
             self.scheduler.schedule(self)
         return status
 
+    def advance(self, u: float, y: float, units: int, work: bool = True) -> bool:
+        """One live sample with its share of the background work: the re-fit or change test under way takes
+        ``units`` slices in the per-sample kernel (and is then this call's work), else, if ``work``, the queued jobs
+        take ``units`` units. Returns False only when a check at a scheduled re-fit or test finds the state
+        non-finite (the snapshot's kernel checks it when it takes one)."""
+        if self.machine is None:
+            status = W.sample(u, y, self.st, self.S, self.ring)
+        else:
+            status = RF.sample_work(u, y, self.st, self.S, self.ring, self._ctx, self.machine, units)
+            if status >= RF.MACHINE_DONE:
+                self.machine = None
+                status -= RF.MACHINE_DONE
+            if status < 8:
+                return True
+        if status >= 8:
+            finite = self.scheduler.schedule(self)
+            return self.state_finite() if finite is None else finite
+        if work and self._jobs:
+            self.work(units)
+        return True
+
+    def go_live(self, outlier_gate: float) -> None:
+        """The start-up buffer replayed: the outlier gate open at ``outlier_gate``, fitting on, a first re-fit queued."""
+        self.sc[W.SC_GATE] = float(outlier_gate)
+        self.fitting = True
+        self._jobs.append(self.scheduler.refit_job(self))
+
     def feed_block(self, u: np.ndarray, y: np.ndarray, status: np.ndarray, start: int = 0, stop: int = -1) -> int:
         """Samples ``start`` to ``stop`` (-1: the end) up to the next scheduled job or shift; returns how many
         were consumed."""
@@ -295,7 +322,26 @@ class WindowTracker(ParameterView, Checkpointable):
     def fit(self, value: Fit) -> None:
         self._fit, self._fit_sample = value, value.sample
 
+    def drop_failed_jobs(self) -> list[str] | None:
+        """After a fault inside the background work: if only periodic jobs (re-fit, snapshot, change test) failed
+        and no slice is under way, drop them and return their names; else None (the tracker cannot go on)."""
+        dead = [job for job in self._jobs if job.gi_frame is None]     # (a generator that raised is closed)
+        if not (dead and self.machine is None and all(job.__name__ in PERIODIC_JOBS for job in dead)):
+            return None
+        for job in dead:
+            self._jobs.remove(job)
+        return [job.__name__.strip("_").replace("_", " ") for job in dead]
+
     # ------------------------------------------------------------------ remembered samples
+    @property
+    def remembered_window(self) -> int:
+        """Samples of the current window still remembered (after a detected change: the post-change ones)."""
+        return max(0, min(int(self.sc[W.SC_RCOUNT]), self.n - self.window_start))
+
+    def copy_recent(self, u: np.ndarray, y: np.ndarray) -> None:
+        """u, y = the newest remembered inputs (as applied) and outputs, as many as u holds."""
+        W.ring_copy(self.ring, self._ring_position(self.n - u.shape[0]), u, y)
+
     def _ring_position(self, index: int) -> int:
         """Ring slot of the sample with this index (must be remembered). A sample keeps its slot while it is
         remembered (the oldest slot and index advance together), so jobs compute it once and count on."""

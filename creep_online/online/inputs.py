@@ -1,0 +1,143 @@
+"""The input gate in action: samples held back while the gate decides, then fed (or buffered) in order.
+
+The rule (``online/policy/input_gate.py``) says what becomes of each sample; ``InputStage`` keeps the samples it
+holds (``est._held``: glitch candidates (u, y) not yet decided) and those decided but not yet taken by the live
+tracker (``est._backlog``: (du, y), fed ``input_gate.drain_per_update`` per update()), and the input's range
+(``est._u_lo``, ``est._u_hi``, ``est._u_last``, ``est._u_ref``: the reference inputs are deviations from). These
+live on the estimator: update()'s per-sample path reads them directly.
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .policy import input_gate as G
+
+if TYPE_CHECKING:
+    from .estimator import OnlineEstimator
+    from .trackers import Tracker
+
+
+class InputStage:
+    """The input gate's held and waiting samples for one estimator (``est``)."""
+
+    def __init__(self, est: "OnlineEstimator") -> None:
+        self.est = est
+        self.drain = est._settings.input_gate.drain_per_update
+
+    def glitch_candidate(self, u: float) -> bool:
+        """Is u a glitch candidate (``input_gate.glitch_candidate``)?"""
+        est = self.est
+        return G.glitch_candidate(u, G.InputRange(est._u_lo, est._u_hi, est._u_last), est.input_gate)
+
+    def classify(self, u: float, y: float) -> list[tuple[float, float]]:
+        """The samples (input to apply, y) decided by this one, in order (often just this one): ``input_gate.verdict``
+        applied."""
+        est = self.est
+        if est._u_ref is None:
+            est._u_ref = u
+            est._u_lo = est._u_hi = u
+            est._u_last = u
+            # a first input of zero is a start at rest; a non-zero one at the stream's first sample is read from the
+            # data (``Startup.read_start``); after a start over in mid-stream the plant is in operation
+            est._startup.start = "rest" if u == 0.0 else (None if est.samples == 1 else "operation")
+        verdict = G.verdict(self.glitch_candidate(u), len(est._held), est._burst)
+        if verdict == G.PASS:
+            return [(u, y)]
+        if verdict == G.HOLD:
+            est._held.append((u, y))
+            est._deferred = True
+            return []
+        held, est._held = est._held, []
+        est._deferred = bool(est._backlog)
+        if verdict == G.MOVE:
+            return held + [(u, y)]
+        est.input_outliers += len(held)
+        return [(est._u_last, w) for _, w in held] + [(u, y)]
+
+    def accept(self, u: float) -> float:
+        """Take u as the input applied (the range seen so far, the first input change); its deviation from the
+        reference. Called per sample in stream order, just before the sample is fed or buffered."""
+        est = self.est
+        if u != est._u_last and est._startup.first_change is None:
+            est._startup.first_change = est._startup.nbuf
+        est._u_last = u
+        est._u_lo = min(est._u_lo, u)
+        est._u_hi = max(est._u_hi, u)
+        return u - est._u_ref
+
+    def block(self, u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+        """Vector form of ``classify`` and ``accept`` for the live tracker: (du, y, exact). Exact: the arrays
+        are the block's samples one for one (every input within the range seen so far, nothing waiting: the
+        fast path); otherwise the samples that waited come first and glitch candidates at the end stay held."""
+        est = self.est
+        if not est._deferred and est._u_lo <= u.min() and u.max() <= est._u_hi:
+            est._u_last = float(u[-1])
+            return u - est._u_ref, y, True
+        ready = list(est._backlog)
+        est._backlog.clear()
+        for k in range(u.size):
+            ready.extend((self.accept(v), w) for v, w in self.classify(float(u[k]), float(y[k])))
+        est._deferred = bool(est._held)
+        out = np.array(ready, dtype=float).reshape(-1, 2)
+        return np.ascontiguousarray(out[:, 0]), np.ascontiguousarray(out[:, 1]), False
+
+    def buffer_sample(self, u: float, y: float) -> None:
+        """A sample into the start-up buffer through the input gate, after any the live tracker had waiting (a
+        fault's restart leaves them: ``update_deferred``, ``Recovery.block_resync``)."""
+        est = self.est
+        self.backlog_to_buffer()
+        for v, w in self.classify(u, y):
+            est._startup.buffer(self.accept(v), w)
+        est._deferred = bool(est._held)
+
+    def update_deferred(self, tr: "Tracker", u: float, y: float) -> None:
+        """update()'s slow path: an input outside the range seen so far, or samples waiting. The sample goes
+        through the input gate; of the decided ones at most ``drain_per_update`` are fed now, in order."""
+        est = self.est
+        est._backlog.extend((self.accept(v), w) for v, w in self.classify(u, y))
+        for k in range(min(self.drain, len(est._backlog))):
+            du, w = est._backlog.popleft()
+            self.feed_live(tr, du, w, work=k == self.drain - 1 or not est._backlog)
+            if est._live is not tr:        # a fault restarted the tracker: the rest goes to the start-up buffer
+                self.backlog_to_buffer()
+                break
+        est._deferred = bool(est._held or est._backlog)
+
+    def feed_live(self, tr: "Tracker", du: float, y: float, work: bool) -> None:
+        """One sample into the live tracker with its slice of a re-fit under way and, if ``work``, a share of the
+        queued jobs (the per-sample path of update(), for the samples the input gate kept back)."""
+        est = self.est
+        if not tr.advance(du, y, est._units, work):
+            est._recovery.fault(None, "update")
+
+    def settle(self) -> None:
+        """Before a gap: glitch candidates still held count as a glitch (the input is unknown past them) and every
+        sample waiting is fed (or buffered) now."""
+        est = self.est
+        if est._held:
+            est.input_outliers += len(est._held)
+            est._backlog.extend((est._u_last - est._u_ref, w) for _, w in est._held)
+            est._held = []
+        while est._backlog and est._live is not None:
+            du, w = est._backlog.popleft()
+            self.feed_live(est._live, du, w, work=True)
+        self.backlog_to_buffer()
+        est._deferred = False
+
+    def forget_held(self) -> None:
+        """Before a long outage: glitch candidates count as a glitch (the input went on unknown), nothing waits."""
+        est = self.est
+        if est._held:
+            est.input_outliers += len(est._held)
+            est._held = []
+        est._backlog.clear()
+        est._deferred = False
+
+    def backlog_to_buffer(self) -> None:
+        """The decided samples the live tracker has not taken, in order, into the start-up buffer (the tracker was
+        restarted by a fault: the start-up takes them first)."""
+        est = self.est
+        while est._backlog:
+            est._startup.buffer(*est._backlog.popleft())

@@ -1,0 +1,499 @@
+"""The start-up: buffer the stream, read how it starts, search the plant, start the tracker, replay the buffer.
+
+``Startup.advance`` runs it in bounded steps, called by ``OnlineEstimator`` on every sample until the tracker is
+live (phases ``buffering``, ``searching``, then ``tracking`` while the buffer is replayed):
+
+1. the samples go to the buffer (``buffer``; before the input's first move only the latest are kept);
+2. a stream whose first input is not zero is read: a step from rest at its first sample, or taken in operation
+   (``read_start``; both readings compete when the output may show a step: ``compete``);
+3. the first search's grid is planned on idle calls (``plan_grid``), the search runs in slices once the buffer spans
+   the search window (``start_search``), and again on a longer window when the resonance found needs one
+   (``longer_window_needed``);
+4. the tracker starts at the search's result (``start_steps``) and the buffer is replayed into it (``catch_up``),
+   after the rest a stream read from rest implies (``lead_in``); then it is live.
+
+Sample by sample each of these takes calls of its own (no update() pays two of them); in block mode (``units`` >=
+2^29) everything runs at once. Thresholds: ``OnlineSettings.startup``; the reading of the start: ``online/rest.py``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Generator
+
+import numpy as np
+
+from ..errors import DataError
+from . import rest
+from ._kernels import window as W
+from .search import ResonanceSearch, SearchScratch, frequency_steps, grid_ends
+from .trackers.recursive import RecursiveTracker
+from .trackers.window import FREE_RATES, WindowTracker
+
+if TYPE_CHECKING:
+    from .estimator import OnlineEstimator
+
+#: Block mode: a unit budget this large runs every step of the start-up in one call.
+EAGER = 1 << 29
+#: A generator's end (``next(gen, _DONE)``).
+_DONE = object()
+
+
+@dataclass
+class GridPlan:
+    """The start-up search prepared on idle buffering calls (``Startup.plan_grid``): the buffer's rows it will take,
+    its grid frequencies' steps, the frequencies once computed, the search once built."""
+    span: tuple[int, int]
+    steps: Generator | None
+    freqs: np.ndarray | None = None
+    search: ResonanceSearch | None = None
+
+
+class Startup:
+    """The start-up's state and steps for one estimator (``est``: the stream's shared state and settings)."""
+
+    def __init__(self, est: "OnlineEstimator") -> None:
+        self.est = est
+        self.cfg = cfg = est._settings.startup
+        h = est._h
+        self.bu = np.empty(cfg.buffer_samples)
+        self.by = np.empty(cfg.buffer_samples)
+        self.nbuf = 0
+        # pre-faulted work memory: page faults would otherwise land inside update()
+        self.bu.fill(0.0)
+        self.by.fill(0.0)
+        self.hist_work = np.zeros((cfg.max_search_samples, est.basis.size))
+        self.hist_work.fill(0.0)
+        self.first_change: int | None = None   # buffer index of the input's first change
+        #: how the stream starts (``rest.py``): "rest" (its first input zero), "step" (a step from rest at its first
+        #: sample), "operation" (taken in operation), None while the data do not tell yet
+        self.start: str | None = None
+        self.competing = False             # both readings of the start are being searched (``compete``)
+        self.move_a: int | None = None     # the input's first move (buffer index) in operation's reading
+        self.jump = 0.0                    # the first input level (the step's size in the step's reading)
+        self.reframing: Generator | None = None   # the buffer moving to the step's frame (``read_start``)
+        self.lead: int | None = None       # rest samples replayed before the buffer (``lead_in``; None: not yet)
+        self.lead_u = np.zeros(rest.REST_LEAD)            # ... their inputs (0) and outputs (the rest level)
+        self.lead_y = np.zeros(rest.REST_LEAD)
+        self.start_wait = max(64, min(int(rest.WAIT_S / h), cfg.buffer_samples // 2))   # (``rest.WAIT_S``)
+        self.noise_scratch = np.zeros(W.NOISE_SEED_ROWS)
+        self.noise_seed = 0.0              # the buffer's noise level (``buffer_noise``)
+        self.t_need = max(cfg.first_window_s, cfg.first_window_samples * h)
+        self.search: ResonanceSearch | None = None
+        self.search_scratch = SearchScratch(est.basis.size)
+        self.search_scratch.prepare_judge(FREE_RATES, est.basis.h)   # (a start-up search in operation's)
+        self.grid_plan: GridPlan | None = None
+        self.search_rounds = 0
+        self.search_end = 0                # end (buffer index) of the last start-up search's rows
+        self.plan_waits = 0                # ready calls spent on the plan (``plan_pending``)
+        self.tc_used = 0.0
+        self.starting: Generator | None = None      # the tracker's start under way (``start_steps``)
+        self.replayed = 0
+        self.restarted = False             # restarted in operation after a fault: the plant was not at rest
+        self.hint: tuple | None = None     # (alpha, a1, a2) before a fault's restart: a candidate of the search
+        # the window trackers for a stream from rest and one taken in operation, built now (``WindowTracker.start``)
+        self.spares = {} if est._recursive else {free: self.window_tracker(free) for free in (False, True)}
+        #: the catch-up's status buffer (``catch_up``), allocated ahead for the window trackers
+        self.status = np.empty(max([t.feed_chunk for t in self.spares.values()] or [0]), dtype=np.int64)
+
+    # ------------------------------------------------------------------ the buffer
+    def buffer(self, du: float, y: float) -> None:
+        """Append to the start-up buffer (before any input change only the last samples are kept)."""
+        cfg = self.cfg
+        k = self.nbuf
+        if self.first_change is None and k >= cfg.idle_buffer and self.start is not None:  # no excitation: the latest
+            keep = cfg.idle_keep
+            self.bu[:keep] = self.bu[k - keep:k]
+            self.by[:keep] = self.by[k - keep:k]
+            k = keep
+        if k == self.bu.size:
+            if self.first_change is None:
+                if self.start is None:       # (a held input whose output never showed a step: the first sample goes)
+                    self.start = "operation"
+                keep = cfg.idle_keep
+                self.bu[:keep] = self.bu[k - keep:k]
+                self.by[:keep] = self.by[k - keep:k]
+                k = keep
+            else:                            # the search cannot keep up: finish it now
+                self.advance(1 << 30)
+                if self.est._live is not None:
+                    self.est._live.feed(du, y)
+                    return
+                raise DataError("start-up buffer overflow: the stream is too fast for the search")
+        self.bu[k] = du
+        self.by[k] = y
+        self.nbuf = k + 1
+
+    def ready_to_search(self) -> bool:
+        return self.first_change is not None and self.nbuf - self.first_change >= self.t_search() / self.est._h
+
+    def t_search(self) -> float:
+        return self.t_need if self.est.t_c is None else float(self.est.t_c)
+
+    @property
+    def in_operation(self) -> bool:
+        """Does the buffer start with the plant not at rest? A stream whose first input is not zero, and every
+        buffer after a fault's restart: the searches and the tracker then fit free responses."""
+        return self.restarted or bool(self.est._u_ref)
+
+    # ------------------------------------------------------------------ the steps
+    def advance(self, units: int) -> None:
+        """Buffering and searching: start the search when ready, give it ``units``, start the tracker.
+
+        Sample by sample the search's end, the tracker's start steps and the replay's first unit each take
+        a call of their own (``start_steps``): together they were one update() of ~80-120 us. The estimate
+        reads "searching" until the tracker has started, a few samples later. With ``units`` >= ``EAGER``
+        (block mode, a full buffer) everything runs in this call."""
+        est = self.est
+        eager = units >= EAGER
+        while self.reframing is not None:      # (the step's reading's buffer moving to its frame, a chunk per call)
+            if next(self.reframing, _DONE) is _DONE:
+                self.reframing = None
+            if not eager:
+                return
+        if self.lead is None and self.first_change is not None and not self.in_operation:
+            self.lead_in()
+            if not eager:
+                return
+        if est._phase == "buffering":
+            if self.start is None and not self.competing and self.read_start():
+                return
+            if not self.ready_to_search() or self.plan_pending():
+                self.plan_grid()
+                return
+            self.start_search()
+            units -= 1
+        if est._phase == "searching":
+            if self.starting is None:
+                s = self.search
+                while units > 0 and not s.step():
+                    units -= 1
+                if s.result is None or self.longer_window_needed(s.result):
+                    return
+                self.starting = self.start_steps(s.result, compete=self.competing)
+                if not eager:
+                    return
+            for _ in self.starting:
+                if not eager:
+                    return
+            if not eager:                  # started in this call: the replay from the next
+                return
+        if est._catchup:
+            self.catch_up(max(units, 1))
+
+    def read_start(self) -> bool:
+        """A stream whose input is at a non-zero level from its first sample: a step from rest there, or taken in
+        operation (``rest``)? Read when the search in operation is ready (the input has moved: if the output may show
+        a step, both readings compete, ``compete``), or every ``rest.WAIT_S`` while the input holds (the step's
+        reading once the output shows one; until then the buffer keeps the first sample). Returns whether this call
+        read it."""
+        est = self.est
+        n = self.nbuf
+        moved = self.first_change is not None
+        if not (self.ready_to_search() if moved else n % self.start_wait == 0):
+            return False
+        near, step = rest.reading(self.by[:n])
+        if not near:
+            self.start = "operation"
+            self.keep_latest_before_move()
+            return True
+        if not (moved or step):
+            return True                    # (near rest, not moved yet: read again after another WAIT_S)
+        self.competing = moved
+        if not moved:
+            self.start = "step"
+        self.move_a = self.first_change
+        self.jump = est._u_ref
+        est._u_lo, est._u_hi = min(est._u_lo, 0.0), max(est._u_hi, 0.0)
+        self.reframing = self.reframe(0.0)   # (in the next calls)
+        next(self.reframing)               # (the frame itself now: samples from the next call on are in it)
+        self.first_change = 0
+        self.grid_plan = None
+        return True
+
+    def keep_latest_before_move(self) -> None:
+        """A stream read in operation after its input moved: of the samples before the move, the latest ``idle_keep``
+        only if there were ``idle_buffer`` of them, as ``buffer`` drops them while the input holds (the reading kept
+        them all). A held input's are dropped by ``buffer`` itself."""
+        fc = self.first_change
+        if fc is None or fc < self.cfg.idle_buffer:
+            return
+        drop = fc - self.cfg.idle_keep
+        n = self.nbuf - drop
+        self.bu[:n] = self.bu[drop:drop + n]
+        self.by[:n] = self.by[drop:drop + n]
+        self.nbuf = n
+        self.first_change = fc - drop
+        self.grid_plan = None
+
+    def lead_in(self) -> None:
+        """A stream read from rest: the rest it implies before its first sample, if it shows too little of it
+        (``rest.lead_in``): input 0, output at the mean of its rest outputs (those up to its first input change),
+        replayed into the tracker before the buffer (``catch_up``; the searches start at the first change and need
+        no more rest). The tracker's time then runs that many samples ahead of the stream's (``_n_shift``)."""
+        fc = self.first_change
+        lead = rest.lead_in(fc + 1)
+        outputs = [v for v in self.by[:min(fc + 1, self.nbuf)].tolist() if v == v] if lead else []
+        self.lead = lead if outputs else 0     # (plain Python on <= REST_LEAD values: numpy's nanmean was ~100 us cold)
+        if self.lead:
+            self.lead_y[:lead] = sum(outputs) / len(outputs)
+            self.est._n_shift -= lead
+
+    def reframe(self, u_ref: float) -> Generator:
+        """The buffered inputs as deviations from ``u_ref`` (0: the step's reading, the input 0 before the first
+        sample; the first level: the stream in operation), ``reframe_chunk`` per unit; samples that arrive meanwhile
+        are buffered in the new frame."""
+        est = self.est
+        shift, est._u_ref = est._u_ref - u_ref, u_ref
+        n = self.nbuf
+        chunk = self.cfg.reframe_chunk
+        yield                              # (the frame is set: the caller's next samples are buffered in it)
+        for k in range(0, n, chunk):
+            self.bu[k:min(k + chunk, n)] += shift
+            yield
+
+    def compete(self, step) -> Generator:
+        """Both readings of the start on the samples the step's search had (``rest``, stage 2): the buffer in the
+        in-operation frame, its search (the step's result a candidate), the costs compared; the buffer in the frame
+        taken. In units; returns the search result to start the tracker at.
+
+        The in-operation search refines the step's search's candidates (its ``starts``) instead of running a grid of
+        its own: both readings share the plant's resonance, only the start's free responses differ, and a grid of
+        its own takes several times the units (one per sample) for the same reading."""
+        rows = self.search_end             # (the step's search: from the first sample)
+        starts = [c[1:] for c in self.search.candidates] or None
+        yield from self.reframe(self.jump)
+        search = ResonanceSearch(self.est.basis, self.bu[:rows], self.by[:rows],
+                                 extra=((step.alpha, step.a1, step.a2),), work=self.hist_work,
+                                 scratch=self.search_scratch, free=FREE_RATES, starts=starts)
+        while not search.step():
+            yield
+        operation = search.result
+        self.competing = False
+        if rest.prefer_step(step.cost, operation.cost, rows, 2 + len(FREE_RATES)):
+            self.start = "step"
+            yield from self.reframe(0.0)
+            return step
+        self.start = "operation"
+        self.est._n_shift += self.lead or 0   # (no rest to replay in operation)
+        self.lead = 0
+        self.first_change = self.move_a
+        return operation
+
+    # ------------------------------------------------------------------ the search
+    def search_span(self, nbuf: int) -> tuple[int, int]:
+        """(start, end) in the buffer of the search that starts with ``nbuf`` samples buffered: from rest, the search
+        window after the first change (a step read at the first sample after a held second has a whole second
+        buffered: searched at a stride, a fast mode's transient fell between the rows and the search took a slower
+        resonance); in operation, and for the step's reading in a competition (``compete``: it must meet the input's
+        moves that the in-operation reading is searched on), everything buffered."""
+        most = self.cfg.max_search_samples
+        if self.in_operation:
+            return 0, min(nbuf, most)
+        start = max(0, self.first_change - 1)
+        end = nbuf if self.competing else self.first_change + math.ceil(self.t_search() / self.est._h)
+        return start, min(nbuf, end, start + most)
+
+    def plan_grid(self) -> None:
+        """On an idle buffering call, one step of the search that starts when the buffer is ready: its grid
+        frequencies (``search.frequency_steps``, a few numpy calls), then its construction (the buffer's rows
+        to come are views of memory already there). Its first unit, in the update() that fills the buffer,
+        then does neither (~35 us of cold numpy and ~10 us of cold Python). Only the first search has a grid (later
+        ones refine its candidates); the plan is used only if its rows are the search's (``start_search``)."""
+        plan = self.grid_plan
+        if self.first_change is None or self.search is not None or plan is not None and plan.search is not None:
+            return
+        if plan is None:
+            start, end = self.search_span(self.first_change + math.ceil(self.t_search() / self.est._h))
+            self.grid_plan = GridPlan((start, end), frequency_steps(*grid_ends(end - start, self.est._h)))
+            return
+        if plan.freqs is None:
+            try:
+                next(plan.steps)
+            except StopIteration as done:
+                plan.freqs = done.value
+            return
+        plan.search = self.new_search(*plan.span, plan.freqs)
+
+    def plan_pending(self) -> bool:
+        """Is the first search's plan (``plan_grid``) still being prepared although the buffer is ready? A step read
+        at the first sample finds its buffer full at once: the few calls of the plan come first (unplanned, the
+        search's construction and first unit were ~170 us in one update()). Not in a competition of the start's
+        readings (its search takes every buffered sample, not the plan's rows)."""
+        plan = self.grid_plan
+        if (self.search is not None or self.competing or self.first_change is None
+                or plan is not None and plan.search is not None or self.plan_waits >= self.cfg.plan_waits):
+            return False
+        self.plan_waits += 1
+        return True
+
+    def finish_plan(self) -> None:
+        """Before a checkpoint (generators cannot be pickled): the grid's frequencies computed, the prepared search
+        dropped (it is built again, the same, when the buffer is ready)."""
+        plan = self.grid_plan
+        if plan is None:
+            return
+        if plan.freqs is None and plan.steps is not None:
+            try:
+                while True:
+                    next(plan.steps)
+            except StopIteration as done:
+                plan.freqs = done.value
+        plan.steps = None
+        plan.search = None
+
+    def start_search(self) -> None:
+        est = self.est
+        start, end = self.search_span(self.nbuf)
+        self.search_end = end
+        plan, self.grid_plan = self.grid_plan, None
+        planned = plan is not None and plan.span == (start, end)
+        if planned and plan.search is not None:
+            self.search = plan.search
+        else:
+            self.search = self.new_search(start, end, plan.freqs if planned else None)
+        self.tc_used = (end - start) * est._h
+        est._phase = "searching"
+
+    def new_search(self, start: int, end: int, freqs: np.ndarray | None) -> ResonanceSearch:
+        """The search over the buffer's rows [start, end) (some may be still to come), with the grid's
+        frequencies ``freqs`` if computed ahead; after a first search it refines that one's candidates."""
+        est = self.est
+        prev = self.search
+        starts = [c[1:] for c in prev.candidates] if prev is not None and prev.candidates else None
+        alphas = () if est.alpha0 is None else (float(est.alpha0),)
+        # in operation the buffer starts in the fading memory of an unknown past input: the search projects it
+        # out (the tracker's free responses), as it does the unknown resonance state (``ResonanceSearch`` free)
+        extra = () if self.hint is None else (self.hint,)     # (a fault's restart: the estimate before it)
+        return ResonanceSearch(est.basis, self.bu[start:end], self.by[start:end], alphas=alphas,
+                               extra=extra, work=self.hist_work, starts=starts, scratch=self.search_scratch,
+                               freqs=freqs, free=FREE_RATES if self.in_operation else None)
+
+    def longer_window_needed(self, res) -> bool:
+        """After a search: grow the buffer to ``settling_windows`` settling times of the resonance found and search
+        again; or, if the result sits on the search box's edge (``ResonanceSearch.at_bound``: held by the box, not
+        shown by the data), to ``box_growth`` times the window (a slow mode searched on a short window comes out as a
+        fast, over-damped one with alpha near its bound: the tracker would start there)."""
+        est, cfg = self.est, self.cfg
+        if est.t_c is not None or self.search_rounds >= cfg.search_rounds:
+            return False
+        settle = 8.0 * res.a2 / res.a1
+        held = cfg.box_growth * self.t_need if self.search.at_bound(res) else 0.0
+        want = min(max(cfg.settling_windows * settle, held, cfg.first_window_s, cfg.first_window_samples * est._h),
+                   float(est.t_c_max), cfg.max_search_samples * est._h * 0.95)
+        if want <= 1.05 * self.t_need:
+            return False
+        self.search_rounds += 1
+        self.t_need = want
+        est._phase = "buffering"
+        return True
+
+    # ------------------------------------------------------------------ the tracker's start
+    def window_tracker(self, free: bool) -> WindowTracker:
+        """A window tracker with the estimator's settings, linearized at a placeholder resonance (fs / 20,
+        zeta 0.5) until ``WindowTracker.start`` gives it the start-up search's estimate."""
+        est = self.est
+        lo, hi = est._bounds
+        wn = 2.0 * math.pi / (20.0 * est._h)
+        theta = np.array([0.5 * (lo + hi), math.log(1.0 / wn), math.log(1.0 / wn ** 2), 1.0, 0.0])
+        return WindowTracker(
+            est.basis, theta, window_s=est.window_s, free=free, ring=est._ring, work=self.hist_work,
+            gate=0.0, burst=est._burst, stuck=max(10, int(round(0.05 / est._h))), alpha_bounds=(lo, hi),
+            refit_every=est._refit_every, test_every=est._test_every, detect=bool(est.detect_changes),
+            drift=est._settings.memory.drift_columns if est.track_drift else 0, settings=est._settings.trackers)
+
+    def start_steps(self, res, compete: bool = False) -> Generator:
+        """Start the tracker at the search's result (with ``compete``: at the reading of the start taken,
+        ``compete``), in steps (one per call sample by sample, ``advance``): the window tracker's fresh state
+        (``WindowTracker.start_state``), then its adoption; the replay of the buffer (``catch_up``) follows."""
+        if compete:
+            res = yield from self.compete(res)
+        est = self.est
+        lo, hi = est._bounds
+        theta = np.array([min(max(res.alpha, lo), hi), math.log(res.a1), math.log(res.a2), res.b, res.c])
+        if est._recursive:
+            est._tracker = RecursiveTracker(
+                est.basis, theta, window_s=est.window_s, free=self.in_operation, gate=0.0, burst=est._burst,
+                stuck=max(10, int(round(0.05 / est._h))), alpha_bounds=(lo, hi), refit_every=est._refit_every,
+                detect=bool(est.detect_changes), scale=res.b * (est._u_hi - est._u_lo), settings=est._settings.trackers)
+        else:
+            yield                          # (theta above, the fresh state below: ~30 us cold in one call)
+            # (the other spare stays until reset(): freeing its arrays here cost ~35 us of this update())
+            key = self.in_operation
+            if key not in self.spares:     # (used by a tracker that a fault's restart dropped)
+                self.spares[key] = self.window_tracker(key)
+            tracker = self.spares[key]
+            tracker.start_state(theta)
+            yield
+            self.buffer_noise()            # (a median of 2048 second differences: in a call of its own)
+            yield
+            est._tracker = self.spares.pop(key)
+            est._tracker.start_adopt()
+        self.starting = None
+        self.start_tracking()
+
+    def buffer_noise(self) -> None:
+        """The start-up buffer's noise level (``window.noise_seed``; a lead-in's still outputs left out)."""
+        self.noise_seed = W.noise_seed(self.by, self.nbuf, self.noise_scratch)
+
+    def start_tracking(self) -> None:
+        """The tracker has started: its noise monitor at the buffer's noise level (``buffer_noise``, computed by the
+        window tracker's start a call before), the replay of the buffer (``catch_up``) follows."""
+        est = self.est
+        if est._recursive:
+            self.buffer_noise()
+        est._tracker.begin_replay(self.noise_seed, adapting=not est.frozen)
+        est._catchup = 1
+        self.replayed = 0
+        est._phase = "tracking"
+
+    def catch_up(self, units: int) -> None:
+        """Feed the buffer into the new tracker, a few samples per unit, then go live (outlier gate open)."""
+        est = self.est
+        tr = est._tracker
+        per_unit = tr.feed_chunk
+        if self.status.size < per_unit:
+            self.status = np.empty(per_unit, dtype=np.int64)
+        status = self.status
+        lead = self.lead or 0
+        total = lead + self.nbuf           # (the lead-in's rest first, then the buffer)
+        while units > 0 and self.replayed < total:
+            units -= 1
+            k = self.replayed
+            # (the first unit a quarter: the new tracker's statistics and the block kernel are cold, ~27 us whole)
+            n = min(per_unit if k else max(per_unit // 4, 1), total - k)
+            if k < lead:
+                n = min(n, lead - k)
+                used = tr.feed_block(self.lead_u, self.lead_y, status, k, k + n)
+            else:
+                used = tr.feed_block(self.bu, self.by, status, k - lead, k - lead + n)
+            self.replayed += used
+            if k < lead <= self.replayed:  # the lead-in's still outputs are no sample of the sensor's noise
+                tr.restart_monitors(self.noise_seed)
+            if tr.busy and units > 0:      # the tracker's own jobs share the budget
+                units -= 1
+                tr.work(1 if units < EAGER else 1 << 30)
+        if self.replayed >= total:
+            est._recovery.went_live()
+            est._catchup = 0
+            self.nbuf = 0
+            tr.go_live(est.outlier_gate)
+
+    # ------------------------------------------------------------------ after a fault or an outage
+    def restart_on(self, k: int) -> None:
+        """Start again in operation on the ``k`` samples now at the head of the buffer (a fault's restart)."""
+        self.restarted = True
+        self.lead = 0                      # (in operation: no rest to replay)
+        self.nbuf = k
+        moves = np.flatnonzero(self.bu[1:k] != self.bu[:k - 1]) if k > 1 else ()
+        self.first_change = int(moves[0]) + 1 if len(moves) else None
+
+    def restart_empty(self) -> None:
+        """Start again in operation on new samples (the buffer dropped)."""
+        self.restarted = self.restarted or self.first_change is not None
+        if self.start is None:             # (the stream's first samples are gone: a step there can no longer show)
+            self.start = "operation"
+            self.competing = False
+        self.lead = 0
+        self.nbuf = 0
+        self.first_change = None
