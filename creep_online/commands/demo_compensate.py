@@ -43,7 +43,7 @@ def run_compensated(args, progress) -> dict:
     from ..online import OnlineEstimator, warm_kernels
     from ..online.compensator import CreepCompensator
     from ..online.compensator import warm_kernels as warm_compensator
-    from .demo import DRIFT, hardware_extras, start_plant
+    from .demo_plant import DRIFT, hardware_extras, start_plant
     open_source = hardware_extras()
     if args.transport != "serial-binary" or args.faults or args.effects:
         raise CreepOnlineError("--compensate runs over --transport serial-binary without --faults or --effects")
@@ -71,8 +71,8 @@ def run_compensated(args, progress) -> dict:
         sender.send_upto(sender.lead)
         t0 = float(plant.wait_event("start", timeout=60)["t0_monotonic"])
         progress.show(f"demo: closed loop over {plant.port} ({ready['tty']})", force=True)
-        from .demo import _stream
-        result = _stream(src, est, truth, n, args, t0, progress,
+        from .demo_plant import stream_plant
+        result = stream_plant(src, est, truth, n, args, t0, progress,
                          on_batch=lambda loop: sender.step(loop, est))
         progress.close()
         try:

@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..errors import DataError
+from .policy.limits import DeterminedLimits
+from .trackers.settings import TrackerSettings
 
 
 def _check(section: object) -> None:
@@ -101,24 +103,6 @@ class RecoverySettings:
 
 
 @dataclass(frozen=True)
-class DeterminedLimits:
-    """Relative 1-sigma below which the data determine a parameter (in this order the quality names the first
-    one that is not)."""
-
-    alpha: float = 0.01
-    b: float = 0.015
-    a1: float = 0.025
-    a2: float = 0.025
-
-    def __post_init__(self) -> None:
-        _check(self)
-
-    def items(self) -> list[tuple[str, float]]:
-        """(name, limit) in order."""
-        return [(f.name, getattr(self, f.name)) for f in dataclasses.fields(self)]
-
-
-@dataclass(frozen=True)
 class QualitySettings:
     """The quality rule (``online/policy/quality.py``)."""
 
@@ -179,14 +163,13 @@ class OnlineSettings:
     quality: QualitySettings = field(default_factory=QualitySettings)
     memory: MemorySettings = field(default_factory=MemorySettings)
     #: The trackers' own settings (``online/trackers/settings.py``, ``TrackerSettings``); None: their defaults.
-    trackers: Any = None
+    trackers: TrackerSettings | None = None
 
     def __post_init__(self) -> None:
         for name, kind in _SECTIONS.items():
             if not isinstance(getattr(self, name), kind):
                 raise DataError(f"OnlineSettings.{name} must be a {kind.__name__}, got {getattr(self, name)!r}")
         if self.trackers is not None:
-            from .trackers.settings import TrackerSettings     # (they import the quality rule, which imports this)
             if not isinstance(self.trackers, TrackerSettings):
                 raise DataError(f"OnlineSettings.trackers must be a TrackerSettings or None, got {self.trackers!r}")
 
@@ -199,8 +182,7 @@ class OnlineSettings:
                 raise DataError(f"OnlineSettings has no section {name!r}; its sections: "
                                 f"{', '.join([*_SECTIONS, 'trackers'])}")
             if isinstance(value, dict) and name == "trackers":
-                from .trackers.settings import DEFAULT as TRACKER_DEFAULTS
-                current = self.trackers or TRACKER_DEFAULTS
+                current = self.trackers or TrackerSettings()
                 unknown = set(value) - {f.name for f in dataclasses.fields(current)}
                 if unknown:
                     raise DataError(f"TrackerSettings has no setting {sorted(unknown)[0]!r}")

@@ -14,12 +14,12 @@ from dataclasses import dataclass, field, fields
 from typing import Mapping
 
 from ..policy.change import GeneralizedLikelihoodRatio, LikelihoodRatioTest
-from ..policy.quality import DETERMINED
+from ..policy.limits import DeterminedLimits
 from ..policy.research import ResearchRule
 
 
 def _determined() -> dict[str, float]:
-    return dict(DETERMINED)     # (the quality rule's limits: one definition)
+    return dict(DeterminedLimits().items())     # (the quality rule's limits: one definition)
 
 
 def _start_sd() -> dict[str, float]:
