@@ -34,7 +34,7 @@ def test_help_and_version_import_no_numpy_scipy_or_numba(argv):
     assert _loaded_after(argv) == "[]"
 
 
-@pytest.mark.parametrize("command", ["simulate", "stream", "diagnose", "fit", "demo"])
+@pytest.mark.parametrize("command", ["simulate", "stream", "diagnose", "fit", "demo", "compare"])
 def test_command_help_imports_no_scipy_or_numba(command):
     loaded = _loaded_after([command, "--help"])
     assert "scipy" not in loaded and "numba" not in loaded, loaded

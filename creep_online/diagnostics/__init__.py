@@ -6,12 +6,18 @@
 ``creep-online diagnose --json`` schema). ``fit_extended`` / ``with_effects``
 fit and build models with one or more catalogue effects.
 """
-from .compare import Comparison, compare, error_metrics, overlay
-from .explain import Candidate, Diagnosis, diagnose, evidence
-from .extended import (ExtendedFit, ExtendedModel, Prepared, check_effects, fit_base, fit_extended, prepare, refit,
-                       with_effects)
-from .locate import locate, spectrum_peaks
-from .residuals import autocorrelation, cross_correlation, parameter_uncertainty
+from .._lazy import lazy_attributes
+
+#: Imported on first use (scipy and the fitting kernels load only when a diagnosis or a fit runs: the CLI's
+#: ``compare --help`` needs none of them).
+_LAZY = {
+    **dict.fromkeys(("Comparison", "compare", "error_metrics", "overlay"), "compare"),
+    **dict.fromkeys(("Candidate", "Diagnosis", "diagnose", "evidence"), "explain"),
+    **dict.fromkeys(("ExtendedFit", "ExtendedModel", "Prepared", "check_effects", "fit_base", "fit_extended",
+                     "prepare", "refit", "with_effects"), "extended"),
+    **dict.fromkeys(("locate", "spectrum_peaks"), "locate"),
+    **dict.fromkeys(("autocorrelation", "cross_correlation", "parameter_uncertainty"), "residuals"),
+}
 
 __all__ = [
     "diagnose", "Diagnosis", "Candidate", "evidence",
@@ -19,3 +25,5 @@ __all__ = [
     "prepare", "Prepared", "fit_base", "fit_extended", "ExtendedFit", "ExtendedModel", "with_effects", "refit",
     "check_effects", "locate", "spectrum_peaks", "autocorrelation", "cross_correlation", "parameter_uncertainty",
 ]
+
+__getattr__ = lazy_attributes(__name__, _LAZY)
