@@ -167,17 +167,21 @@ def test_stream_cli_identifies_the_controllers_plant(live_controller, capsys):
     assert out["a2"] == pytest.approx(truth["a2"], rel=0.05)
 
 
-def test_disconnect_is_one_line_and_exit_4(capsys):
-    proc, _ = controller(["--rate", "5000", "--duration", "5", "--disconnect-after", "0.8"])
+@pytest.mark.parametrize("link", ["serial", "tcp"])
+def test_a_controller_that_goes_away_is_a_lost_link_and_exit_4(capsys, link):
+    """The controller's end of the link goes away mid-stream (a pulled cable on the pty; a closed socket on TCP)."""
+    tcp = ["--tcp"] if link == "tcp" else []
+    proc, _ = controller([*tcp, "--rate", "5000", "--duration", "5", "--disconnect-after", "0.8"])
+    spec = f"pi:tcp:{proc.port}" if link == "tcp" else f"pi:{proc.port}"
     with proc:
-        code = main(["stream", "--source", f"pi:{proc.port}?reconnect=0&timeout=0.5", "--duration", "20",
-                     "--json"])
+        code = main(["stream", "--source", f"{spec}?reconnect=0&timeout=0.5", "--duration", "20", "--json"])
         proc.wait_event("disconnect", timeout=5)
     captured = capsys.readouterr()
     out = json.loads(captured.out)
     lines = captured.err.strip().splitlines()
     assert code == 4 and out["samples"] > 1000 and out["source_stats"]["disconnects"] == 1
-    assert lines[-1].startswith(f"creep-online stream: link lost: pi:{proc.port}: controller disappeared (no answer to ")
+    said = f"creep-online stream: link lost: {spec}: controller disappeared ("
+    assert lines[-1].startswith(said + ("no answer to " if link == "serial" else ""))
     assert lines[-1].endswith("reconnect is off") and "Traceback" not in captured.err
 
 
@@ -331,20 +335,6 @@ def test_the_emulator_exits_after_its_record():
         end = proc.wait_event("end", timeout=30)
         assert proc.proc.wait(10) == 0 and time.monotonic() - started < 10
     assert end["recorded"] == 1000
-
-
-def test_a_tcp_controller_that_goes_away_is_a_lost_link_and_exit_4(capsys):
-    proc, _ = controller(["--tcp", "--rate", "5000", "--duration", "5", "--disconnect-after", "0.8"])
-    with proc:
-        code = main(["stream", "--source", f"pi:tcp:{proc.port}?reconnect=0&timeout=0.5", "--duration", "20",
-                     "--json"])
-        proc.wait_event("disconnect", timeout=5)
-    captured = capsys.readouterr()
-    out = json.loads(captured.out)
-    lines = captured.err.strip().splitlines()
-    assert code == 4 and out["samples"] > 1000 and out["source_stats"]["disconnects"] == 1
-    assert lines[-1].startswith(f"creep-online stream: link lost: pi:tcp:{proc.port}: controller disappeared (")
-    assert lines[-1].endswith("reconnect is off") and "Traceback" not in captured.err
 
 
 def test_a_tcp_controller_that_comes_back_is_reconnected():
