@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import sys
 import time
 
 
@@ -65,16 +64,8 @@ for line in sys.stdin:
 
 def _previous_worker(ref: str):
     """(worker process, commit): the previous code (``git archive`` of ``ref``) timing diagnose on request."""
-    import subprocess
-
     from bench import _baseline
-    path, commit = _baseline.extract(ref)
-    env = dict(os.environ, PYTHONPATH=path, NUMBA_CACHE_DIR=os.path.join(path, ".numba_cache"))
-    proc = subprocess.Popen([sys.executable, "-c", PREVIOUS_WORKER], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                            text=True, env=env, cwd=path)
-    if proc.stdout.readline().strip() != "ready":
-        raise RuntimeError("the previous code's worker did not start")
-    return proc, commit
+    return _baseline.start_worker(ref, PREVIOUS_WORKER)
 
 
 def timing(records: int, repeats: int, previous: str | None = "main") -> dict:

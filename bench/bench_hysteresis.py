@@ -38,7 +38,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -114,14 +113,9 @@ def dist_finite(x: list[float]) -> dict:
 
 
 def _previous_worker(ref: str):
+    """(worker process, commit): the previous code (``git archive`` of ``ref``) fitting on request."""
     from bench import _baseline
-    path, commit = _baseline.extract(ref)
-    env = dict(os.environ, PYTHONPATH=path, NUMBA_CACHE_DIR=os.path.join(path, ".numba_cache"))
-    proc = subprocess.Popen([sys.executable, "-c", PREVIOUS_WORKER], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                            text=True, env=env, cwd=path)
-    if proc.stdout.readline().strip() != "ready":
-        raise RuntimeError("the previous code's worker did not start")
-    return proc, commit
+    return _baseline.start_worker(ref, PREVIOUS_WORKER)
 
 
 def run_one(family: str, seed: int, n: int, worker=None) -> dict:
