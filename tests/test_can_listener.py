@@ -55,6 +55,15 @@ def _wait(condition, timeout: float = 120.0) -> None:
         time.sleep(0.02)
 
 
+def _wait_until_quiet(listener: EstimatorListener, quiet_s: float = 1.0) -> None:
+    """The plant has sent everything: wait until the notifier has taken the last frames queued on the bus (its
+    count of frames stays put for ``quiet_s``; a loaded machine delays its thread)."""
+    seen = -1
+    while (frames := listener.stats.as_dict()["frames"]) != seen:
+        seen = frames
+        time.sleep(quiet_s)
+
+
 def _drain(src: CanSource, last_seq: int) -> list:
     out: list = []
     deadline = time.monotonic() + 120
@@ -78,7 +87,8 @@ def test_listener_feeds_what_can_source_reads_from_the_same_frames(frame):
     try:
         th.join(60)
         read = _drain(source, runner.n_samples - 1)
-        _wait(lambda: listener.stats.sequence.delivered + listener.stats.missing >= runner.n_samples - 32)
+        # every frame the source read has reached the listener too (under load its notifier thread lags)
+        _wait(lambda: listener.stats.as_dict()["frames"] >= source.stats.as_dict()["frames"])
     finally:
         notifier.stop()
         bus.shutdown()
@@ -104,6 +114,7 @@ def test_listener_on_a_notifier_thread_identifies_the_plant():
         th.start()
         th.join(60)
         _wait(lambda: listener.fed + listener.lost >= runner.n_samples - 32)
+        _wait_until_quiet(listener)
         live = listener.estimate             # read from this thread while the notifier's may feed
     bus.shutdown()
     assert listener.stopped and listener.fed + listener.lost == runner.n_samples
