@@ -13,7 +13,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from creep_online.online import OnlineEstimator
+from creep_online.online import OnlineEstimator, OnlineSettings
 from creep_online.online._kernels import fit_machine as RF
 from creep_online.online.trackers import window as T
 from creep_online.online.trackers.settings import DEFAULT
@@ -474,3 +474,34 @@ def test_a_corrected_start_frees_alpha_at_once(single):
     assert all(err[k] <= TOL[k] for k in TOL), err
     assert all(ev["estimate_settled"] is False for ev in est.estimate.events), est.estimate.events
     assert est.estimate.quality == "good"
+
+
+def _run_to_end(job) -> np.ndarray:
+    """Run a generator job (``Replayer.nodes_at``) to its return value."""
+    try:
+        while True:
+            next(job)
+    except StopIteration as stop:
+        return stop.value
+
+
+@pytest.mark.parametrize("history", [40_000, 1 << 19], ids=["history-wrapped", "history-whole"])
+def test_a_node_mark_fast_forwards_to_the_same_state_as_the_history_tail(history):
+    """A search's start state from the newest node mark is the one fast-forwarded from the history's oldest
+    sample (the same recursion on the same inputs: equal to rounding), with the history wrapped or not."""
+    u, y, _ = _quiet_start_record(0.3, 40.0, 0.05, 1.0, seed=2, seconds=12.0)
+    est = OnlineEstimator(H, settings=OnlineSettings().replace(memory={"max_history": history}))
+    for k in range(0, u.size, 1000):
+        est.update_block(u[k:k + 1000], y[k:k + 1000])
+    tr = est._tracker
+    marks = tr._node_mark_at[tr._node_mark_at >= 0]
+    assert marks.size >= 3 and marks.max() >= tr.n - 2 * tr._node_mark_every
+    oldest = int(tr.sc[T.W.SC_RSTART])
+    for n0 in (tr.n - 1, tr.n - 7000, oldest + (tr.n - oldest) // 2):
+        from_mark = _run_to_end(tr.replayer.nodes_at(tr, n0))
+        saved = tr._node_mark_at.copy()
+        tr._node_mark_at.fill(-1)
+        from_tail = _run_to_end(tr.replayer.nodes_at(tr, n0))
+        tr._node_mark_at[:] = saved
+        assert tr.replayer.nearest_mark(tr, n0, oldest) >= 0
+        np.testing.assert_allclose(from_mark, from_tail, rtol=1e-12, atol=1e-14 * np.abs(from_tail).max())

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Generator
 
+import numpy as np
+
 from .._kernels import window as W
 from .common import KEPT_SNAPSHOTS, MACHINE_TEST, WAIT, replay_unit
 from . import workspace as WS
@@ -94,19 +96,38 @@ class Replayer:
         tr.relinearizations += 1
         tr.scheduler.pace_refits(tr, False)
 
+    def mark_nodes(self, tr: WindowTracker, n: int) -> None:
+        """Mark the live node state (before sample n, now) in the row of the oldest mark, and set the next mark's sample.
+        The nodes are the input's exact history (the same recursion as the history's tail state), so a mark is as
+        good a start for a fast-forward as the tail, and much nearer a search's segment."""
+        row = int(np.argmin(tr._node_mark_at))
+        tr._node_marks[row] = tr.phi[:tr.q]
+        tr._node_mark_at[row] = n
+        tr._next_node_mark = n + tr._node_mark_every
+
+    def nearest_mark(self, tr: WindowTracker, n0: int, oldest: int) -> int:
+        """The row of the newest node mark taken at or before sample n0 and not before the history's oldest, or -1."""
+        at = tr._node_mark_at
+        usable = np.where((at >= oldest) & (at <= n0), at, -1)
+        row = int(np.argmax(usable))
+        return row if usable[row] >= 0 else -1
+
     def nodes_at(self, tr: WindowTracker, n0: int) -> Generator:
-        """The exact node state before remembered sample n0 (fast-forwarded from the ring's oldest, in units)."""
+        """The exact node state before remembered sample n0: fast-forwarded, in units, from the newest node mark
+        before it (``mark_nodes``), else from the history's oldest sample and its tail state."""
         st, S = tr._nodes_state          # node states only (no statistics: S is not touched)
         st.fill(0.0)
         W.start_state(st, tr.basis.decay, tr.basis.gain, tr._free_decay, tr.forget, tr.h, tr.a1l,
                       tr.a2l, tr.n_rate)
         yield                              # (with the caller's set-up and the rest below, ~28 us cold in one call)
         oldest = int(tr.sc[W.SC_RSTART])  # (the ring's oldest and its tail, read together)
-        st[tr.lay["phi"]:tr.lay["phi"] + tr.q] = tr.ztail
-        st[W.SC_N] = oldest
+        row = self.nearest_mark(tr, n0, oldest)
+        start = oldest if row < 0 else int(tr._node_mark_at[row])
+        st[tr.lay["phi"]:tr.lay["phi"] + tr.q] = tr.ztail if row < 0 else tr._node_marks[row]
+        st[W.SC_N] = start
         chunk = max(16, tr.settings.unit_macs // (4 * tr.q))         # states only: ~0.04 us per sample at Q = 42
-        size, slot = tr.ring.shape[1], tr._ring_position(oldest) - oldest
-        i = oldest
+        size, slot = tr.ring.shape[1], tr._ring_position(start) - start
+        i = start
         yield                              # (the set-up and a first chunk in one update(): 45-55 us)
         while i < n0:                      # (n0 is remembered: a search's segment starts well after the oldest)
             n = min(chunk, n0 - i)

@@ -65,6 +65,10 @@ class TrackerSettings:
     segment_chunk: int = 4096
     #: Samples in a replay's first accumulating unit (the statistics' pages come cold from memory).
     cold_replay_rows: int = 8
+    #: The nodes' state is marked this often (s): a search's fast-forward to its segment starts at the newest
+    #: mark before it, not at the oldest remembered sample (the history holds several windows; fast-forwarding
+    #: all of it spread one search over thousands of ``update()`` calls).
+    node_mark_s: float = 0.25
 
     # ---------------------------------------------------------------- free responses (a stream taken in operation)
     #: Decay rates (1/s) the searches project out: the start-up search's buffer and a re-search's segment.

@@ -164,6 +164,8 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         self._blank = None
         self.fit = fit
         self._adopt(st, S, views)
+        self._node_mark_at.fill(-1)                     # (marks of another stream's nodes: none)
+        self._next_node_mark = self.n + self._node_mark_every
         self.scheduler.set_due(self, self.n)              # (``Scheduler.schedule`` at sample 0: no re-fit or test is due yet)
 
     def _blank_state(self) -> tuple:

@@ -62,6 +62,13 @@ def allocate_work(tr: WindowTracker) -> None:
     tr._segment = np.zeros((2, rows))
     tr._segment.fill(0.0)
     tr._nodes_state = (np.zeros(tr.lay["size"]), np.zeros((p, p)))
+    # the nodes' state marked every ``settings.node_mark_s`` (``Replayer.mark_nodes``): one row per mark the history
+    # can hold, and the sample each was taken before (-1: none)
+    every = max(1, int(round(tr.settings.node_mark_s / tr.h)))
+    tr._node_mark_every = every
+    tr._node_marks = np.zeros((tr.ring.shape[1] // every + 2, tr.q))
+    tr._node_mark_at = np.full(tr._node_marks.shape[0], -1, dtype=np.int64)
+    tr._next_node_mark = every
     # the replays' state and statistics: a spare pair, swapped with the live one by each replay (``Replayer.arrays``)
     spare = np.full(tr.lay["size"], 0.0)
     tr._spare = (spare, np.full((p, p), 0.0), views(tr, spare))
