@@ -426,7 +426,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                          "families' 0.05-0.3 s); mid_operation, taken in operation, is left out")
     ap.add_argument("--refit", choices=("window", "recursive"), default=None,
                     help="Remark 3's strategy of the current estimator (default: the estimator's default)")
-    ap.add_argument("--out", default=str(results_path("online_scenarios")))
+    ap.add_argument("--out", default=None, help="results file (default: bench/results/online_scenarios.json)")
     return ap.parse_args(argv)
 
 
@@ -444,6 +444,8 @@ def main(argv: list[str] | None = None) -> dict:
     from hil_sim import scenarios
     from hil_sim.scenarios import FAMILIES
     args = parse_args(argv)
+    if args.out is None:
+        args.out = str(results_path("online_scenarios"))
     families = args.families.split(",") if args.families else list(FAMILIES)
     unknown = set(families) - set(FAMILIES)
     if unknown:
