@@ -12,9 +12,9 @@ import math
 from functools import lru_cache
 
 import numpy as np
-from scipy.special import digamma, roots_jacobi, roots_legendre
 
 from . import kernels
+from .special import digamma, gauss_jacobi, gauss_legendre
 
 #: Intervals integrated by Gauss quadrature before switching to the Taylor series.
 HEAD_INTERVALS = 32
@@ -65,8 +65,8 @@ def _integrator_chain(a1: float, a2: float, terms: int) -> np.ndarray:
 @lru_cache(maxsize=64)
 def _gauss(n: int, alpha: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Legendre nodes/weights and Jacobi nodes/weights for weight (1+x)^alpha on [-1, 1]."""
-    xl, wl = roots_legendre(n)
-    xj, wj = roots_jacobi(n, 0.0, alpha)
+    xl, wl = gauss_legendre(n)
+    xj, wj = gauss_jacobi(n, 0.0, alpha)
     return xl, wl, xj, wj
 
 

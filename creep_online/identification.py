@@ -30,7 +30,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.special import digamma, rgamma
+from .special import digamma, rgamma
 
 from . import kernels
 from ._threads import single_threaded

@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 from scipy.fft import irfft, next_fast_len, rfft
 from scipy.interpolate import CubicSpline
-from scipy.special import digamma
+from ..special import digamma
 
 from ..discretize import resonance_poles, step_response_grid
 from ..errors import DataError
