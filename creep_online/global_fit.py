@@ -16,7 +16,8 @@ noise floor:
 3. The structure (at rest or in operation) is chosen by BIC, so records that
    do start at rest are not given free initial-state terms they do not need.
 
-Stops as soon as a fit reaches the noise floor (``at_floor``).
+Stops as soon as a fit reaches the noise floor (``at_floor``) with the resonance
+the refined grid finds (a warm start at the floor is checked against it).
 """
 from __future__ import annotations
 
@@ -39,7 +40,7 @@ GRID_ZETAS = (0.01, 0.03, 0.1, 0.3, 0.7, 1.5, 4.0)
 GRID_FREQUENCIES = 24
 #: Frequencies of the second-pass grid at the best alpha (a lightly damped resonance needs ~3 % steps).
 REFINE_FREQUENCIES = 160
-#: The grid is scored on at most this many leading samples.
+#: The grid is scored on at most this many samples from the input's first move (``grid_samples``).
 GRID_SAMPLES = 8000
 #: Grid points (best first, at most one per alpha) each fitted from.
 STARTS = 3
@@ -165,11 +166,21 @@ class GlobalFit:
         return float(self.coef[1]) if self.problem.offset else 0.0
 
 
+def grid_samples(prob: Problem) -> int:
+    """The leading samples the starting grid scores: GRID_SAMPLES after the input's first move (from 0; for a
+    record in operation, from its first level), so that a record which holds its level for longer still shows
+    the grid a forced response."""
+    ref = prob.u[0] if prob.init else 0.0
+    moved = np.flatnonzero(prob.u != ref)
+    first = int(moved[0]) if moved.size else 0
+    return min(prob.u.size, first + GRID_SAMPLES)
+
+
 def grid_starts(prob: Problem, f_lo: float, f_hi: float,
                 alphas: tuple[float, ...] = GRID_ALPHAS,
                 frequencies: int = GRID_FREQUENCIES) -> list[tuple[float, float, float, float]]:
     """(cost, alpha, fn, zeta) of the best grid point per alpha, best first (split form, nuisance projected)."""
-    n = min(prob.u.size, GRID_SAMPLES)
+    n = grid_samples(prob)
     h = prob.h
     u = prob.u[:n] - (prob.u[0] if prob.init else 0.0)
     y = prob.y[:n]
@@ -226,8 +237,8 @@ def global_fit(u: np.ndarray, y: np.ndarray, h: float, *, warm: list[CreepModel]
     """Best fit over the structures (at rest; in operation when ``try_init``) and multi-starts.
 
     ``warm`` are starting models from elsewhere (e.g. the two layers), fitted
-    first. Returns as soon as a fit is at the noise floor; otherwise the lowest
-    BIC over everything tried.
+    first. Returns as soon as a fit is at the noise floor and its resonance is the
+    refined grid's (``_refined``); otherwise the lowest BIC over everything tried.
     """
     n = u.size
     f_hi = 0.45 / h
@@ -236,44 +247,59 @@ def global_fit(u: np.ndarray, y: np.ndarray, h: float, *, warm: list[CreepModel]
     if try_init:
         structures.append(Problem(u, y, h, init=True, offset=offset_free))
     best: GlobalFit | None = None
-    tried = []
+    tried: list[dict] = []
     for prob in structures:
         starts = list(warm)
         for cost, alpha, fn, zeta in grid_starts(prob, f_lo, f_hi)[:STARTS]:
             starts.append(CreepModel.from_resonance(alpha, fn, zeta))
-        for start in starts:
-            try:
-                model, coef, r = fit_from(prob, start)
-            except (ValueError, FloatingPointError, np.linalg.LinAlgError):
-                continue
-            fit = GlobalFit(model, prob, coef, r, y - r, n_bic(r, 3 + prob.linear_count))
-            tried.append({"init": prob.init, "start": start.params(), "bic": fit.bic,
-                          "floor_ratio": floor_ratio(r)})
-            if best is None or fit.bic < best.bic:
-                best = fit
-            if at_floor(r):
+        from_warm = False
+        for k, start in enumerate(starts):
+            fit = _fit(prob, start, tried)
+            if fit is not None and (best is None or fit.bic < best.bic):
+                best, from_warm = fit, k < len(warm)
+            if fit is not None and at_floor(fit.residual):
                 break
-        if best is not None and at_floor(best.residual):
+        if best is None or best.problem is not prob:
+            continue
+        if from_warm or not at_floor(best.residual):
+            best = _refined(prob, best, f_lo, f_hi, tried)
+        if at_floor(best.residual):
             break
-        if best is not None and best.problem is prob:
-            # the resonance grid again at the best alpha so far: creep fixes alpha well before the resonance
-            refine = grid_starts(prob, f_lo, f_hi, (best.model.alpha,), REFINE_FREQUENCIES)[0]
-            start = CreepModel.from_resonance(refine[1], refine[2], refine[3])
-            try:
-                model, coef, r = fit_from(prob, start)
-                fit = GlobalFit(model, prob, coef, r, y - r, n_bic(r, 3 + prob.linear_count))
-                tried.append({"init": prob.init, "start": start.params(), "bic": fit.bic,
-                              "floor_ratio": floor_ratio(r)})
-                if fit.bic < best.bic:
-                    best = fit
-            except (ValueError, FloatingPointError, np.linalg.LinAlgError):
-                pass
-            if at_floor(best.residual):
-                break
     if best is None:
         raise ValueError("no start converged")
     best.info = {"tried": tried, "design": best.problem.design(best.model.alpha, best.model.a1, best.model.a2)}
     return best
+
+
+def _fit(prob: Problem, start: CreepModel, tried: list[dict]) -> GlobalFit | None:
+    """``fit_from`` as a ``GlobalFit`` (None when it fails), recorded in ``tried``."""
+    try:
+        model, coef, r = fit_from(prob, start)
+    except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+        return None
+    fit = GlobalFit(model, prob, coef, r, prob.y - r, n_bic(r, 3 + prob.linear_count))
+    tried.append({"init": prob.init, "start": start.params(), "bic": fit.bic, "floor_ratio": floor_ratio(r)})
+    return fit
+
+
+#: A refined grid start within this factor of the best fit's natural frequency lies in its basin: not fitted again.
+SAME_BASIN_FN = 1.25
+
+
+def _refined(prob: Problem, best: GlobalFit, f_lo: float, f_hi: float, tried: list[dict]) -> GlobalFit:
+    """The resonance grid again at the best fit's alpha (creep fixes alpha well before the resonance); a fit from
+    its best point kept when its BIC is lower.
+
+    Also run when a warm start reached the noise floor: the warm start is the layers' resonance, which is why the
+    global fit runs at all, and "at the floor" says the residual is white, not that the resonance is the best one
+    (a wrong resonance of a record taken in operation can ring inside the free-response terms of the initial state
+    and pass the whiteness test).
+    """
+    refine = grid_starts(prob, f_lo, f_hi, (best.model.alpha,), REFINE_FREQUENCIES)[0]
+    if max(refine[2] / best.model.fn, best.model.fn / refine[2]) < SAME_BASIN_FN:
+        return best
+    fit = _fit(prob, CreepModel.from_resonance(refine[1], refine[2], refine[3]), tried)
+    return fit if fit is not None and fit.bic < best.bic else best
 
 
 def global_uncertainty(fit: GlobalFit) -> dict[str, float]:

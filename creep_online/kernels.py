@@ -411,7 +411,10 @@ def foh_grid_costs_free(z: np.ndarray, y_perp: np.ndarray, q: np.ndarray, phi: n
                     acc -= cq[a, j] * cq[b, j]
                 gram[a, b] = acc
                 gram[b, a] = acc
-        scale = np.sqrt(np.abs(np.diag(gram))) + 1e-300
+        scale = np.sqrt(np.abs(np.diag(gram)))
+        for a in range(3):
+            if not scale[a] > 1e-150:     # a column that is zero here (no input change in the window): left unscaled
+                scale[a] = 1.0
         gs = gram / np.outer(scale, scale)
         vs = v / scale
         for a in range(3):

@@ -11,14 +11,15 @@ import sys
 import numpy as np
 import pytest
 
-from creep_online import CreepModel
-from creep_online.discretize import step_response_grid
+from creep_online import CreepModel, kernels
+from creep_online.discretize import foh_matrices_batch, step_response_grid
 from creep_online.global_fit import at_floor
 from creep_online.identification import identify
 from creep_online.initial_state import free_columns, past_offsets
 from creep_online.metrics import fit_percent
 from hil_sim.experiments import Experiment
 from creep_online.simulate import causal_convolve, simulate
+from hil_sim import scenarios
 from hil_sim.validation import FAMILIES, make_record
 
 
@@ -49,6 +50,73 @@ def test_a_record_taken_five_seconds_into_operation():
     for name, tol in (("alpha", 0.02), ("a1", 0.05), ("a2", 0.05), ("b", 0.03)):
         assert abs(getattr(res.model, name) / getattr(m, name) - 1) < tol, (name, res.model)
     assert any("in operation" in w for w in res.warnings)
+
+
+#: The scenario tolerances (relative to the truth).
+TOL = {"alpha": 0.02, "b": 0.03, "a1": 0.05, "a2": 0.05}
+
+
+def _within_tolerances(model, truth: dict) -> dict:
+    """The parameters outside TOL of the truth, with their relative errors (empty: all within)."""
+    return {p: getattr(model, p) / truth[p] - 1 for p, tol in TOL.items() if abs(getattr(model, p) / truth[p] - 1) > tol}
+
+
+@pytest.mark.parametrize("seed", [5, 15])
+def test_records_in_operation_that_settled_on_a_wrong_resonance(seed, monkeypatch):
+    """Two scenario records taken 5 s into operation (40 dB) on which the fit used to land on a wrong resonance:
+    seed 15 holds its first level for 1.1 s, longer than the starting grid's window (the grid scored nothing and
+    the global fit was lost); on seed 5 the layers' resonance (4.6 kHz, the plant's is 325 Hz) reached the noise
+    floor inside the free response of the initial state and was kept without being checked."""
+    monkeypatch.setattr(scenarios, "SNR_DB", 40.0)
+    sc = scenarios.make("mid_operation", seed)
+    res = identify(sc.t, sc.u, sc.y)
+    assert not _within_tolerances(res.model, sc.final_truth), res.model
+    assert any("in operation" in w for w in res.warnings)
+
+
+@pytest.mark.slow
+def test_records_in_operation_of_random_plants_are_identified(monkeypatch):
+    """20 scenario records taken in operation (seeds the bench does not run; fn 100-1000 Hz, zeta 0.02-0.5,
+    alpha 0.01-0.5, 40 dB): every parameter within the tolerances of the truth, or reported as not determined
+    (its 1-sigma wider than the online estimator's "determined" limits) with the truth within 2 of its 1-sigma.
+    Measured: 19 of 20 within the tolerances; the 20th (a well-damped mode, zeta 0.46) has a2 8.0 % off with a
+    1-sigma of 8.5 %."""
+    from creep_online.online.policy.limits import DeterminedLimits
+    limits = dict(DeterminedLimits().items())
+    monkeypatch.setattr(scenarios, "SNR_DB", 40.0)
+    misses = {}
+    for seed in range(100, 120):
+        sc = scenarios.make("mid_operation", seed)
+        res = identify(sc.t, sc.u, sc.y)
+        for p, err in _within_tolerances(res.model, sc.final_truth).items():
+            sd = res.uncertainty[p] / abs(getattr(res.model, p))
+            if not (sd > limits[p] and abs(err) <= 2 * sd):
+                misses[(seed, p)] = (err, sd)
+    assert not misses, misses
+
+
+def test_the_free_mode_grid_scores_a_window_without_an_input_change():
+    """A window in which the input holds its first level: the forced column is zero, and each grid point's cost is
+    the data's projection onto the two free modes alone (a direct least squares; it used to be 0/0)."""
+    h, n = 1e-4, 400
+    fn, zeta = np.array([150.0, 900.0]), np.array([0.05, 0.7])
+    wn = 2 * np.pi * fn
+    phi, g0, g1 = foh_matrices_batch(2 * zeta / wn, 1 / wn**2, h)
+    y = np.random.default_rng(3).normal(size=n)
+    q = np.ones((n, 1)) / np.sqrt(n)
+    y_perp = y - q @ (q.T @ y)
+    costs = kernels.foh_grid_costs_free(np.zeros(n), y_perp, q, phi, g0, g1, h)
+    for k in range(fn.size):
+        modes = np.zeros((n, 2))
+        for c in range(2):
+            x = np.eye(2)[c]
+            for i in range(n):
+                modes[i, c] = x[0]
+                x = phi[k] @ x
+        modes -= q @ (q.T @ modes)
+        coef, *_ = np.linalg.lstsq(modes, y_perp, rcond=None)
+        direct = float(y_perp @ y_perp - y_perp @ (modes @ coef))
+        assert costs[k] == pytest.approx(direct, rel=1e-6)
 
 
 def test_free_response_columns_span_a_step_between_grid_instants():
