@@ -57,6 +57,40 @@ def test_the_micromanipulator_record_does_not_diverge():
     assert ratios and max(ratios) < 0.5, ratios
 
 
+def _scenario_ratios(family: str, seed: int, snr_db: float, rest_samples: int | None, monkeypatch) -> list[tuple]:
+    """(window start s, ratio, samples) per 1 s window of a scenario record fed sample by sample."""
+    from hil_sim import scenarios
+    monkeypatch.setattr(scenarios, "SNR_DB", snr_db)
+    scen = scenarios.make(family, seed, rest_samples)
+    est = OnlineEstimator(scen.h)
+    err = np.full(scen.u.size, np.nan)
+    for i, (a, b) in enumerate(zip(scen.u.tolist(), scen.y.tolist())):
+        est.update(a, b)
+        p = est.last_prediction
+        if p is not None and est.phase == "tracking":
+            err[i] = b - p
+    w = int(round(1.0 / scen.h))
+    out = []
+    for a in range(0, scen.u.size - w + 1, w):
+        e, ok = err[a:a + w], np.isfinite(err[a:a + w])
+        if np.count_nonzero(ok) >= w // 2:
+            out.append((a * scen.h, float(np.sqrt(np.mean(e[ok] ** 2)) / np.std(scen.y[a:a + w][ok])),
+                        int(np.count_nonzero(ok))))
+    return out
+
+
+def test_a_false_change_on_close_modes_does_not_take_a_wrong_gain(monkeypatch):
+    """Close unmodelled modes from the step at the first sample, 40 dB (seed 4): the change test declared a change
+    on the modes' misfit (b -3.5 %), and the first pass of the search after it took b -18 %, a1 -21 %, which fit
+    its 1.2 s segment (it starts just after an input step: transients' shapes, not levels); the prediction then
+    missed by 25x the output's spread for a second. A search's gain must agree with the test's. (The first
+    second of tracking, where the start-up's estimate misfits the modes, is not checked here: it still diverges
+    on some close-modes records.)"""
+    windows = _scenario_ratios("close_modes", 4, 40.0, 0, monkeypatch)
+    late = [(t, r) for t, r, n in windows if t >= 2.0 and r > 1.0 + 3.0 / math.sqrt(n)]
+    assert windows and not late, late
+
+
 def test_a_resonance_far_from_the_linearization_point_waits_for_its_replay():
     """The rule itself: a search's resonance further than TRUST (in ln) from the live states' point leaves the
     prediction's coefficients alone; within it they are the new estimate's."""

@@ -98,6 +98,20 @@ class ResearchRule:
         """Is the result's gain (``gain_ratio`` = new b / live b) one to take?"""
         return 1.0 / self.gain_ratio < abs(gain_ratio) < self.gain_ratio and (gain_ratio > 0 or gross)
 
+    @staticmethod
+    def agrees_with_change(gain_change: float, declared_gain_change: float, gain_move: float) -> bool:
+        """May a post-change search's result replace the estimate, as far as its gain goes? Its gain's move from
+        the gain before the change (relative, ``gain_change``) must lie between no move and the move the change
+        test estimated (``declared_gain_change``), widened on both sides by the change rule's smallest counted
+        move (``gain_move``) or half the test's estimate. The search's segment starts after the detection, often
+        just after an input step: with its start state unknown it sees the transients' shapes more than the
+        levels, and a wrong gain with a wrong resonance can fit it at the floor while predicting the next second
+        far off (close modes at 40 dB: the test b -3.5 %, the search b -18 %, a1 -21 %, a prediction 25x the
+        output's spread until a longer pass corrected it). Either end may be the right one: a change the test
+        declared on a misfit (close modes) is no change at all."""
+        margin = max(gain_move, 0.5 * abs(declared_gain_change))
+        return min(0.0, declared_gain_change) - margin <= gain_change <= max(0.0, declared_gain_change) + margin
+
     def switch(self, lr: float, moved: list[str], cost: float, gain_ratio: float, gross: bool,
                drifting: bool, alpha_change: float) -> bool:
         """Does the re-search's result replace the live estimate? Clearly better (``lr``), a real move, a finite

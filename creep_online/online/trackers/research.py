@@ -81,6 +81,8 @@ class Researcher:
         r = search.result
         if r is None or not (math.isfinite(r.cost) and r.a1 > 0 and r.a2 > 0 and r.b != 0):
             return
+        if not self.agrees_with_change(tr, r.b):
+            return
         yield                              # (the search's last unit ended this call)
         c_live = yield from search.judged_cost(tr.alpha, tr.a1, tr.a2, tr._free_decays)
         c_new = yield from search.judged_cost(r.alpha, r.a1, r.a2, tr._free_decays)
@@ -90,6 +92,16 @@ class Researcher:
             tr.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
             tr._take_resonance()
             yield
+
+    def agrees_with_change(self, tr: WindowTracker, b: float) -> bool:
+        """Does a post-change search's gain ``b`` agree with the change the test declared, from the gain before it
+        (``policy.research.ResearchRule.agrees_with_change``)?"""
+        event = tr.events[-1] if tr.events else None
+        before = float(event["_before"][3]) if event is not None and "_before" in event else 0.0
+        if not before:
+            return True
+        return tr.settings.research.agrees_with_change(b / before - 1.0, event["relative_change"]["b"],
+                                                        tr.settings.change_rule.move["b"])
 
     def misfit_from_start(self, tr: WindowTracker) -> bool:
         """Has the window misfit (``Researcher.watch``) since its first re-fit? Then its estimate was wrong, not the plant

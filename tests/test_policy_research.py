@@ -1,0 +1,23 @@
+"""The re-search rules as functions (``online.policy.research``)."""
+from __future__ import annotations
+
+import pytest
+
+from creep_online.online.policy.research import ResearchRule
+
+MOVE = 0.03     # the change rule's smallest counted gain move (``LikelihoodRatioTest.move["b"]``)
+
+
+@pytest.mark.parametrize("found, declared, takes", [
+    (-0.185, -0.035, False),     # close modes: the test saw b -3.5 %, the short segment's search b -18 %
+    (0.18, -0.012, False),       # a drifting record's false change: the search's gain the other way
+    (0.001, -0.0745, True),      # a false change the test put at b -7.5 %: the search finds the gain unmoved
+    (-0.07, -0.0745, True),      # ... or where the test put it
+    (-0.02, 0.0, True),          # within the smallest counted move
+    (-0.30, -0.25, True),        # a real gain change: the search refines the test's estimate
+    (-0.40, -0.25, False),       # ... not beyond half of it
+    (0.10, 0.20, True),
+    (-0.15, 0.20, False),
+])
+def test_a_post_change_search_keeps_its_gain_between_before_and_the_test_s_estimate(found, declared, takes):
+    assert ResearchRule.agrees_with_change(found, declared, MOVE) is takes
