@@ -1,0 +1,175 @@
+"""The window tracker's hysteresis columns: play operators filtered by the plant, as regressors of its own fit.
+
+The plant is Hammerstein, ``y = b G1[u + sum_i w_i p_i(u)] + offset`` with ``G1 = 1/(s^alpha (1 + a1 s + a2
+s^2))`` and ``p_i`` the play operators of thresholds ``r_i`` (``effects.hysteresis.play_operators``). G1 is
+linear, so ``y = b G1[u] + sum_i w_i (b G1[p_i]) + offset``: each play's output goes through the same SOE nodes
+and resonance states as u (the nodes do not depend on alpha), and its column is the model's own response to it,
+``h_i = chan_i . m[:Q+2]`` with the window's current coefficients ``m`` (b included). The weights w_i (the batch
+fit's, relative to b) are then linear parameters of the window's least squares beside the offset; the columns are
+pseudo-linear (computed with the estimate of their sample's time, as the drift columns are, and recomputed with
+the current one by every replay).
+
+The block at the end of the state array (``block_at``; ``size`` entries):
+
+==================  ====================================================================================
+``[0]``             1 once the operators have been started (at the first input, centred on it)
+``r`` (K)           the thresholds
+``plays`` (K)       the operators' states after the last sample
+``ptail`` (K)       their states before the oldest remembered sample
+``chan`` (K, Q+2)   each play's SOE nodes and resonance states x0, x1 (at the linearization point)
+``ctail`` (K, Q)    each play's node states before the oldest remembered sample
+==================  ====================================================================================
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .layout import ONE, md_at, resonance_in_co
+
+CACHE = True
+
+
+@njit(cache=CACHE, inline="always")
+def size(q: int, k: int) -> int:
+    """Entries of the hysteresis block for Q nodes and K operators (0 without operators)."""
+    if k == 0:
+        return 0
+    return 1 + 3 * k + k * (q + 2) + k * q
+
+
+@njit(cache=CACHE, inline="always")
+def block_at(q: int, nm: int, nr: int, nh: int) -> int:
+    """Offset of the hysteresis block: after ``md``, the last block of the layout (its trailing columns are the
+    K hysteresis columns and the R drift columns)."""
+    return md_at(q, nm, nr + nh) + q + ONE
+
+
+@njit(cache=CACHE, inline="always")
+def channels_at(o: int, k: int) -> int:
+    """Offset of ``chan`` for the block at ``o``."""
+    return o + 1 + 3 * k
+
+
+@njit(cache=CACHE)
+def set_thresholds(st: np.ndarray, o: int, r: np.ndarray) -> None:
+    """The operators' thresholds (before the first sample: the operators start at it)."""
+    k = r.shape[0]
+    for i in range(k):
+        st[o + 1 + i] = r[i]
+
+
+@njit(cache=CACHE, fastmath={"contract", "reassoc", "arcp"})
+def columns(st: np.ndarray, o: int, k: int, q: int, phi: np.ndarray, c0: int, m: np.ndarray) -> None:
+    """phi[c0 + i] = chan_i . m[:Q+2]: the model's response to play i at the current coefficients."""
+    ch = channels_at(o, k)
+    w = q + 2
+    for i in range(k):
+        row = ch + i * w
+        acc = 0.0
+        for j in range(w):
+            acc += st[row + j] * m[j]
+        phi[c0 + i] = acc
+
+
+@njit(cache=CACHE)
+def _start(st: np.ndarray, o: int, k: int, u: float) -> None:
+    """The operators centred on the first input (``play_operators``' p[-1] = u[0]), here and in the tail."""
+    for i in range(k):
+        st[o + 1 + k + i] = u
+        st[o + 1 + 2 * k + i] = u
+    st[o] = 1.0
+
+
+@njit(cache=CACHE, fastmath={"contract", "reassoc", "arcp"})
+def step(st: np.ndarray, o: int, k: int, q: int, co: np.ndarray, u: float) -> None:
+    """One sample of the zero-order-held input u: the plays, then each play's nodes and resonance states
+    (exactly as ``window.advance`` moves u's; no sensitivity states)."""
+    if st[o] == 0.0:
+        _start(st, o, k, u)
+    r = resonance_in_co(q)
+    ch = channels_at(o, k)
+    w = q + 2
+    for i in range(k):
+        ri = st[o + 1 + i]
+        p = st[o + 1 + k + i]
+        if p < u - ri:
+            p = u - ri
+        elif p > u + ri:
+            p = u + ri
+        st[o + 1 + k + i] = p
+        row = ch + i * w
+        for j in range(q):
+            st[row + j] = co[j] * st[row + j] + co[q + j] * p
+        x0 = st[row + q]
+        x1 = st[row + q + 1]
+        st[row + q] = co[r] * x0 + co[r + 1] * x1 + co[r + 4] * p
+        st[row + q + 1] = co[r + 2] * x0 + co[r + 3] * x1 + co[r + 5] * p
+
+
+@njit(cache=CACHE, fastmath={"contract", "reassoc", "arcp"})
+def tail(st: np.ndarray, o: int, k: int, q: int, co: np.ndarray, u_old: float) -> None:
+    """The oldest remembered sample leaves the ring: the tail's plays and nodes absorb it (``window._remember``'s
+    ztail, for each play)."""
+    if st[o] == 0.0:
+        return
+    ct = channels_at(o, k) + k * (q + 2)
+    for i in range(k):
+        ri = st[o + 1 + i]
+        p = st[o + 1 + 2 * k + i]
+        if p < u_old - ri:
+            p = u_old - ri
+        elif p > u_old + ri:
+            p = u_old + ri
+        st[o + 1 + 2 * k + i] = p
+        row = ct + i * q
+        for j in range(q):
+            st[row + j] = co[j] * st[row + j] + co[q + j] * p
+
+
+@njit(cache=CACHE)
+def replay_origin(st: np.ndarray, live: np.ndarray, o: int, k: int, q: int) -> None:
+    """A replay's start at the ring's oldest sample: the live block's thresholds and tails, the plays and the
+    nodes at the tail's states, the resonance states at zero (as ``window.replay_origin`` starts u's)."""
+    st[o] = live[o]
+    for i in range(k):
+        st[o + 1 + i] = live[o + 1 + i]
+        st[o + 1 + k + i] = live[o + 1 + 2 * k + i]
+        st[o + 1 + 2 * k + i] = live[o + 1 + 2 * k + i]
+    ch = channels_at(o, k)
+    ct = ch + k * (q + 2)
+    for i in range(k):
+        for j in range(q):
+            st[ch + i * (q + 2) + j] = live[ct + i * q + j]
+            st[ct + i * q + j] = live[ct + i * q + j]
+        st[ch + i * (q + 2) + q] = 0.0
+        st[ch + i * (q + 2) + q + 1] = 0.0
+
+
+@njit(cache=CACHE)
+def corrected_nodes(st: np.ndarray, o: int, k: int, q: int, w: np.ndarray, zeta: np.ndarray) -> np.ndarray:
+    """The node states of the corrected input v = u + sum_i w_i p_i (in place in ``zeta``, u's nodes) from each
+    play's nodes in the block at ``o``; returns a copy of the plays' states (the corrected input's memory)."""
+    ch = channels_at(o, k)
+    for i in range(k):
+        for j in range(q):
+            zeta[j] += w[i] * st[ch + i * (q + 2) + j]
+    return st[o + 1 + k:o + 1 + 2 * k].copy()
+
+
+@njit(cache=CACHE)
+def correct_input(u: np.ndarray, r: np.ndarray, plays: np.ndarray, w: np.ndarray) -> None:
+    """u -> u + sum_i w_i p_i(u) in place, the plays advanced from their states ``plays`` (in place)."""
+    k = r.shape[0]
+    for n in range(u.shape[0]):
+        x = u[n]
+        v = x
+        for i in range(k):
+            p = plays[i]
+            if p < x - r[i]:
+                p = x - r[i]
+            elif p > x + r[i]:
+                p = x + r[i]
+            plays[i] = p
+            v += w[i] * p
+        u[n] = v
