@@ -89,7 +89,7 @@ def test_the_tails_hold_the_plays_and_nodes_before_the_oldest_remembered_sample(
     old = u.size - ring.shape[1]                          # samples the ring has dropped
     plays = play_operators(u, r)
     o, q, k = lay["hyst"], basis.size, r.size
-    assert np.array_equal(st[o + 1 + 2 * k:o + 1 + 3 * k], plays[:, old - 1])
+    assert np.array_equal(st[o + HK.HEAD + 2 * k:o + HK.HEAD + 3 * k], plays[:, old - 1])
     z = np.zeros((k, q))
     for n in range(old):
         z = basis.decay * z + basis.gain * plays[:, n][:, None]

@@ -1630,10 +1630,10 @@ def swap_into(live: np.ndarray, replayed: np.ndarray, theta: np.ndarray, lam: np
     nh = int(live[SC_NH])
     if nh == 0:
         replayed[ztail:] = live[ztail:]
-    else:                                # the plays' channel states stay the replay's (its resonance point)
-        ch = HK.channels_at(HK.block_at(q, int(live[SC_NM]), int(live[SC_NR]), nh), nh)
-        replayed[ztail:ch] = live[ztail:ch]
-        replayed[ch + nh * (q + 2):] = live[ch + nh * (q + 2):]
+    else:                                # the replay's plays and their states stay (its thresholds, its point)
+        ho = HK.block_at(q, int(live[SC_NM]), int(live[SC_NR]), nh)
+        replayed[ztail:ho] = live[ztail:ho]
+        HK.swap_block(live, replayed, ho, nh, q)
     set_estimate(theta, replayed, lam, dx)
 
 

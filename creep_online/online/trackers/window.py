@@ -63,6 +63,9 @@ from .settings import DEFAULT, TrackerSettings
 #: The defaults' free-response rates and "determined" limits (the estimator's start-up search and quality).
 FREE_RATES = DEFAULT.free_rates
 DETERMINED = DEFAULT.determined
+#: The play operators' thresholds follow the input's range once it is this much wider than the one they were set for
+#: (``widen_loop``; each widening is a replay of the remembered samples).
+HYSTERESIS_WIDEN = 1.05
 
 
 class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
@@ -92,6 +95,7 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         #: loop's misfit: a false change and the resonance lost within 10 s on a plain 1 Hz triangle)
         self.n_rate = 0 if self.n_hyst else int(drift)
         self.hyst_r = np.zeros(self.n_hyst)
+        self._hyst_span = 0.0            # the input range the thresholds are set for
         self.lay = W.layout(self.q, self.n_free, self.n_rate, self.n_hyst)
         self.p = self.lay["p"]
         #: samples per light unit of a replay (each costs the P^2 statistics update, which runs as blocked
@@ -170,6 +174,7 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         if self.n_hyst:                  # (the operators start at the first sample fed, centred on it)
             if u_span is not None:
                 self.hyst_r[:] = threshold_fractions(self.n_hyst) * float(u_span)
+                self._hyst_span = float(u_span)
             HK.set_thresholds(st, self.lay["hyst"], self.hyst_r)
 
     @property
@@ -181,6 +186,22 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
     def hysteresis_weights(self) -> np.ndarray:
         """The play operators' weights w_i (relative to b, as the batch fit's), thresholds ascending."""
         return self.theta[5 + self.n_free:self.r0].copy()
+
+    def widen_loop(self) -> bool:
+        """The thresholds for the input's range, if it has grown HYSTERESIS_WIDEN beyond the one they were set for
+        (the batch fit's rule on the range seen so far): the new thresholds and tails in the live block
+        (``hysteresis.rethreshold``); the caller then replays the remembered samples. True if they moved."""
+        if not self.n_hyst:
+            return False
+        o = self.lay["hyst"]
+        span = float(self.st[o + 2] - self.st[o + 1])
+        if not span > HYSTERESIS_WIDEN * self._hyst_span:
+            return False
+        self._hyst_span = span
+        self.hyst_r[:] = threshold_fractions(self.n_hyst) * span
+        oldest = self.ring[0, self._ring_position(int(self.sc[W.SC_RSTART]))]
+        HK.rethreshold(self.st, o, self.n_hyst, self.q, self.hyst_r, float(oldest), self.ztail)
+        return True
 
     @property
     def hysteresis(self) -> dict | None:
