@@ -20,6 +20,8 @@ tuned on), ``--samples`` long. Per record: the online estimate at the end agains
 a2 5 %: the scenario tolerances) and the online weights against the batch fit's (``fit_extended(data,
 ("hysteresis",))``, 24 thresholds; the online 8 are every third of them, so each online weight compares with the
 batch weights summed in threes) within 5 % of the largest batch weight. Pass fractions per family and overall.
+Also the loops as the output sees them (``_loop_error``: b (u + w . p(u)) on the record's input) of the online
+estimate against the batch fit's and the truth's, and the batch fit's against the truth's, over the loop width.
 
 Prints one JSON document and writes it to ``bench/results/online_hysteresis_<mode>.json``.
 """
@@ -109,6 +111,17 @@ def _grouped(w_batch: np.ndarray, groups: int) -> np.ndarray:
     return w_batch.reshape(groups, -1).sum(axis=1)
 
 
+def _loop_error(u: np.ndarray, b: float, loop: dict, b_ref: float, ref: dict) -> float:
+    """The loop as the output sees it, b (u + sum_i w_i p_i(u)) on the record's input, against a reference loop:
+    the largest difference over the reference's loop width times |b_ref| (thresholds and initial states may
+    differ: this compares what the data determine, not the weights' split)."""
+    from creep_online.effects.hysteresis import hysteresis_input, loop_width
+    v = b * hysteresis_input(u, loop["r"], loop["w"], loop.get("initial", "centred"))
+    v_ref = b_ref * hysteresis_input(u, ref["r"], ref["w"], ref.get("initial", "centred"))
+    scale = abs(b_ref) * loop_width(ref["r"], ref["w"], float(np.ptp(u)))
+    return float(np.max(np.abs(v - v_ref)) / scale) if scale > 0 else float("nan")
+
+
 def run_plant(family: str, seed: int, n: int) -> dict:
     from creep_online.diagnostics.extended import fit_base, fit_extended, prepare
     from creep_online.online import OnlineEstimator
@@ -139,6 +152,10 @@ def run_plant(family: str, seed: int, n: int) -> dict:
         row.update(weights_ok=False, weight_err_over_max=None)
         return row
     wo = np.asarray(e.hysteresis["w"])
+    row["loop_err_vs_batch"] = _loop_error(rec.u, e.b, e.hysteresis, fit.model.b, fit.effect_params["hysteresis"])
+    row["loop_err_vs_true"] = _loop_error(rec.u, e.b, e.hysteresis, truth.b, rec.params)
+    row["batch_loop_err_vs_true"] = _loop_error(rec.u, fit.model.b, fit.effect_params["hysteresis"], truth.b,
+                                                rec.params)
     grouped = _grouped(wb, wo.size)
     scale = float(np.max(np.abs(grouped))) or 1.0
     err = float(np.max(np.abs(wo - grouped)) / scale)
@@ -169,6 +186,8 @@ def _plants_doc(args, rows: list[dict]) -> dict:
     summary = {f: {"records": sum(r["family"] == f for r in rows),
                    **{key: frac([r for r in rows if r["family"] == f], key)
                       for key in ("creep_ok", "weights_ok", "alpha_ok", "b_ok", "a1_ok", "a2_ok")},
+                   **{key: dist([r[key] for r in rows if r["family"] == f and r.get(key) is not None])
+                      for key in ("loop_err_vs_batch", "loop_err_vs_true", "batch_loop_err_vs_true")},
                    "alpha_rel_err": dist([r["alpha_rel_err"] for r in rows
                                           if r["family"] == f and r["alpha_rel_err"] is not None]),
                    "weight_err_over_max": dist([r["weight_err_over_max"] for r in rows
