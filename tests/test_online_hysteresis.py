@@ -33,6 +33,7 @@ def _state(basis: SoeBasis, r: np.ndarray, a1l: float, a2l: float, m_seed: int =
     W.start_state(st, basis.decay, basis.gain, np.zeros(0), 0.999, basis.h, a1l, a2l, 0, k)
     HK.set_thresholds(st, lay["hyst"], r)
     st[lay["m"]:lay["m"] + q + 2] = np.random.default_rng(m_seed).standard_normal(q + 2)
+    st[lay["hyst"] + HK.GAIN] = 1.7                       # (b of the coefficients: the columns are unit-gain)
     return st
 
 
@@ -70,7 +71,7 @@ def test_the_columns_are_the_plays_through_the_nodes_and_the_resonance():
         W.sample(u[n], math.nan, st, S, ring)
         got[:, n] = st[c0:c0 + r.size]
     m = st[lay["m"]:lay["m"] + basis.size + 2]
-    want = _direct_columns(basis, u, r, m, a1l, a2l)
+    want = _direct_columns(basis, u, r, m, a1l, a2l) / 1.7
     # (the kernel computes the column at a sample from the states before it, as the direct loop does)
     assert np.allclose(got, want, rtol=1e-10, atol=1e-12 * np.abs(want).max())
 

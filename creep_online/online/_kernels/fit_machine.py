@@ -319,8 +319,8 @@ def _hysteresis_weights(st: np.ndarray, F: np.ndarray, wk: np.ndarray, theta: np
     """A re-fit with hysteresis columns: the weights' prior in its statistics (``hysteresis.weight_prior``), the
     operators the input has not opened pinned at 0 (``hysteresis.pin_unopened``)."""
     nm, nh = int(st[W.SC_NM]), int(st[W.SC_NH])
-    HK.weight_prior(F, q + W.FREE + nm, nh, st[W.SC_NOISE], st[W.SC_NEFF], wk[RF_FYY])
     o = HK.block_at(q, nm, int(st[W.SC_NR]), nh)
+    HK.weight_prior(F, q + W.FREE + nm, nh, st[W.SC_NOISE], st[W.SC_NEFF], wk[RF_FYY], st[o + HK.GAIN])
     HK.pin_unopened(st, o, nh, theta, 5 + nm, masks, REFIT_MASKS, W.LINEAR)
 
 

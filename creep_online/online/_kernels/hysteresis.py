@@ -2,18 +2,21 @@
 
 The plant is Hammerstein, ``y = b G1[u + sum_i w_i p_i(u)] + offset`` with ``G1 = 1/(s^alpha (1 + a1 s + a2
 s^2))`` and ``p_i`` the play operators of thresholds ``r_i`` (``effects.hysteresis.play_operators``). G1 is
-linear, so ``y = b G1[u] + sum_i w_i (b G1[p_i]) + offset``: each play's output goes through the same SOE nodes
-and resonance states as u (the nodes do not depend on alpha), and its column is the model's own response to it,
-``h_i = chan_i . m[:Q+2]`` with the window's current coefficients ``m`` (b included). The weights w_i (the batch
-fit's, relative to b) are then linear parameters of the window's least squares beside the offset; the columns are
-pseudo-linear (computed with the estimate of their sample's time, as the drift columns are, and recomputed with
-the current one by every replay).
+linear, so ``y = b G1[u] + sum_i (b w_i) G1[p_i] + offset``: each play's output goes through the same SOE nodes
+and resonance states as u (the nodes do not depend on alpha), and its column is the unit-gain model's response to
+it, ``h_i = chan_i . m[:Q+2] / b`` with the window's current coefficients ``m``. The products c_i = b w_i are then
+linear parameters of the window's least squares beside the offset (the weights relative to b, the batch fit's,
+are c_i / b); the columns are pseudo-linear (computed with the estimate of their sample's time, as the drift
+columns are, and recomputed with the current one by every replay). Unit gain: a column computed while b was
+still far off (the start, a change) is as good as one computed now; with b in it, such rows made the window
+trade b against the first weights (b 20-50 % off on random plants).
 
 The block at the end of the state array (``block_at``; ``size`` entries):
 
 ==================  ====================================================================================
 ``[0]``             1 once the operators have been started (at the first input, centred on it)
 ``[1]``, ``[2]``    the lowest and the highest input fed (the tracker widens the thresholds with them)
+``[GAIN]``          b of the coefficients m (``window.set_estimate``): the columns are unit-gain responses
 ``r`` (K)           the thresholds
 ``plays`` (K)       the operators' states after the last sample
 ``ptail`` (K)       their states before the oldest remembered sample
@@ -36,8 +39,9 @@ CACHE = True
 WEIGHT_SCALE = 0.03
 #: The prior's noise level is at least this times the window's output RMS (a noise-free record still pins them).
 PRIOR_FLOOR = 1e-6
-#: Entries before the thresholds: the started flag, the input's lowest and highest value.
-HEAD = 3
+#: Entries before the thresholds: the started flag, the input's lowest and highest value, b of the coefficients.
+HEAD = 4
+GAIN = 3
 
 
 @njit(cache=CACHE, inline="always")
@@ -71,15 +75,17 @@ def set_thresholds(st: np.ndarray, o: int, r: np.ndarray) -> None:
 
 @njit(cache=CACHE, fastmath={"contract", "reassoc", "arcp"})
 def columns(st: np.ndarray, o: int, k: int, q: int, phi: np.ndarray, c0: int, m: np.ndarray) -> None:
-    """phi[c0 + i] = chan_i . m[:Q+2]: the model's response to play i at the current coefficients."""
+    """phi[c0 + i] = chan_i . m[:Q+2] / b: the unit-gain model's response to play i at the current coefficients."""
     ch = channels_at(o, k)
     w = q + 2
+    b = st[o + GAIN]
+    inv = 1.0 / b if b != 0.0 else 0.0
     for i in range(k):
         row = ch + i * w
         acc = 0.0
         for j in range(w):
             acc += st[row + j] * m[j]
-        phi[c0 + i] = acc
+        phi[c0 + i] = acc * inv
 
 
 @njit(cache=CACHE)
@@ -152,6 +158,7 @@ def replay_origin(st: np.ndarray, live: np.ndarray, o: int, k: int, q: int) -> N
     st[o] = live[o]
     st[o + 1] = live[o + 1]
     st[o + 2] = live[o + 2]
+    st[o + GAIN] = live[o + GAIN]
     for i in range(k):
         st[o + HEAD + i] = live[o + HEAD + i]
         st[o + HEAD + k + i] = live[o + HEAD + 2 * k + i]
@@ -225,13 +232,15 @@ def rethreshold(st: np.ndarray, o: int, k: int, q: int, r: np.ndarray, u_oldest:
 
 
 @njit(cache=CACHE)
-def weight_prior(F: np.ndarray, c0: int, nh: int, noise: float, neff: float, fyy: float) -> None:
-    """Add the weights' prior to a re-fit's statistics at true scale (F, the window's Gram matrix; the weights'
-    columns from c0): w_i ~ N(0, WEIGHT_SCALE^2) against the output noise (the monitor's level, at least
-    PRIOR_FLOOR x the window's RMS) is the pseudo-observation ``noise / WEIGHT_SCALE * w_i = 0``, i.e.
-    (noise / WEIGHT_SCALE)^2 on the weight's diagonal (its column's coefficient is the weight itself)."""
+def weight_prior(F: np.ndarray, c0: int, nh: int, noise: float, neff: float, fyy: float, b: float) -> None:
+    """Add the weights' prior to a re-fit's statistics at true scale (F, the window's Gram matrix; the columns from
+    c0, coefficients c_i = b w_i): w_i ~ N(0, WEIGHT_SCALE^2) against the output noise (the monitor's level, at
+    least PRIOR_FLOOR x the window's RMS) is the pseudo-observation ``noise / (WEIGHT_SCALE |b|) * c_i = 0``, i.e.
+    (noise / (WEIGHT_SCALE b))^2 on each coefficient's diagonal (the batch fit's prior rows)."""
     noise = max(noise, PRIOR_FLOOR * np.sqrt(max(fyy, 0.0) / max(neff, 1.0)))
-    lam = (noise / WEIGHT_SCALE) ** 2
+    if b == 0.0:
+        return
+    lam = (noise / (WEIGHT_SCALE * b)) ** 2
     for i in range(nh):
         F[c0 + i, c0 + i] += lam
 

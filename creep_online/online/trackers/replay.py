@@ -58,6 +58,8 @@ class Replayer:
         yield
         if tr.n_rate or tr.n_hyst:        # (the drift and hysteresis columns are computed with them)
             W.full_coefficients(tr.theta, a1, a2, tr.basis.lam, tr.basis.dx, st[lay["m"]:lay["sy"]])
+            if tr.n_hyst:                  # (the unit-gain hysteresis columns divide by b)
+                st[lay["hyst"] + HK.GAIN] = tr.theta[3]
             if tr.n_rate > 1:
                 W.drift_coefficients(tr.theta, a1, a2, tr.basis.lam, tr.basis.dx, st[lay["md"]:lay["hyst"]])
         chunk = tr.replay_chunk

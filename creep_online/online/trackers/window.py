@@ -184,8 +184,9 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
 
     @property
     def hysteresis_weights(self) -> np.ndarray:
-        """The play operators' weights w_i (relative to b, as the batch fit's), thresholds ascending."""
-        return self.theta[5 + self.n_free:self.r0].copy()
+        """The play operators' weights w_i (relative to b, as the batch fit's: theta holds b w_i), thresholds
+        ascending."""
+        return self.theta[5 + self.n_free:self.r0] / self.theta[3]
 
     def widen_loop(self) -> bool:
         """The thresholds for the input's range, if it has grown HYSTERESIS_WIDEN beyond the one they were set for
