@@ -114,13 +114,17 @@ def _grouped(w_batch: np.ndarray, groups: int) -> np.ndarray:
 def _loop_error(u: np.ndarray, b: float, loop: dict, b_ref: float, ref: dict) -> float:
     """The loop as the output sees it, b (u + sum_i w_i p_i(u)) on the record's input, against a reference loop:
     the largest difference over the reference's loop width times |b_ref| (thresholds and initial states may
-    differ: this compares what the data determine, not the weights' split), over the record's second half."""
+    differ: this compares what the data determine, not the weights' split), over the record's second half, less its
+    best affine fit in u (a gain error is b's, not the loop's)."""
     from creep_online.effects.hysteresis import hysteresis_input, loop_width
     v = b * hysteresis_input(u, loop["r"], loop["w"], loop.get("initial", "centred"))
     v_ref = b_ref * hysteresis_input(u, ref["r"], ref["w"], ref.get("initial", "centred"))
     scale = abs(b_ref) * loop_width(ref["r"], ref["w"], float(np.ptp(u)))
     late = slice(u.size // 2, None)          # (the second half: the initial states' difference is forgotten)
-    return float(np.max(np.abs(v - v_ref)[late]) / scale) if scale > 0 else float("nan")
+    d = (v - v_ref)[late]
+    basis = np.column_stack([u[late], np.ones(d.size)])
+    d = d - basis @ np.linalg.lstsq(basis, d, rcond=None)[0]     # (the affine part: a gain error, not the loop)
+    return float(np.max(np.abs(d)) / scale) if scale > 0 else float("nan")
 
 
 def run_plant(family: str, seed: int, n: int) -> dict:
