@@ -100,9 +100,9 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         self.p = self.lay["p"]
         #: samples per light unit of a replay (each costs the P^2 statistics update, which runs as blocked
         #: matrix products at about twice the rate of the per-sample update, and the states)
-        self.replay_chunk = max(2, self.settings.unit_macs // (self.p * self.p // 2 + 4 * self.q))
+        self.replay_chunk = max(2, self.settings.unit_macs // (self.p * self.p // 2 + 4 * self.q * (1 + self.n_hyst)))
         #: samples per unit fed live (``feed_block``: a rank-one update each, with the gate and the prediction)
-        self.feed_chunk = max(2, self.settings.unit_macs // (self.p * self.p + 4 * self.q))
+        self.feed_chunk = max(2, self.settings.unit_macs // (self.p * self.p + 4 * self.q * (1 + self.n_hyst)))
         self.alpha_bounds = alpha_bounds
         self.refit_every = refit_every
         self.test_every = test_every
