@@ -69,6 +69,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                                                                "(default: none needed)")
     p.add_argument("--window", default=None,
                    help="forgetting time constant in s (default: the estimator's, 10 s); 'none' keeps everything")
+    p.add_argument("--effects", default=None, metavar="NAME[,NAME]",
+                   help="effects estimated with the creep (default: none): 'hysteresis' adds a Prandtl-Ishlinskii loop on "
+                        "the input, its weights fitted on the same window (docs/online.md)")
     p.add_argument("--refit", choices=REFITS, default=None,
                    help="Remark 3's strategy: window re-fits over the forgetting window (default), recursive "
                         "carries on with the newest estimate (constant work per sample; docs/online.md)")
@@ -95,6 +98,8 @@ def _options(args: argparse.Namespace) -> dict:
         opts["alpha0"] = args.alpha0
     if args.refit is not None:
         opts["refit"] = args.refit
+    if args.effects is not None:
+        opts["effects"] = tuple(name.strip() for name in str(args.effects).split(",") if name.strip())
     if args.window is not None:
         text = str(args.window).strip().lower()
         if text in ("none", "inf"):
@@ -217,7 +222,7 @@ def _report(est: OnlineEstimator, latency: dict, extra: dict) -> dict:
            "outliers": e.outliers, "input_outliers": e.input_outliers, "noise_rms": e.noise_rms,
            "residual_rms": e.residual_rms, "events": e.events, "t": e.t, "dt": est.dt,
            "b_rate": e.b_rate, "alpha_rate": e.alpha_rate, "researches": e.researches,
-           "frozen": e.frozen, "start": e.start}
+           "frozen": e.frozen, "start": e.start, "hysteresis": e.hysteresis}
     out.update(extra)
     return out
 
@@ -281,6 +286,9 @@ def _print_estimate(spec: str, est: OnlineEstimator) -> None:
         print(f"  start  : {START_TEXT.get(e.start, e.start)}" + ("; frozen (freeze())" if e.frozen else ""))
     print(f"  fn     = {_value(e.fn_hz, '.5g')} Hz, zeta = {_value(e.zeta, '.4g')}, t_c = {_value(e.t_c, '.4g')} s, "
           f"offset = {_value(e.offset, '.4g')}")
+    if e.hysteresis is not None:
+        print(f"  hysteresis: {len(e.hysteresis['w'])} play operators (thresholds {e.hysteresis['r'][0]:.4g} .. "
+              f"{e.hysteresis['r'][-1]:.4g}), weights " + ", ".join(f"{w:.4g}" for w in e.hysteresis["w"]))
     print(f"  skipped {est.skipped_nonfinite} non-finite, {est.gaps} lost, {est.alpha_updates} window fits, "
           f"outliers gated: {e.outliers} output, {e.input_outliers} input, internal faults: {est.internal_faults}")
     for ev in e.events:

@@ -59,7 +59,7 @@ from .checkpoint import Checkpointable
 from .inputs import InputStage
 from .recovery import PASS_THROUGH, Recovery
 from .report import OnlineEstimate, build_estimate, shifted
-from .settings import DEFAULT_SETTINGS, OnlineSettings
+from .settings import DEFAULT_SETTINGS, OnlineSettings, check_effects
 from .soe import DEFAULT_DX, DEFAULT_HORIZON_S, SOE_TOP, SoeBasis
 from .startup import Startup
 from .stored_params import StoredParams
@@ -111,6 +111,7 @@ class OnlineEstimator(StoredParams, Checkpointable):
                     resonance moves), ``"recursive"`` carries on with the newest estimate (RPEM, constant
                     work per sample; docs/online.md, "Remark 3: window vs recursive").
     settings:       the rules' thresholds (``online.settings.OnlineSettings``; None: the defaults).
+    effects:        effects estimated with the creep: () none, ``("hysteresis",)`` (``settings.check_effects``).
     """
 
     def __init__(self, dt: float, *, window_s: float | None = 10.0, update_every_s: float = 0.1,
@@ -120,7 +121,7 @@ class OnlineEstimator(StoredParams, Checkpointable):
                  outlier_gate: float = 8.0, burst_s: float = 0.002, input_gate: float = INPUT_GATE,
                  detect_changes: bool = True,
                  work_units: int | None = None, track_drift: bool = True, refit: str = "window",
-                 settings: OnlineSettings | None = None) -> None:
+                 settings: OnlineSettings | None = None, effects: tuple[str, ...] = ()) -> None:
         self.dt = dt
         self.window_s = window_s
         self.update_every_s = update_every_s
@@ -136,8 +137,7 @@ class OnlineEstimator(StoredParams, Checkpointable):
         self.detect_changes = detect_changes
         self.work_units = work_units
         self.track_drift = track_drift
-        self.refit = refit
-        self.settings = settings
+        self.refit, self.settings, self.effects = refit, settings, effects
         self._validate()
         self.reset()
 
@@ -183,6 +183,7 @@ class OnlineEstimator(StoredParams, Checkpointable):
             raise DataError(f"track_drift must be True or False, got {self.track_drift!r}")
         if not (isinstance(self.refit, str) and self.refit in REFITS):
             raise DataError(f"refit must be one of {', '.join(REFITS)}, got {self.refit!r}")
+        check_effects(self.effects, self.refit)
         if self.horizon_s <= self.dt:
             raise DataError(f"horizon_s ({self.horizon_s}) must exceed dt ({self.dt})")
         if self.window_s is not None and self.window_s < min_window * self.dt:

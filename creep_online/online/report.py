@@ -22,7 +22,9 @@ class OnlineEstimate:
     new samples (``reason`` names the misfit). ``start`` says how the stream was read to start: ``"rest"`` (its first
     input zero), ``"step"`` (its input at a non-zero level from the first sample, read as a step from rest there:
     the input 0 before it), ``"operation"`` (taken in operation: the plant moving from an unknown past input), None
-    while the data do not tell yet (``rest.py``).
+    while the data do not tell yet (``rest.py``). ``hysteresis`` (with ``effects=("hysteresis",)``) is the live
+    Prandtl-Ishlinskii loop, ``{"r": thresholds, "w": weights relative to b, "initial": "centred"}`` (the batch fit's
+    ``effects["hysteresis"]`` form), None while unknown or without the effect.
 
     With drift tracking (``track_drift``) alpha and b are the values at the
     newest re-fit (not window averages); ``b_rate`` and ``alpha_rate`` are their
@@ -74,6 +76,7 @@ class OnlineEstimate:
     internal_faults: int = 0
     frozen: bool = False
     start: str | None = None
+    hysteresis: dict | None = None
 
     def to_dict(self) -> dict:
         """JSON-ready dict."""
@@ -133,7 +136,7 @@ def build_estimate(est: "OnlineEstimator") -> OnlineEstimate:
         input_outliers=est.input_outliers, events=est.events, b_rate=_known(tr.b_rate),
         alpha_rate=_known(tr.alpha_rate), rate_uncertainty=rate_std,
         researches=est.researches, determined=verdict.determined, internal_faults=est.internal_faults,
-        frozen=est.frozen, start=est._startup.start)
+        frozen=est.frozen, start=est._startup.start, hysteresis=tr.hysteresis)
 
 
 def bare_estimate(est: "OnlineEstimator", quality: str, reason: str) -> OnlineEstimate:

@@ -21,6 +21,24 @@ from ..errors import DataError
 from .policy.limits import DeterminedLimits
 from .trackers.settings import TrackerSettings
 
+#: Effects the estimator can estimate with the creep (``OnlineEstimator(effects=...)``): the Prandtl-Ishlinskii loop
+#: on the input.
+ONLINE_EFFECTS = ("hysteresis",)
+
+
+def check_effects(effects, refit: str) -> None:
+    """``OnlineEstimator(effects=...)``: a tuple of names from ``ONLINE_EFFECTS``, with the window tracker (the
+    hysteresis columns are columns of its statistics). One-line ``DataError`` otherwise.
+
+    With ``"hysteresis"`` the window has ``MemorySettings.hysteresis_operators`` play operators whose thresholds the start-up
+    buffer's input range sets (the batch fit's rule), their outputs filtered by the plant as regressors of the
+    window's fit, their weights tracked with alpha, a1, a2 and b; the window then models no drift."""
+    if isinstance(effects, str) or not isinstance(effects, (tuple, list)) or not all(
+            isinstance(e, str) and e in ONLINE_EFFECTS for e in effects):
+        raise DataError(f"effects must be a tuple of names from: {', '.join(ONLINE_EFFECTS)} (or empty), got {effects!r}")
+    if effects and refit != "window":
+        raise DataError(f"effects {', '.join(effects)} need refit='window', got refit={refit!r}")
+
 
 def _check(section: object) -> None:
     """Every numeric field of a settings section finite and positive (ints whole); one-line ``DataError`` if not."""
@@ -142,11 +160,17 @@ class MemorySettings:
     max_history: int = 1 << 19
     #: Drift columns with ``track_drift``: 1 the gain's rate, 2 the gain's and alpha's.
     drift_columns: int = 2
+    #: Play operators of the online hysteresis loop (``effects=("hysteresis",)``): thresholds evenly spaced over
+    #: (0, 1/2) of the input range (``effects.hysteresis.threshold_fractions``, the batch fit's rule with fewer of
+    #: them); each is one more column of the window's statistics (the per-sample update grows as their square).
+    hysteresis_operators: int = 8
 
     def __post_init__(self) -> None:
         _check(self)
         if self.drift_columns > 2:
             raise DataError(f"MemorySettings.drift_columns must be 1 or 2, got {self.drift_columns!r}")
+        if not 1 <= self.hysteresis_operators <= 24:
+            raise DataError(f"MemorySettings.hysteresis_operators must be 1 to 24, got {self.hysteresis_operators!r}")
 
 
 _SECTIONS = {"startup": StartupSettings, "input_gate": InputGateSettings, "recovery": RecoverySettings,

@@ -400,7 +400,8 @@ class Startup:
             est.basis, theta, window_s=est.window_s, free=free, ring=est._ring, work=self.hist_work,
             gate=0.0, burst=est._burst, stuck=max(10, int(round(0.05 / est._h))), alpha_bounds=(lo, hi),
             refit_every=est._refit_every, test_every=est._test_every, detect=bool(est.detect_changes),
-            drift=est._settings.memory.drift_columns if est.track_drift else 0, settings=est._settings.trackers)
+            drift=est._settings.memory.drift_columns if est.track_drift else 0, settings=est._settings.trackers,
+            hysteresis=est._settings.memory.hysteresis_operators if "hysteresis" in est.effects else 0)
 
     def start_steps(self, res, compete: bool = False) -> Generator:
         """Start the tracker at the search's result (with ``compete``: at the reading of the start taken,
@@ -423,7 +424,7 @@ class Startup:
             if key not in self.spares:     # (used by a tracker that a fault's restart dropped)
                 self.spares[key] = self.window_tracker(key)
             tracker = self.spares[key]
-            tracker.start_state(theta)
+            tracker.start_state(theta, est._u_hi - est._u_lo)
             yield
             self.buffer_noise()            # (a median of 2048 second differences: in a call of its own)
             yield

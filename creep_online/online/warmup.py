@@ -9,6 +9,7 @@ import numpy as np
 
 from . import rest
 from ._kernels import fit_machine as RF
+from ._kernels import hysteresis as HK
 from ._kernels import window as W
 from .search import ResonanceSearch
 from .trackers import recursive as R
@@ -64,5 +65,33 @@ def warm_kernels() -> None:
         pass
     T.WindowTracker  # noqa: B018 - imported for its kernels
     R.warm()
+    _warm_hysteresis(u)
     rest.reading(np.linspace(0.0, 1.0, 64))          # the start's reading (a stream whose first input is not 0)
     W.noise_seed(t, t.size, np.empty(W.NOISE_SEED_ROWS))
+
+
+def _warm_hysteresis(u: np.ndarray) -> None:
+    """The hysteresis columns' kernels that the tracker's Python calls (a widening, a replay's start and swap, a
+    re-search's corrected input), and a tracker with the columns through its per-sample, replay and re-fit kernels:
+    loaded at a stream's first widening otherwise (6 ms in one update())."""
+    from .estimator import OnlineEstimator
+    est = OnlineEstimator(1e-3, horizon_s=10.0, t_c=0.05, effects=("hysteresis",))
+    t = np.arange(3000) * 1e-3
+    est.update_block(u[:3000] * (1.0 + t), u[:3000] * 0.5 + 0.01 * np.sin(t * 50))
+    tr = est._tracker
+    if tr is None:
+        return
+    o, k, q = tr.lay["hyst"], tr.n_hyst, tr.q
+    st = tr.st.copy()
+    HK.rethreshold(st, o, k, q, tr.hyst_r.copy(), 0.0, tr.ztail)
+    HK.replay_origin(st, tr.st, o, k, q)
+    HK.swap_block(tr.st, st, o, k, q)
+    W.swap_into(tr.st.copy(), st, tr.theta, tr.basis.lam, tr.basis.dx)
+    W.replay(tr.ring, 0, 4, 1, st, tr.S.copy(), *W.replay_scratch(tr.p))
+    plays = HK.corrected_nodes(st, o, k, q, np.zeros(k), np.zeros(q))
+    HK.correct_input(np.zeros(4), tr.hyst_r, plays, np.zeros(k))
+    wk = tr._wk.copy()
+    S, shift = tr.S.copy(), tr._shift.copy()
+    RF.begin(st, S, shift, wk, 1, False, True, 0, True)
+    RF.run(st, S, shift, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)
+    tr.widen_loop()

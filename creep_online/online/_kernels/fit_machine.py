@@ -23,6 +23,7 @@ import numpy as np
 from numba import njit
 
 from . import coefficients as kernels
+from . import hysteresis as HK
 from . import window as W
 
 CACHE = True
@@ -307,6 +308,22 @@ def _plan(wk: np.ndarray, n: float, window_start: int, drift_on: bool, converged
     wk[RF_WIDE_DUE] = 1.0 if narrow and converged and due else 0.0
 
 
+#: The masks a re-fit may use (the change test holds the weights at the live values).
+REFIT_MASKS = np.array([MASK_ALL, MASK_CONSTANT, MASK_HOLD, NARROW + MASK_ALL, NARROW + MASK_CONSTANT,
+                        NARROW + MASK_HOLD], dtype=np.int64)
+
+
+@njit(cache=CACHE)
+def _hysteresis_weights(st: np.ndarray, F: np.ndarray, wk: np.ndarray, theta: np.ndarray, masks: np.ndarray,
+                        q: int) -> None:
+    """A re-fit with hysteresis columns: the weights' prior in its statistics (``hysteresis.weight_prior``), the
+    operators the input has not opened pinned at 0 (``hysteresis.pin_unopened``)."""
+    nm, nh = int(st[W.SC_NM]), int(st[W.SC_NH])
+    o = HK.block_at(q, nm, int(st[W.SC_NR]), nh)
+    HK.weight_prior(F, q + W.FREE + nm, nh, st[W.SC_NOISE], st[W.SC_NEFF], wk[RF_FYY], st[o + HK.GAIN])
+    HK.pin_unopened(st, o, nh, theta, 5 + nm, masks, REFIT_MASKS, W.LINEAR)
+
+
 @njit(cache=CACHE)
 def fit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarray, wk: np.ndarray,
                lam: np.ndarray, dx: float) -> bool:
@@ -363,6 +380,8 @@ def fit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarray,
         wk[RF_FYY] = W.scaled_statistics(st, S, F, fy)
         wk[RF_NEFF] = st[W.SC_NEFF]
         theta[:] = live
+        if st[W.SC_NH] > 0.0:          # the hysteresis weights: their prior, the operators not yet opened pinned
+            _hysteresis_weights(st, F, wk, theta, masks, q)
         wk[RF_A1L], wk[RF_A2L] = st[W.SC_A1L], st[W.SC_A2L]
         wk[RF_STEP] = 0.0
         wk[RF_DRIFT_SWITCH] = 0.0

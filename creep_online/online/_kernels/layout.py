@@ -27,7 +27,7 @@ X0, S1, S2, ONE, FREE = 0, 2, 4, 6, 7
 #: Resonance coefficients: Phi, Gamma at (a1, a2) and their a1- and a2-derivatives (``window.resonance_coefficients``).
 RESONANCE = 18
 #: Scalars in the header (``window.SC_*``).
-SCALARS = 44
+SCALARS = 45
 
 
 class Size(NamedTuple):
@@ -69,14 +69,19 @@ def _start(blocks: tuple, name: str, base: int) -> Size:
     raise KeyError(name)
 
 
-def offsets(q: int, m: int, r: int = 0) -> dict[str, int]:
-    """The offsets of the blocks of a state array (``{"sc": 0, "phi": ..., "size": ..., "p": P}``)."""
+def offsets(q: int, m: int, r: int = 0, h: int = 0) -> dict[str, int]:
+    """The offsets of the blocks of a state array (``{"sc": 0, "phi": ..., "size": ..., "p": P}``).
+
+    ``h`` hysteresis columns (``hysteresis.py``) count as trailing columns beside the R drift columns, and their
+    block (``"hyst"``) follows ``md``."""
+    from .hysteresis import size as hyst_size
     out = {"sc": 0}
     for name, _ in BLOCKS:
-        out[name] = _start(BLOCKS, name, SCALARS).of(q, m, r)
+        out[name] = _start(BLOCKS, name, SCALARS).of(q, m, r + h)
     last, size = BLOCKS[-1]
-    out["size"] = out[last] + size.of(q, m, r)
-    out["p"] = P.of(q, m, r)
+    out["hyst"] = out[last] + size.of(q, m, r + h)
+    out["size"] = out["hyst"] + hyst_size(q, h)
+    out["p"] = P.of(q, m, r + h)
     return out
 
 
@@ -132,7 +137,7 @@ def describe_state(st: np.ndarray, names: dict[int, str] | None = None) -> list[
     from . import window as W
     if names is None:
         names = {v: k for k, v in vars(W).items() if k.startswith("SC_") and k != "SC_SIZE" and isinstance(v, int)}
-    q, m, r = int(st[W.SC_NQ]), int(st[W.SC_NM]), int(st[W.SC_NR])
+    q, m, r = int(st[W.SC_NQ]), int(st[W.SC_NM]), int(st[W.SC_NR]) + int(st[W.SC_NH])
     out = [(i, names.get(i, f"sc[{i}]"), float(st[i])) for i in range(SCALARS)]
     off = offsets(q, m, r)
     for name, size in BLOCKS:

@@ -74,6 +74,7 @@ LINEAR_PRIOR = 1e-9
 #: Offsets of the regressor entries after the Q SOE nodes (``layout``).
 from .layout import (FREE, ONE, RESONANCE, S1, S2, X0, co_at, co_size, free_decay_in_co,  # noqa: E402,F401
                      md_at, offsets, resonance_in_co, ztail_at)
+from . import hysteresis as HK  # noqa: E402
 
 # indices into the scalar work array ``sc``
 SC_G = 0          # weight of the next sample (forget^-n, renormalised)
@@ -120,7 +121,8 @@ SC_REPK = 40      # smoothing factor of that rate (~10 s)
 SC_TREF = 41      # sample index at which the drift regressors' time tau is zero
 SC_H = 42         # sampling step (s)
 SC_NR = 43        # number of drift columns R (0, 1: gain rate, 2: gain and alpha rates)
-SC_SIZE = 44
+SC_NH = 44        # number of hysteresis columns K (``hysteresis.py``; before the drift columns)
+SC_SIZE = 45
 
 
 @njit(cache=CACHE)
@@ -281,7 +283,7 @@ def parts(st: np.ndarray) -> tuple:
     regressor's length, the model coefficients, the statistics' sy and the alpha-derivative md."""
     q = int(st[SC_NQ])
     nm = int(st[SC_NM])
-    nr = int(st[SC_NR])
+    nr = int(st[SC_NR]) + int(st[SC_NH])
     p = q + FREE + nm + nr
     o = SC_SIZE
     md = md_at(q, nm, nr)
@@ -299,6 +301,8 @@ def set_estimate(theta: np.ndarray, st: np.ndarray, lam: np.ndarray, dx: float) 
     full_coefficients(theta, a1l, a2l, lam, dx, m)
     if int(sc[SC_NR]) > 1:
         drift_coefficients(theta, a1l, a2l, lam, dx, md)
+    if int(sc[SC_NH]) > 0:               # the hysteresis columns are unit-gain: they divide by this b
+        st[HK.block_at(q, int(sc[SC_NM]), int(sc[SC_NR]), int(sc[SC_NH])) + HK.GAIN] = theta[3]
     sc[SC_BABS] = abs(theta[3])
     settle = 8.0 * math.exp(theta[2]) / math.exp(theta[1])
     h = sc[SC_H]
@@ -614,25 +618,27 @@ def drift_score(H: np.ndarray, g: np.ndarray, free: np.ndarray, r0: int) -> floa
     return drift_gain(H, g, free, r0, True, A, mask, r, x) - drift_gain(H, g, free, r0, False, A, mask, r, x)
 
 
-def layout(q: int, n_free: int, n_rate: int = 0) -> dict:
+def layout(q: int, n_free: int, n_rate: int = 0, n_hyst: int = 0) -> dict:
     """Offsets of the parts of the flat state array ``st`` (one array: fewer arguments per numba call).
 
     ``st`` = [scalars (SC_SIZE) | regressor phi (P) | coefficients m (P) | sy (P) |
     co (2Q + 18 + M: node decays and gains, resonance, free-response decays) |
     ztail (Q: node states before the oldest remembered sample) |
-    md (Q + 6: alpha-derivative of the model coefficients, b dk/dalpha)].
+    md (Q + 6: alpha-derivative of the model coefficients, b dk/dalpha) |
+    hyst (the hysteresis columns' block, ``hysteresis.py``; none without them)].
     """
-    return offsets(q, n_free, n_rate)
+    return offsets(q, n_free, n_rate, n_hyst)
 
 
 @njit(cache=CACHE)
 def start_state(st: np.ndarray, decay: np.ndarray, gain: np.ndarray, free_decay: np.ndarray, forget: float,
-                h: float, a1l: float, a2l: float, n_rate: int) -> None:
+                h: float, a1l: float, a2l: float, n_rate: int, n_hyst: int = 0) -> None:
     """A fresh state array's header, coefficients and constant regressor entries (both trackers; the parts at
     ``layout``'s offsets). One kernel: the trackers' jobs build fresh states from cold Python.
 
     ``decay``/``gain``: the SOE nodes' per-sample decay and input gain; ``free_decay``: the free
-    responses' per-sample decay; the resonance coefficients at the linearization point (a1l, a2l).
+    responses' per-sample decay; the resonance coefficients at the linearization point (a1l, a2l); ``n_hyst``
+    hysteresis columns (``hysteresis.py``: their thresholds are set apart).
     """
     q, n_free = decay.shape[0], free_decay.shape[0]
     st[SC_NQ] = q
@@ -641,7 +647,8 @@ def start_state(st: np.ndarray, decay: np.ndarray, gain: np.ndarray, free_decay:
     st[SC_FORGET] = forget
     st[SC_H] = h
     st[SC_NR] = n_rate
-    co = co_at(q, n_free, n_rate)
+    st[SC_NH] = n_hyst
+    co = co_at(q, n_free, n_rate + n_hyst)
     st[co:co + q] = decay
     st[co + q:co + 2 * q] = gain
     f = co + free_decay_in_co(q)
@@ -672,7 +679,7 @@ def linearize(st: np.ndarray, a1l: float, a2l: float) -> None:
     """A fresh state array's linearization point (a1l, a2l) and its resonance coefficients (``start_state``'s
     part that depends on the estimate)."""
     q = int(st[SC_NQ])
-    res = co_at(q, int(st[SC_NM]), int(st[SC_NR])) + resonance_in_co(q)
+    res = co_at(q, int(st[SC_NM]), int(st[SC_NR]) + int(st[SC_NH])) + resonance_in_co(q)
     st[SC_A1L] = a1l
     st[SC_A2L] = a2l
     resonance_coefficients(a1l, a2l, st[SC_H], st[res:res + RESONANCE])
@@ -881,14 +888,18 @@ def sample(u: float, y: float, st: np.ndarray, S: np.ndarray, ring: np.ndarray) 
     sc = st[:SC_SIZE]
     q = int(sc[SC_NQ])
     nr = int(sc[SC_NR])
-    p = q + FREE + int(sc[SC_NM]) + nr
+    nh = int(sc[SC_NH])
+    p = q + FREE + int(sc[SC_NM]) + nh + nr
     o = SC_SIZE
     phi = st[o:o + p]
     m = st[o + p:o + 2 * p]
     sy = st[o + 2 * p:o + 3 * p]
-    c0 = co_at(q, int(sc[SC_NM]), nr)
+    c0 = co_at(q, int(sc[SC_NM]), nr + nh)
     co = st[c0:c0 + co_size(q, int(sc[SC_NM]))]
     ztail = st[c0 + co.shape[0]:c0 + co.shape[0] + q]
+    ho = c0 + co.shape[0] + 2 * q + ONE         # the hysteresis block (``hysteresis.block_at``)
+    if nh > 0:
+        HK.columns(st, ho, nh, q, phi, p - nr - nh, m)
     pred = _drift_regressors(phi, m, st[c0 + co.shape[0] + q:c0 + co.shape[0] + 2 * q + ONE], sc, q, p, nr)
     for i in range(q + ONE, p):
         pred += phi[i] * m[i]
@@ -903,9 +914,13 @@ def sample(u: float, y: float, st: np.ndarray, S: np.ndarray, ring: np.ndarray) 
                 _accumulate(y, phi, S, sy, sc)
             elif status == 0:
                 status = 4
+    if nh > 0 and sc[SC_RCOUNT] >= ring.shape[1]:
+        HK.tail(st, ho, nh, q, co, ring[0, int(sc[SC_RPOS])])
     _remember(u, y if status == 0 or status == 3 else math.nan, co, q, sc, ring, ztail)
     note_input(u, sc)
     advance(phi, co, q, u)
+    if nh > 0:
+        HK.step(st, ho, nh, q, co, u)
     sc[SC_N] += 1.0
     if sc[SC_N] >= sc[SC_DUE]:
         status += 8
@@ -1483,19 +1498,21 @@ def replay_scratch(p: int) -> tuple:
 
 @njit(cache=CACHE, inline="always")
 def _replay_views(st: np.ndarray) -> tuple:
-    """What a replay reads and advances in st: scalars, Q, rates, P, phi, m, sy, coefficients, md."""
+    """What a replay reads and advances in st: scalars, Q, rates, P, phi, m, sy, coefficients, md, and the
+    hysteresis columns' count and block (``hysteresis.py``)."""
     sc = st[:SC_SIZE]
     q = int(sc[SC_NQ])
     nr = int(sc[SC_NR])
-    p = q + FREE + int(sc[SC_NM]) + nr
+    nh = int(sc[SC_NH])
+    p = q + FREE + int(sc[SC_NM]) + nh + nr
     o = SC_SIZE
     phi = st[o:o + p]
     m = st[o + p:o + 2 * p]
     sy = st[o + 2 * p:o + 3 * p]
-    c0 = co_at(q, int(sc[SC_NM]), nr)
+    c0 = co_at(q, int(sc[SC_NM]), nr + nh)
     co = st[c0:c0 + co_size(q, int(sc[SC_NM]))]
     md = st[c0 + co.shape[0] + q:c0 + co.shape[0] + 2 * q + ONE]
-    return sc, q, nr, p, phi, m, sy, co, md
+    return sc, q, nr, p, phi, m, sy, co, md, nh, c0 + co.shape[0] + 2 * q + ONE
 
 
 @njit(cache=CACHE, fastmath=FAST)
@@ -1543,7 +1560,7 @@ def replay(ring: np.ndarray, p0: int, n: int, skip: int, st: np.ndarray, S: np.n
     as the live kernel accumulates), gathered in blocks of ``REPLAY_BLOCK`` rows
     and added one block at a time (``_add_block``; ``replay_scratch``: X, Xw, yb).
     """
-    sc, q, nr, p, phi, m, sy, co, md = _replay_views(st)
+    sc, q, nr, p, phi, m, sy, co, md, nh, ho = _replay_views(st)
     size = ring.shape[1]
     block = X.shape[0]
     f = sc[SC_FORGET]
@@ -1552,6 +1569,8 @@ def replay(ring: np.ndarray, p0: int, n: int, skip: int, st: np.ndarray, S: np.n
         pos = (p0 + k) % size
         y = ring[1, pos]
         if k >= skip and y == y:
+            if nh > 0:
+                HK.columns(st, ho, nh, q, phi, p - nr - nh, m)
             if nr > 0:
                 _drift_regressors(phi, m, md, sc, q, p, nr)
             g = sc[SC_G]               # the weight of this row, as ``_accumulate`` grows it
@@ -1575,6 +1594,8 @@ def replay(ring: np.ndarray, p0: int, n: int, skip: int, st: np.ndarray, S: np.n
                 _add_block(X, Xw, yb, nb, S, sy)
                 nb = 0
         advance(phi, co, q, ring[0, pos])
+        if nh > 0:
+            HK.step(st, ho, nh, q, co, ring[0, pos])
         sc[SC_N] += 1.0
     if nb > 0:
         _add_block(X, Xw, yb, nb, S, sy)
@@ -1598,30 +1619,41 @@ def swap_into(live: np.ndarray, replayed: np.ndarray, theta: np.ndarray, lam: np
     slices from Python, in the update() that swaps, it cost ~35-50 us cold; into a new array (``swapped_state``
     until 93452cc) its page was first touched there. The tracker swaps its two state arrays so."""
     q = int(live[SC_NQ])
-    p = q + FREE + int(live[SC_NM]) + int(live[SC_NR])
+    nt = int(live[SC_NR]) + int(live[SC_NH])
+    p = q + FREE + int(live[SC_NM]) + nt
     o = SC_SIZE
-    ztail = ztail_at(q, int(live[SC_NM]), int(live[SC_NR]))
+    ztail = ztail_at(q, int(live[SC_NM]), nt)
     g, syy, neff = replayed[SC_G], replayed[SC_SYY], replayed[SC_NEFF]
     a1l, a2l, tref = replayed[SC_A1L], replayed[SC_A2L], replayed[SC_TREF]
     replayed[:o] = live[:o]
     replayed[SC_G], replayed[SC_SYY], replayed[SC_NEFF] = g, syy, neff
     replayed[SC_A1L], replayed[SC_A2L], replayed[SC_TREF] = a1l, a2l, tref
     replayed[o + p:o + 2 * p] = live[o + p:o + 2 * p]    # (between phi and sy)
-    replayed[ztail:] = live[ztail:]
+    nh = int(live[SC_NH])
+    if nh == 0:
+        replayed[ztail:] = live[ztail:]
+    else:                                # the replay's plays and their states stay (its thresholds, its point)
+        ho = HK.block_at(q, int(live[SC_NM]), int(live[SC_NR]), nh)
+        replayed[ztail:ho] = live[ztail:ho]
+        HK.swap_block(live, replayed, ho, nh, q)
     set_estimate(theta, replayed, lam, dx)
 
 
 @njit(cache=CACHE, fastmath=FAST)
 def replay_direct(ring: np.ndarray, p0: int, n: int, skip: int, st: np.ndarray, S: np.ndarray) -> None:
     """``replay`` one rank-one update per sample, as the live kernel accumulates (the reference in the tests)."""
-    sc, q, nr, p, phi, m, sy, co, md = _replay_views(st)
+    sc, q, nr, p, phi, m, sy, co, md, nh, ho = _replay_views(st)
     size = ring.shape[1]
     for k in range(n):
         pos = (p0 + k) % size
         y = ring[1, pos]
         if k >= skip and y == y:
+            if nh > 0:
+                HK.columns(st, ho, nh, q, phi, p - nr - nh, m)
             if nr > 0:
                 _drift_regressors(phi, m, md, sc, q, p, nr)
             _accumulate(y, phi, S, sy, sc)
         advance(phi, co, q, ring[0, pos])
+        if nh > 0:
+            HK.step(st, ho, nh, q, co, ring[0, pos])
         sc[SC_N] += 1.0

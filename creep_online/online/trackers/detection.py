@@ -164,7 +164,7 @@ class ChangeDetection:
         # the ceramic's thermal drift): its rates stay, fitted in the new window from the start (zeroed, a short
         # window without drift misreads alpha and b, and a re-search may then take a candidate without the resonance)
         if not tr.drift_on:
-            tr.theta[5 + tr.n_free:] = 0.0
+            tr.theta[tr.r0:] = 0.0
         tr._lr_recent = []
         tr._snaps = []
         tr._misfit_since = None

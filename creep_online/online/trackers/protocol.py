@@ -27,6 +27,7 @@ class Tracker(Protocol):
     b_rate: float                       #: drift of b per second (0 while not modelled)
     alpha_rate: float                   #: drift of alpha per second (0 while not modelled)
     drift_on: bool                      #: the drift rates are fitted now
+    hysteresis: dict | None             #: the live PI loop {"r", "w", "initial"}; None: none, or no fit yet
     fit: "object"                       #: the last fit: ``std`` (1-sigma by name), ``cost``, ``neff``, ``sample``
     n: int                              #: samples fed
     prediction: float                   #: model output for the latest sample

@@ -96,6 +96,7 @@ class RecursiveTracker(ParameterView, LiveMonitors, Checkpointable):
         self.q = q = basis.size
         self.n_free = len(s.free_rates) if free else 0
         self.n_rate = 0
+        self.hysteresis = None           # (no hysteresis columns: ``OnlineEstimator`` allows them with the window only)
         self.lay = lay = layout(q, self.n_free)
         self.p = lay["p"]
         self.refit_every = refit_every

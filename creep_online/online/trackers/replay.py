@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING, Generator
 
 import numpy as np
 
+from .._kernels import hysteresis as HK
 from .._kernels import window as W
 from .common import KEPT_SNAPSHOTS, MACHINE_TEST, WAIT, replay_unit
 from . import workspace as WS
@@ -54,11 +55,15 @@ class Replayer:
         # the nodes, the free responses, the drift columns' time at the oldest sample (and, after the yield, their
         # coefficients at the new point)
         W.replay_origin(st, tr.ztail, tr._free_rates, oldest, float(tr.sc[W.SC_TREF]))
+        if tr.n_hyst:                      # the plays and their nodes at the oldest sample, from the live tails
+            HK.replay_origin(st, tr.st, lay["hyst"], tr.n_hyst, tr.q)
         yield
-        if tr.n_rate:
+        if tr.n_rate or tr.n_hyst:        # (the drift and hysteresis columns are computed with them)
             W.full_coefficients(tr.theta, a1, a2, tr.basis.lam, tr.basis.dx, st[lay["m"]:lay["sy"]])
+            if tr.n_hyst:                  # (the unit-gain hysteresis columns divide by b)
+                st[lay["hyst"] + HK.GAIN] = tr.theta[3]
             if tr.n_rate > 1:
-                W.drift_coefficients(tr.theta, a1, a2, tr.basis.lam, tr.basis.dx, st[lay["md"]:lay["size"]])
+                W.drift_coefficients(tr.theta, a1, a2, tr.basis.lam, tr.basis.dx, st[lay["md"]:lay["hyst"]])
         chunk = tr.replay_chunk
         snaps: list[tuple] = []
         buffers, taken = tr._replay_snaps[tr._replay_set], 0
@@ -118,14 +123,17 @@ class Replayer:
         st, S = tr._nodes_state          # node states only (no statistics: S is not touched)
         st.fill(0.0)
         W.start_state(st, tr.basis.decay, tr.basis.gain, tr._free_decay, tr.forget, tr.h, tr.a1l,
-                      tr.a2l, tr.n_rate)
+                      tr.a2l, tr.n_rate, tr.n_hyst)
         yield                              # (with the caller's set-up and the rest below, ~28 us cold in one call)
         oldest = int(tr.sc[W.SC_RSTART])  # (the ring's oldest and its tail, read together)
-        row = self.nearest_mark(tr, n0, oldest)
+        # (the marks hold the nodes only: with hysteresis columns the plays' states come from the history's tail)
+        row = self.nearest_mark(tr, n0, oldest) if not tr.n_hyst else -1
         start = oldest if row < 0 else int(tr._node_mark_at[row])
         st[tr.lay["phi"]:tr.lay["phi"] + tr.q] = tr.ztail if row < 0 else tr._node_marks[row]
         st[W.SC_N] = start
-        chunk = max(16, tr.settings.unit_macs // (4 * tr.q))         # states only: ~0.04 us per sample at Q = 42
+        if tr.n_hyst:                      # the plays and their nodes too, from the live tails
+            HK.replay_origin(st, tr.st, tr.lay["hyst"], tr.n_hyst, tr.q)
+        chunk = max(16, tr.settings.unit_macs // (4 * tr.q * (1 + tr.n_hyst)))   # states only: ~0.04 us per sample at Q = 42
         size, slot = tr.ring.shape[1], tr._ring_position(start) - start
         i = start
         yield                              # (the set-up and a first chunk in one update(): 45-55 us)
@@ -134,7 +142,10 @@ class Replayer:
             W.replay(tr.ring, (slot + i) % size, n, n, st, S, *tr._replay_work)
             i += n
             yield
-        return st[tr.lay["phi"]:tr.lay["phi"] + tr.q].copy()
+        zeta = st[tr.lay["phi"]:tr.lay["phi"] + tr.q].copy()
+        if tr.n_hyst:                      # the corrected input's nodes, and the plays at n0 for ``ring_segment``
+            tr._segment_plays = HK.corrected_nodes(st, tr.lay["hyst"], tr.n_hyst, tr.q, tr.hysteresis_weights, zeta)
+        return zeta
 
     def ring_segment(self, tr: WindowTracker, n0: int, n1: int) -> Generator:
         """Copies of the remembered u, y for samples n0..n1 (``settings.segment_chunk`` per unit); returns (u, y), views of
@@ -142,8 +153,12 @@ class Replayer:
         up to 2 x 256 kB, and numpy's fancy indexing cost ~80 us in one update())."""
         u, y = tr._segment[0, :n1 - n0], tr._segment[1, :n1 - n0]
         size, slot = tr.ring.shape[1], tr._ring_position(n0)
+        if tr.n_hyst:                      # the search sees the input corrected by the live loop (``nodes_at``'s plays)
+            plays, w = tr._segment_plays.copy(), tr.hysteresis_weights
         for k0 in range(0, n1 - n0, tr.settings.segment_chunk):
             k1 = min(n1 - n0, k0 + tr.settings.segment_chunk)
             W.ring_copy(tr.ring, (slot + k0) % size, u[k0:k1], y[k0:k1])
+            if tr.n_hyst:
+                HK.correct_input(u[k0:k1], tr.hyst_r, plays, w)
             yield
         return u, y

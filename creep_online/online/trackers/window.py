@@ -45,7 +45,9 @@ from typing import Generator
 
 import numpy as np
 
+from ...effects.hysteresis import threshold_fractions
 from .._kernels import fit_machine as RF
+from .._kernels import hysteresis as HK
 from .._kernels import window as W
 from ..checkpoint import Checkpointable
 from ..soe import SoeBasis
@@ -61,6 +63,9 @@ from .settings import DEFAULT, TrackerSettings
 #: The defaults' free-response rates and "determined" limits (the estimator's start-up search and quality).
 FREE_RATES = DEFAULT.free_rates
 DETERMINED = DEFAULT.determined
+#: The play operators' thresholds follow the input's range once it is this much wider than the one they were set for
+#: (``widen_loop``; each widening is a replay of the remembered samples).
+HYSTERESIS_WIDEN = 1.05
 
 
 class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
@@ -69,7 +74,7 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
     def __init__(self, basis: SoeBasis, theta: np.ndarray, *, window_s: float | None, free: bool,
                  ring: np.ndarray, gate: float, burst: int, stuck: int, alpha_bounds: tuple[float, float],
                  refit_every: int, test_every: int, detect: bool, work: np.ndarray | None = None,
-                 drift: int = 0, settings: TrackerSettings | None = None) -> None:
+                 drift: int = 0, hysteresis: int = 0, settings: TrackerSettings | None = None) -> None:
         self.settings = DEFAULT if settings is None else settings
         #: the collaborators that run the jobs (no state of their own: they work on this tracker)
         self.scheduler, self.replayer = Scheduler(), Replayer()
@@ -82,14 +87,22 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         self._free_decay = np.exp(-self._free_rates * self.h)   # per sample (``workspace.fresh``)
         #: the free responses' rates, also what a search's judge projects out (``ResonanceSearch.judged_cost``)
         self._free_decays = self.settings.free_rates if free else ()
-        self.n_rate = int(drift)         # drift columns: 0 none, 1 gain rate, 2 gain and alpha rates
-        self.lay = W.layout(self.q, self.n_free, self.n_rate)
+        #: hysteresis columns: play operators filtered by the plant, their weights linear parameters of the window's
+        #: fit beside the offset (``_kernels/hysteresis.py``); their thresholds from the input's span (``start_state``)
+        self.n_hyst = int(hysteresis)
+        #: drift columns: 0 none, 1 gain rate, 2 gain and alpha rates. None with the hysteresis columns: a drift column
+        #: is the model's output times the time, and the loop's part is not in it (with it, the rates took up the
+        #: loop's misfit: a false change and the resonance lost within 10 s on a plain 1 Hz triangle)
+        self.n_rate = 0 if self.n_hyst else int(drift)
+        self.hyst_r = np.zeros(self.n_hyst)
+        self._hyst_span = 0.0            # the input range the thresholds are set for
+        self.lay = W.layout(self.q, self.n_free, self.n_rate, self.n_hyst)
         self.p = self.lay["p"]
         #: samples per light unit of a replay (each costs the P^2 statistics update, which runs as blocked
         #: matrix products at about twice the rate of the per-sample update, and the states)
-        self.replay_chunk = max(2, self.settings.unit_macs // (self.p * self.p // 2 + 4 * self.q))
+        self.replay_chunk = max(2, self.settings.unit_macs // (self.p * self.p // 2 + 4 * self.q * (1 + self.n_hyst)))
         #: samples per unit fed live (``feed_block``: a rank-one update each, with the gate and the prediction)
-        self.feed_chunk = max(2, self.settings.unit_macs // (self.p * self.p + 4 * self.q))
+        self.feed_chunk = max(2, self.settings.unit_macs // (self.p * self.p + 4 * self.q * (1 + self.n_hyst)))
         self.alpha_bounds = alpha_bounds
         self.refit_every = refit_every
         self.test_every = test_every
@@ -100,7 +113,7 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         self._lr_recent: list[float] = []   # statistics of the last change tests (no change found)
         self.drift_on = False            # the rates are fitted (switched by the score and Wald tests)
         self.drift_stat = 0.0            # the last test statistic (score when off, Wald when on)
-        self.theta = np.zeros(5 + self.n_free + self.n_rate)     # (its values: ``start``)
+        self.theta = np.zeros(5 + self.n_free + self.n_hyst + self.n_rate)     # (its values: ``start``)
         self.forget = 1.0 if window_s is None else math.exp(-self.h / window_s)
         self.ring = ring                 # (2, H) history, owned by the caller (pre-faulted)
         self.work_memory = work          # (N, Q) scratch for the post-change search (pre-faulted)
@@ -150,13 +163,55 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         self.start_state(theta)
         self.start_adopt()
 
-    def start_state(self, theta: np.ndarray) -> None:
+    def start_state(self, theta: np.ndarray, u_span: float | None = None) -> None:
         """``start``'s first half: the fresh state linearized at ``theta`` (one kernel). The estimator calls the two
-        halves on two calls: together, with cold caches, they were ~35-40 us."""
+        halves on two calls: together, with cold caches, they were ~35-40 us. ``u_span``: the input's range so far,
+        which sets the play operators' thresholds (the batch fit's rule, ``threshold_fractions``; None: as they were)."""
         if self._blank is None:
             self._blank = self._blank_state()
         st, fit = self._blank[0], self._blank[3]
         W.start_at(np.asarray(theta, dtype=float), self.theta, fit.theta, st, self.basis.lam, self.basis.dx)
+        if self.n_hyst:                  # (the operators start at the first sample fed, centred on it)
+            if u_span is not None:
+                self.hyst_r[:] = threshold_fractions(self.n_hyst) * float(u_span)
+                self._hyst_span = float(u_span)
+            HK.set_thresholds(st, self.lay["hyst"], self.hyst_r)
+
+    @property
+    def r0(self) -> int:
+        """Index in theta of the first drift rate (after the offset, free responses and hysteresis weights)."""
+        return 5 + self.n_free + self.n_hyst
+
+    @property
+    def hysteresis_weights(self) -> np.ndarray:
+        """The play operators' weights w_i (relative to b, as the batch fit's: theta holds b w_i), thresholds
+        ascending."""
+        return self.theta[5 + self.n_free:self.r0] / self.theta[3]
+
+    def widen_loop(self) -> bool:
+        """The thresholds for the input's range, if it has grown HYSTERESIS_WIDEN beyond the one they were set for
+        (the batch fit's rule on the range seen so far): the new thresholds and tails in the live block
+        (``hysteresis.rethreshold``); the caller then replays the remembered samples. True if they moved."""
+        if not self.n_hyst:
+            return False
+        o = self.lay["hyst"]
+        span = float(self.st[o + 2] - self.st[o + 1])
+        if not span > HYSTERESIS_WIDEN * self._hyst_span:
+            return False
+        self._hyst_span = span
+        self.hyst_r[:] = threshold_fractions(self.n_hyst) * span
+        oldest = self.ring[0, self._ring_position(int(self.sc[W.SC_RSTART]))]
+        HK.rethreshold(self.st, o, self.n_hyst, self.q, self.hyst_r, float(oldest), self.ztail)
+        return True
+
+    @property
+    def hysteresis(self) -> dict | None:
+        """The live loop as an ``effects["hysteresis"]`` dict (thresholds r, weights w, ``initial`` "centred"), or
+        None: no hysteresis columns, no window re-fit yet, or weights not finite."""
+        w = self.hysteresis_weights
+        if not self.n_hyst or self.refits == 0 or not np.all(np.isfinite(w)):
+            return None
+        return {"r": self.hyst_r.tolist(), "w": w.tolist(), "initial": "centred"}
 
     def start_adopt(self) -> None:
         """``start``'s second half: the state of ``start_state`` becomes the live one."""
@@ -180,7 +235,7 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
     @property
     def b_rate(self) -> float:
         """Drift of b (per second) at the last fit; 0 without drift columns."""
-        return float(self.theta[5 + self.n_free] * self.theta[3]) if self.n_rate > 0 else 0.0
+        return float(self.theta[self.r0] * self.theta[3]) if self.n_rate > 0 else 0.0
 
     @property
     def free_wide(self) -> bool:
@@ -191,7 +246,7 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
     @property
     def alpha_rate(self) -> float:
         """Drift of alpha (per second) at the last fit; 0 without the alpha drift column."""
-        return float(self.theta[6 + self.n_free]) if self.n_rate > 1 else 0.0
+        return float(self.theta[self.r0 + 1]) if self.n_rate > 1 else 0.0
 
     @property
     def n(self) -> int:

@@ -25,7 +25,7 @@ def allocate_work(tr: WindowTracker) -> None:
     one re-fit is queued at a time (``Scheduler.schedule``), and the periodic jobs
     run one after the other (``Scheduler.next_job``), so each owns its arrays.
     """
-    p, k, r0 = tr.p, tr.theta.size, 5 + tr.n_free
+    p, k, r0 = tr.p, tr.theta.size, tr.r0
     policy = {"LO": tr.alpha_bounds[0], "HI": tr.alpha_bounds[1], "DRIFT_ON": tr.settings.drift_on,
               "DRIFT_OFF": tr.settings.drift_off, "DRIFT_MAX": tr.settings.drift_max, "HOLD_N": tr.settings.alpha_hold_s / tr.h,
               "DRIFT_MIN_N": tr.settings.drift_min_s / tr.h, "DRIFT_EVERY": tr.settings.drift_test_every, "NRATE": tr.n_rate,
@@ -86,7 +86,7 @@ def fresh(tr: WindowTracker, a1l: float, a2l: float, arrays: tuple | None = None
         st.fill(0.0)
         S.fill(0.0)
     W.start_state(st, tr.basis.decay, tr.basis.gain, tr._free_decay, tr.forget, tr.h, a1l, a2l,
-                  tr.n_rate)
+                  tr.n_rate, tr.n_hyst)
     return st, S
 
 
@@ -94,7 +94,7 @@ def views(tr: WindowTracker, st: np.ndarray) -> tuple:
     """The parts of a state array: sc, phi, m, sy, co, ztail, md."""
     lay = tr.lay
     return (st[:W.SC_SIZE], st[lay["phi"]:lay["m"]], st[lay["m"]:lay["sy"]], st[lay["sy"]:lay["co"]],
-            st[lay["co"]:lay["ztail"]], st[lay["ztail"]:lay["md"]], st[lay["md"]:lay["size"]])
+            st[lay["co"]:lay["ztail"]], st[lay["ztail"]:lay["md"]], st[lay["md"]:lay["hyst"]])
 
 
 def settling_samples(tr: WindowTracker, a1: float, a2: float) -> int:

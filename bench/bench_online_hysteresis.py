@@ -1,0 +1,228 @@
+"""Hysteresis and creep estimated online (``OnlineEstimator(effects=("hysteresis",))``): cost, real record, random plants.
+
+Usage (from the repository root)::
+
+    python -m bench.bench_online_hysteresis latency [--samples 60000]
+    python -m bench.bench_online_hysteresis real [--window 10]
+    python -m bench.bench_online_hysteresis plants [--records 20] [--families sine,triangle,random_staircase]
+
+``latency``: per-sample work of ``update()`` (thread CPU and wall, p50/p99/max in us) at 10 kHz with the default 8
+play operators, against the plain estimator on the same stream in the same run (a triangle record of
+``hil_sim.hysteresis_plants``, fed sample by sample).
+
+``real``: the real 150 V piezo record (tests/data/real/piezo-hyst-150V-1Hz, 5 kHz, 10 s), plain and with hysteresis:
+the estimator's quality and window error over its noise floor at the end, the live prediction error per 1-s window
+over the noise floor, the loop.
+
+``plants``: ``--records`` random plants per input family (``hil_sim.hysteresis_plants.hysteresis_record``: loop
+width 2-20 % of the stroke, alpha 0.01-0.3, noise 0.1-1 % of the output range, 10 kHz; seeds 1000+, not the seeds
+tuned on), ``--samples`` long. Per record: the online estimate at the end against the truth (alpha 2 %, b 3 %, a1 5 %,
+a2 5 %: the scenario tolerances) and the online weights against the batch fit's (``fit_extended(data,
+("hysteresis",))``, 24 thresholds; the online 8 are every third of them, so each online weight compares with the
+batch weights summed in threes) within 5 % of the largest batch weight. Pass fractions per family and overall.
+Also the loops as the output sees them (``_loop_error``: b (u + w . p(u)) on the record's input) of the online
+estimate against the batch fit's and the truth's, and the batch fit's against the truth's, over the loop width.
+
+Prints one JSON document and writes it to ``bench/results/online_hysteresis_<mode>.json``.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import time
+
+import creep_online  # noqa: F401  (before numpy: one BLAS thread)
+import numpy as np
+
+from bench.harness import ROOT, dist, results_path, write_report
+
+TOLERANCES = {"alpha": 0.02, "b": 0.03, "a1": 0.05, "a2": 0.05}
+WEIGHT_TOLERANCE = 0.05
+REAL = ROOT / "tests" / "data" / "real" / "piezo-hyst-150V-1Hz" / "piezo_150V_1Hz.csv"
+
+
+def _per_sample(est, u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    cpu = np.empty(u.size)
+    wall = np.empty(u.size)
+    tt, pc = time.thread_time_ns, time.perf_counter_ns
+    for i in range(u.size):
+        a, b = tt(), pc()
+        est.update(float(u[i]), float(y[i]))
+        cpu[i] = tt() - a
+        wall[i] = pc() - b
+    return cpu / 1e3, wall / 1e3
+
+
+def latency(args) -> dict:
+    from creep_online.online import OnlineEstimator, warm_kernels
+    from hil_sim.hysteresis_plants import hysteresis_record
+    warm_kernels()
+    rec = hysteresis_record("triangle", 1000, n=args.samples)
+    warm = OnlineEstimator(1e-4, effects=("hysteresis",))
+    warm.update_block(rec.u[:3000], rec.y[:3000])
+    out = {}
+    for name, kw in (("plain", {}), ("hysteresis", {"effects": ("hysteresis",)})):
+        est = OnlineEstimator(1e-4, **kw)
+        cpu, wall = _per_sample(est, rec.u, rec.y)
+        out[name] = {"thread_cpu_us": dist(cpu), "wall_us": dist(wall), "over_25us_cpu": int(np.sum(cpu > 25.0)),
+                     "quality": est.estimate.quality}
+    out["ratio_p50_cpu"] = out["hysteresis"]["thread_cpu_us"]["p50"] / out["plain"]["thread_cpu_us"]["p50"]
+    out["ratio_p99_cpu"] = out["hysteresis"]["thread_cpu_us"]["p99"] / out["plain"]["thread_cpu_us"]["p99"]
+    return {"mode": "latency", "rate_hz": 1e4, "operators": 8, "samples": args.samples, **out}
+
+
+def _live_windows(est, u, y, dt, window_s=1.0):
+    err = np.full(u.size, np.nan)
+    for i in range(u.size):
+        est.update(float(u[i]), float(y[i]))
+        p = est.last_prediction
+        if p is not None and est.phase == "tracking":
+            err[i] = y[i] - p
+    w = int(round(window_s / dt))
+    rms = []
+    for a in range(0, u.size - w + 1, w):
+        seg = err[a:a + w]
+        seg = seg[np.isfinite(seg)]
+        rms.append(float(np.sqrt(np.mean(seg * seg))) if seg.size else None)
+    return rms
+
+
+def real(args) -> dict:
+    from creep_online.online import OnlineEstimator
+    d = np.loadtxt(REAL, delimiter=",", skiprows=1)
+    t, u, y = d.T
+    dt = float(t[1] - t[0])
+    out = {"mode": "real", "record": str(REAL.relative_to(ROOT)), "window_s": args.window}
+    for name, kw in (("plain", {}), ("hysteresis", {"effects": ("hysteresis",)})):
+        est = OnlineEstimator(dt, window_s=args.window, **kw)
+        windows = _live_windows(est, u, y, dt)
+        e = est.estimate
+        noise = e.noise_rms
+        row = {"quality": e.quality, "reason": e.reason, "alpha": e.alpha, "b": e.b, "noise_rms": noise,
+               "window_error_over_noise": (e.residual_rms / noise) if e.residual_rms and noise else None,
+               "live_1s_rms_over_noise": [None if w is None else w / noise for w in windows]}
+        row.update(hysteresis=e.hysteresis, events=len(e.events), researches=len(e.researches))
+        out[name] = row
+    return out
+
+
+def _grouped(w_batch: np.ndarray, groups: int) -> np.ndarray:
+    """The batch weights summed over consecutive groups (24 -> 8: every three)."""
+    return w_batch.reshape(groups, -1).sum(axis=1)
+
+
+def _loop_error(u: np.ndarray, b: float, loop: dict, b_ref: float, ref: dict) -> float:
+    """The loop as the output sees it, b (u + sum_i w_i p_i(u)) on the record's input, against a reference loop:
+    the largest difference over the reference's loop width times |b_ref| (thresholds and initial states may
+    differ: this compares what the data determine, not the weights' split), over the record's second half, less its
+    best affine fit in u (a gain error is b's, not the loop's)."""
+    from creep_online.effects.hysteresis import hysteresis_input, loop_width
+    v = b * hysteresis_input(u, loop["r"], loop["w"], loop.get("initial", "centred"))
+    v_ref = b_ref * hysteresis_input(u, ref["r"], ref["w"], ref.get("initial", "centred"))
+    scale = abs(b_ref) * loop_width(ref["r"], ref["w"], float(np.ptp(u)))
+    late = slice(u.size // 2, None)          # (the second half: the initial states' difference is forgotten)
+    d = (v - v_ref)[late]
+    basis = np.column_stack([u[late], np.ones(d.size)])
+    d = d - basis @ np.linalg.lstsq(basis, d, rcond=None)[0]     # (the affine part: a gain error, not the loop)
+    return float(np.max(np.abs(d)) / scale) if scale > 0 else float("nan")
+
+
+def run_plant(family: str, seed: int, n: int) -> dict:
+    from creep_online.diagnostics.extended import fit_base, fit_extended, prepare
+    from creep_online.online import OnlineEstimator
+    from hil_sim.hysteresis_plants import hysteresis_record
+    rec = hysteresis_record(family, seed, n=n)
+    truth = rec.model
+    row = {"family": family, "seed": seed, "loop_width_rel": rec.notes["loop_width_rel"], "alpha_true": truth.alpha,
+           "initial_true": rec.params["initial"]}
+    c0 = time.process_time()
+    est = OnlineEstimator(float(rec.t[1] - rec.t[0]), effects=("hysteresis",))
+    est.update_block(rec.u, rec.y)
+    row["online_cpu_s"] = time.process_time() - c0
+    e = est.estimate
+    row.update(quality=e.quality, reason=e.reason[:120])
+    for k, tol in TOLERANCES.items():
+        got = getattr(e, k)
+        rel = None if got is None else abs(got - getattr(truth, k)) / abs(getattr(truth, k))
+        row[f"{k}_rel_err"] = rel
+        row[f"{k}_ok"] = rel is not None and rel <= tol
+    row["creep_ok"] = all(row[f"{k}_ok"] for k in TOLERANCES)
+    c0 = time.process_time()
+    data = prepare(rec.t, rec.u, rec.y, u_pre=rec.u_pre)
+    fit = fit_extended(data, ("hysteresis",), fit_base(data))
+    row["batch_cpu_s"] = time.process_time() - c0
+    wb = np.asarray(fit.effect_params["hysteresis"]["w"])
+    row["batch_alpha"] = fit.model.alpha
+    if e.hysteresis is None:
+        row.update(weights_ok=False, weight_err_over_max=None)
+        return row
+    wo = np.asarray(e.hysteresis["w"])
+    row["loop_err_vs_batch"] = _loop_error(rec.u, e.b, e.hysteresis, fit.model.b, fit.effect_params["hysteresis"])
+    row["loop_err_vs_true"] = _loop_error(rec.u, e.b, e.hysteresis, truth.b, rec.params)
+    row["batch_loop_err_vs_true"] = _loop_error(rec.u, fit.model.b, fit.effect_params["hysteresis"], truth.b,
+                                                rec.params)
+    grouped = _grouped(wb, wo.size)
+    scale = float(np.max(np.abs(grouped))) or 1.0
+    err = float(np.max(np.abs(wo - grouped)) / scale)
+    row.update(weight_err_over_max=err, weights_ok=err <= WEIGHT_TOLERANCE, w_online=wo.tolist(),
+               w_batch_grouped=grouped.tolist(), r_online=e.hysteresis["r"],
+               r_batch=fit.effect_params["hysteresis"]["r"], events=len(e.events), researches=len(e.researches))
+    return row
+
+
+def plants(args) -> dict:
+    rows = []
+    for k in range(args.records):                 # families interleaved: a stopped run still covers each
+        for family in args.families.split(","):
+            row = run_plant(family, 1000 + k, args.samples)
+            print(f"{family} {1000 + k}: creep_ok {row['creep_ok']} weights_ok {row['weights_ok']} "
+                  f"alpha {row['alpha_rel_err']} werr {row['weight_err_over_max']}", flush=True)
+            rows.append(row)
+            if args.out_partial:
+                write_report(_plants_doc(args, rows), args.out_partial, echo=False)
+    return _plants_doc(args, rows)
+
+
+def _plants_doc(args, rows: list[dict]) -> dict:
+    def frac(sel, key):
+        return sum(1 for r in sel if r[key]) / len(sel) if sel else None
+
+    fams = sorted({r["family"] for r in rows})
+    summary = {f: {"records": sum(r["family"] == f for r in rows),
+                   **{key: frac([r for r in rows if r["family"] == f], key)
+                      for key in ("creep_ok", "weights_ok", "alpha_ok", "b_ok", "a1_ok", "a2_ok")},
+                   **{key: dist([r[key] for r in rows if r["family"] == f and r.get(key) is not None])
+                      for key in ("loop_err_vs_batch", "loop_err_vs_true", "batch_loop_err_vs_true")},
+                   "alpha_rel_err": dist([r["alpha_rel_err"] for r in rows
+                                          if r["family"] == f and r["alpha_rel_err"] is not None]),
+                   "weight_err_over_max": dist([r["weight_err_over_max"] for r in rows
+                                                if r["family"] == f and r["weight_err_over_max"] is not None])}
+               for f in fams}
+    summary["all"] = {key: frac(rows, key) for key in ("creep_ok", "weights_ok", "alpha_ok", "b_ok", "a1_ok", "a2_ok")}
+    return {"mode": "plants", "samples": args.samples, "tolerances": TOLERANCES, "weight_tolerance": WEIGHT_TOLERANCE,
+            "summary": summary, "records": rows}
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    sub = ap.add_subparsers(dest="mode", required=True)
+    p = sub.add_parser("latency")
+    p.add_argument("--samples", type=int, default=60000)
+    p = sub.add_parser("real")
+    p.add_argument("--window", type=float, default=10.0)
+    p = sub.add_parser("plants")
+    p.add_argument("--records", type=int, default=20)
+    p.add_argument("--samples", type=int, default=60000)
+    p.add_argument("--families", default="sine,triangle,random_staircase")
+    p.add_argument("--out-partial", default=None, help="rewrite this file after every record")
+    for q in sub.choices.values():
+        q.add_argument("--out", default=None)
+    args = ap.parse_args(argv)
+    doc = {"latency": latency, "real": real, "plants": plants}[args.mode](args)
+    suffix = "" if args.mode != "real" or args.window == 10.0 else f"_window{args.window:g}s"
+    write_report(doc, args.out or results_path(f"online_hysteresis_{args.mode}{suffix}"), argv=argv)
+    return doc
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,199 @@
+"""Hysteresis estimated online with the creep: the play operators' filtered outputs as columns of the window's fit.
+
+The kernels against a slow direct implementation (the plays by ``play_operators``, the nodes and the resonance
+states by their recursions in numpy); a replay of the ring against the live statistics; the estimator's weights
+against the batch least squares (``solve_pi_weights``) on exactly simulated Hammerstein data; the parameter's
+contract (stored verbatim, validated, off by default).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from creep_online.effects.hysteresis import (hysteresis_input, play_operators, solve_pi_weights,
+                                             threshold_fractions)
+from creep_online.errors import DataError
+from creep_online.model import CreepModel
+from creep_online.online import OnlineEstimator
+from creep_online.online._kernels import hysteresis as HK
+from creep_online.online._kernels import window as W
+from creep_online.online.soe import SoeBasis
+from creep_online.simulate import simulate
+
+H = 1e-4
+
+
+def _state(basis: SoeBasis, r: np.ndarray, a1l: float, a2l: float, m_seed: int = 0) -> np.ndarray:
+    """A window state with len(r) hysteresis columns, random model coefficients m, statistics off (states only)."""
+    q, k = basis.size, r.size
+    lay = W.layout(q, 0, 0, k)
+    st = np.zeros(lay["size"])
+    W.start_state(st, basis.decay, basis.gain, np.zeros(0), 0.999, basis.h, a1l, a2l, 0, k)
+    HK.set_thresholds(st, lay["hyst"], r)
+    st[lay["m"]:lay["m"] + q + 2] = np.random.default_rng(m_seed).standard_normal(q + 2)
+    st[lay["hyst"] + HK.GAIN] = 1.7                       # (b of the coefficients: the columns are unit-gain)
+    return st
+
+
+def _direct_columns(basis: SoeBasis, u: np.ndarray, r: np.ndarray, m: np.ndarray, a1l: float, a2l: float) -> np.ndarray:
+    """Each play's column before each sample, the slow way: plays, then nodes and resonance states one by one."""
+    q = basis.size
+    res = np.empty(6)
+    W.resonance_step(a1l, a2l, basis.h, res)
+    phi_r, gam = res[:4].reshape(2, 2), res[4:6]
+    plays = play_operators(u, r)
+    out = np.empty((r.size, u.size))
+    for i in range(r.size):
+        z, x = np.zeros(q), np.zeros(2)
+        for n in range(u.size):
+            out[i, n] = z @ m[:q] + x @ m[q:q + 2]
+            z = basis.decay * z + basis.gain * plays[i, n]
+            x = phi_r @ x + gam * plays[i, n]
+    return out
+
+
+def test_the_columns_are_the_plays_through_the_nodes_and_the_resonance():
+    basis = SoeBasis.build(H, horizon_s=10.0, dx=1.2)
+    rng = np.random.default_rng(3)
+    u = np.cumsum(rng.standard_normal(600)) * 0.1
+    u[200:230] = u[199]                                   # holds: the plays keep their states
+    r = threshold_fractions(4) * np.ptp(u)
+    a1l, a2l = 2 * 0.2 / (2 * math.pi * 300), 1 / (2 * math.pi * 300) ** 2
+    st = _state(basis, r, a1l, a2l)
+    ring = np.zeros((2, 4096))
+    lay = W.layout(basis.size, 0, 0, r.size)
+    c0 = lay["phi"] + basis.size + W.FREE
+    got = np.empty((r.size, u.size))
+    S = np.zeros((lay["p"], lay["p"]))
+    for n in range(u.size):
+        W.sample(u[n], math.nan, st, S, ring)
+        got[:, n] = st[c0:c0 + r.size]
+    m = st[lay["m"]:lay["m"] + basis.size + 2]
+    want = _direct_columns(basis, u, r, m, a1l, a2l) / 1.7
+    # (the kernel computes the column at a sample from the states before it, as the direct loop does)
+    assert np.allclose(got, want, rtol=1e-10, atol=1e-12 * np.abs(want).max())
+
+
+def test_the_tails_hold_the_plays_and_nodes_before_the_oldest_remembered_sample():
+    basis = SoeBasis.build(H, horizon_s=10.0, dx=1.2)
+    rng = np.random.default_rng(5)
+    u = np.round(np.cumsum(rng.standard_normal(500)) * 0.2, 2)
+    r = threshold_fractions(3) * np.ptp(u)
+    st = _state(basis, r, 1e-3, 1e-7)
+    ring = np.zeros((2, 128))                             # the ring overflows: the tails absorb 372 samples
+    lay = W.layout(basis.size, 0, 0, r.size)
+    S = np.zeros((lay["p"], lay["p"]))
+    for x in u:
+        W.sample(x, math.nan, st, S, ring)
+    old = u.size - ring.shape[1]                          # samples the ring has dropped
+    plays = play_operators(u, r)
+    o, q, k = lay["hyst"], basis.size, r.size
+    assert np.array_equal(st[o + HK.HEAD + 2 * k:o + HK.HEAD + 3 * k], plays[:, old - 1])
+    z = np.zeros((k, q))
+    for n in range(old):
+        z = basis.decay * z + basis.gain * plays[:, n][:, None]
+    ct = HK.channels_at(o, k) + k * (q + 2)
+    assert np.allclose(st[ct:ct + k * q].reshape(k, q), z, rtol=1e-12, atol=1e-14)
+
+
+def test_a_replay_of_the_ring_reproduces_the_live_statistics():
+    """The statistics with the hysteresis columns, accumulated live, equal a replay from the stream's start
+    (the states from the tails, the columns from the same coefficients)."""
+    basis = SoeBasis.build(H, horizon_s=10.0, dx=1.2)
+    rng = np.random.default_rng(7)
+    n = 700
+    u = np.round(np.cumsum(rng.standard_normal(n)) * 0.2, 2)
+    y = rng.standard_normal(n)
+    r = threshold_fractions(3) * np.ptp(u)
+    st = _state(basis, r, 1e-3, 1e-7)
+    lay = W.layout(basis.size, 0, 0, r.size)
+    p = lay["p"]
+    S = np.zeros((p, p))
+    ring = np.zeros((2, 1024))
+    for a, b in zip(u, y):
+        W.sample(a, b, st, S, ring)                       # (gate off, statistics on: every sample accumulated)
+    rep = _state(basis, r, 1e-3, 1e-7)
+    rep[lay["m"]:lay["sy"]] = st[lay["m"]:lay["sy"]]
+    HK.replay_origin(rep, st, lay["hyst"], r.size, basis.size)
+    S2 = np.zeros((p, p))
+    W.replay_direct(ring, 0, n, 0, rep, S2)
+    assert np.allclose(S2, S, rtol=1e-10, atol=1e-12 * np.abs(S).max())
+    assert np.allclose(rep[lay["sy"]:lay["sy"] + p], st[lay["sy"]:lay["sy"] + p], rtol=1e-10)
+
+
+def _hammerstein(seed: int, seconds: float = 12.0, fs: float = 5000.0):
+    """A creep + resonance plant behind a PI loop of 8 operators at the online thresholds, a 1 Hz triangle."""
+    rng = np.random.default_rng(seed)
+    h = 1.0 / fs
+    t = np.arange(int(seconds * fs)) * h
+    wn = 2 * math.pi * rng.uniform(200, 500)
+    zeta = rng.uniform(0.2, 0.5)
+    model = CreepModel(rng.uniform(0.03, 0.2), 2 * zeta / wn, 1 / wn ** 2, rng.uniform(0.5, 3.0))
+    u = np.round(4.0 * (2 * np.abs(t % 1.0 - 0.5)) * 250) / 250
+    r = threshold_fractions(8) * np.ptp(u)
+    w = rng.uniform(0.02, 0.1) * np.exp(-np.arange(8) / rng.uniform(1.0, 3.0))
+    y = simulate(model, t, hysteresis_input(u, r, w))
+    noise = 1e-4 * np.ptp(y)
+    return h, t, u, y + noise * rng.standard_normal(t.size), model, r, w, noise
+
+
+def test_the_online_weights_match_the_batch_least_squares_on_a_hammerstein_plant():
+    h, t, u, y, model, r, w, noise = _hammerstein(11)
+    est = OnlineEstimator(h, effects=("hysteresis",))
+    est.update_block(u, y)
+    e = est.estimate
+    assert e.hysteresis is not None
+    assert np.allclose(e.hysteresis["r"], r)
+    w_online = np.asarray(e.hysteresis["w"])
+    # the batch fit's weights on the last window's samples: the exact creep model's responses to u and the plays
+    tail = t.size // 2
+    cols = np.vstack([simulate(model, t, u)] + [simulate(model, t, p) for p in play_operators(u, r)] +
+                     [np.ones(t.size)]).T[tail:]
+    x, _ = solve_pi_weights(cols, y[tail:], 0, np.arange(1, 9), np.ones(8, bool), model.b, noise ** 2)
+    w_batch = x[1:9] / x[0]
+    assert np.max(np.abs(w_batch - w)) <= 0.05 * np.max(np.abs(w))     # (the reference itself is right)
+    assert np.max(np.abs(w_online - w_batch)) <= 0.05 * np.max(np.abs(w_batch))
+    assert abs(e.alpha / model.alpha - 1) < 0.05 and abs(e.b / model.b - 1) < 0.02
+    assert e.quality != "degraded"
+
+
+def test_effects_are_stored_verbatim_and_validated():
+    est = OnlineEstimator(1e-3, effects=("hysteresis",))
+    assert est.get_params()["effects"] == ("hysteresis",)
+    assert est.clone().effects == ("hysteresis",)
+    assert OnlineEstimator(1e-3).get_params()["effects"] == ()
+    for bad in ("hysteresis", ("creep",), (1,), None):
+        with pytest.raises(DataError, match="effects"):
+            OnlineEstimator(1e-3, effects=bad)
+    with pytest.raises(DataError, match="refit='window'"):
+        OnlineEstimator(1e-3, effects=("hysteresis",), refit="recursive")
+
+
+def test_without_the_effect_the_estimate_has_no_loop():
+    h, t, u, y, *_ = _hammerstein(2, seconds=3.0)
+    est = OnlineEstimator(h)
+    est.update_block(u, y)
+    assert est.estimate.hysteresis is None and est.estimate.to_dict()["hysteresis"] is None
+
+
+def test_stream_effects_hysteresis_reports_the_loop(tmp_path, capsys):
+    import json
+
+    from creep_online.cli import main
+    from creep_online.io.csvfile import save_csv
+    h, t, u, y, model, r, w, noise = _hammerstein(1, seconds=8.0)
+    path = tmp_path / "loop.csv"
+    save_csv(path, t, u, y)
+    assert main(["stream", "--source", f"csv:{path}", "--json", "--block", "--effects", "hysteresis"]) == 0
+    loop = json.loads(capsys.readouterr().out)["hysteresis"]
+    assert np.allclose(loop["r"], r) and len(loop["w"]) == 8 and loop["initial"] == "centred"
+    assert np.max(np.abs(np.asarray(loop["w"]) - w)) <= 0.05 * np.max(w)
+    assert main(["stream", "--source", f"csv:{path}", "--json", "--block", "--max-samples", "3000"]) == 0
+    assert json.loads(capsys.readouterr().out)["hysteresis"] is None
+    assert main(["stream", "--source", f"csv:{path}", "--block", "--effects", "hysteresis"]) == 0
+    assert "hysteresis: 8 play operators" in capsys.readouterr().out
+    assert main(["stream", "--source", f"csv:{path}", "--effects", "hysteresis,backlash"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "effects" in err[0]
