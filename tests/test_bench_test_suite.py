@@ -10,6 +10,10 @@ demo output
 ........
 1519 passed, 6 deselected in 281.40s (0:04:41)
 == quick start 2: the test suite: 283 s wall (load average 1.95 2.10 2.40)
+== the slow tests
+........
+140 passed, 1738 deselected in 401.20s (0:06:41)
+== the slow tests: 403 s wall (load average 2.05 2.20 2.30)
 """
 
 XML = """<?xml version="1.0" encoding="utf-8"?><testsuites><testsuite name="pytest">
@@ -23,7 +27,9 @@ def test_the_steps_wall_times_and_loads_come_from_the_ci_log():
     out = bench.parse_log(LOG)
     assert out["steps"]["install_and_demo"] == {"wall_s": 113, "load_average_after": [1.04, 1.80, 2.69]}
     assert out["steps"]["suite"] == {"wall_s": 283, "load_average_after": [1.95, 2.10, 2.40]}
+    assert out["steps"]["slow"] == {"wall_s": 403, "load_average_after": [2.05, 2.20, 2.30]}
     assert out["pytest_summary"] == "1519 passed, 6 deselected"
+    assert out["pytest_summary_slow"] == "140 passed, 1738 deselected"
 
 
 def test_counts_and_the_slowest_tests_come_from_the_junit_xml(tmp_path):
