@@ -10,7 +10,9 @@ times and the 20 slowest tests (pytest's junit XML, setup + call + teardown, whi
 with ``CI_REPORTS``). Target: the default suite <= 300 s on 2 cores.
 
 ``--here`` times the README's test command alone in this checkout instead (numba's kernel cache as it
-is), with the load average before and after and the run's CPU time.
+is), with the load average before and after, the run's CPU time and each test's CPU time
+(``bench/suite_cpu.py``): their sum, per file and the most expensive tests. On a shared machine the
+CPU sums are the figures to compare; wall times grow with the load.
 
 Usage: python -m bench.bench_test_suite [--runs 2] [--keep DIR] [--out FILE]
        python -m bench.bench_test_suite --here [--out FILE]
@@ -21,6 +23,8 @@ A run made by hand: ``CI_REPORTS=DIR bash .ci/run > LOG 2>&1`` in a fresh clone 
 from __future__ import annotations
 
 import argparse
+import glob
+import json
 import os
 import re
 import resource
@@ -90,13 +94,34 @@ def fresh_clone_run(workdir: str) -> dict:
     return run
 
 
+def cpu_profile(paths: list[str], top: int = 20) -> dict:
+    """Per-test CPU rows (``bench/suite_cpu.py``'s JSON lines) summed: in all, per file, the ``top`` tests."""
+    rows = [json.loads(line) for path in paths for line in open(path) if line.strip()]
+    files: dict[str, dict] = {}
+    for r in rows:
+        f = files.setdefault(r["id"].split("::")[0], {"tests": 0, "cpu_s": 0.0, "wall_s": 0.0})
+        f["tests"] += 1
+        f["cpu_s"] += r["self"] + max(r["children"], 0.0)
+        f["wall_s"] += r["wall"]
+    ranked = sorted(rows, key=lambda r: -(r["self"] + max(r["children"], 0.0)))
+    return {"tests": len(rows), "sum_own_cpu_s": round(sum(r["self"] for r in rows), 1),
+            "sum_children_cpu_s": round(sum(max(r["children"], 0.0) for r in rows), 1),
+            "sum_wall_s": round(sum(r["wall"] for r in rows), 1),
+            "files": {k: {"tests": v["tests"], "cpu_s": round(v["cpu_s"], 1), "wall_s": round(v["wall_s"], 1)}
+                      for k, v in sorted(files.items(), key=lambda kv: -kv[1]["cpu_s"])[:top]},
+            "costliest": [{"test": r["id"], "cpu_s": round(r["self"] + max(r["children"], 0.0), 1),
+                           "wall_s": round(r["wall"], 1)} for r in ranked[:top]]}
+
+
 def here_run() -> dict:
     """The README's test command in this checkout (numba's cache as it is): wall, loads, CPU, junit summary."""
     with tempfile.TemporaryDirectory(prefix="creep_suite_") as workdir:
         xml = os.path.join(workdir, "suite.xml")
+        env = dict(os.environ, SUITE_CPU_DIR=workdir, PYTHONPATH=os.pathsep.join(
+            p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p))
         before, load_before, t0 = resource.getrusage(resource.RUSAGE_CHILDREN), list(os.getloadavg()), time.time()
-        proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-n", "auto", f"--junitxml={xml}"], cwd=ROOT,
-                              capture_output=True, text=True)
+        proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-n", "auto", "-p", "bench.suite_cpu",
+                               f"--junitxml={xml}"], cwd=ROOT, capture_output=True, text=True, env=env)
         wall, load_after = time.time() - t0, list(os.getloadavg())
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         summaries = re.findall(r"^=*\s*(\d+ passed.*?) in [\d.]+s", proc.stdout, re.M)
@@ -107,6 +132,7 @@ def here_run() -> dict:
                "pytest_summary": summaries[-1] if summaries else None}
         if os.path.exists(xml):
             run.update(parse_junit(xml))
+        run["cpu_profile"] = cpu_profile(glob.glob(os.path.join(workdir, "*.jsonl")))
     return run
 
 
