@@ -337,8 +337,7 @@ def _pair_fit_over_noise(pair: tuple[str, str], band: str, seed: int) -> float:
     return fit_extended(data, pair, base, warm=warm).residual_rms / rec["noise"]
 
 
-# seed 9 takes the same path (started on the hump with hysteresis' fit) at twice the cost: -m slow
-@pytest.mark.parametrize("seed", [5, pytest.param(9, marks=pytest.mark.slow)])
+@pytest.mark.parametrize("seed", [5, 9])
 def test_a_damped_second_mode_beside_strong_hysteresis_is_started_on_its_ringing(seed):
     # before spectrum_humps and the warm priority starts the pair stopped at 7.0x (seed 5) and 5.1x (seed 9) the
     # noise, the mode on the base's resonance; started on the hump (233 Hz, 391 Hz) with hysteresis' fit it is found
