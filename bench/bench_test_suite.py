@@ -2,25 +2,35 @@
 
 Each run clones the committed tree (``git clone`` of this repository) into a temporary directory and
 runs ``bash .ci/run`` there: a new virtual environment, the package installed with every extra, the
-demo, then the README's test command (``pytest -q -n auto``) with numba's kernel cache empty, as a
-newcomer's first run. Reported per run: the suite's wall time and the load average CI prints beside
-it, the install-and-demo step's wall time, the CPU time of the whole run (user + sys of every child:
-on a shared machine the steadier figure), the pass/fail counts and the 20 slowest tests (pytest's
-junit XML, setup + call + teardown). Target: the suite <= 300 s on 2 cores.
+demo, the README's test command (``pytest -q -n auto``) with numba's kernel cache empty, as a
+newcomer's first run, then the tests marked ``slow``. Reported per run: each step's wall time and the
+load average CI prints beside it, the CPU time of the whole run (user + sys of every child: on a
+shared machine the steadier figure), and per test step the pass/fail counts, the sum of the test
+times and the 20 slowest tests (pytest's junit XML, setup + call + teardown, which ``.ci/run`` writes
+with ``CI_REPORTS``). Target: the default suite <= 300 s on 2 cores.
+
+``--here`` times the README's test command alone in this checkout instead (numba's kernel cache as it
+is), with the load average before and after, the run's CPU time and each test's CPU time
+(``bench/suite_cpu.py``): their sum, per file and the most expensive tests. On a shared machine the
+CPU sums are the figures to compare; wall times grow with the load.
 
 Usage: python -m bench.bench_test_suite [--runs 2] [--keep DIR] [--out FILE]
+       python -m bench.bench_test_suite --here [--out FILE]
        python -m bench.bench_test_suite --from-run LOG XML [--out FILE]   (a run made by hand, see below)
-A run made by hand: ``PYTEST_ADDOPTS=--junitxml=XML bash .ci/run > LOG 2>&1`` in a fresh clone.
+A run made by hand: ``CI_REPORTS=DIR bash .ci/run > LOG 2>&1`` in a fresh clone (XML: DIR/suite.xml).
 (prints one JSON document; --out writes it too, e.g. bench/results/test_suite.json)
 """
 from __future__ import annotations
 
 import argparse
+import glob
+import json
 import os
 import re
 import resource
 import shutil
 import subprocess
+import sys
 import tempfile
 import time
 import xml.etree.ElementTree as ET
@@ -35,11 +45,12 @@ def parse_log(text: str) -> dict:
     """The wall time and load average of each ``.ci/run`` step (the lines it prints after each)."""
     steps = {}
     for m in STEP.finditer(text):
-        key = "suite" if "test suite" in m["title"] else "install_and_demo"
+        key = "suite" if "test suite" in m["title"] else "slow" if "slow" in m["title"] else "install_and_demo"
         load = [float(x) for x in m["load"].split()] if m["load"] != "n/a" else None
         steps[key] = {"wall_s": int(m["wall"]), "load_average_after": load}
-    summary = re.findall(r"^=*\s*(\d+ passed.*?) in [\d.]+s", text, re.M)
-    return {"steps": steps, "pytest_summary": summary[-1] if summary else None}
+    summaries = re.findall(r"^=*\s*(\d+ passed.*?) in [\d.]+s", text, re.M)
+    return {"steps": steps, "pytest_summary": summaries[0] if summaries else None,
+            "pytest_summary_slow": summaries[1] if len(summaries) > 1 else None}
 
 
 def parse_junit(path: str, top: int = 20) -> dict:
@@ -63,8 +74,8 @@ def fresh_clone_run(workdir: str) -> dict:
     clone = os.path.join(workdir, "creep_online")
     subprocess.run(["git", "clone", "-q", str(ROOT), clone], check=True)
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=clone, capture_output=True, text=True).stdout
-    xml, log = os.path.join(workdir, "junit.xml"), os.path.join(workdir, "ci.log")
-    env = dict(os.environ, PYTEST_ADDOPTS=f"--junitxml={xml}")
+    log = os.path.join(workdir, "ci.log")
+    env = dict(os.environ, CI_REPORTS=workdir)
     env.pop("NUMBA_CACHE_DIR", None)
     before, load_before, t0 = resource.getrusage(resource.RUSAGE_CHILDREN), list(os.getloadavg()), time.time()
     with open(log, "w") as out:
@@ -75,8 +86,53 @@ def fresh_clone_run(workdir: str) -> dict:
            "ci_cpu_s": round(cpu, 1), "load_average_before": load_before}
     with open(log) as f:
         run.update(parse_log(f.read()))
-    if os.path.exists(xml):
-        run.update(parse_junit(xml))
+    suite_xml, slow_xml = os.path.join(workdir, "suite.xml"), os.path.join(workdir, "slow.xml")
+    if os.path.exists(suite_xml):
+        run.update(parse_junit(suite_xml))
+    if os.path.exists(slow_xml):
+        run["slow_tests"] = parse_junit(slow_xml)
+    return run
+
+
+def cpu_profile(paths: list[str], top: int = 20) -> dict:
+    """Per-test CPU rows (``bench/suite_cpu.py``'s JSON lines) summed: in all, per file, the ``top`` tests."""
+    rows = [json.loads(line) for path in paths for line in open(path) if line.strip()]
+    files: dict[str, dict] = {}
+    for r in rows:
+        f = files.setdefault(r["id"].split("::")[0], {"tests": 0, "cpu_s": 0.0, "wall_s": 0.0})
+        f["tests"] += 1
+        f["cpu_s"] += r["self"] + max(r["children"], 0.0)
+        f["wall_s"] += r["wall"]
+    ranked = sorted(rows, key=lambda r: -(r["self"] + max(r["children"], 0.0)))
+    return {"tests": len(rows), "sum_own_cpu_s": round(sum(r["self"] for r in rows), 1),
+            "sum_children_cpu_s": round(sum(max(r["children"], 0.0) for r in rows), 1),
+            "sum_wall_s": round(sum(r["wall"] for r in rows), 1),
+            "files": {k: {"tests": v["tests"], "cpu_s": round(v["cpu_s"], 1), "wall_s": round(v["wall_s"], 1)}
+                      for k, v in sorted(files.items(), key=lambda kv: -kv[1]["cpu_s"])[:top]},
+            "costliest": [{"test": r["id"], "cpu_s": round(r["self"] + max(r["children"], 0.0), 1),
+                           "wall_s": round(r["wall"], 1)} for r in ranked[:top]]}
+
+
+def here_run() -> dict:
+    """The README's test command in this checkout (numba's cache as it is): wall, loads, CPU, junit summary."""
+    with tempfile.TemporaryDirectory(prefix="creep_suite_") as workdir:
+        xml = os.path.join(workdir, "suite.xml")
+        env = dict(os.environ, SUITE_CPU_DIR=workdir, PYTHONPATH=os.pathsep.join(
+            p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p))
+        before, load_before, t0 = resource.getrusage(resource.RUSAGE_CHILDREN), list(os.getloadavg()), time.time()
+        proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-n", "auto", "-p", "bench.suite_cpu",
+                               f"--junitxml={xml}"], cwd=ROOT, capture_output=True, text=True, env=env)
+        wall, load_after = time.time() - t0, list(os.getloadavg())
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        summaries = re.findall(r"^=*\s*(\d+ passed.*?) in [\d.]+s", proc.stdout, re.M)
+        run = {"where": "this checkout", "exit_code": proc.returncode,
+               "steps": {"suite": {"wall_s": round(wall), "load_average_before": load_before,
+                                   "load_average_after": load_after}},
+               "ci_cpu_s": round((after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), 1),
+               "pytest_summary": summaries[-1] if summaries else None}
+        if os.path.exists(xml):
+            run.update(parse_junit(xml))
+        run["cpu_profile"] = cpu_profile(glob.glob(os.path.join(workdir, "*.jsonl")))
     return run
 
 
@@ -91,6 +147,7 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=2, help="fresh-clone CI runs (default 2)")
     ap.add_argument("--keep", help="run in this directory and keep the clones (default: a temporary one)")
+    ap.add_argument("--here", action="store_true", help="time the README's test command in this checkout instead")
     ap.add_argument("--from-run", nargs=2, metavar=("LOG", "XML"), help="report a finished run instead")
     ap.add_argument("--out", help="write the JSON here too")
     args = ap.parse_args(argv)
@@ -98,6 +155,8 @@ def main(argv: list[str] | None = None) -> None:
         log, xml = args.from_run
         with open(log) as f:
             runs = [{**parse_log(f.read()), **parse_junit(xml)}]
+    elif args.here:
+        runs = [here_run()]
     else:
         runs = []
         for k in range(args.runs):
