@@ -45,7 +45,7 @@ def parse_log(text: str) -> dict:
     """The wall time and load average of each ``.ci/run`` step (the lines it prints after each)."""
     steps = {}
     for m in STEP.finditer(text):
-        key = "suite" if "test suite" in m["title"] else "slow" if "slow" in m["title"] else "install_and_demo"
+        key = "suite" if "test suite" in m["title"] else "install_and_demo" if "quick start" in m["title"] else "slow"
         load = [float(x) for x in m["load"].split()] if m["load"] != "n/a" else None
         steps[key] = {"wall_s": int(m["wall"]), "load_average_after": load}
     summaries = re.findall(r"^=*\s*(\d+ passed.*?) in [\d.]+s", text, re.M)
