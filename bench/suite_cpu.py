@@ -34,6 +34,8 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
     yield
     row = {"id": item.nodeid, "wall": time.perf_counter() - wall, "self": _cpu(resource.RUSAGE_SELF) - own,
            "children": _cpu(resource.RUSAGE_CHILDREN) - children}
-    path = Path(folder) / f"{os.environ.get('PYTEST_XDIST_WORKER', 'main')}.jsonl"
+    # (the worker id from pytest-xdist's own config: the environment's is inherited by a pytest a test starts)
+    worker = getattr(item.config, "workerinput", {}).get("workerid", "main")
+    path = Path(folder) / f"{worker}.jsonl"
     with path.open("a") as out:
         out.write(json.dumps(row) + "\n")
