@@ -21,7 +21,7 @@ class Scheduler:
         """Queue the jobs that are due at this sample and set the next due count. Returns whether the state is
         finite when a change test's snapshot was taken (its kernel checks it, ``fit_machine.snapshot``), else None."""
         n = tr.n
-        if n >= tr._next_node_mark:
+        if n >= tr._next_node_mark and not tr.n_hyst:   # (with hysteresis columns a search starts from the tail)
             tr.replayer.mark_nodes(tr, n)
         due = n >= tr._next_refit
         if due:
