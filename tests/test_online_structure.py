@@ -11,7 +11,7 @@ from creep_online.online.trackers import protocol
 
 ONLINE = Path(__file__).resolve().parents[1] / "creep_online" / "online"
 #: The estimator's orchestration: the API, the start-up, the input stage, the recovery, the report, the rules.
-ORCHESTRATION = ["estimator.py", "startup.py", "inputs.py", "recovery.py", "report.py", "settings.py",
+ORCHESTRATION = ["estimator.py", "startup.py", "handover.py", "inputs.py", "recovery.py", "report.py", "settings.py",
                  "policy/quality.py", "policy/input_gate.py", "trackers/protocol.py"]
 #: The modules that hold a tracker only as a ``Tracker``.
 PROTOCOL_USERS = ["estimator.py", "inputs.py", "recovery.py", "report.py"]

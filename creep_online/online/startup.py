@@ -9,8 +9,8 @@ live (phases ``buffering``, ``searching``, then ``tracking`` while the buffer is
 3. the first search's grid is planned on idle calls (``plan_grid``), the search runs in slices once the buffer spans
    the search window (``start_search``), and again on a longer window when the resonance found needs one
    (``longer_window_needed``);
-4. the tracker starts at the search's result (``start_steps``) and the buffer is replayed into it (``catch_up``),
-   after the rest a stream read from rest implies (``lead_in``); then it is live.
+4. the tracker starts at the search's result and the buffer is replayed into it, after the rest a stream read from
+   rest implies (``lead_in``); it goes live after its first fit of the replayed window (``handover.Handover``).
 
 Sample by sample each of these takes calls of its own (no update() pays two of them); in block mode (``units`` >=
 2^29) everything runs at once. Thresholds: ``OnlineSettings.startup``; the reading of the start: ``online/rest.py``.
@@ -25,16 +25,13 @@ import numpy as np
 
 from ..errors import DataError
 from . import rest
-from ._kernels import window as W
+from .handover import EAGER, Handover
 from .search import ResonanceSearch, SearchScratch, frequency_steps, grid_ends
-from .trackers.recursive import RecursiveTracker
-from .trackers.window import FREE_RATES, WindowTracker
+from .trackers.window import FREE_RATES
 
 if TYPE_CHECKING:
     from .estimator import OnlineEstimator
 
-#: Block mode: a unit budget this large runs every step of the start-up in one call.
-EAGER = 1 << 29
 #: A generator's end (``next(gen, _DONE)``).
 _DONE = object()
 
@@ -76,8 +73,6 @@ class Startup:
         self.lead_u = np.zeros(rest.REST_LEAD)            # ... their inputs (0) and outputs (the rest level)
         self.lead_y = np.zeros(rest.REST_LEAD)
         self.start_wait = max(64, min(int(rest.WAIT_S / h), cfg.buffer_samples // 2))   # (``rest.WAIT_S``)
-        self.noise_scratch = np.zeros(W.NOISE_SEED_ROWS)
-        self.noise_seed = 0.0              # the buffer's noise level (``buffer_noise``)
         self.t_need = max(cfg.first_window_s, cfg.first_window_samples * h)
         self.search: ResonanceSearch | None = None
         self.search_scratch = SearchScratch(est.basis.size)
@@ -87,14 +82,10 @@ class Startup:
         self.search_end = 0                # end (buffer index) of the last start-up search's rows
         self.plan_waits = 0                # ready calls spent on the plan (``plan_pending``)
         self.tc_used = 0.0
-        self.starting: Generator | None = None      # the tracker's start under way (``start_steps``)
-        self.replayed = 0
+        self.starting: Generator | None = None      # the tracker's start under way (``Handover.start_steps``)
         self.restarted = False             # restarted in operation after a fault: the plant was not at rest
         self.hint: tuple | None = None     # (alpha, a1, a2) before a fault's restart: a candidate of the search
-        # the window trackers for a stream from rest and one taken in operation, built now (``WindowTracker.start``)
-        self.spares = {} if est._recursive else {free: self.window_tracker(free) for free in (False, True)}
-        #: the catch-up's status buffer (``catch_up``), allocated ahead for the window trackers
-        self.status = np.empty(max([t.feed_chunk for t in self.spares.values()] or [0]), dtype=np.int64)
+        self.handover = Handover(self)     # the tracker's start, the buffer's replay, going live
 
     # ------------------------------------------------------------------ the buffer
     def buffer(self, du: float, y: float) -> None:
@@ -170,7 +161,7 @@ class Startup:
                     units -= 1
                 if s.result is None or self.longer_window_needed(s.result):
                     return
-                self.starting = self.start_steps(s.result, compete=self.competing)
+                self.starting = self.handover.start_steps(s.result, compete=self.competing)
                 if not eager:
                     return
             for _ in self.starting:
@@ -179,7 +170,7 @@ class Startup:
             if not eager:                  # started in this call: the replay from the next
                 return
         if est._catchup:
-            self.catch_up(max(units, 1))
+            self.handover.catch_up(max(units, 1))
 
     def read_start(self) -> bool:
         """A stream whose input is at a non-zero level from its first sample: a step from rest there, or taken in
@@ -387,98 +378,6 @@ class Startup:
         self.t_need = want
         est._phase = "buffering"
         return True
-
-    # ------------------------------------------------------------------ the tracker's start
-    def window_tracker(self, free: bool) -> WindowTracker:
-        """A window tracker with the estimator's settings, linearized at a placeholder resonance (fs / 20,
-        zeta 0.5) until ``WindowTracker.start`` gives it the start-up search's estimate."""
-        est = self.est
-        lo, hi = est._bounds
-        wn = 2.0 * math.pi / (20.0 * est._h)
-        theta = np.array([0.5 * (lo + hi), math.log(1.0 / wn), math.log(1.0 / wn ** 2), 1.0, 0.0])
-        return WindowTracker(
-            est.basis, theta, window_s=est.window_s, free=free, ring=est._ring, work=self.hist_work,
-            gate=0.0, burst=est._burst, stuck=max(10, int(round(0.05 / est._h))), alpha_bounds=(lo, hi),
-            refit_every=est._refit_every, test_every=est._test_every, detect=bool(est.detect_changes),
-            drift=est._settings.memory.drift_columns if est.track_drift else 0, settings=est._settings.trackers,
-            hysteresis=est._settings.memory.hysteresis_operators if "hysteresis" in est.effects else 0)
-
-    def start_steps(self, res, compete: bool = False) -> Generator:
-        """Start the tracker at the search's result (with ``compete``: at the reading of the start taken,
-        ``compete``), in steps (one per call sample by sample, ``advance``): the window tracker's fresh state
-        (``WindowTracker.start_state``), then its adoption; the replay of the buffer (``catch_up``) follows."""
-        if compete:
-            res = yield from self.compete(res)
-        est = self.est
-        lo, hi = est._bounds
-        theta = np.array([min(max(res.alpha, lo), hi), math.log(res.a1), math.log(res.a2), res.b, res.c])
-        if est._recursive:
-            est._tracker = RecursiveTracker(
-                est.basis, theta, window_s=est.window_s, free=self.in_operation, gate=0.0, burst=est._burst,
-                stuck=max(10, int(round(0.05 / est._h))), alpha_bounds=(lo, hi), refit_every=est._refit_every,
-                detect=bool(est.detect_changes), scale=res.b * (est._u_hi - est._u_lo), settings=est._settings.trackers)
-        else:
-            yield                          # (theta above, the fresh state below: ~30 us cold in one call)
-            # (the other spare stays until reset(): freeing its arrays here cost ~35 us of this update())
-            key = self.in_operation
-            if key not in self.spares:     # (used by a tracker that a fault's restart dropped)
-                self.spares[key] = self.window_tracker(key)
-            tracker = self.spares[key]
-            tracker.start_state(theta, est._u_hi - est._u_lo)
-            yield
-            self.buffer_noise()            # (a median of 2048 second differences: in a call of its own)
-            yield
-            est._tracker = self.spares.pop(key)
-            est._tracker.start_adopt()
-        self.starting = None
-        self.start_tracking()
-
-    def buffer_noise(self) -> None:
-        """The start-up buffer's noise level (``window.noise_seed``; a lead-in's still outputs left out)."""
-        self.noise_seed = W.noise_seed(self.by, self.nbuf, self.noise_scratch)
-
-    def start_tracking(self) -> None:
-        """The tracker has started: its noise monitor at the buffer's noise level (``buffer_noise``, computed by the
-        window tracker's start a call before), the replay of the buffer (``catch_up``) follows."""
-        est = self.est
-        if est._recursive:
-            self.buffer_noise()
-        est._tracker.begin_replay(self.noise_seed, adapting=not est.frozen)
-        est._catchup = 1
-        self.replayed = 0
-        est._phase = "tracking"
-
-    def catch_up(self, units: int) -> None:
-        """Feed the buffer into the new tracker, a few samples per unit, then go live (outlier gate open)."""
-        est = self.est
-        tr = est._tracker
-        per_unit = tr.feed_chunk
-        if self.status.size < per_unit:
-            self.status = np.empty(per_unit, dtype=np.int64)
-        status = self.status
-        lead = self.lead or 0
-        total = lead + self.nbuf           # (the lead-in's rest first, then the buffer)
-        while units > 0 and self.replayed < total:
-            units -= 1
-            k = self.replayed
-            # (the first unit a quarter: the new tracker's statistics and the block kernel are cold, ~27 us whole)
-            n = min(per_unit if k else max(per_unit // 4, 1), total - k)
-            if k < lead:
-                n = min(n, lead - k)
-                used = tr.feed_block(self.lead_u, self.lead_y, status, k, k + n)
-            else:
-                used = tr.feed_block(self.bu, self.by, status, k - lead, k - lead + n)
-            self.replayed += used
-            if k < lead <= self.replayed:  # the lead-in's still outputs are no sample of the sensor's noise
-                tr.restart_monitors(self.noise_seed)
-            if tr.busy and units > 0:      # the tracker's own jobs share the budget
-                units -= 1
-                tr.work(1 if units < EAGER else 1 << 30)
-        if self.replayed >= total:
-            est._recovery.went_live()
-            est._catchup = 0
-            self.nbuf = 0
-            tr.go_live(est.outlier_gate)
 
     # ------------------------------------------------------------------ after a fault or an outage
     def restart_on(self, k: int) -> None:

@@ -39,6 +39,7 @@ class Tracker(Protocol):
     disagreement: dict | None           #: the last change test, if the last second disagreed with the window
     feed_chunk: int                     #: samples per unit of work when a buffer is replayed
     busy: bool                          #: background jobs are queued
+    first_fit_pending: bool             #: the first fit after the start-up's replay has not finished yet
 
     # ---------------------------------------------------------------- monitors
     noise_level: float                  #: the output noise's standard deviation
@@ -81,6 +82,9 @@ class Tracker(Protocol):
 
     def restart_monitors(self, noise: float) -> None:
         """Output monitors as at a stream's first sample (after a lead-in of still outputs)."""
+
+    def begin_fitting(self) -> None:
+        """The buffer replayed: fitting on (a first fit of the replayed window, if the tracker fits windows)."""
 
     def go_live(self, outlier_gate: float) -> None:
         """The buffer replayed: the outlier gate open, fitting on."""

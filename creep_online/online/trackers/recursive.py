@@ -191,6 +191,13 @@ class RecursiveTracker(ParameterView, LiveMonitors, Checkpointable):
             return self.state_finite()
         return True
 
+    #: no first re-fit to wait for: the updates are per sample
+    first_fit_pending = False
+
+    def begin_fitting(self) -> None:
+        """The start-up buffer replayed: the per-sample updates on."""
+        self.fitting = True
+
     def go_live(self, outlier_gate: float) -> None:
         """The start-up buffer replayed: the outlier gate open at ``outlier_gate`` (no jobs: updates are per sample)."""
         self.sc[W.SC_GATE] = float(outlier_gate)

@@ -311,11 +311,22 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
             self.work(units)
         return True
 
+    def begin_fitting(self) -> None:
+        """The start-up buffer replayed: fitting on, the first re-fit of the replayed window queued."""
+        if not self.fitting:
+            self.fitting = True
+            self._jobs.append(self.scheduler.refit_job(self))
+
+    @property
+    def first_fit_pending(self) -> bool:
+        """Is the first re-fit after the replay still queued or running? The start-up search's estimate is a grid's
+        refinement on the search window; the window's own fit is what the live predictions should come from."""
+        return self.fitting and self._first_fit is None and self.scheduler.queued(self, "refit_job")
+
     def go_live(self, outlier_gate: float) -> None:
-        """The start-up buffer replayed: the outlier gate open at ``outlier_gate``, fitting on, a first re-fit queued."""
+        """The start-up buffer replayed: the outlier gate open at ``outlier_gate``, fitting on (``begin_fitting``)."""
         self.sc[W.SC_GATE] = float(outlier_gate)
-        self.fitting = True
-        self._jobs.append(self.scheduler.refit_job(self))
+        self.begin_fitting()
 
     def feed_block(self, u: np.ndarray, y: np.ndarray, status: np.ndarray, start: int = 0, stop: int = -1) -> int:
         """Samples ``start`` to ``stop`` (-1: the end) up to the next scheduled job or shift; returns how many
