@@ -83,12 +83,37 @@ def test_a_false_change_on_close_modes_does_not_take_a_wrong_gain(monkeypatch):
     """Close unmodelled modes from the step at the first sample, 40 dB (seed 4): the change test declared a change
     on the modes' misfit (b -3.5 %), and the first pass of the search after it took b -18 %, a1 -21 %, which fit
     its 1.2 s segment (it starts just after an input step: transients' shapes, not levels); the prediction then
-    missed by 25x the output's spread for a second. A search's gain must agree with the test's. (The first
-    second of tracking, where the start-up's estimate misfits the modes, is not checked here: it still diverges
-    on some close-modes records.)"""
+    missed by 25x the output's spread for a second. A search's gain must agree with the test's."""
     windows = _scenario_ratios("close_modes", 4, 40.0, 0, monkeypatch)
-    late = [(t, r) for t, r, n in windows if t >= 2.0 and r > 1.0 + 3.0 / math.sqrt(n)]
-    assert windows and not late, late
+    assert windows and not _divergent(windows), windows
+
+
+def _divergent(windows: list[tuple]) -> list[tuple]:
+    """The windows whose ratio exceeds 1 beyond three standard deviations of an rms over their samples."""
+    return [(t, r) for t, r, n in windows if r > 1.0 + 3.0 / math.sqrt(n)]
+
+
+@pytest.mark.parametrize("seed, snr_db", [(4, 80.0), (9, 80.0), (9, 40.0)])
+def test_the_first_live_predictions_come_from_the_windows_own_fit(seed, snr_db, monkeypatch):
+    """Close unmodelled modes from the step at the first sample: the start-up search's estimate (a grid refined
+    on the search window) was b -24 %, a1 -27 % off on seed 4 at 80 dB, and it predicted the first 50 live samples,
+    until the first window fit: the first second of tracking missed by 4x the output's spread (seed 9: 2.2x; at
+    40 dB 1.16x). The tracker now goes live once its first fit of the replayed window has finished."""
+    windows = _scenario_ratios("close_modes", seed, snr_db, 0, monkeypatch)
+    assert windows and not _divergent(windows), windows
+
+
+@pytest.mark.parametrize("family, seed, snr_db, rest", [("close_modes", 6, 80.0, 0), ("drift", 15, 80.0, None)])
+def test_a_window_that_misses_the_data_declares_no_change_on_its_own_misfit(family, seed, snr_db, rest,
+                                                                            monkeypatch):
+    """Close modes at 80 dB (seed 6, window error ~127x the floor): the change test declared b -8 % at 7 s on no
+    change (likelihood ratio 710, though the tested second fit the window's estimate better than the window
+    did); the restart took the test's gain and the 9 s window missed by 1.7x its spread. A misfitting window's
+    second is a change only if the estimate misses it by more than it misses the window. Drift seed 15 (80 dB):
+    the drift's gain trend read as alpha until the drift rates may enter (the 3 s hold missed by 1.13x); they
+    may enter after 2.5 s of window now, which the misfit rule keeps from a late false change."""
+    windows = _scenario_ratios(family, seed, snr_db, rest, monkeypatch)
+    assert windows and not _divergent(windows), windows
 
 
 def test_a_resonance_far_from_the_linearization_point_waits_for_its_replay():

@@ -243,3 +243,14 @@ def test_generated_records_below_the_physical_move_are_followed_not_declared():
     """A 2 % jump of b (below its 3 % move) is significant but not a change: 100 records, none declared."""
     declared = sum(bool(_detections(LRT, _record(np.random.default_rng(1000 + s), {"b": 0.02}))) for s in range(100))
     assert declared == 0
+
+
+@pytest.mark.parametrize("second_ms, window_ms, noise_var, explains", [
+    (1.88e-4, 2.29e-4, 1.5e-8, True),     # close modes: the second fits better than the window (127x the floor)
+    (1.5e-3, 7.0e-4, 1.5e-8, False),      # the window's estimate misses the second twice as much: it may be a change
+    (1.2e-8, 1.0e-8, 1.0e-8, False),      # a window at the floor: the chi-square statistic decides
+    (3.0e-8, 3.9e-8, 1.0e-8, False),      # within floor_ratio 2 of the floor (mean square 3.9x): not a misfit
+    (3.0e-8, 4.1e-8, 1.0e-8, True),
+])
+def test_a_window_that_misses_the_data_explains_a_second_it_misses_less(second_ms, window_ms, noise_var, explains):
+    assert C.LikelihoodRatioTest().misfit_explains(second_ms, window_ms, noise_var) is explains

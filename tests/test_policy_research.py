@@ -21,3 +21,12 @@ MOVE = 0.03     # the change rule's smallest counted gain move (``LikelihoodRati
 ])
 def test_a_post_change_search_keeps_its_gain_between_before_and_the_test_s_estimate(found, declared, takes):
     assert ResearchRule.agrees_with_change(found, declared, MOVE) is takes
+
+
+def test_a_declared_change_that_moved_the_resonance_does_not_hold_the_gain():
+    """A change test that moved the resonance beyond a counted move was linearized far from its solution: its gain
+    (a stiffness change of b +44 % read as b -26 % with a1 -24 %) does not bound the search's."""
+    rule = ResearchRule()
+    assert not rule.agrees_with_change(0.44, -0.26, 0.03)
+    assert rule.agrees_with_change(0.44, -0.26, 0.03, resonance_moved=True)
+    assert not rule.agrees_with_change(-0.18, -0.035, 0.03, resonance_moved=False)

@@ -99,7 +99,8 @@ class ResearchRule:
         return 1.0 / self.gain_ratio < abs(gain_ratio) < self.gain_ratio and (gain_ratio > 0 or gross)
 
     @staticmethod
-    def agrees_with_change(gain_change: float, declared_gain_change: float, gain_move: float) -> bool:
+    def agrees_with_change(gain_change: float, declared_gain_change: float, gain_move: float,
+                           resonance_moved: bool = False) -> bool:
         """May a post-change search's result replace the estimate, as far as its gain goes? Its gain's move from
         the gain before the change (relative, ``gain_change``) must lie between no move and the move the change
         test estimated (``declared_gain_change``), widened on both sides by the change rule's smallest counted
@@ -108,7 +109,11 @@ class ResearchRule:
         levels, and a wrong gain with a wrong resonance can fit it at the floor while predicting the next second
         far off (close modes at 40 dB: the test b -3.5 %, the search b -18 %, a1 -21 %, a prediction 25x the
         output's spread until a longer pass corrected it). Either end may be the right one: a change the test
-        declared on a misfit (close modes) is no change at all."""
+        declared on a misfit (close modes) is no change at all. A test that also moved the resonance by more than
+        a counted move (``resonance_moved``) was linearized far from its solution, and its gain tells nothing
+        (a stiffness change, b +44 %: the test said b -26 % with a1 -24 %): then the gain is not held to it."""
+        if resonance_moved:
+            return True
         margin = max(gain_move, 0.5 * abs(declared_gain_change))
         return min(0.0, declared_gain_change) - margin <= gain_change <= max(0.0, declared_gain_change) + margin
 

@@ -92,6 +92,8 @@ class ChangeDetection:
         # 40 % 1-sigma passed as 5.9 sigma, it is 3.0 in ln a2, and the window restarted on no change)
         size = {"a1": abs(r.ln_a1 - r.live_ln_a1), "a2": abs(r.ln_a2 - r.live_ln_a2), "b": abs(moves["b"])}
         moved = rule.moved(moves, size, rel_sd)
+        if moved and self.misfit_explains(tr, r.before / max(nr, 1)):
+            moved = {}
         tr.disagreement = {"t": tr.n * tr.h, "lr": float(lr), "moves": {k: float(v) for k, v in moved.items()}} \
             if rule.disagrees(lr, moved) else None
         if not rule.is_change(lr, level, moved) or lin != (tr.a1l, tr.a2l):
@@ -113,6 +115,15 @@ class ChangeDetection:
         if settled:
             tr.theta[0] = theta0[0]      # alpha as it was before the change (the refits chased it since)
         self.restart_window(tr, n0, "b" in moved, alpha_known=settled)
+
+    def misfit_explains(self, tr: WindowTracker, second_ms: float) -> bool:
+        """Does the window's misfit explain the tested second (``LikelihoodRatioTest.misfit_explains``)? The
+        window's mean square error is its last accepted fit's (cost over effective samples)."""
+        last = getattr(tr, "_fit_raw", None)
+        if last is None:
+            return False
+        raw = last[0]
+        return tr.settings.change_rule.misfit_explains(second_ms, raw[5] / max(raw[6], 1.0), tr.noise_level ** 2)
 
     def open_event(self, tr: WindowTracker, t: float, moved: list[str], moves: dict, lr: float, before: np.ndarray,
                     **extra) -> None:

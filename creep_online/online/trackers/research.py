@@ -100,8 +100,9 @@ class Researcher:
         before = float(event["_before"][3]) if event is not None and "_before" in event else 0.0
         if not before:
             return True
-        return tr.settings.research.agrees_with_change(b / before - 1.0, event["relative_change"]["b"],
-                                                        tr.settings.change_rule.move["b"])
+        declared, move = event["relative_change"], tr.settings.change_rule.move
+        resonance_moved = abs(declared.get("a1", 0.0)) > move["a1"] or abs(declared.get("a2", 0.0)) > move["a2"]
+        return tr.settings.research.agrees_with_change(b / before - 1.0, declared["b"], move["b"], resonance_moved)
 
     def misfit_from_start(self, tr: WindowTracker) -> bool:
         """Has the window misfit (``Researcher.watch``) since its first re-fit? Then its estimate was wrong, not the plant
