@@ -140,20 +140,21 @@ def estimate(t: float, loop: dict | None, quality: str = "good", determined=("al
                           determined=list(determined), hysteresis=loop)
 
 
-def test_gate_carries_the_live_loop_with_the_creep_part():
+def test_gate_gives_the_live_loop_with_the_creep_part_of_the_same_estimate():
     rng = np.random.default_rng(0)
     loop1, loop2 = random_loop(rng), random_loop(rng)
     gate = ModelGate()
     assert gate.model(estimate(0.0, loop1)) is None                    # the dwell: no creep part yet
     m = gate.model(estimate(DWELL_S + 0.01, loop1))
     assert isinstance(m, ExtendedModel) and m.effects == {"hysteresis": loop1} and m.base.b == 1.0
-    # the creep part undetermined now: the loop still follows, with the creep part last given
-    m = gate.model(estimate(1.0, loop2, quality="provisional", determined=(), b=1.3))
-    assert m.effects == {"hysteresis": loop2} and m.base.b == 1.0
-    # not taken: a loop that is not monotone, or one of an unsettled fit (the last good one stays)
-    falling = {**loop1, "w": [0.2, -1.5, 0.1, 0.1, 0.1]}
-    assert gate.model(estimate(1.1, falling)).effects == {"hysteresis": loop2}
-    assert gate.model(estimate(1.2, loop1, quality="changing", determined=())).effects == {"hysteresis": loop2}
+    m = gate.model(estimate(DWELL_S + 0.02, loop2, b=1.3))
+    assert m.effects == {"hysteresis": loop2} and m.base.b == 1.3
+    # the creep part undetermined: nothing (b and the weights trade off: a new loop never goes with an old b)
+    assert gate.model(estimate(1.0, loop1, quality="provisional", determined=())) is None
+    # a loop that is not monotone: nothing, though alpha and b are determined
+    gate = ModelGate()
+    gate.model(estimate(0.0, loop1))
+    assert gate.model(estimate(DWELL_S + 0.01, {**loop1, "w": [0.2, -1.5, 0.1, 0.1, 0.1]})) is None
     # without a loop in the estimate the gate is the creep gate (a CreepModel or None)
     plain = ModelGate()
     plain.model(estimate(0.0, None))

@@ -23,11 +23,11 @@ An estimate is taken only once alpha and b have stayed determined for ``DWELL_S`
 are the quality rule's (``online/policy/quality.py``: ``model_source``); this class keeps what it must remember.
 
 The hysteresis loop (an estimator with ``effects=("hysteresis",)``: ``OnlineEstimate.hysteresis``) travels
-with the creep part: once a creep model has been given, every estimate whose loop is invertible with the fit's
-margin (``effects.hysteresis.flattest_branch`` at least ``SLOPE_FLOOR``: every branch of the inverse bounded)
-and whose fit has settled (quality not ``changing``) gives ``ExtendedModel(creep, {"hysteresis": loop})``, the
-creep part the last one the rule above gave. The loop thus follows the plant at every window fit (the loop
-width drifts with temperature and preload) while the creep part still waits for alpha and b determined.
+with the creep part of the same estimate: ``ExtendedModel(creep, {"hysteresis": loop})``. Never a new loop with
+an older creep part: the window fits b and the weights together, and they trade off (the large-signal gain
+``b (1 + sum w)`` is what the data fix), so only the pair is a model. An estimate whose loop is not invertible with
+the fit's margin (``effects.hysteresis.flattest_branch`` below ``SLOPE_FLOOR``: a branch of the inverse unbounded)
+gives nothing.
 
 The estimator's ``quality`` is not touched: it still says ``provisional`` and why.
 """
@@ -40,18 +40,14 @@ from ..model import CreepModel, ExtendedModel
 from .policy.quality import CREEP, DWELL_S, RESONANCE, ROUGH, model_source
 from .stored_params import StoredParams
 
-__all__ = ["ModelGate", "CREEP", "DWELL_S", "RESONANCE", "ROUGH", "UNSETTLED"]
-
-#: Qualities whose loop the gate does not take (the fit has not settled after a detected change).
-UNSETTLED = ("changing",)
+__all__ = ["ModelGate", "CREEP", "DWELL_S", "RESONANCE", "ROUGH"]
 
 
 class ModelGate(StoredParams):
     """The model to give a compensator from each new estimate (``model``), or None: keep what it has.
 
-    Remembers the last determined resonance, the last creep model given and the last loop taken.
-    ``source`` says where the resonance of the last creep model came from: ``"determined"``, ``"held"`` (the
-    last determined one), ``"rough"`` (case 3).
+    Remembers the last determined resonance. ``source`` says where the resonance of the last
+    model came from: ``"determined"``, ``"held"`` (the last determined one), ``"rough"`` (case 3).
     """
 
     def __init__(self) -> None:
@@ -62,26 +58,18 @@ class ModelGate(StoredParams):
         self._resonance: tuple[float, float] | None = None
         self._since: float | None = None       # estimate time since which alpha and b are determined
         self.source = ""
-        self._creep: CreepModel | None = None
-        self._loop: dict | None = None
         return self
 
     def model(self, estimate) -> CreepModel | ExtendedModel | None:
         """The model a compensator may take from ``estimate`` (an ``OnlineEstimate``), or None: keep what it has.
 
-        With a live loop in the estimate: the last creep model given, extended by the newest acceptable loop.
+        With a live loop in the estimate: the creep part extended by that loop (None if it is not invertible).
         """
         creep = self._creep_model(estimate)
-        if creep is not None:
-            self._creep = creep
         loop = getattr(estimate, "hysteresis", None)
-        if self._creep is None or loop is None:
+        if creep is None or loop is None:
             return creep
-        if estimate.quality not in UNSETTLED and _invertible(loop):
-            self._loop = loop
-        if self._loop is None:
-            return creep
-        return ExtendedModel(self._creep, {"hysteresis": self._loop})
+        return ExtendedModel(creep, {"hysteresis": loop}) if _invertible(loop) else None
 
     def _creep_model(self, estimate) -> CreepModel | None:
         """The creep part (alpha, b and a resonance) the rule gives now, or None."""
