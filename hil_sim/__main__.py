@@ -22,7 +22,7 @@ from creep_online.cli import OneLineParser
 
 from .faults import FaultSpec, plan
 from .links import PtyLink
-from .plant import SCHEDULES, PlantConfig, generate, parse_effects, parse_params
+from .plant import EFFECT_DEFAULTS, SCHEDULES, PlantConfig, generate, parse_effects, parse_params
 from .runner import CAN_FRAMES, TRANSPORTS, Runner, emit_event
 
 CAPANCDT = "capancdt"
@@ -232,6 +232,9 @@ def _closed_loop(args, model, drift: tuple[float, float], spec, effects) -> int:
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     n = max(2, int(round(args.duration * args.rate)))
+    if effects.get("hysteresis") == EFFECT_DEFAULTS["hysteresis"]:     # bare: a loop scaled to the command stroke
+        from .hysteresis_plants import command_loop
+        effects = {"hysteresis": command_loop(model, args.seed)}
     try:
         runner = CommandRunner(model, args.rate, n, link, noise=args.noise, adc_bits=args.adc_bits,
                                adc_range=args.adc_range, seed=args.seed, drift=drift, events=emit_event, stop=stop,

@@ -23,7 +23,8 @@ compensator takes the estimator's model according to ``mode``:
 A plant with hysteresis (``hysteresis``: a Prandtl-Ishlinskii loop, ``play_stage.PlayStage``, before the creep
 plant; ``loop_scale`` per sample makes its width drift) is identified with ``OnlineEstimator(dt,
 effects=("hysteresis",))``: the gate then gives the creep part with the live loop (``ModelGate``), which the
-compensator inverts. ``known`` inverts the true loop; ``frozen`` keeps the gate's model in force at
+compensator inverts. ``known`` inverts the true initial loop, ``oracle`` the true current one (its weights
+times ``loop_scale`` at each block); ``frozen`` keeps the gate's model in force at
 ``FROZEN_WAIT_S`` (the loop learnt at the start, never updated).
 
 ``creep_online.metrics.creep_error`` measures what the issue asks: output minus
@@ -87,7 +88,9 @@ def run_closed_loop(t: np.ndarray, r: np.ndarray, plant: CreepModel, mode: str, 
     for k0 in range(0, n, block):
         k1 = min(n, k0 + block)
         if mode == "oracle":
-            comp.set_model(CreepModel(alpha[k0], plant.a1, plant.a2, b[k0]))
+            now = CreepModel(alpha[k0], plant.a1, plant.a2, b[k0])
+            comp.set_model(now if stage is None else
+                           ExtendedModel(now, {"hysteresis": {**hysteresis, "w": (stage.w * scale[k0]).tolist()}}))
         u = r[k0:k1] / gain if mode == "uncompensated" else comp.command_block(r[k0:k1])
         v = u if stage is None else stage.step_block(u, scale[k0:k1])
         yc = stream.step_block(v, alpha[k0:k1], b[k0:k1])

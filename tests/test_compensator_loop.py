@@ -142,6 +142,7 @@ def test_demo_compensate_with_hysteresis_compensates_loop_and_creep(tmp_path):
     assert "hysteresis: 2 Hz triangle scan" in proc.stdout
     h = json.loads((report / "summary.json").read_text())["compensation"]["hysteresis"]
     tr = h["tracking_rms"]
+    assert len(h["loop"]["r"]) == 30                       # (hil_sim's loop for a bare --effects hysteresis)
     assert h["live_loop"] is not None and len(h["live_loop"]["w"]) == 8
     assert tr["uncompensated_simulated"] > 10 * tr["compensated"]
     assert tr["creep_only_simulated"] > 3 * tr["compensated"]
@@ -152,4 +153,4 @@ def test_demo_compensate_refuses_effects_it_cannot_invert():
     env = dict(os.environ, PYTHONPATH=str(REPO))
     proc = subprocess.run([sys.executable, "-m", "creep_online", "demo", "--compensate", "--effects", "delay",
                            "--quiet"], capture_output=True, text=True, env=env, timeout=120)
-    assert proc.returncode == 2 and "inverts hysteresis only" in proc.stderr and "Traceback" not in proc.stderr
+    assert proc.returncode == 2 and "cannot be combined with --effects delay" in proc.stderr and "Traceback" not in proc.stderr

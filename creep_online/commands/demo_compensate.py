@@ -17,8 +17,8 @@ same plant gives without compensation (exact simulation, ``u = r / g`` with
 the static gain 1 s after a step), and both creep errors over time.
 
 ``--effects hysteresis``: the plant's actuator has a Prandtl-Ishlinskii loop
-(``hil_sim --effects hysteresis``; without parameters a smooth loop of 30
-thresholds, ``HYSTERESIS_WIDTH`` of the command stroke wide). The estimator
+(``hil_sim --command-input --effects hysteresis``; without parameters a smooth
+loop of 30 thresholds, 10 % of the stroke of commands for a unit output). The estimator
 runs with ``effects=("hysteresis",)``; the gate gives the creep part with the
 live loop, which the compensator inverts. The reference is the staircase
 (``--period`` holds, 0.4 s by default: its steps and reversals identify creep,
@@ -42,10 +42,9 @@ LEAD_S = 0.05
 LEVELS = (0.25, 0.5, 0.75, 1.0, 0.75, 0.875, 0.5, 0.625, 0.25, 0.375)
 
 
-#: ``--effects hysteresis`` without parameters: the loop's width over the command stroke, and the simulated
-#: sensor's noise over the output's stroke (an estimate of 8 operators approximates the plant's smooth loop to about
-#: 0.3 % of the stroke: on a much cleaner sensor its window reads ``degraded`` and the gate gives no model).
-HYSTERESIS_WIDTH = 0.1
+#: ``--effects hysteresis``: the simulated sensor's noise over the output's stroke (an estimate of 8 operators
+#: approximates the plant's smooth loop to about 0.3 % of the stroke: on a much cleaner sensor its window reads
+#: ``degraded`` and the gate gives no model).
 HYSTERESIS_NOISE = 2.5e-3
 #: With hysteresis: the staircase's default hold (s), then a triangle scan at this frequency (Hz).
 HYSTERESIS_HOLD_S = 0.4
@@ -68,26 +67,6 @@ def scan_reference(t: np.ndarray, hold_s: float, amplitude: float, t_start: floa
     return np.where(t >= t_scan, amplitude * (1.0 - np.abs(2.0 * (phase % 1.0) - 1.0)), r), t_scan
 
 
-def hysteresis_plant(args) -> dict | None:
-    """The plant's loop for ``--effects`` (None: no hysteresis); a one-line error for effects it cannot invert."""
-    from hil_sim.plant import parse_effects, parse_params
-    try:
-        effects = parse_effects(args.effects)
-        model = parse_params(args.params)
-    except ValueError as exc:
-        raise CreepOnlineError(str(exc).splitlines()[0]) from None
-    other = sorted(set(effects) - {"hysteresis"})
-    if other:
-        raise CreepOnlineError(f"--compensate inverts hysteresis only; it cannot run --effects {', '.join(other)}")
-    if not effects:
-        return None
-    if args.effects.strip() != "hysteresis":
-        return {"initial": "centred", **effects["hysteresis"]}
-    from hil_sim.hysteresis_plants import random_loop
-    stroke = abs(args.amplitude / model.b)              # (the commands' stroke: the reference over the gain)
-    return {**random_loop(np.random.default_rng(args.seed), stroke, HYSTERESIS_WIDTH), "initial": "centred"}
-
-
 def run_compensated(args, progress) -> dict:
     """Run the loop; return the demo's result dict plus ``compensation`` (and the arrays for the report)."""
     from ..model import CreepModel
@@ -98,13 +77,12 @@ def run_compensated(args, progress) -> dict:
     open_source = hardware_extras()
     if args.transport != "serial-binary" or args.faults:
         raise CreepOnlineError("--compensate runs over --transport serial-binary without --faults")
-    loop = hysteresis_plant(args)
     plant_args = ["--rate", repr(args.rate), "--duration", repr(args.duration), "--transport", "serial-binary",
                   "--command-input", "--seed", str(args.seed), "--linger", "30"]
-    if loop is not None:
-        import json
-        plant_args += ["--effects", json.dumps({"hysteresis": loop}),
-                       "--noise", repr(HYSTERESIS_NOISE * abs(args.amplitude))]
+    if args.effects:                 # (the closed-loop plant takes hysteresis only, and says so in one line)
+        plant_args += ["--effects", args.effects]
+        if "hysteresis" in args.effects:
+            plant_args += ["--noise", repr(HYSTERESIS_NOISE * abs(args.amplitude))]
     if args.params:
         plant_args += ["--params", args.params]
     if args.scenario == "drift":
@@ -113,6 +91,7 @@ def run_compensated(args, progress) -> dict:
     with plant:
         ready = plant.ready
         truth = CreepModel(**ready["model"])
+        loop = (ready.get("effects") or {}).get("hysteresis")       # the plant's loop, as it runs it
         n = int(ready["samples"])
         dt = 1.0 / args.rate
         t = np.arange(n) * dt
