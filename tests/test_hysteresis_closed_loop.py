@@ -1,17 +1,11 @@
 """The simulated plant with hysteresis (``hil_sim.play_stage``) in the closed loops: in process
-(``hil_sim.closed_loop``) and over a real pty (``python -m hil_sim --command-input --effects hysteresis``).
+(``hil_sim.closed_loop``); over a real pty (``hil_sim --command-input --effects hysteresis``) in
+tests/test_compensator_loop.py.
 
 Reference: the library's exact simulation ``simulate_with_effects`` (the same Prandtl-Ishlinskii operator, the
 creep plant's SOE simulation) on the commands the plant applied.
 """
 from __future__ import annotations
-
-import json
-import os
-import subprocess
-import sys
-import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,17 +13,13 @@ import pytest
 from creep_online.effects import loop_width
 from creep_online.effects.forward import simulate_with_effects
 from creep_online.effects.hysteresis import hysteresis_input, play_operators
-from creep_online.io import open_source
-from creep_online.io.frames import encode_command
 from creep_online.model import CreepModel, ExtendedModel
 from creep_online.online import OnlineEstimator
 from creep_online.online.compensator import CreepCompensator
 from hil_sim.closed_loop import run_closed_loop
-from hil_sim.harness import PlantProcess
 from hil_sim.hysteresis_plants import random_loop
 from hil_sim.play_stage import PlayStage, width_scale
 
-REPO = Path(__file__).resolve().parents[1]
 H = 1e-4
 
 
@@ -93,49 +83,3 @@ def test_adaptive_closed_loop_takes_the_live_loop():
                           estimator=OnlineEstimator(H, input_gate=0.0, effects=("hysteresis",)),
                           hysteresis=loop, block=100, noise=5e-3)
     assert rec.models and all(isinstance(m, ExtendedModel) for m in rec.models)
-
-
-def test_command_input_plant_with_hysteresis_over_a_pty():
-    """1 s at 10 kHz through ``--effects hysteresis``: the output is the exact simulation of the applied
-    commands through the given loop (the JSON form of --effects)."""
-    rate, n = 10_000.0, 10_000
-    loop = {"r": [0.05, 0.15, 0.3], "w": [0.2, 0.1, 0.05]}
-    with PlantProcess(["--rate", repr(rate), "--duration", "1", "--command-input", "--noise", "0",
-                       "--effects", json.dumps({"hysteresis": loop}), "--linger", "1"]) as plant:
-        truth = CreepModel(**plant.ready["model"])
-        assert plant.ready["effects"] == {"hysteresis": loop}
-        t = np.arange(n) / rate
-        cmd = 0.4 * (1 - np.cos(2 * np.pi * 3.0 * t))
-        src = open_source(f"serial:{plant.port}?rate={rate!r}&format=binary")
-        fd = os.open(plant.port, os.O_WRONLY | os.O_NOCTTY | os.O_NONBLOCK)
-        pending = bytearray(b"".join(encode_command(k, cmd[k]) for k in range(n)))
-        seq, u, y = [], [], []
-        deadline = time.monotonic() + 60
-        try:
-            while (not seq or seq[-1] < n - 1) and time.monotonic() < deadline:
-                if pending:
-                    try:
-                        del pending[:os.write(fd, pending)]
-                    except BlockingIOError:
-                        pass
-                for s in src.read(0.01):
-                    seq.append(s.seq)
-                    u.append(s.u)
-                    y.append(s.y)
-        finally:
-            os.close(fd)
-            src.close()
-    assert np.array_equal(seq, np.arange(n))
-    u = np.array(u)
-    y_sim = simulate_with_effects(truth, t, u, {"hysteresis": {**loop, "initial": "centred"}})
-    assert np.max(np.abs(np.array(y) - y_sim)) < 1e-4 + 10.0 / 2 ** 20
-
-
-def test_command_input_refuses_other_effects_in_one_line():
-    env = dict(os.environ, PYTHONPATH=str(REPO))
-    for effects, message in (("drift", "cannot be combined with --effects drift"),
-                             ('{"hysteresis": {"r": [0.1, 0.2], "w": [0.1]}}', "--effects hysteresis:")):
-        proc = subprocess.run([sys.executable, "-m", "hil_sim", "--command-input", "--effects", effects],
-                              capture_output=True, text=True, env=env, timeout=120)
-        assert proc.returncode == 2 and message in proc.stderr and "Traceback" not in proc.stderr
-        assert len(proc.stderr.strip().splitlines()) == 1
