@@ -22,7 +22,7 @@ from creep_online.cli import OneLineParser
 
 from .faults import FaultSpec, plan
 from .links import PtyLink
-from .plant import SCHEDULES, PlantConfig, generate, parse_effects, parse_params
+from .plant import EFFECT_DEFAULTS, SCHEDULES, PlantConfig, generate, parse_effects, parse_params
 from .runner import CAN_FRAMES, TRANSPORTS, Runner, emit_event
 
 CAPANCDT = "capancdt"
@@ -214,7 +214,8 @@ def _drift(text: str) -> tuple[float, float]:
 def _closed_loop(args, model, drift: tuple[float, float], spec, effects) -> int:
     """``--command-input``: the plant steps in real time on the reader's command frames."""
     from .command_runner import CommandRunner
-    refused = [name for name, given in (("--faults", spec.counts), ("--effects", effects),
+    other = sorted(set(effects) - {"hysteresis"})      # (the closed loop's plant models the actuator's loop only)
+    refused = [name for name, given in (("--faults", spec.counts), (f"--effects {','.join(other)}", other),
                                         ("--payload", args.payload), ("--fast", args.fast)) if given]
     if args.transport != "serial-binary":
         print(f"hil_sim: --command-input needs --transport serial-binary (got {args.transport})", file=sys.stderr)
@@ -231,12 +232,21 @@ def _closed_loop(args, model, drift: tuple[float, float], spec, effects) -> int:
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     n = max(2, int(round(args.duration * args.rate)))
-    runner = CommandRunner(model, args.rate, n, link, noise=args.noise, adc_bits=args.adc_bits,
-                           adc_range=args.adc_range, seed=args.seed, drift=drift, events=emit_event, stop=stop)
+    if effects.get("hysteresis") == EFFECT_DEFAULTS["hysteresis"]:     # bare: a loop scaled to the command stroke
+        from .hysteresis_plants import command_loop
+        effects = {"hysteresis": command_loop(model, args.seed)}
+    try:
+        runner = CommandRunner(model, args.rate, n, link, noise=args.noise, adc_bits=args.adc_bits,
+                               adc_range=args.adc_range, seed=args.seed, drift=drift, events=emit_event, stop=stop,
+                               hysteresis=effects.get("hysteresis"))
+    except ValueError as exc:
+        print(f"hil_sim: --effects hysteresis: {str(exc).splitlines()[0]}", file=sys.stderr)
+        link.close()
+        return 2
     print(link.port, flush=True)
     emit_event("ready", port=link.port, tty=link.tty, transport=args.transport, rate=args.rate, samples=n,
                samples_per_frame=1, model=model.params(), schedule="command", noise=args.noise,
-               lsb=runner.lsb, effects={}, faults={}, drift={"alpha": drift[0], "b": drift[1]},
+               lsb=runner.lsb, effects=effects, faults={}, drift={"alpha": drift[0], "b": drift[1]},
                pid=os.getpid())
     if runner.wait_first_command():
         runner.run()

@@ -17,7 +17,15 @@ compensator takes the estimator's model according to ``mode``:
 ``known``          the true initial model from the start (no estimator needed);
 ``oracle``         the true current parameters (alpha, b per sample) at every block: the limit of a
                    compensator that inverts the frozen-time plant (no estimator needed);
-``uncompensated``  u = r / g with g the plant's static gain 1 s after a step (b / Gamma(1 + alpha)).
+``uncompensated``  u = r / g with g the plant's static gain 1 s after a step (b / Gamma(1 + alpha));
+``creep_only``     as ``adaptive``, the estimate's hysteresis loop left out (what inverting the loop adds).
+
+A plant with hysteresis (``hysteresis``: a Prandtl-Ishlinskii loop, ``play_stage.PlayStage``, before the creep
+plant; ``loop_scale`` per sample makes its width drift) is identified with ``OnlineEstimator(dt,
+effects=("hysteresis",))``: the gate then gives the creep part with the live loop (``ModelGate``), which the
+compensator inverts. ``known`` inverts the true initial loop, ``oracle`` the true current one (its weights
+times ``loop_scale`` at each block); ``frozen`` keeps the gate's model in force at
+``FROZEN_WAIT_S`` (the loop learnt at the start, never updated).
 
 ``creep_online.metrics.creep_error`` measures what the issue asks: output minus
 reference from the end of the resonance transient after each step to the end of its hold.
@@ -29,13 +37,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from creep_online.model import CreepModel
+from creep_online.model import CreepModel, ExtendedModel
 from creep_online.online.compensator import CreepCompensator
 from creep_online.online.gate import ModelGate
 
+from .play_stage import PlayStage
 from .varying_plant import PlantStream
 
-MODES = ("adaptive", "frozen", "known", "oracle", "uncompensated")
+MODES = ("adaptive", "frozen", "known", "oracle", "uncompensated", "creep_only")
 
 
 @dataclass
@@ -48,14 +57,16 @@ class LoopRecord:
     y_clean: np.ndarray
     y: np.ndarray
     model_t: list          # times at which the compensator's model changed
-    models: list           # the models it took (CreepModel)
+    models: list           # the models it took (CreepModel, or ExtendedModel with the live loop)
 
 
 def run_closed_loop(t: np.ndarray, r: np.ndarray, plant: CreepModel, mode: str, *,
                     alpha: np.ndarray | None = None, b: np.ndarray | None = None, estimator=None,
                     compensator: CreepCompensator | None = None, noise: float = 2e-4, seed: int = 0,
-                    block: int = 10, gate: bool = True) -> LoopRecord:
-    """One run of the loop; ``alpha``/``b`` per sample make the plant drift (default: constant)."""
+                    block: int = 10, gate: bool = True, hysteresis: dict | None = None,
+                    loop_scale: np.ndarray | None = None) -> LoopRecord:
+    """One run of the loop; ``alpha``/``b`` per sample make the plant drift (default: constant); ``hysteresis``
+    puts a loop before the plant, its weights times ``loop_scale`` per sample (default 1)."""
     if mode not in MODES:
         raise ValueError(f"unknown mode {mode!r}; choose one of {', '.join(MODES)}")
     h = float(t[1] - t[0])
@@ -64,34 +75,42 @@ def run_closed_loop(t: np.ndarray, r: np.ndarray, plant: CreepModel, mode: str, 
     b = np.full(n, plant.b) if b is None else np.asarray(b, dtype=float)
     stream = PlantStream(h, plant.alpha, plant.a1, plant.a2, plant.b, horizon_s=max(3600.0, 10 * n * h))
     rng = np.random.default_rng(seed)
+    stage = None if hysteresis is None else PlayStage(hysteresis)
+    scale = np.ones(n) if loop_scale is None else np.asarray(loop_scale, dtype=float)
     comp = compensator or CreepCompensator(h)
     if mode == "known":
-        comp.set_model(plant)
+        comp.set_model(plant if hysteresis is None else ExtendedModel(plant, {"hysteresis": hysteresis}))
     gain = plant.b / math.gamma(1.0 + plant.alpha)
     u_all, y_clean = np.empty(n), np.empty(n)
     model_t, models = [], []
     frozen = False
-    take = _policy(mode, gate)
+    take = _policy(mode, gate, hysteresis is not None)
     for k0 in range(0, n, block):
         k1 = min(n, k0 + block)
         if mode == "oracle":
-            comp.set_model(CreepModel(alpha[k0], plant.a1, plant.a2, b[k0]))
+            now = CreepModel(alpha[k0], plant.a1, plant.a2, b[k0])
+            comp.set_model(now if stage is None else
+                           ExtendedModel(now, {"hysteresis": {**hysteresis, "w": (stage.w * scale[k0]).tolist()}}))
         u = r[k0:k1] / gain if mode == "uncompensated" else comp.command_block(r[k0:k1])
-        yc = stream.step_block(u, alpha[k0:k1], b[k0:k1])
+        v = u if stage is None else stage.step_block(u, scale[k0:k1])
+        yc = stream.step_block(v, alpha[k0:k1], b[k0:k1])
         u_all[k0:k1], y_clean[k0:k1] = u, yc
         if estimator is None or mode in ("known", "oracle", "uncompensated") or frozen:
             continue                 # (frozen: the estimator's later models are never used: not fed)
         estimator.update_block(u, yc + noise * rng.standard_normal(k1 - k0))
         m = take(estimator, t[k1 - 1])
-        if m is None:
-            continue
-        if m != comp.current_model:
-            if not comp.accepts(m):
-                continue             # a model the compensator cannot take: the last one is held
-            comp.set_model(m)
-            model_t.append(float(t[k1 - 1]))
-            models.append(m)
-        frozen = mode == "frozen"
+        if m is not None and mode == "creep_only" and isinstance(m, ExtendedModel):
+            m = m.base
+        if m is not None and m != comp.current_model:
+            if comp.accepts(m):
+                comp.set_model(m)
+                model_t.append(float(t[k1 - 1]))
+                models.append(m)
+            else:
+                m = None             # a model the compensator cannot take: the last one is held
+        if mode == "frozen":
+            frozen = m is not None if hysteresis is None else \
+                comp.current_model is not None and t[k1 - 1] >= FROZEN_WAIT_S
     y = y_clean + noise * np.random.default_rng(seed + 1).standard_normal(n)
     return LoopRecord(t, r, u_all, y_clean, y, model_t, models)
 
@@ -102,9 +121,9 @@ TRUSTED = ("good",)
 FROZEN_WAIT_S = 10.0
 
 
-def _policy(mode: str, gate: bool):
+def _policy(mode: str, gate: bool, hysteresis: bool = False):
     """f(estimator, t) -> the model the compensator may take now, or None: per mode (module docstring)."""
-    if mode == "adaptive" and gate:
+    if mode == "creep_only" or (mode == "adaptive" and gate) or (mode == "frozen" and hysteresis):
         g = ModelGate()
         return lambda est, t: g.model(est.estimate)
 

@@ -14,6 +14,10 @@ losing them: a sample whose command has not arrived waits for it up to
 ``command_timeout`` past its due time (the ledger's ``late_max_s`` says how far
 the plant fell behind); only then does the DAC hold its last value.
 
+With ``hysteresis`` (a Prandtl-Ishlinskii loop, ``play_stage.PlayStage``) the DAC's
+command goes through the actuator's loop before the creep plant; the frame reports
+the command applied, as a real amplifier's monitor does.
+
 The stream starts with the first command frame (any other byte before it,
 such as a reader's start command, is ignored).
 """
@@ -29,6 +33,7 @@ import numpy as np
 from creep_online.io.frames import STATUS_COMMAND, BinaryParser, encode_binary
 from creep_online.model import CreepModel
 
+from .play_stage import PlayStage
 from .varying_plant import PlantStream
 
 #: Largest number of samples produced in one go (bounds the pacing jitter).
@@ -57,7 +62,7 @@ class CommandRunner:
     def __init__(self, model: CreepModel, rate: float, n_samples: int, link, *, noise: float = 2e-4,
                  adc_bits: int = 20, adc_range: float = 10.0, seed: int = 0, drift: tuple[float, float] = (0.0, 0.0),
                  events=None, stop: threading.Event | None = None, start_timeout: float = 60.0,
-                 command_timeout: float = 1.0) -> None:
+                 command_timeout: float = 1.0, hysteresis: dict | None = None) -> None:
         self.model, self.rate, self.n = model, float(rate), int(n_samples)
         self.link = link
         self.noise, self.lsb, self.half = noise, adc_range / 2.0 ** adc_bits, adc_range / 2
@@ -75,6 +80,7 @@ class CommandRunner:
         self.ledger = CommandLedger()
         self.stream = PlantStream(1.0 / self.rate, model.alpha, model.a1, model.a2, model.b,
                                   horizon_s=max(3600.0, 10 * span))
+        self.stage = None if hysteresis is None else PlayStage(hysteresis)
         self.produced = 0
         self.last_u = 0.0
 
@@ -112,7 +118,8 @@ class CommandRunner:
                 u[i] = self.last_u
                 self.ledger.late_samples += 1
             self.last_u = u[i]
-        y = self.stream.step_block(u, self.alpha[k0:upto], self.b[k0:upto])
+        v = u if self.stage is None else self.stage.step_block(u)
+        y = self.stream.step_block(v, self.alpha[k0:upto], self.b[k0:upto])
         if self.noise > 0:
             y = y + self.noise * self.rng.standard_normal(y.size)
         y = np.clip(np.round(y / self.lsb) * self.lsb, -self.half, self.half - self.lsb)

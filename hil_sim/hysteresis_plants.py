@@ -110,6 +110,17 @@ def random_loop(rng: np.random.Generator, stroke: float, width: float | None = N
     return {"r": r.tolist(), "w": w.tolist(), "initial": str(rng.choice(list(INITIAL_STATES)))}
 
 
+#: The closed-loop plant's loop for a bare ``--effects hysteresis`` (``command_loop``): its width over the stroke.
+COMMAND_LOOP_WIDTH = 0.1
+
+
+def command_loop(model: CreepModel, seed: int) -> dict:
+    """The loop of a closed-loop plant given a bare ``--effects hysteresis``: ``random_loop`` of width
+    COMMAND_LOOP_WIDTH over the stroke of the commands that move the output by 1 (1 / |b|), centred."""
+    return {**random_loop(np.random.default_rng([seed, 41]), 1.0 / abs(model.b), COMMAND_LOOP_WIDTH),
+            "initial": "centred"}
+
+
 def random_plant(rng: np.random.Generator) -> CreepModel:
     """alpha in ALPHA_RANGE, fn 100-1500 Hz, zeta 0.05-0.5, gain of either sign 0.5-2."""
     return CreepModel.from_resonance(rng.uniform(*ALPHA_RANGE), math.exp(rng.uniform(math.log(100.0), math.log(1500.0))),

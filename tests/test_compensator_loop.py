@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from creep_online.effects.forward import simulate_with_effects
 from creep_online.io.frames import encode_command
 from creep_online.io import open_source
 from creep_online.model import CreepModel
@@ -21,6 +22,31 @@ from hil_sim.harness import PlantProcess
 
 REPO = Path(__file__).resolve().parents[1]
 RATE = 10_000.0
+
+
+def send_commands(plant, cmd: np.ndarray, rate: float = RATE) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Write every command frame to the plant's pty (non-blocking) while reading its samples: (seq, u, y)."""
+    n = cmd.size
+    src = open_source(f"serial:{plant.port}?rate={rate!r}&format=binary")
+    fd = os.open(plant.port, os.O_WRONLY | os.O_NOCTTY | os.O_NONBLOCK)
+    pending = bytearray(b"".join(encode_command(k, cmd[k]) for k in range(n)))
+    seq, u, y = [], [], []
+    deadline = time.monotonic() + 60
+    try:
+        while (not seq or seq[-1] < n - 1) and time.monotonic() < deadline:
+            if pending:
+                try:
+                    del pending[:os.write(fd, pending)]
+                except BlockingIOError:
+                    pass
+            for s in src.read(0.01):
+                seq.append(s.seq)
+                u.append(s.u)
+                y.append(s.y)
+    finally:
+        os.close(fd)
+        src.close()
+    return np.array(seq), np.array(u), np.array(y)
 
 
 def test_plant_applies_the_commands_and_the_output_follows_the_reference():
@@ -38,27 +64,8 @@ def test_plant_applies_the_commands_and_the_output_follows_the_reference():
         for k in range(n):           # feedforward: all commands can be computed ahead
             shaped[k] = comp.shaped_reference
             cmd[k] = comp.command(r[k])
-        src = open_source(f"serial:{plant.port}?rate={RATE!r}&format=binary")
-        fd = os.open(plant.port, os.O_WRONLY | os.O_NOCTTY | os.O_NONBLOCK)
-        pending = bytearray(b"".join(encode_command(k, cmd[k]) for k in range(n)))
-        seq, u, y = [], [], []
-        deadline = time.monotonic() + 60
-        try:
-            while (not seq or seq[-1] < n - 1) and time.monotonic() < deadline:
-                if pending:
-                    try:
-                        del pending[:os.write(fd, pending)]
-                    except BlockingIOError:
-                        pass
-                for s in src.read(0.01):
-                    seq.append(s.seq)
-                    u.append(s.u)
-                    y.append(s.y)
-        finally:
-            os.close(fd)
-            src.close()
+        seq, u, y = send_commands(plant, cmd)
         ledger = plant.wait_event("end", timeout=20)["ledger"]
-    seq, u, y = np.array(seq), np.array(u), np.array(y)
     assert seq.size == n and np.array_equal(seq, np.arange(n))
     wrong = np.abs(u - cmd) > 1e-6            # the wire carries 1e-6 per LSB
     assert ledger["crc_errors"] == 0 and ledger["commands"] == n - ledger["stale"]
@@ -71,12 +78,17 @@ def test_plant_applies_the_commands_and_the_output_follows_the_reference():
         assert np.max(np.abs(y - shaped)[settled]) < 1e-4 + lsb
 
 
-def test_demo_compensate_writes_the_compensation_report(tmp_path):
-    env = dict(os.environ, PYTHONPATH=str(REPO))
+def run_demo(tmp_path: Path, *flags: str) -> tuple[subprocess.CompletedProcess, Path]:
+    """``creep-online demo --compensate FLAGS --quiet`` in its own process; (the run, its report folder)."""
     report = tmp_path / "rep"
-    proc = subprocess.run([sys.executable, "-m", "creep_online", "demo", "--compensate", "--duration", "5",
-                           "--period", "1", "--report", str(report), "--quiet"],
-                          capture_output=True, text=True, env=env, timeout=300, cwd=tmp_path)
+    proc = subprocess.run([sys.executable, "-m", "creep_online", "demo", "--compensate", *flags, "--report",
+                           str(report), "--quiet"], capture_output=True, text=True,
+                          env=dict(os.environ, PYTHONPATH=str(REPO)), timeout=300, cwd=tmp_path)
+    return proc, report
+
+
+def test_demo_compensate_writes_the_compensation_report(tmp_path):
+    proc, report = run_demo(tmp_path, "--duration", "5", "--period", "1")
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "creep error" in proc.stdout
     summary = json.loads((report / "summary.json").read_text())
@@ -128,3 +140,50 @@ def test_command_frames_survive_garbage_and_bit_flips_on_a_real_pty():
     assert led.garbage_bytes >= 10
     np.testing.assert_allclose(runner.cmd[[0, 1, 4]], [0.1, 0.2, 0.4], atol=1e-6)   # 1e-6 per LSB
     assert np.isnan(runner.cmd[[2, 3, 5]]).all()
+
+
+def test_demo_compensate_with_hysteresis_compensates_loop_and_creep(tmp_path):
+    """``demo --compensate --effects hysteresis`` (8 s): the live loop and creep compensated on the scan, measured
+    over the pty, against creep-only and uncompensated simulated on the same plant."""
+    proc, report = run_demo(tmp_path, "--effects", "hysteresis", "--duration", "8")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "hysteresis: 2 Hz triangle scan" in proc.stdout
+    h = json.loads((report / "summary.json").read_text())["compensation"]["hysteresis"]
+    tr = h["tracking_rms"]
+    assert len(h["loop"]["r"]) == 30                       # (hil_sim's loop for a bare --effects hysteresis)
+    assert h["live_loop"] is not None and len(h["live_loop"]["w"]) == 8
+    assert tr["uncompensated_simulated"] > 10 * tr["compensated"]
+    assert tr["creep_only_simulated"] > 3 * tr["compensated"]
+    assert (report / "compensation.png").is_file()
+
+
+def test_demo_compensate_refuses_effects_it_cannot_invert(tmp_path):
+    proc, _ = run_demo(tmp_path, "--effects", "delay")
+    assert proc.returncode == 2 and "cannot be combined with --effects delay" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_command_input_plant_with_hysteresis_over_a_pty():
+    """1 s at 10 kHz through ``--effects hysteresis``: the output is the exact simulation of the applied
+    commands through the given loop (the JSON form of --effects)."""
+    rate, n = 10_000.0, 10_000
+    loop = {"r": [0.05, 0.15, 0.3], "w": [0.2, 0.1, 0.05]}
+    with PlantProcess(["--rate", repr(rate), "--duration", "1", "--command-input", "--noise", "0",
+                       "--effects", json.dumps({"hysteresis": loop}), "--linger", "1"]) as plant:
+        truth = CreepModel(**plant.ready["model"])
+        assert plant.ready["effects"] == {"hysteresis": loop}
+        t = np.arange(n) / rate
+        cmd = 0.4 * (1 - np.cos(2 * np.pi * 3.0 * t))
+        seq, u, y = send_commands(plant, cmd, rate)
+    assert np.array_equal(seq, np.arange(n))
+    y_sim = simulate_with_effects(truth, t, u, {"hysteresis": {**loop, "initial": "centred"}})
+    assert np.max(np.abs(y - y_sim)) < 1e-4 + 10.0 / 2 ** 20
+
+
+def test_command_input_refuses_other_effects_in_one_line():
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    for effects, message in (("drift", "cannot be combined with --effects drift"),
+                             ('{"hysteresis": {"r": [0.1, 0.2], "w": [0.1]}}', "--effects hysteresis:")):
+        proc = subprocess.run([sys.executable, "-m", "hil_sim", "--command-input", "--effects", effects],
+                              capture_output=True, text=True, env=env, timeout=120)
+        assert proc.returncode == 2 and message in proc.stderr and "Traceback" not in proc.stderr
+        assert len(proc.stderr.strip().splitlines()) == 1

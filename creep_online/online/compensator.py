@@ -186,7 +186,13 @@ class CreepCompensator(StoredParams, Checkpointable):
         return self._tau
 
     def set_model(self, model: CreepModel | ExtendedModel | None) -> "CreepCompensator":
-        """Compute from now on with ``model`` (cheap: K powers; nothing happens if it is unchanged)."""
+        """Compute from now on with ``model`` (cheap: K powers; nothing happens if it is unchanged).
+
+        A new loop (``hysteresis``) with the thresholds of the current one keeps the operators' memory
+        (``carry_play_states``: a live estimate's new weights move the command by no jump); a loop with other
+        thresholds restarts its operators centred on the next command. ModelError (nothing changed) for a model
+        it cannot take: effects it does not invert, a loop that is not monotone, an unstable pinned recursion.
+        """
         if model is self._current or (model is not None and model == self._current):
             return self
         if model is None:
@@ -194,6 +200,8 @@ class CreepCompensator(StoredParams, Checkpointable):
             self._base = None
             return self
         base, offset, hysteresis = _split(model)
+        old_hy = self._current.effects.get("hysteresis") if isinstance(self._current, ExtendedModel) else None
+        new_hy = pack_hysteresis(hysteresis) if hysteresis is not None and hysteresis != old_hy else None
         if self._tau is None:
             self._build(1.0 / (2.0 * math.pi * BANDWIDTH_FRACTION * base.fn))
         ur, Wz, Ux = self._coefficients(base)       # (into the spare buffers)
@@ -205,10 +213,13 @@ class CreepCompensator(StoredParams, Checkpointable):
         self._Wz[...] = Wz
         self._Ux[...] = Ux
         self._ur = ur
-        old_hy = self._current.effects.get("hysteresis") if isinstance(self._current, ExtendedModel) else None
         if hysteresis != old_hy:
             self._hy_on = hysteresis is not None
-            self._hy = pack_hysteresis(hysteresis) if hysteresis is not None else np.zeros(4)
+            if new_hy is None:
+                new_hy = np.zeros(4)
+            elif old_hy is not None:
+                carry_play_states(self._hy, new_hy)    # same thresholds: the operators keep their memory
+            self._hy = new_hy
         if self._current is not None:
             self.model_changes += 1
         if self._base is not None and base.b != self._base.b:
@@ -244,7 +255,9 @@ class CreepCompensator(StoredParams, Checkpointable):
     def accepts(self, model: CreepModel | ExtendedModel) -> bool:
         """Can ``set_model(model)`` take this model (effects it inverts, a stable pinned recursion)?"""
         try:
-            base, _, _ = _split(model)
+            base, _, hysteresis = _split(model)
+            if hysteresis is not None:
+                pack_hysteresis(hysteresis)      # (an invertible loop)
         except ModelError:
             return False
         if self._tau is None:
@@ -374,6 +387,33 @@ def pack_hysteresis(params: dict) -> np.ndarray:
     c = INITIAL_STATES[initial]
     n = r.size
     return np.concatenate(([n, w0h, 1.0], rh, wh, c * rh, r[order], w[order], c * r[order], [0.0]))
+
+
+def carry_play_states(old: np.ndarray, new: np.ndarray) -> bool:
+    """Carry the operators' states of the packed loop ``old`` into ``new`` (both ``pack_hysteresis``) when they have
+    the same thresholds (only the weights changed: a live estimate's update); returns whether it did.
+
+    Why: a loop restarted centred on the next command forgets which branch the actuator is on, and the command
+    jumps by up to the loop's width at every update of the weights. The forward plays depend on the input and the
+    thresholds only, so they are copied. The inverse operator's plays follow from them: with thresholds ascending
+    and ``S_j = 1 + w_1 + .. + w_j``, the play of threshold ``rh_j`` (``pi_inverse``) on ``v = u + sum_i w_i p_i``
+    is ``S_(j-1) p_j + sum_(i >= j) w_i p_i`` (it is ``v - rh_j`` or ``v + rh_j`` wherever p_j moves, and it moves
+    exactly when p_j does). With other thresholds nothing is carried: ``new`` starts centred on its first command.
+    """
+    n = int(new[0])
+    if int(old[0]) != n or n == 0 or old[3 + 6 * n] == 0.0:
+        return False
+    o = 3
+    if not np.array_equal(old[o + 3 * n:o + 4 * n], new[o + 3 * n:o + 4 * n]):
+        return False
+    p = old[o + 5 * n:o + 6 * n].copy()
+    w = new[o + 4 * n:o + 5 * n]
+    s_prev = 1.0 + np.concatenate(([0.0], np.cumsum(w)[:-1]))
+    tail = np.cumsum(w[::-1] * p[::-1])[::-1]
+    new[o + 2 * n:o + 3 * n] = s_prev * p + tail
+    new[o + 5 * n:o + 6 * n] = p
+    new[o + 6 * n] = 1.0
+    return True
 
 
 def _split(model: CreepModel | ExtendedModel) -> tuple[CreepModel, float, dict | None]:

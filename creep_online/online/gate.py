@@ -22,13 +22,21 @@ change pending) and chooses the resonance separately:
 An estimate is taken only once alpha and b have stayed determined for ``DWELL_S``. The rule and its thresholds
 are the quality rule's (``online/policy/quality.py``: ``model_source``); this class keeps what it must remember.
 
+The hysteresis loop (an estimator with ``effects=("hysteresis",)``: ``OnlineEstimate.hysteresis``) travels
+with the creep part of the same estimate: ``ExtendedModel(creep, {"hysteresis": loop})``. Never a new loop with
+an older creep part: the window fits b and the weights together, and they trade off (the large-signal gain
+``b (1 + sum w)`` is what the data fix), so only the pair is a model. An estimate whose loop is not invertible with
+the fit's margin (``effects.hysteresis.flattest_branch`` below ``SLOPE_FLOOR``: a branch of the inverse unbounded)
+gives nothing.
+
 The estimator's ``quality`` is not touched: it still says ``provisional`` and why.
 """
 from __future__ import annotations
 
 import math
 
-from ..model import CreepModel
+from ..effects.hysteresis import SLOPE_FLOOR, flattest_branch
+from ..model import CreepModel, ExtendedModel
 from .policy.quality import CREEP, DWELL_S, RESONANCE, ROUGH, model_source
 from .stored_params import StoredParams
 
@@ -52,8 +60,19 @@ class ModelGate(StoredParams):
         self.source = ""
         return self
 
-    def model(self, estimate) -> CreepModel | None:
-        """The model a compensator may take from ``estimate`` (an ``OnlineEstimate``), or None."""
+    def model(self, estimate) -> CreepModel | ExtendedModel | None:
+        """The model a compensator may take from ``estimate`` (an ``OnlineEstimate``), or None: keep what it has.
+
+        With a live loop in the estimate: the creep part extended by that loop (None if it is not invertible).
+        """
+        creep = self._creep_model(estimate)
+        loop = getattr(estimate, "hysteresis", None)
+        if creep is None or loop is None:
+            return creep
+        return ExtendedModel(creep, {"hysteresis": loop}) if _invertible(loop) else None
+
+    def _creep_model(self, estimate) -> CreepModel | None:
+        """The creep part (alpha, b and a resonance) the rule gives now, or None."""
         determined = set(getattr(estimate, "determined", ()))
         if not set(CREEP) <= determined:
             self._since = None
@@ -88,3 +107,9 @@ def _relative_std(estimate, name: str) -> float:
     value = abs(float(getattr(estimate, name)))
     std = float(estimate.uncertainty.get(name, math.inf))
     return std / value if value > 0 else math.inf
+
+
+def _invertible(loop: dict) -> bool:
+    """Does the loop's inverse have every branch within 1 / SLOPE_FLOOR of its mean (the fit's own rule)?"""
+    r, w = loop.get("r") or [], loop.get("w") or []
+    return len(r) == len(w) and (not r or flattest_branch(r, w) >= SLOPE_FLOOR)
