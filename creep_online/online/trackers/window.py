@@ -102,7 +102,8 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         #: after a rest at the start, the first sample whose plays do not depend on their state at the stream's start
         #: (``settle_loop``): replays leave the samples before it out of the window's statistics
         self.loop_from = 0
-        self._loop_swept = 0.0           # the sweep (2 r of the largest opened play) that set ``loop_from``
+        self._loop_swept = 0.0           # the last sweep found (2 r of the largest opened play) and its sample
+        self._loop_swept_at = 0
         self.lay = W.layout(self.q, self.n_free, self.n_rate, self.n_hyst)
         self.p = self.lay["p"]
         #: samples per light unit of a replay (each costs the P^2 statistics update, which runs as blocked
@@ -217,29 +218,30 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         HK.rethreshold(self.st, o, self.n_hyst, self.q, self.hyst_r, float(oldest), self.ztail)
         return True
 
-    def settle_loop(self) -> bool:
-        """After a rest at the stream's start (HYSTERESIS_REST_S or longer): has the input now swept the opened plays
-        free of their start (a rise or fall of 2 r_i, ``hysteresis.sweep``), for thresholds it had not yet swept?
-        Then ``loop_from`` moves to now and the caller replays the remembered samples without the ones before it.
+    def settle_loop(self, rms: float, floor: float) -> bool:
+        """After a rest at the stream's start (HYSTERESIS_REST_S or longer), once the input has swept the opened plays
+        free of their start (a rise or fall of 2 r_i, ``hysteresis.sweep``): does the window misfit (after a re-fit:
+        its rms error ``rms``, the noise floor ``floor``, ``ResearchRule.misfits``)? Then ``loop_from`` moves to the
+        sweep and the caller replays the remembered samples without the ones before it.
 
         The start columns (``_kernels/hysteresis.py``) model the plays' unknown start as a difference that begins
         with the stream (the input and the plays are zero before it, the window's reading of its start); a device
         at rest has sat in its start long before, so its rest's output is not that difference's creeping step. On
         the real 150 V record (3 s at rest on the ascending branch, then a 1 Hz sine) the rest's samples kept the
         window at 2.7x the noise floor; without the samples before the sweep, 1.5x. Streams that move from their
-        first samples keep them: there the start columns fit them, and they tell the weights apart best (the
-        first branch of a periodic input)."""
+        first samples keep them, and so does a window that fits them (a plant resting centred): there they tell
+        the weights apart best (the first branch of a periodic input)."""
         o = self.lay["hyst"]
         if not self.n_hyst or self.st[o + HK.REST] * self.h < HYSTERESIS_REST_S:
             return False
         opened = HK.opened(self.st, o, self.n_hyst)
-        if not opened.any():
+        if opened.any():
+            need = 2.0 * float(self.hyst_r[opened].max())
+            if need > self._loop_swept and HK.sweep(self.st, o) >= need:
+                self._loop_swept, self._loop_swept_at = need, self.n
+        if self._loop_swept_at <= self.loop_from or not self.settings.research.misfits(rms, floor):
             return False
-        need = 2.0 * float(self.hyst_r[opened].max())
-        if need <= self._loop_swept or HK.sweep(self.st, o) < need:
-            return False
-        self._loop_swept = need
-        self.loop_from = self.n
+        self.loop_from = self._loop_swept_at
         return True
 
     @property
