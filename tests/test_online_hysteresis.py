@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from creep_online.effects.hysteresis import (hysteresis_input, play_operators, solve_pi_weights,
+from creep_online.effects.hysteresis import (hysteresis_input, initial_plays, play_operators, solve_pi_weights,
                                              threshold_fractions)
 from creep_online.errors import DataError
 from creep_online.model import CreepModel
@@ -25,27 +25,38 @@ from creep_online.simulate import simulate
 H = 1e-4
 
 
-def _state(basis: SoeBasis, r: np.ndarray, a1l: float, a2l: float, m_seed: int = 0) -> np.ndarray:
-    """A window state with len(r) hysteresis columns, random model coefficients m, statistics off (states only)."""
-    q, k = basis.size, r.size
-    lay = W.layout(q, 0, 0, k)
+def _state(basis: SoeBasis, r: np.ndarray, a1l: float, a2l: float, m_seed: int = 0,
+           w: np.ndarray | None = None) -> np.ndarray:
+    """A window state with len(r) plays (and the start columns), random model coefficients m, weights w (default
+    0), statistics off (states only)."""
+    q, nh = basis.size, HK.columns_for(r.size)
+    lay = W.layout(q, 0, 0, nh)
     st = np.zeros(lay["size"])
-    W.start_state(st, basis.decay, basis.gain, np.zeros(0), 0.999, basis.h, a1l, a2l, 0, k)
+    W.start_state(st, basis.decay, basis.gain, np.zeros(0), 0.999, basis.h, a1l, a2l, 0, nh)
     HK.set_thresholds(st, lay["hyst"], r)
     st[lay["m"]:lay["m"] + q + 2] = np.random.default_rng(m_seed).standard_normal(q + 2)
-    st[lay["hyst"] + HK.GAIN] = 1.7                       # (b of the coefficients: the columns are unit-gain)
+    theta = np.zeros(5 + nh)
+    theta[3] = 1.7                                        # (b of the coefficients: the columns are unit-gain)
+    theta[5:5 + r.size] = 1.7 * (np.zeros(r.size) if w is None else w)
+    HK.set_gain(st, lay["hyst"], nh, theta, 5)
     return st
 
 
-def _direct_columns(basis: SoeBasis, u: np.ndarray, r: np.ndarray, m: np.ndarray, a1l: float, a2l: float) -> np.ndarray:
-    """Each play's column before each sample, the slow way: plays, then nodes and resonance states one by one."""
+def _direct_columns(basis: SoeBasis, u: np.ndarray, r: np.ndarray, m: np.ndarray, a1l: float, a2l: float,
+                    w: np.ndarray | None = None) -> np.ndarray:
+    """Each play's column before each sample, the slow way: plays, then nodes and resonance states one by one;
+    then (with weights w) the start columns': the ascending and the descending start's loop input less the
+    centred one's, sum_i w_i (p_i^s - p_i)."""
     q = basis.size
     res = np.empty(6)
     W.resonance_step(a1l, a2l, basis.h, res)
     phi_r, gam = res[:4].reshape(2, 2), res[4:6]
     plays = play_operators(u, r)
-    out = np.empty((r.size, u.size))
-    for i in range(r.size):
+    if w is not None:
+        plays = np.vstack([plays] + [w @ (play_operators(u, r, initial=initial_plays(u[0], r, s)) - plays[:r.size])
+                                     for s in ("ascending", "descending")])
+    out = np.empty((plays.shape[0], u.size))
+    for i in range(plays.shape[0]):
         z, x = np.zeros(q), np.zeros(2)
         for n in range(u.size):
             out[i, n] = z @ m[:q] + x @ m[q:q + 2]
@@ -61,17 +72,20 @@ def test_the_columns_are_the_plays_through_the_nodes_and_the_resonance():
     u[200:230] = u[199]                                   # holds: the plays keep their states
     r = threshold_fractions(4) * np.ptp(u)
     a1l, a2l = 2 * 0.2 / (2 * math.pi * 300), 1 / (2 * math.pi * 300) ** 2
-    st = _state(basis, r, a1l, a2l)
+    w = np.array([0.3, -0.1, 0.2, 0.05])
+    st = _state(basis, r, a1l, a2l, w=w)
     ring = np.zeros((2, 4096))
-    lay = W.layout(basis.size, 0, 0, r.size)
+    nh = HK.columns_for(r.size)
+    lay = W.layout(basis.size, 0, 0, nh)
     c0 = lay["phi"] + basis.size + W.FREE
-    got = np.empty((r.size, u.size))
+    got = np.empty((nh, u.size))
     S = np.zeros((lay["p"], lay["p"]))
     for n in range(u.size):
         W.sample(u[n], math.nan, st, S, ring)
-        got[:, n] = st[c0:c0 + r.size]
+        got[:, n] = st[c0:c0 + nh]
     m = st[lay["m"]:lay["m"] + basis.size + 2]
-    want = _direct_columns(basis, u, r, m, a1l, a2l) / 1.7
+    want = _direct_columns(basis, u, r, m, a1l, a2l, w) / 1.7
+    assert np.abs(want[r.size:]).max() > 0.1 * np.abs(want[:r.size]).max()     # (the start columns are not empty)
     # (the kernel computes the column at a sample from the states before it, as the direct loop does)
     assert np.allclose(got, want, rtol=1e-10, atol=1e-12 * np.abs(want).max())
 
@@ -83,7 +97,8 @@ def test_the_tails_hold_the_plays_and_nodes_before_the_oldest_remembered_sample(
     r = threshold_fractions(3) * np.ptp(u)
     st = _state(basis, r, 1e-3, 1e-7)
     ring = np.zeros((2, 128))                             # the ring overflows: the tails absorb 372 samples
-    lay = W.layout(basis.size, 0, 0, r.size)
+    nh = HK.columns_for(r.size)
+    lay = W.layout(basis.size, 0, 0, nh)
     S = np.zeros((lay["p"], lay["p"]))
     for x in u:
         W.sample(x, math.nan, st, S, ring)
@@ -94,7 +109,7 @@ def test_the_tails_hold_the_plays_and_nodes_before_the_oldest_remembered_sample(
     z = np.zeros((k, q))
     for n in range(old):
         z = basis.decay * z + basis.gain * plays[:, n][:, None]
-    ct = HK.channels_at(o, k) + k * (q + 2)
+    ct = HK.channels_at(o, nh) + nh * (q + 2)
     assert np.allclose(st[ct:ct + k * q].reshape(k, q), z, rtol=1e-12, atol=1e-14)
 
 
@@ -107,16 +122,18 @@ def test_a_replay_of_the_ring_reproduces_the_live_statistics():
     u = np.round(np.cumsum(rng.standard_normal(n)) * 0.2, 2)
     y = rng.standard_normal(n)
     r = threshold_fractions(3) * np.ptp(u)
-    st = _state(basis, r, 1e-3, 1e-7)
-    lay = W.layout(basis.size, 0, 0, r.size)
+    w = np.array([0.2, -0.05, 0.1])
+    st = _state(basis, r, 1e-3, 1e-7, w=w)
+    nh = HK.columns_for(r.size)
+    lay = W.layout(basis.size, 0, 0, nh)
     p = lay["p"]
     S = np.zeros((p, p))
     ring = np.zeros((2, 1024))
     for a, b in zip(u, y):
         W.sample(a, b, st, S, ring)                       # (gate off, statistics on: every sample accumulated)
-    rep = _state(basis, r, 1e-3, 1e-7)
+    rep = _state(basis, r, 1e-3, 1e-7, w=w)
     rep[lay["m"]:lay["sy"]] = st[lay["m"]:lay["sy"]]
-    HK.replay_origin(rep, st, lay["hyst"], r.size, basis.size)
+    HK.replay_origin(rep, st, lay["hyst"], nh, basis.size)
     S2 = np.zeros((p, p))
     W.replay_direct(ring, 0, n, 0, rep, S2)
     assert np.allclose(S2, S, rtol=1e-10, atol=1e-12 * np.abs(S).max())
@@ -157,6 +174,42 @@ def test_the_online_weights_match_the_batch_least_squares_on_a_hammerstein_plant
     assert np.max(np.abs(w_online - w_batch)) <= 0.05 * np.max(np.abs(w_batch))
     assert abs(e.alpha / model.alpha - 1) < 0.05 and abs(e.b / model.b - 1) < 0.02
     assert e.quality != "degraded"
+
+
+def _resting_on_a_branch(seed: int, initial: str, rest_s: float = 2.0, seconds: float = 10.0, fs: float = 5000.0):
+    """The plant of ``_hammerstein`` resting on the branch ``initial`` (its plays at u - r or u + r since long
+    before the record) for ``rest_s``, then a 1 Hz triangle from the rest level up: the record is the deviation
+    from that rest."""
+    rng = np.random.default_rng(seed)
+    h = 1.0 / fs
+    t = np.arange(int(seconds * fs)) * h
+    wn = 2 * math.pi * rng.uniform(200, 500)
+    zeta = rng.uniform(0.2, 0.5)
+    model = CreepModel(rng.uniform(0.03, 0.2), 2 * zeta / wn, 1 / wn ** 2, rng.uniform(0.5, 3.0))
+    phase = np.maximum(t - rest_s, 0.0)
+    u = np.round(4.0 * (1.0 - np.abs(2.0 * (phase % 1.0) - 1.0)) * 250) / 250
+    r = threshold_fractions(8) * np.ptp(u)
+    w = rng.uniform(0.02, 0.1) * np.exp(-np.arange(8) / rng.uniform(1.0, 3.0))
+    v = hysteresis_input(u, r, w, initial)
+    y = simulate(model, t, v - v[0])
+    noise = 1e-4 * np.ptp(y)
+    return h, u, y + noise * rng.standard_normal(t.size), model, w
+
+
+@pytest.mark.parametrize("seed, initial", [(22, "ascending"), (23, "descending"), (23, "centred")])
+def test_a_plant_resting_on_a_branch_is_fitted_at_the_floor(seed, initial):
+    """The plays start centred; a plant at rest on a branch differs from that until the input has swept the
+    plays, and a window holding the rest misfits it: the rest's samples are left out once the window misfits
+    (the start columns alone left these at 2.9x and 3.1x the floor). A plant resting centred keeps them, and
+    its creep and loop come out right."""
+    h, u, y, model, w = _resting_on_a_branch(seed, initial)
+    est = OnlineEstimator(h, effects=("hysteresis",))
+    est.update_block(u, y)
+    e = est.estimate
+    assert e.quality != "degraded" and e.residual_rms <= 1.5 * e.noise_rms
+    if initial == "centred":
+        assert abs(e.alpha / model.alpha - 1) < 0.02 and abs(e.b / model.b - 1) < 0.03
+        assert np.max(np.abs(np.asarray(e.hysteresis["w"]) - w)) <= 0.05 * np.max(w)
 
 
 def test_effects_are_stored_verbatim_and_validated():

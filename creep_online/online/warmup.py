@@ -84,6 +84,7 @@ def _warm_hysteresis(u: np.ndarray) -> None:
     o, k, q = tr.lay["hyst"], tr.n_hyst, tr.q
     st = tr.st.copy()
     HK.rethreshold(st, o, k, q, tr.hyst_r.copy(), 0.0, tr.ztail)
+    HK.set_gain(st, o, k, tr.theta, 5 + tr.n_free)
     HK.replay_origin(st, tr.st, o, k, q)
     HK.swap_block(tr.st, st, o, k, q)
     W.swap_into(tr.st.copy(), st, tr.theta, tr.basis.lam, tr.basis.dx)

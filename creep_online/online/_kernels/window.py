@@ -301,8 +301,9 @@ def set_estimate(theta: np.ndarray, st: np.ndarray, lam: np.ndarray, dx: float) 
     full_coefficients(theta, a1l, a2l, lam, dx, m)
     if int(sc[SC_NR]) > 1:
         drift_coefficients(theta, a1l, a2l, lam, dx, md)
-    if int(sc[SC_NH]) > 0:               # the hysteresis columns are unit-gain: they divide by this b
-        st[HK.block_at(q, int(sc[SC_NM]), int(sc[SC_NR]), int(sc[SC_NH])) + HK.GAIN] = theta[3]
+    if int(sc[SC_NH]) > 0:               # the hysteresis columns are unit-gain: they divide by this b (and the start
+        nh = int(sc[SC_NH])              # columns weigh the plays with the weights)
+        HK.set_gain(st, HK.block_at(q, int(sc[SC_NM]), int(sc[SC_NR]), nh), nh, theta, 5 + int(sc[SC_NM]))
     sc[SC_BABS] = abs(theta[3])
     settle = 8.0 * math.exp(theta[2]) / math.exp(theta[1])
     h = sc[SC_H]

@@ -45,7 +45,7 @@ class Replayer:
         yield                              # (with the set-up below, ~55-65 us cold)
         lay = tr.lay
         oldest = int(tr.sc[W.SC_RSTART])
-        begin = max(tr.window_start if start is None else start, oldest)
+        begin = max(tr.window_start if start is None else start, oldest, tr.loop_from)
         # the states are replayed from the oldest remembered sample, exact for the nodes; the
         # resonance states start at zero, which is exact only at the record's start: otherwise
         # they are not trusted before two settling times
@@ -60,8 +60,8 @@ class Replayer:
         yield
         if tr.n_rate or tr.n_hyst:        # (the drift and hysteresis columns are computed with them)
             W.full_coefficients(tr.theta, a1, a2, tr.basis.lam, tr.basis.dx, st[lay["m"]:lay["sy"]])
-            if tr.n_hyst:                  # (the unit-gain hysteresis columns divide by b)
-                st[lay["hyst"] + HK.GAIN] = tr.theta[3]
+            if tr.n_hyst:                  # (the unit-gain hysteresis columns divide by b; the start columns weigh)
+                HK.set_gain(st, lay["hyst"], tr.n_hyst, tr.theta, 5 + tr.n_free)
             if tr.n_rate > 1:
                 W.drift_coefficients(tr.theta, a1, a2, tr.basis.lam, tr.basis.dx, st[lay["md"]:lay["hyst"]])
         chunk = tr.replay_chunk
@@ -144,7 +144,7 @@ class Replayer:
             yield
         zeta = st[tr.lay["phi"]:tr.lay["phi"] + tr.q].copy()
         if tr.n_hyst:                      # the corrected input's nodes, and the plays at n0 for ``ring_segment``
-            tr._segment_plays = HK.corrected_nodes(st, tr.lay["hyst"], tr.n_hyst, tr.q, tr.hysteresis_weights, zeta)
+            tr._segment_plays = HK.corrected_nodes(st, tr.lay["hyst"], tr.n_hyst, tr.q, tr.hysteresis_coefficients, zeta)
         return zeta
 
     def ring_segment(self, tr: WindowTracker, n0: int, n1: int) -> Generator:
@@ -154,7 +154,7 @@ class Replayer:
         u, y = tr._segment[0, :n1 - n0], tr._segment[1, :n1 - n0]
         size, slot = tr.ring.shape[1], tr._ring_position(n0)
         if tr.n_hyst:                      # the search sees the input corrected by the live loop (``nodes_at``'s plays)
-            plays, w = tr._segment_plays.copy(), tr.hysteresis_weights
+            plays, w = tr._segment_plays.copy(), tr.hysteresis_coefficients
         for k0 in range(0, n1 - n0, tr.settings.segment_chunk):
             k1 = min(n1 - n0, k0 + tr.settings.segment_chunk)
             W.ring_copy(tr.ring, (slot + k0) % size, u[k0:k1], y[k0:k1])

@@ -176,7 +176,7 @@ class Scheduler:
             tr.researcher.watch(tr, rms, False, n, noise, raw)
         self.pace_refits(tr, tr.converged and move < tr.settings.calm_move and rms <= tr.settings.research.clear_ratio * noise
                           and not (relinearize or fine) and not (tr.events and not tr.events[-1]["settled"]))
-        if not self.queued(tr, "relinearize_job") and tr.widen_loop():
+        if not self.queued(tr, "relinearize_job") and (tr.widen_loop() | tr.settle_loop(rms, noise)):
             relinearize = True             # (the plays' thresholds follow a wider input range: a replay rebuilds them)
         if relinearize or fine:
             if not self.queued(tr, "relinearize_job"):

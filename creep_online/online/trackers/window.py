@@ -66,6 +66,8 @@ DETERMINED = DEFAULT.determined
 #: The play operators' thresholds follow the input's range once it is this much wider than the one they were set for
 #: (``widen_loop``; each widening is a replay of the remembered samples).
 HYSTERESIS_WIDEN = 1.05
+#: A stream that held its first input this long (s) before moving started at rest (``settle_loop``).
+HYSTERESIS_REST_S = 0.1
 
 
 class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
@@ -89,13 +91,19 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         self._free_decays = self.settings.free_rates if free else ()
         #: hysteresis columns: play operators filtered by the plant, their weights linear parameters of the window's
         #: fit beside the offset (``_kernels/hysteresis.py``); their thresholds from the input's span (``start_state``)
-        self.n_hyst = int(hysteresis)
+        self.n_plays = int(hysteresis)
+        self.n_hyst = HK.columns_for(self.n_plays)     # (the plays' and the start columns)
         #: drift columns: 0 none, 1 gain rate, 2 gain and alpha rates. None with the hysteresis columns: a drift column
         #: is the model's output times the time, and the loop's part is not in it (with it, the rates took up the
         #: loop's misfit: a false change and the resonance lost within 10 s on a plain 1 Hz triangle)
         self.n_rate = 0 if self.n_hyst else int(drift)
-        self.hyst_r = np.zeros(self.n_hyst)
+        self.hyst_r = np.zeros(self.n_plays)
         self._hyst_span = 0.0            # the input range the thresholds are set for
+        #: after a rest at the start, the first sample whose plays do not depend on their state at the stream's start
+        #: (``settle_loop``): replays leave the samples before it out of the window's statistics
+        self.loop_from = 0
+        self._loop_swept = 0.0           # the last sweep found (2 r of the largest opened play) and its sample
+        self._loop_swept_at = 0
         self.lay = W.layout(self.q, self.n_free, self.n_rate, self.n_hyst)
         self.p = self.lay["p"]
         #: samples per light unit of a replay (each costs the P^2 statistics update, which runs as blocked
@@ -173,7 +181,7 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         W.start_at(np.asarray(theta, dtype=float), self.theta, fit.theta, st, self.basis.lam, self.basis.dx)
         if self.n_hyst:                  # (the operators start at the first sample fed, centred on it)
             if u_span is not None:
-                self.hyst_r[:] = threshold_fractions(self.n_hyst) * float(u_span)
+                self.hyst_r[:] = threshold_fractions(self.n_plays) * float(u_span)
                 self._hyst_span = float(u_span)
             HK.set_thresholds(st, self.lay["hyst"], self.hyst_r)
 
@@ -186,6 +194,12 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
     def hysteresis_weights(self) -> np.ndarray:
         """The play operators' weights w_i (relative to b, as the batch fit's: theta holds b w_i), thresholds
         ascending."""
+        return self.theta[5 + self.n_free:5 + self.n_free + self.n_plays] / self.theta[3]
+
+    @property
+    def hysteresis_coefficients(self) -> np.ndarray:
+        """The weights w_i, then the start columns' sigma_s (ascending, descending): every hysteresis column's
+        coefficient over b (``_kernels/hysteresis.py``)."""
         return self.theta[5 + self.n_free:self.r0] / self.theta[3]
 
     def widen_loop(self) -> bool:
@@ -199,15 +213,42 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         if not span > HYSTERESIS_WIDEN * self._hyst_span:
             return False
         self._hyst_span = span
-        self.hyst_r[:] = threshold_fractions(self.n_hyst) * span
+        self.hyst_r[:] = threshold_fractions(self.n_plays) * span
         oldest = self.ring[0, self._ring_position(int(self.sc[W.SC_RSTART]))]
         HK.rethreshold(self.st, o, self.n_hyst, self.q, self.hyst_r, float(oldest), self.ztail)
+        return True
+
+    def settle_loop(self, rms: float, floor: float) -> bool:
+        """After a rest at the stream's start (HYSTERESIS_REST_S or longer), once the input has swept the opened plays
+        free of their start (a rise or fall of 2 r_i, ``hysteresis.sweep``): does the window misfit (after a re-fit:
+        its rms error ``rms``, the noise floor ``floor``, ``ResearchRule.misfits``)? Then ``loop_from`` moves to the
+        sweep and the caller replays the remembered samples without the ones before it.
+
+        The start columns (``_kernels/hysteresis.py``) model the plays' unknown start as a difference that begins
+        with the stream (the input and the plays are zero before it, the window's reading of its start); a device
+        at rest has sat in its start long before, so its rest's output is not that difference's creeping step. On
+        the real 150 V record (3 s at rest on the ascending branch, then a 1 Hz sine) the rest's samples kept the
+        window at 2.7x the noise floor; without the samples before the sweep, 1.5x. Streams that move from their
+        first samples keep them, and so does a window that fits them (a plant resting centred): there they tell
+        the weights apart best (the first branch of a periodic input)."""
+        o = self.lay["hyst"]
+        if not self.n_hyst or self.st[o + HK.REST] * self.h < HYSTERESIS_REST_S:
+            return False
+        opened = HK.opened(self.st, o, self.n_hyst)
+        if opened.any():
+            need = 2.0 * float(self.hyst_r[opened].max())
+            if need > self._loop_swept and HK.sweep(self.st, o) >= need:
+                self._loop_swept, self._loop_swept_at = need, self.n
+        if self._loop_swept_at <= self.loop_from or not self.settings.research.misfits(rms, floor):
+            return False
+        self.loop_from = self._loop_swept_at
         return True
 
     @property
     def hysteresis(self) -> dict | None:
         """The live loop as an ``effects["hysteresis"]`` dict (thresholds r, weights w, ``initial`` "centred"), or
-        None: no hysteresis columns, no window re-fit yet, or weights not finite."""
+        None: no hysteresis columns, no window re-fit yet, or weights not finite. (The start columns only say how
+        the stream's first samples differ from a centred start: not part of the loop.)"""
         w = self.hysteresis_weights
         if not self.n_hyst or self.refits == 0 or not np.all(np.isfinite(w)):
             return None
