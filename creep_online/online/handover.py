@@ -133,7 +133,8 @@ class Handover:
         start-up search's estimate comes from its grid on the search window, which a plant the model class does not
         hold (close unmodelled modes) can leave a fifth off in gain; the live predictions start from the window's
         own fit. Meanwhile the new samples are fed as live ones (the fit's slices run in the per-sample kernel),
-        only their predictions are not reported; in block mode the fit runs at once."""
+        only their predictions are not reported. In block mode (``EAGER``) it goes live at once: no prediction is
+        reported before the block's end, and the fit runs with the block's next samples."""
         est = self.est
         tr = est._tracker
         lead = self.startup.lead or 0
@@ -141,9 +142,7 @@ class Handover:
             k = self.replayed - lead
             tr.advance(float(self.startup.bu[k]), float(self.startup.by[k]), units)
             self.replayed += 1
-        if units >= EAGER:
-            tr.finish()
-        if tr.first_fit_pending:
+        if tr.first_fit_pending and units < EAGER:
             return
         est._recovery.went_live()
         est._catchup = 0

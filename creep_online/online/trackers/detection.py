@@ -92,8 +92,8 @@ class ChangeDetection:
         # 40 % 1-sigma passed as 5.9 sigma, it is 3.0 in ln a2, and the window restarted on no change)
         size = {"a1": abs(r.ln_a1 - r.live_ln_a1), "a2": abs(r.ln_a2 - r.live_ln_a2), "b": abs(moves["b"])}
         moved = rule.moved(moves, size, rel_sd)
-        if moved and self.misfit_explains(tr, r.before / max(nr, 1)):
-            moved = {}
+        if moved and self.misfit_explains(tr, r.before / max(nr, 1)) and self.settled_before(tr, n0, theta0):
+            moved = {}                     # (an estimate still settling is corrected, however large the misfit)
         tr.disagreement = {"t": tr.n * tr.h, "lr": float(lr), "moves": {k: float(v) for k, v in moved.items()}} \
             if rule.disagrees(lr, moved) else None
         if not rule.is_change(lr, level, moved) or lin != (tr.a1l, tr.a2l):
@@ -118,7 +118,9 @@ class ChangeDetection:
 
     def misfit_explains(self, tr: WindowTracker, second_ms: float) -> bool:
         """Does the window's misfit explain the tested second (``LikelihoodRatioTest.misfit_explains``)? The
-        window's mean square error is its last accepted fit's (cost over effective samples)."""
+        window's mean square error is its last accepted fit's (cost over effective samples). Asked only of a
+        settled estimate (``settled_before``): one still settling misfits because it is wrong, not because the
+        model class misses the data (a loop being learned: the start's correction restarts the window)."""
         last = getattr(tr, "_fit_raw", None)
         if last is None:
             return False
