@@ -51,6 +51,7 @@ GOAL_MB = 300.0
 WORKER = r"""
 import json, resource, sys, time
 from pathlib import Path
+import creep_online  # before numpy, as the command line: its one BLAS thread applies only if set before BLAS loads
 import numpy as np
 from creep_online.diagnostics import diagnose
 from creep_online.diagnostics.loading import load_for_diagnosis
