@@ -5,6 +5,9 @@ once", has the whole table and where it fails): two where the two best single fi
 were already the pair, and two where they were not and the pair search
 (``diagnostics/pairs.py``) is what finds it, one of them with a stand-in ranked first
 alone. Outcomes only, never timings.
+
+Each test diagnoses a 6,000-sample record through the pair search (20 s to 4 min of CPU each, 450 s together):
+the module is ``slow``, run by CI after the default suite (``.ci/run``).
 """
 from __future__ import annotations
 
@@ -13,6 +16,7 @@ import pytest
 from creep_online.diagnostics import diagnose
 from creep_online.effects import HYSTERESIS_COMPONENTS
 
+pytestmark = pytest.mark.slow
 
 
 def _bench():
