@@ -7,7 +7,8 @@ were already the pair, and two where they were not and the pair search
 alone. Outcomes only, never timings.
 
 Each test diagnoses a 6,000-sample record through the pair search (20 s to 4 min of CPU each, 450 s together):
-the module is ``slow``, run by CI after the default suite (``.ci/run``).
+the module is ``long``, run by CI after the default suite (``.ci/run``); its ``slow`` cases (more strengths of a
+path another case takes) are not.
 """
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ import pytest
 from creep_online.diagnostics import diagnose
 from creep_online.effects import HYSTERESIS_COMPONENTS
 
-pytestmark = pytest.mark.slow
+pytestmark = pytest.mark.long
 
 
 def _bench():
