@@ -27,8 +27,12 @@ output's stroke): a staircase over the stroke for 6 s (0.3 s holds), then a 2 Hz
 the gate's model at every block of 100 samples; ``frozen`` keeps the model it holds at 10 s. The error is the rms of
 the output minus the shaped reference over the last 20 s; goal: adaptive at least 3x smaller than frozen.
 
-Usage: ``python -m bench.bench_hysteresis_compensation [--plants 20] [--first-seed 0] [--drift-plants 4]``; JSON
-in ``bench/results/hysteresis_compensation.json``.
+``--attribute`` (with both sources): two mixed models on the same scans, ``live_creep+batch_loop`` (the live
+estimate's creep and resonance with the batch fit's loop) and ``batch_creep+live_loop``: which half of the live
+model the compensation error comes from.
+
+Usage: ``python -m bench.bench_hysteresis_compensation [--plants 20] [--first-seed 0] [--drift-plants 4]
+[--attribute]``; JSON in ``bench/results/hysteresis_compensation.json``.
 """
 from __future__ import annotations
 
@@ -52,6 +56,9 @@ from bench.harness import dist, results_path, write_report
 
 #: Model sources compared on the same plants.
 SOURCES = ("batch", "live")
+
+#: The mixed models of ``--attribute``: (name, the creep part's source, the loop's source).
+MIXED = (("live_creep+batch_loop", "live", "batch"), ("batch_creep+live_loop", "batch", "live"))
 
 #: Scan frequencies (Hz) and shapes.
 FREQUENCIES = (1.0, 3.0, 10.0)
@@ -104,7 +111,16 @@ def live_model(rec) -> tuple[ExtendedModel | None, dict]:
                    model.base.alpha - rec.model.alpha}
 
 
-def one_plant(seed: int, n_calibration: int, sources: tuple = SOURCES) -> dict:
+def mixed_models(models: dict) -> dict:
+    """``MIXED``: the creep part of one source's model with the other's loop (None where either has no model)."""
+    out = {}
+    for name, creep_from, loop_from in MIXED:
+        creep, loop = models.get(creep_from), models.get(loop_from)
+        out[name] = None if creep is None or loop is None else ExtendedModel(creep.base, loop.effects)
+    return out
+
+
+def one_plant(seed: int, n_calibration: int, sources: tuple = SOURCES, attribute: bool = False) -> dict:
     rec = hysteresis_record("random_staircase", seed, n=n_calibration)
     models, facts = {}, {}
     if "batch" in sources:
@@ -114,6 +130,8 @@ def one_plant(seed: int, n_calibration: int, sources: tuple = SOURCES) -> dict:
                                               offset=0.0)
     if "live" in sources:
         models["live"], facts["live"] = live_model(rec)
+    if attribute:
+        models.update(mixed_models(models))
     gain = float(np.linalg.lstsq(np.column_stack([rec.u, np.ones_like(rec.u)]), rec.y, rcond=None)[0][0])
     stroke = float(np.max(rec.u))
     h = float(rec.t[1] - rec.t[0])
@@ -237,15 +255,20 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--calibration-samples", type=int, default=40_000, help="calibration record length (10 kHz)")
     ap.add_argument("--sources", default=",".join(SOURCES), help="batch, live or both (comma-separated)")
     ap.add_argument("--drift-plants", type=int, default=4, help="plants of the drifting-loop comparison (0: none)")
+    ap.add_argument("--attribute", action="store_true", help="also the mixed models (live creep with the batch loop "
+                    "and the reverse; needs both sources)")
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
     sources = tuple(x for x in args.sources.split(",") if x)
+    if args.attribute and set(SOURCES) - set(sources):
+        ap.error("--attribute needs both sources (batch,live)")
+    summarised = sources + tuple(m[0] for m in MIXED) if args.attribute else sources
     start = time.perf_counter()
     rows = []
     for seed in range(args.first_seed, args.first_seed + args.plants):
-        rows.append(one_plant(seed, args.calibration_samples, sources))
+        rows.append(one_plant(seed, args.calibration_samples, sources, args.attribute))
         worst = {src: min((s["ratio"] for s in rows[-1]["scans"] if s["source"] == src), default=None)
-                 for src in sources}
+                 for src in summarised}
         print(f"seed {seed}: loop {100 * rows[-1]['loop_width_rel']:.1f} % worst ratio "
               + ", ".join(f"{k} {v:.1f}" for k, v in worst.items()), flush=True)
     drift = []
@@ -257,7 +280,7 @@ def main(argv: list[str] | None = None) -> dict:
                   + " ".join(f"{k} {v['rms_late_rel']:.2e}" for k, v in m.items()), flush=True)
     doc = {"plants": args.plants, "first_seed": args.first_seed, "calibration_samples": args.calibration_samples,
            "frequencies_hz": FREQUENCIES, "shapes": SHAPES, "goal_ratio": GOAL_RATIO,
-           "summary": {src: summary(rows, src) for src in sources}, "rows": rows,
+           "summary": {src: summary(rows, src) for src in summarised}, "rows": rows,
            "drift_goal": DRIFT_GOAL, "drift_summary": drift_summary(drift) if drift else None, "drift": drift,
            "elapsed_s": time.perf_counter() - start}
     write_report(doc, args.out or results_path("hysteresis_compensation"))
