@@ -5,7 +5,7 @@
   controller, so that two workers never compile the same kernel at once (on a fresh clone that is
   about a minute of CPU); the workers load them from numba's cache.
 * Units of work (``FileOrTestScheduling``): a test file goes to one worker whole, so that its
-  module fixtures are computed once; in the files of long diagnoses (``SPLIT``) each test (or
+  module fixtures are computed once; in the files of long tests (``SPLIT``) each test (or
   test class: tests that read one fixture are a class) is a unit of its own, so both workers
   share them. The longest units go out first (``RUN_FIRST``): they need only the batch kernels
   (compiled before the workers start), so the online kernels compile beside them, and the short
@@ -35,8 +35,10 @@ ONLINE_KERNELS = (
     "from creep_online.online import compensator, estimator, recursive\n"
     "estimator.warm_kernels(); recursive.warm(); compensator.warm_kernels()\n"
 )
-#: Files whose tests are each a long diagnosis: under -n every test (or test class) is a unit of work.
-SPLIT = ("test_real_data.py", "test_diagnose_pairs.py", "test_diagnostics.py")
+#: Files whose tests are each long (a diagnosis, a documentation page's examples, a replay of a record): under -n
+#: every test (or test class) is a unit of work, so that both workers share the file.
+SPLIT = ("test_real_data.py", "test_diagnose_pairs.py", "test_diagnostics.py", "test_docs.py",
+         "test_online_divergence.py", "test_hysteresis_fit.py")
 #: Under -n these files go out first, in this order (the longest first; the rest follow in collection order).
 RUN_FIRST = (*SPLIT, "test_online.py", "test_hil_faults.py", "test_bench_scenarios.py", "test_hold_physics.py",
              "test_scenarios.py", "test_diagnose_parallel.py", "test_readonly_install.py", "test_transport_pi.py",
@@ -95,7 +97,7 @@ def _unit_of_work(nodeid: str) -> str:
 
 @pytest.hookimpl(tryfirst=True, optionalhook=True)
 def pytest_xdist_make_scheduler(config: pytest.Config, log):
-    """pytest-xdist's file-at-a-time scheduling with the long diagnoses' files taken test by test."""
+    """pytest-xdist's file-at-a-time scheduling with the long tests' files taken test by test."""
     if config.getvalue("dist") != "loadscope":      # another --dist asked for on the command line: xdist's own
         return None
     from xdist.scheduler import LoadScopeScheduling

@@ -6,6 +6,10 @@ fit owns its designs, so nothing may differ: verdict, ranking, evidence, the
 fitted parameters, residual sums, evaluation counts and the combination. The
 records: a hidden hysteresis (its fit explores on a window of the record and a
 combination is fitted) and a clean one. No timing is asserted.
+
+The fits run with BLAS on one thread whatever the caller's process set (a
+program that imported numpy first gets OpenBLAS' threads, which only add
+synchronisation on these small matrices).
 """
 from __future__ import annotations
 
@@ -39,6 +43,30 @@ def test_parallel_diagnosis_equals_serial(effect, seed, n):
     parallel = diagnose((ds.t, ds.u, ds.y), workers=3)
     assert _outcome(parallel) == _outcome(serial)
     assert serial.verdict == (effect or "none")
+
+
+def test_the_fits_run_with_one_blas_thread_whatever_the_caller_set(monkeypatch):
+    """diagnose, fit_base, fit_extended and compare, called with BLAS allowed two threads, solve on one."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from creep_online.diagnostics import compare, extended, fit_base, fit_extended, prepare
+
+    seen = []
+    solve = extended._solve
+
+    def spying(*args):
+        seen.append(max(lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"))
+        return solve(*args)
+
+    monkeypatch.setattr(extended, "_solve", spying)
+    ds = hidden_dataset("drift", 3, n=2000)
+    with threadpool_limits(limits=2, user_api="blas"):
+        assert max(lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas") == 2
+        diagnose((ds.t, ds.u, ds.y), candidates=("drift",), combine=False, workers=2)
+        data = prepare(ds.t, ds.u, ds.y)
+        fit = fit_extended(data, ("drift",), fit_base(data))
+        compare(fit, (ds.t, ds.u, ds.y))
+    assert seen and set(seen) == {1}, sorted(set(seen))
 
 
 def test_ordered_map_keeps_order_and_raises_in_turn():

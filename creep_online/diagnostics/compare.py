@@ -33,6 +33,7 @@ from ..errors import DataError
 from ..metrics import fit_percent, noise_floor_fit, noise_std_estimate, rms
 from ..model import FittedModel
 from ..record import Record
+from .._threads import single_threaded
 
 #: ``compare``'s choices for the initial state.
 INITIAL_CHOICES = ("estimate", "zero")
@@ -95,6 +96,7 @@ class Comparison:
                           "fitted_fit_percent": self.model.fitted.get("fit_percent")}}
 
 
+@single_threaded
 def compare(model, record, *, initial: str = "estimate", u_pre: float | None = None,
             t_pre: float | None = None) -> Comparison:
     """The model's fit percent and residual on ``record``, the offset and initial state estimated.

@@ -29,6 +29,7 @@ from ..errors import CreepOnlineError, DataError
 from ..io.jsonable import jsonable
 from ..metrics import noise_std_estimate
 from ..record import Record
+from .._threads import single_threaded
 from . import extended as ext
 from .basis import verdict_basis
 from .bic import EVIDENCE_THRESHOLD, evidence
@@ -185,6 +186,7 @@ def _as_arrays(record_or_t_u_y, step_before: bool = False) -> tuple[np.ndarray, 
     return rec.t, rec.u, rec.y, rec.source
 
 
+@single_threaded
 def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_identify: bool = True,
              u_pre: float | None = None, t_pre: float | None = None, combine: bool = True,
              max_nfev: int = ext.MAX_NFEV, progress: Callable[[str], None] | None = None,

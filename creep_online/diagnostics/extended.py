@@ -39,6 +39,7 @@ from ..metrics import fit_percent, noise_std_estimate, rms
 from ..model import EXTENDED_FIT_ALPHA_BOUNDS as ALPHA_BOUNDS
 from ..model import CreepModel, ExtendedModel, FittedModel, with_effects
 from ..record import check_amplitudes, check_time_and_output
+from .._threads import single_threaded
 from .pool import ordered_map
 from .varpro import projected_jacobian
 
@@ -928,6 +929,7 @@ def _frf_peaks(data: Prepared, count: int = 3) -> list[float]:
     return [float(f[peaks[i]]) for i in order[:count]]
 
 
+@single_threaded
 def fit_base(data: Prepared, start: CreepModel | None = None, max_nfev: int = MAX_NFEV,
              grid: bool = True) -> ExtendedFit:
     """The base creep model (plus offset) by variable projection from several starts.
@@ -1079,6 +1081,7 @@ def residual_peaks(data: Prepared, residual: np.ndarray) -> list[float]:
     return lines + humps[:HUMPS]
 
 
+@single_threaded
 def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, base: ExtendedFit | None = None,
                  harmonics: int = 1, max_nfev: int = MAX_NFEV, n_starts: int = 2,
                  warm: ExtendedFit | None = None, workers: int = 1, restart: bool = False) -> ExtendedFit:
@@ -1380,6 +1383,7 @@ def _swapped(design: Design, theta: np.ndarray) -> list[np.ndarray]:
 
 
 # --------------------------------------------------------------------------- refit a model
+@single_threaded
 def refit(model: ExtendedModel, t: np.ndarray, u: np.ndarray, y: np.ndarray) -> ExtendedFit:
     """Refit ``model``'s structure (base + its effects) to a record, warm-started from its base."""
     data = prepare(t, u, y)
