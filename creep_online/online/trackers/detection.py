@@ -121,7 +121,7 @@ class ChangeDetection:
         window's mean square error is its last accepted fit's (cost over effective samples). Asked only of a
         settled estimate (``settled_before``): one still settling misfits because it is wrong, not because the
         model class misses the data (a loop being learned: the start's correction restarts the window)."""
-        last = getattr(tr, "_fit_raw", None)
+        last = tr._fit_raw
         if last is None:
             return False
         raw = last[0]

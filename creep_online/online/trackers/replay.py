@@ -46,15 +46,17 @@ class Replayer:
         lay = tr.lay
         oldest = int(tr.sc[W.SC_RSTART])
         begin = max(tr.window_start if start is None else start, oldest, tr.loop_from)
-        # the states are replayed from the oldest remembered sample, exact for the nodes; the
-        # resonance states start at zero, which is exact only at the record's start: otherwise
-        # they are not trusted before two settling times
-        skip = begin - oldest
-        if oldest > 0:
-            skip = max(skip, WS.settling_samples(tr, a1, a2))
-        # the nodes, the free responses, the drift columns' time at the oldest sample (and, after the yield, their
+        settle = WS.settling_samples(tr, a1, a2)
+        origin, nodes = self.replay_start(tr, begin - settle, oldest)
+        # the states are replayed from the origin, exact for the nodes; the resonance states start at
+        # zero, which is exact only at the record's start: otherwise they are not trusted before two
+        # settling times
+        skip = begin - origin
+        if origin > 0:
+            skip = max(skip, settle)
+        # the nodes, the free responses, the drift columns' time at the origin (and, after the yield, their
         # coefficients at the new point)
-        W.replay_origin(st, tr.ztail, tr._free_rates, oldest, float(tr.sc[W.SC_TREF]))
+        W.replay_origin(st, nodes, tr._free_rates, origin, float(tr.sc[W.SC_TREF]))
         if tr.n_hyst:                      # the plays and their nodes at the oldest sample, from the live tails
             HK.replay_origin(st, tr.st, lay["hyst"], tr.n_hyst, tr.q)
         yield
@@ -70,16 +72,16 @@ class Replayer:
         tr._replay_set ^= 1
         yield
         lin = (a1, a2)
-        size, slot = tr.ring.shape[1], tr._ring_position(oldest) - oldest
-        i = oldest
+        size, slot = tr.ring.shape[1], tr._ring_position(origin) - origin
+        i = origin
         deferred = False
         while i < tr.n:                  # the live stream keeps appending: catch up
-            n = min(replay_unit(chunk, skip - (i - oldest), tr.settings.cold_replay_rows), tr.n - i)
+            n = min(replay_unit(chunk, skip - (i - origin), tr.settings.cold_replay_rows), tr.n - i)
             if tr.detect:                # stop at the change test's snapshot instants
                 n = min(n, tr.scheduler.test_after(tr, i) - i)
-            W.replay(tr.ring, (slot + i) % size, n, max(skip - (i - oldest), 0), st, S, *tr._replay_work)
+            W.replay(tr.ring, (slot + i) % size, n, max(skip - (i - origin), 0), st, S, *tr._replay_work)
             i += n
-            if tr.detect and i % tr.test_every == 0 and i - oldest > skip:
+            if tr.detect and i % tr.test_every == 0 and i - origin > skip:
                 index, S0, sy0, shift0, theta0 = buffers[taken % KEPT_SNAPSHOTS]  # (the slot of the one dropped now)
                 taken += 1                 # shift0 stays zero: a replay's snapshots are at its own origin
                 theta_i = tr._theta_at.get(i, tr.theta)
@@ -100,6 +102,17 @@ class Replayer:
         yield                              # (the swap and the pace below: 25 us cold in one)
         tr.relinearizations += 1
         tr.scheduler.pace_refits(tr, False)
+
+    def replay_start(self, tr: WindowTracker, latest: int, oldest: int) -> tuple[int, np.ndarray]:
+        """Where a replay starts: (sample, the node state before it). The newest node mark at or before ``latest``
+        (the replay's first counted sample less the resonance's settling), else the history's oldest sample and its
+        tail state. The nodes are exact from either; starting at a mark replays only what the new statistics and
+        the settling need, not the whole history, so the prediction at a new resonance (``WindowTracker._take_resonance``)
+        comes sooner. With hysteresis columns the plays' states come from the history's tail: the oldest sample."""
+        row = self.nearest_mark(tr, latest, oldest) if not tr.n_hyst else -1
+        if row < 0:
+            return oldest, tr.ztail
+        return int(tr._node_mark_at[row]), tr._node_marks[row]
 
     def mark_nodes(self, tr: WindowTracker, n: int) -> None:
         """Mark the live node state (before sample n, now) in the row of the oldest mark, and set the next mark's sample.

@@ -65,24 +65,29 @@ class Researcher:
             # longer pass may still replace it (at 80 dB the first pass's own cost, the resonance at rest
             # at the segment's start, sat at 1.5-2x the floor with the right resonance, and the estimate
             # waited ~1.6 s for the third)
-            yield from self.take_if_better(tr, search)
+            took = yield from self.take_if_better(tr, search)
             # (with a shortened lead the misfit may be the unknown resonance state at the segment's start)
             if self.resolved(tr, search) or u.size >= cap or lead < settle:
                 break
+            if took and not tr.predicts_estimate():
+                # another pass waits for twice the samples (up to ~2 s): predict with the result meanwhile (the
+                # old resonance's ringing, out of phase after a payload change, missed each step by the step's
+                # own spread until the last pass's replay)
+                yield from tr.replayer.relinearize_job(tr, max(n_from, oldest))
         # re-fits wait for the replay from the change: until it is swapped in, the live statistics
         # still hold the pre-change window, and a fit of them would report a second change
         yield from tr.replayer.relinearize_job(tr, max(n_from, oldest))
         tr.fitting = True
 
-    def take_if_better(self, tr: WindowTracker, search: ResonanceSearch) -> Generator:
+    def take_if_better(self, tr: WindowTracker, search: ResonanceSearch) -> Generator[object, None, bool]:
         """The post-change search's result replaces the estimate when clearly better on its segment (both judged
         with the resonance state at the segment's start unknown, as a re-search): where every candidate fits at
-        the noise floor (one small step) the re-fits do better from the estimate."""
+        the noise floor (one small step) the re-fits do better from the estimate. Returns whether it did."""
         r = search.result
         if r is None or not (math.isfinite(r.cost) and r.a1 > 0 and r.a2 > 0 and r.b != 0):
-            return
+            return False
         if not self.agrees_with_change(tr, r.b):
-            return
+            return False
         yield                              # (the search's last unit ended this call)
         c_live = yield from search.judged_cost(tr.alpha, tr.a1, tr.a2, tr._free_decays)
         c_new = yield from search.judged_cost(r.alpha, r.a1, r.a2, tr._free_decays)
@@ -92,6 +97,8 @@ class Researcher:
             tr.theta[1:4] = (math.log(r.a1), math.log(r.a2), r.b)
             tr._take_resonance()
             yield
+            return True
+        return False
 
     def agrees_with_change(self, tr: WindowTracker, b: float) -> bool:
         """Does a post-change search's gain ``b`` agree with the change the test declared, from the gain before it

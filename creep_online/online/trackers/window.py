@@ -133,6 +133,7 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         self._floor_at: int | None = None       # the last re-fit that found the converged window at the noise floor
         self._floor_raw: tuple | None = None    # ... its accepted fit (``fit_machine.accept``'s tuple)
         self._first_fit: int | None = None      # first re-fit of the current window (start, change, re-search)
+        self._fit_raw: tuple | None = None      # the last accepted re-fit (``fit_machine.accept``'s tuple, drift on)
         self._research_wait = int(self.settings.research.after_s / self.h)
         self._next_research = 0            # earliest sample of the next re-search (backoff)
         self._fine_wait = int(self.settings.fine_wait_s / self.h)
@@ -313,8 +314,13 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         last estimate's coefficients until the replay at the new point is swapped in (``Replayer.relinearize_job``).
         The states hold the resonance to first order around their point only: a prediction with a resonance
         far from it is no model at all (a1 x900 beyond the point predicted 1e5 times the output's span)."""
-        if max(abs(self.theta[1] - math.log(self.a1l)), abs(self.theta[2] - math.log(self.a2l))) <= self.settings.trust:
+        if self.predicts_estimate():
             self._coefficients()
+
+    def predicts_estimate(self) -> bool:
+        """Do the live states represent the estimate's resonance (within ``settings.trust`` of their linearization
+        point)? If not, the prediction keeps the last coefficients until a replay at the new point is swapped in."""
+        return max(abs(self.theta[1] - math.log(self.a1l)), abs(self.theta[2] - math.log(self.a2l))) <= self.settings.trust
 
     # ------------------------------------------------------------------ per sample
     def feed(self, u: float, y: float, slices: int = 1) -> int:
