@@ -14,6 +14,10 @@ import numpy as np
 
 from .policy import input_gate as G
 
+#: Samples a run of passed samples is judged over at most (``InputStage.passing_run``): a block with many glitch
+#: candidates costs this many element operations per candidate, not the block's length.
+PASS_SCAN = 4096
+
 if TYPE_CHECKING:
     from .estimator import OnlineEstimator
     from .trackers import Tracker
@@ -70,18 +74,66 @@ class InputStage:
     def block(self, u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
         """Vector form of ``classify`` and ``accept`` for the live tracker: (du, y, exact). Exact: the arrays
         are the block's samples one for one (every input within the range seen so far, nothing waiting: the
-        fast path); otherwise the samples that waited come first and glitch candidates at the end stay held."""
+        fast path); otherwise the samples that waited come first and glitch candidates at the end stay held.
+        Runs of samples the gate passes are taken at once (``passing_run``); only the candidates and the samples
+        after them while some are held go through ``classify`` one by one."""
         est = self.est
         if not est._deferred and est._u_lo <= u.min() and u.max() <= est._u_hi:
             est._u_last = float(u[-1])
             return u - est._u_ref, y, True
-        ready = list(est._backlog)
-        est._backlog.clear()
-        for k in range(u.size):
-            ready.extend((self.accept(v), w) for v, w in self.classify(float(u[k]), float(y[k])))
+        parts_u: list[np.ndarray] = []
+        parts_y: list[np.ndarray] = []
+        if est._backlog:
+            waited = np.array(est._backlog, dtype=float).reshape(-1, 2)
+            parts_u.append(waited[:, 0])
+            parts_y.append(waited[:, 1])
+            est._backlog.clear()
+        k, n = 0, u.size
+        while k < n:
+            run = 0 if est._held else self.passing_run(u[k:k + PASS_SCAN])
+            if run:
+                self.accept_run(u[k:k + run])
+                parts_u.append(u[k:k + run] - est._u_ref)
+                parts_y.append(y[k:k + run])
+                k += run
+                continue
+            decided = [(self.accept(v), w) for v, w in self.classify(float(u[k]), float(y[k]))]
+            if decided:
+                pair = np.array(decided, dtype=float).reshape(-1, 2)
+                parts_u.append(pair[:, 0])
+                parts_y.append(pair[:, 1])
+            k += 1
         est._deferred = bool(est._held)
-        out = np.array(ready, dtype=float).reshape(-1, 2)
-        return np.ascontiguousarray(out[:, 0]), np.ascontiguousarray(out[:, 1]), False
+        if not parts_u:
+            return np.empty(0), np.empty(0), False
+        return np.concatenate(parts_u), np.concatenate(parts_y), False
+
+    def passing_run(self, u: np.ndarray) -> int:
+        """How many of the samples u (nothing held) the gate passes one after the other, each accepted before the
+        next is judged: ``input_gate.glitch_candidate`` on the range and the last input as they grow over the run."""
+        est = self.est
+        gate = est.input_gate
+        if not gate > 0:
+            return u.size
+        lo = np.minimum.accumulate(u)
+        hi = np.maximum.accumulate(u)
+        lo_before = np.minimum(np.concatenate(([est._u_lo], lo[:-1])), est._u_lo)
+        hi_before = np.maximum(np.concatenate(([est._u_hi], hi[:-1])), est._u_hi)
+        last = np.concatenate(([est._u_last], u[:-1]))
+        span = hi_before - lo_before
+        candidate = (span > 0) & (np.abs(u - last) > gate * span)
+        first = int(np.argmax(candidate))
+        return first if candidate[first] else u.size
+
+    def accept_run(self, u: np.ndarray) -> None:
+        """``accept`` for each sample of a run the gate passed, at once (the range, the last input, the first
+        input change)."""
+        est = self.est
+        if est._startup.first_change is None and (u[0] != est._u_last or np.any(u[1:] != u[:-1])):
+            est._startup.first_change = est._startup.nbuf
+        est._u_last = float(u[-1])
+        est._u_lo = min(est._u_lo, float(u.min()))
+        est._u_hi = max(est._u_hi, float(u.max()))
 
     def buffer_sample(self, u: float, y: float) -> None:
         """A sample into the start-up buffer through the input gate, after any the live tracker had waiting (a

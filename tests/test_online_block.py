@@ -1,0 +1,229 @@
+"""Block mode is per-sample feeding, bit for bit: the kernels, the deferred statistics, the input gate's runs.
+
+``update_block`` runs the trackers' block kernels (``window.block``: the rank-one updates of S deferred and added
+in one pass, ``window._flush``; ``recursive.block``) and takes the samples the input gate passes as runs
+(``InputStage.passing_run``). Each is checked against the per-sample reference it replaces (``window.sample``,
+``recursive.sample``, ``InputStage.classify``/``accept`` one by one): kernels on their own, with the block
+stopping where a job reads S; then whole estimators on records with a change, gaps, missing outputs, input
+glitches and the hysteresis effect, every estimate and the final statistics compared with ``==``.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from creep_online.effects.hysteresis import hysteresis_input, threshold_fractions
+from creep_online.model import ONLINE_ALPHA_BOUNDS, CreepModel
+from creep_online.online import OnlineEstimator
+from creep_online.online import inputs as INP
+from creep_online.online._kernels import recursive as R
+from creep_online.online._kernels import window as W
+from creep_online.online.soe import SOE_TOP, SoeBasis
+from creep_online.online.trackers import recursive as TR
+from creep_online.online.trackers.window import WindowTracker
+from creep_online.simulate import simulate
+from hil_sim import scenarios
+
+
+# ---------------------------------------------------------------------- references (what block mode replaces)
+def _per_sample(sample):
+    """A block kernel made of per-sample calls (the reference ``window.block`` and ``recursive.block`` are)."""
+    def block(u, y, st, S, ring, status, start=0, stop=-1):
+        end = u.shape[0] if stop < 0 else stop
+        for k in range(start, end):
+            s = sample(u[k], y[k], st, S, ring)
+            status[k - start] = s
+            if s >= 8:
+                return k - start + 1
+        return end - start
+    return block
+
+
+def _gate_one_by_one(self, u, y):
+    """``InputStage.block`` with every sample through ``classify`` and ``accept`` in turn."""
+    est = self.est
+    if not est._deferred and est._u_lo <= u.min() and u.max() <= est._u_hi:
+        est._u_last = float(u[-1])
+        return u - est._u_ref, y, True
+    ready = list(est._backlog)
+    est._backlog.clear()
+    for k in range(u.size):
+        ready.extend((self.accept(v), w) for v, w in self.classify(float(u[k]), float(y[k])))
+    est._deferred = bool(est._held)
+    out = np.array(ready, dtype=float).reshape(-1, 2)
+    return np.ascontiguousarray(out[:, 0]), np.ascontiguousarray(out[:, 1]), False
+
+
+def _reference(monkeypatch) -> None:
+    monkeypatch.setattr(W, "block", _per_sample(W.sample))
+    monkeypatch.setattr(TR, "block", _per_sample(R.sample))
+    monkeypatch.setattr(INP.InputStage, "block", _gate_one_by_one)
+
+
+# ---------------------------------------------------------------------- kernels
+@pytest.mark.parametrize("p, k", [(7, 0), (7, 1), (8, 7), (8, 8), (9, 17), (51, 64), (52, 63), (51, 3)])
+def test_flush_adds_the_rows_as_the_rank_one_updates_do(p, k):
+    """``_flush`` of k deferred rows = k calls of ``_accumulate`` (its multiply-adds in the same order), bit for bit,
+    for odd and even P and any count of rows (eight-row passes and the rest)."""
+    rng = np.random.default_rng(p * 100 + k)
+    X = rng.standard_normal((W.DEFER_ROWS, p)) * np.exp(rng.uniform(-20, 20, p))
+    gx = np.exp(rng.uniform(0, 200, W.DEFER_ROWS))
+    S0 = rng.standard_normal((p, p))
+    flushed = S0.copy()
+    W._flush(flushed, X, gx, k)
+    direct, sy, sc = S0.copy(), np.zeros(p), np.zeros(W.SC_SIZE)
+    sc[W.SC_FORGET] = 1.0                     # (the weight stays what each row sets)
+    for t in range(k):
+        sc[W.SC_G] = gx[t]
+        W._accumulate(0.0, X[t].copy(), direct, sy, sc)
+    assert np.array_equal(flushed, direct)
+
+
+def _window_tracker(window_s: float | None, drift: int, free: bool) -> tuple[WindowTracker, np.ndarray, np.ndarray]:
+    model = CreepModel.from_resonance(0.1, 30.0, 0.3, 1.0)
+    h, n = 1e-3, 3000
+    basis = SoeBasis.build(h, top=SOE_TOP)
+    theta = np.array([model.alpha, math.log(model.a1), math.log(model.a2), model.b, 0.0])
+    tr = WindowTracker(basis, theta, window_s=window_s, free=free, ring=np.zeros((2, 1 << 11)), gate=4.0,
+                       burst=3, stuck=10**9, alpha_bounds=ONLINE_ALPHA_BOUNDS, refit_every=10**9,
+                       test_every=10**9, detect=False, drift=drift)
+    rng = np.random.default_rng(drift + 3)
+    u = np.repeat(rng.normal(size=n // 300 + 1), 300)[:n]
+    y = simulate(model, np.arange(n) * h, u) + 1e-3 * rng.standard_normal(n)
+    y[[7, 8, 40, 41, 42, 1500]] = np.nan
+    y[[900, 2000]] += 5.0                      # (outliers: gated, not accumulated)
+    tr.sc[W.SC_GATE] = 4.0
+    return tr, u, y
+
+
+@pytest.mark.parametrize("window_s, drift, free", [(None, 0, False), (1.0, 2, True), (0.01, 2, False)])
+def test_window_block_is_sample_by_sample_wherever_it_stops(window_s, drift, free):
+    """``window.block`` = ``window.sample`` per sample: state, statistics, ring and statuses bit for bit, at each
+    sample where the block stops for a job (which reads S: the deferred rows are in S by then), with missing outputs,
+    outliers, the drift and free columns, and a window short enough (10 ms at 1 kHz) that the weight is
+    renormalised inside a block."""
+    tr, u, y = _window_tracker(window_s, drift, free)
+    st, S, ring = tr.st.copy(), tr.S.copy(), tr.ring.copy()
+    ref = (tr.st.copy(), tr.S.copy(), tr.ring.copy())
+    status, expected = np.empty(u.size, dtype=np.int64), np.empty(u.size, dtype=np.int64)
+    done = 0
+    for due in (1, 2, 65, 66, 200, 777, 1500, 2999, 10**9):
+        st[W.SC_DUE] = ref[0][W.SC_DUE] = due
+        while done < u.size:
+            used = W.block(u, y, st, S, ring, status[done:], done)
+            for k in range(done, done + used):
+                expected[k] = W.sample(u[k], y[k], *ref)
+            done += used
+            assert np.array_equal(S, ref[1]) and np.array_equal(st, ref[0], equal_nan=True)
+            if status[done - 1] >= 8:
+                break
+    assert done == u.size
+    assert np.array_equal(status, expected) and np.array_equal(ring, ref[2], equal_nan=True)
+    if window_s == 0.01:
+        assert st[W.SC_G] < 1e100            # (renormalised on the way: exp(0.1 n) ~ 1e130 unrenormalised)
+
+
+# ---------------------------------------------------------------------- whole estimators
+def _payload_record() -> tuple[float, np.ndarray, np.ndarray]:
+    """A payload change 10 kHz record (to 2 s after the change), with missing outputs and input glitches."""
+    scen = scenarios.make("payload", 1)
+    end = min(scen.u.size, int((scen.change_time + 2.0) / scen.h))
+    u, y = scen.u[:end].copy(), scen.y[:end].copy()
+    rng = np.random.default_rng(5)
+    y[rng.integers(1000, end, 40)] = np.nan
+    for k in rng.integers(5000, end - 10, 6):      # single-sample spikes of the input: glitches
+        u[k] += 3.0 * np.ptp(u)
+    return scen.h, u, y
+
+
+def _hammerstein_record() -> tuple[float, np.ndarray, np.ndarray]:
+    """A creep plant behind play operators (hysteresis), a 1 Hz triangle, 4 s at 2 kHz."""
+    h = 5e-4
+    t = np.arange(int(4.0 / h)) * h
+    u = np.round(4.0 * (2 * np.abs(t % 1.0 - 0.5)) * 250) / 250
+    r = threshold_fractions(8) * np.ptp(u)
+    w = np.linspace(1.0, 0.2, 8)
+    y = simulate(CreepModel.from_resonance(0.08, 120.0, 0.2, 1.3), t, hysteresis_input(u, r, w))
+    return h, u, y + 1e-4 * np.ptp(y) * np.random.default_rng(2).standard_normal(t.size)
+
+
+def _trajectory(make, u: np.ndarray, y: np.ndarray, pieces: np.ndarray, gaps: dict[int, int]) -> tuple[list, object]:
+    """Every estimate after each piece fed by update_block (and a gap before the pieces named in ``gaps``)."""
+    est = make()
+    out = []
+    for i, (a, b) in enumerate(zip(pieces[:-1], pieces[1:])):
+        if i in gaps:
+            est.gap(gaps[i])
+        est.update_block(u[a:b], y[a:b])
+        e = est.estimate
+        out.append((e.quality, e.samples, e.alpha, e.a1, e.a2, e.b, e.residual_rms, e.noise_rms,
+                    est.input_outliers, len(est.events)))
+    return out, est
+
+
+def _same(a: list, b: list) -> bool:
+    return len(a) == len(b) and all(all(x == z or (x != x and z != z) for x, z in zip(ra, rb)) for ra, rb in zip(a, b))
+
+
+@pytest.mark.parametrize("record, kwargs", [("payload", {}), ("payload", {"refit": "recursive"}),
+                                            ("hammerstein", {"effects": ("hysteresis",)})])
+def test_update_block_is_the_per_sample_kernels_and_gate(record, kwargs, monkeypatch):
+    """Whole estimators, block mode against the same feeding through the per-sample kernels and the input gate one
+    sample at a time: every estimate after every piece and the final statistics identical (``==``), on a change
+    with missing outputs, gaps and input glitches, both trackers, and with the hysteresis columns."""
+    h, u, y = _payload_record() if record == "payload" else _hammerstein_record()
+    rng = np.random.default_rng(11)
+    pieces = np.unique(np.concatenate(([0, u.size], rng.integers(0, u.size, 60),
+                                       np.arange(0, u.size, int(0.1 / h)))))
+    gaps = {5: 3, 30: 1, 45: 20}
+
+    def make():
+        return OnlineEstimator(h, **kwargs)
+
+    fast, est_fast = _trajectory(make, u, y, pieces, gaps)
+    with monkeypatch.context() as m:
+        _reference(m)
+        slow, est_slow = _trajectory(make, u, y, pieces, gaps)
+    assert _same(fast, slow)
+    assert fast[-1][0] != "none" and est_fast.samples == est_slow.samples
+    assert np.array_equal(est_fast._tracker.S, est_slow._tracker.S)
+    if record == "payload":
+        assert est_fast.input_outliers > 0   # (the glitches went through the gate's one-by-one path)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_input_gate_runs_are_the_rule_sample_by_sample(seed, monkeypatch):
+    """``InputStage.block``'s runs against the rule one sample at a time, on random inputs that keep widening their
+    range, with glitches (returning within the burst) and moves (staying), a gate narrower than one range too:
+    the samples fed, the held ones and the range after every block the same."""
+    rng = np.random.default_rng(seed)
+    n = 6000
+    u = np.cumsum(rng.standard_normal(n)) * 0.01 + np.repeat(rng.uniform(-1, 1, n // 500 + 1), 500)[:n]
+    for k in rng.integers(100, n - 5, 12):
+        u[k:k + rng.integers(1, 4)] += rng.choice([-1, 1]) * rng.uniform(2, 20)
+    for k in rng.integers(100, n - 5, 3):
+        u[k:] += rng.uniform(5, 10)                 # (moves: the input stays)
+    y = 0.5 * u + 0.01 * rng.standard_normal(n)
+    gate = float(rng.choice([0.4, 2.0]))
+
+    def feed(stage_block):
+        monkeypatch.setattr(INP.InputStage, "block", stage_block)
+        est = OnlineEstimator(1e-3, input_gate=gate)
+        fed, states = [], []
+        pieces = np.unique(np.concatenate(([0, n], rng_pieces)))
+        for a, b in zip(pieces[:-1], pieces[1:]):
+            est.update_block(u[a:b], y[a:b])
+            states.append((est.samples, est.input_outliers, est._u_lo, est._u_hi, est._u_last, len(est._held),
+                           est._startup.first_change))
+            if est._live is not None:
+                fed.append(est._live.n)
+        return states, fed, est
+
+    rng_pieces = np.random.default_rng(seed + 100).integers(0, n, 40)
+    fast = feed(INP.InputStage.__dict__["block"])
+    slow = feed(_gate_one_by_one)
+    assert fast[0] == slow[0] and fast[1] == slow[1]
+    e_fast, e_slow = fast[2].estimate, slow[2].estimate
+    assert _same([(e_fast.alpha, e_fast.b, e_fast.quality)], [(e_slow.alpha, e_slow.b, e_slow.quality)])
