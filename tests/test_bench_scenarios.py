@@ -89,6 +89,7 @@ def test_a_drift_goes_on_through_a_change_of_the_resonance(noise_seed, monkeypat
     assert abs(est.estimate.b / final["b"] - 1) < bench.TOL["b"], est.estimate
 
 
+@pytest.mark.long
 def test_the_oracle_fit_lands_within_its_cramer_rao_bound_and_at_the_noise_floor():
     """The oracle (``bench_online_oracle.oracle_fit``: the maximum-likelihood fit of the four parameters on the
     last 10 s with everything else given) and the Fisher bound (``cramer_rao_rel``) are computed apart, one by

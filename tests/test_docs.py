@@ -77,7 +77,13 @@ def test_every_example_is_marked():
     assert not unmarked, f"blocks with neither {RUN_MARK} nor a visible 'Not run by the tests: ...' line: {unmarked}"
 
 
-@pytest.mark.parametrize("page", runnable_pages(), ids=lambda p: str(p.relative_to(ROOT)))
+#: Pages whose examples take over 10 s of CPU (the tutorial's diagnoses of two real records ~60 s, the reliability
+#: and fleet pages' runs ~15 s each): marked ``long``, run by CI after the default suite.
+LONG_PAGES = ("tutorial.md", "reliability.md", "fleet.md")
+
+
+@pytest.mark.parametrize("page", [pytest.param(p, marks=pytest.mark.long) if p.name in LONG_PAGES else p
+                                  for p in runnable_pages()], ids=lambda p: str(p.relative_to(ROOT)))
 def test_examples_run(page: Path, tmp_path: Path):
     """The page's runnable blocks, in order, in an empty folder, in a child process."""
     runnable = [b for b in blocks(page) if b["marker"] == "run"]

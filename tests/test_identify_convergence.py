@@ -61,7 +61,7 @@ def _within_tolerances(model, truth: dict) -> dict:
     return {p: getattr(model, p) / truth[p] - 1 for p, tol in TOL.items() if abs(getattr(model, p) / truth[p] - 1) > tol}
 
 
-@pytest.mark.parametrize("seed", [5, 15])
+@pytest.mark.parametrize("seed", [pytest.param(5, marks=pytest.mark.long), 15])
 def test_records_in_operation_that_settled_on_a_wrong_resonance(seed, monkeypatch):
     """Two scenario records taken 5 s into operation (40 dB) on which the fit used to land on a wrong resonance:
     seed 15 holds its first level for 1.1 s, longer than the starting grid's window (the grid scored nothing and

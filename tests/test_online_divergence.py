@@ -79,6 +79,7 @@ def _scenario_ratios(family: str, seed: int, snr_db: float, rest_samples: int | 
     return out
 
 
+@pytest.mark.long
 def test_a_false_change_on_close_modes_does_not_take_a_wrong_gain(monkeypatch):
     """Close unmodelled modes from the step at the first sample, 40 dB (seed 4): the change test declared a change
     on the modes' misfit (b -3.5 %), and the first pass of the search after it took b -18 %, a1 -21 %, which fit
@@ -102,7 +103,8 @@ def _divergent(windows: list[tuple]) -> list[tuple]:
     return [(t, r) for t, r, n in windows if r > 1.0 + 3.0 / math.sqrt(n)]
 
 
-@pytest.mark.parametrize("seed, snr_db", [(4, 80.0), (9, 80.0), (9, 40.0)])
+@pytest.mark.parametrize("seed, snr_db", [pytest.param(4, 80.0, marks=pytest.mark.long), (9, 80.0),
+                                          pytest.param(9, 40.0, marks=pytest.mark.long)])
 def test_the_first_live_predictions_come_from_the_windows_own_fit(seed, snr_db, monkeypatch):
     """Close unmodelled modes from the step at the first sample: the start-up search's estimate (a grid refined
     on the search window) was b -24 %, a1 -27 % off on seed 4 at 80 dB, and it predicted the first 50 live samples,
@@ -112,7 +114,8 @@ def test_the_first_live_predictions_come_from_the_windows_own_fit(seed, snr_db, 
     assert windows and not _divergent(windows), windows
 
 
-@pytest.mark.parametrize("family, seed, snr_db, rest", [("close_modes", 6, 80.0, 0), ("drift", 15, 80.0, None)])
+@pytest.mark.parametrize("family, seed, snr_db, rest", [pytest.param("close_modes", 6, 80.0, 0, marks=pytest.mark.long),
+                                                        ("drift", 15, 80.0, None)])
 def test_a_window_that_misses_the_data_declares_no_change_on_its_own_misfit(family, seed, snr_db, rest,
                                                                             monkeypatch):
     """Close modes at 80 dB (seed 6, window error ~127x the floor): the change test declared b -8 % at 7 s on no

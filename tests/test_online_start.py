@@ -139,7 +139,8 @@ FAMILY_SEEDS = {"strong_creep": 1, "payload": 1, "stiffness": 1, "drift": 0, "co
                 "quiet_start": 1}
 
 
-@pytest.mark.parametrize("family", scenarios.FROM_REST)
+@pytest.mark.parametrize("family", [pytest.param(f, marks=pytest.mark.long) if f == "close_modes" else f
+                                    for f in scenarios.FROM_REST])
 def test_every_family_starting_at_the_first_sample(family):
     assert set(FAMILY_SEEDS) == set(scenarios.FROM_REST)
     sc = scenarios.make(family, FAMILY_SEEDS[family], 0)
@@ -164,6 +165,7 @@ def test_families_starting_at_the_first_sample_sample_by_sample(family):
     assert all(err[k] <= TOL[k] for k in TOL), (err, e.quality, e.reason)
 
 
+@pytest.mark.long
 def test_a_step_after_one_sample_of_rest_beside_close_modes_is_not_a_wrong_basin():
     """close_modes seed 2 at 40 dB, one sample of rest: without the rest lead-in the window's free offset let a
     second basin fit as well (alpha +18 %, b -14 %, a1 -20 %, to the end); without the noise monitor's seed the

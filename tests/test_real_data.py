@@ -58,8 +58,8 @@ def _excerpt(rel: str, rows: int | None, folder: Path) -> Path:
 
 
 # a 50,001-sample diagnosis; the micromanipulator test below takes the same path (hysteresis named on a real 1 Hz
-# sine record, its loop a model) and the tutorial diagnoses a 2 s excerpt of this record: -m slow
-@pytest.mark.slow
+# sine record, its loop a model) and the tutorial diagnoses a 2 s excerpt of this record: -m long
+@pytest.mark.long
 def test_piezo_150v_shows_hysteresis():
     d = _diagnose("piezo-hyst-150V-1Hz/piezo_150V_1Hz.csv")
     assert d.verdict == "hysteresis"
@@ -71,7 +71,7 @@ def test_piezo_150v_shows_hysteresis():
 
 
 # the tutorial's excerpt (the first 10 s: the loading curve and ten loops) by default, the whole record with -m slow
-@pytest.mark.parametrize("rows", [2000, pytest.param(None, marks=pytest.mark.slow)], ids=["10s", "whole"])
+@pytest.mark.parametrize("rows", [2000, pytest.param(None, marks=pytest.mark.long)], ids=["10s", "whole"])
 def test_micromanipulator_shows_hysteresis(rows, tmp_path):
     path = _excerpt("piezo-micromanipulator-1Hz/micromanipulator_1Hz.csv", rows, tmp_path)
     d = _diagnose(path)
@@ -93,7 +93,7 @@ def _fsm(level):
     return virtual_siso(ins, outs, fs=6400.0, period=8192, channel=0, periods=2)
 
 
-@pytest.mark.parametrize("level", [100, pytest.param(300, marks=pytest.mark.slow)])
+@pytest.mark.parametrize("level", [pytest.param(100, marks=pytest.mark.long), pytest.param(300, marks=pytest.mark.long)])
 def test_fine_steering_mirror_has_a_second_mode(level):
     t, u, y = _fsm(level)
     d = diagnose((t, u, y))
@@ -109,6 +109,7 @@ def polymer_creep():
     return _diagnose("pe-melt-creep-reptate/pe_cm3_creep_10Pa.csv")
 
 
+@pytest.mark.long
 class TestPolymerCreep:
     """Two tests of one diagnosis (fixture ``polymer_creep``): a class, so that a parallel run keeps them on one
     worker."""

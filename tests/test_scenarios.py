@@ -133,7 +133,8 @@ def test_strong_creep_spans_the_ranges():
     assert {d["fs"] for d in draws} == {1000.0, 2000.0, 10_000.0}
 
 
-@pytest.mark.parametrize("family, rest", [(f, 0) for f in S.FROM_REST] + [("controller", 1), ("payload", 10)])
+@pytest.mark.parametrize("family, rest", [pytest.param(f, 0, marks=pytest.mark.long) if f == "close_modes" else (f, 0)
+                                          for f in S.FROM_REST] + [("controller", 1), ("payload", 10)])
 def test_a_family_record_can_start_with_the_step(family, rest):
     """``make(family, seed, rest=k)``: the same plant and input levels, the input's first change after k samples of
     rest (0: the input at its first level from the first sample); the output at rest (zero) until it."""
