@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from creep_online.effects.forward import simulate_with_effects
 from creep_online.io.frames import encode_command
@@ -142,6 +143,7 @@ def test_command_frames_survive_garbage_and_bit_flips_on_a_real_pty():
     assert np.isnan(runner.cmd[[2, 3, 5]]).all()
 
 
+@pytest.mark.long
 def test_demo_compensate_with_hysteresis_compensates_loop_and_creep(tmp_path):
     """``demo --compensate --effects hysteresis`` (8 s): the live loop and creep compensated on the scan, measured
     over the pty, against creep-only and uncompensated simulated on the same plant."""

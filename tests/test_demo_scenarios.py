@@ -30,6 +30,7 @@ def test_the_plant_at_each_moment():
     assert plant_truth(scenario_plan("stationary", START, 10.0, 10.0), 7.0) == START
 
 
+@pytest.mark.long
 def test_payload_demo_judges_the_estimate_against_the_plant_of_the_moment(tmp_path):
     env = dict(os.environ, PYTHONPATH=str(REPO))
     proc = subprocess.run([sys.executable, "-m", "creep_online", "demo", "--scenario", "payload", "--duration", "7",

@@ -103,8 +103,8 @@ def _divergent(windows: list[tuple]) -> list[tuple]:
     return [(t, r) for t, r, n in windows if r > 1.0 + 3.0 / math.sqrt(n)]
 
 
-@pytest.mark.parametrize("seed, snr_db", [pytest.param(4, 80.0, marks=pytest.mark.long), (9, 80.0),
-                                          pytest.param(9, 40.0, marks=pytest.mark.long)])
+@pytest.mark.long
+@pytest.mark.parametrize("seed, snr_db", [(4, 80.0), (9, 80.0), (9, 40.0)])
 def test_the_first_live_predictions_come_from_the_windows_own_fit(seed, snr_db, monkeypatch):
     """Close unmodelled modes from the step at the first sample: the start-up search's estimate (a grid refined
     on the search window) was b -24 %, a1 -27 % off on seed 4 at 80 dB, and it predicted the first 50 live samples,
