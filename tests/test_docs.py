@@ -78,9 +78,10 @@ def test_every_example_is_marked():
 
 
 #: Pages whose examples take over ~8 s (the tutorial's diagnoses of two real records ~60 s of CPU, the reliability,
-#: fleet and diagnostics pages' runs 8-16 s; the PI and CAN how-tos wait 11-13 s on their real transports): marked
-#: ``long``, run by CI after the default suite.
-LONG_PAGES = ("tutorial.md", "reliability.md", "fleet.md", "diagnostics.md", "pi.md", "can.md")
+#: fleet and diagnostics pages' runs 8-16 s; the PI, CAN, serial and capaNCDT how-tos wait 8-13 s on their real
+#: transports): marked ``long``, run by CI after the default suite.
+LONG_PAGES = ("tutorial.md", "reliability.md", "fleet.md", "diagnostics.md", "pi.md", "can.md", "serial.md",
+              "capancdt.md")
 
 
 @pytest.mark.parametrize("page", [pytest.param(p, marks=pytest.mark.long) if p.name in LONG_PAGES else p

@@ -197,6 +197,7 @@ def _wait_for(cond, timeout: float) -> None:
         time.sleep(0.05)
 
 
+@pytest.mark.long
 def test_sigterm_during_a_long_computation_leaves_no_temporary_file_and_the_old_output(tmp_path):
     """``simulate -o`` stopped by SIGTERM left a 27 MB ``.out.csv.*.tmp`` behind."""
     big = tmp_path / "tu.csv"
