@@ -139,10 +139,8 @@ class Replayer:
                       tr.a2l, tr.n_rate, tr.n_hyst)
         yield                              # (with the caller's set-up and the rest below, ~28 us cold in one call)
         oldest = int(tr.sc[W.SC_RSTART])  # (the ring's oldest and its tail, read together)
-        # (the marks hold the nodes only: with hysteresis columns the plays' states come from the history's tail)
-        row = self.nearest_mark(tr, n0, oldest) if not tr.n_hyst else -1
-        start = oldest if row < 0 else int(tr._node_mark_at[row])
-        st[tr.lay["phi"]:tr.lay["phi"] + tr.q] = tr.ztail if row < 0 else tr._node_marks[row]
+        start, nodes = self.replay_start(tr, n0, oldest)
+        st[tr.lay["phi"]:tr.lay["phi"] + tr.q] = nodes
         st[W.SC_N] = start
         if tr.n_hyst:                      # the plays and their nodes too, from the live tails
             HK.replay_origin(st, tr.st, tr.lay["hyst"], tr.n_hyst, tr.q)
