@@ -73,7 +73,11 @@ class Handover:
             tracker = self.spares[key]
             tracker.start_state(theta, est._u_hi - est._u_lo)
             yield
-            self.buffer_noise()            # (a median of 2048 second differences: in a call of its own)
+            # the buffer's noise level in two calls of their own (``buffer_noise``): 2048 second differences spread
+            # over the buffer, cold memory, then their median (together ~30 us in one update())
+            k = W.noise_differences(self.startup.by, self.startup.nbuf, self.noise_scratch)
+            yield
+            self.noise_seed = W.noise_level(self.noise_scratch, k)
             yield
             est._tracker = self.spares.pop(key)
             est._tracker.start_adopt()

@@ -751,10 +751,17 @@ def noise_seed(y: np.ndarray, n: int, scratch: np.ndarray) -> float:
     starts. A buffer that opens with a step's transient (a record whose input moves at its first samples) made the
     monitor start at the transient's second differences, up to 5x the noise, shrinking over seconds; the window
     read "good" at 0.4x that floor with alpha 18 % off (close unmodelled modes). Outputs that are NaN are skipped;
-    0 without enough of them."""
+    0 without enough of them. In two calls (``noise_differences``, then ``noise_level``) where each must be short."""
+    return noise_level(scratch, noise_differences(y, n, scratch))
+
+
+@njit(cache=CACHE)
+def noise_differences(y: np.ndarray, n: int, scratch: np.ndarray) -> int:
+    """``noise_seed``'s first half: the absolute second differences of up to NOISE_SEED_ROWS samples spread over
+    y[:n], NaN skipped, into ``scratch``; returns how many."""
     m = min(NOISE_SEED_ROWS, scratch.shape[0], n - 2)
     if m < 8:
-        return 0.0
+        return 0
     step = (n - 2) / m
     k = 0
     for j in range(m):
@@ -763,9 +770,36 @@ def noise_seed(y: np.ndarray, n: int, scratch: np.ndarray) -> float:
         if d == d:
             scratch[k] = d
             k += 1
+    return k
+
+
+@njit(cache=CACHE)
+def noise_level(scratch: np.ndarray, k: int) -> float:
+    """``noise_seed``'s second half: the noise's standard deviation from the median of scratch[:k] (0 if k < 8)."""
     if k < 8:
         return 0.0
     return float(np.median(scratch[:k])) / (0.6745 * math.sqrt(6.0))
+
+
+@njit(cache=CACHE)
+def oldest_mark(at: np.ndarray) -> int:
+    """The index of the smallest entry of ``at`` (the first if tied): the node mark to overwrite (-1 unused)."""
+    row = 0
+    for r in range(1, at.shape[0]):
+        if at[r] < at[row]:
+            row = r
+    return row
+
+
+@njit(cache=CACHE)
+def newest_mark(at: np.ndarray, oldest: int, latest: int) -> int:
+    """The index of the largest entry of ``at`` within [oldest, latest], or -1 (the node marks' samples, -1 unused)."""
+    row, newest = -1, -1
+    for r in range(at.shape[0]):
+        a = at[r]
+        if oldest <= a <= latest and a > newest:
+            row, newest = r, a
+    return row
 
 
 def restart_monitors(sc: np.ndarray, noise: float) -> None:
