@@ -814,8 +814,8 @@ class ResonanceSearch(Checkpointable):
         passes = self._start_pass(stride)
         cold = passes == 0                 # (a first pass: its set-up in units of its own)
         lead = COLD_LEAD_WORK if passes <= 1 else FREE_PREPARE_WORK
-        if cold:
-            yield
+        if passes <= 1:                    # (a first or second pass: the set-up below in a unit of its own; after the
+            yield                          # first candidate's end and its fit, ~45 us cold in one update())
         vz, x = self._vz, self._x
         vx0, vx1 = _prepare(alpha, a1, a2, self.basis.lam, self.basis.dx, self.basis.h, self._v, self._dv,
                             self._rc, vz, x, self._acc)
@@ -934,23 +934,25 @@ class ResonanceSearch(Checkpointable):
         """Every grid point's projected cost, in units; returns the starts (alpha, fn, zeta) of the REFINE best
         points in distinct basins (``_distinct_picks``)."""
         yield                            # (after the history's last unit: the set-ups below are cold)
-        found = []
         size = len(self.alphas) * GRID_FREQS * len(GRID_ZETA)
         costs, ranked, picks = self._grid_work
         if costs.size < size:            # (more creep exponents than the scratch was sized for)
             costs, ranked = np.empty(size), np.empty(size, dtype=np.int64)
-        for alpha in self.alphas:
+        i = 0                            # (points by their index, no tuple each: the garbage collector's passes
+        for alpha in self.alphas:        # over hundreds of them were 20-50 us in one update())
             for fn in self._freqs:
                 wn = 2 * math.pi * fn
                 for z in GRID_ZETA:
                     a1, a2 = 2 * z / wn, 1 / wn**2
                     cost, _, _ = yield from self._evaluate(alpha, a1, a2, stride)
-                    _rank(cost, len(found), costs, ranked)
-                    found.append((alpha, fn, z))
+                    _rank(cost, i, costs, ranked)
+                    i += 1
         yield                            # (the last candidate's end and the picks below: ~28 us cold in one)
         m = _distinct_picks(costs, ranked, size, self._freqs, _GRID_ZETAS, picks)
         yield                            # (the picks and the grid's end, cold: 25-28 us in one)
-        return [found[i] for i in picks.tolist()[:m]]
+        per_alpha, nz = len(self._freqs) * len(GRID_ZETA), len(GRID_ZETA)
+        return [(self.alphas[i // per_alpha], self._freqs[i % per_alpha // nz], GRID_ZETA[i % nz])
+                for i in picks.tolist()[:m]]
 
     def _refine(self, alpha: float, fn: float, z: float, stride: int) -> Generator:
         """Pattern search in (ln alpha, ln fn, ln zeta) from a start; returns (cost, alpha, fn, zeta).

@@ -120,7 +120,7 @@ class Scheduler:
 
     def refit_job(self, tr: WindowTracker) -> Generator:
         """A re-fit of the window: ``Scheduler.begin_refit``, its slices in the per-sample kernel, then the result swapped in
-        (``Scheduler.accept``) and what it triggers (``Scheduler.after_accept``), each on its own call: with cold caches each of these
+        (``Scheduler.accept``) and what it triggers (``Scheduler.after_accept``, then ``after_accept_jobs``), each on its own call: with cold caches each of these
         Python visits costs 10-25 us, together they were over 25 us. While it is queued no other is (``Scheduler.schedule``)."""
         try:
             self.begin_refit(tr)
@@ -128,7 +128,9 @@ class Scheduler:
             raw = self.accept(tr)
             if raw is not None:
                 yield
-                self.after_accept(tr, raw)
+                replay_due = self.after_accept(tr, raw)
+                yield
+                self.after_accept_jobs(tr, raw, replay_due)
         finally:
             tr._refit_queued = False
 
@@ -166,19 +168,26 @@ class Scheduler:
             tr._first_fit = n
         return raw
 
-    def after_accept(self, tr: WindowTracker, raw: tuple) -> None:
-        """What an accepted re-fit triggers (on the call after ``Scheduler.accept``): the re-search watch, the re-fit pace,
-        a replay when the resonance left the linearization point, the settling of a change event."""
+    def after_accept(self, tr: WindowTracker, raw: tuple) -> bool:
+        """What an accepted re-fit triggers first (on the call after ``Scheduler.accept``): the re-search watch and the
+        re-fit pace. Returns whether a replay at the new resonance is due (``after_accept_jobs`` queues it)."""
         (_, _, _, _, _, cost, neff, move, *_, n, noise, relinearize) = raw
-        rms = math.sqrt(max(cost, 0.0) / max(neff, 1.0))
+        rms = _fit_rms(raw)
         fine = not relinearize and self.fine_relinearization_due(tr, rms, noise, n)
         if not fine:
             tr.researcher.watch(tr, rms, False, n, noise, raw)
         self.pace_refits(tr, tr.converged and move < tr.settings.calm_move and rms <= tr.settings.research.clear_ratio * noise
                           and not (relinearize or fine) and not (tr.events and not tr.events[-1]["settled"]))
-        if not self.queued(tr, "relinearize_job") and (tr.widen_loop() | tr.settle_loop(rms, noise)):
-            relinearize = True             # (the plays' thresholds follow a wider input range: a replay rebuilds them)
-        if relinearize or fine:
+        return relinearize or fine
+
+    def after_accept_jobs(self, tr: WindowTracker, raw: tuple, replay_due: bool) -> None:
+        """The jobs an accepted re-fit queues (on the call after ``Scheduler.after_accept``: together ~30 us cold in one
+        update()): a replay when the resonance left the linearization point or the loop's plays need new thresholds,
+        else the settling of a change event."""
+        move, noise = raw[7], raw[-2]      # (the fit's largest relative move, the noise level: ``after_accept``)
+        if not self.queued(tr, "relinearize_job") and (tr.widen_loop() | tr.settle_loop(_fit_rms(raw), noise)):
+            replay_due = True              # (the plays' thresholds follow a wider input range: a replay rebuilds them)
+        if replay_due:
             if not self.queued(tr, "relinearize_job"):
                 # a settled window whose resonance runs off is what a change looks like: the test due next
                 # decides first, and a declared change drops the replay with the old window
@@ -201,3 +210,8 @@ class Scheduler:
         tr._next_fine = n + tr._fine_wait
         tr._fine_wait = min(2 * tr._fine_wait, int(tr.settings.research.max_wait_s / tr.h))
         return True
+
+
+def _fit_rms(raw: tuple) -> float:
+    """An accepted re-fit's rms error (``fit_machine.accept``'s cost over its effective samples)."""
+    return math.sqrt(max(raw[5], 0.0) / max(raw[6], 1.0))
