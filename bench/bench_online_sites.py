@@ -51,8 +51,20 @@ def site(est) -> str:
     """Where the estimator is between two calls (see the module docstring)."""
     tr = est._live
     if tr is None:
-        search = getattr(est, "_search", None)
-        inner = f"[{_chain(search._gen)}]" if est.phase == "searching" and search is not None else ""
+        startup = est._startup
+        search, starting = startup.search, startup.starting
+        inner = ""
+        if starting is not None:
+            inner = f"[{_chain(starting)}]"
+        elif est.phase == "tracking" and est._tracker is not None:   # the buffer's catch-up, the tracker's own jobs
+            tr = est._tracker
+            inner = "[first fit]" if tr.fitting else "[catch-up]"
+            if tr._jobs:
+                inner += f"[{_chain(tr._jobs[0])}]"
+            elif tr.machine is not None:
+                inner += "[machine]"
+        elif est.phase == "searching" and search is not None:
+            inner = f"[{_chain(search._gen)}]"
         return "startup:" + est.phase + inner
     if tr.machine is not None:
         return "machine"
