@@ -331,7 +331,7 @@ def test_free_fit_is_least_squares_with_the_unknown_start():
         _drain(search._free_gram(model.alpha, a1, a2, decays, 1))       # (the candidate's coefficients)
         search._x[:] = 0.0
         _rows_free_sparse(search._hist, search.u, search.y, search._vz, search._v[-2], search._v[-1], search._rc,
-                          search._x, np.array([1.0, 0.0]), a1, a2, H, np.array(decays), 0, t.size, 1, 0, G2,
+                          search._x, np.array([1.0, 0.0]), (a1, a2), H, np.array(decays), 0, t.size, 1, 0, G2,
                           np.zeros((1, 1)), 0)
         assert _free_fit(G2)[0] == pytest.approx(_free_cost(G), rel=1e-6), (a1, a2)
 

@@ -281,7 +281,7 @@ def _free_shift(a1: float, a2: float, h: float) -> tuple:
 
 @njit(cache=True)
 def _rows_free_sparse(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx0: float, vx1: float,
-                      rc: np.ndarray, x: np.ndarray, g: np.ndarray, a1: float, a2: float, h: float,
+                      rc: np.ndarray, x: np.ndarray, g: np.ndarray, resonance: tuple, h: float,
                       rates: np.ndarray, r0: int, r1: int, stride: int, lead: int, G: np.ndarray, table: np.ndarray,
                       mode: int) -> None:
     """``_rows_free`` on one row per block of ``stride`` (``_kept``): the forced state advances at every row,
@@ -299,7 +299,12 @@ def _rows_free_sparse(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.nda
     ``mode`` (``FreeRowCache``): 0 every entry of G from the decays' exponentials; 1 the same, the decays of
     kept row k also stored in ``table[k // stride]``; 2 the decays read from the table and only the
     candidate's entries of G accumulated (``_add_candidate_row``), the rest (the constant, the decays, y:
-    the same for every candidate) left as they are (``_constant_entries``)."""
+    the same for every candidate) left as they are (``_constant_entries``).
+
+    ``resonance`` is the candidate's (a1, a2): one argument, not two. Called with 20 or more arguments, numba's
+    dispatcher leaves each call's argument tuple in a reference cycle (~6 objects per call for the garbage
+    collector; a loop run with the collector off would keep them all)."""
+    a1, a2 = resonance
     m = rates.shape[0]
     p = 5 + m
     row = np.empty(p)
@@ -851,7 +856,7 @@ class ResonanceSearch(Checkpointable):
         if passes <= 1:                    # (the second candidate's set-up after the first's end: ~15 us cold)
             yield
         for r0, r1 in _row_units(n, per_row, lead):
-            _rows_free_sparse(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, g, a1, a2, self.basis.h, rates,
+            _rows_free_sparse(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, g, (a1, a2), self.basis.h, rates,
                               r0, r1, stride, self.lead, G, table, mode)
             yield
         if cold:                           # (the first candidate's end, the next one's set-up and rows: 26 us)
