@@ -137,6 +137,11 @@ class Researcher:
                 and abs(r.var_ln_a1) * sigma2 <= tr.settings.determined["a1"] ** 2
                 and abs(r.var_ln_a2) * sigma2 <= tr.settings.determined["a2"] ** 2)
 
+    def sudden_misfit(self, tr: WindowTracker) -> bool:
+        """Did the current misfit run come suddenly (``settings.research.sudden_ratio``) after a window at the floor whose
+        fit determined the resonance and alpha? (The plant changed before the re-fit that saw it.)"""
+        return tr._misfit_sudden and self.resonance_determined(tr, tr._misfit_floor_raw)
+
     def watch(self, tr: WindowTracker, rms: float, broken: bool, n: int, floor: float, raw: tuple | None = None) -> None:
         """After each re-fit (at sample n; the output's noise level ``floor``; ``raw`` the accepted fit's tuple):
         start a re-search once the error has sat above the noise floor (or the fit has been broken) for
@@ -153,9 +158,11 @@ class Researcher:
             return
         if tr._misfit_since is None:
             tr._misfit_since = n
+            # (whether that floor's fit determined the resonance is asked by the re-search, ``sudden_misfit``: judged
+            # here, in the re-fit's call, it was ~30 us cold)
             tr._misfit_sudden = not broken and tr._floor_at is not None \
-                and rule.sudden(rms, floor, n - tr._floor_at, int(rule.sudden_within_s / tr.h)) \
-                and self.resonance_determined(tr, tr._floor_raw)
+                and rule.sudden(rms, floor, n - tr._floor_at, int(rule.sudden_within_s / tr.h))
+            tr._misfit_floor_raw = tr._floor_raw
         span = int(rule.after_s / tr.h)
         if n - tr._misfit_since >= span and n - tr.window_start >= span and n >= tr._next_research:
             reason = "fit broken" if broken else f"window error {rms / floor:.1f}x the noise floor"
@@ -174,7 +181,8 @@ class Researcher:
         cap = min(tr.work_memory.shape[0] if tr.work_memory is not None else 1 << 15,
                   int(tr.settings.research_segment_s / tr.h))
         # a sudden misfit: the plant changed before the re-fit that saw it, so only the samples since are searched
-        suspect = tr._misfit_since if tr._misfit_sudden and tr._misfit_since is not None else None
+        suspect = tr._misfit_since if tr._misfit_since is not None and self.sudden_misfit(tr) else None
+        yield                              # (with the fast-forward's set-up below: ~30 us cold in one update())
         n0 = max(tr.window_start, int(tr.sc[W.SC_RSTART]), n1 - cap, suspect or 0)
         zeta0 = yield from tr.replayer.nodes_at(tr, n0)
         u, y = yield from tr.replayer.ring_segment(tr, n0, n1)

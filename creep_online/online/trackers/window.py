@@ -132,6 +132,7 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         self._misfit_sudden = False             # ... and it came suddenly after a window at the floor (settings.research.sudden_ratio)
         self._floor_at: int | None = None       # the last re-fit that found the converged window at the noise floor
         self._floor_raw: tuple | None = None    # ... its accepted fit (``fit_machine.accept``'s tuple)
+        self._misfit_floor_raw: tuple | None = None  # ... that fit when the current misfit run began
         self._first_fit: int | None = None      # first re-fit of the current window (start, change, re-search)
         self._fit_raw: tuple | None = None      # the last accepted re-fit (``fit_machine.accept``'s tuple, drift on)
         self._research_wait = int(self.settings.research.after_s / self.h)
