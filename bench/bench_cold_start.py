@@ -2,10 +2,18 @@
 
 For ``--help``, ``--version``, ``identify --help`` and ``identify FILE`` (12,000 samples: the load-cell
 experiment, 60 s at 200 Hz) each run is a new interpreter (``python -m creep_online``) with the compiled
-kernels already in numba's cache (one warm-up run per command and version first, so the OS file cache is
-warm too). The two versions alternate run by run, so load on the machine hits both alike. Wall time and
-the process's own CPU time (user + sys, from the child's rusage) are reported: on a shared machine the
-CPU time is the steadier figure. Targets: ``--help`` <= 0.15 s, ``identify`` <= 0.6 s (best of 5 wall).
+kernels already in numba's cache and the modules' bytecode written (one warm-up run per command and version
+first, so the OS file cache is warm too; an installed package has its bytecode, pip compiles it, so the
+children may write it even when ``PYTHONDONTWRITEBYTECODE`` is set here). The two versions alternate run by
+run, so load on the machine hits both alike. Wall time and the process's own CPU time (user + sys, from the
+child's rusage) are reported: on a shared machine the CPU time is the steadier figure. Targets: ``--help``
+<= 0.15 s, ``identify`` <= 0.6 s (best of 5 wall).
+
+``identify_12000_phases_cpu_s`` says where a cold ``identify`` spends its own CPU (minimum over the repeats
+of each phase, both versions): the interpreter and the program's parser, numpy, scipy.linalg (numba's first
+dispatch imports it for BLAS), numba, creep_online's modules, numba's first dispatch of a cached kernel (its
+target context and runtime), the command (reading the CSV, loading the other kernels, the fit, the JSON) and
+the interpreter's shutdown (the child's total CPU minus what it had used when the command returned).
 
 Usage: python -m bench.bench_cold_start [--repeats 5] [--previous REF] [--out FILE]
 (prints one JSON document; --out writes it too, e.g. bench/results/cold_start.json)
@@ -13,6 +21,7 @@ Usage: python -m bench.bench_cold_start [--repeats 5] [--previous REF] [--out FI
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
 import resource
@@ -53,6 +62,59 @@ def run_once(code_dir: str, args: list[str], cwd: str, env: dict[str, str]) -> t
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
+#: Run in a fresh interpreter: ``creep-online identify PATH --json`` as the program runs it (``console``, its
+#: shutdown included), with the heavy imports and numba's first dispatch taken one by one before it. Prints
+#: the process's own CPU at each mark as one ``PHASES`` line on stderr.
+_PHASE_PROBE = """
+import json, resource, sys
+def cpu():
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+marks = []
+def mark(name):
+    marks.append((name, cpu()))
+mark("interpreter")
+import creep_online.cli
+mark("program")
+import numpy
+mark("numpy")
+import scipy.linalg
+mark("scipy.linalg")
+import numba
+mark("numba")
+import creep_online.identification, creep_online.io.csvfile
+mark("creep_online modules")
+from creep_online import kernels
+kernels.second_differences(numpy.zeros(3))
+mark("numba first dispatch")
+sys.argv = ["creep-online", "identify", PATH, "--json"]
+try:
+    creep_online.cli.console()
+except SystemExit as stop:
+    code = stop.code
+mark("identify command")
+print("PHASES " + json.dumps(marks), file=sys.stderr)
+raise SystemExit(code)
+"""
+
+
+def run_phases(code_dir: str, path: str, cwd: str, env: dict[str, str]) -> dict[str, float]:
+    """Own CPU s of each phase of one cold ``identify`` (see the module notes), ``shutdown`` and ``total``."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    out = subprocess.run([sys.executable, "-c", _PHASE_PROBE.replace("PATH", repr(path))], check=True,
+                         capture_output=True, text=True, cwd=cwd, env=dict(env, PYTHONPATH=code_dir))
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    total = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    line = next(x for x in out.stderr.splitlines() if x.startswith("PHASES "))
+    marks = json.loads(line[len("PHASES "):])
+    phases, previous = {}, 0.0
+    for name, at in marks:
+        phases[name], previous = at - previous, at
+    phases["shutdown"] = total - previous
+    phases["total"] = total
+    return phases
+
+
 def summary(values: list[float]) -> dict[str, float]:
     return {"best": min(values), "median": statistics.median(values), "max": max(values), "n": len(values)}
 
@@ -78,8 +140,9 @@ def main() -> None:
     path = record_file(work)
     commands = {"help": ["--help"], "version": ["--version"], "identify_help": ["identify", "--help"],
                 "identify_12000": ["identify", path, "--json"]}
-    versions = {"this_code": (ROOT, dict(os.environ)),
-                "previous": (previous_dir, dict(os.environ, NUMBA_CACHE_DIR=os.path.join(previous_dir, ".numba")))}
+    installed = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}   # bytecode kept
+    versions = {"this_code": (ROOT, installed),
+                "previous": (previous_dir, dict(installed, NUMBA_CACHE_DIR=os.path.join(previous_dir, ".numba")))}
     for code_dir, env in versions.values():
         for args in commands.values():
             run_once(code_dir, args, work, env)   # numba cache compiled, files in the OS cache
@@ -91,6 +154,11 @@ def main() -> None:
                 wall, cpu = run_once(code_dir, args, work, env)
                 samples[version][label]["wall"].append(wall)
                 samples[version][label]["cpu"].append(cpu)
+    phase_runs = {v: [] for v in versions}
+    for _ in range(opts.repeats):
+        for version, (code_dir, env) in versions.items():
+            phase_runs[version].append(run_phases(code_dir, path, work, env))
+    phases = {v: {name: min(run[name] for run in runs) for name in runs[0]} for v, runs in phase_runs.items()}
     results = {v: {c: {"wall_s": summary(s["wall"]), "cpu_s": summary(s["cpu"]),
                        "imports": modules_loaded(versions[v][0], commands[c], work, versions[v][1])}
                    for c, s in by_cmd.items()} for v, by_cmd in samples.items()}
@@ -104,7 +172,10 @@ def main() -> None:
     write_report({"bench": "cold_start", "repeats": opts.repeats, "samples": 12000,
                       "previous_commit": previous_commit, "python": platform.python_version(),
                       "cpus": os.cpu_count(), "load_average_start": load_start, "load_average_end": os.getloadavg(),
-                      "results": results, "ratio_previous_over_this": ratios, "targets": targets}, opts.out, indent=2)
+                      "bytecode": "written by the warm-up runs (PYTHONDONTWRITEBYTECODE unset in the children)",
+                      "results": results, "ratio_previous_over_this": ratios, "targets": targets,
+                      "identify_12000_phases_cpu_s": {"statistic": f"minimum of each phase over {opts.repeats} runs",
+                                                      **phases}}, opts.out, indent=2)
 
 
 if __name__ == "__main__":

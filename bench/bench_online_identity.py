@@ -7,24 +7,36 @@ Usage (from the repository root)::
 
 A restructuring of ``creep_online/online`` must not change a single estimate. This runs the scenario
 records of ``bench.bench_online_scenarios`` (same generator, same feeding, the estimate read after every
-0.1 s chunk) through this tree and, in a subprocess, through ``git archive BASELINE creep_online``, and
-compares the two trajectories chunk by chunk: the quality strings must match and every parameter must
-agree to ``--rtol`` (NaN equals NaN: not estimated on both sides). It prints one JSON document: per
-family, the runs compared, the runs identical, the largest relative difference and the first chunk
-where a run differs; ``identical`` is true only when every run of every family is.
+0.1 s chunk) through this tree and through ``git archive BASELINE creep_online``, and compares the two
+trajectories chunk by chunk: the quality strings must match and every parameter must agree to ``--rtol``
+(NaN equals NaN: not estimated on both sides). It prints one JSON document: per family, the runs
+compared, the runs identical, the largest relative difference and the first chunk where a run differs;
+``identical`` is true only when every run of every family is.
+
+Both sides run alike: each in a worker process of its own (the same worker, the same BLAS threads), compiling
+its kernels into a numba cache of its own that starts empty. The online kernels are compiled with
+fastmath (reassociation, contraction), so their machine code, and the last bits of an estimate, depend
+on which of the kernels they call were already in the cache when they were compiled: the same source
+run from a tree whose cache grew over earlier runs (another tracker first, say) differs from a fresh
+compile by ~1e-7, and where a decision hangs on those bits a trajectory parts for good. Compared from
+empty caches, the same code gives the same bits (``main`` against ``main``: identical).
 """
 from __future__ import annotations
 
 import argparse
 import json
 import math
+import os
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from bench.bench_online_scenarios import PARAMS, generate, run_files, start_baseline
+from bench import bench_online_scenarios
+from bench.bench_online_scenarios import PARAMS, ROOT, baseline_tree, generate
 from bench.harness import results_path, write_report
 
 
@@ -53,6 +65,26 @@ def compare_runs(cur: dict, base: dict, rtol: float) -> dict:
     if len(tc["samples"]) != len(tb["samples"]):
         worst, first = math.inf, n if first is None else first
     return {"identical": first is None, "max_rel_diff": worst, "first_diff_chunk": first}
+
+
+def start_side(tree: Path, files: list[Path], mode: str, kwargs: dict, work: Path) -> tuple[subprocess.Popen, Path]:
+    """One side's worker (``bench_online_scenarios --worker``): ``tree`` first on the path, an empty numba cache of
+    its own in ``work``; returns the process and the path its report will be written to."""
+    work.mkdir(parents=True, exist_ok=True)
+    spec, out = work / "spec.json", work / "out.json"
+    spec.write_text(json.dumps({"files": [str(f) for f in files], "mode": mode, "kwargs": kwargs, "out": str(out)}))
+    env = {**os.environ, "PYTHONPATH": str(tree), "NUMBA_CACHE_DIR": str(work / "numba_cache")}
+    with open(work / "stderr.txt", "w") as err:   # a file, not a pipe: nobody reads it until the end
+        proc = subprocess.Popen([sys.executable, bench_online_scenarios.__file__, "--worker", str(spec)],
+                                env=env, cwd=str(work), stderr=err)
+    return proc, out
+
+
+def finish_side(proc: subprocess.Popen, out: Path, name: str) -> dict:
+    """A side's report once its worker has ended (SystemExit naming the side if it failed)."""
+    if proc.wait() != 0 or not out.exists():
+        raise SystemExit(f"{name} worker failed: {(out.parent / 'stderr.txt').read_text()[-2000:]}")
+    return json.loads(out.read_text())
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -84,11 +116,14 @@ def main(argv: list[str] | None = None) -> dict:
         (work / "scenarios").mkdir()
         truth = generate(families, args.plants, work / "scenarios", args.seed_offset, args.snr_db, args.rest_samples)
         files = sorted((work / "scenarios").glob("*.npz"))
-        proc, out = start_baseline(args.baseline, files, args.mode, kwargs, work)
-        current = run_files(files, args.mode, kwargs)
-        if proc.wait() != 0:
-            raise SystemExit(f"baseline worker failed: {(work / 'baseline_stderr.txt').read_text()[-2000:]}")
-        base = json.loads(out.read_text())["results"]
+        base_tree = baseline_tree(args.baseline, work / "baseline_src")
+        sides = {"current": start_side(ROOT, files, args.mode, kwargs, work / "current"),
+                 "baseline": start_side(base_tree, files, args.mode, kwargs, work / "baseline")}
+        reports = {name: finish_side(proc, out, name) for name, (proc, out) in sides.items()}
+        for name, tree in (("current", ROOT), ("baseline", base_tree)):
+            if not Path(reports[name]["package"]).is_relative_to(tree):
+                raise SystemExit(f"the {name} worker imported {reports[name]['package']}, not {tree}")
+        current, base = reports["current"]["results"], reports["baseline"]["results"]
     per_family: dict[str, dict] = {}
     for cur, bas in zip(current, base):
         fam = truth[cur["file"]]["family"]
@@ -100,6 +135,7 @@ def main(argv: list[str] | None = None) -> dict:
         if not cmp["identical"]:
             row["differing"].append({"file": cur["file"], **cmp})
     doc = {"config": {**vars(args), "families": families},
+           "sides": "each in a worker process of its own (the same BLAS threads), its numba cache starting empty",
            "identical": all(r["runs"] == r["identical"] for r in per_family.values()),
            "families": per_family, "elapsed_s": time.perf_counter() - start,
            "max_rel_diff": float(np.max([r["max_rel_diff"] for r in per_family.values()]))}

@@ -145,7 +145,8 @@ def worker_main(argv: list[str]) -> None:
     spec = json.loads(Path(argv[0]).read_text())
     results = run_files([Path(f) for f in spec["files"]], spec["mode"], spec["kwargs"])
     import creep_online
-    report = {"results": results, "package": creep_online.__file__, "hil_sim_imported": "hil_sim" in sys.modules}
+    report = {"results": results, "package": creep_online.__file__, "hil_sim_imported": "hil_sim" in sys.modules,
+              "numba_cache_dir": os.environ.get("NUMBA_CACHE_DIR")}
     Path(spec["out"]).write_text(json.dumps(report))
 
 

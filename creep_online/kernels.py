@@ -747,8 +747,20 @@ def expm_small(x: np.ndarray) -> np.ndarray:
             out[i, i] += 1.0
     for _ in range(squarings):
         _matmul_into(tmp, out, out)
-        out[:, :] = tmp
+        _copy_into(out, tmp)
     return out
+
+
+@njit(cache=CACHE, nogil=True)
+def _copy_into(out: np.ndarray, x: np.ndarray) -> None:
+    """out[:, :] = x for arrays of one shape, element by element.
+
+    A slice assignment's shape check formats its error message with numba's string
+    functions: that doubles the exponentials' compiled code and the time to load it from the cache.
+    """
+    for i in range(x.shape[0]):
+        for j in range(x.shape[1]):
+            out[i, j] = x[i, j]
 
 
 @njit(cache=CACHE, nogil=True)
@@ -765,7 +777,10 @@ def expm_directional(x: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray,
     out = np.empty(directions.shape)
     for k in range(directions.shape[0]):
         eps = 1e-20 * size / max(np.max(np.abs(directions[k])), 1e-300)
-        out[k] = expm_small(x + 1j * eps * directions[k]).imag / eps
+        step = expm_small(x + 1j * eps * directions[k])
+        for i in range(step.shape[0]):          # out[k] = step.imag / eps, without a slice assignment
+            for j in range(step.shape[1]):
+                out[k, i, j] = step[i, j].imag / eps
     return e, out
 
 

@@ -57,3 +57,19 @@ def test_taylor_moment_derivatives_match_the_complex_step_through_scipy(fn, zeta
         e = expm(f * h + 1j * eps * (df * h)).imag / eps
         assert _relative(dphi[k], e[:2, :2]) < 1e-10, k
         assert _relative(dm[k], e[:2, 2:].T) < 1e-10, k
+
+
+def test_expm_directional_is_expm_small_and_its_complex_step_bit_for_bit():
+    """The directional kernel's exponential is ``expm_small``'s, and each derivative is the complex step
+    through ``expm_small`` itself (Im e^(x + i eps E) / eps), to the last bit, on random and resonance matrices."""
+    rng = np.random.default_rng(11)
+    cases = [rng.standard_normal((size, size)) * scale for size in (2, 4, 10) for scale in (1e-3, 0.4, 40.0)]
+    cases += [_integrator_chain(*_resonance(fn, zeta), 8) * h for fn, zeta, h in CASES]
+    for x in cases:
+        directions = rng.standard_normal((3, *x.shape))
+        e, d = kernels.expm_directional(x, directions)
+        assert np.array_equal(e, kernels.expm_small(x))
+        size = max(np.max(np.abs(x)), 1e-300)
+        for k, direction in enumerate(directions):
+            eps = 1e-20 * size / max(np.max(np.abs(direction)), 1e-300)
+            assert np.array_equal(d[k], kernels.expm_small(x + 1j * eps * direction).imag / eps), k
