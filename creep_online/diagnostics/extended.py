@@ -1084,7 +1084,8 @@ def residual_peaks(data: Prepared, residual: np.ndarray) -> list[float]:
 @single_threaded
 def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, base: ExtendedFit | None = None,
                  harmonics: int = 1, max_nfev: int = MAX_NFEV, n_starts: int = 2,
-                 warm: ExtendedFit | None = None, workers: int = 1, restart: bool = False) -> ExtendedFit:
+                 warm: ExtendedFit | None = None, workers: int = 1, restart: bool = False,
+                 screen: bool = False) -> ExtendedFit:
     """Fit the base model extended by ``effects``, warm-started from ``base`` (fitted if not given).
 
     The effects' nonlinear parameters start from a grid (residual-spectrum
@@ -1096,7 +1097,9 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     runs the short polishes of a long record on that many threads (the
     result does not depend on it, ``_short_polishes``). ``restart``: search the base
     parameters again from a grid (``_restart_base``) whatever the fit's misfit (by default
-    only a fit above the floor that explains most of the base's misfit is restarted).
+    only a fit above the floor that explains most of the base's misfit is restarted). ``screen``: the fit
+    only ranks effects for a fit on a longer record (the pair search on a long record's window, where only the
+    chosen pair is fitted to the record, warm from this fit and restarted by the rule there): no restart here.
     """
     if isinstance(effects, str):
         effects = tuple(e.strip() for e in effects.split(",") if e.strip())
@@ -1170,8 +1173,8 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
             best, best_cost = th, c
     fit = _result(design, best)
     above = RESTART_ABOVE_FLOOR * noise_std_estimate(fit.residual) < fit.residual_rms
-    if restart or (above and (fit.residual_rms < RESTART_EXPLAINED * base.residual_rms
-                              or _on_a_bound(design, base.theta[:3]))):
+    if restart or (not screen and above and (fit.residual_rms < RESTART_EXPLAINED * base.residual_rms
+                                             or _on_a_bound(design, base.theta[:3]))):
         th = _restart_base(design, explore, best, max_nfev, workers)
         cost = design.cost(th)
         if cost < best_cost:
