@@ -72,6 +72,8 @@ SOLVED_CACHE = 8
 BASE_PATH_CACHE = 8
 #: Parallel-effect paths remembered per record (``Prepared.parallel_path``) ...
 PARALLEL_PATH_CACHE = 16
+#: Reported-solution rows remembered per record (``_reported_rows``: one per set of variants) ...
+REPORTED_CACHE = 4
 #: ... and at most this many bytes in each of those memories (the most recent entry always kept). The counts
 #: suit the explore window; on a long record one entry of a hysteresis fit (13 input rows, or a coupled design's
 #: tangent of 27 columns) is 5-11 MB at 50,000 samples, and eight to sixteen of each, per record and per design,
@@ -261,8 +263,10 @@ class Prepared:
 _CACHE_LOCK = threading.Lock()
 
 
-def _remembered(cache: dict, key: tuple, size: int, make: Callable[[], np.ndarray]) -> np.ndarray:
-    """``cache[key]``, or ``make()`` remembered (read-only) with the least recently used entries beyond ``size`` evicted.
+def _remembered(cache: dict, key: tuple, size: int, make: Callable[[], np.ndarray],
+                nbytes: Callable[[object], int] = lambda v: v.nbytes) -> np.ndarray:
+    """``cache[key]``, or ``make()`` remembered (an array: read-only) with the least recently used entries beyond
+    ``size`` or ``CACHE_BYTES`` (``nbytes`` of an entry) evicted.
 
     Exact reuse only: a remembered array is bit for bit what ``make()`` gives
     again, so hits, misses and evictions (which depend on what other threads
@@ -275,10 +279,11 @@ def _remembered(cache: dict, key: tuple, size: int, make: Callable[[], np.ndarra
             cache[key] = value                   # most recently used last
             return value
     value = make()
-    value.setflags(write=False)
+    if isinstance(value, np.ndarray):
+        value.setflags(write=False)
     with _CACHE_LOCK:
         cache[key] = value
-        _evict(cache, size, lambda v: v.nbytes)
+        _evict(cache, size, nbytes)
     return value
 
 
@@ -832,19 +837,15 @@ def _reported(design: Design, theta: np.ndarray) -> tuple[np.ndarray, list[str],
 def _reported_solution(design: Design, theta: np.ndarray) -> tuple | None:
     """``_reported`` computed."""
     data = design.data
-    solutions = [(e, variant, e.reported_solution(data, variant)) for e, variant in design.inputs]
+    if not design.inputs:
+        return None
+    solutions, sup = _remembered(data._cache.setdefault("reported", {}), tuple((e.name, v) for e, v in design.inputs),
+                                 REPORTED_CACHE, lambda: _reported_rows(design), _reported_bytes)
     own = [(e, sol) for e, _, sol in solutions if sol is not None]
     if not own:
         return None
     coef, _, wres = design.project(theta)
     noise_var = float(wres @ wres) / max(data.n - len(coef) - len(theta), 1)
-
-    def rows(u: np.ndarray, before: bool = False) -> np.ndarray:
-        return np.vstack([u[None, :]] + [sol.rows(u, before) if sol is not None else e.design_rows(data, u, v, before)
-                                          for e, v, sol in solutions])
-
-    pre = None if data.u_pre is None else rows(np.array([data.u_pre]), before=True)[:, 0]
-    sup = fx.Superposer(data.t, rows(data.u), x_pre=pre, t_pre=data.t_pre)
     p, alpha, a1, a2, d = design._base(theta)
     names, cols = ["b"], {}
     for e, _, sol in solutions:
@@ -887,6 +888,32 @@ def _reported_solution(design: Design, theta: np.ndarray) -> tuple | None:
         x = np.concatenate([x[:rows_n], [k * x[0] for k in kappa], x[rows_n:]])
         names = names[:rows_n] + [e.gain_column for e in design.stages[Stage.PARALLEL]] + names[rows_n:]
     return x, names, y_hat, wres, {effect.name: found}
+
+
+def _reported_rows(design: Design) -> tuple[list[tuple], fx.Superposer | None]:
+    """(each input effect, its variant and its reported solution; the superposer of the reported rows, None when
+    no effect has a reported solution): what ``_reported_solution`` needs of a record and the variants, remembered
+    per record (``Prepared``) since the fits ask for it at every result and at each variant."""
+    data = design.data
+    solutions = [(e, variant, e.reported_solution(data, variant)) for e, variant in design.inputs]
+    if all(sol is None for _, _, sol in solutions):
+        return solutions, None
+
+    def rows(u: np.ndarray, before: bool = False) -> np.ndarray:
+        return np.vstack([u[None, :]] + [sol.rows(u, before) if sol is not None else e.design_rows(data, u, v, before)
+                                          for e, v, sol in solutions])
+
+    pre = None if data.u_pre is None else rows(np.array([data.u_pre]), before=True)[:, 0]
+    return solutions, fx.Superposer(data.t, rows(data.u), x_pre=pre, t_pre=data.t_pre)
+
+
+def _reported_bytes(entry: tuple) -> int:
+    """Bytes of a remembered ``_reported_rows``: its superposer's input steps and their spectra (the reported
+    solutions hold the same rows once more)."""
+    sup = entry[1]
+    if sup is None:
+        return 0
+    return 2 * sup.dx.nbytes + (sup.spectra.nbytes if sup.uniform else sup.tau.nbytes)
 
 
 def base_theta(model: CreepModel) -> np.ndarray:
