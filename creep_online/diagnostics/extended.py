@@ -264,9 +264,10 @@ _CACHE_LOCK = threading.Lock()
 
 
 def _remembered(cache: dict, key: tuple, size: int, make: Callable[[], np.ndarray],
-                nbytes: Callable[[object], int] = lambda v: v.nbytes) -> np.ndarray:
+                nbytes: Callable[[object], int] = lambda v: v.nbytes, keep: int = 1) -> np.ndarray:
     """``cache[key]``, or ``make()`` remembered (an array: read-only) with the least recently used entries beyond
-    ``size`` or ``CACHE_BYTES`` (``nbytes`` of an entry) evicted.
+    ``size`` or ``CACHE_BYTES`` (``nbytes`` of an entry) evicted, but for the ``keep`` most recent ones (0: an
+    entry larger than ``CACHE_BYTES`` is not remembered at all).
 
     Exact reuse only: a remembered array is bit for bit what ``make()`` gives
     again, so hits, misses and evictions (which depend on what other threads
@@ -283,15 +284,15 @@ def _remembered(cache: dict, key: tuple, size: int, make: Callable[[], np.ndarra
         value.setflags(write=False)
     with _CACHE_LOCK:
         cache[key] = value
-        _evict(cache, size, nbytes)
+        _evict(cache, size, nbytes, keep)
     return value
 
 
-def _evict(cache: dict, size: int, nbytes: Callable[[object], int]) -> None:
+def _evict(cache: dict, size: int, nbytes: Callable[[object], int], keep: int = 1) -> None:
     """Drop the least recently used entries (first in ``cache``) beyond ``size`` entries or ``CACHE_BYTES``
-    bytes (``nbytes`` of an entry), keeping the most recent one."""
+    bytes (``nbytes`` of an entry), keeping the ``keep`` most recent ones."""
     total = sum(nbytes(v) for v in cache.values())
-    while len(cache) > 1 and (len(cache) > size or total > CACHE_BYTES):
+    while len(cache) > keep and (len(cache) > size or total > CACHE_BYTES):
         total -= nbytes(cache.pop(next(iter(cache))))
 
 
@@ -840,7 +841,7 @@ def _reported_solution(design: Design, theta: np.ndarray) -> tuple | None:
     if not design.inputs:
         return None
     solutions, sup = _remembered(data._cache.setdefault("reported", {}), tuple((e.name, v) for e, v in design.inputs),
-                                 REPORTED_CACHE, lambda: _reported_rows(design), _reported_bytes)
+                                 REPORTED_CACHE, lambda: _reported_rows(design), _reported_bytes, keep=0)
     own = [(e, sol) for e, _, sol in solutions if sol is not None]
     if not own:
         return None
@@ -893,7 +894,8 @@ def _reported_solution(design: Design, theta: np.ndarray) -> tuple | None:
 def _reported_rows(design: Design) -> tuple[list[tuple], fx.Superposer | None]:
     """(each input effect, its variant and its reported solution; the superposer of the reported rows, None when
     no effect has a reported solution): what ``_reported_solution`` needs of a record and the variants, remembered
-    per record (``Prepared``) since the fits ask for it at every result and at each variant."""
+    per record (``Prepared``) within ``CACHE_BYTES`` (an exploration window's; a long record's, 40 MB for
+    hysteresis at 50,000 samples, is built again when asked again)."""
     data = design.data
     solutions = [(e, variant, e.reported_solution(data, variant)) for e, variant in design.inputs]
     if all(sol is None for _, _, sol in solutions):
