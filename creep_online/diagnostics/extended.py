@@ -1145,13 +1145,8 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     grid, prio = _grid_starts(explore, base, peaks)
 
     def ranked(d: Design, starts: list[np.ndarray]) -> list[tuple[float, np.ndarray]]:
-        out = []
-        for th in starts:
-            th = np.clip(th, d.lo, d.hi)
-            try:
-                out.append((d.cost(th), th))
-            except (ValueError, ModelError, np.linalg.LinAlgError):
-                out.append((np.inf, th))
+        starts = [np.clip(th, d.lo, d.hi) for th in starts]
+        out = list(zip(_costs(d, starts, workers if d is not design else 1), starts))
         out.sort(key=lambda ct: ct[0])
         return out
 
@@ -1293,6 +1288,26 @@ def _short_polishes(explore: Design, design: Design, chosen: list[np.ndarray], w
                             chosen, workers))
 
 
+def _costs(design: Design, thetas: list[np.ndarray], workers: int = 1) -> list[float]:
+    """Each theta's cost on ``design`` (inf where the model cannot be evaluated), in order; on ``workers`` threads
+    when > 1, each a share of the thetas on its own copy of the design (as ``_short_polishes``: a copy only misses
+    remembered solutions, which are exact reuse). Only for an exploration window's design: a copy's evaluations
+    are not added to the design's count, which the record's design reports (``ExtendedFit.nfev``)."""
+    def each(d: Design, part: list[np.ndarray]) -> list[float]:
+        out = []
+        for th in part:
+            try:
+                out.append(d.cost(th))
+            except (ValueError, ModelError, np.linalg.LinAlgError):
+                out.append(np.inf)
+        return out
+    if workers <= 1 or len(thetas) <= 1:
+        return each(design, thetas)
+    size = -(-len(thetas) // workers)
+    shares = [thetas[i:i + size] for i in range(0, len(thetas), size)]
+    return [c for done in ordered_map(lambda part: each(design.copy(), part), shares, workers) for c in done]
+
+
 def _on_a_bound(design: Design, base: np.ndarray) -> bool:
     """True when a base parameter (alpha, fn, zeta) sits on its bound: a base fit a strong effect distorted.
 
@@ -1321,12 +1336,8 @@ def _restart_base(design: Design, explore: Design, best: np.ndarray, max_nfev: i
     kept = [best] + _swapped(design, best)
     starts = [np.concatenate([[a, math.log10(fn), math.log10(z)], th[3:]])
               for th in kept for a in RESTART_ALPHAS + (float(th[0]),) for fn in fns for z in RESTART_ZETAS]
-    costs = []
-    for th in starts:
-        try:
-            costs.append(explore.cost(np.clip(th, explore.lo, explore.hi)))
-        except (ValueError, ModelError, np.linalg.LinAlgError):
-            costs.append(np.inf)
+    costs = _costs(explore, [np.clip(th, explore.lo, explore.hi) for th in starts],
+                   workers if explore is not design else 1)
     out, out_cost = best, design.cost(best)
     # the cheapest start at each frequency: ranked unpolished, with the effects' parameters of a fit in a wrong
     # basin, the starts near the plant's resonance can lose to others that polish elsewhere (hysteresis + second
