@@ -74,11 +74,13 @@ BASE_PATH_CACHE = 8
 PARALLEL_PATH_CACHE = 16
 #: Reported-solution rows remembered per record (``_reported_rows``: one per set of variants) ...
 REPORTED_CACHE = 4
-#: ... and at most this many bytes in each of those memories (the most recent entry always kept). The counts
-#: suit the explore window; on a long record one entry of a hysteresis fit (13 input rows, or a coupled design's
-#: tangent of 27 columns) is 5-11 MB at 50,000 samples, and eight to sixteen of each, per record and per design,
-#: held a diagnosis near 1 GB. Every remembered value is exact reuse, so the bound changes no result.
-CACHE_BYTES = 24 * 2**20
+#: ... and at most this many bytes in each of those memories (the most recent response or solution always kept).
+#: The counts suit the explore window; on a long record one entry of a hysteresis fit (13 input rows, or a coupled
+#: design's tangent of 27 columns) is 5-11 MB at 50,000 samples, and eight to sixteen of each, per record and per
+#: design, held a diagnosis near 1 GB. There a fit's evaluations reuse the last one or two entries (the Jacobian
+#: at the point just evaluated); 24 MB held ~25 MB more at the 150 V piezo record's peak, for no evaluation saved.
+#: Every remembered value is exact reuse, so the bound changes no result.
+CACHE_BYTES = 12 * 2**20
 #: Gauss-Newton steps of a coupled design's gain ratios (``Design._coupled_project``), and their relative tolerance.
 COUPLING_STEPS = 8
 COUPLING_RTOL = 1e-10
