@@ -18,7 +18,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ModelError
-from ..kernels import play_rows
 from .base import FitView, InputCompensator, InputEffect
 
 #: Play-operator thresholds the fit uses, as fractions of the input range: 24 evenly spaced
@@ -82,6 +81,7 @@ def play_operators(u: np.ndarray, r: np.ndarray, initial: np.ndarray | None = No
     is given). A compiled loop (``kernels.play_rows``): a record whose input
     changes at every sample needs one update per sample.
     """
+    from ..kernels import play_rows          # numba on first use: importing the effects stays light (``--help``)
     u = np.ascontiguousarray(u, dtype=float)
     r = np.ascontiguousarray(np.atleast_1d(np.asarray(r, dtype=float)))
     p = np.full(r.size, u[0]) if initial is None else np.broadcast_to(np.asarray(initial, dtype=float), r.shape).copy()
