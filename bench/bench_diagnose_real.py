@@ -9,7 +9,8 @@ load. Prints one JSON document (and writes ``bench/results/diagnose_real.json``)
 
 * per record and code: wall seconds, CPU seconds of the process (every
   thread: the candidate fits run on threads) and of the main thread, peak
-  resident memory (MB, ``ru_maxrss``), the verdict, the base fit %, each
+  resident memory (MB, ``ru_maxrss`` of the process or of any child it waited for, whichever is larger),
+  the verdict, the base fit %, each
   candidate's fit % and evidence, the combination's;
 * ``same``: per record, whether the verdict is the same and the largest
   difference of any fit % (base, candidates, combination) between the two;
@@ -79,7 +80,7 @@ wall, cpu, main = time.perf_counter() - t0, time.process_time() - c0, time.threa
 c = d.combination
 print(json.dumps({
     "samples": int(d.data.n), "seconds": wall, "cpu_seconds": cpu, "main_thread_cpu_seconds": main,
-    "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+    "peak_rss_mb": max(resource.getrusage(w).ru_maxrss for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)) / 1024.0,
     "verdict": d.verdict, "fit_percent_base": d.base.fit_percent,
     "candidates": [[x.effect, x.fit.fit_percent, x.evidence] for x in d.candidates],
     "combination": None if c is None else [c.effect, c.fit.fit_percent, c.evidence, bool(c.significant)]}))

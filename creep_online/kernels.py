@@ -794,3 +794,18 @@ def second_differences(y: np.ndarray) -> np.ndarray:
     for i in range(n):
         out[i] = ((y[i + 2] - y[i + 1]) - (y[i + 1] - y[i])) / root6
     return out
+
+
+@njit(cache=CACHE, nogil=True)
+def play_rows(u: np.ndarray, r: np.ndarray, p0: np.ndarray) -> np.ndarray:
+    """Play (backlash) operator outputs, one row per threshold r_i: p[n] = max(u[n] - r_i, min(u[n] + r_i, p[n-1])),
+    p[-1] = p0 (``effects.hysteresis.play_operators``: the same operations, updated where the input changes)."""
+    out = np.empty((r.size, u.size))
+    p = p0.copy()
+    for n in range(u.size):
+        if n == 0 or u[n] != u[n - 1]:
+            for i in range(r.size):
+                p[i] = max(u[n] - r[i], min(u[n] + r[i], p[i]))
+        for i in range(r.size):
+            out[i, n] = p[i]
+    return out

@@ -10,6 +10,7 @@ from scipy import signal
 from creep_online import CreepModel, simulate
 from creep_online.effects import (EFFECTS, base_step_at, creep_step, hysteresis_input, leakage_filter, loop_width,
                                   play_operators, resonance_step, simulate_with_effects)
+from creep_online.effects.hysteresis import initial_plays
 from creep_online.errors import ModelError
 
 H = 1e-3
@@ -109,6 +110,25 @@ def test_play_operator_against_slow_loop():
             p = max(u[n] - ri, min(u[n] + ri, p))
             ref[i, n] = p
     assert np.array_equal(play_operators(u, r), ref)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_play_operators_from_each_initial_state_against_slow_loop(seed):
+    """Random thresholds, inputs that change at every sample or hold (staircases), each initial state: the
+    compiled operator gives the slow loop's values bit for bit."""
+    rng = np.random.default_rng([seed, 17])
+    n = int(rng.integers(2, 1500))
+    u = (rng.normal(size=n).cumsum() if seed % 2 else np.repeat(rng.normal(size=n // 7 + 1), 7)[:n]) * 10 ** rng.uniform(-3, 3)
+    r = np.sort(rng.uniform(0.0, 1.0, int(rng.integers(1, 30)))) * np.ptp(u)
+    state = ("centred", "ascending", "descending")[seed % 3]
+    start = initial_plays(u[0], r, state)
+    ref = np.zeros((r.size, u.size))
+    for i, ri in enumerate(r):
+        p = start[i]
+        for k in range(u.size):
+            p = max(u[k] - ri, min(u[k] + ri, p))
+            ref[i, k] = p
+    assert np.array_equal(play_operators(u, r, initial=start), ref)
 
 
 def test_loop_width_of_a_single_operator():

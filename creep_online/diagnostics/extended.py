@@ -72,11 +72,15 @@ SOLVED_CACHE = 8
 BASE_PATH_CACHE = 8
 #: Parallel-effect paths remembered per record (``Prepared.parallel_path``) ...
 PARALLEL_PATH_CACHE = 16
-#: ... and at most this many bytes in each of those memories (the most recent entry always kept). The counts
-#: suit the explore window; on a long record one entry of a hysteresis fit (13 input rows, or a coupled design's
-#: tangent of 27 columns) is 5-11 MB at 50,000 samples, and eight to sixteen of each, per record and per design,
-#: held a diagnosis near 1 GB. Every remembered value is exact reuse, so the bound changes no result.
-CACHE_BYTES = 24 * 2**20
+#: Reported-solution rows remembered per record (``_reported_rows``: one per set of variants) ...
+REPORTED_CACHE = 4
+#: ... and at most this many bytes in each of those memories (the most recent response or solution always kept).
+#: The counts suit the explore window; on a long record one entry of a hysteresis fit (13 input rows, or a coupled
+#: design's tangent of 27 columns) is 5-11 MB at 50,000 samples, and eight to sixteen of each, per record and per
+#: design, held a diagnosis near 1 GB. There a fit's evaluations reuse the last one or two entries (the Jacobian
+#: at the point just evaluated); 24 MB held ~25 MB more at the 150 V piezo record's peak, for no evaluation saved.
+#: Every remembered value is exact reuse, so the bound changes no result.
+CACHE_BYTES = 12 * 2**20
 #: Gauss-Newton steps of a coupled design's gain ratios (``Design._coupled_project``), and their relative tolerance.
 COUPLING_STEPS = 8
 COUPLING_RTOL = 1e-10
@@ -261,8 +265,11 @@ class Prepared:
 _CACHE_LOCK = threading.Lock()
 
 
-def _remembered(cache: dict, key: tuple, size: int, make: Callable[[], np.ndarray]) -> np.ndarray:
-    """``cache[key]``, or ``make()`` remembered (read-only) with the least recently used entries beyond ``size`` evicted.
+def _remembered(cache: dict, key: tuple, size: int, make: Callable[[], np.ndarray],
+                nbytes: Callable[[object], int] = lambda v: v.nbytes, keep: int = 1) -> np.ndarray:
+    """``cache[key]``, or ``make()`` remembered (an array: read-only) with the least recently used entries beyond
+    ``size`` or ``CACHE_BYTES`` (``nbytes`` of an entry) evicted, but for the ``keep`` most recent ones (0: an
+    entry larger than ``CACHE_BYTES`` is not remembered at all).
 
     Exact reuse only: a remembered array is bit for bit what ``make()`` gives
     again, so hits, misses and evictions (which depend on what other threads
@@ -275,18 +282,19 @@ def _remembered(cache: dict, key: tuple, size: int, make: Callable[[], np.ndarra
             cache[key] = value                   # most recently used last
             return value
     value = make()
-    value.setflags(write=False)
+    if isinstance(value, np.ndarray):
+        value.setflags(write=False)
     with _CACHE_LOCK:
         cache[key] = value
-        _evict(cache, size, lambda v: v.nbytes)
+        _evict(cache, size, nbytes, keep)
     return value
 
 
-def _evict(cache: dict, size: int, nbytes: Callable[[object], int]) -> None:
+def _evict(cache: dict, size: int, nbytes: Callable[[object], int], keep: int = 1) -> None:
     """Drop the least recently used entries (first in ``cache``) beyond ``size`` entries or ``CACHE_BYTES``
-    bytes (``nbytes`` of an entry), keeping the most recent one."""
+    bytes (``nbytes`` of an entry), keeping the ``keep`` most recent ones."""
     total = sum(nbytes(v) for v in cache.values())
-    while len(cache) > 1 and (len(cache) > size or total > CACHE_BYTES):
+    while len(cache) > keep and (len(cache) > size or total > CACHE_BYTES):
         total -= nbytes(cache.pop(next(iter(cache))))
 
 
@@ -832,19 +840,15 @@ def _reported(design: Design, theta: np.ndarray) -> tuple[np.ndarray, list[str],
 def _reported_solution(design: Design, theta: np.ndarray) -> tuple | None:
     """``_reported`` computed."""
     data = design.data
-    solutions = [(e, variant, e.reported_solution(data, variant)) for e, variant in design.inputs]
+    if not design.inputs:
+        return None
+    solutions, sup = _remembered(data._cache.setdefault("reported", {}), tuple((e.name, v) for e, v in design.inputs),
+                                 REPORTED_CACHE, lambda: _reported_rows(design), _reported_bytes, keep=0)
     own = [(e, sol) for e, _, sol in solutions if sol is not None]
     if not own:
         return None
     coef, _, wres = design.project(theta)
     noise_var = float(wres @ wres) / max(data.n - len(coef) - len(theta), 1)
-
-    def rows(u: np.ndarray, before: bool = False) -> np.ndarray:
-        return np.vstack([u[None, :]] + [sol.rows(u, before) if sol is not None else e.design_rows(data, u, v, before)
-                                          for e, v, sol in solutions])
-
-    pre = None if data.u_pre is None else rows(np.array([data.u_pre]), before=True)[:, 0]
-    sup = fx.Superposer(data.t, rows(data.u), x_pre=pre, t_pre=data.t_pre)
     p, alpha, a1, a2, d = design._base(theta)
     names, cols = ["b"], {}
     for e, _, sol in solutions:
@@ -887,6 +891,33 @@ def _reported_solution(design: Design, theta: np.ndarray) -> tuple | None:
         x = np.concatenate([x[:rows_n], [k * x[0] for k in kappa], x[rows_n:]])
         names = names[:rows_n] + [e.gain_column for e in design.stages[Stage.PARALLEL]] + names[rows_n:]
     return x, names, y_hat, wres, {effect.name: found}
+
+
+def _reported_rows(design: Design) -> tuple[list[tuple], fx.Superposer | None]:
+    """(each input effect, its variant and its reported solution; the superposer of the reported rows, None when
+    no effect has a reported solution): what ``_reported_solution`` needs of a record and the variants, remembered
+    per record (``Prepared``) within ``CACHE_BYTES`` (an exploration window's; a long record's, 40 MB for
+    hysteresis at 50,000 samples, is built again when asked again)."""
+    data = design.data
+    solutions = [(e, variant, e.reported_solution(data, variant)) for e, variant in design.inputs]
+    if all(sol is None for _, _, sol in solutions):
+        return solutions, None
+
+    def rows(u: np.ndarray, before: bool = False) -> np.ndarray:
+        return np.vstack([u[None, :]] + [sol.rows(u, before) if sol is not None else e.design_rows(data, u, v, before)
+                                          for e, v, sol in solutions])
+
+    pre = None if data.u_pre is None else rows(np.array([data.u_pre]), before=True)[:, 0]
+    return solutions, fx.Superposer(data.t, rows(data.u), x_pre=pre, t_pre=data.t_pre)
+
+
+def _reported_bytes(entry: tuple) -> int:
+    """Bytes of a remembered ``_reported_rows``: its superposer's input steps and their spectra (the reported
+    solutions hold the same rows once more)."""
+    sup = entry[1]
+    if sup is None:
+        return 0
+    return 2 * sup.dx.nbytes + (sup.spectra.nbytes if sup.uniform else sup.tau.nbytes)
 
 
 def base_theta(model: CreepModel) -> np.ndarray:
@@ -1084,7 +1115,8 @@ def residual_peaks(data: Prepared, residual: np.ndarray) -> list[float]:
 @single_threaded
 def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, base: ExtendedFit | None = None,
                  harmonics: int = 1, max_nfev: int = MAX_NFEV, n_starts: int = 2,
-                 warm: ExtendedFit | None = None, workers: int = 1, restart: bool = False) -> ExtendedFit:
+                 warm: ExtendedFit | None = None, workers: int = 1, restart: bool = False,
+                 screen: bool = False) -> ExtendedFit:
     """Fit the base model extended by ``effects``, warm-started from ``base`` (fitted if not given).
 
     The effects' nonlinear parameters start from a grid (residual-spectrum
@@ -1096,7 +1128,9 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     runs the short polishes of a long record on that many threads (the
     result does not depend on it, ``_short_polishes``). ``restart``: search the base
     parameters again from a grid (``_restart_base``) whatever the fit's misfit (by default
-    only a fit above the floor that explains most of the base's misfit is restarted).
+    only a fit above the floor that explains most of the base's misfit is restarted). ``screen``: the fit
+    only ranks effects for a fit on a longer record (the pair search on a long record's window, where only the
+    chosen pair is fitted to the record, warm from this fit and restarted by the rule there): no restart here.
     """
     if isinstance(effects, str):
         effects = tuple(e.strip() for e in effects.split(",") if e.strip())
@@ -1113,13 +1147,8 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     grid, prio = _grid_starts(explore, base, peaks)
 
     def ranked(d: Design, starts: list[np.ndarray]) -> list[tuple[float, np.ndarray]]:
-        out = []
-        for th in starts:
-            th = np.clip(th, d.lo, d.hi)
-            try:
-                out.append((d.cost(th), th))
-            except (ValueError, ModelError, np.linalg.LinAlgError):
-                out.append((np.inf, th))
+        starts = [np.clip(th, d.lo, d.hi) for th in starts]
+        out = list(zip(_costs(d, starts, workers if d is not design else 1), starts))
         out.sort(key=lambda ct: ct[0])
         return out
 
@@ -1170,8 +1199,8 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
             best, best_cost = th, c
     fit = _result(design, best)
     above = RESTART_ABOVE_FLOOR * noise_std_estimate(fit.residual) < fit.residual_rms
-    if restart or (above and (fit.residual_rms < RESTART_EXPLAINED * base.residual_rms
-                              or _on_a_bound(design, base.theta[:3]))):
+    if restart or (not screen and above and (fit.residual_rms < RESTART_EXPLAINED * base.residual_rms
+                                             or _on_a_bound(design, base.theta[:3]))):
         th = _restart_base(design, explore, best, max_nfev, workers)
         cost = design.cost(th)
         if cost < best_cost:
@@ -1261,6 +1290,26 @@ def _short_polishes(explore: Design, design: Design, chosen: list[np.ndarray], w
                             chosen, workers))
 
 
+def _costs(design: Design, thetas: list[np.ndarray], workers: int = 1) -> list[float]:
+    """Each theta's cost on ``design`` (inf where the model cannot be evaluated), in order; on ``workers`` threads
+    when > 1, each a share of the thetas on its own copy of the design (as ``_short_polishes``: a copy only misses
+    remembered solutions, which are exact reuse). Only for an exploration window's design: a copy's evaluations
+    are not added to the design's count, which the record's design reports (``ExtendedFit.nfev``)."""
+    def each(d: Design, part: list[np.ndarray]) -> list[float]:
+        out = []
+        for th in part:
+            try:
+                out.append(d.cost(th))
+            except (ValueError, ModelError, np.linalg.LinAlgError):
+                out.append(np.inf)
+        return out
+    if workers <= 1 or len(thetas) <= 1:
+        return each(design, thetas)
+    size = -(-len(thetas) // workers)
+    shares = [thetas[i:i + size] for i in range(0, len(thetas), size)]
+    return [c for done in ordered_map(lambda part: each(design.copy(), part), shares, workers) for c in done]
+
+
 def _on_a_bound(design: Design, base: np.ndarray) -> bool:
     """True when a base parameter (alpha, fn, zeta) sits on its bound: a base fit a strong effect distorted.
 
@@ -1289,12 +1338,8 @@ def _restart_base(design: Design, explore: Design, best: np.ndarray, max_nfev: i
     kept = [best] + _swapped(design, best)
     starts = [np.concatenate([[a, math.log10(fn), math.log10(z)], th[3:]])
               for th in kept for a in RESTART_ALPHAS + (float(th[0]),) for fn in fns for z in RESTART_ZETAS]
-    costs = []
-    for th in starts:
-        try:
-            costs.append(explore.cost(np.clip(th, explore.lo, explore.hi)))
-        except (ValueError, ModelError, np.linalg.LinAlgError):
-            costs.append(np.inf)
+    costs = _costs(explore, [np.clip(th, explore.lo, explore.hi) for th in starts],
+                   workers if explore is not design else 1)
     out, out_cost = best, design.cost(best)
     # the cheapest start at each frequency: ranked unpolished, with the effects' parameters of a fit in a wrong
     # basin, the starts near the plant's resonance can lose to others that polish elsewhere (hysteresis + second

@@ -78,18 +78,14 @@ def play_operators(u: np.ndarray, r: np.ndarray, initial: np.ndarray | None = No
 
     ``p[n] = max(u[n] - r, min(u[n] + r, p[n-1]))`` with ``p[-1] = u[0]``
     (the operators start centred on the first input value unless ``initial``
-    is given). Work is done only where the input changes.
+    is given). A compiled loop (``kernels.play_rows``): a record whose input
+    changes at every sample needs one update per sample.
     """
-    u = np.asarray(u, dtype=float)
-    r = np.atleast_1d(np.asarray(r, dtype=float))
-    out = np.empty((r.size, u.size))
-    p = np.full(r.size, u[0]) if initial is None else np.asarray(initial, dtype=float).copy()
-    change = np.flatnonzero(np.diff(u, prepend=u[0] - 1.0) != 0.0)
-    stops = np.append(change[1:], u.size)
-    for i0, i1 in zip(change, stops):
-        p = np.maximum(u[i0] - r, np.minimum(u[i0] + r, p))
-        out[:, i0:i1] = p[:, None]
-    return out
+    from ..kernels import play_rows          # numba on first use: importing the effects stays light (``--help``)
+    u = np.ascontiguousarray(u, dtype=float)
+    r = np.ascontiguousarray(np.atleast_1d(np.asarray(r, dtype=float)))
+    p = np.full(r.size, u[0]) if initial is None else np.broadcast_to(np.asarray(initial, dtype=float), r.shape).copy()
+    return play_rows(u, r, p)
 
 
 def initial_plays(u0: float, r: np.ndarray, initial: str = "centred") -> np.ndarray:
