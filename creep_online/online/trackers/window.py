@@ -48,6 +48,7 @@ import numpy as np
 from ...effects.hysteresis import threshold_fractions
 from .._kernels import fit_machine as RF
 from .._kernels import hysteresis as HK
+from ..rest import REST_LEAD
 from .._kernels import window as W
 from ..checkpoint import Checkpointable
 from ..soe import SoeBasis
@@ -185,6 +186,7 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
                 self.hyst_r[:] = threshold_fractions(self.n_plays) * float(u_span)
                 self._hyst_span = float(u_span)
             HK.set_thresholds(st, self.lay["hyst"], self.hyst_r)
+            HK.set_start_form(st, self.lay["hyst"], float(REST_LEAD))   # (a start-up's lead-in is no rest)
 
     @property
     def r0(self) -> int:
@@ -243,6 +245,7 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         if self._loop_swept_at <= self.loop_from or not self.settings.research.misfits(rms, floor):
             return False
         self.loop_from = self._loop_swept_at
+        HK.hold_start(self.st, o, self.n_hyst)
         return True
 
     @property
