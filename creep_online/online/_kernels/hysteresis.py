@@ -312,10 +312,12 @@ def sweep(st: np.ndarray, o: int) -> float:
 
 def hold_start(st: np.ndarray, o: int, nh: int) -> None:
     """The window is about to leave out the samples that told the starts apart (a restart after a change, a rest's
-    samples dropped): in a start in equilibrium whose input has already opened a play, the start columns' D_s are
-    constants from the sweep on, and their creeping response only trades with alpha and b in a window without those
-    samples. The re-fits hold their coefficients as fitted (``pin_unopened``)."""
-    if in_equilibrium(st, o) and bool(opened(st, o, nh).any()):
+    samples dropped): in a start in equilibrium whose input has swept every play (``sweep`` at least twice the
+    largest threshold), the start columns' D_s are constants from the sweep on, and their creeping response only
+    trades with alpha and b in a window without those samples. The re-fits hold their coefficients as fitted
+    (``pin_unopened``)."""
+    k = nh - START
+    if in_equilibrium(st, o) and sweep(st, o) >= 2.0 * float(st[o + HEAD:o + HEAD + k].max()):
         st[o + HOLD] = 1.0
 
 
@@ -477,12 +479,16 @@ def pin_unopened(st: np.ndarray, o: int, nh: int, theta: np.ndarray, t0: int, ma
     start or the oldest remembered sample follows u - r or u + r, an affine copy of the input, and its weight is not
     the data's: pinned at 0 (fixed in the masks ``rows``); an opened one is free (mask value ``free``), as the batch
     fit's rule (``effects.hysteresis.opened_operators``). The start columns are free (their prior holds them) unless
-    held (``hold_start``: fixed at their values)."""
+    held (``hold_start``: fixed at their values) or, in a start in equilibrium, until the input has moved both up
+    and down: a move in one direction from rest that sweeps the plays turns both D_s into steps with the input's
+    own, whose coefficients trade with b (the resting-centred demo plant: its first model came at the first
+    reversal, with b 40 % off); they are pinned at 0 until then."""
     k = nh - START
     held = st[o + HOLD] != 0.0
+    unread = st[o + EQUILIBRIUM] != 0.0 and (st[o + RISE] == 0.0 or st[o + FALL] == 0.0)
     for i in range(nh):
-        opened = (i >= k and not held) or (i < k and int(st[o + HEAD + 3 * k + i]) == 3)
-        if not opened and i < k:
+        opened = (i >= k and not held and not unread) or (i < k and int(st[o + HEAD + 3 * k + i]) == 3)
+        if not opened and (i < k or (unread and not held)):
             theta[t0 + i] = 0.0
         for j in range(rows.shape[0]):
             masks[rows[j], t0 + i] = free if opened else 0.0
