@@ -35,6 +35,7 @@ The block at the end of the state array (``block_at``; ``size`` entries; K plays
 ``[EQUILIBRIUM]``   1: the start columns describe a start in equilibrium (``set_start_form``), 0: a jump
 ``[REST_MIN]``      the rest (samples) beyond which the input's first move reads its start in equilibrium
 ``[HOLD]``          1: the re-fits hold the start columns' coefficients (``hold_start``)
+``[FREED]``         1: the re-fits fit the coefficients of a start in equilibrium's columns (``free_start``)
 ``r`` (K)           the thresholds
 ``plays`` (K)       the operators' states after the last sample
 ``ptail`` (K)       their states before the oldest remembered sample
@@ -66,7 +67,7 @@ START_SCALE = 1.0
 PRIOR_FLOOR = 1e-6
 #: Entries before the thresholds: the started flag, the input's lowest and highest value, b of the coefficients,
 #: the input's largest rise and fall (``sweep``), the samples before its first move.
-HEAD = 10
+HEAD = 11
 GAIN = 3
 RISE = 4
 FALL = 5
@@ -77,6 +78,8 @@ EQUILIBRIUM = 7
 REST_MIN = 8
 #: 1 while the start columns' coefficients are held (``hold_start``).
 HOLD = 9
+#: 1 once the re-fits fit the coefficients of a start in equilibrium's columns (``free_start``).
+FREED = 10
 #: Start columns after the K play columns: the ascending start's, then the descending start's.
 START = 2
 
@@ -131,6 +134,7 @@ def set_start_form(st: np.ndarray, o: int, rest_min: float) -> None:
     st[o + EQUILIBRIUM] = 0.0
     st[o + REST_MIN] = rest_min
     st[o + HOLD] = 0.0
+    st[o + FREED] = 0.0
 
 
 @njit(cache=CACHE)
@@ -310,14 +314,27 @@ def sweep(st: np.ndarray, o: int) -> float:
     return float(max(st[o + RISE], st[o + FALL]))
 
 
+def free_start(st: np.ndarray, o: int, nh: int) -> None:
+    """A re-fit at the noise floor with an opened play: the re-fits fit the coefficients of a start in
+    equilibrium's columns from now on (``pin_unopened``); until then they are pinned at 0, the centred start. The
+    columns take the plays' mean (fixed weights), so before the loop's weights are known they are the only
+    hysteresis the window has: a move from rest that sweeps the plays turns both D_s into steps with the input's
+    own, and the first re-fits with a play opened traded them with b and the weights (the resting-centred demo
+    plant: b 0.27 for 2.5, weights of 8, a false change, no model after it)."""
+    if in_equilibrium(st, o) and st[o + HOLD] == 0.0 and bool(opened(st, o, nh).any()):
+        st[o + FREED] = 1.0
+
+
 def hold_start(st: np.ndarray, o: int, nh: int) -> None:
     """The window is about to leave out the samples that told the starts apart (a restart after a change, a rest's
     samples dropped): in a start in equilibrium whose input has swept every play (``sweep`` at least twice the
     largest threshold), the start columns' D_s are constants from the sweep on, and their creeping response only
     trades with alpha and b in a window without those samples. The re-fits hold their coefficients as fitted
-    (``pin_unopened``)."""
+    (``pin_unopened``); coefficients not yet fitted (``free_start``) are held at 0, the centred start, whatever the
+    sweep (a window without the rest cannot tell the starts apart either: freed after the rest's drop, they left a
+    plant resting on the ascending branch at 2.5x the floor)."""
     k = nh - START
-    if in_equilibrium(st, o) and sweep(st, o) >= 2.0 * float(st[o + HEAD:o + HEAD + k].max()):
+    if in_equilibrium(st, o) and (st[o + FREED] == 0.0 or sweep(st, o) >= 2.0 * float(st[o + HEAD:o + HEAD + k].max())):
         st[o + HOLD] = 1.0
 
 
@@ -348,6 +365,7 @@ def replay_origin(st: np.ndarray, live: np.ndarray, o: int, nh: int, q: int) -> 
     st[o + EQUILIBRIUM] = live[o + EQUILIBRIUM]
     st[o + REST_MIN] = live[o + REST_MIN]
     st[o + HOLD] = live[o + HOLD]
+    st[o + FREED] = live[o + FREED]
     for i in range(k):
         st[o + HEAD + i] = live[o + HEAD + i]
         st[o + HEAD + k + i] = live[o + HEAD + 2 * k + i]
@@ -424,6 +442,7 @@ def swap_block(live: np.ndarray, replayed: np.ndarray, o: int, nh: int, q: int) 
     replayed[o + FALL] = live[o + FALL]
     replayed[o + REST] = live[o + REST]
     replayed[o + HOLD] = live[o + HOLD]
+    replayed[o + FREED] = live[o + FREED]
     for i in range(k):
         replayed[o + HEAD + 2 * k + i] = live[o + HEAD + 2 * k + i]
     for i in range(2 * k):
@@ -479,16 +498,14 @@ def pin_unopened(st: np.ndarray, o: int, nh: int, theta: np.ndarray, t0: int, ma
     start or the oldest remembered sample follows u - r or u + r, an affine copy of the input, and its weight is not
     the data's: pinned at 0 (fixed in the masks ``rows``); an opened one is free (mask value ``free``), as the batch
     fit's rule (``effects.hysteresis.opened_operators``). The start columns are free (their prior holds them) unless
-    held (``hold_start``: fixed at their values) or, in a start in equilibrium, until the input has moved both up
-    and down: a move in one direction from rest that sweeps the plays turns both D_s into steps with the input's
-    own, whose coefficients trade with b (the resting-centred demo plant: its first model came at the first
-    reversal, with b 40 % off); they are pinned at 0 until then."""
+    held (``hold_start``: fixed at their values) or, in a start in equilibrium, until ``free_start`` (pinned at 0,
+    the centred start)."""
     k = nh - START
     held = st[o + HOLD] != 0.0
-    unread = st[o + EQUILIBRIUM] != 0.0 and (st[o + RISE] == 0.0 or st[o + FALL] == 0.0)
+    pinned = st[o + EQUILIBRIUM] != 0.0 and st[o + FREED] == 0.0 and not held
     for i in range(nh):
-        opened = (i >= k and not held and not unread) or (i < k and int(st[o + HEAD + 3 * k + i]) == 3)
-        if not opened and (i < k or (unread and not held)):
+        opened = (i >= k and not held and not pinned) or (i < k and int(st[o + HEAD + 3 * k + i]) == 3)
+        if not opened and (i < k or pinned):
             theta[t0 + i] = 0.0
         for j in range(rows.shape[0]):
             masks[rows[j], t0 + i] = free if opened else 0.0

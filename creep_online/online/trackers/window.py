@@ -235,6 +235,8 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         first samples keep them, and so does a window that fits them (a plant resting centred): there they tell
         the weights apart best (the first branch of a periodic input)."""
         o = self.lay["hyst"]
+        if self.n_hyst and self.settings.research.clears(rms, floor):
+            HK.free_start(self.st, o, self.n_hyst)
         if not self.n_hyst or self.st[o + HK.REST] * self.h < HYSTERESIS_REST_S:
             return False
         opened = HK.opened(self.st, o, self.n_hyst)
