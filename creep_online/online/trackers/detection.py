@@ -173,7 +173,7 @@ class ChangeDetection:
         """
         tr.window_start = self.post_change_start(tr, n0, gain_moved)
         if tr.n_hyst:                      # (the new window may not hold what told the loop's starts apart)
-            HK.hold_start(tr.st, tr.lay["hyst"], tr.n_hyst)
+            HK.drop_start(tr.st, tr.lay["hyst"])
         tr._alpha_known = alpha_known
         tr.converged = False
         # a drift the old window modelled goes on through the change (a payload or a resonance change does not stop

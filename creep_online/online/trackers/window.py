@@ -247,7 +247,7 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         if self._loop_swept_at <= self.loop_from or not self.settings.research.misfits(rms, floor):
             return False
         self.loop_from = self._loop_swept_at
-        HK.hold_start(self.st, o, self.n_hyst)
+        HK.drop_start(self.st, o)
         return True
 
     @property
