@@ -16,7 +16,8 @@ piezo at rest after a rise sits on its ascending branch, p_i = u - r_i). Two mor
 which: the start columns, the responses to ``D_s = sum_i w_i (p_i^s - p_i)``, the loop's input as it would be
 from the ascending (s = a: p_i^s = u0 - r_i at the start) or the descending start (p_i^s = u0 + r_i), less the
 centred one's (weights of their sample's time, as the columns' m); after a rest at the first input, a start in
-equilibrium (``set_start_form``). Their coefficients b sigma_s are linear too:
+equilibrium (``set_start_form``), whose coefficients are fitted only between ``free_start`` and ``drop_start``
+(pinned at 0 otherwise). Their coefficients b sigma_s are linear too:
 sigma_s = 1 is the start s exactly, 0 the centred one. ``D_s`` is zero once the input has risen or fallen by 2 r_i
 since the start for every opened play (the three starts' plays are then one), but the nodes' memory keeps its
 response alive. Without these columns the window fitted a start on a branch with a wrong loop and b (on random
@@ -130,7 +131,7 @@ def set_start_form(st: np.ndarray, o: int, rest_min: float) -> None:
     before): at its first move D_s becomes zero before it (its channels cleared) and grows only as the input moves
     the plays, ``D_s = (1/K) sum_i [(p_i^s - p_i) - (p_i^s - p_i)(start)]``, with fixed weights (the estimate's
     weights fed back into it held a wrong loop: on random staircases from rest on a branch the live compensation
-    reached 10x in 96 of 120 scans, with this form in all 120)."""
+    reached 10x in 96 of 120 scans, with this form in all 120). Its coefficients: ``free_start``, ``drop_start``."""
     st[o + EQUILIBRIUM] = 0.0
     st[o + REST_MIN] = rest_min
     st[o + DROPPED] = 0.0
