@@ -34,6 +34,7 @@ def _state(basis: SoeBasis, r: np.ndarray, a1l: float, a2l: float, m_seed: int =
     st = np.zeros(lay["size"])
     W.start_state(st, basis.decay, basis.gain, np.zeros(0), 0.999, basis.h, a1l, a2l, 0, nh)
     HK.set_thresholds(st, lay["hyst"], r)
+    HK.set_start_form(st, lay["hyst"], 20.0)           # (a rest of more than 20 samples: a start in equilibrium)
     st[lay["m"]:lay["m"] + q + 2] = np.random.default_rng(m_seed).standard_normal(q + 2)
     theta = np.zeros(5 + nh)
     theta[3] = 1.7                                        # (b of the coefficients: the columns are unit-gain)
@@ -43,18 +44,25 @@ def _state(basis: SoeBasis, r: np.ndarray, a1l: float, a2l: float, m_seed: int =
 
 
 def _direct_columns(basis: SoeBasis, u: np.ndarray, r: np.ndarray, m: np.ndarray, a1l: float, a2l: float,
-                    w: np.ndarray | None = None) -> np.ndarray:
+                    w: np.ndarray | None = None, equilibrium: bool = False) -> np.ndarray:
     """Each play's column before each sample, the slow way: plays, then nodes and resonance states one by one;
     then (with weights w) the start columns': the ascending and the descending start's loop input less the
-    centred one's, sum_i w_i (p_i^s - p_i)."""
+    centred one's, sum_i w_i (p_i^s - p_i); ``equilibrium``: the mean over the plays of p_i^s - p_i less its value
+    before the first sample (a start in equilibrium: no jump at the first sample)."""
     q = basis.size
     res = np.empty(6)
     W.resonance_step(a1l, a2l, basis.h, res)
     phi_r, gam = res[:4].reshape(2, 2), res[4:6]
     plays = play_operators(u, r)
     if w is not None:
-        plays = np.vstack([plays] + [w @ (play_operators(u, r, initial=initial_plays(u[0], r, s)) - plays[:r.size])
-                                     for s in ("ascending", "descending")])
+        starts = [play_operators(u, r, initial=initial_plays(u[0], r, s)) - plays[:r.size]
+                  for s in ("ascending", "descending")]
+        if equilibrium:
+            before = {s: initial_plays(u[0], r, s) - initial_plays(u[0], r, "centred") for s in ("ascending", "descending")}
+            starts = [np.mean(d - before[s][:, None], axis=0) for d, s in zip(starts, ("ascending", "descending"))]
+        else:
+            starts = [w @ d for d in starts]
+        plays = np.vstack([plays] + starts)
     out = np.empty((plays.shape[0], u.size))
     for i in range(plays.shape[0]):
         z, x = np.zeros(q), np.zeros(2)
@@ -65,11 +73,14 @@ def _direct_columns(basis: SoeBasis, u: np.ndarray, r: np.ndarray, m: np.ndarray
     return out
 
 
-def test_the_columns_are_the_plays_through_the_nodes_and_the_resonance():
+@pytest.mark.parametrize("equilibrium", [False, True])
+def test_the_columns_are_the_plays_through_the_nodes_and_the_resonance(equilibrium):
     basis = SoeBasis.build(H, horizon_s=10.0, dx=1.2)
     rng = np.random.default_rng(3)
     u = np.cumsum(rng.standard_normal(600)) * 0.1
     u[200:230] = u[199]                                   # holds: the plays keep their states
+    if equilibrium:
+        u[:50] = u[50]                                    # (a rest at the start: its first move clears the D_s)
     r = threshold_fractions(4) * np.ptp(u)
     a1l, a2l = 2 * 0.2 / (2 * math.pi * 300), 1 / (2 * math.pi * 300) ** 2
     w = np.array([0.3, -0.1, 0.2, 0.05])
@@ -84,10 +95,15 @@ def test_the_columns_are_the_plays_through_the_nodes_and_the_resonance():
         W.sample(u[n], math.nan, st, S, ring)
         got[:, n] = st[c0:c0 + nh]
     m = st[lay["m"]:lay["m"] + basis.size + 2]
-    want = _direct_columns(basis, u, r, m, a1l, a2l, w) / 1.7
+    assert HK.in_equilibrium(st, lay["hyst"]) == equilibrium
+    want = _direct_columns(basis, u, r, m, a1l, a2l, w, equilibrium) / 1.7
     assert np.abs(want[r.size:]).max() > 0.1 * np.abs(want[:r.size]).max()     # (the start columns are not empty)
     # (the kernel computes the column at a sample from the states before it, as the direct loop does)
-    assert np.allclose(got, want, rtol=1e-10, atol=1e-12 * np.abs(want).max())
+    # (with a rest, the start columns up to its first move are the jump's: cleared at it)
+    keep = np.ones((nh, u.size), bool)
+    if equilibrium:
+        keep[r.size:, :np.flatnonzero(u != u[0])[0] + 1] = False
+    assert np.allclose(got[keep], want[keep], rtol=1e-10, atol=1e-12 * np.abs(want).max())
 
 
 def test_the_tails_hold_the_plays_and_nodes_before_the_oldest_remembered_sample():
@@ -113,13 +129,16 @@ def test_the_tails_hold_the_plays_and_nodes_before_the_oldest_remembered_sample(
     assert np.allclose(st[ct:ct + k * q].reshape(k, q), z, rtol=1e-12, atol=1e-14)
 
 
-def test_a_replay_of_the_ring_reproduces_the_live_statistics():
+@pytest.mark.parametrize("equilibrium", [False, True])
+def test_a_replay_of_the_ring_reproduces_the_live_statistics(equilibrium):
     """The statistics with the hysteresis columns, accumulated live, equal a replay from the stream's start
     (the states from the tails, the columns from the same coefficients)."""
     basis = SoeBasis.build(H, horizon_s=10.0, dx=1.2)
     rng = np.random.default_rng(7)
     n = 700
     u = np.round(np.cumsum(rng.standard_normal(n)) * 0.2, 2)
+    if equilibrium:
+        u[:50] = u[50]
     y = rng.standard_normal(n)
     r = threshold_fractions(3) * np.ptp(u)
     w = np.array([0.2, -0.05, 0.1])
@@ -132,6 +151,7 @@ def test_a_replay_of_the_ring_reproduces_the_live_statistics():
     for a, b in zip(u, y):
         W.sample(a, b, st, S, ring)                       # (gate off, statistics on: every sample accumulated)
     rep = _state(basis, r, 1e-3, 1e-7, w=w)
+    assert HK.in_equilibrium(st, lay["hyst"]) == equilibrium
     rep[lay["m"]:lay["sy"]] = st[lay["m"]:lay["sy"]]
     HK.replay_origin(rep, st, lay["hyst"], nh, basis.size)
     S2 = np.zeros((p, p))

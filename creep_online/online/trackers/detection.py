@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Generator
 import numpy as np
 
 from .._kernels import fit_machine as RF
+from .._kernels import hysteresis as HK
 from .._kernels import window as W
 from .common import KEPT_SNAPSHOTS, MACHINE, MACHINE_TEST, SNAP_SLOTS
 
@@ -173,6 +174,8 @@ class ChangeDetection:
         ``ChangeDetection.settled_before``): alpha is not held afterwards, and later re-searches free it.
         """
         tr.window_start = self.post_change_start(tr, n0, gain_moved)
+        if tr.n_hyst:                      # (the new window may not hold what told the loop's starts apart)
+            HK.drop_start(tr.st, tr.lay["hyst"])
         tr._alpha_known = alpha_known
         tr.converged = False
         # a drift the old window modelled goes on through the change (a payload or a resonance change does not stop

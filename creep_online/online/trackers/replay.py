@@ -167,6 +167,6 @@ class Replayer:
             k1 = min(n1 - n0, k0 + tr.settings.segment_chunk)
             W.ring_copy(tr.ring, (slot + k0) % size, u[k0:k1], y[k0:k1])
             if tr.n_hyst:
-                HK.correct_input(u[k0:k1], tr.hyst_r, plays, w)
+                HK.correct_input(u[k0:k1], tr.hyst_r, plays, w, HK.in_equilibrium(tr.st, tr.lay["hyst"]))
             yield
         return u, y

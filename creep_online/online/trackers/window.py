@@ -48,6 +48,7 @@ import numpy as np
 from ...effects.hysteresis import threshold_fractions
 from .._kernels import fit_machine as RF
 from .._kernels import hysteresis as HK
+from ..rest import REST_LEAD
 from .._kernels import window as W
 from ..checkpoint import Checkpointable
 from ..soe import SoeBasis
@@ -186,6 +187,7 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
                 self.hyst_r[:] = threshold_fractions(self.n_plays) * float(u_span)
                 self._hyst_span = float(u_span)
             HK.set_thresholds(st, self.lay["hyst"], self.hyst_r)
+            HK.set_start_form(st, self.lay["hyst"], float(REST_LEAD))   # (a start-up's lead-in is no rest)
 
     @property
     def r0(self) -> int:
@@ -234,6 +236,8 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         first samples keep them, and so does a window that fits them (a plant resting centred): there they tell
         the weights apart best (the first branch of a periodic input)."""
         o = self.lay["hyst"]
+        if self.n_hyst and self.settings.research.clears(rms, floor):
+            HK.free_start(self.st, o, self.n_hyst)
         if not self.n_hyst or self.st[o + HK.REST] * self.h < HYSTERESIS_REST_S:
             return False
         opened = HK.opened(self.st, o, self.n_hyst)
@@ -244,6 +248,7 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         if self._loop_swept_at <= self.loop_from or not self.settings.research.misfits(rms, floor):
             return False
         self.loop_from = self._loop_swept_at
+        HK.drop_start(self.st, o)
         return True
 
     @property
