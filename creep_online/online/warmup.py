@@ -68,7 +68,8 @@ def warm_kernels() -> None:
     _warm_hysteresis(u)
     rest.reading(np.linspace(0.0, 1.0, 64))          # the start's reading (a stream whose first input is not 0)
     W.noise_seed(t, t.size, np.empty(W.NOISE_SEED_ROWS))
-    W.noise_level(np.ones(8), W.noise_differences(t, t.size, np.empty(W.NOISE_SEED_ROWS)))
+    scratch = np.empty(W.NOISE_SEED_ROWS)
+    W.noise_level(scratch, W.noise_differences(t, t.size, scratch))
     W.newest_mark(np.full(4, -1, dtype=np.int64), 0, 10)
     W.oldest_mark(np.full(4, -1, dtype=np.int64))
 

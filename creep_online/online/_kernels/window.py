@@ -778,6 +778,7 @@ def noise_level(scratch: np.ndarray, k: int) -> float:
     """``noise_seed``'s second half: the noise's standard deviation from the median of scratch[:k] (0 if k < 8),
     selected in place (scratch[:k] is reordered): ``np.median``'s copy and its two selections were ~25 us of one
     update() at the tracker's start."""
+    k = min(k, scratch.shape[0])          # (compiled code does not check bounds)
     if k < 8:
         return 0.0
     half = k // 2
