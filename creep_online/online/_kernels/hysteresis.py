@@ -201,6 +201,16 @@ def _start(st: np.ndarray, o: int, k: int, u: float) -> None:
 
 
 @njit(cache=CACHE, inline="always")
+def _start_terms(eq: bool, c: float, w: float, p: float, pa: float, pd: float, r: float) -> tuple:
+    """One play's terms of the two start columns (ascending, descending; ``set_start_form``): its start differences
+    (``pa - p``, ``pd - p``) less their values at a rest (-r, +r) weighted 1/K (``c``) in the equilibrium form
+    (``eq``), else weighted by the estimate's weight ``w``."""
+    if eq:
+        return c * (pa - p + r), c * (pd - p - r)
+    return w * (pa - p), w * (pd - p)
+
+
+@njit(cache=CACHE, inline="always")
 def _play(p: float, u: float, r: float) -> float:
     if p < u - r:
         return u - r
@@ -261,12 +271,9 @@ def step(st: np.ndarray, o: int, nh: int, q: int, co: np.ndarray, u: float) -> N
         pd = _play(st[o + HEAD + 5 * k + i], u, ri)
         st[o + HEAD + 4 * k + i] = pa
         st[o + HEAD + 5 * k + i] = pd
-        if eq:
-            da += c * (pa - p + ri)
-            dd += c * (pd - p - ri)
-        else:
-            da += st[wt + i] * (pa - p)
-            dd += st[wt + i] * (pd - p)
+        ia, id_ = _start_terms(eq, c, st[wt + i], p, pa, pd, ri)
+        da += ia
+        dd += id_
         _channel(st, ch + i * w, q, r, co, p)
     _channel(st, ch + k * w, q, r, co, da)
     _channel(st, ch + (k + 1) * w, q, r, co, dd)
@@ -293,12 +300,9 @@ def tail(st: np.ndarray, o: int, nh: int, q: int, co: np.ndarray, u_old: float) 
         st[o + HEAD + 2 * k + i] = p
         st[o + HEAD + 6 * k + i] = pa
         st[o + HEAD + 7 * k + i] = pd
-        if eq:
-            da += c * (pa - p + ri)
-            dd += c * (pd - p - ri)
-        else:
-            da += st[wt + i] * (pa - p)
-            dd += st[wt + i] * (pd - p)
+        ia, id_ = _start_terms(eq, c, st[wt + i], p, pa, pd, ri)
+        da += ia
+        dd += id_
         row = ct + i * q
         for j in range(q):
             st[row + j] = co[j] * st[row + j] + co[q + j] * p
