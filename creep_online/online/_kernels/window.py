@@ -1002,17 +1002,7 @@ def sample(u: float, y: float, st: np.ndarray, S: np.ndarray, ring: np.ndarray) 
                 _accumulate(y, phi, S, sy, sc)
             elif status == 0:
                 status = 4
-    if nh > 0 and sc[SC_RCOUNT] >= ring.shape[1]:
-        HK.tail(st, ho, nh, q, co, ring[0, int(sc[SC_RPOS])])
-    _remember(u, y if status == 0 or status == 3 else math.nan, co, q, sc, ring, ztail)
-    note_input(u, sc)
-    advance(phi, co, q, u)
-    if nh > 0:
-        HK.step(st, ho, nh, q, co, u)
-    sc[SC_N] += 1.0
-    if sc[SC_N] >= sc[SC_DUE]:
-        status += 8
-    return status
+    return status + _move_on(u, y, status, st, ho, nh, q, co, phi, sc, ring, ztail)
 
 
 @njit(cache=CACHE)
@@ -1114,22 +1104,30 @@ def block(u: np.ndarray, y: np.ndarray, st: np.ndarray, S: np.ndarray, ring: np.
                     k = _defer(yi, phi, S, sy, sc, X, gx, k)
                 elif status_i == 0:
                     status_i = 4
-        if nh > 0 and sc[SC_RCOUNT] >= ring.shape[1]:
-            HK.tail(st, ho, nh, q, co, ring[0, int(sc[SC_RPOS])])
-        _remember(ui, yi if status_i == 0 or status_i == 3 else math.nan, co, q, sc, ring, ztail)
-        note_input(ui, sc)
-        advance(phi, co, q, ui)
-        if nh > 0:
-            HK.step(st, ho, nh, q, co, ui)
-        sc[SC_N] += 1.0
-        if sc[SC_N] >= sc[SC_DUE]:
-            status_i += 8
+        status_i += _move_on(ui, yi, status_i, st, ho, nh, q, co, phi, sc, ring, ztail)
         status[i - start] = status_i
         if status_i >= 8:
             used = i - start + 1
             break
     _flush(S, X, gx, k)
     return used
+
+
+@njit(cache=CACHE, fastmath=FAST, inline="always")
+def _move_on(u: float, y: float, status: int, st: np.ndarray, ho: int, nh: int, q: int, co: np.ndarray,
+             phi: np.ndarray, sc: np.ndarray, ring: np.ndarray, ztail: np.ndarray) -> int:
+    """A sample's last steps after its gate (``sample`` and ``block`` alike): the ring remembers it (its output only
+    if it was used: status 0 or 3), the hysteresis tail and plays, the input's notes and the node states move on,
+    the count too. Returns 8 if the caller's work is due at this sample, else 0."""
+    if nh > 0 and sc[SC_RCOUNT] >= ring.shape[1]:
+        HK.tail(st, ho, nh, q, co, ring[0, int(sc[SC_RPOS])])
+    _remember(u, y if status == 0 or status == 3 else math.nan, co, q, sc, ring, ztail)
+    note_input(u, sc)
+    advance(phi, co, q, u)
+    if nh > 0:
+        HK.step(st, ho, nh, q, co, u)
+    sc[SC_N] += 1.0
+    return 8 if sc[SC_N] >= sc[SC_DUE] else 0
 
 
 @njit(cache=CACHE, fastmath=FAST, inline="always")
