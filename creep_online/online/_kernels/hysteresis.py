@@ -56,7 +56,7 @@ from numba import njit
 from .layout import ONE, md_at, resonance_in_co
 
 CACHE = True
-FAST = {"contract", "reassoc", "arcp"}
+FAST: set[str] = set()   # IEEE arithmetic, as the window kernels (``window.FAST``: why)
 #: Prior scale of each weight in the window's fit (a Gaussian around 0, as the batch fit's
 #: ``effects.hysteresis.WEIGHT_SCALE``): a weight the window determines better than this is the data's; a combination
 #: of operators the input opens alike (near-collinear columns) is held near 0 instead of cancelling in large pairs.
