@@ -180,13 +180,23 @@ class Prepared:
         () is the plain input.
         """
         key = "+".join(f"{e.name}[{variant}]" for e, variant in inputs) or "u"
-        if key not in self._cache:
+        sup = self._cache.get(key)          # one look-up: ``release`` may empty the cache meanwhile
+        if sup is None:
             x = self.input_rows(inputs, self.u)
             pre = None
             if self.u_pre is not None:
                 pre = self.input_rows(inputs, np.array([self.u_pre]), before=True)[:, 0]
-            self._cache[key] = fx.Superposer(self.t, x, x_pre=pre, t_pre=self.t_pre)
-        return self._cache[key]
+            sup = self._cache[key] = fx.Superposer(self.t, x, x_pre=pre, t_pre=self.t_pre)
+        return sup
+
+    def release(self) -> None:
+        """Forget the remembered responses and superposers (not the exploration window): the next fit builds
+        what it asks for again. Exact reuse only, so no result changes; on a long record they are most of a
+        diagnosis' memory between its stages (a hysteresis variant's superposer alone is 16 MB at 50,000
+        samples), and the next stage (the pair search, on a window) does not ask for them."""
+        with _CACHE_LOCK:
+            for key in [k for k in self._cache if k != "explore"]:
+                del self._cache[key]
 
     def base_path(self, inputs: tuple[tuple[InputEffect, str | None], ...], alpha: float, a1: float, a2: float,
                   delay: float) -> np.ndarray:
@@ -855,32 +865,33 @@ def _reported_solution(design: Design, theta: np.ndarray) -> tuple | None:
         more = sol.names if sol is not None else e.column_names()
         cols[e.name] = np.arange(len(names), len(names) + len(more))
         names += more
-    if data.uniform:
-        base = sup.apply(fx.delayed_grid(data.step_grid(alpha, a1, a2), data.h, d))
-        tau = sup.grid_tau - d
-    else:
-        base = sup.apply(lambda tt: fx.base_step_at(alpha, a1, a2, tt - d))
-        tau = None
-    par = []
-    for e in design.stages[Stage.PARALLEL]:
-        if design.coupled:        # the path sees the transformed input: its responses to the same rows
-            step = e.unit_step(p)
-            par.append(sup.apply(step(tau) if tau is not None else (lambda tt, s=step: s(tt - d))))
-        else:
-            par.append(data.parallel_path(e, p, tuple(p[k] for k in design.own[e.name]), d, tau))
-    for e in design.stages[Stage.OUTPUT_FILTER]:
-        base = e.filter_columns(data.t, base, p)
-        par = [e.filter_columns(data.t, q, p) for q in par]
     static, static_names = design._static_columns(p)
-    rows_n = sup.rows
+    rows_n, parallel = sup.rows, design.stages[Stage.PARALLEL]
+    tau = sup.grid_tau - d if data.uniform else None
     if design.coupled:        # columns B_i + kappa P_i with the search's kappa = g / b
-        kappa = [coef[len(design.col_names) - len(static_names) - len(par) + j] / coef[0] if coef[0] != 0.0 else 0.0
-                 for j in range(len(par))]
-        dynamic = base + sum(k * q for k, q in zip(kappa, par)) if par else base
-        phi = np.vstack([dynamic, static]).T
+        first = len(design.col_names) - len(static_names) - len(parallel)
+        kappa = [coef[first + j] / coef[0] if coef[0] != 0.0 else 0.0 for j in range(len(parallel))]
+        # every path sees the transformed input: B_i + kappa P_i is the superposition of the combined step
+        # response (linear in it), one pass over the rows instead of one per path
+        steps = [e.unit_step(p) for e in parallel]
+        if data.uniform:
+            step = fx.delayed_grid(data.step_grid(alpha, a1, a2), data.h, d) + sum(
+                k * s(tau) for k, s in zip(kappa, steps))
+        else:
+            def step(tt: np.ndarray) -> np.ndarray:
+                return fx.base_step_at(alpha, a1, a2, tt - d) + sum(k * s(tt - d) for k, s in zip(kappa, steps))
+        dynamic = [sup.apply(step)]
     else:
-        phi = np.vstack([base, *par, static]).T
-        names = names + [e.gain_column for e in design.stages[Stage.PARALLEL]]
+        if data.uniform:
+            dynamic = [sup.apply(fx.delayed_grid(data.step_grid(alpha, a1, a2), data.h, d))]
+        else:
+            dynamic = [sup.apply(lambda tt: fx.base_step_at(alpha, a1, a2, tt - d))]
+        dynamic += [data.parallel_path(e, p, tuple(p[k] for k in design.own[e.name]), d, tau) for e in parallel]
+        names = names + [e.gain_column for e in parallel]
+    for e in design.stages[Stage.OUTPUT_FILTER]:
+        dynamic = [e.filter_columns(data.t, q, p) for q in dynamic]
+    phi = np.vstack(dynamic + [static]).T
+    del dynamic
     names = names + static_names
     wphi = phi if data.weights is None else phi * data.weights[:, None]
     effect, sol = own[0]
