@@ -934,7 +934,7 @@ def _reported_rows(design: Design) -> tuple[list[tuple], fx.Superposer | None]:
     """(each input effect, its variant and its reported solution; the superposer of the reported rows, None when
     no effect has a reported solution): what ``_reported_solution`` needs of a record and the variants, remembered
     per record (``Prepared``) within ``CACHE_BYTES`` (an exploration window's; a long record's, 40 MB for
-    hysteresis at 50,000 samples, is built again when asked again)."""
+    hysteresis at 50,000 samples, is built again when asked again, without its rows' spectra)."""
     data = design.data
     solutions = [(e, variant, e.reported_solution(data, variant)) for e, variant in design.inputs]
     if all(sol is None for _, _, sol in solutions):
@@ -945,7 +945,11 @@ def _reported_rows(design: Design) -> tuple[list[tuple], fx.Superposer | None]:
                                           for e, v, sol in solutions])
 
     pre = None if data.u_pre is None else rows(np.array([data.u_pre]), before=True)[:, 0]
-    return solutions, fx.Superposer(data.t, rows(data.u), x_pre=pre, t_pre=data.t_pre)
+    x = rows(data.u)
+    # rows' steps, their spectra and the solutions' copy of the rows: 32 bytes per row and sample; beyond
+    # CACHE_BYTES the entry is not remembered, and spectra kept for its one ``apply`` would only add to the peak
+    keep = 32 * x.size <= CACHE_BYTES
+    return solutions, fx.Superposer(data.t, x, x_pre=pre, t_pre=data.t_pre, keep_spectra=keep)
 
 
 def _reported_bytes(entry: tuple) -> int:
@@ -954,7 +958,8 @@ def _reported_bytes(entry: tuple) -> int:
     sup = entry[1]
     if sup is None:
         return 0
-    return 2 * sup.dx.nbytes + (sup.spectra.nbytes if sup.uniform else sup.tau.nbytes)
+    held = sup.tau.nbytes if not sup.uniform else 0 if sup.spectra is None else sup.spectra.nbytes
+    return 2 * sup.dx.nbytes + held
 
 
 def base_theta(model: CreepModel) -> np.ndarray:
