@@ -1147,11 +1147,16 @@ def residual_peaks(data: Prepared, residual: np.ndarray) -> list[float]:
     from .locate import spectrum_humps, spectrum_peaks
     if not data.uniform:
         return []
+    last = data._cache.get("residual_peaks")     # every fit from the same base asks for its residual's peaks
+    if last is not None and last[0] is residual:
+        return list(last[1])
     lines = [p["f_hz"] for p in spectrum_peaks(data.t, residual, max_peaks=4, ratio=3.0)]
     # then the broad humps a damped mode leaves, where no line is already
     humps = [f for f in spectrum_humps(data.t, residual, max_peaks=HUMPS + len(lines))
              if all(abs(f - g) > 0.05 * f for g in lines)]
-    return lines + humps[:HUMPS]
+    peaks = lines + humps[:HUMPS]
+    data._cache["residual_peaks"] = (residual, tuple(peaks))
+    return peaks
 
 
 @single_threaded
