@@ -28,7 +28,6 @@ from typing import Callable
 import numpy as np
 from scipy.linalg import get_lapack_funcs, qr
 from scipy.linalg import lstsq as scipy_lstsq
-from scipy.linalg.lapack import _compute_lwork
 from scipy.optimize import least_squares
 
 from .. import effects as fx
@@ -773,7 +772,10 @@ def _gelsy(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return scipy_lstsq(a, b, cond=RCOND, lapack_driver="gelsy", check_finite=False)[0]
     work = _GELSY_WORK.get((m, n))
     if work is None:
-        work = _GELSY_WORK[(m, n)] = _compute_lwork(_GELSY_LWORK, m, n, 1, RCOND)
+        size, info = _GELSY_LWORK(m, n, 1, RCOND)
+        if info != 0:
+            return scipy_lstsq(a, b, cond=RCOND, lapack_driver="gelsy", check_finite=False)[0]
+        work = _GELSY_WORK[(m, n)] = int(size)
     if m < n:
         b = np.concatenate([b, np.zeros(n - m)])
     x, info = _GELSY(a, b, np.zeros((n, 1), dtype=np.int32), RCOND, work, False, False)[1::3]
@@ -983,9 +985,18 @@ def _optimise(design: Design, theta0: np.ndarray, max_nfev: int = MAX_NFEV, tol:
 
 # --------------------------------------------------------------------------- base fit
 def _frf_peaks(data: Prepared, count: int = 3) -> list[float]:
-    """Frequencies (Hz) of the largest peaks of |Y/U| * f (uniform records), strongest first."""
+    """Frequencies (Hz) of the largest peaks of |Y/U| * f (uniform records), strongest first (remembered per
+    record: the base fit and every restart ask)."""
     if not data.uniform or data.n < 64:
         return []
+    peaks = data._cache.get(("frf_peaks", count))       # one look-up: ``release`` may empty the cache meanwhile
+    if peaks is None:
+        peaks = data._cache[("frf_peaks", count)] = tuple(_frf_peaks_of(data, count))
+    return list(peaks)
+
+
+def _frf_peaks_of(data: Prepared, count: int) -> list[float]:
+    """``_frf_peaks`` computed."""
     from scipy.signal import csd, find_peaks, welch
     nper = int(min(data.n, 2 ** int(math.log2(max(64, data.n // 8)))))
     du = np.diff(data.u, prepend=data.u[0])
