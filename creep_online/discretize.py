@@ -73,7 +73,7 @@ def _gauss(n: int, alpha: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
 @lru_cache(maxsize=8)
 def _legendre(n: int) -> tuple[np.ndarray, np.ndarray]:
     """Legendre nodes/weights, remembered apart from ``_gauss``: a fit asks for a new alpha at almost every
-    evaluation, and the Legendre rule, which does not depend on it, was three quarters of the rules' time.
+    evaluation, and the Legendre rule, which does not depend on it, is three quarters of the rules' time.
     (Shared arrays: the compiled kernels only read them.)"""
     return gauss_legendre(n)
 

@@ -280,8 +280,8 @@ def _compressed(a: np.ndarray, wy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     Every least squares in ``a`` below (the bounded solve, the resolution matrix) takes linear combinations of
     its columns, and those see the data only through R and Q^T wy (Q orthonormal): the same solutions and
-    resolution to rounding, from p x p matrices. On a long record the n x p design's copies (each 10 MB for
-    25 columns of 50,000 samples, seven of them at once) were a diagnosis' peak memory.
+    resolution to rounding, from p x p matrices: on a long record the n x p design's copies (each 10 MB for
+    25 columns of 50,000 samples, seven of them at once) would be a diagnosis' peak memory.
     """
     n, p = a.shape
     if n <= COMPRESS_ROWS * p:

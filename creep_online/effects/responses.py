@@ -236,7 +236,7 @@ class Superposer:
             self.h = (self.t[-1] - self.t[0]) / max(n - 1, 1)
             self.nfft = next_fast_len(2 * n)
             # ``keep_spectra`` False: each ``apply`` transforms the rows again, a few at a time (for a superposer
-            # used once: its spectra were twice its rows' memory)
+            # used once: its spectra are twice its rows' memory)
             self.spectra = rfft(self.dx, self.nfft, axis=1) if keep_spectra else None
         else:
             self.h = float("nan")
