@@ -256,6 +256,7 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
         ranked.append(Candidate(name, ev, lr, pv, dk, bool(sig), fit, signature(name, fit, base, where, data),
                                 against or ""))
     ranked.sort(key=lambda c: (bool(c.contradiction), -c.evidence))  # a contradicted fit ranks after the others
+    data.release()      # the single fits' remembered responses: the pair search asks for a window's
     if ranked and ranked[0].significant:
         # high-frequency misfit (ringing, a hum) inflates the difference-based noise estimate: re-estimate
         # on the residual of the model that explains it, and keep the smaller
@@ -268,6 +269,7 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
     partner_scores: list = []
     combo, tried, rivals = (_combination(data, base, ranked, noise, max_nfev, n_workers, report, partner_scores)
                             if combine else (None, {}, []))
+    data.release()
     report("hold physics: leakage, second creep or drift")
     physics = _physics(data, base, tuple(c.fit for c in ranked if c.effect in PHYSICS_EFFECTS))
     result = Diagnosis(source, base, noise, ranked, skipped, where, analysis, combo, warnings, 0.0, data, physics,

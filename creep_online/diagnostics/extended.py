@@ -26,8 +26,8 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
+from scipy.linalg import get_lapack_funcs, qr
 from scipy.linalg import lstsq as scipy_lstsq
-from scipy.linalg import qr
 from scipy.optimize import least_squares
 
 from .. import effects as fx
@@ -43,6 +43,9 @@ from .._threads import single_threaded
 from .pool import ordered_map
 from .varpro import projected_jacobian
 
+#: Relative singular-value cut-off of the linear least squares (``_solve``).
+RCOND = 1e-10
+_GELSY, _GELSY_LWORK = get_lapack_funcs(("gelsy", "gelsy_lwork"), (np.zeros((1, 1)),))
 #: Bounds of the base model's damping (alpha's are ``model.EXTENDED_FIT_ALPHA_BOUNDS``).
 ZETA_BOUNDS = (1e-3, 20.0)
 #: Evaluations allowed per least-squares fit.
@@ -180,13 +183,23 @@ class Prepared:
         () is the plain input.
         """
         key = "+".join(f"{e.name}[{variant}]" for e, variant in inputs) or "u"
-        if key not in self._cache:
+        sup = self._cache.get(key)          # one look-up: ``release`` may empty the cache meanwhile
+        if sup is None:
             x = self.input_rows(inputs, self.u)
             pre = None
             if self.u_pre is not None:
                 pre = self.input_rows(inputs, np.array([self.u_pre]), before=True)[:, 0]
-            self._cache[key] = fx.Superposer(self.t, x, x_pre=pre, t_pre=self.t_pre)
-        return self._cache[key]
+            sup = self._cache[key] = fx.Superposer(self.t, x, x_pre=pre, t_pre=self.t_pre)
+        return sup
+
+    def release(self) -> None:
+        """Forget the remembered responses and superposers (not the exploration window): the next fit builds
+        what it asks for again. Exact reuse only, so no result changes; on a long record they are most of a
+        diagnosis' memory between its stages (a hysteresis variant's superposer alone is 16 MB at 50,000
+        samples), and the next stage (the pair search, on a window) does not ask for them."""
+        with _CACHE_LOCK:
+            for key in [k for k in self._cache if k != "explore"]:
+                del self._cache[key]
 
     def base_path(self, inputs: tuple[tuple[InputEffect, str | None], ...], alpha: float, a1: float, a2: float,
                   delay: float) -> np.ndarray:
@@ -742,8 +755,33 @@ def _solve(wphi: np.ndarray, wy: np.ndarray) -> np.ndarray:
     """Least-squares coefficients of the weighted design (columns scaled to unit norm; gelsy, as identify)."""
     scale = np.linalg.norm(wphi, axis=0)
     scale[scale == 0] = 1.0
-    coef = scipy_lstsq(wphi / scale, wy, cond=1e-10, lapack_driver="gelsy", check_finite=False)[0]
-    return coef / scale
+    return _gelsy(wphi / scale, wy) / scale
+
+
+#: (rows, columns) -> LAPACK's optimal work size for gelsy (``_gelsy``).
+_GELSY_WORK: dict[tuple[int, int], int] = {}
+
+
+def _gelsy(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``scipy.linalg.lstsq(a, b, cond=RCOND, lapack_driver="gelsy", check_finite=False)[0]`` for real 2-d ``a``
+    and 1-d ``b``: the same LAPACK call with the same arguments (so the same numbers), without the wrapper's
+    per-call checks and work-size query (~60 us, a tenth of an evaluation on a 6,000-sample window, where
+    a coupled design solves ten small problems per evaluation)."""
+    m, n = a.shape
+    if m == 0 or n == 0 or a.dtype != np.float64 or b.ndim != 1:
+        return scipy_lstsq(a, b, cond=RCOND, lapack_driver="gelsy", check_finite=False)[0]
+    work = _GELSY_WORK.get((m, n))
+    if work is None:
+        size, info = _GELSY_LWORK(m, n, 1, RCOND)
+        if info != 0:
+            return scipy_lstsq(a, b, cond=RCOND, lapack_driver="gelsy", check_finite=False)[0]
+        work = _GELSY_WORK[(m, n)] = int(size)
+    if m < n:
+        b = np.concatenate([b, np.zeros(n - m)])
+    x, info = _GELSY(a, b, np.zeros((n, 1), dtype=np.int32), RCOND, work, False, False)[1::3]
+    if info < 0:
+        raise ValueError(f"illegal value in {-info}-th argument of internal gelsy")
+    return x[:n]
 
 
 # --------------------------------------------------------------------------- results
@@ -855,32 +893,33 @@ def _reported_solution(design: Design, theta: np.ndarray) -> tuple | None:
         more = sol.names if sol is not None else e.column_names()
         cols[e.name] = np.arange(len(names), len(names) + len(more))
         names += more
-    if data.uniform:
-        base = sup.apply(fx.delayed_grid(data.step_grid(alpha, a1, a2), data.h, d))
-        tau = sup.grid_tau - d
-    else:
-        base = sup.apply(lambda tt: fx.base_step_at(alpha, a1, a2, tt - d))
-        tau = None
-    par = []
-    for e in design.stages[Stage.PARALLEL]:
-        if design.coupled:        # the path sees the transformed input: its responses to the same rows
-            step = e.unit_step(p)
-            par.append(sup.apply(step(tau) if tau is not None else (lambda tt, s=step: s(tt - d))))
-        else:
-            par.append(data.parallel_path(e, p, tuple(p[k] for k in design.own[e.name]), d, tau))
-    for e in design.stages[Stage.OUTPUT_FILTER]:
-        base = e.filter_columns(data.t, base, p)
-        par = [e.filter_columns(data.t, q, p) for q in par]
     static, static_names = design._static_columns(p)
-    rows_n = sup.rows
+    rows_n, parallel = sup.rows, design.stages[Stage.PARALLEL]
+    tau = sup.grid_tau - d if data.uniform else None
     if design.coupled:        # columns B_i + kappa P_i with the search's kappa = g / b
-        kappa = [coef[len(design.col_names) - len(static_names) - len(par) + j] / coef[0] if coef[0] != 0.0 else 0.0
-                 for j in range(len(par))]
-        dynamic = base + sum(k * q for k, q in zip(kappa, par)) if par else base
-        phi = np.vstack([dynamic, static]).T
+        first = len(design.col_names) - len(static_names) - len(parallel)
+        kappa = [coef[first + j] / coef[0] if coef[0] != 0.0 else 0.0 for j in range(len(parallel))]
+        # every path sees the transformed input: B_i + kappa P_i is the superposition of the combined step
+        # response (linear in it), one pass over the rows instead of one per path
+        steps = [e.unit_step(p) for e in parallel]
+        if data.uniform:
+            step = fx.delayed_grid(data.step_grid(alpha, a1, a2), data.h, d) + sum(
+                k * s(tau) for k, s in zip(kappa, steps))
+        else:
+            def step(tt: np.ndarray) -> np.ndarray:
+                return fx.base_step_at(alpha, a1, a2, tt - d) + sum(k * s(tt - d) for k, s in zip(kappa, steps))
+        dynamic = [sup.apply(step)]
     else:
-        phi = np.vstack([base, *par, static]).T
-        names = names + [e.gain_column for e in design.stages[Stage.PARALLEL]]
+        if data.uniform:
+            dynamic = [sup.apply(fx.delayed_grid(data.step_grid(alpha, a1, a2), data.h, d))]
+        else:
+            dynamic = [sup.apply(lambda tt: fx.base_step_at(alpha, a1, a2, tt - d))]
+        dynamic += [data.parallel_path(e, p, tuple(p[k] for k in design.own[e.name]), d, tau) for e in parallel]
+        names = names + [e.gain_column for e in parallel]
+    for e in design.stages[Stage.OUTPUT_FILTER]:
+        dynamic = [e.filter_columns(data.t, q, p) for q in dynamic]
+    phi = np.vstack(dynamic + [static]).T
+    del dynamic
     names = names + static_names
     wphi = phi if data.weights is None else phi * data.weights[:, None]
     effect, sol = own[0]
@@ -897,7 +936,7 @@ def _reported_rows(design: Design) -> tuple[list[tuple], fx.Superposer | None]:
     """(each input effect, its variant and its reported solution; the superposer of the reported rows, None when
     no effect has a reported solution): what ``_reported_solution`` needs of a record and the variants, remembered
     per record (``Prepared``) within ``CACHE_BYTES`` (an exploration window's; a long record's, 40 MB for
-    hysteresis at 50,000 samples, is built again when asked again)."""
+    hysteresis at 50,000 samples, is built again when asked again, without its rows' spectra)."""
     data = design.data
     solutions = [(e, variant, e.reported_solution(data, variant)) for e, variant in design.inputs]
     if all(sol is None for _, _, sol in solutions):
@@ -908,7 +947,11 @@ def _reported_rows(design: Design) -> tuple[list[tuple], fx.Superposer | None]:
                                           for e, v, sol in solutions])
 
     pre = None if data.u_pre is None else rows(np.array([data.u_pre]), before=True)[:, 0]
-    return solutions, fx.Superposer(data.t, rows(data.u), x_pre=pre, t_pre=data.t_pre)
+    x = rows(data.u)
+    # rows' steps, their spectra and the solutions' copy of the rows: 32 bytes per row and sample; beyond
+    # CACHE_BYTES the entry is not remembered, and spectra kept for its one ``apply`` would only add to the peak
+    keep = 32 * x.size <= CACHE_BYTES
+    return solutions, fx.Superposer(data.t, x, x_pre=pre, t_pre=data.t_pre, keep_spectra=keep)
 
 
 def _reported_bytes(entry: tuple) -> int:
@@ -917,7 +960,8 @@ def _reported_bytes(entry: tuple) -> int:
     sup = entry[1]
     if sup is None:
         return 0
-    return 2 * sup.dx.nbytes + (sup.spectra.nbytes if sup.uniform else sup.tau.nbytes)
+    held = sup.tau.nbytes if not sup.uniform else 0 if sup.spectra is None else sup.spectra.nbytes
+    return 2 * sup.dx.nbytes + held
 
 
 def base_theta(model: CreepModel) -> np.ndarray:
@@ -941,9 +985,18 @@ def _optimise(design: Design, theta0: np.ndarray, max_nfev: int = MAX_NFEV, tol:
 
 # --------------------------------------------------------------------------- base fit
 def _frf_peaks(data: Prepared, count: int = 3) -> list[float]:
-    """Frequencies (Hz) of the largest peaks of |Y/U| * f (uniform records), strongest first."""
+    """Frequencies (Hz) of the largest peaks of |Y/U| * f (uniform records), strongest first (remembered per
+    record: the base fit and every restart ask)."""
     if not data.uniform or data.n < 64:
         return []
+    peaks = data._cache.get(("frf_peaks", count))       # one look-up: ``release`` may empty the cache meanwhile
+    if peaks is None:
+        peaks = data._cache[("frf_peaks", count)] = tuple(_frf_peaks_of(data, count))
+    return list(peaks)
+
+
+def _frf_peaks_of(data: Prepared, count: int) -> list[float]:
+    """``_frf_peaks`` computed."""
     from scipy.signal import csd, find_peaks, welch
     nper = int(min(data.n, 2 ** int(math.log2(max(64, data.n // 8)))))
     du = np.diff(data.u, prepend=data.u[0])
@@ -1105,11 +1158,16 @@ def residual_peaks(data: Prepared, residual: np.ndarray) -> list[float]:
     from .locate import spectrum_humps, spectrum_peaks
     if not data.uniform:
         return []
+    last = data._cache.get("residual_peaks")     # every fit from the same base asks for its residual's peaks
+    if last is not None and last[0] is residual:
+        return list(last[1])
     lines = [p["f_hz"] for p in spectrum_peaks(data.t, residual, max_peaks=4, ratio=3.0)]
     # then the broad humps a damped mode leaves, where no line is already
     humps = [f for f in spectrum_humps(data.t, residual, max_peaks=HUMPS + len(lines))
              if all(abs(f - g) > 0.05 * f for g in lines)]
-    return lines + humps[:HUMPS]
+    peaks = lines + humps[:HUMPS]
+    data._cache["residual_peaks"] = (residual, tuple(peaks))
+    return peaks
 
 
 @single_threaded

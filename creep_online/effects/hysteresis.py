@@ -57,6 +57,8 @@ INITIAL_STATES = {"centred": 0.0, "ascending": -1.0, "descending": 1.0}
 #: branch of the inverse within 1 / SLOPE_FLOOR of its mean. (Relative to S_0 alone, a fit could make the first
 #: branch flat instead: b -> 0, its weights ~1e300, on a loop whose large-signal branch falls.)
 SLOPE_FLOOR = 0.05
+#: ``solve_pi_weights`` works on the design's triangular factor when it has more than this many rows per column.
+COMPRESS_ROWS = 4
 #: Prior scale of each weight (a Gaussian of this standard deviation around 0): a weight the data determine
 #: better than this is theirs; a combination of weights the record cannot see (operators it opens the same way)
 #: is held near 0, so the weights share what the data say instead of cancelling in +-1e12 pairs. On 12 random
@@ -249,6 +251,7 @@ def solve_pi_weights(a: np.ndarray, wy: np.ndarray, gain: int, cols: np.ndarray,
     """
     n, p = a.shape
     noise_var = max(noise_var, float(PRIOR_FLOOR ** 2 * np.mean(np.square(wy))))
+    a, wy = _compressed(a, wy)
     cols = np.asarray(cols, dtype=int)
     live = cols[np.asarray(opened, dtype=bool)]
     others = np.setdiff1d(np.arange(p), np.concatenate(([gain], cols)))
@@ -270,6 +273,25 @@ def solve_pi_weights(a: np.ndarray, wy: np.ndarray, gain: int, cols: np.ndarray,
     penalty = prior @ z[:k]
     return x, {"determined": _determined(a, gain, live, others, noise_var / (WEIGHT_SCALE * scale_b) ** 2),
                "penalty": float(penalty @ penalty)}
+
+
+def _compressed(a: np.ndarray, wy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(R, Q^T wy) of ``a = Q R`` (economic) where ``a`` has many more rows than columns, else (a, wy).
+
+    Every least squares in ``a`` below (the bounded solve, the resolution matrix) takes linear combinations of
+    its columns, and those see the data only through R and Q^T wy (Q orthonormal): the same solutions and
+    resolution to rounding, from p x p matrices: on a long record the n x p design's copies (each 10 MB for
+    25 columns of 50,000 samples, seven of them at once) would be a diagnosis' peak memory.
+    """
+    n, p = a.shape
+    if n <= COMPRESS_ROWS * p:
+        return a, wy
+    from scipy.linalg import qr              # scipy on first use: importing the effects stays light
+    aug = np.empty((n, p + 1), order="F")
+    aug[:, :p] = a
+    aug[:, p] = wy
+    r = qr(aug, mode="raw", overwrite_a=True, check_finite=False)[1]
+    return r[:p, :p], r[:p, p]
 
 
 def _slope_basis(opened: np.ndarray) -> np.ndarray:

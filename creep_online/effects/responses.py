@@ -219,7 +219,8 @@ class Superposer:
     the time of that first jump (default t[0]).
     """
 
-    def __init__(self, t: np.ndarray, x: np.ndarray, x_pre=None, t_pre: float | None = None) -> None:
+    def __init__(self, t: np.ndarray, x: np.ndarray, x_pre=None, t_pre: float | None = None,
+                 keep_spectra: bool = True) -> None:
         self.t = np.asarray(t, dtype=float)
         x = np.atleast_2d(np.asarray(x, dtype=float))
         n = self.t.size
@@ -234,7 +235,9 @@ class Superposer:
         if self.uniform:
             self.h = (self.t[-1] - self.t[0]) / max(n - 1, 1)
             self.nfft = next_fast_len(2 * n)
-            self.spectra = rfft(self.dx, self.nfft, axis=1)
+            # ``keep_spectra`` False: each ``apply`` transforms the rows again, a few at a time (for a superposer
+            # used once: its spectra are twice its rows' memory)
+            self.spectra = rfft(self.dx, self.nfft, axis=1) if keep_spectra else None
         else:
             self.h = float("nan")
             any_change = np.flatnonzero(np.any(self.dx != 0.0, axis=0))
@@ -267,8 +270,9 @@ class Superposer:
             # were 4x the output, 50 MB beside it for hysteresis' 25 rows of a 50,000-sample record
             batch = max(1, SCRATCH_BYTES // (16 * self.nfft * max(1, s.size // self.n)))
             for a in range(0, self.rows, batch):
-                out[..., a:a + batch, :] = irfft(self.spectra[a:a + batch] * fs[..., None, :], self.nfft,
-                                                 axis=-1)[..., : self.n]
+                spectra = (self.spectra[a:a + batch] if self.spectra is not None
+                           else rfft(self.dx[a:a + batch], self.nfft, axis=1))
+                out[..., a:a + batch, :] = irfft(spectra * fs[..., None, :], self.nfft, axis=-1)[..., : self.n]
             return out
         if not callable(step):
             raise ValueError("non-uniform records need the step response as a function of time")
@@ -292,6 +296,8 @@ class Superposer:
         dx_i . q_k with q_k the cross-correlation of v and S_k: one per response).
         """
         steps = np.atleast_2d(steps)
+        if self.spectra is None:
+            self.spectra = rfft(self.dx, self.nfft, axis=1)
         fs = rfft(steps, self.nfft, axis=-1)
         summed = irfft((weights @ self.spectra) * fs, self.nfft, axis=-1)[:, : self.n]
         fv = rfft(v, self.nfft)

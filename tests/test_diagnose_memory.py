@@ -1,0 +1,71 @@
+"""What keeps a long diagnosis' memory down must not change a number: the PI weights solved on the design's
+triangular factor, LAPACK's gelsy called directly, a superposer without its rows' spectra, released caches."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.linalg import lstsq
+
+from creep_online.diagnostics import extended as ext
+from creep_online.effects import hysteresis as hy
+from creep_online.effects.responses import Superposer
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_pi_weights_on_the_triangular_factor_match_the_full_design(seed, monkeypatch):
+    """Random designs, half of them with a loop whose unconstrained optimum breaks a branch slope (the bounded
+    solve), a closed operator pinned: weights, determined count and penalty as on the n x p design itself."""
+    rng = np.random.default_rng(seed)
+    n, k = 2000, 8
+    base = rng.normal(size=(n, 1))
+    a = np.hstack([base, base + 0.3 * rng.normal(size=(n, k)), np.ones((n, 1))])
+    w = rng.normal(scale=0.3, size=k) if seed % 2 else np.array([0.4, -0.9, -0.6, 0.2, 0.1, 0.05, -0.3, 0.2])
+    wy = a @ np.concatenate([[2.0], 2.0 * w, [0.3]]) + 0.05 * rng.normal(size=n)
+    opened = np.ones(k, bool)
+    opened[-2] = False
+    args = (0, np.arange(1, k + 1), opened, 2.0, 0.05 ** 2)
+    x, found = hy.solve_pi_weights(a, wy, *args)
+    monkeypatch.setattr(hy, "COMPRESS_ROWS", 10 ** 9)           # never compressed: the n x p design throughout
+    x_full, found_full = hy.solve_pi_weights(a, wy, *args)
+    np.testing.assert_allclose(x, x_full, rtol=1e-10, atol=1e-12 * np.max(np.abs(x_full)))
+    assert found["determined"] == pytest.approx(found_full["determined"], rel=1e-10)
+    assert found["penalty"] == pytest.approx(found_full["penalty"], rel=1e-8)
+
+
+@pytest.mark.parametrize("shape", [(6000, 27), (51, 30), (5, 8), (300, 3)])
+def test_gelsy_called_directly_is_scipys_lstsq_bit_for_bit(shape):
+    rng = np.random.default_rng(shape[0])
+    a = rng.normal(size=shape)
+    a[:, -1] = a[:, 0]                                             # rank-deficient: the cut-off matters
+    b = rng.normal(size=shape[0])
+    for m in (a, np.asfortranarray(a)):
+        expected = lstsq(m, b, cond=ext.RCOND, lapack_driver="gelsy", check_finite=False)[0]
+        assert np.array_equal(ext._gelsy(m, b), expected)
+
+
+def test_a_superposer_without_spectra_gives_the_same_columns():
+    rng = np.random.default_rng(3)
+    n = 4000
+    x = np.cumsum(rng.normal(size=(5, n)), axis=1)
+    t = np.arange(n) * 1e-3
+    step = 1.0 - np.exp(-np.arange(n) * 1e-3 / 0.05)
+    kept, lean = Superposer(t, x, x_pre=np.zeros(5)), Superposer(t, x, x_pre=np.zeros(5), keep_spectra=False)
+    assert lean.spectra is None
+    assert np.array_equal(lean.apply(step), kept.apply(step))
+    assert np.array_equal(lean.apply(np.vstack([step, step ** 2])), kept.apply(np.vstack([step, step ** 2])))
+
+
+def test_released_caches_are_built_again_with_the_same_values():
+    rng = np.random.default_rng(4)
+    n = 3000
+    t = np.arange(n) * 1e-3
+    u = np.repeat(rng.uniform(-1, 1, size=n // 300), 300)
+    y = np.cumsum(u) * 1e-3 + 0.01 * rng.normal(size=n)
+    data = ext.prepare(t, u, y)
+    design = ext.Design(data, ("second_creep",))
+    theta = np.array([0.3, 1.0, -0.5, 0.6, -1.0])[:len(design.names)]
+    before = design.cost(theta)
+    window = data.explore_data()
+    data.release()
+    assert set(data._cache) <= {"explore"} and data.explore_data() is window
+    assert ext.Design(data, ("second_creep",)).cost(theta) == before
