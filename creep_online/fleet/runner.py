@@ -62,6 +62,12 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+#: The local cluster's own log level. What a record's run raises comes back as its row; below CRITICAL the
+#: cluster's processes print Dask's internal races on the user's terminal, e.g. a worker whose heartbeat was in
+#: flight while Ctrl-C shut the scheduler down logs "Failed to communicate with scheduler" with a traceback.
+WORKER_LOG_LEVEL = logging.CRITICAL
+
+
 @contextlib.contextmanager
 def dask_client(scheduler: str | None = None, workers: int | None = None) -> Iterator[Any]:
     """A ``Client`` of the scheduler at ``scheduler``, or of a new local cluster of ``workers`` processes.
@@ -80,7 +86,7 @@ def dask_client(scheduler: str | None = None, workers: int | None = None) -> Ite
     import dask
     with _workers_ignore_ctrl_c(), dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES}):
         cluster = dd.LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
-                                  host="127.0.0.1", dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+                                  host="127.0.0.1", dashboard_address="127.0.0.1:0", silence_logs=WORKER_LOG_LEVEL)
     with contextlib.closing(cluster), contextlib.closing(dd.Client(cluster)) as client:
         warm_up_workers(client, "the local cluster")
         yield client
