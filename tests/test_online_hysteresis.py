@@ -240,6 +240,38 @@ def test_a_plant_resting_on_a_branch_is_fitted_at_the_floor(seed, initial):
         assert np.max(np.abs(np.asarray(e.hysteresis["w"]) - w)) <= 0.05 * np.max(w)
 
 
+
+@pytest.mark.parametrize("epoch", [0, 500])
+def test_an_operator_the_input_leaves_is_opened_only_within_the_windows_memory(epoch):
+    """An operator counts as opened while the input moved it up and down within this epoch of the window's memory
+    or the one before (``set_memory``); 0: since the start. A full-stroke sweep opens all four, a narrower input
+    afterwards keeps moving the two smallest only: two epochs later the other two are pinned at 0, as the batch fit
+    pins an operator the record never opens; without an epoch they stay free. A replay starts with the live epoch."""
+    basis = SoeBasis.build(H, horizon_s=10.0, dx=1.2)
+    r = np.array([0.05, 0.15, 0.3, 0.45])
+    st = _state(basis, r, 1e-4, 1e-8)
+    nh = HK.columns_for(r.size)
+    lay = W.layout(basis.size, 0, 0, nh)
+    o = lay["hyst"]
+    HK.set_memory(st, o, float(epoch))
+    ring, S = np.zeros((2, 4096)), np.zeros((lay["p"], lay["p"]))
+    n = np.arange(1600)
+    wide = 0.5 * (1.0 - np.cos(2 * math.pi * n[:400] / 200))           # two periods over 0 .. 1
+    narrow = 0.5 + 0.25 * np.sin(2 * math.pi * n / 200)                  # then 0.25 .. 0.75: r 0.3, 0.45 stuck
+    for x in np.concatenate([wide, narrow[:100]]):
+        W.sample(float(x), math.nan, st, S, ring)
+    assert HK.opened(st, o, nh).all()
+    for x in narrow[100:]:
+        W.sample(float(x), math.nan, st, S, ring)
+    want = [True, True, True, True] if epoch == 0 else [True, True, False, False]
+    assert HK.opened(st, o, nh).tolist() == want
+    theta, masks = np.ones(nh + 5), np.ones((1, nh + 5))
+    HK.pin_unopened(st, o, nh, theta, 5, masks, np.array([0]), 1.0)
+    assert (theta[5:5 + r.size] != 0.0).tolist() == want and (masks[0, 5:5 + r.size] != 0.0).tolist() == want
+    replay = np.zeros_like(st)
+    HK.replay_origin(replay, st, o, nh, basis.size)
+    assert replay[o + HK.EPOCH] == epoch and replay[o + HK.AGE] == 0.0
+
 def test_a_start_in_equilibrium_outlives_the_rests_drop_and_is_freed_by_a_window_that_fits():
     """A start in equilibrium's columns: pinned at 0 while the window misfits; kept (still pinned) when the rest's
     samples are dropped at the sweep (the window from the sweep on holds the creep they set off);

@@ -37,10 +37,12 @@ The block at the end of the state array (``block_at``; ``size`` entries; K plays
 ``[REST_MIN]``      the rest (samples) beyond which the input's first move reads its start in equilibrium
 ``[DROPPED]``       1: a start in equilibrium's columns left out for good, their coefficients 0 (``drop_start``)
 ``[FREED]``         1: the re-fits fit the coefficients of a start in equilibrium's columns (``free_start``)
+``[AGE]``           samples since the ``opened`` flags last aged (``set_memory``) ...
+``[EPOCH]``         ... and the samples between two agings (0: never)
 ``r`` (K)           the thresholds
 ``plays`` (K)       the operators' states after the last sample
 ``ptail`` (K)       their states before the oldest remembered sample
-``opened`` (K)      1 moved up, 2 moved down, 3 both since the start (or a replay's oldest sample): opened
+``opened`` (K)      bit 0 moved up, bit 1 moved down in this epoch; bits 2, 3 the same in the epoch before
 ``starts`` (2K)     the plays from the ascending and from the descending start, after the last sample
 ``stail`` (2K)      the same before the oldest remembered sample
 ``w`` (K)           the weights w_i of the coefficients m (``set_gain``), for the start columns' D_s
@@ -67,8 +69,9 @@ START_SCALE = 1.0
 #: The prior's noise level is at least this times the window's output RMS (a noise-free record still pins them).
 PRIOR_FLOOR = 1e-6
 #: Entries before the thresholds: the started flag, the input's lowest and highest value, b of the coefficients,
-#: the input's largest rise and fall (``sweep``), the samples before its first move.
-HEAD = 11
+#: the input's largest rise and fall (``sweep``), the samples before its first move, the start's form and the
+#: ``opened`` flags' epoch.
+HEAD = 13
 GAIN = 3
 RISE = 4
 FALL = 5
@@ -81,6 +84,9 @@ REST_MIN = 8
 DROPPED = 9
 #: 1 once the re-fits fit the coefficients of a start in equilibrium's columns (``free_start``).
 FREED = 10
+#: Samples since the ``opened`` flags last aged, and the samples between two agings (``set_memory``; 0: never).
+AGE = 11
+EPOCH = 12
 #: Start columns after the K play columns: the ascending start's, then the descending start's.
 START = 2
 
@@ -136,6 +142,40 @@ def set_start_form(st: np.ndarray, o: int, rest_min: float) -> None:
     st[o + REST_MIN] = rest_min
     st[o + DROPPED] = 0.0
     st[o + FREED] = 0.0
+
+
+@njit(cache=CACHE)
+def set_memory(st: np.ndarray, o: int, epoch: float) -> None:
+    """How long an operator counts as opened (``pin_unopened``): the flags of its moves up and down age every
+    ``epoch`` samples (the window's forgetting time; 0: never), and it is opened while it moved both ways within
+    this epoch and the one before. A window that forgets holds an operator's weight only while the input still moves
+    it: stuck (the input's range now narrower than 2 r_i), its column is a constant plus the dying creep of its last
+    move, which the weight trades with the offset and with any slow drift of the plant (a loop whose width grows:
+    weights of 0.3 on operators the input had left 40 s before, the compensator, whose own play sits at another
+    constant, then off by b w_i times that difference)."""
+    st[o + AGE] = 0.0
+    st[o + EPOCH] = epoch
+
+
+@njit(cache=CACHE, inline="always")
+def _age(st: np.ndarray, o: int, k: int) -> None:
+    """One sample towards the ``opened`` flags' next aging (``set_memory``): at it, this epoch's flags become the
+    epoch before's."""
+    if st[o + EPOCH] <= 0.0:
+        return
+    st[o + AGE] += 1.0
+    if st[o + AGE] < st[o + EPOCH]:
+        return
+    st[o + AGE] = 0.0
+    for i in range(k):
+        st[o + HEAD + 3 * k + i] = float((int(st[o + HEAD + 3 * k + i]) & 3) << 2)
+
+
+@njit(cache=CACHE, inline="always")
+def _is_open(flags: float) -> bool:
+    """Moved up and down within this epoch and the one before (``set_memory``)."""
+    f = int(flags)
+    return ((f & 3) | (f >> 2)) == 3
 
 
 @njit(cache=CACHE)
@@ -249,6 +289,7 @@ def step(st: np.ndarray, o: int, nh: int, q: int, co: np.ndarray, u: float) -> N
         st[o + RISE] = u - st[o + 1]
     if st[o + 2] - u > st[o + FALL]:
         st[o + FALL] = st[o + 2] - u
+    _age(st, o, k)
     r = resonance_in_co(q)
     ch = channels_at(o, nh)
     w = q + 2
@@ -352,10 +393,11 @@ def in_equilibrium(st: np.ndarray, o: int) -> bool:
 
 
 def opened(st: np.ndarray, o: int, nh: int) -> np.ndarray:
-    """Which operators the input has opened (pushed both up and down) since the start or the oldest remembered
-    sample (``pin_unopened``: the others' weights are pinned at 0)."""
+    """Which operators the input has opened (pushed both up and down) within the window's memory (``set_memory``)
+    since the start or the oldest remembered sample (``pin_unopened``: the others' weights are pinned at 0)."""
     k = nh - START
-    return st[o + HEAD + 3 * k:o + HEAD + 4 * k] == 3.0
+    f = st[o + HEAD + 3 * k:o + HEAD + 4 * k].astype(np.int64)
+    return ((f & 3) | (f >> 2)) == 3
 
 
 @njit(cache=CACHE)
@@ -374,6 +416,8 @@ def replay_origin(st: np.ndarray, live: np.ndarray, o: int, nh: int, q: int) -> 
     st[o + REST_MIN] = live[o + REST_MIN]
     st[o + DROPPED] = live[o + DROPPED]
     st[o + FREED] = live[o + FREED]
+    st[o + AGE] = 0.0
+    st[o + EPOCH] = live[o + EPOCH]
     for i in range(k):
         st[o + HEAD + i] = live[o + HEAD + i]
         st[o + HEAD + k + i] = live[o + HEAD + 2 * k + i]
@@ -502,15 +546,15 @@ def weight_prior(F: np.ndarray, c0: int, nh: int, noise: float, neff: float, fyy
 @njit(cache=CACHE)
 def pin_unopened(st: np.ndarray, o: int, nh: int, theta: np.ndarray, t0: int, masks: np.ndarray, rows: np.ndarray,
                  free: float) -> None:
-    """A re-fit's weights (theta from t0): an operator the input has not opened (pushed both up and down) since the
-    start or the oldest remembered sample follows u - r or u + r, an affine copy of the input, and its weight is not
+    """A re-fit's weights (theta from t0): an operator the input has not opened (pushed both up and down) within the
+    window's memory (``set_memory``) since the start or the oldest remembered sample follows u - r or u + r, an affine copy of the input, and its weight is not
     the data's: pinned at 0 (fixed in the masks ``rows``); an opened one is free (mask value ``free``), as the batch
     fit's rule (``effects.hysteresis.opened_operators``). The start columns are free (their prior holds them); a
     start in equilibrium's are pinned at 0, the centred start, until ``free_start`` and after ``drop_start``."""
     k = nh - START
     pinned = st[o + EQUILIBRIUM] != 0.0 and (st[o + FREED] == 0.0 or st[o + DROPPED] != 0.0)
     for i in range(nh):
-        opened = (i >= k and not pinned) or (i < k and int(st[o + HEAD + 3 * k + i]) == 3)
+        opened = (i >= k and not pinned) or (i < k and _is_open(st[o + HEAD + 3 * k + i]))
         if not opened:
             theta[t0 + i] = 0.0
         for j in range(rows.shape[0]):

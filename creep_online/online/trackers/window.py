@@ -124,6 +124,8 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         self.drift_stat = 0.0            # the last test statistic (score when off, Wald when on)
         self.theta = np.zeros(5 + self.n_free + self.n_hyst + self.n_rate)     # (its values: ``start``)
         self.forget = 1.0 if window_s is None else math.exp(-self.h / window_s)
+        #: samples per epoch of the operators' ``opened`` flags (``hysteresis.set_memory``): the forgetting time
+        self._hyst_epoch = 0.0 if window_s is None else window_s / self.h
         self.ring = ring                 # (2, H) history, owned by the caller (pre-faulted)
         self.work_memory = work          # (N, Q) scratch for the post-change search (pre-faulted)
         self.events: list[dict] = []
@@ -188,6 +190,7 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
                 self._hyst_span = float(u_span)
             HK.set_thresholds(st, self.lay["hyst"], self.hyst_r)
             HK.set_start_form(st, self.lay["hyst"], float(REST_LEAD))   # (a start-up's lead-in is no rest)
+            HK.set_memory(st, self.lay["hyst"], self._hyst_epoch)
 
     @property
     def r0(self) -> int:
