@@ -504,6 +504,31 @@ def test_the_compensator_and_a_tracker_round_trip():
     assert (tr.alpha, tr.a1, tr.a2, tr.b) == (tr2.alpha, tr2.a1, tr2.a2, tr2.b)
 
 
+def test_a_checkpoint_laid_out_by_another_version_is_refused_in_one_line(monkeypatch):
+    """The kernels index the state without bounds checks: a checkpoint whose state layout differs (an operator
+    block two entries longer, say) or is not recorded must not be read into them."""
+    from creep_online import DataError, OnlineEstimator
+    from creep_online.online import checkpoint
+    from creep_online.online._kernels import hysteresis
+    h, u, y = _data(3000)
+    est = OnlineEstimator(h, effects=("hysteresis",))
+    est.update_block(u, y)
+    saved = pickle.dumps(est)
+    assert pickle.loads(saved).estimate.alpha == est.estimate.alpha
+    monkeypatch.setattr(hysteresis, "HEAD", hysteresis.HEAD + 2)       # this version's layout, another block size
+    checkpoint.state_layout.cache_clear()
+    try:
+        with pytest.raises(DataError, match="laid out otherwise .*resume it with the version that wrote it") as err:
+            pickle.loads(saved)
+    finally:
+        monkeypatch.undo()
+        checkpoint.state_layout.cache_clear()
+    assert "\n" not in str(err.value)
+    with pytest.raises(DataError, match="not recorded"):
+        checkpoint._loads(checkpoint.dumps(est))                      # the form without a layout
+    assert pickle.loads(saved).estimate.alpha == est.estimate.alpha
+
+
 # ------------------------------------------------------------------ CAN logs: one bad record never ends the replay
 @pytest.mark.parametrize("suffix", [".log", ".csv", ".asc", ".blf"])
 def test_an_unreadable_can_log_record_is_skipped_and_counted(tmp_path, suffix):

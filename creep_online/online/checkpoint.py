@@ -23,10 +23,19 @@ both for every class that derives from :class:`Checkpointable`:
 The whole object graph goes through one pickler (``__reduce_ex__`` returns its
 bytes), so ``pickle``, ``copy.copy`` and ``copy.deepcopy`` all give the same
 result.
+
+A checkpoint carries the fingerprint of the state's layout (``state_layout``):
+the compiled kernels index the state vectors without bounds checks, so a
+checkpoint laid out by another version would be read at the wrong places, or
+past the arrays' ends. Loading one whose layout differs (or is not recorded)
+raises a one-line ``DataError`` instead.
 """
 from __future__ import annotations
 
 import ctypes
+import functools
+import hashlib
+import importlib
 import inspect
 import io
 import pickle
@@ -34,6 +43,11 @@ from collections import deque
 from typing import Any
 
 import numpy as np
+
+from ..errors import DataError
+
+#: The modules whose integer constants lay out the state vectors the compiled kernels index.
+LAYOUT_MODULES = ("layout", "window", "recursive", "hysteresis", "fit_machine", "coefficients")
 
 
 class Checkpointable:
@@ -56,7 +70,7 @@ class Checkpointable:
         self.__dict__.update(state)
 
     def __reduce_ex__(self, protocol: int):
-        return _loads, (dumps(self),)
+        return _loads, (dumps(self), state_layout())
 
 
 def dumps(obj: Any) -> bytes:
@@ -69,7 +83,24 @@ def dumps(obj: Any) -> bytes:
     return buffer.getvalue()
 
 
-def _loads(data: bytes) -> Any:
+@functools.lru_cache(maxsize=1)
+def state_layout() -> str:
+    """A fingerprint of the online state's layout: every integer constant (an index into a state vector, a block's
+    size) of the kernels' modules, with its module and name."""
+    items = []
+    for name in LAYOUT_MODULES:
+        module = importlib.import_module(f"{__package__}._kernels.{name}")
+        items += [f"{name}.{key}={value}" for key, value in sorted(vars(module).items())
+                  if key.isupper() and type(value) is int]
+    return hashlib.sha256("\n".join(items).encode()).hexdigest()[:16]
+
+
+def _loads(data: bytes, layout: str | None = None) -> Any:
+    """The object of a checkpoint, refused (``DataError``) when its state is laid out otherwise than here."""
+    if layout != state_layout():
+        raise DataError(f"this checkpoint's online state is laid out otherwise (layout {layout or 'not recorded'}, "
+                        f"this creep_online's {state_layout()}): resume it with the version that wrote it, "
+                        "or start a new estimator")
     return pickle.loads(data)
 
 
