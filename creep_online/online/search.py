@@ -728,6 +728,9 @@ class ResonanceSearch(Checkpointable):
         self._freqs = freqs
         self._judged_rows: int | None = None
         self._passes: dict[int, int] = {}     # passes over the rows per stride (``_start_pass``)
+        #: block mode: each candidate's rows in one kernel call (the same sums in the same order: bit for bit the
+        #: units' result), not cut into units of ~UNIT_WORK for update()'s latency (``_units``)
+        self.eager = False
         self._gen = self._run()
 
     def _state(self) -> dict:
@@ -834,7 +837,7 @@ class ResonanceSearch(Checkpointable):
             per_row = self._node_work(1, passes) + 30 + 6 * e.size
             if cold or self._judged_rows is None:     # (a first judged cost: the recursion's kernel is cold too,
                 yield                                 # 23-26 us with the set-up and its first rows)
-            for r0, r1 in _row_units(n, per_row, lead):
+            for r0, r1 in self._units(n, per_row, lead):
                 _rows_free(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, f, decay, e, r0, r1, self.lead, G)
                 yield
             return G
@@ -855,7 +858,7 @@ class ResonanceSearch(Checkpointable):
         g[0], g[1] = 1.0, 0.0
         if passes <= 1:                    # (the second candidate's set-up after the first's end: ~15 us cold)
             yield
-        for r0, r1 in _row_units(n, per_row, lead):
+        for r0, r1 in self._units(n, per_row, lead):
             _rows_free_sparse(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, g, (a1, a2), self.basis.h, rates,
                               r0, r1, stride, self.lead, G, table, mode)
             yield
@@ -864,6 +867,10 @@ class ResonanceSearch(Checkpointable):
         if mode == 1:
             self._rows_cache.keep(slot, G)
         return G
+
+    def _units(self, n: int, per_row: float, first: float) -> Generator | tuple:
+        """A candidate's row ranges: ``_row_units``'s, or all n rows at once in block mode (``eager``)."""
+        return ((0, n),) if self.eager else _row_units(n, per_row, first)
 
     def _start_pass(self, stride: int) -> int:
         """Count a candidate's pass over the rows at this stride; returns the passes before it (0: a first pass,
@@ -893,6 +900,7 @@ class ResonanceSearch(Checkpointable):
 
     def run(self) -> SearchResult:
         """To completion (block mode)."""
+        self.eager = True
         while not self.step():
             pass
         return self.result
@@ -916,7 +924,7 @@ class ResonanceSearch(Checkpointable):
         per_row = 6 + self._node_work(stride, passes) / stride
         if cold:
             yield
-        for r0, r1 in _row_units(self.u.size, per_row, COLD_LEAD_WORK if passes <= 1 else PREPARE_WORK):
+        for r0, r1 in self._units(self.u.size, per_row, COLD_LEAD_WORK if passes <= 1 else PREPARE_WORK):
             _rows(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, r0, r1, stride, self.lead, acc)
             yield
         if cold:

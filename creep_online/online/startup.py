@@ -86,6 +86,7 @@ class Startup:
         self.restarted = False             # restarted in operation after a fault: the plant was not at rest
         self.hint: tuple | None = None     # (alpha, a1, a2) before a fault's restart: a candidate of the search
         self.handover = Handover(self)     # the tracker's start, the buffer's replay, going live
+        self.eager = False                 # the current call runs everything at once (``advance``: block mode)
 
     # ------------------------------------------------------------------ the buffer
     def buffer(self, du: float, y: float) -> None:
@@ -136,7 +137,7 @@ class Startup:
         reads "searching" until the tracker has started, a few samples later. With ``units`` >= ``EAGER``
         (block mode, a full buffer) everything runs in this call."""
         est = self.est
-        eager = units >= EAGER
+        eager = self.eager = units >= EAGER
         while self.reframing is not None:      # (the step's reading's buffer moving to its frame, a chunk per call)
             if next(self.reframing, _DONE) is _DONE:
                 self.reframing = None
@@ -157,6 +158,7 @@ class Startup:
         if est._phase == "searching":
             if self.starting is None:
                 s = self.search
+                s.eager = eager            # (block mode: each candidate's rows in one kernel call)
                 while units > 0 and not s.step():
                     units -= 1
                 if s.result is None or self.longer_window_needed(s.result):
@@ -257,7 +259,10 @@ class Startup:
         search = ResonanceSearch(self.est.basis, self.bu[:rows], self.by[:rows],
                                  extra=((step.alpha, step.a1, step.a2),), work=self.hist_work,
                                  scratch=self.search_scratch, free=FREE_RATES, starts=starts)
-        while not search.step():
+        while True:
+            search.eager = self.eager
+            if search.step():
+                break
             yield
         operation = search.result
         self.competing = False
