@@ -337,6 +337,66 @@ def _rows_free_sparse(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.nda
     g[1] = g2
 
 
+#: Candidates a block-mode grid evaluates side by side in one pass over the rows (``_rows_batch``,
+#: ``_rows_free_batch``): their resonance states' recursions are chains of dependent multiply-adds, one row's
+#: latency each; side by side the processor overlaps them, and a kept row's node history is read once for all.
+BATCH = 4
+
+
+@njit(cache=True)
+def _rows_batch(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx: np.ndarray, rc: np.ndarray,
+                x: np.ndarray, nb: int, stride: int, lead: int, acc: np.ndarray) -> None:
+    """``_rows`` over every row for ``nb`` candidates at once (row c of vz, vx, rc, x, acc: candidate c's
+    ``vz``, (vx0, vx1), ``rc``, ``x``, ``acc``): each candidate's operations and their order are ``_rows``'s,
+    so its sums are the same bit for bit."""
+    for k in range(u.shape[0]):
+        uk = u[k]
+        if k >= lead and _kept(k, stride) and y[k] == y[k]:
+            yk = y[k]
+            for c in range(nb):
+                s = _forced_output(hist, k, vz[c], vx[c, 0], vx[c, 1], x[c, 0], x[c, 1])
+                a = acc[c]
+                a[0] += 1.0
+                a[1] += s
+                a[2] += s * s
+                a[3] += yk
+                a[4] += s * yk
+                a[5] += yk * yk
+        for c in range(nb):
+            x[c, 0], x[c, 1] = _advance(rc[c], x[c, 0], x[c, 1], uk)
+
+
+@njit(cache=True)
+def _rows_free_batch(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx: np.ndarray,
+                     rc: np.ndarray, x: np.ndarray, g: np.ndarray, shift: np.ndarray, nb: int, stride: int,
+                     lead: int, G: np.ndarray, table: np.ndarray, Gc: np.ndarray) -> None:
+    """``_rows_free_sparse`` in its mode 2 (the decays read from ``table``, G starting from the shared entries of
+    ``Gc``: ``_constant_entries``) over every row for ``nb`` candidates at once (row c of vz, vx, rc, x, g, G:
+    candidate c's; row c of ``shift``: its ``_free_shift``); each candidate's operations and their order are
+    ``_rows_free_sparse``'s, so its Gram matrix is the same bit for bit."""
+    p = G.shape[1]
+    m = p - 5
+    row = np.empty(p)
+    for c in range(nb):
+        _constant_entries(Gc, G[c])
+        g[c, 0], g[c, 1] = 1.0, 0.0
+    for k in range(u.shape[0]):
+        uk = u[k]
+        if k >= lead and _kept(k, stride) and y[k] == y[k]:
+            row[1] = 1.0
+            row[p - 1] = y[k]
+            for j in range(m):
+                row[4 + j] = table[k // stride, j]
+            for c in range(nb):
+                row[0] = _forced_output(hist, k, vz[c], vx[c, 0], vx[c, 1], x[c, 0], x[c, 1])
+                row[2], row[3] = g[c, 0], g[c, 1]
+                _add_candidate_row(row, G[c])
+        for c in range(nb):
+            x[c, 0], x[c, 1] = _advance(rc[c], x[c, 0], x[c, 1], uk)
+            g1, g2 = g[c, 0], g[c, 1]
+            g[c, 0], g[c, 1] = shift[c, 0] * g1 + shift[c, 1] * g2, shift[c, 2] * g1 + shift[c, 3] * g2
+
+
 @njit(cache=True, inline="always")
 def _add_candidate_row(row: np.ndarray, G: np.ndarray) -> None:
     """``_add_row`` for the entries of G that depend on the candidate: those of its forced output (0) and
@@ -673,6 +733,15 @@ def _judge_reset(f: np.ndarray, e: np.ndarray, G: np.ndarray) -> None:
     G[:, :] = 0.0
 
 
+def _run_to_end(gen: Generator):
+    """A generator's return value, its units run at once."""
+    try:
+        while True:
+            next(gen)
+    except StopIteration as done:
+        return done.value
+
+
 def _finished() -> Generator:
     """A generator that has run to its end (a restored search's finished work)."""
     gen = (x for x in ())
@@ -951,21 +1020,78 @@ class ResonanceSearch(Checkpointable):
         costs, ranked, picks = self._grid_work
         if costs.size < size:            # (more creep exponents than the scratch was sized for)
             costs, ranked = np.empty(size), np.empty(size, dtype=np.int64)
-        i = 0                            # (points by their index, no tuple each: the garbage collector's passes
-        for alpha in self.alphas:        # over hundreds of them were 20-50 us in one update())
-            for fn in self._freqs:
-                wn = 2 * math.pi * fn
-                for z in GRID_ZETA:
-                    a1, a2 = 2 * z / wn, 1 / wn**2
-                    cost, _, _ = yield from self._evaluate(alpha, a1, a2, stride)
-                    _rank(cost, i, costs, ranked)
-                    i += 1
+        if self.eager:                   # (block mode: the grid's candidates side by side, ``_grid_costs``)
+            for i, cost in enumerate(self._grid_costs(stride)):
+                _rank(cost, i, costs, ranked)
+        else:
+            i = 0                        # (points by their index, no tuple each: the garbage collector's passes
+            for alpha in self.alphas:    # over hundreds of them were 20-50 us in one update())
+                for fn in self._freqs:
+                    wn = 2 * math.pi * fn
+                    for z in GRID_ZETA:
+                        a1, a2 = 2 * z / wn, 1 / wn**2
+                        cost, _, _ = yield from self._evaluate(alpha, a1, a2, stride)
+                        _rank(cost, i, costs, ranked)
+                        i += 1
         yield                            # (the last candidate's end and the picks below: ~28 us cold in one)
         m = _distinct_picks(costs, ranked, size, self._freqs, _GRID_ZETAS, picks)
         yield                            # (the picks and the grid's end, cold: 25-28 us in one)
         per_alpha, nz = len(self._freqs) * len(GRID_ZETA), len(GRID_ZETA)
         return [(self.alphas[i // per_alpha], self._freqs[i % per_alpha // nz], GRID_ZETA[i % nz])
                 for i in picks.tolist()[:m]]
+
+    def _grid_points(self) -> list[tuple[float, float, float]]:
+        """The grid's (alpha, a1, a2) in ``_grid``'s order (alpha, then fn, then zeta), computed as ``_grid`` does."""
+        points = []
+        for alpha in self.alphas:
+            for fn in self._freqs:
+                wn = 2 * math.pi * fn
+                for z in GRID_ZETA:
+                    points.append((alpha, 2 * z / wn, 1 / wn**2))
+        return points
+
+    def _grid_costs(self, stride: int) -> list[float]:
+        """Block mode: each grid point's ``_evaluate`` cost, bit for bit, BATCH candidates side by side in one kernel
+        call (``_rows_batch``; with ``free``, ``_rows_free_batch`` once the first candidate has filled the shared
+        rows' cache, else each on its own). Each candidate's coefficients come from the kernels ``_evaluate``
+        calls (``_prepare``, ``_free_shift``), its cost from the same fit (``_projected``, ``_free_fit``)."""
+        points = self._grid_points()
+        costs: list[float] = []
+        self._bind()
+        basis, n = self.basis, self.u.size
+        q = basis.size
+        vz, vx, rc, x = np.empty((BATCH, q)), np.empty((BATCH, 2)), np.empty((BATCH, 6)), np.empty((BATCH, 2))
+        acc, g, shift = np.empty((BATCH, 6)), np.empty((BATCH, 2)), np.empty((BATCH, 4))
+        k = 0
+        if self.free is not None:
+            while k < len(points):         # (until a candidate has filled the cache: each on its own)
+                slot, mode = self._rows_cache.claim(stride, n, len(self.free))
+                if mode == 2:
+                    break
+                costs.append(_run_to_end(self._evaluate(*points[k], stride))[0])
+                k += 1
+            if k < len(points):
+                p = 5 + len(self.free)
+                G = np.empty((BATCH, p, p))
+                table, Gc = self._rows_cache.tables[slot], self._rows_cache.grams[slot]
+        while k < len(points):
+            batch = points[k:k + BATCH]
+            nb = len(batch)
+            self._passes[stride] = self._passes.get(stride, 0) + nb
+            for c, (alpha, a1, a2) in enumerate(batch):
+                vx[c] = _prepare(alpha, a1, a2, basis.lam, basis.dx, basis.h, self._v, self._dv, rc[c], vz[c], x[c],
+                                 acc[c])
+                if self.free is not None:
+                    shift[c] = _free_shift(a1, a2, basis.h)
+            if self.free is None:
+                _rows_batch(self._hist, self.u, self.y, vz, vx, rc, x, nb, stride, self.lead, acc)
+                costs.extend(_projected(acc[c])[0] for c in range(nb))
+            else:
+                _rows_free_batch(self._hist, self.u, self.y, vz, vx, rc, x, g, shift, nb, stride, self.lead, G,
+                                 table, Gc)
+                costs.extend(_free_fit(G[c])[0] for c in range(nb))
+            k += nb
+        return costs
 
     def _refine(self, alpha: float, fn: float, z: float, stride: int) -> Generator:
         """Pattern search in (ln alpha, ln fn, ln zeta) from a start; returns (cost, alpha, fn, zeta).
