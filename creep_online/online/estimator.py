@@ -427,6 +427,12 @@ class OnlineEstimator(StoredParams, Checkpointable):
         i = done[0]
         n = u.size
         while i < n and self._live is None:
+            run = self._inputs.buffer_quiet(u[i:], y[i:])     # (samples between the start-up's steps: at once)
+            if run:
+                self.samples += run
+                i += run
+                done[0] = i
+                continue
             self.samples += 1
             done[0] = i + 1
             self._inputs.buffer_sample(float(u[i]), float(y[i]))

@@ -144,6 +144,23 @@ class InputStage:
             est._startup.buffer(self.accept(v), w)
         est._deferred = bool(est._held)
 
+    def buffer_quiet(self, u: np.ndarray, y: np.ndarray) -> int:
+        """Block mode: the leading samples of u, y that the gate passes, into the start-up buffer at once, as many as
+        its quiet run allows (``Startup.quiet_samples``: no start-up step falls between them); returns how many
+        (0: the next goes through ``buffer_sample``). The same values as ``buffer_sample`` one by one."""
+        est = self.est
+        if est._held or est._backlog or est._deferred or est._u_ref is None:
+            return 0
+        quiet = min(est._startup.quiet_samples(), u.size, PASS_SCAN)
+        if quiet and est._startup.first_change is None:     # (the run ends at the input's first move)
+            moves = np.flatnonzero(u[:quiet] != est._u_last)
+            quiet = int(moves[0]) if moves.size else quiet
+        run = self.passing_run(u[:quiet]) if quiet else 0
+        if run:
+            self.accept_run(u[:run])
+            est._startup.buffer_run(u[:run] - est._u_ref, y[:run])
+        return run
+
     def update_deferred(self, tr: "Tracker", u: float, y: float) -> None:
         """update()'s slow path: an input outside the range seen so far, or samples waiting. The sample goes
         through the input gate; of the decided ones at most ``drain_per_update`` are fed now, in order."""
