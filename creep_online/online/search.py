@@ -339,22 +339,73 @@ def _rows_free_sparse(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.nda
 
 #: Candidates a block-mode grid evaluates side by side in one pass over the rows (``_rows_batch``,
 #: ``_rows_free_batch``): their resonance states' recursions are chains of dependent multiply-adds, one row's
-#: latency each; side by side the processor overlaps them, and a kept row's node history is read once for all.
+#: latency each; side by side the processor overlaps them.
 BATCH = 4
+#: Kept rows per tile of ``_node_sums`` (its partial sums stay in the first-level cache).
+NODE_TILE = 256
 
 
 @njit(cache=True)
-def _rows_batch(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx: np.ndarray, rc: np.ndarray,
-                x: np.ndarray, nb: int, stride: int, lead: int, acc: np.ndarray) -> None:
-    """``_rows`` over every row for ``nb`` candidates at once (row c of vz, vx, rc, x, acc: candidate c's
-    ``vz``, (vx0, vx1), ``rc``, ``x``, ``acc``): each candidate's operations and their order are ``_rows``'s,
-    so its sums are the same bit for bit."""
+def _kept_history(hist: np.ndarray, stride: int, HT: np.ndarray) -> None:
+    """HT[:, j] = the node history's kept row of block j of ``stride`` rows (``_kept``), the rows side by side
+    (``_node_sums``); a block whose kept row lies past the end gets zeros."""
+    HT[:, :] = 0.0
+    for k in range(hist.shape[0]):
+        if _kept(k, stride):
+            j = k // stride
+            for i in range(hist.shape[1]):
+                HT[i, j] = hist[k, i]
+
+
+@njit(cache=True)
+def _node_sums(HT: np.ndarray, vz: np.ndarray, out: np.ndarray) -> None:
+    """out[j] = the node sum of kept row j (HT's column j, ``_kept_history``), as ``_forced_output`` adds it: four
+    interleaved partial sums over the nodes, the rest into the first, then (s0 + s1) + (s2 + s3). The same
+    operations on each row in the same order (bit for bit), rows side by side: NODE_TILE rows of each partial sum
+    advance together, an independent lane per row (~5 ns a row at Q = 42, where ``_forced_output`` waits on one
+    row's chains, ~20 ns). (The partial sums in four arrays of their own: as rows of one 2-D array they were not
+    vectorized, 11 ns.)"""
+    q, nk = HT.shape
+    s0, s1, s2, s3 = np.empty(NODE_TILE), np.empty(NODE_TILE), np.empty(NODE_TILE), np.empty(NODE_TILE)
+    for j0 in range(0, nk, NODE_TILE):
+        w = min(NODE_TILE, nk - j0)
+        s0[:] = 0.0
+        s1[:] = 0.0
+        s2[:] = 0.0
+        s3[:] = 0.0
+        i = 0
+        while i + 4 <= q:
+            v0, v1, v2, v3 = vz[i], vz[i + 1], vz[i + 2], vz[i + 3]
+            h0, h1, h2, h3 = HT[i, j0:j0 + w], HT[i + 1, j0:j0 + w], HT[i + 2, j0:j0 + w], HT[i + 3, j0:j0 + w]
+            for j in range(w):
+                s0[j] += h0[j] * v0
+                s1[j] += h1[j] * v1
+                s2[j] += h2[j] * v2
+                s3[j] += h3[j] * v3
+            i += 4
+        while i < q:
+            v0 = vz[i]
+            h0 = HT[i, j0:j0 + w]
+            for j in range(w):
+                s0[j] += h0[j] * v0
+            i += 1
+        for j in range(w):
+            out[j0 + j] = (s0[j] + s1[j]) + (s2[j] + s3[j])
+
+
+@njit(cache=True)
+def _rows_batch(ns: np.ndarray, u: np.ndarray, y: np.ndarray, vx: np.ndarray, rc: np.ndarray, x: np.ndarray,
+                nb: int, stride: int, lead: int, acc: np.ndarray) -> None:
+    """``_rows`` over every row for ``nb`` candidates at once (row c of vx, rc, x, acc: candidate c's (vx0, vx1),
+    ``rc``, ``x``, ``acc``; ns[c, j]: its node sum at kept row j, ``_node_sums``): each candidate's operations and
+    their order are ``_rows``'s, so its sums are the same bit for bit."""
     for k in range(u.shape[0]):
         uk = u[k]
         if k >= lead and _kept(k, stride) and y[k] == y[k]:
             yk = y[k]
+            j = k // stride
             for c in range(nb):
-                s = _forced_output(hist, k, vz[c], vx[c, 0], vx[c, 1], x[c, 0], x[c, 1])
+                s = vx[c, 0] * x[c, 0] + vx[c, 1] * x[c, 1] + ns[c, j]
                 a = acc[c]
                 a[0] += 1.0
                 a[1] += s
@@ -367,12 +418,12 @@ def _rows_batch(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, 
 
 
 @njit(cache=True)
-def _rows_free_batch(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx: np.ndarray,
-                     rc: np.ndarray, x: np.ndarray, g: np.ndarray, shift: np.ndarray, nb: int, stride: int,
-                     lead: int, G: np.ndarray, table: np.ndarray, Gc: np.ndarray) -> None:
+def _rows_free_batch(ns: np.ndarray, u: np.ndarray, y: np.ndarray, vx: np.ndarray, rc: np.ndarray, x: np.ndarray,
+                     g: np.ndarray, shift: np.ndarray, nb: int, stride: int, lead: int, G: np.ndarray,
+                     table: np.ndarray, Gc: np.ndarray) -> None:
     """``_rows_free_sparse`` in its mode 2 (the decays read from ``table``, G starting from the shared entries of
-    ``Gc``: ``_constant_entries``) over every row for ``nb`` candidates at once (row c of vz, vx, rc, x, g, G:
-    candidate c's; row c of ``shift``: its ``_free_shift``); each candidate's operations and their order are
+    ``Gc``: ``_constant_entries``) over every row for ``nb`` candidates at once (row c of vx, rc, x, g, G, ns as in
+    ``_rows_batch``; row c of ``shift``: its ``_free_shift``); each candidate's operations and their order are
     ``_rows_free_sparse``'s, so its Gram matrix is the same bit for bit."""
     p = G.shape[1]
     m = p - 5
@@ -385,10 +436,11 @@ def _rows_free_batch(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndar
         if k >= lead and _kept(k, stride) and y[k] == y[k]:
             row[1] = 1.0
             row[p - 1] = y[k]
-            for j in range(m):
-                row[4 + j] = table[k // stride, j]
+            for i in range(m):
+                row[4 + i] = table[k // stride, i]
+            j = k // stride
             for c in range(nb):
-                row[0] = _forced_output(hist, k, vz[c], vx[c, 0], vx[c, 1], x[c, 0], x[c, 1])
+                row[0] = vx[c, 0] * x[c, 0] + vx[c, 1] * x[c, 1] + ns[c, j]
                 row[2], row[3] = g[c, 0], g[c, 1]
                 _add_candidate_row(row, G[c])
         for c in range(nb):
@@ -800,6 +852,8 @@ class ResonanceSearch(Checkpointable):
         #: block mode: each candidate's rows in one kernel call (the same sums in the same order: bit for bit the
         #: units' result), not cut into units of ~UNIT_WORK for update()'s latency (``_units``)
         self.eager = False
+        self._kept_t: dict[int, np.ndarray] = {}      # block mode's kept rows per stride (``_kept_rows``)
+        self._batch: dict[int, tuple] = {}            # ... and work arrays (``_batch_arrays``)
         self._gen = self._run()
 
     def _state(self) -> dict:
@@ -812,10 +866,12 @@ class ResonanceSearch(Checkpointable):
                 pass
             progress = inspect.GEN_CLOSED
         state["_gen"] = progress
+        state["_kept_t"], state["_batch"] = {}, {}     # (block mode's work arrays: made again when needed)
         return state
 
     def _restore_state(self, state: dict) -> None:
         progress = state.pop("_gen")
+        state = {"eager": False, "_kept_t": {}, "_batch": {}, **state}
         self.__dict__.update(state)
         self._gen = self._run() if progress == inspect.GEN_CREATED else _finished()
 
@@ -976,9 +1032,17 @@ class ResonanceSearch(Checkpointable):
 
     # ------------------------------------------------------------------ pieces
     def _evaluate(self, alpha: float, a1: float, a2: float, stride: int) -> Generator:
-        """Projected cost of one candidate, in units; the generator's return value is (cost, b, c). With
-        ``free`` the unknown start is projected out too (``_free_gram`` with the free responses in closed form
-        on every stride, ``_free_fit``)."""
+        """Projected cost of one candidate, in units; the generator's return value is (cost, b, c). In block mode
+        (``eager``) in one pass (``_evaluate_batch``) where it can, else in units (``_evaluate_units``)."""
+        if self.eager:
+            fits = self._evaluate_batch([(alpha, a1, a2)], stride)
+            if fits is not None:
+                return fits[0]
+        return (yield from self._evaluate_units(alpha, a1, a2, stride))
+
+    def _evaluate_units(self, alpha: float, a1: float, a2: float, stride: int) -> Generator:
+        """``_evaluate`` in units of ~UNIT_WORK. With ``free`` the unknown start is projected out too (``_free_gram``
+        with the free responses in closed form on every stride, ``_free_fit``)."""
         if self.free is not None:
             G = yield from self._free_gram(alpha, a1, a2, self.free, stride, closed=True)
             return _free_fit(G)
@@ -1051,47 +1115,72 @@ class ResonanceSearch(Checkpointable):
         return points
 
     def _grid_costs(self, stride: int) -> list[float]:
-        """Block mode: each grid point's ``_evaluate`` cost, bit for bit, BATCH candidates side by side in one kernel
-        call (``_rows_batch``; with ``free``, ``_rows_free_batch`` once the first candidate has filled the shared
-        rows' cache, else each on its own). Each candidate's coefficients come from the kernels ``_evaluate``
-        calls (``_prepare``, ``_free_shift``), its cost from the same fit (``_projected``, ``_free_fit``)."""
+        """Block mode: each grid point's ``_evaluate`` cost, bit for bit, BATCH candidates side by side
+        (``_evaluate_batch``); with ``free``, each on its own until one has filled the shared rows' cache."""
         points = self._grid_points()
         costs: list[float] = []
-        self._bind()
-        basis, n = self.basis, self.u.size
-        q = basis.size
-        vz, vx, rc, x = np.empty((BATCH, q)), np.empty((BATCH, 2)), np.empty((BATCH, 6)), np.empty((BATCH, 2))
-        acc, g, shift = np.empty((BATCH, 6)), np.empty((BATCH, 2)), np.empty((BATCH, 4))
         k = 0
-        if self.free is not None:
-            while k < len(points):         # (until a candidate has filled the cache: each on its own)
-                slot, mode = self._rows_cache.claim(stride, n, len(self.free))
-                if mode == 2:
-                    break
-                costs.append(_run_to_end(self._evaluate(*points[k], stride))[0])
-                k += 1
-            if k < len(points):
-                p = 5 + len(self.free)
-                G = np.empty((BATCH, p, p))
-                table, Gc = self._rows_cache.tables[slot], self._rows_cache.grams[slot]
         while k < len(points):
             batch = points[k:k + BATCH]
-            nb = len(batch)
-            self._passes[stride] = self._passes.get(stride, 0) + nb
-            for c, (alpha, a1, a2) in enumerate(batch):
-                vx[c] = _prepare(alpha, a1, a2, basis.lam, basis.dx, basis.h, self._v, self._dv, rc[c], vz[c], x[c],
-                                 acc[c])
-                if self.free is not None:
-                    shift[c] = _free_shift(a1, a2, basis.h)
-            if self.free is None:
-                _rows_batch(self._hist, self.u, self.y, vz, vx, rc, x, nb, stride, self.lead, acc)
-                costs.extend(_projected(acc[c])[0] for c in range(nb))
-            else:
-                _rows_free_batch(self._hist, self.u, self.y, vz, vx, rc, x, g, shift, nb, stride, self.lead, G,
-                                 table, Gc)
-                costs.extend(_free_fit(G[c])[0] for c in range(nb))
-            k += nb
+            fits = self._evaluate_batch(batch, stride)
+            if fits is None:               # (no cache filled at this stride yet: this one fills it, in units)
+                fits = [_run_to_end(self._evaluate_units(*batch[0], stride))]
+            costs.extend(fit[0] for fit in fits)
+            k += len(fits)
         return costs
+
+    def _evaluate_batch(self, points: list, stride: int) -> list[tuple] | None:
+        """Block mode: ``_evaluate``'s (cost, b, c) for up to BATCH candidates (alpha, a1, a2), bit for bit, in one
+        pass over the rows (``_rows_batch``, ``_rows_free_batch``), their node sums first over the kept rows side by
+        side (``_node_sums``). Each candidate's coefficients come from the kernels ``_evaluate`` calls
+        (``_prepare``, ``_free_shift``), its fit from the same (``_projected``, ``_free_fit``). None with ``free``
+        while no candidate has filled the shared rows' cache at this stride, or when it cannot hold them
+        (``FreeRowCache.claim``), and for a lone first candidate at a stride (its kept rows side by side would cost
+        as much as its evaluation): those go in units."""
+        self._bind()
+        basis, n, nb = self.basis, self.u.size, len(points)
+        if nb == 1 and stride not in self._kept_t and not self._passes.get(stride, 0):
+            return None
+        if self.free is not None:
+            slot, mode = self._rows_cache.claim(stride, n, len(self.free))
+            if mode != 2:
+                return None
+        self._passes[stride] = self._passes.get(stride, 0) + nb
+        HT = self._kept_rows(stride)
+        vz, vx, rc, x, acc, g, shift, ns, G = self._batch_arrays(HT.shape[1])
+        for c, (alpha, a1, a2) in enumerate(points):
+            vx[c] = _prepare(alpha, a1, a2, basis.lam, basis.dx, basis.h, self._v, self._dv, rc[c], vz[c], x[c],
+                             acc[c])
+            _node_sums(HT, vz[c], ns[c])
+            if self.free is not None:
+                shift[c] = _free_shift(a1, a2, basis.h)
+        if self.free is None:
+            _rows_batch(ns, self.u, self.y, vx, rc, x, nb, stride, self.lead, acc)
+            return [_projected(acc[c]) for c in range(nb)]
+        _rows_free_batch(ns, self.u, self.y, vx, rc, x, g, shift, nb, stride, self.lead, G,
+                         self._rows_cache.tables[slot], self._rows_cache.grams[slot])
+        return [_free_fit(G[c]) for c in range(nb)]
+
+    def _kept_rows(self, stride: int) -> np.ndarray:
+        """The node history's kept rows at this stride side by side (``_kept_history``), made once per search."""
+        HT = self._kept_t.get(stride)
+        if HT is None:
+            HT = np.empty((self.basis.size, (self.u.size + stride - 1) // stride))
+            _kept_history(self._hist, stride, HT)
+            self._kept_t[stride] = HT
+        return HT
+
+    def _batch_arrays(self, kept: int) -> tuple:
+        """``_evaluate_batch``'s work arrays for BATCH candidates over ``kept`` kept rows (made once per search and
+        size)."""
+        arrays = self._batch.get(kept)
+        if arrays is None:
+            q, p = self.basis.size, 5 + (len(self.free) if self.free is not None else 0)
+            arrays = (np.empty((BATCH, q)), np.empty((BATCH, 2)), np.empty((BATCH, 6)), np.empty((BATCH, 2)),
+                      np.empty((BATCH, 6)), np.empty((BATCH, 2)), np.empty((BATCH, 4)), np.empty((BATCH, kept)),
+                      np.empty((BATCH, p, p)))
+            self._batch[kept] = arrays
+        return arrays
 
     def _refine(self, alpha: float, fn: float, z: float, stride: int) -> Generator:
         """Pattern search in (ln alpha, ln fn, ln zeta) from a start; returns (cost, alpha, fn, zeta).
