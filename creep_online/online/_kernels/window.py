@@ -1053,18 +1053,28 @@ def _rescale(S: np.ndarray, sy: np.ndarray, sc: np.ndarray, factor: float) -> No
 DEFER_ROWS = 64
 
 
-@njit(cache=CACHE, fastmath=FAST)
+@njit(cache=CACHE)
 def block(u: np.ndarray, y: np.ndarray, st: np.ndarray, S: np.ndarray, ring: np.ndarray,
           status: np.ndarray, start: int = 0, stop: int = -1) -> int:
     """Samples ``start`` to ``stop`` (-1: the end) until due work (flag 8), their statuses from status[0];
     returns how many were consumed. (A range, not slices: the start-up replay calls it from cold Python.)
 
-    ``sample``'s steps for each sample, bit for bit, in one loop: the views of the state array taken once, and
-    the rank-one updates of S waiting in a block of DEFER_ROWS regressor rows, added in one pass over S
+    ``sample``'s steps for each sample, bit for bit, in one loop (``_block``): the views of the state array taken
+    once, and the rank-one updates of S waiting in a block of DEFER_ROWS regressor rows, added in one pass over S
     (``_flush``: the same operations on each element in the same order). S is complete whenever this returns,
-    so no reader of S sees the deferral. (The steps are written out here, not shared with ``sample`` through
-    inlined helpers: numba's inlining counts references to the arrays passed at every call, which cost ~0.1 us
-    a sample.)"""
+    so no reader of S sees the deferral. Here: the deferred rows' memory, which ``_block`` (no reference counts)
+    cannot allocate."""
+    p = S.shape[0]
+    return _block(u, y, st, S, ring, status, start, stop, np.empty((DEFER_ROWS, p)), np.empty(DEFER_ROWS))
+
+
+@njit(cache=CACHE, fastmath=FAST, _nrt=False)
+def _block(u: np.ndarray, y: np.ndarray, st: np.ndarray, S: np.ndarray, ring: np.ndarray, status: np.ndarray,
+           start: int, stop: int, X: np.ndarray, gx: np.ndarray) -> int:
+    """``block``'s loop, without numba's reference counts: every array here is a view of the caller's, and the
+    counts kept for each view passed to the step's helpers were a sixth of the time. (The steps are written out
+    here, not shared with ``sample`` through inlined helpers: numba's inlining counts references to the arrays
+    passed at every call, which cost ~0.1 us a sample.)"""
     end = u.shape[0] if stop < 0 else stop
     sc = st[:SC_SIZE]
     q = int(sc[SC_NQ])
@@ -1082,8 +1092,6 @@ def block(u: np.ndarray, y: np.ndarray, st: np.ndarray, S: np.ndarray, ring: np.
     ztail = st[c1:c1 + q]
     md = st[c1 + q:c1 + 2 * q + ONE]
     ho = c1 + 2 * q + ONE                       # the hysteresis block (``hysteresis.block_at``)
-    X = np.empty((DEFER_ROWS, p))
-    gx = np.empty(DEFER_ROWS)
     k = 0
     used = end - start
     for i in range(start, end):
