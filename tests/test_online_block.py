@@ -209,6 +209,7 @@ def test_update_block_is_the_per_sample_kernels_and_gate(record, kwargs, monkeyp
         slow, est_slow = _trajectory(make, u, y, pieces, gaps)
     assert _same(fast, slow)
     assert fast[-1][0] != "none" and est_fast.samples == est_slow.samples
+    assert est_fast.estimate.internal_faults == 0     # (a kernel that failed to compile is a fault, recovered from)
     assert np.array_equal(est_fast._tracker.S, est_slow._tracker.S)
     if record == "payload":
         assert est_fast.input_outliers > 0   # (the glitches went through the gate's one-by-one path)

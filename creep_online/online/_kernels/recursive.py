@@ -338,17 +338,10 @@ def _median(x: np.ndarray, count: int, work: np.ndarray) -> float:
     return work[h] if count % 2 else 0.5 * (work[h - 1] + work[h])
 
 
-#: ``sample`` and ``block`` run without the numba runtime's reference counts (``_nrt=False``): every array they touch
-#: is a view of the caller's (nothing is allocated, nothing returned), and the counts that numba otherwise keeps for
-#: each view passed to the step's helpers cost more than the step (with them, ``_step`` inlined into ``block`` took
-#: 330 ns a sample, written out twice 200 ns; without them, 140 ns). The views come from the inlined ``_parts``: an
-#: array returned by a compiled function would carry a count that nothing here releases.
-NO_REFCOUNTS = {"_nrt": False}
-
-
 @njit(cache=CACHE, fastmath=FAST)
 def sample(u: float, y: float, st: np.ndarray, P: np.ndarray, CT: np.ndarray) -> int:
-    """One sample: predict, gate, RPEM update, CUSUM, advance, refresh when due (``_step``). Status as ``window.sample``.
+    """One sample: predict, gate, RPEM update, advance (``_step``), then the change test and the refresh when due
+    (``_checks``). Status as ``window.sample``.
 
     Low bits: 0 accepted, 1 output missing (NaN), 2 rejected as an outlier,
     3 beyond the gate but accepted, 4 not used (adaptation paused or output
@@ -356,45 +349,78 @@ def sample(u: float, y: float, st: np.ndarray, P: np.ndarray, CT: np.ndarray) ->
     """
     sc, q, p, phi, m, co, r, n, t0 = _parts(st)
     zo = t0 + 6 * n + q
-    return _step(u, y, st, P, CT, sc, q, phi, m, co, r, st[t0:t0 + n], st[t0 + n:t0 + 2 * n],
-                 st[t0 + 3 * n:t0 + 4 * n], st[t0 + 4 * n:t0 + 5 * n], st[t0 + 5 * n:t0 + 6 * n], st[zo:zo + n],
-                 st[zo + n:zo + n + n * n])
+    status = _step(u, y, P, CT, sc, q, phi, m, co, r, st[t0:t0 + n], st[t0 + 3 * n:t0 + 4 * n],
+                   st[t0 + 4 * n:t0 + 5 * n], st[t0 + 5 * n:t0 + 6 * n], st[zo:zo + n], st[zo + n:zo + n + n * n])
+    return status + _checks(st, P, CT)
 
 
-@njit(cache=CACHE, fastmath=FAST, **NO_REFCOUNTS)
+@njit(cache=CACHE, fastmath=FAST)
 def block(u: np.ndarray, y: np.ndarray, st: np.ndarray, P: np.ndarray, CT: np.ndarray,
           status: np.ndarray, start: int = 0, stop: int = -1) -> int:
     """Samples ``start`` to ``stop`` (-1: the end) until due work (flag 8), their statuses from status[0];
-    returns how many were consumed (``window.block``).
-
-    ``sample``'s step (``_step``) for each sample, with the views of the state array taken once for the block
-    (taken per sample, with their reference counts, they were about a third of the block's time)."""
+    returns how many were consumed (``window.block``). ``sample``'s steps for each sample, bit for bit: the
+    samples' steps in runs (``_steps``) up to one at which a check is due, then its checks (``_checks``)."""
     end = u.shape[0] if stop < 0 else stop
+    k = start
+    while k < end:
+        k = _steps(u, y, st, P, CT, status, start, k, end)
+        if _checks_due(st):
+            flag = _checks(st, P, CT)
+            status[k - 1 - start] += flag
+            if flag:
+                return k - start
+    return end - start
+
+
+#: ``_steps`` runs without numba's reference counts (``_nrt=False``): every array it touches is a view of the caller's,
+#: nothing is allocated or returned, and the counts numba otherwise keeps for each view passed to the step's helpers
+#: cost more than the step (``_step`` inlined with them: 330 ns a sample; the step written out twice in ``sample``
+#: and ``block``: 200 ns; without them: ~145 ns). What it calls must not need the runtime either (a slice copy,
+#: an allocation): the checks (``change_test``, ``refresh``) run outside it, in ``_checks``.
+NO_REFCOUNTS = {"_nrt": False}
+
+
+@njit(cache=CACHE, fastmath=FAST, **NO_REFCOUNTS)
+def _steps(u: np.ndarray, y: np.ndarray, st: np.ndarray, P: np.ndarray, CT: np.ndarray, status: np.ndarray,
+           start: int, k0: int, end: int) -> int:
+    """``_step`` for samples k0, k0 + 1, ... up to ``end`` or the first after which a check is due (``_checks_due``);
+    their statuses into status[k - start]; returns the index after the last one stepped."""
     sc, q, p, phi, m, co, r, n, t0 = _parts(st)
     theta = st[t0:t0 + n]
-    ref = st[t0 + n:t0 + 2 * n]
     prior = st[t0 + 3 * n:t0 + 4 * n]
     psi = st[t0 + 4 * n:t0 + 5 * n]
     ppsi = st[t0 + 5 * n:t0 + 6 * n]
     zo = t0 + 6 * n + q
     z = st[zo:zo + n]
     info = st[zo + n:zo + n + n * n]
-    for k in range(start, end):
-        s = _step(u[k], y[k], st, P, CT, sc, q, phi, m, co, r, theta, ref, prior, psi, ppsi, z, info)
-        status[k - start] = s
-        if s >= 8:
-            return k - start + 1
-    return end - start
+    for k in range(k0, end):
+        status[k - start] = _step(u[k], y[k], P, CT, sc, q, phi, m, co, r, theta, prior, psi, ppsi, z, info)
+        if _due(sc, r):
+            return k + 1
+    return end
+
+
+@njit(cache=CACHE, inline="always")
+def _due(sc: np.ndarray, r: np.ndarray) -> bool:
+    """After a sample: is the change test's look, the refresh check or the caller's work due (``_checks``)?"""
+    n = int(sc[W.SC_N])
+    return n % int(r[R_CHECKN]) == 0 or n % int(r[R_EVERY]) == 0 or sc[W.SC_N] >= sc[W.SC_DUE]
+
+
+@njit(cache=CACHE)
+def _checks_due(st: np.ndarray) -> bool:
+    """``_due`` on the state array."""
+    sc = st[:W.SC_SIZE]
+    return _due(sc, st[_base(sc):_base(sc) + R_SIZE])
 
 
 @njit(cache=CACHE, fastmath=FAST, inline="always")
-def _step(u: float, y: float, st: np.ndarray, P: np.ndarray, CT: np.ndarray, sc: np.ndarray, q: int,
-          phi: np.ndarray, m: np.ndarray, co: np.ndarray, r: np.ndarray, theta: np.ndarray, ref: np.ndarray,
-          prior: np.ndarray, psi: np.ndarray, ppsi: np.ndarray, z: np.ndarray, info: np.ndarray) -> int:
-    """A sample's whole step on the views of ``st`` (``_parts``; theta, its value at the last refresh, the prior
-    variances, psi, P psi, the test's score and information): the prediction, the gate, the RPEM update, the
-    input's notes and the node states, the change test when its look is due, the refresh when the estimate left
-    its tolerance; returns the status (``sample``'s, flag 8 included). ``sample`` and ``block`` both run it."""
+def _step(u: float, y: float, P: np.ndarray, CT: np.ndarray, sc: np.ndarray, q: int, phi: np.ndarray,
+          m: np.ndarray, co: np.ndarray, r: np.ndarray, theta: np.ndarray, prior: np.ndarray, psi: np.ndarray,
+          ppsi: np.ndarray, z: np.ndarray, info: np.ndarray) -> int:
+    """A sample's step on the views of ``st`` (``_parts``; theta, the prior variances, psi, P psi, the test's score
+    and information): the prediction, the gate, the RPEM update, the input's notes and the node states, the count;
+    returns the status's low bits (``sample``). ``sample`` and ``block`` (through ``_steps``) both run it."""
     pred = 0.0
     for i in range(phi.shape[0]):
         pred += phi[i] * m[i]
@@ -414,12 +440,20 @@ def _step(u: float, y: float, st: np.ndarray, P: np.ndarray, CT: np.ndarray, sc:
     sc[W.SC_N] += 1.0
     if r[R_QUIET] > 0.0:
         r[R_QUIET] -= 1.0
+    return status
+
+
+@njit(cache=CACHE, fastmath=FAST)
+def _checks(st: np.ndarray, P: np.ndarray, CT: np.ndarray) -> int:
+    """After a sample's ``_step``: the change test when its look is due, the refresh when the estimate left its
+    tolerance; returns 8 if the caller's work is due at this sample, else 0."""
+    sc, q, p, phi, m, co, r, n, t0 = _parts(st)
     if int(sc[W.SC_N]) % int(r[R_CHECKN]) == 0:
         change_test(st, P, CT, int(sc[W.SC_N]) % int(r[R_TESTN]) == 0)
     if int(sc[W.SC_N]) % int(r[R_EVERY]) == 0:
+        theta = st[t0:t0 + n]
+        ref = st[t0 + n:t0 + 2 * n]
         if abs(theta[0] - ref[0]) > r[R_TOLA] or abs(theta[1] - ref[1]) > r[R_TOLLN] \
                 or abs(theta[2] - ref[2]) > r[R_TOLLN] or abs(theta[3] - ref[3]) > r[R_TOLLN] * abs(ref[3]):
             refresh(st, CT)
-    if sc[W.SC_N] >= sc[W.SC_DUE]:
-        status += 8
-    return status
+    return 8 if sc[W.SC_N] >= sc[W.SC_DUE] else 0

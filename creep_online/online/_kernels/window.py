@@ -1173,15 +1173,29 @@ def _flush(S: np.ndarray, X: np.ndarray, gx: np.ndarray, k: int) -> None:
     """S += sum over the k rows t of (gx[t] X[t])^T X[t], element by element in the rows' order as ``_accumulate``
     adds them (one multiply-add each: ``S[i, j] += (g phi[i]) phi[j]``), so S is bit for bit the same. Eight rows
     per pass over S, two rows of S at a time (each element loaded and stored once per eight updates, each row of
-    X loaded once per two). Contraction only: reassociation would let the compiler reorder the sum."""
+    X loaded once per two; the last alone when P is odd). Contraction only: reassociation would let the compiler
+    reorder the sum. Nothing allocated: ``_block`` runs it without reference counts."""
     p = S.shape[0]
-    spare = np.empty(p)                 # (the partner of the last row when p is odd: written, never read)
     t = 0
     while t + 8 <= k:
         x0, x1, x2, x3, x4, x5, x6, x7 = X[t], X[t + 1], X[t + 2], X[t + 3], X[t + 4], X[t + 5], X[t + 6], X[t + 7]
-        for i in range(0, p, 2):
-            i2 = min(i + 1, p - 1)
-            row, row2 = S[i], (S[i2] if i2 > i else spare)
+        if p % 2:
+            i = p - 1
+            row = S[i]
+            g0, g1, g2, g3 = gx[t] * x0[i], gx[t + 1] * x1[i], gx[t + 2] * x2[i], gx[t + 3] * x3[i]
+            g4, g5, g6, g7 = gx[t + 4] * x4[i], gx[t + 5] * x5[i], gx[t + 6] * x6[i], gx[t + 7] * x7[i]
+            for j in range(p):
+                v = row[j] + g0 * x0[j]
+                v = v + g1 * x1[j]
+                v = v + g2 * x2[j]
+                v = v + g3 * x3[j]
+                v = v + g4 * x4[j]
+                v = v + g5 * x5[j]
+                v = v + g6 * x6[j]
+                row[j] = v + g7 * x7[j]
+        for i in range(0, p - 1, 2):
+            i2 = i + 1
+            row, row2 = S[i], S[i2]
             g0, g1, g2, g3 = gx[t] * x0[i], gx[t + 1] * x1[i], gx[t + 2] * x2[i], gx[t + 3] * x3[i]
             g4, g5, g6, g7 = gx[t + 4] * x4[i], gx[t + 5] * x5[i], gx[t + 6] * x6[i], gx[t + 7] * x7[i]
             h0, h1, h2, h3 = gx[t] * x0[i2], gx[t + 1] * x1[i2], gx[t + 2] * x2[i2], gx[t + 3] * x3[i2]
@@ -1774,7 +1788,7 @@ def _add_block(X: np.ndarray, Xw: np.ndarray, yb: np.ndarray, nb: int, S: np.nda
         r += 1
 
 
-@njit(cache=CACHE, fastmath=FAST)
+@njit(cache=CACHE, fastmath=FAST, _nrt=False)
 def replay(ring: np.ndarray, p0: int, n: int, skip: int, st: np.ndarray, S: np.ndarray, X: np.ndarray,
            Xw: np.ndarray, yb: np.ndarray) -> None:
     """Re-accumulate n remembered samples from ring position p0 (wrapping); the first ``skip`` only advance.
