@@ -1788,7 +1788,7 @@ def _add_block(X: np.ndarray, Xw: np.ndarray, yb: np.ndarray, nb: int, S: np.nda
         r += 1
 
 
-@njit(cache=CACHE, fastmath=FAST, _nrt=False)
+@njit(cache=CACHE, fastmath=FAST)
 def replay(ring: np.ndarray, p0: int, n: int, skip: int, st: np.ndarray, S: np.ndarray, X: np.ndarray,
            Xw: np.ndarray, yb: np.ndarray) -> None:
     """Re-accumulate n remembered samples from ring position p0 (wrapping); the first ``skip`` only advance.
