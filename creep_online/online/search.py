@@ -449,6 +449,35 @@ def _rows_free_batch(ns: np.ndarray, u: np.ndarray, y: np.ndarray, vx: np.ndarra
             g[c, 0], g[c, 1] = shift[c, 0] * g1 + shift[c, 1] * g2, shift[c, 2] * g1 + shift[c, 3] * g2
 
 
+@njit(cache=True)
+def _evaluate_candidates(pts: np.ndarray, nb: int, model: tuple, data: tuple, work: tuple, cache: tuple,
+                         stride: int, lead: int, free: bool, out: np.ndarray) -> None:
+    """Block mode: ``ResonanceSearch._evaluate``'s fit (cost, b, c) of candidates pts[c] = (alpha, a1, a2),
+    c < nb, into out[c], bit for bit: each candidate's coefficients (``_prepare``; with ``free`` its free responses'
+    shift, ``_free_shift``), its node sums over the kept rows (``_node_sums``), their rows side by side
+    (``_rows_batch``; with ``free`` ``_rows_free_batch``, the shared rows' cache ``cache`` = (table, Gram
+    matrix)), their fits (``_projected``, ``_free_fit``). model = (lam, dx, h, v, dv): the basis and the
+    coefficients' scratch; data = (u, y, kept rows side by side); work: ``ResonanceSearch._batch_arrays``'."""
+    lam, dx, h, v, dv = model
+    u, y, HT = data
+    vz, vx, rc, x, acc, g, shift, ns, G = work
+    table, Gc = cache
+    for c in range(nb):
+        alpha, a1, a2 = pts[c, 0], pts[c, 1], pts[c, 2]
+        vx[c, 0], vx[c, 1] = _prepare(alpha, a1, a2, lam, dx, h, v, dv, rc[c], vz[c], x[c], acc[c])
+        _node_sums(HT, vz[c], ns[c])
+        if free:
+            shift[c, 0], shift[c, 1], shift[c, 2], shift[c, 3] = _free_shift(a1, a2, h)
+    if free:
+        _rows_free_batch(ns, u, y, vx, rc, x, g, shift, nb, stride, lead, G, table, Gc)
+        for c in range(nb):
+            out[c, 0], out[c, 1], out[c, 2] = _free_fit(G[c])
+    else:
+        _rows_batch(ns, u, y, vx, rc, x, nb, stride, lead, acc)
+        for c in range(nb):
+            out[c, 0], out[c, 1], out[c, 2] = _projected(acc[c])
+
+
 @njit(cache=True, inline="always")
 def _add_candidate_row(row: np.ndarray, G: np.ndarray) -> None:
     """``_add_row`` for the entries of G that depend on the candidate: those of its forced output (0) and
@@ -652,6 +681,7 @@ def grid_frequencies(f_lo: float, f_hi: float) -> np.ndarray:
         return done.value
 
 
+@njit(cache=True)
 def _projected(acc: np.ndarray) -> tuple[float, float, float]:
     """(cost per row, b, c) of min ||y - b s - c||^2 from the sums, centred (no cancellation).
 
@@ -659,7 +689,7 @@ def _projected(acc: np.ndarray) -> tuple[float, float, float]:
     offset: its cost is inf (otherwise rounding can make a degenerate
     candidate look perfect).
     """
-    n, s1, s2, y1, sy, y2 = acc.tolist()
+    n, s1, s2, y1, sy, y2 = acc[0], acc[1], acc[2], acc[3], acc[4], acc[5]
     if n < 3:
         return math.inf, 0.0, 0.0
     ss = s2 - s1 * s1 / n
@@ -1131,35 +1161,28 @@ class ResonanceSearch(Checkpointable):
 
     def _evaluate_batch(self, points: list, stride: int) -> list[tuple] | None:
         """Block mode: ``_evaluate``'s (cost, b, c) for up to BATCH candidates (alpha, a1, a2), bit for bit, in one
-        pass over the rows (``_rows_batch``, ``_rows_free_batch``), their node sums first over the kept rows side by
-        side (``_node_sums``). Each candidate's coefficients come from the kernels ``_evaluate`` calls
-        (``_prepare``, ``_free_shift``), its fit from the same (``_projected``, ``_free_fit``). None with ``free``
-        while no candidate has filled the shared rows' cache at this stride, or when it cannot hold them
-        (``FreeRowCache.claim``), and for a lone first candidate at a stride (its kept rows side by side would cost
-        as much as its evaluation): those go in units."""
+        kernel call (``_evaluate_candidates``). None with ``free`` while no candidate has filled the shared rows'
+        cache at this stride, or when it cannot hold them (``FreeRowCache.claim``), and for a lone first candidate
+        at a stride (its kept rows side by side would cost as much as its evaluation): those go in units."""
         self._bind()
-        basis, n, nb = self.basis, self.u.size, len(points)
+        n, nb = self.u.size, len(points)
         if nb == 1 and stride not in self._kept_t and not self._passes.get(stride, 0):
             return None
+        table, Gc = _NO_TABLE, _NO_TABLE
         if self.free is not None:
             slot, mode = self._rows_cache.claim(stride, n, len(self.free))
             if mode != 2:
                 return None
+            table, Gc = self._rows_cache.tables[slot], self._rows_cache.grams[slot]
         self._passes[stride] = self._passes.get(stride, 0) + nb
         HT = self._kept_rows(stride)
-        vz, vx, rc, x, acc, g, shift, ns, G = self._batch_arrays(HT.shape[1])
-        for c, (alpha, a1, a2) in enumerate(points):
-            vx[c] = _prepare(alpha, a1, a2, basis.lam, basis.dx, basis.h, self._v, self._dv, rc[c], vz[c], x[c],
-                             acc[c])
-            _node_sums(HT, vz[c], ns[c])
-            if self.free is not None:
-                shift[c] = _free_shift(a1, a2, basis.h)
-        if self.free is None:
-            _rows_batch(ns, self.u, self.y, vx, rc, x, nb, stride, self.lead, acc)
-            return [_projected(acc[c]) for c in range(nb)]
-        _rows_free_batch(ns, self.u, self.y, vx, rc, x, g, shift, nb, stride, self.lead, G,
-                         self._rows_cache.tables[slot], self._rows_cache.grams[slot])
-        return [_free_fit(G[c]) for c in range(nb)]
+        work = self._batch_arrays(HT.shape[1])
+        pts, out = work[0], work[-1]
+        pts[:nb] = points
+        basis = self.basis
+        _evaluate_candidates(pts, nb, (basis.lam, basis.dx, basis.h, self._v, self._dv), (self.u, self.y, HT),
+                             work[1:-1], (table, Gc), stride, self.lead, self.free is not None, out)
+        return [(float(out[c, 0]), float(out[c, 1]), float(out[c, 2])) for c in range(nb)]
 
     def _kept_rows(self, stride: int) -> np.ndarray:
         """The node history's kept rows at this stride side by side (``_kept_history``), made once per search."""
@@ -1171,14 +1194,14 @@ class ResonanceSearch(Checkpointable):
         return HT
 
     def _batch_arrays(self, kept: int) -> tuple:
-        """``_evaluate_batch``'s work arrays for BATCH candidates over ``kept`` kept rows (made once per search and
-        size)."""
+        """``_evaluate_batch``'s arrays for BATCH candidates over ``kept`` kept rows (made once per search and size):
+        the points, ``_evaluate_candidates``'s work arrays, the fits."""
         arrays = self._batch.get(kept)
         if arrays is None:
             q, p = self.basis.size, 5 + (len(self.free) if self.free is not None else 0)
-            arrays = (np.empty((BATCH, q)), np.empty((BATCH, 2)), np.empty((BATCH, 6)), np.empty((BATCH, 2)),
-                      np.empty((BATCH, 6)), np.empty((BATCH, 2)), np.empty((BATCH, 4)), np.empty((BATCH, kept)),
-                      np.empty((BATCH, p, p)))
+            arrays = (np.empty((BATCH, 3)), np.empty((BATCH, q)), np.empty((BATCH, 2)), np.empty((BATCH, 6)),
+                      np.empty((BATCH, 2)), np.empty((BATCH, 6)), np.empty((BATCH, 2)), np.empty((BATCH, 4)),
+                      np.empty((BATCH, kept)), np.empty((BATCH, p, p)), np.empty((BATCH, 3)))
             self._batch[kept] = arrays
         return arrays
 
