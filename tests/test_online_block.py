@@ -288,3 +288,40 @@ def test_block_mode_search_is_the_search_in_units(seed):
     (c_units, cand_units, r_units), (c_eager, cand_eager, r_eager) = out
     assert np.array_equal(c_units, c_eager, equal_nan=True) and np.isfinite(c_units).any()
     assert cand_units == cand_eager and r_units == r_eager
+
+
+def _start_record(seed: int) -> tuple[float, np.ndarray, np.ndarray]:
+    """A random plant under a random start: at rest or at a held non-zero level for 0-1.5 s (the start-up's idle
+    buffer and its reading of the start), then a random staircase with input glitches and missing outputs, 2.5 s at
+    10 kHz."""
+    rng = np.random.default_rng(seed)
+    h, n = 1e-4, 25_000
+    hold = int(rng.integers(0, 15_000))
+    first = float(rng.choice([0.0, rng.uniform(-1.0, 1.0)]))
+    steps = np.repeat(rng.uniform(-1.0, 1.0, n // 300 + 1), 300)[:n - hold]
+    u = np.concatenate((np.full(hold, first), steps))
+    model = CreepModel.from_resonance(float(rng.uniform(0.03, 0.5)), float(10 ** rng.uniform(1.7, 3.0)),
+                                      float(10 ** rng.uniform(-1.7, -0.3)), 1.0)
+    y = simulate(model, np.arange(n) * h, u)
+    y = y + 1e-3 * np.ptp(y) * rng.standard_normal(n)
+    y[rng.integers(0, n, 25)] = np.nan
+    for k in rng.integers(hold + 100, n - 5, 3):
+        u[k] += 4.0 * np.ptp(u)
+    return h, u, y
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_block_mode_start_up_is_the_start_up_sample_by_sample(seed, monkeypatch):
+    """The start-up in block mode (the samples between its steps buffered at once, ``InputStage.buffer_quiet``; the
+    searches' candidates in one pass) against every sample through ``buffer_sample`` and ``advance`` and the searches
+    in units, on random starts (at rest or held at a level for up to 1.5 s, then moving), random block lengths:
+    every estimate after every block identical (``==``)."""
+    h, u, y = _start_record(seed)
+    rng = np.random.default_rng(seed + 50)
+    pieces = np.unique(np.concatenate(([0, u.size], rng.integers(0, u.size, 30))))
+    fast, est_fast = _trajectory(lambda: OnlineEstimator(h), u, y, pieces, {})
+    with monkeypatch.context() as m:
+        m.setattr(INP.InputStage, "buffer_quiet", lambda self, u, y: 0)
+        m.setattr(S.ResonanceSearch, "eager", _NEVER_EAGER, raising=False)
+        slow, est_slow = _trajectory(lambda: OnlineEstimator(h), u, y, pieces, {})
+    assert _same(fast, slow) and est_fast.estimate.internal_faults == 0
