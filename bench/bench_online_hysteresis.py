@@ -22,7 +22,9 @@ record itself determines; the online weights against a batch fit with the online
 (``same_thresholds``: the fit's threshold rule patched to them, the weights are comparable only then) within 5 % of
 its largest weight (``weights_ok``), and against the default batch fit's 24 (the online 8 sit on every third of
 them when the thresholds come from the same range, so each online weight compares with the batch weights summed
-in threes: ``weights_ok_grouped``). Pass fractions per family and overall.
+in threes: ``weights_ok_grouped``). Pass fractions per family and overall. Where the weights miss: the weight
+furthest off (``weight_err_at``), and b, the slope just after a reversal b (1 + w_1) and after a full-stroke one
+b (1 + sum w), each over the same-thresholds batch fit's (a split the output does not pin trades along them).
 Also the loops as the output sees them (``_loop_error``: b (u + w . p(u)) on the record's input) of the online
 estimate against the batch fit's and the truth's, and the batch fit's against the truth's, over the loop width.
 
@@ -187,6 +189,12 @@ def run_plant(family: str, seed: int, n: int) -> dict:
     row.update(weight_err_over_max=float(np.max(np.abs(wo - ws)) / scale), w_batch_same=ws.tolist(),
                batch_same_initial=same.effect_params["hysteresis"]["initial"])
     row["weights_ok"] = row["weight_err_over_max"] <= WEIGHT_TOLERANCE
+    row["weight_err_at"] = int(np.argmax(np.abs(wo - ws)))
+    # what the output pins whatever the split: the slope just after a reversal, b (1 + w_1) (the smallest
+    # threshold's play is u itself but for a lag of 2 r_1 at each reversal), and after a full-stroke one, b (1 + sum w)
+    row["b_over_same"] = e.b / same.model.b
+    row["slope_first_over_same"] = e.b * (1.0 + wo[0]) / (same.model.b * (1.0 + ws[0]))
+    row["slope_full_over_same"] = e.b * (1.0 + wo.sum()) / (same.model.b * (1.0 + ws.sum()))
     row["loop_err_vs_batch"] = _loop_error(rec.u, e.b, e.hysteresis, fit.model.b, fit.effect_params["hysteresis"])
     row["loop_err_vs_true"] = _loop_error(rec.u, e.b, e.hysteresis, truth.b, rec.params)
     row["batch_loop_err_vs_true"] = _loop_error(rec.u, fit.model.b, fit.effect_params["hysteresis"], truth.b,
@@ -226,7 +234,8 @@ def _plants_doc(args, rows: list[dict]) -> dict:
                    **{key: dist([r[key] for r in rows if r["family"] == f and r.get(key) is not None])
                       for key in ("loop_err_vs_batch", "loop_err_vs_true", "batch_loop_err_vs_true")},
                    **{key: dist([r[key] for r in rows if r["family"] == f and r.get(key) is not None])
-                      for key in ("alpha_rel_err", "b_rel_err", "batch_alpha_rel_err", "batch_b_rel_err")},
+                      for key in ("alpha_rel_err", "b_rel_err", "batch_alpha_rel_err", "batch_b_rel_err",
+                                  "b_over_same", "slope_first_over_same", "slope_full_over_same")},
                    "weight_err_over_max": dist([r["weight_err_over_max"] for r in rows
                                                 if r["family"] == f and r["weight_err_over_max"] is not None])}
                for f in fams}

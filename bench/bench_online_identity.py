@@ -14,12 +14,11 @@ compared, the runs identical, the largest relative difference and the first chun
 ``identical`` is true only when every run of every family is.
 
 Both sides run alike: each in a worker process of its own (the same worker, the same BLAS threads), compiling
-its kernels into a numba cache of its own that starts empty. The online kernels are compiled with
-fastmath (reassociation, contraction), so their machine code, and the last bits of an estimate, depend
-on which of the kernels they call were already in the cache when they were compiled: the same source
-run from a tree whose cache grew over earlier runs (another tracker first, say) differs from a fresh
-compile by ~1e-7, and where a decision hangs on those bits a trajectory parts for good. Compared from
-empty caches, the same code gives the same bits (``main`` against ``main``: identical).
+its kernels into a numba cache of its own that starts empty. A revision whose online kernels carry fast-math
+flags (reassociation, contraction) compiles machine code, and so the last bits of an estimate, that depend on
+which of the kernels they call were already in the cache: run from a tree whose cache grew over earlier runs
+(another tracker first, say) it differs from a fresh compile by ~1e-7, and where a decision hangs on those bits
+a trajectory parts for good. From empty caches such a baseline compares alike too.
 """
 from __future__ import annotations
 

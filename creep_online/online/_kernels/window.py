@@ -711,7 +711,12 @@ def set_monitors(sc: np.ndarray, h: float, gate: float, burst: int, stuck: int) 
     sc[SC_ACC] = 1.0
 
 
-FAST = {"contract", "reassoc", "arcp"}   # no "nnan": the kernels test for NaN
+#: The online kernels' fast-math flags: none. With reassociation or contraction a kernel's machine code depends on
+#: whether the kernels it calls were compiled in the same process (and inlined) or loaded from numba's cache, and on
+#: whether the CPU fuses multiply-adds, so the same record would give estimates that differ by ~1e-7 (and decisions
+#: that hang on those bits) with the cache's history and the machine. IEEE arithmetic makes every estimate a function
+#: of the data alone (``tests/test_online_reproducible.py``).
+FAST: set[str] = set()
 
 
 @njit(cache=CACHE, fastmath=FAST)
@@ -1169,13 +1174,13 @@ def _defer(y: float, phi: np.ndarray, S: np.ndarray, sy: np.ndarray, sc: np.ndar
     return k
 
 
-@njit(cache=CACHE, fastmath={"contract"})
+@njit(cache=CACHE, fastmath=FAST)
 def _flush(S: np.ndarray, X: np.ndarray, gx: np.ndarray, k: int) -> None:
     """S += sum over the k rows t of (gx[t] X[t])^T X[t], element by element in the rows' order as ``_accumulate``
-    adds them (one multiply-add each: ``S[i, j] += (g phi[i]) phi[j]``), so S is bit for bit the same. Eight rows
+    adds them (``S[i, j] += (g phi[i]) phi[j]``, rounded alike), so S is bit for bit the same. Eight rows
     per pass over S, two rows of S at a time (each element loaded and stored once per eight updates, each row of
-    X loaded once per two; the last alone when P is odd). Contraction only: reassociation would let the compiler
-    reorder the sum. Nothing allocated: ``_block`` runs it without reference counts."""
+    X loaded once per two; the last alone when P is odd). Nothing allocated: ``_block`` runs it without reference
+    counts."""
     p = S.shape[0]
     t = 0
     while t + 8 <= k:

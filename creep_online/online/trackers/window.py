@@ -235,9 +235,11 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         the real 150 V record (3 s at rest on the ascending branch, then a 1 Hz sine) the rest's samples kept the
         window at 2.7x the noise floor; without the samples before the sweep, 1.5x. Streams that move from their
         first samples keep them, and so does a window that fits them (a plant resting centred): there they tell
-        the weights apart best (the first branch of a periodic input)."""
+        the weights apart best (the first branch of a periodic input). A start in equilibrium's columns stay (the
+        window from the sweep on holds the creep they set off): a re-fit that fits frees them
+        (``hysteresis.free_start``)."""
         o = self.lay["hyst"]
-        if self.n_hyst and self.settings.research.clears(rms, floor):
+        if self.n_hyst and not self.settings.research.misfits(rms, floor):
             HK.free_start(self.st, o, self.n_hyst)
         if not self.n_hyst or self.st[o + HK.REST] * self.h < HYSTERESIS_REST_S:
             return False
@@ -249,7 +251,6 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         if self._loop_swept_at <= self.loop_from or not self.settings.research.misfits(rms, floor):
             return False
         self.loop_from = self._loop_swept_at
-        HK.drop_start(self.st, o)
         return True
 
     @property
