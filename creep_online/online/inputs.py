@@ -144,6 +144,27 @@ class InputStage:
             est._startup.buffer(self.accept(v), w)
         est._deferred = bool(est._held)
 
+    def buffer_until_live(self, u: np.ndarray, y: np.ndarray, done: list[int]) -> int:
+        """Block mode before the tracker is live: u[done[0]:], y[...] into the start-up (its steps run to completion
+        after each sample, ``Startup.advance``) until the tracker goes live or the block ends; returns where it
+        stopped. ``done[0]`` (and ``est.samples``) count the samples taken, each before it goes in (a fault inside
+        counts it taken). The samples between the start-up's steps go in at once (``buffer_quiet``)."""
+        est = self.est
+        i, n = done[0], u.size
+        while i < n and est._live is None:
+            run = self.buffer_quiet(u[i:], y[i:])
+            if run:
+                est.samples += run
+                i += run
+                done[0] = i
+                continue
+            est.samples += 1
+            done[0] = i + 1
+            self.buffer_sample(float(u[i]), float(y[i]))
+            i += 1
+            est._startup.advance(1 << 30)
+        return i
+
     def buffer_quiet(self, u: np.ndarray, y: np.ndarray) -> int:
         """Block mode: the leading samples of u, y that the gate passes, into the start-up buffer at once, as many as
         its quiet run allows (``Startup.quiet_samples``: no start-up step falls between them); returns how many
