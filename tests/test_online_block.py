@@ -18,11 +18,12 @@ from creep_online.effects.hysteresis import hysteresis_input, threshold_fraction
 from creep_online.model import ONLINE_ALPHA_BOUNDS, CreepModel
 from creep_online.online import OnlineEstimator
 from creep_online.online import inputs as INP
+from creep_online.online import search as S
 from creep_online.online._kernels import recursive as R
 from creep_online.online._kernels import window as W
 from creep_online.online.soe import SOE_TOP, SoeBasis
 from creep_online.online.trackers import recursive as TR
-from creep_online.online.trackers.window import WindowTracker
+from creep_online.online.trackers.window import FREE_RATES, WindowTracker
 from creep_online.simulate import simulate
 from hil_sim import scenarios
 
@@ -60,6 +61,12 @@ def _reference(monkeypatch) -> None:
     monkeypatch.setattr(W, "block", _per_sample(W.sample))
     monkeypatch.setattr(TR, "block", _per_sample(R.sample))
     monkeypatch.setattr(INP.InputStage, "block", _gate_one_by_one)
+    monkeypatch.setattr(INP.InputStage, "buffer_quiet", lambda self, u, y: 0)     # every sample through the start-up
+    monkeypatch.setattr(S.ResonanceSearch, "eager", _NEVER_EAGER, raising=False)  # searches in units
+
+
+#: ``ResonanceSearch.eager`` pinned to False: every search in units of ~UNIT_WORK, its grid one candidate at a time.
+_NEVER_EAGER = property(lambda self: False, lambda self, value: None)
 
 
 # ---------------------------------------------------------------------- kernels
@@ -138,6 +145,15 @@ def _payload_record() -> tuple[float, np.ndarray, np.ndarray]:
     return scen.h, u, y
 
 
+def _operation_record() -> tuple[float, np.ndarray, np.ndarray]:
+    """A stream taken in operation (its input held at a level, then moving), 3 s at 10 kHz, with missing outputs."""
+    scen = scenarios.make("mid_operation", 1)
+    end = min(scen.u.size, int(3.0 / scen.h))
+    u, y = scen.u[:end].copy(), scen.y[:end].copy()
+    y[np.random.default_rng(6).integers(100, end, 30)] = np.nan
+    return scen.h, u, y
+
+
 def _hammerstein_record() -> tuple[float, np.ndarray, np.ndarray]:
     """A creep plant behind play operators (hysteresis), a 1 Hz triangle, 4 s at 2 kHz."""
     h = 5e-4
@@ -167,13 +183,18 @@ def _same(a: list, b: list) -> bool:
     return len(a) == len(b) and all(all(x == z or (x != x and z != z) for x, z in zip(ra, rb)) for ra, rb in zip(a, b))
 
 
+_RECORDS = {"payload": _payload_record, "operation": _operation_record, "hammerstein": _hammerstein_record}
+
+
 @pytest.mark.parametrize("record, kwargs", [("payload", {}), ("payload", {"refit": "recursive"}),
+                                            ("operation", {}), ("operation", {"refit": "recursive"}),
                                             ("hammerstein", {"effects": ("hysteresis",)})])
 def test_update_block_is_the_per_sample_kernels_and_gate(record, kwargs, monkeypatch):
-    """Whole estimators, block mode against the same feeding through the per-sample kernels and the input gate one
-    sample at a time: every estimate after every piece and the final statistics identical (``==``), on a change
-    with missing outputs, gaps and input glitches, both trackers, and with the hysteresis columns."""
-    h, u, y = _payload_record() if record == "payload" else _hammerstein_record()
+    """Whole estimators, block mode against the same feeding through the per-sample kernels, the input gate and the
+    start-up one sample at a time, and the searches in units: every estimate after every piece and the final
+    statistics identical (``==``), on a change with missing outputs, gaps and input glitches, a stream taken in
+    operation, both trackers, and with the hysteresis columns."""
+    h, u, y = _RECORDS[record]()
     rng = np.random.default_rng(11)
     pieces = np.unique(np.concatenate(([0, u.size], rng.integers(0, u.size, 60),
                                        np.arange(0, u.size, int(0.1 / h)))))
@@ -188,6 +209,7 @@ def test_update_block_is_the_per_sample_kernels_and_gate(record, kwargs, monkeyp
         slow, est_slow = _trajectory(make, u, y, pieces, gaps)
     assert _same(fast, slow)
     assert fast[-1][0] != "none" and est_fast.samples == est_slow.samples
+    assert est_fast.estimate.internal_faults == 0     # (a kernel that failed to compile is a fault, recovered from)
     assert np.array_equal(est_fast._tracker.S, est_slow._tracker.S)
     if record == "payload":
         assert est_fast.input_outliers > 0   # (the glitches went through the gate's one-by-one path)
@@ -227,3 +249,79 @@ def test_input_gate_runs_are_the_rule_sample_by_sample(seed, monkeypatch):
     assert fast[0] == slow[0] and fast[1] == slow[1]
     e_fast, e_slow = fast[2].estimate, slow[2].estimate
     assert _same([(e_fast.alpha, e_fast.b, e_fast.quality)], [(e_slow.alpha, e_slow.b, e_slow.quality)])
+
+
+# ---------------------------------------------------------------------- searches
+def _search_buffer(seed: int) -> tuple[SoeBasis, np.ndarray, np.ndarray, tuple | None, int]:
+    """A random plant's response on a random stretch of a random staircase (from rest, or taken in operation: the
+    input's past unknown), 300-6000 samples at 10 kHz, some outputs missing: (basis, u, y, free rates, lead)."""
+    rng = np.random.default_rng(seed)
+    h = 1e-4
+    n = int(rng.integers(300, 6000))
+    past = int(rng.integers(0, 2)) * int(rng.integers(500, 4000))
+    levels = rng.uniform(-1.0, 1.0, (n + past) // 200 + 2)
+    u = np.repeat(levels, 200)[:n + past]
+    alpha = float(rng.uniform(0.02, 0.6))
+    model = CreepModel.from_resonance(alpha, float(10 ** rng.uniform(1.5, 3.2)), float(10 ** rng.uniform(-2, 0)), 1.0)
+    y = simulate(model, np.arange(n + past) * h, u)[past:]
+    y = y + 1e-3 * np.ptp(y) * rng.standard_normal(n)
+    y[rng.integers(0, n, n // 100)] = np.nan
+    u = u[past:] - (u[past] if past else 0.0)
+    free = FREE_RATES if past else None
+    return SoeBasis.build(h), u, y, free, int(rng.integers(0, n // 8))
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_block_mode_search_is_the_search_in_units(seed):
+    """``ResonanceSearch`` in block mode (``eager``: each candidate's rows in one kernel call, the grid's candidates
+    side by side, ``_rows_batch``/``_rows_free_batch``) against the same search in units: every grid cost, the refined
+    candidates and the result identical (``==``), from rest and in operation, on random plants and buffers."""
+    basis, u, y, free, lead = _search_buffer(seed)
+    out = []
+    for eager in (False, True):
+        search = S.ResonanceSearch(basis, u, y, lead=lead, free=free, alphas=(0.3,))
+        search.eager = eager
+        while not search.step():
+            pass
+        size = len(search.alphas) * S.GRID_FREQS * len(S.GRID_ZETA)
+        out.append((search._scratch.costs[:size].copy(), search.candidates, search.result))
+    (c_units, cand_units, r_units), (c_eager, cand_eager, r_eager) = out
+    assert np.array_equal(c_units, c_eager, equal_nan=True) and np.isfinite(c_units).any()
+    assert cand_units == cand_eager and r_units == r_eager
+
+
+def _start_record(seed: int) -> tuple[float, np.ndarray, np.ndarray]:
+    """A random plant under a random start: at rest or at a held non-zero level for 0-1.5 s (the start-up's idle
+    buffer and its reading of the start), then a random staircase with input glitches and missing outputs, 2.5 s at
+    10 kHz."""
+    rng = np.random.default_rng(seed)
+    h, n = 1e-4, 25_000
+    hold = int(rng.integers(0, 15_000))
+    first = float(rng.choice([0.0, rng.uniform(-1.0, 1.0)]))
+    steps = np.repeat(rng.uniform(-1.0, 1.0, n // 300 + 1), 300)[:n - hold]
+    u = np.concatenate((np.full(hold, first), steps))
+    model = CreepModel.from_resonance(float(rng.uniform(0.03, 0.5)), float(10 ** rng.uniform(1.7, 3.0)),
+                                      float(10 ** rng.uniform(-1.7, -0.3)), 1.0)
+    y = simulate(model, np.arange(n) * h, u)
+    y = y + 1e-3 * np.ptp(y) * rng.standard_normal(n)
+    y[rng.integers(0, n, 25)] = np.nan
+    for k in rng.integers(hold + 100, n - 5, 3):
+        u[k] += 4.0 * np.ptp(u)
+    return h, u, y
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_block_mode_start_up_is_the_start_up_sample_by_sample(seed, monkeypatch):
+    """The start-up in block mode (the samples between its steps buffered at once, ``InputStage.buffer_quiet``; the
+    searches' candidates in one pass) against every sample through ``buffer_sample`` and ``advance`` and the searches
+    in units, on random starts (at rest or held at a level for up to 1.5 s, then moving), random block lengths:
+    every estimate after every block identical (``==``)."""
+    h, u, y = _start_record(seed)
+    rng = np.random.default_rng(seed + 50)
+    pieces = np.unique(np.concatenate(([0, u.size], rng.integers(0, u.size, 30))))
+    fast, est_fast = _trajectory(lambda: OnlineEstimator(h), u, y, pieces, {})
+    with monkeypatch.context() as m:
+        m.setattr(INP.InputStage, "buffer_quiet", lambda self, u, y: 0)
+        m.setattr(S.ResonanceSearch, "eager", _NEVER_EAGER, raising=False)
+        slow, est_slow = _trajectory(lambda: OnlineEstimator(h), u, y, pieces, {})
+    assert _same(fast, slow) and est_fast.estimate.internal_faults == 0

@@ -424,14 +424,8 @@ class OnlineEstimator(StoredParams, Checkpointable):
         """update_block()'s work from ``done[0]`` on. ``done[0]``: samples taken (counted in ``samples``); in the
         tracker's loop it is advanced by the tracker's own sample count, which its kernel moves per sample, so a
         fault inside ``feed_block`` or ``finish`` leaves it exact."""
-        i = done[0]
         n = u.size
-        while i < n and self._live is None:
-            self.samples += 1
-            done[0] = i + 1
-            self._inputs.buffer_sample(float(u[i]), float(y[i]))
-            i += 1
-            self._startup.advance(1 << 30)
+        i = self._inputs.buffer_until_live(u, y, done)
         if i == n:
             return
         du, yy, exact = self._inputs.block(u[i:], y[i:])

@@ -144,6 +144,44 @@ class InputStage:
             est._startup.buffer(self.accept(v), w)
         est._deferred = bool(est._held)
 
+    def buffer_until_live(self, u: np.ndarray, y: np.ndarray, done: list[int]) -> int:
+        """Block mode before the tracker is live: u[done[0]:], y[...] into the start-up (its steps run to completion
+        after each sample, ``Startup.advance``) until the tracker goes live or the block ends; returns where it
+        stopped. ``done[0]`` (and ``est.samples``) count the samples taken, each before it goes in (a fault inside
+        counts it taken). The samples between the start-up's steps go in at once (``buffer_quiet``)."""
+        est = self.est
+        i, n = done[0], u.size
+        while i < n and est._live is None:
+            run = self.buffer_quiet(u[i:], y[i:])
+            if run:
+                est.samples += run
+                i += run
+                done[0] = i
+                continue
+            est.samples += 1
+            done[0] = i + 1
+            self.buffer_sample(float(u[i]), float(y[i]))
+            i += 1
+            est._startup.advance(1 << 30)
+        return i
+
+    def buffer_quiet(self, u: np.ndarray, y: np.ndarray) -> int:
+        """Block mode: the leading samples of u, y that the gate passes, into the start-up buffer at once, as many as
+        its quiet run allows (``Startup.quiet_samples``: no start-up step falls between them); returns how many
+        (0: the next goes through ``buffer_sample``). The same values as ``buffer_sample`` one by one."""
+        est = self.est
+        if est._held or est._backlog or est._deferred or est._u_ref is None:
+            return 0
+        quiet = min(est._startup.quiet_samples(), u.size, PASS_SCAN)
+        if quiet and est._startup.first_change is None:     # (the run ends at the input's first move)
+            moves = np.flatnonzero(u[:quiet] != est._u_last)
+            quiet = int(moves[0]) if moves.size else quiet
+        run = self.passing_run(u[:quiet]) if quiet else 0
+        if run:
+            self.accept_run(u[:run])
+            est._startup.buffer_run(u[:run] - est._u_ref, y[:run])
+        return run
+
     def update_deferred(self, tr: "Tracker", u: float, y: float) -> None:
         """update()'s slow path: an input outside the range seen so far, or samples waiting. The sample goes
         through the input gate; of the decided ones at most ``drain_per_update`` are fed now, in order."""

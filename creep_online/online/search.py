@@ -337,6 +337,147 @@ def _rows_free_sparse(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.nda
     g[1] = g2
 
 
+#: Candidates a block-mode grid evaluates side by side in one pass over the rows (``_rows_batch``,
+#: ``_rows_free_batch``): their resonance states' recursions are chains of dependent multiply-adds, one row's
+#: latency each; side by side the processor overlaps them.
+BATCH = 4
+#: Kept rows per tile of ``_node_sums`` (its partial sums stay in the first-level cache).
+NODE_TILE = 256
+
+
+@njit(cache=True)
+def _kept_history(hist: np.ndarray, stride: int, HT: np.ndarray) -> None:
+    """HT[:, j] = the node history's kept row of block j of ``stride`` rows (``_kept``), the rows side by side
+    (``_node_sums``); a block whose kept row lies past the end gets zeros."""
+    HT[:, :] = 0.0
+    for k in range(hist.shape[0]):
+        if _kept(k, stride):
+            j = k // stride
+            for i in range(hist.shape[1]):
+                HT[i, j] = hist[k, i]
+
+
+@njit(cache=True)
+def _node_sums(HT: np.ndarray, vz: np.ndarray, out: np.ndarray) -> None:
+    """out[j] = the node sum of kept row j (HT's column j, ``_kept_history``), as ``_forced_output`` adds it: four
+    interleaved partial sums over the nodes, the rest into the first, then (s0 + s1) + (s2 + s3). The same
+    operations on each row in the same order (bit for bit), rows side by side: NODE_TILE rows of each partial sum
+    advance together, an independent lane per row (~5 ns a row at Q = 42, where ``_forced_output`` waits on one
+    row's chains, ~20 ns). (The partial sums in four arrays of their own: as rows of one 2-D array they were not
+    vectorized, 11 ns.)"""
+    q, nk = HT.shape
+    s0, s1, s2, s3 = np.empty(NODE_TILE), np.empty(NODE_TILE), np.empty(NODE_TILE), np.empty(NODE_TILE)
+    for j0 in range(0, nk, NODE_TILE):
+        w = min(NODE_TILE, nk - j0)
+        s0[:] = 0.0
+        s1[:] = 0.0
+        s2[:] = 0.0
+        s3[:] = 0.0
+        i = 0
+        while i + 4 <= q:
+            v0, v1, v2, v3 = vz[i], vz[i + 1], vz[i + 2], vz[i + 3]
+            h0, h1, h2, h3 = HT[i, j0:j0 + w], HT[i + 1, j0:j0 + w], HT[i + 2, j0:j0 + w], HT[i + 3, j0:j0 + w]
+            for j in range(w):
+                s0[j] += h0[j] * v0
+                s1[j] += h1[j] * v1
+                s2[j] += h2[j] * v2
+                s3[j] += h3[j] * v3
+            i += 4
+        while i < q:
+            v0 = vz[i]
+            h0 = HT[i, j0:j0 + w]
+            for j in range(w):
+                s0[j] += h0[j] * v0
+            i += 1
+        for j in range(w):
+            out[j0 + j] = (s0[j] + s1[j]) + (s2[j] + s3[j])
+
+
+@njit(cache=True)
+def _rows_batch(ns: np.ndarray, u: np.ndarray, y: np.ndarray, vx: np.ndarray, rc: np.ndarray, x: np.ndarray,
+                nb: int, stride: int, lead: int, acc: np.ndarray) -> None:
+    """``_rows`` over every row for ``nb`` candidates at once (row c of vx, rc, x, acc: candidate c's (vx0, vx1),
+    ``rc``, ``x``, ``acc``; ns[c, j]: its node sum at kept row j, ``_node_sums``): each candidate's operations and
+    their order are ``_rows``'s, so its sums are the same bit for bit."""
+    for k in range(u.shape[0]):
+        uk = u[k]
+        if k >= lead and _kept(k, stride) and y[k] == y[k]:
+            yk = y[k]
+            j = k // stride
+            for c in range(nb):
+                s = vx[c, 0] * x[c, 0] + vx[c, 1] * x[c, 1] + ns[c, j]
+                a = acc[c]
+                a[0] += 1.0
+                a[1] += s
+                a[2] += s * s
+                a[3] += yk
+                a[4] += s * yk
+                a[5] += yk * yk
+        for c in range(nb):
+            x[c, 0], x[c, 1] = _advance(rc[c], x[c, 0], x[c, 1], uk)
+
+
+@njit(cache=True)
+def _rows_free_batch(ns: np.ndarray, u: np.ndarray, y: np.ndarray, vx: np.ndarray, rc: np.ndarray, x: np.ndarray,
+                     g: np.ndarray, shift: np.ndarray, nb: int, stride: int, lead: int, G: np.ndarray,
+                     table: np.ndarray, Gc: np.ndarray) -> None:
+    """``_rows_free_sparse`` in its mode 2 (the decays read from ``table``, G starting from the shared entries of
+    ``Gc``: ``_constant_entries``) over every row for ``nb`` candidates at once (row c of vx, rc, x, g, G, ns as in
+    ``_rows_batch``; row c of ``shift``: its ``_free_shift``); each candidate's operations and their order are
+    ``_rows_free_sparse``'s, so its Gram matrix is the same bit for bit."""
+    p = G.shape[1]
+    m = p - 5
+    row = np.empty(p)
+    for c in range(nb):
+        _constant_entries(Gc, G[c])
+        g[c, 0], g[c, 1] = 1.0, 0.0
+    for k in range(u.shape[0]):
+        uk = u[k]
+        if k >= lead and _kept(k, stride) and y[k] == y[k]:
+            row[1] = 1.0
+            row[p - 1] = y[k]
+            for i in range(m):
+                row[4 + i] = table[k // stride, i]
+            j = k // stride
+            for c in range(nb):
+                row[0] = vx[c, 0] * x[c, 0] + vx[c, 1] * x[c, 1] + ns[c, j]
+                row[2], row[3] = g[c, 0], g[c, 1]
+                _add_candidate_row(row, G[c])
+        for c in range(nb):
+            x[c, 0], x[c, 1] = _advance(rc[c], x[c, 0], x[c, 1], uk)
+            g1, g2 = g[c, 0], g[c, 1]
+            g[c, 0], g[c, 1] = shift[c, 0] * g1 + shift[c, 1] * g2, shift[c, 2] * g1 + shift[c, 3] * g2
+
+
+@njit(cache=True)
+def _evaluate_candidates(pts: np.ndarray, nb: int, model: tuple, data: tuple, work: tuple, cache: tuple,
+                         stride: int, lead: int, free: bool, out: np.ndarray) -> None:
+    """Block mode: ``ResonanceSearch._evaluate``'s fit (cost, b, c) of candidates pts[c] = (alpha, a1, a2),
+    c < nb, into out[c], bit for bit: each candidate's coefficients (``_prepare``; with ``free`` its free responses'
+    shift, ``_free_shift``), its node sums over the kept rows (``_node_sums``), their rows side by side
+    (``_rows_batch``; with ``free`` ``_rows_free_batch``, the shared rows' cache ``cache`` = (table, Gram
+    matrix)), their fits (``_projected``, ``_free_fit``). model = (lam, dx, h, v, dv): the basis and the
+    coefficients' scratch; data = (u, y, kept rows side by side); work: ``ResonanceSearch._batch_arrays``'."""
+    lam, dx, h, v, dv = model
+    u, y, HT = data
+    vz, vx, rc, x, acc, g, shift, ns, G = work
+    table, Gc = cache
+    for c in range(nb):
+        alpha, a1, a2 = pts[c, 0], pts[c, 1], pts[c, 2]
+        vx[c, 0], vx[c, 1] = _prepare(alpha, a1, a2, lam, dx, h, v, dv, rc[c], vz[c], x[c], acc[c])
+        _node_sums(HT, vz[c], ns[c])
+        if free:
+            shift[c, 0], shift[c, 1], shift[c, 2], shift[c, 3] = _free_shift(a1, a2, h)
+    if free:
+        _rows_free_batch(ns, u, y, vx, rc, x, g, shift, nb, stride, lead, G, table, Gc)
+        for c in range(nb):
+            out[c, 0], out[c, 1], out[c, 2] = _free_fit(G[c])
+    else:
+        _rows_batch(ns, u, y, vx, rc, x, nb, stride, lead, acc)
+        for c in range(nb):
+            out[c, 0], out[c, 1], out[c, 2] = _projected(acc[c])
+
+
 @njit(cache=True, inline="always")
 def _add_candidate_row(row: np.ndarray, G: np.ndarray) -> None:
     """``_add_row`` for the entries of G that depend on the candidate: those of its forced output (0) and
@@ -540,6 +681,7 @@ def grid_frequencies(f_lo: float, f_hi: float) -> np.ndarray:
         return done.value
 
 
+@njit(cache=True)
 def _projected(acc: np.ndarray) -> tuple[float, float, float]:
     """(cost per row, b, c) of min ||y - b s - c||^2 from the sums, centred (no cancellation).
 
@@ -547,7 +689,7 @@ def _projected(acc: np.ndarray) -> tuple[float, float, float]:
     offset: its cost is inf (otherwise rounding can make a degenerate
     candidate look perfect).
     """
-    n, s1, s2, y1, sy, y2 = acc.tolist()
+    n, s1, s2, y1, sy, y2 = acc[0], acc[1], acc[2], acc[3], acc[4], acc[5]
     if n < 3:
         return math.inf, 0.0, 0.0
     ss = s2 - s1 * s1 / n
@@ -673,6 +815,15 @@ def _judge_reset(f: np.ndarray, e: np.ndarray, G: np.ndarray) -> None:
     G[:, :] = 0.0
 
 
+def _run_to_end(gen: Generator):
+    """A generator's return value, its units run at once."""
+    try:
+        while True:
+            next(gen)
+    except StopIteration as done:
+        return done.value
+
+
 def _finished() -> Generator:
     """A generator that has run to its end (a restored search's finished work)."""
     gen = (x for x in ())
@@ -728,6 +879,11 @@ class ResonanceSearch(Checkpointable):
         self._freqs = freqs
         self._judged_rows: int | None = None
         self._passes: dict[int, int] = {}     # passes over the rows per stride (``_start_pass``)
+        #: block mode: each candidate's rows in one kernel call (the same sums in the same order: bit for bit the
+        #: units' result), not cut into units of ~UNIT_WORK for update()'s latency (``_units``)
+        self.eager = False
+        self._kept_t: dict[int, np.ndarray] = {}      # block mode's kept rows per stride (``_kept_rows``)
+        self._batch: dict[int, tuple] = {}            # ... and work arrays (``_batch_arrays``)
         self._gen = self._run()
 
     def _state(self) -> dict:
@@ -740,10 +896,12 @@ class ResonanceSearch(Checkpointable):
                 pass
             progress = inspect.GEN_CLOSED
         state["_gen"] = progress
+        state["_kept_t"], state["_batch"] = {}, {}     # (block mode's work arrays: made again when needed)
         return state
 
     def _restore_state(self, state: dict) -> None:
         progress = state.pop("_gen")
+        state = {"eager": False, "_kept_t": {}, "_batch": {}, **state}
         self.__dict__.update(state)
         self._gen = self._run() if progress == inspect.GEN_CREATED else _finished()
 
@@ -834,7 +992,7 @@ class ResonanceSearch(Checkpointable):
             per_row = self._node_work(1, passes) + 30 + 6 * e.size
             if cold or self._judged_rows is None:     # (a first judged cost: the recursion's kernel is cold too,
                 yield                                 # 23-26 us with the set-up and its first rows)
-            for r0, r1 in _row_units(n, per_row, lead):
+            for r0, r1 in self._units(n, per_row, lead):
                 _rows_free(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, f, decay, e, r0, r1, self.lead, G)
                 yield
             return G
@@ -855,7 +1013,7 @@ class ResonanceSearch(Checkpointable):
         g[0], g[1] = 1.0, 0.0
         if passes <= 1:                    # (the second candidate's set-up after the first's end: ~15 us cold)
             yield
-        for r0, r1 in _row_units(n, per_row, lead):
+        for r0, r1 in self._units(n, per_row, lead):
             _rows_free_sparse(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, g, (a1, a2), self.basis.h, rates,
                               r0, r1, stride, self.lead, G, table, mode)
             yield
@@ -864,6 +1022,10 @@ class ResonanceSearch(Checkpointable):
         if mode == 1:
             self._rows_cache.keep(slot, G)
         return G
+
+    def _units(self, n: int, per_row: float, first: float) -> Generator | tuple:
+        """A candidate's row ranges: ``_row_units``'s, or all n rows at once in block mode (``eager``)."""
+        return ((0, n),) if self.eager else _row_units(n, per_row, first)
 
     def _start_pass(self, stride: int) -> int:
         """Count a candidate's pass over the rows at this stride; returns the passes before it (0: a first pass,
@@ -893,15 +1055,24 @@ class ResonanceSearch(Checkpointable):
 
     def run(self) -> SearchResult:
         """To completion (block mode)."""
+        self.eager = True
         while not self.step():
             pass
         return self.result
 
     # ------------------------------------------------------------------ pieces
     def _evaluate(self, alpha: float, a1: float, a2: float, stride: int) -> Generator:
-        """Projected cost of one candidate, in units; the generator's return value is (cost, b, c). With
-        ``free`` the unknown start is projected out too (``_free_gram`` with the free responses in closed form
-        on every stride, ``_free_fit``)."""
+        """Projected cost of one candidate, in units; the generator's return value is (cost, b, c). In block mode
+        (``eager``) in one pass (``_evaluate_batch``) where it can, else in units (``_evaluate_units``)."""
+        if self.eager:
+            fits = self._evaluate_batch([(alpha, a1, a2)], stride)
+            if fits is not None:
+                return fits[0]
+        return (yield from self._evaluate_units(alpha, a1, a2, stride))
+
+    def _evaluate_units(self, alpha: float, a1: float, a2: float, stride: int) -> Generator:
+        """``_evaluate`` in units of ~UNIT_WORK. With ``free`` the unknown start is projected out too (``_free_gram``
+        with the free responses in closed form on every stride, ``_free_fit``)."""
         if self.free is not None:
             G = yield from self._free_gram(alpha, a1, a2, self.free, stride, closed=True)
             return _free_fit(G)
@@ -916,7 +1087,7 @@ class ResonanceSearch(Checkpointable):
         per_row = 6 + self._node_work(stride, passes) / stride
         if cold:
             yield
-        for r0, r1 in _row_units(self.u.size, per_row, COLD_LEAD_WORK if passes <= 1 else PREPARE_WORK):
+        for r0, r1 in self._units(self.u.size, per_row, COLD_LEAD_WORK if passes <= 1 else PREPARE_WORK):
             _rows(self._hist, self.u, self.y, vz, vx0, vx1, self._rc, x, r0, r1, stride, self.lead, acc)
             yield
         if cold:
@@ -943,21 +1114,96 @@ class ResonanceSearch(Checkpointable):
         costs, ranked, picks = self._grid_work
         if costs.size < size:            # (more creep exponents than the scratch was sized for)
             costs, ranked = np.empty(size), np.empty(size, dtype=np.int64)
-        i = 0                            # (points by their index, no tuple each: the garbage collector's passes
-        for alpha in self.alphas:        # over hundreds of them were 20-50 us in one update())
-            for fn in self._freqs:
-                wn = 2 * math.pi * fn
-                for z in GRID_ZETA:
-                    a1, a2 = 2 * z / wn, 1 / wn**2
-                    cost, _, _ = yield from self._evaluate(alpha, a1, a2, stride)
-                    _rank(cost, i, costs, ranked)
-                    i += 1
+        if self.eager:                   # (block mode: the grid's candidates side by side, ``_grid_costs``)
+            for i, cost in enumerate(self._grid_costs(stride)):
+                _rank(cost, i, costs, ranked)
+        else:
+            i = 0                        # (points by their index, no tuple each: the garbage collector's passes
+            for alpha in self.alphas:    # over hundreds of them were 20-50 us in one update())
+                for fn in self._freqs:
+                    wn = 2 * math.pi * fn
+                    for z in GRID_ZETA:
+                        a1, a2 = 2 * z / wn, 1 / wn**2
+                        cost, _, _ = yield from self._evaluate(alpha, a1, a2, stride)
+                        _rank(cost, i, costs, ranked)
+                        i += 1
         yield                            # (the last candidate's end and the picks below: ~28 us cold in one)
         m = _distinct_picks(costs, ranked, size, self._freqs, _GRID_ZETAS, picks)
         yield                            # (the picks and the grid's end, cold: 25-28 us in one)
         per_alpha, nz = len(self._freqs) * len(GRID_ZETA), len(GRID_ZETA)
         return [(self.alphas[i // per_alpha], self._freqs[i % per_alpha // nz], GRID_ZETA[i % nz])
                 for i in picks.tolist()[:m]]
+
+    def _grid_points(self) -> list[tuple[float, float, float]]:
+        """The grid's (alpha, a1, a2) in ``_grid``'s order (alpha, then fn, then zeta), computed as ``_grid`` does."""
+        points = []
+        for alpha in self.alphas:
+            for fn in self._freqs:
+                wn = 2 * math.pi * fn
+                for z in GRID_ZETA:
+                    points.append((alpha, 2 * z / wn, 1 / wn**2))
+        return points
+
+    def _grid_costs(self, stride: int) -> list[float]:
+        """Block mode: each grid point's ``_evaluate`` cost, bit for bit, BATCH candidates side by side
+        (``_evaluate_batch``); with ``free``, each on its own until one has filled the shared rows' cache."""
+        points = self._grid_points()
+        costs: list[float] = []
+        k = 0
+        while k < len(points):
+            batch = points[k:k + BATCH]
+            fits = self._evaluate_batch(batch, stride)
+            if fits is None:               # (no cache filled at this stride yet: this one fills it, in units)
+                fits = [_run_to_end(self._evaluate_units(*batch[0], stride))]
+            costs.extend(fit[0] for fit in fits)
+            k += len(fits)
+        return costs
+
+    def _evaluate_batch(self, points: list, stride: int) -> list[tuple] | None:
+        """Block mode: ``_evaluate``'s (cost, b, c) for up to BATCH candidates (alpha, a1, a2), bit for bit, in one
+        kernel call (``_evaluate_candidates``). None with ``free`` while no candidate has filled the shared rows'
+        cache at this stride, or when it cannot hold them (``FreeRowCache.claim``), and for a lone first candidate
+        at a stride (its kept rows side by side would cost as much as its evaluation): those go in units."""
+        self._bind()
+        n, nb = self.u.size, len(points)
+        if nb == 1 and stride not in self._kept_t and not self._passes.get(stride, 0):
+            return None
+        table, Gc = _NO_TABLE, _NO_TABLE
+        if self.free is not None:
+            slot, mode = self._rows_cache.claim(stride, n, len(self.free))
+            if mode != 2:
+                return None
+            table, Gc = self._rows_cache.tables[slot], self._rows_cache.grams[slot]
+        self._passes[stride] = self._passes.get(stride, 0) + nb
+        HT = self._kept_rows(stride)
+        work = self._batch_arrays(HT.shape[1])
+        pts, out = work[0], work[-1]
+        pts[:nb] = points
+        basis = self.basis
+        _evaluate_candidates(pts, nb, (basis.lam, basis.dx, basis.h, self._v, self._dv), (self.u, self.y, HT),
+                             work[1:-1], (table, Gc), stride, self.lead, self.free is not None, out)
+        return [(float(out[c, 0]), float(out[c, 1]), float(out[c, 2])) for c in range(nb)]
+
+    def _kept_rows(self, stride: int) -> np.ndarray:
+        """The node history's kept rows at this stride side by side (``_kept_history``), made once per search."""
+        HT = self._kept_t.get(stride)
+        if HT is None:
+            HT = np.empty((self.basis.size, (self.u.size + stride - 1) // stride))
+            _kept_history(self._hist, stride, HT)
+            self._kept_t[stride] = HT
+        return HT
+
+    def _batch_arrays(self, kept: int) -> tuple:
+        """``_evaluate_batch``'s arrays for BATCH candidates over ``kept`` kept rows (made once per search and size):
+        the points, ``_evaluate_candidates``'s work arrays, the fits."""
+        arrays = self._batch.get(kept)
+        if arrays is None:
+            q, p = self.basis.size, 5 + (len(self.free) if self.free is not None else 0)
+            arrays = (np.empty((BATCH, 3)), np.empty((BATCH, q)), np.empty((BATCH, 2)), np.empty((BATCH, 6)),
+                      np.empty((BATCH, 2)), np.empty((BATCH, 6)), np.empty((BATCH, 2)), np.empty((BATCH, 4)),
+                      np.empty((BATCH, kept)), np.empty((BATCH, p, p)), np.empty((BATCH, 3)))
+            self._batch[kept] = arrays
+        return arrays
 
     def _refine(self, alpha: float, fn: float, z: float, stride: int) -> Generator:
         """Pattern search in (ln alpha, ln fn, ln zeta) from a start; returns (cost, alpha, fn, zeta).

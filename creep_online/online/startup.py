@@ -86,6 +86,7 @@ class Startup:
         self.restarted = False             # restarted in operation after a fault: the plant was not at rest
         self.hint: tuple | None = None     # (alpha, a1, a2) before a fault's restart: a candidate of the search
         self.handover = Handover(self)     # the tracker's start, the buffer's replay, going live
+        self.eager = False                 # the current call runs everything at once (``advance``: block mode)
 
     # ------------------------------------------------------------------ the buffer
     def buffer(self, du: float, y: float) -> None:
@@ -115,6 +116,36 @@ class Startup:
         self.by[k] = y
         self.nbuf = k + 1
 
+    def quiet_samples(self) -> int:
+        """Block mode: how many samples the buffer can take now, one after the other, with every ``advance`` after
+        them doing nothing (0: the next sample must go through ``buffer`` and ``advance``). Before the input's first
+        move (the caller ends the run at it): up to the sample at which ``buffer`` would keep only the latest or
+        ``read_start`` would read the start. After it: once the rest's lead and the search's plan are settled (or a
+        search has run), up to the sample that makes the buffer ready for the search (the search's rows depend on
+        the sample it starts at) or full."""
+        est = self.est
+        if est._phase != "buffering" or self.reframing is not None:
+            return 0
+        if self.first_change is None:
+            room = (self.cfg.idle_buffer if self.start is not None else self.bu.size) - self.nbuf
+            if self.start is None and not self.competing:
+                room = min(room, self.start_wait - self.nbuf % self.start_wait - 1)
+            return max(0, room)
+        if self.lead is None and not self.in_operation:
+            return 0
+        plan = self.grid_plan
+        if self.search is None and (plan is None or plan.search is None):
+            return 0
+        before_ready = math.ceil(self.t_search() / est._h - (self.nbuf - self.first_change)) - 1
+        return max(0, min(before_ready, self.bu.size - self.nbuf))
+
+    def buffer_run(self, du: np.ndarray, y: np.ndarray) -> None:
+        """``buffer`` for each of a quiet run of samples (``quiet_samples``), at once."""
+        k, m = self.nbuf, du.size
+        self.bu[k:k + m] = du
+        self.by[k:k + m] = y
+        self.nbuf = k + m
+
     def ready_to_search(self) -> bool:
         return self.first_change is not None and self.nbuf - self.first_change >= self.t_search() / self.est._h
 
@@ -136,7 +167,7 @@ class Startup:
         reads "searching" until the tracker has started, a few samples later. With ``units`` >= ``EAGER``
         (block mode, a full buffer) everything runs in this call."""
         est = self.est
-        eager = units >= EAGER
+        eager = self.eager = units >= EAGER
         while self.reframing is not None:      # (the step's reading's buffer moving to its frame, a chunk per call)
             if next(self.reframing, _DONE) is _DONE:
                 self.reframing = None
@@ -157,6 +188,7 @@ class Startup:
         if est._phase == "searching":
             if self.starting is None:
                 s = self.search
+                s.eager = eager            # (block mode: each candidate's rows in one kernel call)
                 while units > 0 and not s.step():
                     units -= 1
                 if s.result is None or self.longer_window_needed(s.result):
@@ -257,7 +289,10 @@ class Startup:
         search = ResonanceSearch(self.est.basis, self.bu[:rows], self.by[:rows],
                                  extra=((step.alpha, step.a1, step.a2),), work=self.hist_work,
                                  scratch=self.search_scratch, free=FREE_RATES, starts=starts)
-        while not search.step():
+        while True:
+            search.eager = self.eager
+            if search.step():
+                break
             yield
         operation = search.result
         self.competing = False

@@ -1058,18 +1058,29 @@ def _rescale(S: np.ndarray, sy: np.ndarray, sc: np.ndarray, factor: float) -> No
 DEFER_ROWS = 64
 
 
-@njit(cache=CACHE, fastmath=FAST)
+@njit(cache=CACHE)
 def block(u: np.ndarray, y: np.ndarray, st: np.ndarray, S: np.ndarray, ring: np.ndarray,
           status: np.ndarray, start: int = 0, stop: int = -1) -> int:
     """Samples ``start`` to ``stop`` (-1: the end) until due work (flag 8), their statuses from status[0];
     returns how many were consumed. (A range, not slices: the start-up replay calls it from cold Python.)
 
-    ``sample``'s steps for each sample, bit for bit, in one loop: the views of the state array taken once, and
-    the rank-one updates of S waiting in a block of DEFER_ROWS regressor rows, added in one pass over S
+    ``sample``'s steps for each sample, bit for bit, in one loop (``_block``): the views of the state array taken
+    once, and the rank-one updates of S waiting in a block of DEFER_ROWS regressor rows, added in one pass over S
     (``_flush``: the same operations on each element in the same order). S is complete whenever this returns,
-    so no reader of S sees the deferral. (The steps are written out here, not shared with ``sample`` through
-    inlined helpers: numba's inlining counts references to the arrays passed at every call, which cost ~0.1 us
-    a sample.)"""
+    so no reader of S sees the deferral. Here: the deferred rows' memory, which ``_block`` (no reference counts)
+    cannot allocate."""
+    p = S.shape[0]
+    return _block(u, y, st, S, ring, status, start, stop, np.empty((DEFER_ROWS, p)), np.empty(DEFER_ROWS))
+
+
+@njit(cache=CACHE, fastmath=FAST, _nrt=False)
+def _block(u: np.ndarray, y: np.ndarray, st: np.ndarray, S: np.ndarray, ring: np.ndarray, status: np.ndarray,
+           start: int, stop: int, X: np.ndarray, gx: np.ndarray) -> int:
+    """``block``'s loop, without numba's reference counts (``_nrt=False``): every array here is a view of the
+    caller's, and the counts kept for each view passed to the step's helpers were half of the loop's time (0.36
+    against 0.18 us a sample). What it calls is compiled alike, so it must not need the runtime either (an
+    allocation, a slice copy: ``_flush`` has no spare row for that reason); a kernel that cannot compile so is an
+    internal fault of every block (the block tests assert none)."""
     end = u.shape[0] if stop < 0 else stop
     sc = st[:SC_SIZE]
     q = int(sc[SC_NQ])
@@ -1087,8 +1098,6 @@ def block(u: np.ndarray, y: np.ndarray, st: np.ndarray, S: np.ndarray, ring: np.
     ztail = st[c1:c1 + q]
     md = st[c1 + q:c1 + 2 * q + ONE]
     ho = c1 + 2 * q + ONE                       # the hysteresis block (``hysteresis.block_at``)
-    X = np.empty((DEFER_ROWS, p))
-    gx = np.empty(DEFER_ROWS)
     k = 0
     used = end - start
     for i in range(start, end):
@@ -1170,15 +1179,29 @@ def _flush(S: np.ndarray, X: np.ndarray, gx: np.ndarray, k: int) -> None:
     """S += sum over the k rows t of (gx[t] X[t])^T X[t], element by element in the rows' order as ``_accumulate``
     adds them (``S[i, j] += (g phi[i]) phi[j]``, rounded alike), so S is bit for bit the same. Eight rows
     per pass over S, two rows of S at a time (each element loaded and stored once per eight updates, each row of
-    X loaded once per two)."""
+    X loaded once per two; the last alone when P is odd). Nothing allocated: ``_block`` runs it without reference
+    counts."""
     p = S.shape[0]
-    spare = np.empty(p)                 # (the partner of the last row when p is odd: written, never read)
     t = 0
     while t + 8 <= k:
         x0, x1, x2, x3, x4, x5, x6, x7 = X[t], X[t + 1], X[t + 2], X[t + 3], X[t + 4], X[t + 5], X[t + 6], X[t + 7]
-        for i in range(0, p, 2):
-            i2 = min(i + 1, p - 1)
-            row, row2 = S[i], (S[i2] if i2 > i else spare)
+        if p % 2:
+            i = p - 1
+            row = S[i]
+            g0, g1, g2, g3 = gx[t] * x0[i], gx[t + 1] * x1[i], gx[t + 2] * x2[i], gx[t + 3] * x3[i]
+            g4, g5, g6, g7 = gx[t + 4] * x4[i], gx[t + 5] * x5[i], gx[t + 6] * x6[i], gx[t + 7] * x7[i]
+            for j in range(p):
+                v = row[j] + g0 * x0[j]
+                v = v + g1 * x1[j]
+                v = v + g2 * x2[j]
+                v = v + g3 * x3[j]
+                v = v + g4 * x4[j]
+                v = v + g5 * x5[j]
+                v = v + g6 * x6[j]
+                row[j] = v + g7 * x7[j]
+        for i in range(0, p - 1, 2):
+            i2 = i + 1
+            row, row2 = S[i], S[i2]
             g0, g1, g2, g3 = gx[t] * x0[i], gx[t + 1] * x1[i], gx[t + 2] * x2[i], gx[t + 3] * x3[i]
             g4, g5, g6, g7 = gx[t + 4] * x4[i], gx[t + 5] * x5[i], gx[t + 6] * x6[i], gx[t + 7] * x7[i]
             h0, h1, h2, h3 = gx[t] * x0[i2], gx[t + 1] * x1[i2], gx[t + 2] * x2[i2], gx[t + 3] * x3[i2]

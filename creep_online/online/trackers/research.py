@@ -60,7 +60,7 @@ class Researcher:
                                      work=tr.work_memory, extra=((tr.alpha, tr.a1, tr.a2),),
                                      starts=starts, scratch=tr._search_scratch)
             yield
-            yield from run_search(search)
+            yield from run_search(search, tr)
             # each pass's result is reported as soon as it is clearly better than the live estimate; a
             # longer pass may still replace it (at 80 dB the first pass's own cost, the resonance at rest
             # at the segment's start, sat at 1.5-2x the floor with the right resonance, and the estimate
@@ -199,7 +199,7 @@ class Researcher:
                                  extra=((tr.alpha, tr.a1, tr.a2),), scratch=tr._search_scratch,
                                  free=trends or None)
         yield
-        yield from run_search(search)
+        yield from run_search(search, tr)
         yield                              # (the search's last unit ended this call)
         r = search.result
         live = (tr.alpha, tr.a1, tr.a2)
@@ -264,7 +264,11 @@ class Researcher:
         return tr.n - tr.sc[W.SC_SINCE] > since + 1
 
 
-def run_search(search: ResonanceSearch) -> Generator:
-    """A search to its result, one ``ResonanceSearch.step`` per unit of background work."""
-    while not search.step():
+def run_search(search: ResonanceSearch, tr: WindowTracker) -> Generator:
+    """A search to its result, one ``ResonanceSearch.step`` per unit of background work (in block mode each
+    candidate's rows in one unit: ``WindowTracker.eager``)."""
+    while True:
+        search.eager = tr.eager
+        if search.step():
+            return
         yield

@@ -98,14 +98,19 @@ class Scheduler:
         return tr._jobs[0]
 
     def finish(self, tr: WindowTracker) -> None:
-        """Run the queued jobs to completion, or until the one at the head waits for samples (block mode)."""
-        while tr._jobs:
-            if tr.machine is not None:
-                wk = (tr._wk, tr._test_wk)[tr.machine]
-                RF.run(tr.st, tr.S, tr._shift, tr.theta, wk, tr.basis.lam, tr.basis.dx)
-                tr.machine = None
-            elif not self.work(tr, 1 << 30) and tr.machine is None:
-                break
+        """Run the queued jobs to completion, or until the one at the head waits for samples (block mode: the jobs'
+        searches run each candidate's rows in one kernel call, ``WindowTracker.eager``)."""
+        tr.eager = True
+        try:
+            while tr._jobs:
+                if tr.machine is not None:
+                    wk = (tr._wk, tr._test_wk)[tr.machine]
+                    RF.run(tr.st, tr.S, tr._shift, tr.theta, wk, tr.basis.lam, tr.basis.dx)
+                    tr.machine = None
+                elif not self.work(tr, 1 << 30) and tr.machine is None:
+                    break
+        finally:
+            tr.eager = False
 
     def drain(self, tr: WindowTracker) -> None:
         """Run every queued job to its end now; one that waits for samples goes on with those already here.
