@@ -165,6 +165,18 @@ def _add_row(row: np.ndarray, G: np.ndarray) -> None:
             G[a, b] += ra * row[b]
 
 
+@njit(cache=True, inline="always")
+def _add_sums(acc: np.ndarray, s: float, yk: float) -> None:
+    """One kept row into a candidate's running sums acc = [n, sum s, sum s^2, sum y, sum s y, sum y^2]
+    (s: the row's forced output, yk: its measured output), in ``_rows``'s order for every caller."""
+    acc[0] += 1.0
+    acc[1] += s
+    acc[2] += s * s
+    acc[3] += yk
+    acc[4] += s * yk
+    acc[5] += yk * yk
+
+
 @njit(cache=True)
 def _rows(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx0: float, vx1: float,
           rc: np.ndarray, x: np.ndarray, r0: int, r1: int, stride: int, lead: int, acc: np.ndarray) -> None:
@@ -177,14 +189,7 @@ def _rows(hist: np.ndarray, u: np.ndarray, y: np.ndarray, vz: np.ndarray, vx0: f
     x1 = x[1]
     for k in range(r0, r1):
         if k >= lead and _kept(k, stride) and y[k] == y[k]:
-            s = _forced_output(hist, k, vz, vx0, vx1, x0, x1)
-            yk = y[k]
-            acc[0] += 1.0
-            acc[1] += s
-            acc[2] += s * s
-            acc[3] += yk
-            acc[4] += s * yk
-            acc[5] += yk * yk
+            _add_sums(acc, _forced_output(hist, k, vz, vx0, vx1, x0, x1), y[k])
         x0, x1 = _advance(rc, x0, x1, u[k])
     x[0] = x0
     x[1] = x1
@@ -405,14 +410,7 @@ def _rows_batch(ns: np.ndarray, u: np.ndarray, y: np.ndarray, vx: np.ndarray, rc
             yk = y[k]
             j = k // stride
             for c in range(nb):
-                s = vx[c, 0] * x[c, 0] + vx[c, 1] * x[c, 1] + ns[c, j]
-                a = acc[c]
-                a[0] += 1.0
-                a[1] += s
-                a[2] += s * s
-                a[3] += yk
-                a[4] += s * yk
-                a[5] += yk * yk
+                _add_sums(acc[c], vx[c, 0] * x[c, 0] + vx[c, 1] * x[c, 1] + ns[c, j], yk)
         for c in range(nb):
             x[c, 0], x[c, 1] = _advance(rc[c], x[c, 0], x[c, 1], uk)
 
