@@ -306,7 +306,7 @@ class OnlineEstimator(StoredParams, Checkpointable):
         Times are stream times (``samples`` x dt) once a fault has restarted the tracker."""
         rec = self._recovery
         shift = self._n_shift * self._h
-        live = [] if self._tracker is None else [shifted(ev, shift, "change") for ev in self._tracker.events]
+        live = [] if self._tracker is None else [shifted(ev, shift, "change") for ev in self._tracker.report_events()]
         events = rec.past_events + live
         if rec.faults:
             events = sorted(events + rec.faults, key=lambda ev: ev["t"])

@@ -202,7 +202,7 @@ class Recovery:
         tr, est._tracker = est._tracker, None
         if tr is not None:
             shift = est._n_shift * est._h
-            self.past_events += [shifted(ev, shift, "change") for ev in tr.events]
+            self.past_events += [shifted(ev, shift, "change") for ev in tr.report_events()]
             self.past_researches = (self.past_researches
                                     + [shifted(r, shift) for r in tr.researches])[-self.cfg.max_past_researches:]
         st = est._startup

@@ -94,7 +94,7 @@ def quality_view(est: "OnlineEstimator") -> Q.QualityView:
             replaying=bool(est._catchup), alpha=tr.alpha, a1=tr.a1, a2=tr.a2, b=tr.b, std=fit.std,
             fit_sample=fit.sample, fit_cost=fit.cost, fit_neff=fit.neff, noise=tr.noise_level,
             live_error_power=tr.live_error_power, output_stuck=tr.output_stuck,
-            input_held_samples=tr.input_held_samples, last_event=tr.events[-1] if tr.events else None,
+            input_held_samples=tr.input_held_samples, last_event=tr.report_events()[-1] if tr.events else None,
             disagreement=tr.disagreement, last_research=tr.researches[-1] if tr.researches else None)
     return Q.QualityView(
         settings=est._settings.quality, dt=est._h, samples=est.samples, n_shift=est._n_shift,

@@ -34,7 +34,7 @@ class Tracker(Protocol):
     refits: int                         #: fits (or recursive updates) done
     rejected: int                       #: fits rejected (the previous estimate kept)
     relinearizations: int
-    events: list                        #: detected changes (dicts, tracker time)
+    events: list                        #: detected changes (dicts, tracker time; read them by ``report_events``)
     researches: list                    #: re-searches of the resonance (dicts, tracker time)
     disagreement: dict | None           #: the last change test, if the last second disagreed with the window
     feed_chunk: int                     #: samples per unit of work when a buffer is replayed
@@ -90,6 +90,9 @@ class Tracker(Protocol):
         """The buffer replayed: the outlier gate open, fitting on."""
 
     # ---------------------------------------------------------------- recovery
+    def report_events(self) -> list[dict]:
+        """``events`` as reported to the user: anything left to fill in on a settled change filled in now."""
+
     def drop_failed_jobs(self) -> list[str] | None:
         """After a fault in the background work: the names of the failed periodic jobs dropped, or None."""
 

@@ -206,6 +206,10 @@ class RecursiveTracker(ParameterView, LiveMonitors, Checkpointable):
     def drain(self) -> None:
         """Nothing queued (a checkpoint's drain)."""
 
+    def report_events(self) -> list[dict]:
+        """The detected changes as reported (complete when they settle: ``_settle_events``)."""
+        return self.events
+
     def drop_failed_jobs(self) -> list[str] | None:
         """No background jobs: a fault is never confined to one (None)."""
         return None

@@ -448,6 +448,10 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
     def fit(self, value: Fit) -> None:
         self._fit, self._fit_sample = value, value.sample
 
+    def report_events(self) -> list[dict]:
+        """The detected changes as reported (``ChangeDetection.report_events``: a settled change's moves filled in)."""
+        return self.detection.report_events(self)
+
     def drop_failed_jobs(self) -> list[str] | None:
         """After a fault inside the background work: if only periodic jobs (re-fit, snapshot, change test) failed
         and no slice is under way, drop them and return their names; else None (the tracker cannot go on)."""
