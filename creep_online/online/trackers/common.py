@@ -28,17 +28,6 @@ ZETA_BOUNDS = ZETA_BOX
 
 
 
-def replay_unit(chunk: int, skip_left: int, cold_rows: int) -> int:
-    """Samples in a replay's next unit: up to eight chunks only advanced (states, no statistics: ~1/8 of the work)
-    while ``skip_left`` > 0, the last of them ending at the skip; then ``settings.cold_replay_rows`` accumulated (the
-    statistics, p x p, and the block's code come from memory after thousands of calls without a replay:
-    with 20 samples after the skip's end in the same unit the call took ~40 us, after ~90 us for 297 when
-    accumulating past the skip's end at the advance's length); then ``chunk`` accumulated."""
-    if skip_left > 0:
-        return min(skip_left, 8 * chunk)
-    return min(cold_rows, chunk) if skip_left == 0 else chunk
-
-
 def largest_move(new: list[float], old: list[float]) -> float:
     """Largest relative move of alpha, ln a1, ln a2, b (plain floats: numpy on 4-vectors costs ~2 us)."""
     return max(abs(a - b) / max(abs(b), 1e-300) for a, b in zip(new[:4], old[:4]))

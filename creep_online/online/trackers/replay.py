@@ -9,7 +9,7 @@ import numpy as np
 
 from .._kernels import hysteresis as HK
 from .._kernels import window as W
-from .common import KEPT_SNAPSHOTS, MACHINE_TEST, WAIT, replay_unit
+from .common import KEPT_SNAPSHOTS, MACHINE_TEST, WAIT
 from . import workspace as WS
 
 if TYPE_CHECKING:
@@ -72,15 +72,14 @@ class Replayer:
         tr._replay_set ^= 1
         yield
         lin = (a1, a2)
-        size, slot = tr.ring.shape[1], tr._ring_position(origin) - origin
+        slot = tr._ring_position(origin) - origin
         i = origin
         deferred = False
         while i < tr.n:                  # the live stream keeps appending: catch up
-            n = min(replay_unit(chunk, skip - (i - origin), tr.settings.cold_replay_rows), tr.n - i)
-            if tr.detect:                # stop at the change test's snapshot instants
-                n = min(n, tr.scheduler.test_after(tr, i) - i)
-            W.replay(tr.ring, (slot + i) % size, n, max(skip - (i - origin), 0), st, S, *tr._replay_work)
-            i += n
+            stop = tr.scheduler.test_after(tr, i) if tr.detect else tr.n   # (stop at the test's snapshot instants)
+            units = 1 << 30 if tr.eager else 1     # (block mode: every unit up to that stop in one call)
+            i, n = W.replay_units(tr.ring, slot, origin, i, min(stop, tr.n), skip, chunk, tr.settings.cold_replay_rows,
+                                  units, st, S, *tr._replay_work)
             if tr.detect and i % tr.test_every == 0 and i - origin > skip:
                 index, S0, sy0, shift0, theta0 = buffers[taken % KEPT_SNAPSHOTS]  # (the slot of the one dropped now)
                 taken += 1                 # shift0 stays zero: a replay's snapshots are at its own origin

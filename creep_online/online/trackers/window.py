@@ -50,11 +50,12 @@ from .._kernels import fit_machine as RF
 from .._kernels import hysteresis as HK
 from ..rest import REST_LEAD
 from .._kernels import window as W
+from .._kernels.window import replay_unit as _replay_unit  # noqa: F401  (re-exported: tests)
 from ..checkpoint import Checkpointable
 from ..soe import SoeBasis
 from . import workspace as WS
 from .common import (LiveMonitors, KEPT_SNAPSHOTS, MACHINE_REFIT, MACHINE_TEST, PERIODIC_JOBS, SNAP_SLOTS, WAIT,  # noqa: F401
-                     ZETA_BOUNDS, Fit, ParameterView, replay_unit as _replay_unit)   # (re-exported: estimator, tests)
+                     ZETA_BOUNDS, Fit, ParameterView)
 from .detection import ChangeDetection
 from .replay import Replayer
 from .research import Researcher
