@@ -179,7 +179,7 @@ def run_plant(family: str, seed: int, n: int) -> dict:
     row["batch_alpha"] = fit.model.alpha
     _truth_errors(row, "batch_", fit.model, truth)
     if e.hysteresis is None:
-        row.update(weights_ok=False, weight_err_over_max=None, weights_ok_grouped=False)
+        row.update(weights_ok=False, weights_ok_or_2sigma=False, determined_weights_ok=False, weight_err_over_max=None, weights_ok_grouped=False)
         return row
     with same_thresholds(e.hysteresis["r"], data.u_range):
         same = fit_extended(data, ("hysteresis",), base)
@@ -190,6 +190,7 @@ def run_plant(family: str, seed: int, n: int) -> dict:
                batch_same_initial=same.effect_params["hysteresis"]["initial"])
     row["weights_ok"] = row["weight_err_over_max"] <= WEIGHT_TOLERANCE
     row["weight_err_at"] = int(np.argmax(np.abs(wo - ws)))
+    row.update(_weight_uncertainty(wo - ws, scale, e.hysteresis.get("w_std"), same.effect_params["hysteresis"].get("w_std")))
     # what the output pins whatever the split: the slope just after a reversal, b (1 + w_1) (the smallest
     # threshold's play is u itself but for a lag of 2 r_1 at each reversal), and after a full-stroke one, b (1 + sum w)
     row["b_over_same"] = e.b / same.model.b
@@ -208,13 +209,40 @@ def run_plant(family: str, seed: int, n: int) -> dict:
     return row
 
 
+def _std(values, size: int) -> np.ndarray:
+    """A reported ``w_std`` list as an array (None, a weight the fit does not determine: inf)."""
+    if values is None:
+        return np.full(size, np.inf)
+    return np.array([np.inf if v is None else float(v) for v in values])
+
+
+def _weight_uncertainty(diff: np.ndarray, scale: float, std_online, std_batch) -> dict:
+    """Each weight's online-minus-batch difference against both fits' reported 1-sigma (``w_std``): within 5 % of
+    the largest batch weight, or within 2 sigma of the difference (sqrt(s_online^2 + s_batch^2), both fits taken as
+    independent: the window forgets, the batch fit sees the whole record); and the weights the data cannot
+    determine to the tolerance (either fit's 1-sigma above 5 % of the largest weight)."""
+    s_on, s_b = _std(std_online, diff.size), _std(std_batch, diff.size)
+    sigma = np.sqrt(s_on ** 2 + s_b ** 2)
+    close = np.abs(diff) <= WEIGHT_TOLERANCE * scale
+    within = close | (np.abs(diff) <= 2.0 * sigma)
+    undetermined = np.maximum(s_on, s_b) > WEIGHT_TOLERANCE * scale
+    z = np.abs(diff) / sigma
+    return {"w_std_online": s_on.tolist(), "w_std_batch": s_b.tolist(),
+            "weights_ok_or_2sigma": bool(within.all()),
+            "determined_weights_ok": bool(close[~undetermined].all()),
+            "weight_within_5pct_frac": float(close.mean()), "weight_within_5pct_or_2sigma_frac": float(within.mean()),
+            "weight_z_max": float(z.max()), "weight_std_over_max": float(np.max(s_on) / scale),
+            "undetermined_weights": np.flatnonzero(undetermined).tolist()}
+
+
 def plants(args) -> dict:
     rows = []
     for k in range(args.records):                 # families interleaved: a stopped run still covers each
         for family in args.families.split(","):
             row = run_plant(family, 1000 + k, args.samples)
             print(f"{family} {1000 + k}: creep_ok {row['creep_ok']} (batch {row['batch_creep_ok']}) weights_ok "
-                  f"{row['weights_ok']} werr {row['weight_err_over_max']} b {row['b_rel_err']} "
+                  f"{row['weights_ok']} (or 2 sigma {row.get('weights_ok_or_2sigma')}, z {row.get('weight_z_max')}) "
+                  f"werr {row['weight_err_over_max']} b {row['b_rel_err']} "
                   f"(batch {row['batch_b_rel_err']})", flush=True)
             rows.append(row)
             if args.out_partial:
@@ -227,7 +255,7 @@ def _plants_doc(args, rows: list[dict]) -> dict:
         return sum(1 for r in sel if r[key]) / len(sel) if sel else None
 
     fams = sorted({r["family"] for r in rows})
-    passes = ("creep_ok", "weights_ok", "weights_ok_grouped", "alpha_ok", "b_ok", "a1_ok", "a2_ok",
+    passes = ("creep_ok", "weights_ok", "weights_ok_or_2sigma", "determined_weights_ok", "weights_ok_grouped", "alpha_ok", "b_ok", "a1_ok", "a2_ok",
               "batch_creep_ok", "batch_alpha_ok", "batch_b_ok", "batch_a1_ok", "batch_a2_ok")
     summary = {f: {"records": sum(r["family"] == f for r in rows),
                    **{key: frac([r for r in rows if r["family"] == f], key) for key in passes},
@@ -236,6 +264,11 @@ def _plants_doc(args, rows: list[dict]) -> dict:
                    **{key: dist([r[key] for r in rows if r["family"] == f and r.get(key) is not None])
                       for key in ("alpha_rel_err", "b_rel_err", "batch_alpha_rel_err", "batch_b_rel_err",
                                   "b_over_same", "slope_first_over_same", "slope_full_over_same")},
+                   **{key: dist([r[key] for r in rows if r["family"] == f and r.get(key) is not None])
+                      for key in ("weight_z_max", "weight_std_over_max", "weight_within_5pct_frac",
+                                  "weight_within_5pct_or_2sigma_frac")},
+                   "undetermined_weights_per_record": dist([len(r["undetermined_weights"]) for r in rows
+                                                            if r["family"] == f and "undetermined_weights" in r]),
                    "weight_err_over_max": dist([r["weight_err_over_max"] for r in rows
                                                 if r["family"] == f and r["weight_err_over_max"] is not None])}
                for f in fams}
