@@ -147,6 +147,33 @@ def same_thresholds(r: list[float], u_range: float):
         H.HYSTERESIS_THRESHOLDS, H.HYSTERESIS_COMPONENTS = saved
 
 
+def batch_weight_std(data, fit) -> np.ndarray:
+    """The batch fit's weights' 1-sigma with its creep and resonance parameters' uncertainty in it (the fit's own
+    ``w_std`` holds them at their fitted values): for the separable least squares, cov(w) = cov(w | theta) +
+    D cov(theta) D^T, with cov(theta) = s^2 (J^T J)^-1 from the variable-projection Jacobian J of the nonlinear
+    parameters theta (alpha, log10 fn, log10 zeta) and D = dw/dtheta by central differences of the reported
+    solution. Call it with the fit's threshold rule in place (``same_thresholds``)."""
+    from creep_online.diagnostics.extended import Design, _result
+    hp = fit.effect_params["hysteresis"]
+    design = Design(data, ("hysteresis",), variants={"hysteresis": hp["initial"]})
+    theta = np.asarray(fit.theta, dtype=float)
+    design.residual(theta)
+    jac = design.jacobian(theta)
+    dof = max(data.n - theta.size - len(fit.coef), 1)
+    cov = float(fit.rss) / dof * np.linalg.pinv(jac.T @ jac)
+    steps = 1e-4 * np.maximum(np.abs(theta), 1.0)
+    d = np.empty((len(hp["w"]), theta.size))
+    for k in range(theta.size):
+        up, down = theta.copy(), theta.copy()
+        up[k] += steps[k]
+        down[k] -= steps[k]
+        w_up = np.asarray(_result(design, up).effect_params["hysteresis"]["w"])
+        w_down = np.asarray(_result(design, down).effect_params["hysteresis"]["w"])
+        d[:, k] = (w_up - w_down) / (2.0 * steps[k])
+    cond = _std(hp.get("w_std"), d.shape[0])
+    return np.sqrt(cond ** 2 + np.einsum("ik,kl,il->i", d, cov, d))
+
+
 def _truth_errors(row: dict, prefix: str, got, truth) -> None:
     for k, tol in TOLERANCES.items():
         rel = None if got is None else abs(getattr(got, k) - getattr(truth, k)) / abs(getattr(truth, k))
@@ -183,6 +210,7 @@ def run_plant(family: str, seed: int, n: int) -> dict:
         return row
     with same_thresholds(e.hysteresis["r"], data.u_range):
         same = fit_extended(data, ("hysteresis",), base)
+        std_profiled = batch_weight_std(data, same)
     ws = np.asarray(same.effect_params["hysteresis"]["w"])
     wo = np.asarray(e.hysteresis["w"])
     scale = float(np.max(np.abs(ws))) or 1.0
@@ -190,7 +218,8 @@ def run_plant(family: str, seed: int, n: int) -> dict:
                batch_same_initial=same.effect_params["hysteresis"]["initial"])
     row["weights_ok"] = row["weight_err_over_max"] <= WEIGHT_TOLERANCE
     row["weight_err_at"] = int(np.argmax(np.abs(wo - ws)))
-    row.update(_weight_uncertainty(wo - ws, scale, e.hysteresis.get("w_std"), same.effect_params["hysteresis"].get("w_std")))
+    row.update(_weight_uncertainty(wo - ws, scale, e.hysteresis.get("w_std"), std_profiled.tolist()))
+    row["w_std_batch_given_theta"] = same.effect_params["hysteresis"].get("w_std")
     # what the output pins whatever the split: the slope just after a reversal, b (1 + w_1) (the smallest
     # threshold's play is u itself but for a lag of 2 r_1 at each reversal), and after a full-stroke one, b (1 + sum w)
     row["b_over_same"] = e.b / same.model.b
