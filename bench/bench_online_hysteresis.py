@@ -5,6 +5,7 @@ Usage (from the repository root)::
     python -m bench.bench_online_hysteresis latency [--samples 60000]
     python -m bench.bench_online_hysteresis real [--window 10]
     python -m bench.bench_online_hysteresis plants [--records 20] [--families sine,triangle,random_staircase]
+    python -m bench.bench_online_hysteresis scatter [--records 3] [--realisations 6]
 
 ``latency``: per-sample work of ``update()`` (thread CPU and wall, p50/p99/max in us) at 10 kHz with the default 8
 play operators, against the plain estimator on the same stream in the same run (a triangle record of
@@ -27,6 +28,14 @@ furthest off (``weight_err_at``), and b, the slope just after a reversal b (1 + 
 b (1 + sum w), each over the same-thresholds batch fit's (a split the output does not pin trades along them).
 Also the loops as the output sees them (``_loop_error``: b (u + w . p(u)) on the record's input) of the online
 estimate against the batch fit's and the truth's, and the batch fit's against the truth's, over the loop width.
+
+Each weight's uncertainty: the online ``w_std`` (the window fit's covariance) and the batch fit's 1-sigma with its
+creep and resonance parameters' uncertainty in it (``batch_weight_std``); ``weights_ok_or_2sigma``: every weight
+within 5 % of the largest or within 2 sigma of the difference; ``undetermined_weights``: those either fit knows
+only to worse than 5 % of the largest (1-sigma); ``determined_weights_ok``: the others within 5 %.
+
+``scatter``: ``--records`` random plants per family (seeds 2000+), each with ``--realisations`` noise draws: each
+weight's spread over the draws against the mean reported ``w_std``, and the paths (events, re-searches) they took.
 
 Prints one JSON document and writes it to ``bench/results/online_hysteresis_<mode>.json``.
 """
@@ -306,6 +315,44 @@ def _plants_doc(args, rows: list[dict]) -> dict:
             "summary": summary, "records": rows}
 
 
+def scatter(args) -> dict:
+    """Is the online ``w_std`` the weights' spread? Per record, ``--realisations`` noise draws on the same clean
+    output (the record's noise level), each fed to a fresh estimator: each weight's sample standard deviation over
+    the mean reported 1-sigma (``spread_over_std``; six draws put it within a factor ~1.9 of 1 at 2 sigma when the
+    figure is right), and how many events and re-searches each draw took (a different path is a spread no local
+    figure holds)."""
+    from creep_online.online import OnlineEstimator
+    from hil_sim.hysteresis_plants import hysteresis_record
+    rows = []
+    for k in range(args.records):
+        for family in args.families.split(","):
+            rec = hysteresis_record(family, 2000 + k, n=args.samples)
+            w, std, paths = [], [], []
+            for j in range(args.realisations):
+                y = rec.y_clean + rec.noise_std * np.random.default_rng(j).standard_normal(rec.y.size)
+                est = OnlineEstimator(float(rec.t[1] - rec.t[0]), effects=("hysteresis",))
+                est.update_block(rec.u, y)
+                loop = est.estimate.hysteresis
+                if loop is None:
+                    continue
+                w.append(loop["w"])
+                std.append([math.nan if v is None else v for v in loop["w_std"]])
+                paths.append((len(est.estimate.events), len(est.estimate.researches)))
+            ratio = np.std(w, axis=0, ddof=1) / np.nanmean(std, axis=0)
+            rows.append({"family": family, "seed": 2000 + k, "spread_over_std": ratio.tolist(),
+                         "within_2_5x": float(np.mean((ratio >= 0.4) & (ratio <= 2.5))),
+                         "std_over_max": float(np.nanmean(std) / np.max(np.abs(np.mean(w, axis=0)))),
+                         "paths": sorted(set(paths)), "realisations": len(w)})
+            print(family, 2000 + k, np.round(ratio, 2), sorted(set(paths)), flush=True)
+    fams = sorted({r["family"] for r in rows})
+    summary = {f: {"records": sum(r["family"] == f for r in rows),
+                   "spread_over_std": dist([x for r in rows if r["family"] == f for x in r["spread_over_std"]]),
+                   "weights_within_2_5x": float(np.mean([r["within_2_5x"] for r in rows if r["family"] == f])),
+                   "one_path": sum(len(r["paths"]) == 1 for r in rows if r["family"] == f)} for f in fams}
+    return {"mode": "scatter", "samples": args.samples, "realisations": args.realisations, "summary": summary,
+            "records": rows}
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="mode", required=True)
@@ -318,10 +365,15 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--samples", type=int, default=60000)
     p.add_argument("--families", default="sine,triangle,random_staircase")
     p.add_argument("--out-partial", default=None, help="rewrite this file after every record")
+    p = sub.add_parser("scatter")
+    p.add_argument("--records", type=int, default=3)
+    p.add_argument("--realisations", type=int, default=6)
+    p.add_argument("--samples", type=int, default=60000)
+    p.add_argument("--families", default="sine,triangle,random_staircase")
     for q in sub.choices.values():
         q.add_argument("--out", default=None)
     args = ap.parse_args(argv)
-    doc = {"latency": latency, "real": real, "plants": plants}[args.mode](args)
+    doc = {"latency": latency, "real": real, "plants": plants, "scatter": scatter}[args.mode](args)
     suffix = "" if args.mode != "real" or args.window == 10.0 else f"_window{args.window:g}s"
     write_report(doc, args.out or results_path(f"online_hysteresis_{args.mode}{suffix}"), argv=argv)
     return doc
