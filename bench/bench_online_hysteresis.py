@@ -5,6 +5,7 @@ Usage (from the repository root)::
     python -m bench.bench_online_hysteresis latency [--samples 60000]
     python -m bench.bench_online_hysteresis real [--window 10]
     python -m bench.bench_online_hysteresis plants [--records 20] [--families sine,triangle,random_staircase]
+    python -m bench.bench_online_hysteresis scatter [--records 3] [--realisations 6]
 
 ``latency``: per-sample work of ``update()`` (thread CPU and wall, p50/p99/max in us) at 10 kHz with the default 8
 play operators, against the plain estimator on the same stream in the same run (a triangle record of
@@ -27,6 +28,14 @@ furthest off (``weight_err_at``), and b, the slope just after a reversal b (1 + 
 b (1 + sum w), each over the same-thresholds batch fit's (a split the output does not pin trades along them).
 Also the loops as the output sees them (``_loop_error``: b (u + w . p(u)) on the record's input) of the online
 estimate against the batch fit's and the truth's, and the batch fit's against the truth's, over the loop width.
+
+Each weight's uncertainty: the online ``w_std`` (the window fit's covariance) and the batch fit's 1-sigma with its
+creep and resonance parameters' uncertainty in it (``batch_weight_std``); ``weights_ok_or_2sigma``: every weight
+within 5 % of the largest or within 2 sigma of the difference; ``undetermined_weights``: those either fit knows
+only to worse than 5 % of the largest (1-sigma); ``determined_weights_ok``: the others within 5 %.
+
+``scatter``: ``--records`` random plants per family (seeds 2000+), each with ``--realisations`` noise draws: each
+weight's spread over the draws against the mean reported ``w_std``, and the paths (events, re-searches) they took.
 
 Prints one JSON document and writes it to ``bench/results/online_hysteresis_<mode>.json``.
 """
@@ -147,6 +156,33 @@ def same_thresholds(r: list[float], u_range: float):
         H.HYSTERESIS_THRESHOLDS, H.HYSTERESIS_COMPONENTS = saved
 
 
+def batch_weight_std(data, fit) -> np.ndarray:
+    """The batch fit's weights' 1-sigma with its creep and resonance parameters' uncertainty in it (the fit's own
+    ``w_std`` holds them at their fitted values): for the separable least squares, cov(w) = cov(w | theta) +
+    D cov(theta) D^T, with cov(theta) = s^2 (J^T J)^-1 from the variable-projection Jacobian J of the nonlinear
+    parameters theta (alpha, log10 fn, log10 zeta) and D = dw/dtheta by central differences of the reported
+    solution. Call it with the fit's threshold rule in place (``same_thresholds``)."""
+    from creep_online.diagnostics.extended import Design, _result
+    hp = fit.effect_params["hysteresis"]
+    design = Design(data, ("hysteresis",), variants={"hysteresis": hp["initial"]})
+    theta = np.asarray(fit.theta, dtype=float)
+    design.residual(theta)
+    jac = design.jacobian(theta)
+    dof = max(data.n - theta.size - len(fit.coef), 1)
+    cov = float(fit.rss) / dof * np.linalg.pinv(jac.T @ jac)
+    steps = 1e-4 * np.maximum(np.abs(theta), 1.0)
+    d = np.empty((len(hp["w"]), theta.size))
+    for k in range(theta.size):
+        up, down = theta.copy(), theta.copy()
+        up[k] += steps[k]
+        down[k] -= steps[k]
+        w_up = np.asarray(_result(design, up).effect_params["hysteresis"]["w"])
+        w_down = np.asarray(_result(design, down).effect_params["hysteresis"]["w"])
+        d[:, k] = (w_up - w_down) / (2.0 * steps[k])
+    cond = _std(hp.get("w_std"), d.shape[0])
+    return np.sqrt(cond ** 2 + np.einsum("ik,kl,il->i", d, cov, d))
+
+
 def _truth_errors(row: dict, prefix: str, got, truth) -> None:
     for k, tol in TOLERANCES.items():
         rel = None if got is None else abs(getattr(got, k) - getattr(truth, k)) / abs(getattr(truth, k))
@@ -179,10 +215,11 @@ def run_plant(family: str, seed: int, n: int) -> dict:
     row["batch_alpha"] = fit.model.alpha
     _truth_errors(row, "batch_", fit.model, truth)
     if e.hysteresis is None:
-        row.update(weights_ok=False, weight_err_over_max=None, weights_ok_grouped=False)
+        row.update(weights_ok=False, weights_ok_or_2sigma=False, determined_weights_ok=False, weight_err_over_max=None, weights_ok_grouped=False)
         return row
     with same_thresholds(e.hysteresis["r"], data.u_range):
         same = fit_extended(data, ("hysteresis",), base)
+        std_profiled = batch_weight_std(data, same)
     ws = np.asarray(same.effect_params["hysteresis"]["w"])
     wo = np.asarray(e.hysteresis["w"])
     scale = float(np.max(np.abs(ws))) or 1.0
@@ -190,6 +227,8 @@ def run_plant(family: str, seed: int, n: int) -> dict:
                batch_same_initial=same.effect_params["hysteresis"]["initial"])
     row["weights_ok"] = row["weight_err_over_max"] <= WEIGHT_TOLERANCE
     row["weight_err_at"] = int(np.argmax(np.abs(wo - ws)))
+    row.update(_weight_uncertainty(wo - ws, scale, e.hysteresis.get("w_std"), std_profiled.tolist()))
+    row["w_std_batch_given_theta"] = same.effect_params["hysteresis"].get("w_std")
     # what the output pins whatever the split: the slope just after a reversal, b (1 + w_1) (the smallest
     # threshold's play is u itself but for a lag of 2 r_1 at each reversal), and after a full-stroke one, b (1 + sum w)
     row["b_over_same"] = e.b / same.model.b
@@ -208,13 +247,40 @@ def run_plant(family: str, seed: int, n: int) -> dict:
     return row
 
 
+def _std(values, size: int) -> np.ndarray:
+    """A reported ``w_std`` list as an array (None, a weight the fit does not determine: inf)."""
+    if values is None:
+        return np.full(size, np.inf)
+    return np.array([np.inf if v is None else float(v) for v in values])
+
+
+def _weight_uncertainty(diff: np.ndarray, scale: float, std_online, std_batch) -> dict:
+    """Each weight's online-minus-batch difference against both fits' reported 1-sigma (``w_std``): within 5 % of
+    the largest batch weight, or within 2 sigma of the difference (sqrt(s_online^2 + s_batch^2), both fits taken as
+    independent: the window forgets, the batch fit sees the whole record); and the weights the data cannot
+    determine to the tolerance (either fit's 1-sigma above 5 % of the largest weight)."""
+    s_on, s_b = _std(std_online, diff.size), _std(std_batch, diff.size)
+    sigma = np.sqrt(s_on ** 2 + s_b ** 2)
+    close = np.abs(diff) <= WEIGHT_TOLERANCE * scale
+    within = close | (np.abs(diff) <= 2.0 * sigma)
+    undetermined = np.maximum(s_on, s_b) > WEIGHT_TOLERANCE * scale
+    z = np.abs(diff) / sigma
+    return {"w_std_online": s_on.tolist(), "w_std_batch": s_b.tolist(),
+            "weights_ok_or_2sigma": bool(within.all()),
+            "determined_weights_ok": bool(close[~undetermined].all()),
+            "weight_within_5pct_frac": float(close.mean()), "weight_within_5pct_or_2sigma_frac": float(within.mean()),
+            "weight_z_max": float(z.max()), "weight_std_over_max": float(np.max(s_on) / scale),
+            "undetermined_weights": np.flatnonzero(undetermined).tolist()}
+
+
 def plants(args) -> dict:
     rows = []
     for k in range(args.records):                 # families interleaved: a stopped run still covers each
         for family in args.families.split(","):
             row = run_plant(family, 1000 + k, args.samples)
             print(f"{family} {1000 + k}: creep_ok {row['creep_ok']} (batch {row['batch_creep_ok']}) weights_ok "
-                  f"{row['weights_ok']} werr {row['weight_err_over_max']} b {row['b_rel_err']} "
+                  f"{row['weights_ok']} (or 2 sigma {row.get('weights_ok_or_2sigma')}, z {row.get('weight_z_max')}) "
+                  f"werr {row['weight_err_over_max']} b {row['b_rel_err']} "
                   f"(batch {row['batch_b_rel_err']})", flush=True)
             rows.append(row)
             if args.out_partial:
@@ -227,7 +293,7 @@ def _plants_doc(args, rows: list[dict]) -> dict:
         return sum(1 for r in sel if r[key]) / len(sel) if sel else None
 
     fams = sorted({r["family"] for r in rows})
-    passes = ("creep_ok", "weights_ok", "weights_ok_grouped", "alpha_ok", "b_ok", "a1_ok", "a2_ok",
+    passes = ("creep_ok", "weights_ok", "weights_ok_or_2sigma", "determined_weights_ok", "weights_ok_grouped", "alpha_ok", "b_ok", "a1_ok", "a2_ok",
               "batch_creep_ok", "batch_alpha_ok", "batch_b_ok", "batch_a1_ok", "batch_a2_ok")
     summary = {f: {"records": sum(r["family"] == f for r in rows),
                    **{key: frac([r for r in rows if r["family"] == f], key) for key in passes},
@@ -236,12 +302,55 @@ def _plants_doc(args, rows: list[dict]) -> dict:
                    **{key: dist([r[key] for r in rows if r["family"] == f and r.get(key) is not None])
                       for key in ("alpha_rel_err", "b_rel_err", "batch_alpha_rel_err", "batch_b_rel_err",
                                   "b_over_same", "slope_first_over_same", "slope_full_over_same")},
+                   **{key: dist([r[key] for r in rows if r["family"] == f and r.get(key) is not None])
+                      for key in ("weight_z_max", "weight_std_over_max", "weight_within_5pct_frac",
+                                  "weight_within_5pct_or_2sigma_frac")},
+                   "undetermined_weights_per_record": dist([len(r["undetermined_weights"]) for r in rows
+                                                            if r["family"] == f and "undetermined_weights" in r]),
                    "weight_err_over_max": dist([r["weight_err_over_max"] for r in rows
                                                 if r["family"] == f and r["weight_err_over_max"] is not None])}
                for f in fams}
     summary["all"] = {"records": len(rows), **{key: frac(rows, key) for key in passes}}
     return {"mode": "plants", "samples": args.samples, "tolerances": TOLERANCES, "weight_tolerance": WEIGHT_TOLERANCE,
             "summary": summary, "records": rows}
+
+
+def scatter(args) -> dict:
+    """Is the online ``w_std`` the weights' spread? Per record, ``--realisations`` noise draws on the same clean
+    output (the record's noise level), each fed to a fresh estimator: each weight's sample standard deviation over
+    the mean reported 1-sigma (``spread_over_std``; six draws put it within a factor ~1.9 of 1 at 2 sigma when the
+    figure is right), and how many events and re-searches each draw took (a different path is a spread no local
+    figure holds)."""
+    from creep_online.online import OnlineEstimator
+    from hil_sim.hysteresis_plants import hysteresis_record
+    rows = []
+    for k in range(args.records):
+        for family in args.families.split(","):
+            rec = hysteresis_record(family, 2000 + k, n=args.samples)
+            w, std, paths = [], [], []
+            for j in range(args.realisations):
+                y = rec.y_clean + rec.noise_std * np.random.default_rng(j).standard_normal(rec.y.size)
+                est = OnlineEstimator(float(rec.t[1] - rec.t[0]), effects=("hysteresis",))
+                est.update_block(rec.u, y)
+                loop = est.estimate.hysteresis
+                if loop is None:
+                    continue
+                w.append(loop["w"])
+                std.append([math.nan if v is None else v for v in loop["w_std"]])
+                paths.append((len(est.estimate.events), len(est.estimate.researches)))
+            ratio = np.std(w, axis=0, ddof=1) / np.nanmean(std, axis=0)
+            rows.append({"family": family, "seed": 2000 + k, "spread_over_std": ratio.tolist(),
+                         "within_2_5x": float(np.mean((ratio >= 0.4) & (ratio <= 2.5))),
+                         "std_over_max": float(np.nanmean(std) / np.max(np.abs(np.mean(w, axis=0)))),
+                         "paths": sorted(set(paths)), "realisations": len(w)})
+            print(family, 2000 + k, np.round(ratio, 2), sorted(set(paths)), flush=True)
+    fams = sorted({r["family"] for r in rows})
+    summary = {f: {"records": sum(r["family"] == f for r in rows),
+                   "spread_over_std": dist([x for r in rows if r["family"] == f for x in r["spread_over_std"]]),
+                   "weights_within_2_5x": float(np.mean([r["within_2_5x"] for r in rows if r["family"] == f])),
+                   "one_path": sum(len(r["paths"]) == 1 for r in rows if r["family"] == f)} for f in fams}
+    return {"mode": "scatter", "samples": args.samples, "realisations": args.realisations, "summary": summary,
+            "records": rows}
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -256,10 +365,15 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--samples", type=int, default=60000)
     p.add_argument("--families", default="sine,triangle,random_staircase")
     p.add_argument("--out-partial", default=None, help="rewrite this file after every record")
+    p = sub.add_parser("scatter")
+    p.add_argument("--records", type=int, default=3)
+    p.add_argument("--realisations", type=int, default=6)
+    p.add_argument("--samples", type=int, default=60000)
+    p.add_argument("--families", default="sine,triangle,random_staircase")
     for q in sub.choices.values():
         q.add_argument("--out", default=None)
     args = ap.parse_args(argv)
-    doc = {"latency": latency, "real": real, "plants": plants}[args.mode](args)
+    doc = {"latency": latency, "real": real, "plants": plants, "scatter": scatter}[args.mode](args)
     suffix = "" if args.mode != "real" or args.window == 10.0 else f"_window{args.window:g}s"
     write_report(doc, args.out or results_path(f"online_hysteresis_{args.mode}{suffix}"), argv=argv)
     return doc

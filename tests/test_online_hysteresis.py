@@ -206,6 +206,46 @@ def test_the_online_weights_match_the_batch_least_squares_on_a_hammerstein_plant
     assert e.quality != "degraded"
 
 
+def test_the_batch_weights_1_sigma_is_their_spread_over_noise_realisations():
+    """``solve_pi_weights``' ``w_std`` against its own spread over 300 noise draws on one design (the creep model's
+    responses to u and the plays of a triangle; no slope bound binds): within 20 % for each weight (a sample
+    standard deviation of 300 draws is within ~8 % of the true one at 2 sigma)."""
+    h, t, u, y, model, r, w, noise = _hammerstein(12, seconds=4.0)
+    noise *= 30.0                                        # (the weights' spread well above the prior's pull)
+    clean = simulate(model, t, hysteresis_input(u, r, w))
+    cols = np.vstack([simulate(model, t, u)] + [simulate(model, t, p) for p in play_operators(u, r)] +
+                     [np.ones(t.size)]).T
+    q, rr = np.linalg.qr(cols)                           # (one factor: each draw is a 10 x 10 solve)
+    rng = np.random.default_rng(5)
+    draws, reported = [], None
+    for _ in range(300):
+        wy = q.T @ (clean + noise * rng.standard_normal(t.size))
+        x, found = solve_pi_weights(rr, wy, 0, np.arange(1, 9), np.ones(8, bool), model.b, noise ** 2)
+        draws.append(x[1:9] / x[0])
+        reported = found["w_std"] if reported is None else reported
+    spread = np.std(draws, axis=0, ddof=1)
+    assert np.all(np.abs(spread / reported - 1.0) <= 0.2), (spread, reported)
+
+
+@pytest.mark.parametrize("seed", [11, 13])
+def test_the_online_weights_1_sigma_is_their_spread_over_noise_realisations(seed):
+    """The estimate's ``w_std`` (the window re-fit's covariance) against the spread of its weights over six noise
+    realisations of one Hammerstein plant (``_hammerstein``, noise 0.3 % of the output's range): within a factor 2.5
+    either way for every weight (six draws give a spread within a factor ~1.9 of the true one at 2 sigma)."""
+    h, t, u, y, model, r, w, noise = _hammerstein(seed, seconds=8.0)
+    clean = simulate(model, t, hysteresis_input(u, r, w))
+    weights, std = [], []
+    for k in range(6):
+        est = OnlineEstimator(h, effects=("hysteresis",))
+        est.update_block(u, clean + 30.0 * noise * np.random.default_rng(k).standard_normal(t.size))
+        loop = est.estimate.hysteresis
+        assert len(loop["w_std"]) == len(loop["w"])
+        weights.append(loop["w"])
+        std.append([math.nan if v is None else v for v in loop["w_std"]])
+    ratio = np.std(weights, axis=0, ddof=1) / np.nanmean(std, axis=0)
+    assert np.all((ratio >= 0.4) & (ratio <= 2.5)), ratio
+
+
 def _resting_on_a_branch(seed: int, initial: str, rest_s: float = 2.0, seconds: float = 10.0, fs: float = 5000.0):
     """The plant of ``_hammerstein`` resting on the branch ``initial`` (its plays at u - r or u + r since long
     before the record) for ``rest_s``, then a 1 Hz triangle from the rest level up: the record is the deviation

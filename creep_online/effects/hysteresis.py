@@ -271,8 +271,36 @@ def solve_pi_weights(a: np.ndarray, wy: np.ndarray, gain: int, cols: np.ndarray,
     x[live] = bw[1:]
     x[others] = z[k:]
     penalty = prior @ z[:k]
+    std = np.full(len(cols), np.nan)
+    std[np.asarray(opened, dtype=bool)] = _weight_std(a, gain, live, others, x, noise_var,
+                                                      noise_var / (WEIGHT_SCALE * scale_b) ** 2)
     return x, {"determined": _determined(a, gain, live, others, noise_var / (WEIGHT_SCALE * scale_b) ** 2),
-               "penalty": float(penalty @ penalty)}
+               "penalty": float(penalty @ penalty), "w_std": std}
+
+
+def _weight_std(a: np.ndarray, gain: int, live: np.ndarray, others: np.ndarray, x: np.ndarray, noise_var: float,
+                prior_var_ratio: float) -> np.ndarray:
+    """1-sigma of the opened operators' weights w_i = (b w_i) / b at the solution ``x``: the covariance
+    noise_var (A^T A + L)^-1 of b, the b w_i and the free coefficients (L: the prior on the b w_i), then the
+    delta method. The slope bounds are left out (the linearised, unconstrained spread): where a bound holds a
+    weight, its spread is smaller than this."""
+    if live.size == 0:
+        return np.empty(0)
+    idx = np.concatenate(([gain], live, others)).astype(int)
+    block = a[:, idx]
+    norms = np.linalg.norm(block, axis=0)
+    norms[norms == 0.0] = 1.0
+    info = (block / norms).T @ (block / norms)
+    info[1:live.size + 1, 1:live.size + 1] += np.diag(prior_var_ratio / norms[1:live.size + 1] ** 2)
+    try:
+        cov = np.linalg.inv(info) / np.outer(norms, norms) * noise_var
+    except np.linalg.LinAlgError:
+        return np.full(live.size, np.nan)
+    b = x[gain]
+    w = x[live] / b
+    j = np.arange(1, live.size + 1)
+    var = (cov[j, j] - 2.0 * w * cov[j, 0] + w * w * cov[0, 0]) / (b * b)
+    return np.sqrt(np.where(var >= 0.0, var, np.nan))
 
 
 def _compressed(a: np.ndarray, wy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -450,7 +478,8 @@ class Hysteresis(InputEffect):
 
     def fitted_params(self, fit: FitView) -> dict:
         """Thresholds r, weights w and the initial state (an ``effects["hysteresis"]`` dict), with what the
-        record says about them: ``opened`` (how many of the smallest thresholds the record opens; the others'
+        record says about them: ``w_std`` (each weight's 1-sigma, ``_weight_std``; None for an operator the
+        record never opens), ``opened`` (how many of the smallest thresholds the record opens; the others'
         weights are 0), ``r_opened`` (the largest of them), ``determined`` (how many weight combinations the
         data determine rather than the prior), ``flattest_branch`` (the flattest branch's slope over the mean
         branch slope, >= SLOPE_FLOOR), the loop width."""
@@ -459,7 +488,9 @@ class Hysteresis(InputEffect):
         w = np.array([fit.coef[name] for name in weight_names(r.size)]) / fit.gain
         width = loop_width(r, w, data.u_range)
         found = fit.solution.get(self.name, {})
-        return {"r": r.tolist(), "w": w.tolist(), "loop_width": width,
+        std = found.get("w_std")
+        std = None if std is None else [float(v) if np.isfinite(v) else None for v in std]
+        return {"r": r.tolist(), "w": w.tolist(), "w_std": std, "loop_width": width,
                 "loop_width_rel": width / data.u_range if data.u_range else float("nan"),
                 "initial": fit.variant or "centred", "opened": found.get("opened"), "r_opened": found.get("r_opened"),
                 "determined": found.get("determined"), "flattest_branch": flattest_branch(r, w)}

@@ -38,6 +38,7 @@ def warm_kernels() -> None:
     RF.snapshot(st, S, tr._ctx.copy(), T.MACHINE_TEST, 0, 1.0)
     wk = tr._wk.copy()
     RF.begin(st, S, shift, wk, 1, False, True, 0, True)
+    RF.weight_variances(wk, tr.p, tr.theta.size, 5 + tr.n_free, tr.hyst_var.copy())
     RF.run(st, S, shift, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)
     RF.accept(st, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)
     RF.test_outcome(wk, tr.theta)

@@ -834,6 +834,22 @@ def test_outcome(wk: np.ndarray, live: np.ndarray) -> tuple:
             var[1], var[2], var[3], int(wk[RF_SINCE_N]))
 
 
+@njit(cache=CACHE)
+def weight_variances(wk: np.ndarray, p: int, k: int, t0: int, out: np.ndarray) -> None:
+    """The variances (times sigma^2) of the hysteresis weights w_i = c_i / b of a finished re-fit (its theta from
+    t0, ``out.size`` weights) from its covariance, by the delta method: ``(var c_i - 2 w_i cov(c_i, b) + w_i^2 var b)
+    / b^2``. The covariance is the window's whole Gauss-Newton one (the prior on the weights in it): each weight's
+    variance has b, the creep and resonance parameters, the offset, the free responses and the start columns
+    profiled out. A pinned weight (0) and a covariance that failed read inf."""
+    theta, var, H, g, cov, H2, g2, F, fy, masks = _views(wk, p, k)
+    b = theta[3]
+    for i in range(out.shape[0]):
+        j = t0 + i
+        w = theta[j] / b if b != 0.0 else 0.0
+        v = (cov[j, j] - 2.0 * w * cov[j, 3] + w * w * cov[3, 3]) / (b * b) if b != 0.0 else np.inf
+        out[i] = v if theta[j] != 0.0 and math.isfinite(v) and v >= 0.0 else np.inf
+
+
 def result(wk: np.ndarray) -> tuple[list[float], list[float], list[float]]:
     """(header, theta, diagonal of the covariance) as plain floats (tests and diagnostics)."""
     k = int(wk[RF_K])

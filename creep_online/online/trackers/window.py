@@ -100,6 +100,8 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         #: loop's misfit: a false change and the resonance lost within 10 s on a plain 1 Hz triangle)
         self.n_rate = 0 if self.n_hyst else int(drift)
         self.hyst_r = np.zeros(self.n_plays)
+        #: the weights' variances (times sigma^2) at the last accepted re-fit (``fit_machine.weight_variances``)
+        self.hyst_var = np.full(self.n_plays, np.inf)
         self._hyst_span = 0.0            # the input range the thresholds are set for
         #: after a rest at the start, the first sample whose plays do not depend on their state at the stream's start
         #: (``settle_loop``): replays leave the samples before it out of the window's statistics
@@ -261,11 +263,15 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
     def hysteresis(self) -> dict | None:
         """The live loop as an ``effects["hysteresis"]`` dict (thresholds r, weights w, ``initial`` "centred"), or
         None: no hysteresis columns, no window re-fit yet, or weights not finite. (The start columns only say how
-        the stream's first samples differ from a centred start: not part of the loop.)"""
+        the stream's first samples differ from a centred start: not part of the loop.) ``w_std``: each weight's
+        1-sigma from the last re-fit's covariance (``fit_machine.weight_variances``), None where the window does
+        not determine it (a pinned operator, a covariance that failed)."""
         w = self.hysteresis_weights
         if not self.n_hyst or self.refits == 0 or not np.all(np.isfinite(w)):
             return None
-        return {"r": self.hyst_r.tolist(), "w": w.tolist(), "initial": "centred"}
+        sigma2 = WS.noise_variance(self, RF.Accepted._make(self._fit_raw[0]))
+        std = [math.sqrt(v * sigma2) if math.isfinite(v) else None for v in self.hyst_var.tolist()]
+        return {"r": self.hyst_r.tolist(), "w": w.tolist(), "initial": "centred", "w_std": std}
 
     def start_adopt(self) -> None:
         """``start``'s second half: the state of ``start_state`` becomes the live one."""
