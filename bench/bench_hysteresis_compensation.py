@@ -130,6 +130,8 @@ def one_plant(seed: int, n_calibration: int, sources: tuple = SOURCES, attribute
                                               offset=0.0)
     if "live" in sources:
         models["live"], facts["live"] = live_model(rec)
+        if models["live"] is not None:              # (as the batch fit's: the calibration record's offset is its own)
+            models["live"] = dataclasses.replace(models["live"], offset=0.0)
     if attribute:
         models.update(mixed_models(models))
     gain = float(np.linalg.lstsq(np.column_stack([rec.u, np.ones_like(rec.u)]), rec.y, rcond=None)[0][0])
