@@ -9,8 +9,9 @@ compensator takes the estimator's model according to ``mode``:
 ``adaptive``       the estimator's current model after every block, as ``online.gate.ModelGate`` gives it:
                    whenever the estimate determines alpha and b at the noise floor (``good``, or
                    ``provisional`` with only the resonance undetermined: then the last determined
-                   resonance, or a rough one), never one the estimator calls changing or degraded, nor
-                   one the compensator cannot take (``CreepCompensator.accepts``); ``gate=False``: only
+                   resonance, or a rough one), never one the estimator calls degraded or changing (unless
+                   only the resonance is contested: then alpha and b stay determined), nor one the
+                   compensator cannot take (``CreepCompensator.accepts``); ``gate=False``: only
                    ``good`` estimates, whole (the policy before the gate);
 ``frozen``         the first model the estimator calls ``good`` (after 10 s: whatever it has), never again
                    (the estimator is not fed after it);

@@ -183,6 +183,22 @@ def test_models_given_during_a_re_reading_are_taken_at_once_and_re_read_after_it
     assert comp.current_model == ExtendedModel(m4, {}, 0.2) and comp.rebasing == 0
 
 
+def test_a_compensator_pickled_while_it_re_reads_continues_alike():
+    """A checkpoint in the middle of a reading (the history ring and the second state go with it)."""
+    import pickle
+    rng = np.random.default_rng(4)
+    ref = random_reference(rng, 6000)
+    loop = random_loop(rng)
+    comp = CreepCompensator(H, ExtendedModel(BASE, {"hysteresis": loop}))
+    comp.command_block(ref[:3000])
+    comp.set_model(ExtendedModel(CreepModel(0.12, BASE.a1, BASE.a2, 1.1), {"hysteresis": loop}))
+    comp.command_block(ref[3000:3100])
+    twin = pickle.loads(pickle.dumps(comp))
+    assert 0 < twin.rebasing == comp.rebasing
+    np.testing.assert_array_equal(twin.command_block(ref[3100:]), comp.command_block(ref[3100:]))
+    assert comp.rebasing == 0
+
+
 def test_a_loop_it_cannot_invert_is_refused_and_changes_nothing():
     rng = np.random.default_rng(7)
     ref = random_reference(rng, 4000)
