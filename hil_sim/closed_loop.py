@@ -18,7 +18,7 @@ compensator takes the estimator's model according to ``mode``:
 ``known``          the true initial model from the start (no estimator needed);
 ``oracle``         the true current parameters (alpha, b per sample) at every block: the limit of a
                    compensator that inverts the frozen-time plant (no estimator needed; each model taken at once,
-                   ``CreepCompensator(rebase=False)``: the plant's past commands were right for the plant of their
+                   ``CreepCompensator(rebase="never")``: the plant's past commands were right for the plant of their
                    time, so there is nothing to re-read);
 ``uncompensated``  u = r / g with g the plant's static gain 1 s after a step (b / Gamma(1 + alpha));
 ``creep_only``     as ``adaptive``, the estimate's hysteresis loop left out (what inverting the loop adds).
@@ -82,8 +82,8 @@ def run_closed_loop(t: np.ndarray, r: np.ndarray, plant: CreepModel, mode: str, 
     stage = None if hysteresis is None else PlayStage(hysteresis)
     scale = np.ones(n) if loop_scale is None else np.asarray(loop_scale, dtype=float)
     comp = compensator or CreepCompensator(h)
-    if mode == "oracle" and comp.rebase:
-        comp = CreepCompensator(**{**comp.get_params(deep=False), "rebase": False})
+    if mode == "oracle" and comp.rebase != "never":
+        comp = CreepCompensator(**{**comp.get_params(deep=False), "rebase": "never"})
     if mode == "known":
         comp.set_model(plant if hysteresis is None else ExtendedModel(plant, {"hysteresis": hysteresis}))
     gain = plant.b / math.gamma(1.0 + plant.alpha)

@@ -1,5 +1,5 @@
 """CreepCompensator fed the live hysteresis loop: a new model re-reads the commands the plant received; taken at
-once (``rebase=False``), new weights keep the operators' memory and new thresholds restart them; an uninvertible
+once (``rebase="never"``), new weights keep the operators' memory and new thresholds restart them; an uninvertible
 loop is refused; ``ModelGate`` carries the estimate's loop; the compensated open loop on an
 exactly simulated plant with the online estimate.
 
@@ -70,7 +70,7 @@ def test_new_weights_keep_the_operators_memory(seed):
     loop1 = random_loop(rng)
     loop2 = {**loop1, "w": (np.array(loop1["w"]) * rng.uniform(0.7, 1.3, 5)).tolist()}
     k0 = int(rng.integers(3000, 9000))
-    comp = CreepCompensator(H, ExtendedModel(BASE, {"hysteresis": loop1}), rebase=False)
+    comp = CreepCompensator(H, ExtendedModel(BASE, {"hysteresis": loop1}), rebase="never")
     u1 = comp.command_block(ref[:k0])
     comp.set_model(ExtendedModel(BASE, {"hysteresis": loop2}))
     u = np.concatenate([u1, [comp.command(x) for x in ref[k0:k0 + 50]], comp.command_block(ref[k0 + 50:])])
@@ -90,7 +90,7 @@ def test_re_centred_operators_would_miss_the_plant():
     v = creep_inverse(ref)
 
     def miss(carry: bool) -> float:
-        comp = CreepCompensator(H, ExtendedModel(BASE, {"hysteresis": loop1}), rebase=False)
+        comp = CreepCompensator(H, ExtendedModel(BASE, {"hysteresis": loop1}), rebase="never")
         u1 = comp.command_block(ref[:4000])
         if not carry:
             comp.set_model(BASE)
@@ -109,7 +109,7 @@ def test_new_thresholds_restart_the_loop_centred(seed):
     rng = np.random.default_rng(100 + seed)
     ref = random_reference(rng, 10_000)
     loop1, loop2 = random_loop(rng), random_loop(rng)
-    comp = CreepCompensator(H, ExtendedModel(BASE, {"hysteresis": loop1}), rebase=False)
+    comp = CreepCompensator(H, ExtendedModel(BASE, {"hysteresis": loop1}), rebase="never")
     u1 = comp.command_block(ref[:5000])
     comp.set_model(ExtendedModel(BASE, {"hysteresis": loop2}))
     u2 = comp.command_block(ref[5000:])
@@ -121,11 +121,11 @@ def test_new_thresholds_restart_the_loop_centred(seed):
 @pytest.mark.parametrize("seed", range(8))
 def test_a_new_model_re_reads_the_commands_the_plant_received(seed):
     """A running compensator given another model (alpha, gain, resonance and loop weights each 15-30 % off; odd
-    seeds: other thresholds too) takes it at once and re-reads the commands delivered with it: once the reading
-    replaces the states, the new model as the plant, simulated exactly on every command delivered from the first,
-    follows the shaped reference as closely as with a compensator that always had it (the SOE's and the
-    sampling's accuracy), whatever the old model commanded. On the reference's history alone (``rebase=False``)
-    the same plant misses by the old model's past error, which its creep keeps."""
+    seeds: other thresholds too) keeps commanding with the old one while the new one re-reads the commands
+    delivered, then takes over: from then on the new model as the plant, simulated exactly on every command
+    delivered from the first, follows the shaped reference as closely as with a compensator that always had it
+    (the SOE's and the sampling's accuracy), whatever the old model commanded. Taken at once on the reference's
+    history (``rebase="never"``) the same plant misses by the old model's past error, which its creep keeps."""
     rng = np.random.default_rng(200 + seed)
     ref = random_reference(rng, 25_000)
     loop1 = random_loop(rng)
@@ -137,17 +137,18 @@ def test_a_new_model_re_reads_the_commands_the_plant_received(seed):
     k0 = 8000
     t = np.arange(ref.size) * H
 
-    def run(rebase: bool | None) -> tuple[np.ndarray, int]:
+    def run(rebase: str | None) -> tuple[np.ndarray, int]:
         """|output - shaped reference| / the output's span from the take-over on (None: m2 from the start)."""
-        comp = CreepCompensator(H, m1 if rebase is not None else m2, bandwidth_hz=250.0, rebase=bool(rebase))
+        comp = CreepCompensator(H, m1 if rebase is not None else m2, bandwidth_hz=250.0, rebase=rebase or "never")
         u = list(comp.command_block(ref[:k0]))
         comp.set_model(m2)
-        assert comp.current_model == m2 and (comp.rebasing == k0) == bool(rebase)
+        rereads = rebase == "loop"
+        assert (comp.current_model == m1) == rereads and (comp.rebasing == k0) == rereads
         shaped, took = np.full(ref.size, np.nan), None
         for k in range(k0, ref.size):
             u.append(comp.command(ref[k]))
             shaped[k] = comp.shaped_reference
-            if took is None and comp.rebasing == 0:
+            if took is None and comp.current_model == m2:
                 took = k
         assert comp.rebasing == 0 and comp.model_changes == (1 if rebase is not None else 0)
         y = simulate_with_effects(base2, t, np.array(u), {"hysteresis": loop2})
@@ -156,29 +157,37 @@ def test_a_new_model_re_reads_the_commands_the_plant_received(seed):
     def rms(e: np.ndarray) -> float:
         return float(np.sqrt(np.mean(e ** 2)))
 
-    miss, took = run(True)
+    miss, took = run("loop")
     assert k0 < took < k0 + k0 / 10                     # (the history re-read REPLAY_CHUNK - 1 samples per sample)
     always = run(None)[0][took - k0:]
     # measured on these seeds: 0.8-1.07x the rms of the compensator that always had the new model (the SOE's and
     # the sampling's accuracy), the reference's history alone 4-43x the re-read one
     assert rms(miss) < 1.5 * rms(always) and np.max(miss[1000:]) < 1.5 * np.max(always[1000:])
-    assert rms(run(False)[0]) > 3 * rms(miss)
+    assert rms(run("never")[0]) > 3 * rms(miss)
 
 
-def test_models_given_during_a_re_reading_are_taken_at_once_and_re_read_after_it():
-    """Models given while one is re-read: each in force at once; the reading under way finishes, then one more
-    re-reads the model in force then (the ones between are never re-read); an offset alone re-reads nothing."""
-    comp = CreepCompensator(H, BASE)
+@pytest.mark.parametrize("rebase", ["always", "loop"])
+def test_a_newer_model_waits_for_the_re_reading_under_way(rebase):
+    """Models given while one re-reads the history: the newest is taken after it (the ones between never), the one
+    in force again cancels both; the offset alone changes at once. Plain creep models re-read under "always"
+    only (the default, "loop", takes them at once)."""
+    comp = CreepCompensator(H, BASE, rebase=rebase)
     comp.command_block(random_reference(np.random.default_rng(0), 2000))
     m2, m3, m4 = (CreepModel(BASE.alpha * f, BASE.a1, BASE.a2, BASE.b * f) for f in (1.1, 1.2, 1.3))
     comp.set_model(m2).set_model(m3).set_model(m4)
-    assert comp.current_model == m4 and comp.model_changes == 3 and comp.rebasing == 2000
-    readings, last = 1, comp.rebasing
+    if rebase == "loop":
+        assert comp.current_model == m4 and comp.rebasing == 0 and comp.model_changes == 3
+        return
+    assert comp.current_model == BASE and comp.rebasing == 2000
+    while comp.current_model == BASE:
+        comp.command(3.0)
+    assert comp.current_model == m2 and comp.rebasing > 0
     while comp.rebasing:
         comp.command(3.0)
-        readings += comp.rebasing > last
-        last = comp.rebasing
-    assert readings == 2 and comp.current_model == m4
+    assert comp.current_model == m4 and comp.model_changes == 2
+    comp.set_model(m2)
+    comp.set_model(m4)                                  # (the model in force: the re-reading is dropped)
+    assert comp.rebasing == 0 and comp.current_model == m4
     comp.set_model(ExtendedModel(m4, {}, 0.2))
     assert comp.current_model == ExtendedModel(m4, {}, 0.2) and comp.rebasing == 0
 
