@@ -7,6 +7,8 @@ References: the forward Prandtl-Ishlinskii operator (``effects.hysteresis.hyster
 compensator's commands must give back the creep inverse's output v (the commands of the same compensator without
 the loop: its states follow the reference only), sample by sample; the plant is ``simulate_with_effects``.
 """
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -246,6 +248,14 @@ def test_gate_gives_the_live_loop_with_the_creep_part_of_the_same_estimate():
     gate = ModelGate()
     gate.model(estimate(0.0, loop1))
     assert gate.model(estimate(DWELL_S + 0.01, {**loop1, "w": [0.2, -1.5, 0.1, 0.1, 0.1]})) is None
+    # the window's offset goes with the model when the window determines it to within its noise level
+    gate = ModelGate()
+    gate.model(estimate(0.0, loop1))
+    known = dataclasses.replace(estimate(DWELL_S + 0.01, loop1), offset=0.3, noise_rms=0.01,
+                                uncertainty={"offset": 0.002})
+    assert gate.model(known).offset == 0.3
+    assert gate.model(dataclasses.replace(known, uncertainty={"offset": 0.05})) is None     # a fit in transit
+    assert gate.model(dataclasses.replace(known, uncertainty={})) is None                   # (not known)
     # without a loop in the estimate the gate is the creep gate (a CreepModel or None)
     plain = ModelGate()
     plain.model(estimate(0.0, None))
