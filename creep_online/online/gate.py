@@ -32,10 +32,7 @@ gives nothing. The model with a loop also carries the estimate's output ``offset
 frequency, one amplitude) the creep of the scan's mean level (how far alpha and b carry the history) is set by that
 offset as much as by alpha and b, which move with the loop's width there. The compensator inverts the model the window
 fitted, offset included (``CreepCompensator`` subtracts it from the reference); without it, on a scanning plant whose
-loop drifts, the live model's mean level missed by up to 11 % of the stroke. An estimate whose offset the window
-does not determine to within its noise level (``uncertainty["offset"]`` above ``noise_rms``: the offset trading
-with the free responses or the loop's start, a fit in transit) gives nothing: an offset off by the stroke was
-taken otherwise, and the pair is the model, as with the loop.
+loop drifts, the live model's mean level missed by up to 11 % of the stroke.
 
 The estimator's ``quality`` is not touched: it still says ``provisional`` and why.
 """
@@ -78,7 +75,7 @@ class ModelGate(StoredParams):
         loop = getattr(estimate, "hysteresis", None)
         if creep is None or loop is None:
             return creep
-        if not _invertible(loop) or not _offset_determined(estimate):
+        if not _invertible(loop):
             return None
         offset = getattr(estimate, "offset", None)
         return ExtendedModel(creep, {"hysteresis": loop}, float(offset) if offset is not None else 0.0)
@@ -119,15 +116,6 @@ def _relative_std(estimate, name: str) -> float:
     value = abs(float(getattr(estimate, name)))
     std = float(estimate.uncertainty.get(name, math.inf))
     return std / value if value > 0 else math.inf
-
-
-def _offset_determined(estimate) -> bool:
-    """Is the estimate's offset known to within its noise level (1-sigma below ``noise_rms``)?"""
-    std = getattr(estimate, "uncertainty", {}).get("offset")
-    noise = getattr(estimate, "noise_rms", None)
-    if std is None or noise is None:
-        return getattr(estimate, "offset", None) is None       # (no offset: nothing to determine)
-    return std <= noise
 
 
 def _invertible(loop: dict) -> bool:

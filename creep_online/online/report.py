@@ -123,7 +123,7 @@ def build_estimate(est: "OnlineEstimator") -> OnlineEstimate:
     fit = tr.fit
     a1, a2 = _known(tr.a1), _known(tr.a2)
     wn = 1.0 / math.sqrt(a2) if a2 is not None and a2 > 0.0 else None
-    std = {k: _finite(fit.std[k], math.inf) for k in ("alpha", "a1", "a2", "b", "offset") if k in fit.std}
+    std = {k: _finite(fit.std[k], math.inf) for k in ("alpha", "a1", "a2", "b") if k in fit.std}
     rate_std = {k: _finite(fit.std[k], math.inf) for k in ("b_rate", "alpha_rate") if tr.drift_on and k in fit.std}
     return OnlineEstimate(
         alpha=_known(tr.alpha), a1=a1, a2=a2, b=_known(tr.b), phase=est._phase,
