@@ -9,21 +9,25 @@ compensator takes the estimator's model according to ``mode``:
 ``adaptive``       the estimator's current model after every block, as ``online.gate.ModelGate`` gives it:
                    whenever the estimate determines alpha and b at the noise floor (``good``, or
                    ``provisional`` with only the resonance undetermined: then the last determined
-                   resonance, or a rough one), never one the estimator calls changing or degraded, nor
-                   one the compensator cannot take (``CreepCompensator.accepts``); ``gate=False``: only
+                   resonance, or a rough one), never one the estimator calls degraded or changing (unless
+                   only the resonance is contested: then alpha and b stay determined), nor one the
+                   compensator cannot take (``CreepCompensator.accepts``); ``gate=False``: only
                    ``good`` estimates, whole (the policy before the gate);
 ``frozen``         the first model the estimator calls ``good`` (after 10 s: whatever it has), never again
                    (the estimator is not fed after it);
 ``known``          the true initial model from the start (no estimator needed);
 ``oracle``         the true current parameters (alpha, b per sample) at every block: the limit of a
-                   compensator that inverts the frozen-time plant (no estimator needed);
+                   compensator that inverts the frozen-time plant (no estimator needed; each model taken at once,
+                   ``CreepCompensator(rebase="never")``: the plant's past commands were right for the plant of their
+                   time, so there is nothing to re-read);
 ``uncompensated``  u = r / g with g the plant's static gain 1 s after a step (b / Gamma(1 + alpha));
 ``creep_only``     as ``adaptive``, the estimate's hysteresis loop left out (what inverting the loop adds).
 
 A plant with hysteresis (``hysteresis``: a Prandtl-Ishlinskii loop, ``play_stage.PlayStage``, before the creep
 plant; ``loop_scale`` per sample makes its width drift) is identified with ``OnlineEstimator(dt,
-effects=("hysteresis",))``: the gate then gives the creep part with the live loop (``ModelGate``), which the
-compensator inverts. ``known`` inverts the true initial loop, ``oracle`` the true current one (its weights
+effects=("hysteresis",))``: the gate then gives the creep part with the live loop and the window's offset
+(``ModelGate``), which the compensator inverts, each new model after it has re-read the commands the plant received
+(``CreepCompensator``'s ``rebase``). ``known`` inverts the true initial loop, ``oracle`` the true current one (its weights
 times ``loop_scale`` at each block); ``frozen`` keeps the gate's model in force at
 ``FROZEN_WAIT_S`` (the loop learnt at the start, never updated).
 
@@ -56,7 +60,7 @@ class LoopRecord:
     u: np.ndarray
     y_clean: np.ndarray
     y: np.ndarray
-    model_t: list          # times at which the compensator's model changed
+    model_t: list          # times (block ends) at which the compensator's model in force changed
     models: list           # the models it took (CreepModel, or ExtendedModel with the live loop)
 
 
@@ -78,6 +82,8 @@ def run_closed_loop(t: np.ndarray, r: np.ndarray, plant: CreepModel, mode: str, 
     stage = None if hysteresis is None else PlayStage(hysteresis)
     scale = np.ones(n) if loop_scale is None else np.asarray(loop_scale, dtype=float)
     comp = compensator or CreepCompensator(h)
+    if mode == "oracle" and comp.rebase != "never":
+        comp = CreepCompensator(**{**comp.get_params(deep=False), "rebase": "never"})
     if mode == "known":
         comp.set_model(plant if hysteresis is None else ExtendedModel(plant, {"hysteresis": hysteresis}))
     gain = plant.b / math.gamma(1.0 + plant.alpha)
@@ -95,6 +101,10 @@ def run_closed_loop(t: np.ndarray, r: np.ndarray, plant: CreepModel, mode: str, 
         v = u if stage is None else stage.step_block(u, scale[k0:k1])
         yc = stream.step_block(v, alpha[k0:k1], b[k0:k1])
         u_all[k0:k1], y_clean[k0:k1] = u, yc
+        if mode not in ("known", "oracle") and comp.current_model is not None and \
+                (not models or comp.current_model is not models[-1]):
+            model_t.append(float(t[k1 - 1]))      # (the model in force from the next block)
+            models.append(comp.current_model)
         if estimator is None or mode in ("known", "oracle", "uncompensated") or frozen:
             continue                 # (frozen: the estimator's later models are never used: not fed)
         estimator.update_block(u, yc + noise * rng.standard_normal(k1 - k0))
@@ -103,9 +113,7 @@ def run_closed_loop(t: np.ndarray, r: np.ndarray, plant: CreepModel, mode: str, 
             m = m.base
         if m is not None and m != comp.current_model:
             if comp.accepts(m):
-                comp.set_model(m)
-                model_t.append(float(t[k1 - 1]))
-                models.append(m)
+                comp.set_model(m)    # (in force at once, or after re-reading the history: recorded then)
             else:
                 m = None             # a model the compensator cannot take: the last one is held
         if mode == "frozen":

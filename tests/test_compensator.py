@@ -109,12 +109,12 @@ def test_step_command_matches_the_closed_form_tail():
 
 
 def test_set_model_is_the_inverse_of_the_new_model_for_the_whole_history():
-    """The states do not depend on alpha, a1, a2: switching gives the command of a compensator that always
-    had the new model. A new gain scales the states (the plant's output of the past commands scales)."""
+    """Taken at once (``rebase="never"``; a plain creep model under the default too): the states do not depend on alpha, a1, a2, so switching gives the command
+    of a compensator that always had the new model. A new gain scales the states (the plant's output of the past commands scales)."""
     t = np.arange(5000) * H
     r = np.where(t > 0.05, 1.0, 0.0) + np.where(t > 0.3, -0.4, 0.0)
     other = CreepModel.from_resonance(0.2, 400.0, 0.1, DEMO.b)
-    a = CreepCompensator(H, DEMO, bandwidth_hz=200.0)
+    a = CreepCompensator(H, DEMO, bandwidth_hz=200.0, rebase="never")
     a.command_block(r[:3000])
     a.set_model(other)
     b = CreepCompensator(H, other, bandwidth_hz=200.0)

@@ -63,6 +63,18 @@ CASES = [
      "good", "", ["alpha", "b", "a1", "a2"]),
     ("the change test disagrees", _view(_tracker(disagreement={"t": NOW - 1.0, "moves": {"b": 0.1}, "lr": 30.0})),
      "changing", "the last second disagrees", []),
+    ("the change test disagrees on the resonance alone", _view(_tracker(disagreement={
+        "t": NOW - 1.0, "moves": {"a1": 0.5, "a2": 0.3}, "lr": 30.0})), "changing", "the last second disagrees",
+     ["alpha", "b"]),
+    ("... the creep part not determined", _view(_tracker(disagreement={"t": NOW - 1.0, "moves": {"a1": 0.5}, "lr": 30.0},
+                                                         std={"alpha": 2e-4, "b": 0.5, "a1": 1e-4, "a2": 1e-9})),
+     "changing", "the last second disagrees", ["alpha"]),
+    ("... the window missing the data", _view(_tracker(ratio=2.5, disagreement={
+        "t": NOW - 1.0, "moves": {"a1": 0.5}, "lr": 30.0})), "changing", "the last second disagrees", []),
+    ("... a change just found", _view(_tracker(disagreement={"t": NOW - 1.0, "moves": {"a1": 0.5}, "lr": 30.0},
+                                               last_event={"t": NOW - 1.0, "detected_t": NOW - 0.5, "moved": ["b"],
+                                                           "settled": True})),
+     "changing", "change detected", []),
     ("no window fit yet", _view(_tracker(fit_sample=0)), "provisional", "first window fit pending", []),
     ("a re-search switched", _view(_tracker(fit_sample=0, last_research={"t": 3.0, "switched": True,
                                                                          "moved": ["a1", "a2"]})),

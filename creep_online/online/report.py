@@ -34,7 +34,8 @@ class OnlineEstimate:
     (why, the likelihood ratio, whether it switched and what moved).
     ``determined`` names the parameters the data determine now (relative
     1-sigma within ``OnlineSettings.quality.determined``), and is empty unless the window is at the
-    noise floor with no change, degradation or long constant input pending:
+    noise floor with no change, degradation or long constant input pending (a last second that disagrees on
+    the resonance alone leaves alpha and b in it, the quality ``changing``):
     ``quality`` is ``good`` exactly when it holds all four and the window's
     error is within ``good_ratio`` of the noise floor (``online/policy/quality.py``). A ``provisional``
     estimate with alpha and b in it has a trustworthy creep part and an

@@ -13,7 +13,10 @@ One pure function, ``assess``, on a read-only view of the estimator (``QualityVi
 7. the window error within ``good_ratio`` x the noise floor: ``good``; else ``provisional``.
 
 ``determined`` lists the parameters within their limits once steps 1-5 pass (empty before): a ``provisional``
-estimate with alpha and b in it has a trustworthy creep part. The thresholds are ``OnlineSettings.quality``
+estimate with alpha and b in it has a trustworthy creep part. One check contests only the resonance: a last second
+that disagrees with the window on a1 or a2 alone (``resonance_only``; on a scan far below the resonance its fit of
+the last second does not determine them). The estimate then reads ``changing`` and ``determined`` keeps alpha and b
+where they are within their limits (the model gate takes them with the last determined resonance). The thresholds are ``OnlineSettings.quality``
 (``online/settings.py``).
 
 What a compensator may take from an estimate follows from the same verdict (``model_source``; the model gate,
@@ -218,6 +221,22 @@ def checks(view: QualityView) -> tuple[str, str, float]:
     return "", "", ratio
 
 
+def resonance_only(view: QualityView, ratio: float) -> bool:
+    """Is the only failing check a disagreement of the last second on the resonance (a1, a2) alone, the window at
+    most ``floor_ratio`` x the noise floor, no change event held?"""
+    tr = view.tracker
+    dis = tr.disagreement if tr is not None else None
+    if dis is None or not dis["moves"] or not set(dis["moves"]) <= set(RESONANCE) or tr.replaying:
+        return False
+    held = tr.input_held_samples * view.dt
+    if not ratio <= view.settings.floor_ratio or tr.output_stuck or tr.fit_sample == 0 or (
+            view.window_s is not None and held > view.settings.held_windows * view.window_s):
+        return False
+    ev = tr.last_event
+    now = view.samples * view.dt - view.n_shift * view.dt
+    return ev is None or (now - ev["detected_t"] >= view.settings.change_hold_s and ev["settled"])
+
+
 def determination(view: QualityView) -> tuple[list, str]:
     """(the determined parameters, the reason the first one of the limits' order is not; "" if all are)."""
     tr = view.tracker
@@ -245,7 +264,8 @@ def assess(view: QualityView) -> Verdict:
     if view.frozen and view.tracker is not None and not view.tracker.replaying:
         return Verdict(*frozen_quality(view), [], cleared)
     if quality:
-        return Verdict(quality, reason, [], cleared)
+        creep = [p for p in determination(view)[0] if p in CREEP] if resonance_only(view, ratio) else []
+        return Verdict(quality, reason, creep, cleared)
     determined, why = determination(view)
     if why:
         return Verdict("provisional", why, determined, cleared)
