@@ -75,6 +75,9 @@ SOLVED_CACHE = 8
 BASE_PATH_CACHE = 8
 #: Parallel-effect paths remembered per record (``Prepared.parallel_path``) ...
 PARALLEL_PATH_CACHE = 16
+#: Superposers remembered per record (``Prepared.superposer``: the plain input and each input effect's variant; the
+#: two most recent always kept: a fit alternates between the plain input's and its variant's) ...
+SUPERPOSER_CACHE = 8
 #: Reported-solution rows remembered per record (``_reported_rows``: one per set of variants) ...
 REPORTED_CACHE = 4
 #: ... and at most this many bytes in each of those memories (the most recent response or solution always kept).
@@ -180,26 +183,33 @@ class Prepared:
         """Cached superposer of the input rows: u, then each input effect's rows (built on first use).
 
         ``inputs``: (input-stage effect, its variant) pairs in registry order;
-        () is the plain input.
+        () is the plain input. Remembered like the responses (``SUPERPOSER_CACHE``, ``CACHE_BYTES``): on a
+        long record one input effect's variant holds its rows and their spectra (15 MB for hysteresis' 13 rows
+        at 50,000 samples), and a fit tries its variants one after the other.
         """
         key = "+".join(f"{e.name}[{variant}]" for e, variant in inputs) or "u"
-        sup = self._cache.get(key)          # one look-up: ``release`` may empty the cache meanwhile
-        if sup is None:
+
+        def make() -> fx.Superposer:
             x = self.input_rows(inputs, self.u)
             pre = None
             if self.u_pre is not None:
                 pre = self.input_rows(inputs, np.array([self.u_pre]), before=True)[:, 0]
-            sup = self._cache[key] = fx.Superposer(self.t, x, x_pre=pre, t_pre=self.t_pre)
-        return sup
+            return fx.Superposer(self.t, x, x_pre=pre, t_pre=self.t_pre)
+        return _remembered(self._cache.setdefault("superposer", {}), key, SUPERPOSER_CACHE, make, _superposer_bytes,
+                           keep=2)
 
     def release(self) -> None:
         """Forget the remembered responses and superposers (not the exploration window): the next fit builds
         what it asks for again. Exact reuse only, so no result changes; on a long record they are most of a
         diagnosis' memory between its stages (a hysteresis variant's superposer alone is 16 MB at 50,000
-        samples), and the next stage (the pair search, on a window) does not ask for them."""
+        samples), and the next stage (the pair search, on a window) does not ask for them. The exploration
+        window's own remembered responses go too (the next stage's designs explore other parameters)."""
         with _CACHE_LOCK:
             for key in [k for k in self._cache if k != "explore"]:
                 del self._cache[key]
+        window = self._cache.get("explore")
+        if window is not None and window is not self:
+            window.release()
 
     def base_path(self, inputs: tuple[tuple[InputEffect, str | None], ...], alpha: float, a1: float, a2: float,
                   delay: float) -> np.ndarray:
@@ -301,6 +311,11 @@ def _remembered(cache: dict, key: tuple, size: int, make: Callable[[], np.ndarra
         cache[key] = value
         _evict(cache, size, nbytes, keep)
     return value
+
+
+def _superposer_bytes(sup: fx.Superposer) -> int:
+    """Memory a remembered superposer holds: its input rows' differences and (when kept) their spectra."""
+    return sup.dx.nbytes + (0 if sup.spectra is None else sup.spectra.nbytes)
 
 
 def _evict(cache: dict, size: int, nbytes: Callable[[object], int], keep: int = 1) -> None:
