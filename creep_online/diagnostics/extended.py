@@ -84,9 +84,10 @@ REPORTED_CACHE = 4
 #: The counts suit the explore window; on a long record one entry of a hysteresis fit (13 input rows, or a coupled
 #: design's tangent of 27 columns) is 5-11 MB at 50,000 samples, and eight to sixteen of each, per record and per
 #: design, held a diagnosis near 1 GB. There a fit's evaluations reuse the last one or two entries (the Jacobian
-#: at the point just evaluated); 24 MB held ~25 MB more at the 150 V piezo record's peak, for no evaluation saved.
+#: at the point just evaluated); on the 150 V piezo record 24 MB held ~25 MB more at the peak for no evaluation
+#: saved, and 12 MB ~40 MB more than 6 MB for 0.4 s of CPU (~60 responses and superposers built again in 10,000).
 #: Every remembered value is exact reuse, so the bound changes no result.
-CACHE_BYTES = 12 * 2**20
+CACHE_BYTES = 6 * 2**20
 #: Gauss-Newton steps of a coupled design's gain ratios (``Design._coupled_project``), and their relative tolerance.
 COUPLING_STEPS = 8
 COUPLING_RTOL = 1e-10
