@@ -315,8 +315,10 @@ def _remembered(cache: dict, key: tuple, size: int, make: Callable[[], np.ndarra
 
 
 def _superposer_bytes(sup: fx.Superposer) -> int:
-    """Memory a remembered superposer holds: its input rows' differences and (when kept) their spectra."""
-    return sup.dx.nbytes + (0 if sup.spectra is None else sup.spectra.nbytes)
+    """Memory a remembered superposer holds: its input rows' differences and (uniform records, when kept) their
+    spectra, or (other records) its times since each input change."""
+    held = sup.tau.nbytes if not sup.uniform else 0 if sup.spectra is None else sup.spectra.nbytes
+    return sup.dx.nbytes + held
 
 
 def _evict(cache: dict, size: int, nbytes: Callable[[object], int], keep: int = 1) -> None:
