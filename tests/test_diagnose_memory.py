@@ -69,3 +69,39 @@ def test_released_caches_are_built_again_with_the_same_values():
     data.release()
     assert set(data._cache) <= {"explore"} and data.explore_data() is window
     assert ext.Design(data, ("second_creep",)).cost(theta) == before
+
+
+def _long_record(n: int = 20_000, seed: int = 5):
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * 1e-3
+    u = np.repeat(rng.uniform(-1, 1, size=n // 250), 250)
+    y = np.cumsum(u) * 1e-3 + 0.01 * rng.normal(size=n)
+    return ext.prepare(t, u, y)
+
+
+def test_release_forgets_the_exploration_windows_responses_too():
+    data = _long_record()
+    window = data.explore_data()
+    assert window is not data
+    design = ext.Design(data, ("second_creep",))
+    theta = np.array([0.3, 1.0, -0.5, 0.6, -1.0])[:len(design.names)]
+    before = (design.cost(theta), design.explored().cost(theta))
+    assert window._cache                                          # the window's fit remembered its responses
+    data.release()
+    assert set(data._cache) <= {"explore"} and not window._cache and data.explore_data() is window
+    again = ext.Design(data, ("second_creep",))
+    assert (again.cost(theta), again.explored().cost(theta)) == before
+
+
+def test_large_superposers_are_remembered_two_at_a_time_with_the_same_columns(monkeypatch):
+    """Beyond CACHE_BYTES only the two most recent superposers stay (the plain input's and a variant's); one
+    asked for again is built again, giving the same columns."""
+    data = _long_record()
+    monkeypatch.setattr(ext, "CACHE_BYTES", 1)                    # every superposer counts as large
+    hyst = ext.get_effect("hysteresis")
+    keys = [(), ((hyst, "centred"),), ((hyst, "ascending"),)]
+    step = 1.0 - np.exp(-np.arange(data.n) * data.h / 0.05)
+    first = [data.superposer(k).apply(step) for k in keys]
+    assert len(data._cache["superposer"]) == 2 and "u" not in data._cache["superposer"]
+    again = [data.superposer(k).apply(step) for k in keys]
+    assert all(np.array_equal(a, b) for a, b in zip(first, again))

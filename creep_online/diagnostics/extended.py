@@ -75,15 +75,19 @@ SOLVED_CACHE = 8
 BASE_PATH_CACHE = 8
 #: Parallel-effect paths remembered per record (``Prepared.parallel_path``) ...
 PARALLEL_PATH_CACHE = 16
+#: Superposers remembered per record (``Prepared.superposer``: the plain input and each input effect's variant; the
+#: two most recent always kept: a fit alternates between the plain input's and its variant's) ...
+SUPERPOSER_CACHE = 8
 #: Reported-solution rows remembered per record (``_reported_rows``: one per set of variants) ...
 REPORTED_CACHE = 4
 #: ... and at most this many bytes in each of those memories (the most recent response or solution always kept).
 #: The counts suit the explore window; on a long record one entry of a hysteresis fit (13 input rows, or a coupled
 #: design's tangent of 27 columns) is 5-11 MB at 50,000 samples, and eight to sixteen of each, per record and per
 #: design, held a diagnosis near 1 GB. There a fit's evaluations reuse the last one or two entries (the Jacobian
-#: at the point just evaluated); 24 MB held ~25 MB more at the 150 V piezo record's peak, for no evaluation saved.
+#: at the point just evaluated); on the 150 V piezo record 24 MB held ~25 MB more at the peak for no evaluation
+#: saved, and 12 MB ~40 MB more than 6 MB for 0.4 s of CPU (~60 responses and superposers built again in 10,000).
 #: Every remembered value is exact reuse, so the bound changes no result.
-CACHE_BYTES = 12 * 2**20
+CACHE_BYTES = 6 * 2**20
 #: Gauss-Newton steps of a coupled design's gain ratios (``Design._coupled_project``), and their relative tolerance.
 COUPLING_STEPS = 8
 COUPLING_RTOL = 1e-10
@@ -180,26 +184,33 @@ class Prepared:
         """Cached superposer of the input rows: u, then each input effect's rows (built on first use).
 
         ``inputs``: (input-stage effect, its variant) pairs in registry order;
-        () is the plain input.
+        () is the plain input. Remembered like the responses (``SUPERPOSER_CACHE``, ``CACHE_BYTES``): on a
+        long record one input effect's variant holds its rows and their spectra (15 MB for hysteresis' 13 rows
+        at 50,000 samples), and a fit tries its variants one after the other.
         """
         key = "+".join(f"{e.name}[{variant}]" for e, variant in inputs) or "u"
-        sup = self._cache.get(key)          # one look-up: ``release`` may empty the cache meanwhile
-        if sup is None:
+
+        def make() -> fx.Superposer:
             x = self.input_rows(inputs, self.u)
             pre = None
             if self.u_pre is not None:
                 pre = self.input_rows(inputs, np.array([self.u_pre]), before=True)[:, 0]
-            sup = self._cache[key] = fx.Superposer(self.t, x, x_pre=pre, t_pre=self.t_pre)
-        return sup
+            return fx.Superposer(self.t, x, x_pre=pre, t_pre=self.t_pre)
+        return _remembered(self._cache.setdefault("superposer", {}), key, SUPERPOSER_CACHE, make, _superposer_bytes,
+                           keep=2)
 
     def release(self) -> None:
         """Forget the remembered responses and superposers (not the exploration window): the next fit builds
         what it asks for again. Exact reuse only, so no result changes; on a long record they are most of a
         diagnosis' memory between its stages (a hysteresis variant's superposer alone is 16 MB at 50,000
-        samples), and the next stage (the pair search, on a window) does not ask for them."""
+        samples), and the next stage (the pair search, on a window) does not ask for them. The exploration
+        window's own remembered responses go too (the next stage's designs explore other parameters)."""
         with _CACHE_LOCK:
             for key in [k for k in self._cache if k != "explore"]:
                 del self._cache[key]
+        window = self._cache.get("explore")
+        if window is not None and window is not self:
+            window.release()
 
     def base_path(self, inputs: tuple[tuple[InputEffect, str | None], ...], alpha: float, a1: float, a2: float,
                   delay: float) -> np.ndarray:
@@ -301,6 +312,13 @@ def _remembered(cache: dict, key: tuple, size: int, make: Callable[[], np.ndarra
         cache[key] = value
         _evict(cache, size, nbytes, keep)
     return value
+
+
+def _superposer_bytes(sup: fx.Superposer) -> int:
+    """Memory a remembered superposer holds: its input rows' differences and (uniform records, when kept) their
+    spectra, or (other records) its times since each input change."""
+    held = sup.tau.nbytes if not sup.uniform else 0 if sup.spectra is None else sup.spectra.nbytes
+    return sup.dx.nbytes + held
 
 
 def _evict(cache: dict, size: int, nbytes: Callable[[object], int], keep: int = 1) -> None:

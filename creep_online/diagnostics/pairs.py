@@ -174,6 +174,7 @@ def choose_pair(data: ext.Prepared, base: ext.ExtendedFit, singles: list[tuple[s
         best = max(with_first, key=lambda k: scores[k][0])   # no pair explains it all: keep the clearest effect
     fit = fits[best]
     if small is not data:
+        small.release()                   # the window's remembered responses: the whole record's fit asks for none
         report(f"fitting the chosen pair to the whole record: {best[0]} + {best[1]}")
         fit = ext.fit_extended(data, best, base, max_nfev=max_nfev, warm=fit, workers=workers)
     order = [s[0] for s in singles]
