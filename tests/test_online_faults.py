@@ -162,7 +162,7 @@ def test_a_fault_during_a_replay_restarts_and_follows_the_change(monkeypatch):
     """payload 4 (10 kHz, mass added at 8.5 s): replays follow the change; one of them breaks at 10 s, while the
     estimator re-converges after the change (restarted on the post-change samples, ~4 s to the truth)."""
     sc = scenarios.make("payload", 4)
-    count = _fail_at(monkeypatch, window_module, "replay", {200})
+    count = _fail_at(monkeypatch, window_module, "replay_units", {200})
     est = OnlineEstimator(sc.h)
     seen = _feed(est, sc.u, sc.y)
     assert count[0] > 200
