@@ -18,7 +18,7 @@ from creep_online.errors import ModelError
 from creep_online.model import CreepModel, ExtendedModel
 from creep_online.online import ModelGate, OnlineEstimate, OnlineEstimator
 from creep_online.online.compensator import CreepCompensator
-from creep_online.online.gate import DWELL_S
+from creep_online.online.gate import DWELL_S, OFFSET_STEP_NOISE
 from hil_sim.hysteresis_plants import hysteresis_record
 
 H = 1e-4
@@ -256,6 +256,28 @@ def test_gate_gives_the_live_loop_with_the_creep_part_of_the_same_estimate():
     plain = ModelGate()
     plain.model(estimate(0.0, None))
     assert type(plain.model(estimate(DWELL_S + 0.01, None))) is CreepModel
+
+
+def test_gate_waits_while_the_offset_of_a_model_with_a_loop_jumps():
+    """A re-fit whose offset moved by more than OFFSET_STEP_NOISE noise levels restarts the dwell (a fit in transit:
+    alpha and b determined while the offset swings by the stroke); an offset that creeps by less keeps it."""
+    loop = random_loop(np.random.default_rng(1))
+
+    def at(t: float, offset: float):
+        return dataclasses.replace(estimate(t, loop), offset=offset, noise_rms=0.01)
+
+    gate = ModelGate()
+    assert gate.model(at(0.0, 0.0)) is None
+    assert gate.model(at(0.1, 0.2)) is None                           # jumped 20 noise levels: the dwell starts over
+    assert gate.model(at(DWELL_S + 0.01, 0.21)) is None               # (0.11 s since: still dwelling)
+    m = gate.model(at(DWELL_S + 0.11, 0.22))                          # held within a noise level for the dwell
+    assert m is not None and m.offset == 0.22
+    assert gate.model(at(DWELL_S + 0.12, 0.22 + 0.9 * OFFSET_STEP_NOISE * 0.01)).offset > 0.22   # a small step: taken
+    assert gate.model(at(DWELL_S + 0.13, 2.0)) is None                # the stroke's size at once: waits
+    # without a loop the offset is not the model's: it never holds the gate
+    plain = ModelGate()
+    plain.model(dataclasses.replace(estimate(0.0, None), offset=0.0, noise_rms=0.01))
+    assert plain.model(dataclasses.replace(estimate(DWELL_S + 0.01, None), offset=5.0, noise_rms=0.01)) is not None
 
 
 # ----------------------------------------------------------------------------------------------- live estimate

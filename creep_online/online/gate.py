@@ -34,6 +34,13 @@ offset as much as by alpha and b, which move with the loop's width there. The co
 fitted, offset included (``CreepCompensator`` subtracts it from the reference); without it, on a scanning plant whose
 loop drifts, the live model's mean level missed by up to 11 % of the stroke.
 
+The offset must hold still, too: while the model has a loop, a re-fit whose offset moved by more than
+``OFFSET_STEP_NOISE`` times the output noise's level from the last estimate restarts the dwell (``DWELL_S``). A window
+whose creep, loop and offset trade along a ridge swings its offset from re-fit to re-fit (by the whole stroke on a
+staircase plant with a wide loop, alpha and b determined all the while): such a fit is in transit, and its offset,
+inverted, would move the output by as much. The mean level a scan's creep puts into the offset moves by a small
+fraction of the noise per re-fit.
+
 The estimator's ``quality`` is not touched: it still says ``provisional`` and why.
 """
 from __future__ import annotations
@@ -45,7 +52,11 @@ from ..model import CreepModel, ExtendedModel
 from .policy.quality import CREEP, DWELL_S, RESONANCE, ROUGH, model_source
 from .stored_params import StoredParams
 
-__all__ = ["ModelGate", "CREEP", "DWELL_S", "RESONANCE", "ROUGH"]
+__all__ = ["ModelGate", "CREEP", "DWELL_S", "OFFSET_STEP_NOISE", "RESONANCE", "ROUGH"]
+
+#: Largest move of the offset from one estimate to the next (times the output noise's standard deviation) that a model
+#: with a loop may make and keep its dwell (module docstring).
+OFFSET_STEP_NOISE = 5.0
 
 
 class ModelGate(StoredParams):
@@ -62,6 +73,7 @@ class ModelGate(StoredParams):
         """Forget the remembered resonance and the dwell."""
         self._resonance: tuple[float, float] | None = None
         self._since: float | None = None       # estimate time since which alpha and b are determined
+        self._offset: float | None = None      # the last estimate's offset (with a loop: ``OFFSET_STEP_NOISE``)
         self.source = ""
         return self
 
@@ -83,10 +95,11 @@ class ModelGate(StoredParams):
     def _creep_model(self, estimate) -> CreepModel | None:
         """The creep part (alpha, b and a resonance) the rule gives now, or None."""
         determined = set(getattr(estimate, "determined", ()))
+        offset_jumped = self._offset_jumped(estimate)
         if not set(CREEP) <= determined:
             self._since = None
             return None
-        if self._since is None or estimate.t < self._since:
+        if self._since is None or estimate.t < self._since or offset_jumped:
             self._since = estimate.t
         if estimate.t - self._since < DWELL_S:
             return None
@@ -101,6 +114,18 @@ class ModelGate(StoredParams):
             self._resonance = resonance
         self.source = source
         return model
+
+    def _offset_jumped(self, estimate) -> bool:
+        """Did the offset of an estimate with a loop move by more than ``OFFSET_STEP_NOISE`` noise levels since the
+        last estimate? (Remembers this one's.)"""
+        if getattr(estimate, "hysteresis", None) is None or estimate.offset is None:
+            self._offset = None
+            return False
+        offset, last = float(estimate.offset), self._offset
+        self._offset = offset
+        noise = estimate.noise_rms
+        return last is not None and noise is not None and math.isfinite(noise) and \
+            abs(offset - last) > OFFSET_STEP_NOISE * noise
 
     def _choose(self, estimate, determined: set) -> tuple[tuple[float, float] | None, str]:
         """(a1, a2) and where they came from (``policy.quality.model_source``)."""
