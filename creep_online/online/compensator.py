@@ -577,13 +577,7 @@ def carry_play_states(old: np.ndarray, new: np.ndarray) -> bool:
     o = 3
     if not np.array_equal(old[o + 3 * n:o + 4 * n], new[o + 3 * n:o + 4 * n]):
         return False
-    p = old[o + 5 * n:o + 6 * n].copy()
-    w = new[o + 4 * n:o + 5 * n]
-    s_prev = 1.0 + np.concatenate(([0.0], np.cumsum(w)[:-1]))
-    tail = np.cumsum(w[::-1] * p[::-1])[::-1]
-    new[o + 2 * n:o + 3 * n] = s_prev * p + tail
-    new[o + 5 * n:o + 6 * n] = p
-    new[o + 6 * n] = 1.0
+    _set_plays(new, old[o + 5 * n:o + 6 * n].copy())
     return True
 
 
@@ -594,8 +588,14 @@ def start_play_states(hy: np.ndarray, u0: float) -> None:
     n = int(hy[0])
     if n == 0:
         return
+    _set_plays(hy, hy[3 + 5 * n:3 + 6 * n] + u0)
+
+
+def _set_plays(hy: np.ndarray, p: np.ndarray) -> None:
+    """The packed loop ``hy``'s forward plays = p, its inverse plays from them (``carry_play_states``' relation:
+    ``S_(j-1) p_j + sum_(i >= j) w_i p_i``), marked started."""
+    n = int(hy[0])
     o = 3
-    p = hy[o + 5 * n:o + 6 * n] + u0
     w = hy[o + 4 * n:o + 5 * n]
     s_prev = 1.0 + np.concatenate(([0.0], np.cumsum(w)[:-1]))
     hy[o + 2 * n:o + 3 * n] = s_prev * p + np.cumsum(w[::-1] * p[::-1])[::-1]
