@@ -28,6 +28,15 @@ ZETA_BOUNDS = ZETA_BOX
 
 
 
+def settled_moves(before, now: list[float], move: dict) -> tuple[dict, list[str]]:
+    """A change event's relative moves of alpha, a1, a2, b (a1 and a2 from their logarithms) between the estimate
+    ``before`` it and ``now`` that it has settled, and the parameters that moved beyond their threshold in ``move``
+    (default 2 %), sorted."""
+    change = {"alpha": now[0] / before[0] - 1, "a1": math.exp(now[1] - before[1]) - 1,
+              "a2": math.exp(now[2] - before[2]) - 1, "b": now[3] / before[3] - 1}
+    return {k: float(v) for k, v in change.items()}, sorted(k for k, v in change.items() if abs(v) > move.get(k, 0.02))
+
+
 def largest_move(new: list[float], old: list[float]) -> float:
     """Largest relative move of alpha, ln a1, ln a2, b (plain floats: numpy on 4-vectors costs ~2 us)."""
     return max(abs(a - b) / max(abs(b), 1e-300) for a, b in zip(new[:4], old[:4]))

@@ -11,7 +11,7 @@ import numpy as np
 from .._kernels import fit_machine as RF
 from .._kernels import hysteresis as HK
 from .._kernels import window as W
-from .common import KEPT_SNAPSHOTS, MACHINE, MACHINE_TEST, SNAP_SLOTS
+from .common import KEPT_SNAPSHOTS, MACHINE, MACHINE_TEST, SNAP_SLOTS, settled_moves
 
 if TYPE_CHECKING:
     from .window import WindowTracker
@@ -228,15 +228,7 @@ class ChangeDetection:
         the change rule's ``move`` filled in (once) from the estimates ``settle_events`` kept."""
         for ev in tr.events:
             if "_settled_at" in ev:
-                fill_settled_moves(ev, tr.settings.change_rule.move)
+                ev["relative_change"], ev["moved"] = settled_moves(ev.pop("_settled_from"), ev.pop("_settled_at"),
+                                                                   tr.settings.change_rule.move)
         return tr.events
 
-
-def fill_settled_moves(ev: dict, move: dict) -> None:
-    """A settled event's ``relative_change`` (alpha, a1, a2, b; a1 and a2 from their logarithms) between the estimates
-    before the change and after it settled, and ``moved``: those beyond their threshold in ``move`` (default 2 %)."""
-    before, now = ev.pop("_settled_from"), ev.pop("_settled_at")
-    change = {"alpha": now[0] / before[0] - 1, "a1": math.exp(now[1] - before[1]) - 1,
-              "a2": math.exp(now[2] - before[2]) - 1, "b": now[3] / before[3] - 1}
-    ev["relative_change"] = {k: float(v) for k, v in change.items()}
-    ev["moved"] = sorted(k for k, v in change.items() if abs(v) > move.get(k, 0.02))

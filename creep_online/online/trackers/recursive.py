@@ -74,7 +74,7 @@ from .._kernels.recursive import (R_ALARMN, R_ALARMS, R_CHECKN, R_COSTK, R_COST,
 from ..checkpoint import Checkpointable
 from ..soe import SoeBasis
 from .settings import DEFAULT, TrackerSettings
-from .common import Fit, LiveMonitors, ParameterView, largest_move as _largest_move
+from .common import Fit, LiveMonitors, ParameterView, largest_move as _largest_move, settled_moves
 
 
 class RecursiveTracker(ParameterView, LiveMonitors, Checkpointable):
@@ -295,15 +295,11 @@ class RecursiveTracker(ParameterView, LiveMonitors, Checkpointable):
         ev = self.events[-1]
         now = self.theta[:4].tolist()
         if _largest_move(now, previous) < 0.002 and self.n * self.h - ev["_last_t"] > 1.0:
-            before = ev["_before"]
-            change = {"alpha": now[0] / before[0] - 1, "a1": math.exp(now[1] - before[1]) - 1,
-                      "a2": math.exp(now[2] - before[2]) - 1, "b": now[3] / before[3] - 1}
-            moved = sorted(k for k, v in change.items() if abs(v) > self.settings.recursive_change.move.get(k, 0.02))
+            relative_change, moved = settled_moves(ev["_before"], now, self.settings.recursive_change.move)
             if not moved:
                 self.events.pop()
                 return
-            ev.update(relative_change={k: float(v) for k, v in change.items()}, moved=moved, settled=True,
-                      settled_t=self.n * self.h)
+            ev.update(relative_change=relative_change, moved=moved, settled=True, settled_t=self.n * self.h)
 
 
 def warm() -> None:
