@@ -292,14 +292,14 @@ def test_replay_snapshots_equal_the_statistics_at_their_instants_and_survive_the
 
 
 def test_a_replay_unit_does_at_most_one_chunk_of_work():
-    """``_replay_unit``: a unit only advances up to 8 chunks (1/8 the work each) or accumulates ``chunk`` samples;
+    """``replay_unit``: a unit only advances up to 8 chunks (1/8 the work each) or accumulates ``chunk`` samples;
     no unit does both, the last advancing one ends at the skip, the first accumulating one adds only
     ``COLD_REPLAY_ROWS`` (cold statistics), and the units cover every sample."""
     chunk = 54
     for skip in (0, 1, 7, 135, 431, 432, 433, 5000):
         done, units = 0, []
         while done < skip + 3 * chunk:
-            n = T._replay_unit(chunk, skip - done, DEFAULT.cold_replay_rows)
+            n = W.replay_unit(chunk, skip - done, DEFAULT.cold_replay_rows)
             advanced = min(n, max(skip - done, 0))
             assert advanced in (0, n)                      # (advance or accumulate, not both)
             units.append((advanced, n - advanced))

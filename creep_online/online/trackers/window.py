@@ -50,7 +50,6 @@ from .._kernels import fit_machine as RF
 from .._kernels import hysteresis as HK
 from ..rest import REST_LEAD
 from .._kernels import window as W
-from .._kernels.window import replay_unit as _replay_unit  # noqa: F401  (re-exported: tests)
 from ..checkpoint import Checkpointable
 from ..soe import SoeBasis
 from . import workspace as WS
