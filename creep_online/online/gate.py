@@ -32,7 +32,7 @@ gives nothing. The model with a loop also carries the estimate's output ``offset
 frequency, one amplitude) the creep of the scan's mean level (how far alpha and b carry the history) is set by that
 offset as much as by alpha and b, which move with the loop's width there. The compensator inverts the model the window
 fitted, offset included (``CreepCompensator`` subtracts it from the reference); without it, on a scanning plant whose
-loop drifts, the live model's mean level missed by up to 11 % of the stroke.
+loop drifts, the live model's mean level misses by up to 11 % of the stroke.
 
 The offset must hold still, too: while the model has a loop, a re-fit whose offset moved by more than
 ``OFFSET_STEP_NOISE`` times the output noise's level from the last estimate restarts the dwell (``DWELL_S``). A window
