@@ -290,6 +290,47 @@ def test_block_mode_search_is_the_search_in_units(seed):
     assert cand_units == cand_eager and r_units == r_eager
 
 
+class _Forgetful(dict):
+    """A cost memo that keeps nothing: every point is evaluated each time the walk reaches it."""
+
+    def __setitem__(self, key, value) -> None:
+        pass
+
+
+def _evaluations(seed: int, monkeypatch) -> list[tuple]:
+    """(result, candidates, evaluations) of the block-mode search of ``_search_buffer(seed)``, with its cost memo
+    and with one that keeps nothing."""
+    basis, u, y, free, lead = _search_buffer(seed)
+    calls = [0]
+    evaluate = S.ResonanceSearch._evaluate
+
+    def counted(self, *args):
+        calls[0] += 1
+        return (yield from evaluate(self, *args))
+
+    monkeypatch.setattr(S.ResonanceSearch, "_evaluate", counted)
+    out = []
+    for memo in (True, False):
+        calls[0] = 0
+        search = S.ResonanceSearch(basis, u, y, lead=lead, free=free, alphas=(0.3,))
+        search.eager = True
+        if not memo:
+            search._costs = _Forgetful()
+        out.append((search.run(), search.candidates, calls[0]))
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_search_costs_each_point_once(seed, monkeypatch):
+    """The refinements' pattern search comes back to points it has costed; the search keeps their costs
+    (``ResonanceSearch._cost_at``): the refined candidates and the result identical (``==``) to a search that
+    evaluates every point each time, from rest and in operation, with fewer evaluations (5-28 % fewer on these
+    buffers)."""
+    (result, candidates, kept), (result_every, candidates_every, every) = _evaluations(seed, monkeypatch)
+    assert result == result_every and candidates == candidates_every
+    assert 0 < kept < every
+
+
 def _start_record(seed: int) -> tuple[float, np.ndarray, np.ndarray]:
     """A random plant under a random start: at rest or at a held non-zero level for 0-1.5 s (the start-up's idle
     buffer and its reading of the start), then a random staircase with input glitches and missing outputs, 2.5 s at
