@@ -93,6 +93,23 @@ def test_gradient_matches_finite_differences_of_the_exact_simulator(j):
     assert psi[j] == pytest.approx(fd, abs=5e-3 * scale)
 
 
+def test_linear_terms_have_unit_jacobian_rows():
+    """The RPEM step reads the linear terms' gradient off their own phi entries (``LINEAR_FROM``): their rows of the
+    Jacobian coefficients are unit vectors at ``q + ONE`` on, in a tracker taken in operation (offset and four
+    free responses) after it has adapted."""
+    from creep_online.online._kernels import recursive as RK
+    scen = scenarios.make("mid_operation", 0)
+    est = OnlineEstimator(scen.h, refit="recursive")
+    est.update_block(scen.u[:30_000], scen.y[:30_000])
+    tr = est._tracker
+    q, n = tr.basis.size, tr.CT.shape[0]
+    assert n > RK.LINEAR_FROM + 1
+    for j in range(RK.LINEAR_FROM, n):
+        unit = np.zeros(tr.CT.shape[1])
+        unit[q + W.ONE + j - RK.LINEAR_FROM] = 1.0
+        assert np.array_equal(tr.CT[j], unit)
+
+
 def test_carried_states_follow_a_moved_resonance():
     """Moving a1, a2 by 0.5 % (the refresh tolerance) mid-record, states carried on to first order, no replay.
 
