@@ -72,8 +72,9 @@ _NEVER_EAGER = property(lambda self: False, lambda self, value: None)
 # ---------------------------------------------------------------------- kernels
 @pytest.mark.parametrize("p, k", [(7, 0), (7, 1), (8, 7), (8, 8), (9, 17), (51, 64), (52, 63), (51, 3)])
 def test_flush_adds_the_rows_as_the_rank_one_updates_do(p, k):
-    """``_flush`` of k deferred rows = k calls of ``_accumulate`` (its multiply-adds in the same order), bit for bit,
-    for odd and even P and any count of rows (eight-row passes and the rest)."""
+    """``_flush`` of k deferred rows = k calls of ``_accumulate`` (its multiply-adds in the same order), bit for bit
+    on S's upper triangle (where the statistics are held), for odd and even P and any count of rows (eight-row
+    passes and the rest)."""
     rng = np.random.default_rng(p * 100 + k)
     X = rng.standard_normal((W.DEFER_ROWS, p)) * np.exp(rng.uniform(-20, 20, p))
     gx = np.exp(rng.uniform(0, 200, W.DEFER_ROWS))
@@ -85,7 +86,7 @@ def test_flush_adds_the_rows_as_the_rank_one_updates_do(p, k):
     for t in range(k):
         sc[W.SC_G] = gx[t]
         W._accumulate(0.0, X[t].copy(), direct, sy, sc)
-    assert np.array_equal(flushed, direct)
+    assert np.array_equal(np.triu(flushed), np.triu(direct))
 
 
 def _window_tracker(window_s: float | None, drift: int, free: bool) -> tuple[WindowTracker, np.ndarray, np.ndarray]:
@@ -107,10 +108,10 @@ def _window_tracker(window_s: float | None, drift: int, free: bool) -> tuple[Win
 
 @pytest.mark.parametrize("window_s, drift, free", [(None, 0, False), (1.0, 2, True), (0.01, 2, False)])
 def test_window_block_is_sample_by_sample_wherever_it_stops(window_s, drift, free):
-    """``window.block`` = ``window.sample`` per sample: state, statistics, ring and statuses bit for bit, at each
-    sample where the block stops for a job (which reads S: the deferred rows are in S by then), with missing outputs,
-    outliers, the drift and free columns, and a window short enough (10 ms at 1 kHz) that the weight is
-    renormalised inside a block."""
+    """``window.block`` = ``window.sample`` per sample: state, statistics (S's upper triangle, where they are held),
+    ring and statuses bit for bit, at each sample where the block stops for a job (which reads S: the deferred rows
+    are in S by then), with missing outputs, outliers, the drift and free columns, and a window short enough (10 ms
+    at 1 kHz) that the weight is renormalised inside a block."""
     tr, u, y = _window_tracker(window_s, drift, free)
     st, S, ring = tr.st.copy(), tr.S.copy(), tr.ring.copy()
     ref = (tr.st.copy(), tr.S.copy(), tr.ring.copy())
@@ -123,7 +124,7 @@ def test_window_block_is_sample_by_sample_wherever_it_stops(window_s, drift, fre
             for k in range(done, done + used):
                 expected[k] = W.sample(u[k], y[k], *ref)
             done += used
-            assert np.array_equal(S, ref[1]) and np.array_equal(st, ref[0], equal_nan=True)
+            assert np.array_equal(np.triu(S), np.triu(ref[1])) and np.array_equal(st, ref[0], equal_nan=True)
             if status[done - 1] >= 8:
                 break
     assert done == u.size
@@ -210,7 +211,7 @@ def test_update_block_is_the_per_sample_kernels_and_gate(record, kwargs, monkeyp
     assert _same(fast, slow)
     assert fast[-1][0] != "none" and est_fast.samples == est_slow.samples
     assert est_fast.estimate.internal_faults == 0     # (a kernel that failed to compile is a fault, recovered from)
-    assert np.array_equal(est_fast._tracker.S, est_slow._tracker.S)
+    assert np.array_equal(np.triu(est_fast._tracker.S), np.triu(est_slow._tracker.S))
     if record == "payload":
         assert est_fast.input_outliers > 0   # (the glitches went through the gate's one-by-one path)
 
