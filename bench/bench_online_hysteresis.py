@@ -6,6 +6,7 @@ Usage (from the repository root)::
     python -m bench.bench_online_hysteresis real [--window 10]
     python -m bench.bench_online_hysteresis plants [--records 20] [--families sine,triangle,random_staircase]
     python -m bench.bench_online_hysteresis scatter [--records 3] [--realisations 6]
+    python -m bench.bench_online_hysteresis attribution [--records 20] [--block 200]
 
 ``latency``: per-sample work of ``update()`` (thread CPU and wall, p50/p99/max in us) at 10 kHz with the default 8
 play operators, against the plain estimator on the same stream in the same run (a triangle record of
@@ -37,12 +38,23 @@ only to worse than 5 % of the largest (1-sigma); ``determined_weights_ok``: the 
 ``scatter``: ``--records`` random plants per family (seeds 2000+), each with ``--realisations`` noise draws: each
 weight's spread over the draws against the mean reported ``w_std``, and the paths (events, re-searches) they took.
 
+``attribution``: where the online and batch weights part, on the ``plants`` records (seeds 1000+), with the batch
+fit's thresholds set to the online estimate's (``same_thresholds``). The batch fit's reported solution re-solved at
+the online estimate's nonlinear parameters (alpha, a1, a2) for the batch fit's start state (``at_online_theta``)
+and at the plant's true ones (``at_true_theta``): the weights' distance from the online ones and from the batch
+fit's own, over the batch fit's largest weight; how strongly the record rejects the online (alpha, a1, a2) in the
+batch model, ``online_theta_delta_chi2`` (its residual sum of squares over the batch fit's, in noise variances);
+the online model (b, a1, a2, alpha, the weights) simulated over the record from each start state, its residual RMS
+over the noise (``online_model_rms_over_noise``: centred, ascending, descending); and the same estimator fed the
+record in ``--block``-sample blocks instead of one (``block_*``: the path the background work takes).
+
 Prints one JSON document and writes it to ``bench/results/online_hysteresis_<mode>.json``.
 """
 from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import math
 import time
 
@@ -315,6 +327,152 @@ def _plants_doc(args, rows: list[dict]) -> dict:
             "summary": summary, "records": rows}
 
 
+def _theta_of(alpha: float, a1: float, a2: float) -> np.ndarray | None:
+    """The batch fit's nonlinear parameters (alpha, log10 fn, log10 zeta) of (alpha, a1, a2); None without a
+    resonance (a2 <= 0 or a1 <= 0)."""
+    if not (a2 > 0.0 and a1 > 0.0):
+        return None
+    wn = 1.0 / math.sqrt(a2)
+    return np.array([alpha, math.log10(wn / (2.0 * math.pi)), math.log10(0.5 * a1 * wn)])
+
+
+def _online_model_rms(rec, e) -> list[float]:
+    """The online model simulated over the record from each start state (the best offset), residual RMS over the
+    record's noise."""
+    from creep_online.effects import INITIAL_STATES, simulate_with_effects
+    from creep_online.model import CreepModel
+    model = CreepModel(e.alpha, e.a1, e.a2, e.b)
+    out = []
+    for initial in INITIAL_STATES:
+        y = simulate_with_effects(model, rec.t, rec.u, {"hysteresis": {**e.hysteresis, "initial": initial}},
+                                  u_pre=rec.u_pre)
+        out.append(float(np.std(rec.y - y) / rec.noise_std))
+    return out
+
+
+def _hold_centred_start(est) -> None:
+    """The window's start columns held at 0 (the centred start) from now on: their form set to a start in
+    equilibrium and dropped (``_kernels.hysteresis.drop_start``), in the live state and the replays' spare one."""
+    from creep_online.online._kernels import hysteresis as HK
+    tr = getattr(est, "_tracker", None)
+    if tr is None or not getattr(tr, "n_hyst", 0):
+        return
+    o = tr.lay["hyst"]
+    for st in (tr.st, tr._spare[0]):
+        st[o + HK.EQUILIBRIUM] = 1.0
+        st[o + HK.DROPPED] = 1.0
+
+
+def _online(rec, block: int | None, centred: bool = False):
+    """The online estimate at the end of the record fed in ``block``-sample blocks (None: one block); ``centred``:
+    with the start columns held at the centred start after every block."""
+    from creep_online.online import OnlineEstimator
+    est = OnlineEstimator(float(rec.t[1] - rec.t[0]), effects=("hysteresis",))
+    step = block or rec.u.size
+    for k in range(0, rec.u.size, step):
+        est.update_block(rec.u[k:k + step], rec.y[k:k + step])
+        if centred:
+            _hold_centred_start(est)
+    return est.estimate
+
+
+def attribute_plant(family: str, seed: int, n: int, block: int) -> dict:
+    from creep_online.diagnostics.extended import Design, _result, base_theta, fit_base, fit_extended, prepare
+    from hil_sim.hysteresis_plants import hysteresis_record
+    rec = hysteresis_record(family, seed, n=n)
+    truth = rec.model
+    e = _online(rec, None)
+    row = {"family": family, "seed": seed, "initial_true": rec.params["initial"], "quality": e.quality}
+    if e.hysteresis is None:
+        return row
+    wo = np.asarray(e.hysteresis["w"])
+    data = prepare(rec.t, rec.u, rec.y, u_pre=rec.u_pre)
+    base = fit_base(data)
+    with same_thresholds(e.hysteresis["r"], data.u_range):
+        same = fit_extended(data, ("hysteresis",), base)
+        initial = same.effect_params["hysteresis"]["initial"]
+        ws = np.asarray(same.effect_params["hysteresis"]["w"])
+        scale = float(np.max(np.abs(ws))) or 1.0
+        noise_var = float(same.rss) / max(data.n - len(same.theta) - len(same.coef), 1)
+        design = Design(data, ("hysteresis",), variants={"hysteresis": initial})
+        row.update(initial_batch=initial, werr=float(np.max(np.abs(wo - ws)) / scale))
+        for name, theta in (("at_online_theta", _theta_of(e.alpha, e.a1, e.a2)), ("at_true_theta", base_theta(truth))):
+            if theta is None:
+                continue
+            fit = _result(design, theta)
+            w = np.asarray(fit.effect_params["hysteresis"]["w"])
+            row[f"{name}_vs_online"] = float(np.max(np.abs(w - wo)) / scale)
+            row[f"{name}_vs_batch"] = float(np.max(np.abs(w - ws)) / scale)
+            row[f"{name}_delta_chi2"] = (float(fit.rss) - float(same.rss)) / noise_var
+    row["online_theta_delta_chi2"] = row.get("at_online_theta_delta_chi2")
+    row["online_model_rms_over_noise"] = _online_model_rms(rec, e)
+    row.update(b_online_over_true=e.b / truth.b, b_batch_over_true=same.model.b / truth.b,
+               a1_online_over_true=e.a1 / truth.a1, a1_batch_over_true=same.model.a1 / truth.a1,
+               window_error_over_noise=(e.residual_rms / e.noise_rms) if e.residual_rms and e.noise_rms else None)
+    eb = _online(rec, block)
+    if eb.hysteresis is not None:
+        wb = np.asarray(eb.hysteresis["w"])
+        row.update(block_werr=float(np.max(np.abs(wb - ws)) / scale), block_b_over_true=eb.b / truth.b,
+                   block_a1_over_true=eb.a1 / truth.a1, block_vs_whole=float(np.max(np.abs(wb - wo)) / scale))
+    row.update(_centred_start(rec, data, same, e.hysteresis["r"], block))
+    return row
+
+
+def _centred_start(rec, data, same, r: list[float], block: int) -> dict:
+    """Both fits given the centred start: the online estimate with its start columns held at 0 (fed in ``block``
+    blocks) against the batch fit's reported solution for the centred start at the batch fit's (alpha, a1, a2)
+    (``centred_werr``) and at the held estimate's own (``centred_same_theta_werr``), over the batch fit's largest
+    weight. Meaningful where the plant starts centred (``initial_true``)."""
+    from creep_online.diagnostics.extended import Design, _result
+    ec = _online(rec, block, centred=True)
+    if ec.hysteresis is None:
+        return {}
+    wc = np.asarray(ec.hysteresis["w"])
+    with same_thresholds(r, data.u_range):
+        design = Design(data, ("hysteresis",), variants={"hysteresis": "centred"})
+        wb = np.asarray(_result(design, same.theta).effect_params["hysteresis"]["w"])
+        theta = _theta_of(ec.alpha, ec.a1, ec.a2)
+        wt = None if theta is None else np.asarray(_result(design, theta).effect_params["hysteresis"]["w"])
+    scale = float(np.max(np.abs(same.effect_params["hysteresis"]["w"]))) or 1.0
+    return {"centred_werr": float(np.max(np.abs(wc - wb)) / scale), "centred_b_over_true": ec.b / rec.model.b,
+            "centred_same_theta_werr": None if wt is None else float(np.max(np.abs(wc - wt)) / scale)}
+
+
+def _centred_summary(sel: list[dict]) -> dict:
+    """On the plants that start centred: how often both fits given the centred start agree within 5 %."""
+    def frac(key):
+        vals = [r[key] for r in sel if r.get(key) is not None]
+        return {"ok": sum(v <= WEIGHT_TOLERANCE for v in vals), "of": len(vals), **dist(vals)}
+    return {"werr": frac("werr"), "block_werr": frac("block_werr"), "centred_werr": frac("centred_werr"),
+            "centred_same_theta_werr": frac("centred_same_theta_werr")}
+
+
+def attribution(args) -> dict:
+    rows = []
+    for k in range(args.records):
+        for family in args.families.split(","):
+            row = attribute_plant(family, 1000 + k, args.samples, args.block)
+            print(json.dumps({key: (round(v, 3) if isinstance(v, float) else v) for key, v in row.items()
+                              if not isinstance(v, list)}), flush=True)
+            rows.append(row)
+    keys = ("werr", "at_online_theta_vs_online", "at_online_theta_vs_batch", "at_true_theta_vs_batch",
+            "online_theta_delta_chi2", "b_online_over_true", "b_batch_over_true", "a1_online_over_true",
+            "a1_batch_over_true", "window_error_over_noise", "block_werr", "block_vs_whole", "block_b_over_true",
+            "centred_werr", "centred_same_theta_werr")
+    fams = sorted({r["family"] for r in rows})
+    summary = {}
+    for f in fams:
+        sel = [r for r in rows if r["family"] == f]
+        summary[f] = {"records": len(sel), **{key: dist([r[key] for r in sel if r.get(key) is not None]) for key in keys},
+                      "werr_ok": sum(r.get("werr", 9.0) <= WEIGHT_TOLERANCE for r in sel) / len(sel),
+                      "block_werr_ok": sum(r.get("block_werr", 9.0) <= WEIGHT_TOLERANCE for r in sel) / len(sel),
+                      "at_online_theta_closer_to_online": sum(r.get("at_online_theta_vs_online", 9.0) < r.get("werr", 0.0)
+                                                              for r in sel) / len(sel),
+                      "online_theta_rejected_9": sum((r.get("online_theta_delta_chi2") or 0.0) > 9.0 for r in sel) / len(sel),
+                      "centred_plants": _centred_summary([r for r in sel if r["initial_true"] == "centred"])}
+    return {"mode": "attribution", "samples": args.samples, "block": args.block, "summary": summary, "records": rows}
+
+
 def scatter(args) -> dict:
     """Is the online ``w_std`` the weights' spread? Per record, ``--realisations`` noise draws on the same clean
     output (the record's noise level), each fed to a fresh estimator: each weight's sample standard deviation over
@@ -365,6 +523,11 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--samples", type=int, default=60000)
     p.add_argument("--families", default="sine,triangle,random_staircase")
     p.add_argument("--out-partial", default=None, help="rewrite this file after every record")
+    p = sub.add_parser("attribution")
+    p.add_argument("--records", type=int, default=20)
+    p.add_argument("--samples", type=int, default=60000)
+    p.add_argument("--block", type=int, default=200)
+    p.add_argument("--families", default="sine,triangle,random_staircase")
     p = sub.add_parser("scatter")
     p.add_argument("--records", type=int, default=3)
     p.add_argument("--realisations", type=int, default=6)
@@ -373,7 +536,8 @@ def main(argv: list[str] | None = None) -> dict:
     for q in sub.choices.values():
         q.add_argument("--out", default=None)
     args = ap.parse_args(argv)
-    doc = {"latency": latency, "real": real, "plants": plants, "scatter": scatter}[args.mode](args)
+    doc = {"latency": latency, "real": real, "plants": plants, "scatter": scatter,
+           "attribution": attribution}[args.mode](args)
     suffix = "" if args.mode != "real" or args.window == 10.0 else f"_window{args.window:g}s"
     write_report(doc, args.out or results_path(f"online_hysteresis_{args.mode}{suffix}"), argv=argv)
     return doc
