@@ -367,3 +367,39 @@ def test_block_mode_start_up_is_the_start_up_sample_by_sample(seed, monkeypatch)
         m.setattr(S.ResonanceSearch, "eager", _NEVER_EAGER, raising=False)
         slow, est_slow = _trajectory(lambda: OnlineEstimator(h), u, y, pieces, {})
     assert _same(fast, slow) and est_fast.estimate.internal_faults == 0
+
+
+def _hysteresis_feedings(feed: str) -> tuple:
+    """``OnlineEstimator(h, effects=("hysteresis",))`` on a hil_sim hysteresis record (a triangle, seed 1003, 12,000
+    samples at 10 kHz: a start-up, re-fits that each ask for a replay at the new resonance) fed sample by sample
+    (``"sample"``), in random chunks (``"chunks"``) or in one block: the estimate and the hysteresis weights."""
+    from hil_sim.hysteresis_plants import hysteresis_record
+    rec = hysteresis_record("triangle", 1003, n=12_000)
+    est = OnlineEstimator(float(rec.t[1] - rec.t[0]), effects=("hysteresis",))
+    if feed == "sample":
+        for a, b in zip(rec.u.tolist(), rec.y.tolist()):
+            est.update(a, b)
+    else:
+        cuts = np.random.default_rng(7).integers(0, rec.u.size, 40) if feed == "chunks" else np.zeros(0, int)
+        pieces = np.unique(np.concatenate(([0, rec.u.size], cuts)))
+        for a, b in zip(pieces[:-1], pieces[1:]):
+            est.update_block(rec.u[a:b], rec.y[a:b])
+    e = est.estimate
+    return (e.samples, e.alpha, e.a1, e.a2, e.b), tuple(e.hysteresis["w"]) if e.hysteresis else None
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+    "the background work lands at a sample that depends on the feeding: update() runs the start-up search and the "
+    "replays in work_units per sample (a replay with the hysteresis columns catches up thousands of samples after "
+    "its re-fit), update_block() runs them to completion where the block ends or stops (``Scheduler.finish``), so "
+    "the tracker goes live, and each replay is swapped in, at other samples. Every re-fit of this record moves the "
+    "resonance past ``settings.relinearize`` and asks for a replay: the replays differ in count and in where they "
+    "land, and the near-collinear weights follow. The plain estimator differs by when the work lands too (to 0.24 "
+    "%, ``bench_online_feedings``); the rule (==) holds for the kernels at equal pieces "
+    "(``test_update_block_is_the_per_sample_kernels_and_gate``)"))
+def test_hysteresis_estimate_is_the_same_per_sample_in_chunks_and_in_one_block():
+    """The estimator with hysteresis fed sample by sample, in random chunks and in one block: the same estimate and
+    hysteresis weights (``==``)."""
+    runs = {feed: _hysteresis_feedings(feed) for feed in ("block", "chunks", "sample")}
+    assert runs["block"][1] is not None
+    assert runs["chunks"] == runs["block"] and runs["sample"] == runs["block"]
