@@ -228,7 +228,10 @@ class Superposer:
         if x.shape[1] != n:
             raise DataError(f"input rows have {x.shape[1]} samples, time has {n}")
         pre = x[:, 0] if x_pre is None else np.broadcast_to(np.asarray(x_pre, dtype=float), (x.shape[0],))
-        self.dx = np.diff(x, axis=1, prepend=pre[:, None])
+        # np.diff(x, axis=1, prepend=pre): the same subtractions, without its concatenated copy of the rows
+        self.dx = np.empty_like(x)
+        np.subtract(x[:, :1], pre[:, None], out=self.dx[:, :1])
+        np.subtract(x[:, 1:], x[:, :-1], out=self.dx[:, 1:])
         self.rows = x.shape[0]
         self.n = n
         self.t_pre = float(self.t[0] if t_pre is None else t_pre)
