@@ -125,3 +125,11 @@ def test_row_spectra_a_few_rows_at_a_time_are_all_rows_at_once(monkeypatch):
     for rows in (1, 2, 4, 11):
         monkeypatch.setattr(responses, "SCRATCH_BYTES", 8 * sup.nfft * rows)
         assert np.array_equal(sup.row_spectra(), expected)
+
+
+def test_sharing_the_malloc_arena_is_harmless_anywhere(monkeypatch):
+    """The diagnose command's mallopt call runs on glibc and is skipped elsewhere, never raising."""
+    from creep_online.commands import diagnose as command
+    command.share_malloc_arena()
+    monkeypatch.setattr(command.sys, "platform", "darwin")
+    command.share_malloc_arena()
