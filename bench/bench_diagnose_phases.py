@@ -30,7 +30,7 @@ RECORD = "tests/data/real/piezo-hyst-150V-1Hz/piezo_150V_1Hz.csv"
 
 #: Imports, one after the other, as diagnose loads them.
 IMPORTS = ["numpy", "creep_online", "scipy.linalg", "scipy.fft", "scipy.optimize", "scipy.interpolate",
-           "scipy.special", "scipy.signal", "numba", "creep_online.kernels", "creep_online.diagnostics.explain"]
+           "scipy.special", "scipy.ndimage", "numba", "creep_online.kernels", "creep_online.diagnostics.explain"]
 
 _COMMON = r"""
 import json, os, sys, time
@@ -71,7 +71,7 @@ if sys.argv[1] == "record":      # which kernels a (short) diagnosis calls, with
             if isinstance(o, CPUDispatcher) and o.overloads and o.py_func.__module__.startswith("creep_online")}
     sys.stdout.buffer.write(pickle.dumps(used))
 else:
-    import scipy.optimize, scipy.signal, creep_online.kernels, creep_online.diagnostics.explain
+    import scipy.optimize, scipy.ndimage, creep_online.kernels, creep_online.diagnostics.explain
     used = pickle.loads(sys.stdin.buffer.read())
     out, last = [], status("VmRSS")
     for key, sigs in used.items():
@@ -122,6 +122,8 @@ c0 = time.process_time()
 d = diagnose(inp.record, u_pre=inp.u_pre, t_pre=inp.t_pre, workers=int(sys.argv[3]), progress=close)
 close("end")
 print(json.dumps({"stages": [s for s in stages if s["stage"] != "between fits" or s["cpu_seconds"] > 0.05],
+                  "peak_rss_mb": max(s["peak_rss_mb"] for s in stages),
+                  "scipy_signal_or_stats": sorted(m for m in sys.modules if m.startswith(("scipy.signal", "scipy.stats"))),
                   "cpu_seconds": time.process_time() - c0, "verdict": d.verdict,
                   "candidates": [c.effect for c in d.candidates],
                   "combination": None if d.combination is None else d.combination.effect}))

@@ -105,3 +105,31 @@ def test_large_superposers_are_remembered_two_at_a_time_with_the_same_columns(mo
     assert len(data._cache["superposer"]) == 2 and "u" not in data._cache["superposer"]
     again = [data.superposer(k).apply(step) for k in keys]
     assert all(np.array_equal(a, b) for a, b in zip(first, again))
+
+
+def test_row_spectra_a_few_rows_at_a_time_are_all_rows_at_once(monkeypatch):
+    """The superposer's steps (without np.diff's concatenated copy) and spectra computed in batches of rows
+    (``Superposer.row_spectra``) are np.diff's and the one transform of every row bit for bit, for batches that
+    divide the rows and batches that do not."""
+    from scipy.fft import rfft
+
+    from creep_online.effects import responses
+    rng = np.random.default_rng(6)
+    n = 3000
+    x = np.cumsum(rng.normal(size=(11, n)), axis=1)
+    sup = Superposer(np.arange(n) * 1e-3, x, x_pre=np.zeros(11))
+    assert np.array_equal(sup.dx, np.diff(x, axis=1, prepend=np.zeros((11, 1))))
+    assert np.array_equal(Superposer(np.arange(n) * 1e-3, x).dx, np.diff(x, axis=1, prepend=x[:, :1]))
+    expected = rfft(sup.dx, sup.nfft, axis=1)
+    assert np.array_equal(sup.spectra, expected)
+    for rows in (1, 2, 4, 11):
+        monkeypatch.setattr(responses, "SCRATCH_BYTES", 8 * sup.nfft * rows)
+        assert np.array_equal(sup.row_spectra(), expected)
+
+
+def test_sharing_the_malloc_arena_is_harmless_anywhere(monkeypatch):
+    """The diagnose command's mallopt call runs on glibc and is skipped elsewhere, never raising."""
+    from creep_online.commands import diagnose as command
+    command.share_malloc_arena()
+    monkeypatch.setattr(command.sys, "platform", "darwin")
+    command.share_malloc_arena()

@@ -40,6 +40,7 @@ from ..model import EXTENDED_FIT_ALPHA_BOUNDS as ALPHA_BOUNDS
 from ..model import CreepModel, ExtendedModel, FittedModel, with_effects
 from ..record import check_amplitudes, check_time_and_output
 from .._threads import single_threaded
+from . import spectra
 from .pool import ordered_map
 from .varpro import projected_jacobian
 
@@ -1015,18 +1016,17 @@ def _frf_peaks(data: Prepared, count: int = 3) -> list[float]:
 
 def _frf_peaks_of(data: Prepared, count: int) -> list[float]:
     """``_frf_peaks`` computed."""
-    from scipy.signal import csd, find_peaks, welch
     nper = int(min(data.n, 2 ** int(math.log2(max(64, data.n // 8)))))
     du = np.diff(data.u, prepend=data.u[0])
     dy = np.diff(data.y, prepend=data.y[0])
-    f, puu = welch(du, data.fs, nperseg=nper)
-    _, puy = csd(du, dy, data.fs, nperseg=nper)
+    f, puu = spectra.welch(du, data.fs, nper)
+    _, puy = spectra.csd(du, dy, data.fs, nper)
     ok = (f > 2 * f[1]) & (puu > 1e-12 * puu.max())
     if ok.sum() < 8:
         return []
     mag = np.zeros_like(f)
     mag[ok] = np.abs(puy[ok]) / puu[ok]
-    peaks, props = find_peaks(mag, prominence=0.1 * mag.max())
+    peaks, props = spectra.find_peaks(mag, prominence=0.1 * mag.max())
     order = np.argsort(props["prominences"])[::-1]
     return [float(f[peaks[i]]) for i in order[:count]]
 

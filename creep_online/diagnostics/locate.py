@@ -17,6 +17,7 @@ import numpy as np
 
 from ..effects import is_uniform, last_direction
 from ..metrics import rms
+from .spectra import find_peaks, welch
 
 #: A spectral peak must stand this many times above the local median.
 PEAK_RATIO = 8.0
@@ -25,11 +26,10 @@ PEAK_RATIO = 8.0
 # --------------------------------------------------------------------------- spectrum
 def spectrum(t: np.ndarray, r: np.ndarray, segments: int = 4) -> tuple[np.ndarray, np.ndarray]:
     """(f, one-sided PSD) of a uniformly sampled residual (Welch, Hann, ``segments`` averaged)."""
-    from scipy.signal import welch
     t = np.asarray(t, dtype=float)
     fs = (t.size - 1) / (t[-1] - t[0])
     nper = int(max(16, min(t.size, t.size // max(segments, 1) * 2 // 2)))
-    return welch(np.asarray(r, dtype=float) - np.mean(r), fs, nperseg=nper)
+    return welch(np.asarray(r, dtype=float) - np.mean(r), fs, nper)
 
 
 def refine_frequency(t: np.ndarray, r: np.ndarray, f0: float, width: float) -> float:
@@ -54,7 +54,6 @@ def spectrum_peaks(t: np.ndarray, r: np.ndarray, max_peaks: int = 5, ratio: floa
     lines point to a disturbance, wide ones to a resonance).
     """
     from scipy.ndimage import median_filter
-    from scipy.signal import find_peaks
     if not is_uniform(t) or len(t) < 64:
         return []
     f, p = spectrum(t, r)
@@ -97,12 +96,11 @@ def spectrum_humps(t: np.ndarray, r: np.ndarray, max_peaks: int = 3) -> list[flo
     fit stopped at 7x the noise (pairs bench, second mode + hysteresis 10-100x seed 5); one at 398 Hz stood
     2x above the white noise around it (seed 9)."""
     from scipy.ndimage import median_filter
-    from scipy.signal import find_peaks, welch
     t = np.asarray(t, dtype=float)
     if not is_uniform(t) or t.size < 4 * HUMP_SEGMENT:
         return []
     fs = (t.size - 1) / (t[-1] - t[0])
-    f, p = welch(np.asarray(r, dtype=float) - np.mean(r), fs, nperseg=HUMP_SEGMENT)
+    f, p = welch(np.asarray(r, dtype=float) - np.mean(r), fs, HUMP_SEGMENT)
     if not np.any(p > 0):
         return []
     segments = (t.size - HUMP_SEGMENT) // (HUMP_SEGMENT // 2) + 1

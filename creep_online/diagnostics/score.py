@@ -37,11 +37,11 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.stats import chi2
 
 from ..effects import get_effect
 from ..errors import ModelError
 from . import extended as ext
+from .bic import chi2_sf
 
 #: Family-wise false-alarm rate of the trigger on a record one effect explains (Bonferroni over every point of
 #: every partner, on top of the BIC threshold; with the BIC's dk ln N it rarely binds on records of 1000+ samples).
@@ -62,7 +62,7 @@ class PartnerScore:
     against: str = ""          # the single effect the pair must beat (``beside`` unless the test ran beside another)
 
     def p_value(self) -> float:
-        return float(chi2.sf(self.lr, self.dk))
+        return chi2_sf(self.lr, self.dk)
 
 
 def partner_scores(data: ext.Prepared, first: str, fit: ext.ExtendedFit, partners: list[str],

@@ -9,7 +9,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.signal import lfilter
 
 from ..errors import ModelError
 from .base import FitView, OutputCompensator, OutputFilterEffect, ParamSpec
@@ -36,8 +35,11 @@ def leakage_filter(t: np.ndarray, y: np.ndarray, tau: float) -> np.ndarray:
         c0 = 1.0 - tau * (-math.expm1(-h / tau)) / h
         c1 = (1.0 - a) - c0
         # x[n] = a x[n-1] + c0 y[n] + c1 y[n-1] with x[-1] = y[-1] = 0
-        low = lfilter([c0, c1], [1.0, -a], y, axis=-1)
-        return y - low
+        from ..kernels import first_order_filter     # numba on first use: importing the effects stays light
+        if y.size == 0:
+            return y.copy()
+        rows = np.ascontiguousarray(y.reshape(-1, y.shape[-1]))
+        return y - first_order_filter(c0, c1, -a, rows).reshape(y.shape)
     a = np.exp(-dt / tau)
     c0 = 1.0 - tau * (-np.expm1(-dt / tau)) / dt
     c1 = (1.0 - a) - c0

@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.signal import cont2discrete
 
 from .base import FitView, OutputCompensator, ParallelEffect, ParamSpec, StepFn
 from .input_lines import harmonic_of_input
@@ -26,6 +25,17 @@ NO_PEAK_ZETA = 1.0 / math.sqrt(2.0)
 IMAGE_STEPS = (0.97, 0.985, 1.0, 1.015, 1.03)
 
 
+def zoh_discretize(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """(Ad, Bd) of x' = a x + b u under a zero-order hold of ``dt``: ``scipy.signal.cont2discrete(..., dt,
+    method="zoh")``'s computation (the exponential of [[a, b], [0, 0]] dt), without importing scipy.signal
+    (and scipy.stats with it, ~24 MB resident)."""
+    from scipy.linalg import expm
+    upper = np.hstack((a, b))
+    lower = np.hstack((np.zeros((b.shape[1], a.shape[0])), np.zeros((b.shape[1], b.shape[1]))))
+    ms = expm(dt * np.vstack((upper, lower)))[:a.shape[0], :]
+    return ms[:, 0:a.shape[1]], ms[:, a.shape[1]:]
+
+
 class _ModeCompensator(OutputCompensator):
     """The mode's ZOH state-space model driven by the base input, its output subtracted."""
 
@@ -33,7 +43,7 @@ class _ModeCompensator(OutputCompensator):
         wn = 2 * math.pi * float(params["fn_hz"])
         a = np.array([[0.0, 1.0], [-wn * wn, -2 * float(params["zeta"]) * wn]])
         b = np.array([[0.0], [wn * wn]])
-        ad, bd, *_ = cont2discrete((a, b, np.eye(2), np.zeros((2, 1))), dt, method="zoh")
+        ad, bd = zoh_discretize(a, b, dt)
         self.ad, self.bd = ad, bd[:, 0]
         self.x = np.zeros(2)
         self.gain = float(params["gain"])
