@@ -416,6 +416,16 @@ def _rows_batch(ns: np.ndarray, u: np.ndarray, y: np.ndarray, vx: np.ndarray, rc
             x[c, 0], x[c, 1] = _advance(rc[c], x[c, 0], x[c, 1], uk)
 
 
+@njit(cache=True, inline="always")
+def _shared_entries(row: np.ndarray, yk: float, table: np.ndarray, j: int, m: int) -> None:
+    """A kept row's entries that no candidate changes: the constant, the output, and the m decays of kept row j
+    from the shared rows' cache ``table``."""
+    row[1] = 1.0
+    row[row.shape[0] - 1] = yk
+    for i in range(m):
+        row[4 + i] = table[j, i]
+
+
 @njit(cache=True)
 def _rows_free_batch(ns: np.ndarray, u: np.ndarray, y: np.ndarray, vx: np.ndarray, rc: np.ndarray, x: np.ndarray,
                      g: np.ndarray, shift: np.ndarray, nb: int, stride: int, lead: int, G: np.ndarray,
@@ -433,10 +443,7 @@ def _rows_free_batch(ns: np.ndarray, u: np.ndarray, y: np.ndarray, vx: np.ndarra
     for k in range(u.shape[0]):
         uk = u[k]
         if k >= lead and _kept(k, stride) and y[k] == y[k]:
-            row[1] = 1.0
-            row[p - 1] = y[k]
-            for i in range(m):
-                row[4 + i] = table[k // stride, i]
+            _shared_entries(row, y[k], table, k // stride, m)
             j = k // stride
             for c in range(nb):
                 row[0] = vx[c, 0] * x[c, 0] + vx[c, 1] * x[c, 1] + ns[c, j]
@@ -466,10 +473,7 @@ def _rows_free_one(ns: np.ndarray, u: np.ndarray, y: np.ndarray, vx: np.ndarray,
     for k in range(u.shape[0]):
         uk = u[k]
         if k >= lead and _kept(k, stride) and y[k] == y[k]:
-            row[1] = 1.0
-            row[p - 1] = y[k]
-            for i in range(m):
-                row[4 + i] = table[k // stride, i]
+            _shared_entries(row, y[k], table, k // stride, m)
             row[0] = vx0 * x0 + vx1 * x1 + ns[k // stride]
             row[2], row[3] = g0, g1
             _add_candidate_row(row, G)
