@@ -45,15 +45,15 @@ decay per sample) and renormalised; the true statistics are ``S / g``.
 Statistics: ``S`` is symmetric and held in its upper triangle (``j >= i``). Every
 reader takes that triangle (``symmetrize``, ``_upper_times``, the fits); below the
 diagonal is scratch: the per-sample update fills the whole matrix (its
-rectangular loop is faster than a triangular one), the block and replay updates
-only the triangle (there the triangle is faster: eight rows per pass).
+rectangular loop vectorizes), the block and replay updates only the triangle,
+over each row's columns with an unsigned index that LLVM vectorizes (``_columns``).
 """
 from __future__ import annotations
 
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, uint64
 
 from . import coefficients as kernels
 from .coefficients import model_coefficients
@@ -725,13 +725,21 @@ def set_monitors(sc: np.ndarray, h: float, gate: float, burst: int, stuck: int) 
 FAST: set[str] = set()
 
 
+@njit(cache=CACHE, inline="always")
+def _columns(i: int, p: int) -> range:
+    """Columns i to p - 1 as an unsigned range: numba wraps a signed index that may be negative (a select per
+    access), which keeps LLVM from vectorizing a loop that does not start at 0; an unsigned one cannot be."""
+    return range(uint64(i), uint64(p))
+
+
 @njit(cache=CACHE, fastmath=FAST)
 def _accumulate(y: float, phi: np.ndarray, S: np.ndarray, sy: np.ndarray, sc: np.ndarray) -> None:
     """S += g phi phi^T, sy += g phi y, with the growing weight g = forget^-n.
 
     The whole matrix, not its upper triangle: the rectangular loop vectorizes
-    and takes about a third of the time of the triangular one (0.35 vs 1.0 us
-    at P = 49), although it does twice the multiply-adds.
+    and takes about a third of the time of the scalar triangular one (0.35 vs 1.0 us
+    at P = 49), although it does twice the multiply-adds; rows this short, one
+    at a time, gain nothing from a vectorized triangle (``_columns``): 1.0 vs 0.6 us.
     """
     p = phi.shape[0]
     f = sc[SC_FORGET]
@@ -1184,21 +1192,20 @@ def _defer(y: float, phi: np.ndarray, S: np.ndarray, sy: np.ndarray, sc: np.ndar
 def _flush(S: np.ndarray, X: np.ndarray, gx: np.ndarray, k: int) -> None:
     """S's upper triangle += that of sum over the k rows t of (gx[t] X[t])^T X[t], element by element in the rows'
     order as ``_accumulate`` adds them (``S[i, j] += (g phi[i]) phi[j]``, rounded alike), so the statistics are bit
-    for bit the same. Only the upper triangle (j >= i; a pair of rows from the first's diagonal): nothing reads
-    below the diagonal (the module docstring's "Statistics"), and half the multiply-adds took 0.54 of the time
-    (microbenchmark, P = 50 and 58). Eight rows per pass over S, two rows of S at a time (each element loaded and
-    stored once per eight updates, each row of X loaded once per two; the last alone when P is odd). Nothing
-    allocated: ``_block`` runs it without reference counts."""
+    for bit the same. Only the upper triangle (j >= i): nothing reads below the diagonal (the module docstring's
+    "Statistics"). Eight rows per pass over S, each element loaded and stored once per eight updates. The column
+    index is unsigned (``_columns``), so the loop over a row runs four columns per instruction: the same
+    operations on each element, 0.5 of the time of a signed index's scalar loop (microbenchmark, P = 50 to 58).
+    Nothing allocated: ``_block`` runs it without reference counts."""
     p = S.shape[0]
     t = 0
     while t + 8 <= k:
         x0, x1, x2, x3, x4, x5, x6, x7 = X[t], X[t + 1], X[t + 2], X[t + 3], X[t + 4], X[t + 5], X[t + 6], X[t + 7]
-        if p % 2:
-            i = p - 1
+        for i in range(p):
             row = S[i]
             g0, g1, g2, g3 = gx[t] * x0[i], gx[t + 1] * x1[i], gx[t + 2] * x2[i], gx[t + 3] * x3[i]
             g4, g5, g6, g7 = gx[t + 4] * x4[i], gx[t + 5] * x5[i], gx[t + 6] * x6[i], gx[t + 7] * x7[i]
-            for j in range(i, p):
+            for j in _columns(i, p):
                 v = row[j] + g0 * x0[j]
                 v = v + g1 * x1[j]
                 v = v + g2 * x2[j]
@@ -1207,38 +1214,13 @@ def _flush(S: np.ndarray, X: np.ndarray, gx: np.ndarray, k: int) -> None:
                 v = v + g5 * x5[j]
                 v = v + g6 * x6[j]
                 row[j] = v + g7 * x7[j]
-        for i in range(0, p - 1, 2):
-            i2 = i + 1
-            row, row2 = S[i], S[i2]
-            g0, g1, g2, g3 = gx[t] * x0[i], gx[t + 1] * x1[i], gx[t + 2] * x2[i], gx[t + 3] * x3[i]
-            g4, g5, g6, g7 = gx[t + 4] * x4[i], gx[t + 5] * x5[i], gx[t + 6] * x6[i], gx[t + 7] * x7[i]
-            h0, h1, h2, h3 = gx[t] * x0[i2], gx[t + 1] * x1[i2], gx[t + 2] * x2[i2], gx[t + 3] * x3[i2]
-            h4, h5, h6, h7 = gx[t + 4] * x4[i2], gx[t + 5] * x5[i2], gx[t + 6] * x6[i2], gx[t + 7] * x7[i2]
-            for j in range(i, p):
-                a0, a1, a2, a3, a4, a5, a6, a7 = x0[j], x1[j], x2[j], x3[j], x4[j], x5[j], x6[j], x7[j]
-                v = row[j] + g0 * a0
-                v = v + g1 * a1
-                v = v + g2 * a2
-                v = v + g3 * a3
-                v = v + g4 * a4
-                v = v + g5 * a5
-                v = v + g6 * a6
-                row[j] = v + g7 * a7
-                w = row2[j] + h0 * a0
-                w = w + h1 * a1
-                w = w + h2 * a2
-                w = w + h3 * a3
-                w = w + h4 * a4
-                w = w + h5 * a5
-                w = w + h6 * a6
-                row2[j] = w + h7 * a7
         t += 8
     while t < k:
         x0 = X[t]
         for i in range(p):
             g0 = gx[t] * x0[i]
             row = S[i]
-            for j in range(i, p):
+            for j in _columns(i, p):
                 row[j] += g0 * x0[j]
         t += 1
 
@@ -1790,7 +1772,7 @@ def _add_block(X: np.ndarray, Xw: np.ndarray, yb: np.ndarray, nb: int, S: np.nda
             a4, a5, a6, a7 = Xw[r + 4, i], Xw[r + 5, i], Xw[r + 6, i], Xw[r + 7, i]
             sy[i] += (a0 * yb[r] + a1 * yb[r + 1] + a2 * yb[r + 2] + a3 * yb[r + 3]
                       + a4 * yb[r + 4] + a5 * yb[r + 5] + a6 * yb[r + 6] + a7 * yb[r + 7])
-            for j in range(i, p):
+            for j in _columns(i, p):
                 S[i, j] += (a0 * X[r, j] + a1 * X[r + 1, j] + a2 * X[r + 2, j] + a3 * X[r + 3, j]
                             + a4 * X[r + 4, j] + a5 * X[r + 5, j] + a6 * X[r + 6, j] + a7 * X[r + 7, j])
         r += 8
@@ -1798,7 +1780,7 @@ def _add_block(X: np.ndarray, Xw: np.ndarray, yb: np.ndarray, nb: int, S: np.nda
         for i in range(p):
             a = Xw[r, i]
             sy[i] += a * yb[r]
-            for j in range(i, p):
+            for j in _columns(i, p):
                 S[i, j] += a * X[r, j]
         r += 1
 
