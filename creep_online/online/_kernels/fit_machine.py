@@ -173,12 +173,6 @@ def allocate(p: int, k: int, r0: int, steps: int, policy: dict, slots: int = 0,
     return wk
 
 
-def masks_of(wk: np.ndarray, p: int, k: int) -> np.ndarray:
-    """The parameter masks of a work array (MASKS x k; rows MASK_*), a view."""
-    o = _masks_at(p, k)
-    return wk[o:o + MASKS * k].reshape(MASKS, k)
-
-
 @njit(cache=CACHE)
 def _masks_at(p: int, k: int) -> int:
     """Offset of the masks in the work array: after the header, theta, var, H, cov, H2, g, g2, F and fy."""
@@ -446,7 +440,7 @@ def fit_unit(st: np.ndarray, S: np.ndarray, shift: np.ndarray, live: np.ndarray,
         if not ok:
             wk[RF_MU] = mu
             return _step_done(wk)
-        _trust(trial, wk, free)
+        _trust(trial, wk)
         wk[RF_STAGE] = ST_TRIAL_POINT
         return False
     if stage == ST_TRIAL_POINT:        # the trial's coefficients
@@ -539,9 +533,8 @@ def _drift_explains(gain: float, st: np.ndarray, wk: np.ndarray) -> bool:
 
 
 @njit(cache=CACHE)
-def _trust(trial: np.ndarray, wk: np.ndarray, free: np.ndarray) -> None:
-    """Keep the trial's ln a1, ln a2 within RF_TRUST of the linearization point (none if RF_TRUST is 0), where they
-    are free (a held resonance stays where it is held: ``WindowTracker.hold_resonance``).
+def _trust(trial: np.ndarray, wk: np.ndarray) -> None:
+    """Keep the trial's ln a1, ln a2 within RF_TRUST of the linearization point (none if RF_TRUST is 0).
 
     The statistics give the model's cost only near the point they were taken at: beyond it the states are
     extrapolated to first order, x(a) = x(al) + dx/da (a - al), and the sensitivity columns become free
@@ -551,8 +544,6 @@ def _trust(trial: np.ndarray, wk: np.ndarray, free: np.ndarray) -> None:
     r = wk[RF_TRUST]
     if r > 0.0:
         for i, lin in ((1, wk[RF_A1L]), (2, wk[RF_A2L])):
-            if free[i] == 0.0:
-                continue
             c = math.log(lin)
             trial[i] = min(max(trial[i], c - r), c + r)
 

@@ -69,14 +69,6 @@ DETERMINED = DEFAULT.determined
 HYSTERESIS_WIDEN = 1.05
 #: A stream that held its first input this long (s) before moving started at rest (``settle_loop``).
 HYSTERESIS_REST_S = 0.1
-#: A hysteresis window's input is slow while none of its remembered samples moves it more than this share of its
-#: range (``hold_resonance``): a step excites the resonance, a slow sine or triangle (~3e-4 of the range per sample
-#: at 1 Hz and 10 kHz) does not, and then a1, a2 are not the record's but a lag that trades against the loop.
-SLOW_STEP = 0.01
-#: The resonance a slow hysteresis window holds (``hold_resonance``): its frequency over the sampling rate and its
-#: damping ratio. Fast and damped, a lag a1 = 2 zeta / wn of ~1e-4 s at 10 kHz, so that a1 u' on a slow input
-#: (under 1e-3 of the range at 1 Hz) leaves the loop to the weights.
-HELD_RESONANCE = (0.25, 0.7)
 
 
 class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
@@ -115,11 +107,6 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         self.loop_from = 0
         self._loop_swept = 0.0           # the last sweep found (2 r of the largest opened play) and its sample
         self._loop_swept_at = 0
-        #: the resonance held at HELD_RESONANCE while the window's input is slow (``hold_resonance``); the last
-        #: sample that moved the input by more than SLOW_STEP of its range (-1: none), the samples scanned so far
-        self.resonance_held = False
-        self._fast_at = -1
-        self._scanned = 0
         self.lay = W.layout(self.q, self.n_free, self.n_rate, self.n_hyst)
         self.p = self.lay["p"]
         #: samples per light unit of a replay (each costs the P^2 statistics update, which runs as blocked
@@ -270,50 +257,6 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
             return False
         self.loop_from = self._loop_swept_at
         return True
-
-    def hold_resonance(self) -> bool:
-        """A hysteresis window whose remembered input is slow (no sample moves it more than SLOW_STEP of its range)
-        holds a1, a2 at HELD_RESONANCE: such an input does not excite the resonance, and a free a1 drifted to a lag
-        a1 u' that the window could not tell from part of the loop (slow sines: a1 ~40x the plant's, the weights
-        off by their own size). A fast sample in the window frees them again. Called after each accepted re-fit;
-        True when the resonance was just moved to the held point (the caller replays the remembered samples)."""
-        if not self.n_hyst:
-            return False
-        self._scan_steps()
-        slow = self._fast_at < int(self.sc[W.SC_RSTART]) and self._hyst_span > 0.0
-        if slow != self.resonance_held:
-            self.resonance_held = slow
-            self._hold_masks(0.0 if slow else 1.0)
-        if not slow:
-            return False
-        fs, zeta = HELD_RESONANCE
-        wn = 2.0 * math.pi * fs / self.h
-        ln_a1, ln_a2 = math.log(2.0 * zeta / wn), -2.0 * math.log(wn)
-        if self.theta[1] == ln_a1 and self.theta[2] == ln_a2:
-            return False
-        self.theta[1], self.theta[2] = ln_a1, ln_a2
-        self._take_resonance()
-        return True
-
-    def _scan_steps(self) -> None:
-        """Note the newest remembered sample whose input moved by more than SLOW_STEP of the range since the last
-        scan (``_fast_at``)."""
-        n = self.n
-        m = min(n - self._scanned, int(self.sc[W.SC_RCOUNT]))
-        self._scanned = n
-        if m < 2:
-            return
-        u, y = np.empty(m), np.empty(m)
-        self.copy_recent(u, y)
-        o = self.lay["hyst"]
-        fast = np.flatnonzero(np.abs(np.diff(u)) > SLOW_STEP * float(self.st[o + 2] - self.st[o + 1]))
-        if fast.size:
-            self._fast_at = n - m + 1 + int(fast[-1])
-
-    def _hold_masks(self, value: float) -> None:
-        """ln a1, ln a2 fixed (0) or free (1) in every mask of the re-fit's and the change test's work arrays."""
-        for wk in (self._wk, self._test_wk):
-            RF.masks_of(wk, self.p, self.theta.size)[:, 1:3] = value
 
     @property
     def hysteresis(self) -> dict | None:
@@ -501,8 +444,6 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
             sd = [math.sqrt(abs(v) * sigma2) if math.isfinite(v) else math.inf for v in var]
             a1, a2 = math.exp(r.ln_a1), math.exp(r.ln_a2)
             std = {"alpha": sd[0], "a1": sd[1] * a1, "a2": sd[2] * a2, "b": sd[3], "offset": sd[4]}
-            if self.resonance_held:        # (held, not determined: ``hold_resonance``)
-                std["a1"] = std["a2"] = math.inf
             for k, name in enumerate(("b_rate", "alpha_rate")[:self.n_rate]):
                 std[name] = (sd[5 + k] * abs(r.b) if k == 0 else sd[5 + k]) if drift_on else math.inf
             self._fit = Fit(theta=[r.alpha, r.ln_a1, r.ln_a2, r.b], cost=r.cost, neff=r.neff, std=std,
