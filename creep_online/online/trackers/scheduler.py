@@ -169,7 +169,6 @@ class Scheduler:
         tr.converged = tr.converged or raw[7] < 0.01
         tr.refits += 1
         tr._fit, tr._fit_raw, tr._fit_sample = None, (raw, tr.drift_on), n
-        tr.remember_refit(raw[1], raw[4])    # (alpha, b: ``WindowTracker.refit_spread``)
         if tr.n_hyst:                      # (the weights' variances from this fit's covariance: ``hysteresis``)
             RF.weight_variances(tr._wk, tr.p, tr.theta.size, 5 + tr.n_free, tr.hyst_var)
         if tr._first_fit is None:

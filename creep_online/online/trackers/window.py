@@ -69,10 +69,6 @@ DETERMINED = DEFAULT.determined
 HYSTERESIS_WIDEN = 1.05
 #: A stream that held its first input this long (s) before moving started at rest (``settle_loop``).
 HYSTERESIS_REST_S = 0.1
-#: With the loop's columns, alpha's and b's 1-sigma is at least their spread over this many last accepted re-fits
-#: (``refit_spread``): a window whose creep part trades with the loop's weights along a ridge walks from re-fit to
-#: re-fit by far more than its covariance says (10-70 % against a 1-sigma of ~1e-4 relative).
-SPREAD_REFITS = 8
 
 
 class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
@@ -144,8 +140,6 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         self._misfit_floor_raw: tuple | None = None  # ... that fit when the current misfit run began
         self._first_fit: int | None = None      # first re-fit of the current window (start, change, re-search)
         self._fit_raw: tuple | None = None      # the last accepted re-fit (``fit_machine.accept``'s tuple, drift on)
-        #: (alpha, b) of the last ``SPREAD_REFITS`` accepted re-fits, with the loop's columns (``refit_spread``)
-        self._refit_history: list[tuple[float, float]] = []
         self._research_wait = int(self.settings.research.after_s / self.h)
         self._next_research = 0            # earliest sample of the next re-search (backoff)
         self._fine_wait = int(self.settings.fine_wait_s / self.h)
@@ -449,9 +443,7 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
             var = (r.var_alpha, r.var_ln_a1, r.var_ln_a2, r.var_b, r.var_offset, r.var_rate0, r.var_rate1)
             sd = [math.sqrt(abs(v) * sigma2) if math.isfinite(v) else math.inf for v in var]
             a1, a2 = math.exp(r.ln_a1), math.exp(r.ln_a2)
-            spread = self.refit_spread()
-            std = {"alpha": math.hypot(sd[0], spread[0]), "a1": sd[1] * a1, "a2": sd[2] * a2,
-                   "b": math.hypot(sd[3], spread[1]), "offset": sd[4]}
+            std = {"alpha": sd[0], "a1": sd[1] * a1, "a2": sd[2] * a2, "b": sd[3], "offset": sd[4]}
             for k, name in enumerate(("b_rate", "alpha_rate")[:self.n_rate]):
                 std[name] = (sd[5 + k] * abs(r.b) if k == 0 else sd[5 + k]) if drift_on else math.inf
             self._fit = Fit(theta=[r.alpha, r.ln_a1, r.ln_a2, r.b], cost=r.cost, neff=r.neff, std=std,
@@ -461,26 +453,6 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
     @fit.setter
     def fit(self, value: Fit) -> None:
         self._fit, self._fit_sample = value, value.sample
-
-    def remember_refit(self, alpha: float, b: float) -> None:
-        """Keep an accepted re-fit's alpha and b for ``refit_spread`` (with the loop's columns only)."""
-        if self.n_hyst:
-            self._refit_history = self._refit_history[1 - SPREAD_REFITS:] + [(alpha, b)]
-
-    def refit_spread(self) -> tuple[float, float]:
-        """The sample standard deviation of alpha and of b over the last ``SPREAD_REFITS`` accepted re-fits ((0, 0)
-        without the loop's columns or before two re-fits).
-
-        A floor under their 1-sigma: the covariance measures the noise of one window's fit, not how far the fit moves
-        while its creep part trades with the loop's weights (the window's cost nearly flat along that ridge, its
-        residual coloured). Overlapping windows on a record the model describes move by far less than their 1-sigma
-        from re-fit to re-fit, so the floor leaves them as they were; a fit in transit walks by many times it, and
-        reads not determined until it holds still.
-        """
-        if len(self._refit_history) < 2:
-            return 0.0, 0.0
-        values = np.asarray(self._refit_history)
-        return float(np.std(values[:, 0], ddof=1)), float(np.std(values[:, 1], ddof=1))
 
     def report_events(self) -> list[dict]:
         """The detected changes as reported (``ChangeDetection.report_events``: a settled change's moves filled in)."""
