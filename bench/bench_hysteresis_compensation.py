@@ -32,7 +32,7 @@ estimate's creep and resonance with the batch fit's loop) and ``batch_creep+live
 model the compensation error comes from.
 
 Usage: ``python -m bench.bench_hysteresis_compensation [--plants 20] [--first-seed 0] [--drift-plants 4]
-[--attribute]``; JSON in ``bench/results/hysteresis_compensation.json``.
+[--drift-modes adaptive,frozen] [--drift-references stairs] [--attribute]``; JSON in ``bench/results/hysteresis_compensation.json``.
 """
 from __future__ import annotations
 
@@ -240,13 +240,16 @@ def summary(rows: list[dict], source: str) -> dict:
 def drift_summary(rows: list[dict]) -> dict:
     out = {}
     for reference in DRIFT_REFERENCES:
-        sel = [r for r in rows if r["reference"] == reference]
+        sel = [r for r in rows if r["reference"] == reference and "ratio_frozen_over_adaptive" in r]
         ratios = [r["ratio_frozen_over_adaptive"] for r in sel]
+        if not sel:
+            continue
+        modes = [m for m in DRIFT_MODES if sel and all(m in r["modes"] for r in sel)]
+        oracle = [r["ratio_known_over_oracle"] for r in sel if "ratio_known_over_oracle" in r]
         out[reference] = {"plants": len(sel), "ratio_frozen_over_adaptive": dist(ratios),
                           "at_goal": sum(x >= DRIFT_GOAL for x in ratios) / max(len(sel), 1),
-                          "ratio_known_over_oracle": dist([r["ratio_known_over_oracle"] for r in sel]),
-                          **{f"rms_late_rel_{m}": dist([r["modes"][m]["rms_late_rel"] for r in sel])
-                             for m in DRIFT_MODES}}
+                          "ratio_known_over_oracle": dist(oracle) if oracle else None,
+                          **{f"rms_late_rel_{m}": dist([r["modes"][m]["rms_late_rel"] for r in sel]) for m in modes}}
     return out
 
 
@@ -261,6 +264,10 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--calibration-samples", type=int, default=40_000, help="calibration record length (10 kHz)")
     ap.add_argument("--sources", default=",".join(SOURCES), help="batch, live or both (comma-separated)")
     ap.add_argument("--drift-plants", type=int, default=4, help="plants of the drifting-loop comparison (0: none)")
+    ap.add_argument("--drift-modes", default=",".join(DRIFT_MODES),
+                    help="closed loops of the drift comparison (comma-separated; adaptive,frozen for the ratio)")
+    ap.add_argument("--drift-references", default=",".join(DRIFT_REFERENCES),
+                    help="references of the drift comparison: stairs, scan or both (comma-separated)")
     ap.add_argument("--attribute", action="store_true", help="also the mixed models (live creep with the batch loop "
                     "and the reverse; needs both sources)")
     ap.add_argument("--out", default=None)
@@ -279,8 +286,8 @@ def main(argv: list[str] | None = None) -> dict:
               + ", ".join(f"{k} {v:.1f}" for k, v in worst.items()), flush=True)
     drift = []
     for seed in range(args.first_seed, args.first_seed + args.drift_plants):
-        for reference in DRIFT_REFERENCES:
-            drift.append(drift_plant(seed, reference))
+        for reference in [x for x in args.drift_references.split(",") if x]:
+            drift.append(drift_plant(seed, reference, modes=tuple(x for x in args.drift_modes.split(",") if x)))
             m = drift[-1]["modes"]
             print(f"drift seed {seed} {reference}: loop {100 * drift[-1]['loop_width_rel']:.1f} % "
                   + " ".join(f"{k} {v['rms_late_rel']:.2e}" for k, v in m.items()), flush=True)
