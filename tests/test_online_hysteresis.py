@@ -264,15 +264,29 @@ def _resting_on_a_branch(seed: int, initial: str, rest_s: float = 2.0, seconds: 
     return h, u, y + noise * rng.standard_normal(t.size), model, w
 
 
-@pytest.mark.parametrize("seed, initial", [(22, "ascending"), (23, "descending"), (23, "centred")])
-def test_a_plant_resting_on_a_branch_is_fitted_at_the_floor(seed, initial):
+#: A defect of update() sample by sample, held here until it is mended: the feedings land the background work at
+#: different samples (docs/online.md, "Bounded work"), and on this record only the per-sample one ends degraded.
+_PER_SAMPLE_MISFIT = pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+    "update() sample by sample ends degraded at 520x the noise floor on the plant resting on the descending branch "
+    "(one block: at the floor); why is not yet known"))
+
+
+@pytest.mark.parametrize("seed, initial, feed", [
+    (22, "ascending", "block"), (23, "descending", "block"), (23, "centred", "block"),
+    (22, "ascending", "sample"), pytest.param(23, "descending", "sample", marks=_PER_SAMPLE_MISFIT),
+    (23, "centred", "sample")])
+def test_a_plant_resting_on_a_branch_is_fitted_at_the_floor(seed, initial, feed):
     """The plays start centred; a plant at rest on a branch differs from that until the input has swept the
     plays, and a window holding the rest misfits it: the rest's samples are left out once the window misfits
     (the start columns alone left these at 2.9x and 3.1x the floor). A plant resting centred keeps them, and
-    its creep and loop come out right."""
+    its creep and loop come out right. In one block and sample by sample (``update()``)."""
     h, u, y, model, w = _resting_on_a_branch(seed, initial)
     est = OnlineEstimator(h, effects=("hysteresis",))
-    est.update_block(u, y)
+    if feed == "block":
+        est.update_block(u, y)
+    else:
+        for uk, yk in zip(u, y):
+            est.update(float(uk), float(yk))
     e = est.estimate
     assert e.quality != "degraded" and e.residual_rms <= 1.5 * e.noise_rms
     if initial == "centred":
