@@ -241,10 +241,10 @@ def drift_summary(rows: list[dict]) -> dict:
     out = {}
     for reference in DRIFT_REFERENCES:
         sel = [r for r in rows if r["reference"] == reference and "ratio_frozen_over_adaptive" in r]
-        ratios = [r["ratio_frozen_over_adaptive"] for r in sel]
         if not sel:
             continue
-        modes = [m for m in DRIFT_MODES if sel and all(m in r["modes"] for r in sel)]
+        ratios = [r["ratio_frozen_over_adaptive"] for r in sel]
+        modes = [m for m in DRIFT_MODES if all(m in r["modes"] for r in sel)]
         oracle = [r["ratio_known_over_oracle"] for r in sel if "ratio_known_over_oracle" in r]
         out[reference] = {"plants": len(sel), "ratio_frozen_over_adaptive": dist(ratios),
                           "at_goal": sum(x >= DRIFT_GOAL for x in ratios) / max(len(sel), 1),
