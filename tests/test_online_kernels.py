@@ -826,6 +826,38 @@ def test_the_hand_written_cholesky_gain_equals_a_dense_solve(seed):
     assert W.gn_gain(H2, g, mask, *scratch) == 0.0
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_the_step_factor_holds_the_directions_it_is_not_positive_definite_in(seed):
+    """window.cholesky_holding (the damped step's factor): on a positive definite matrix the plain Cholesky factor,
+    bit for bit, none held; on a unit-diagonal matrix with one parameter's diagonal negative (a Gauss-Newton
+    matrix in rounding, as the window's ln a2 entry of a resonance at an SOE node) that parameter is held and the
+    solve is numpy's on the others, its step 0."""
+    rng = np.random.default_rng(seed)
+    k = 7
+    m = rng.standard_normal((k, 3 * k))
+    H = m @ m.T
+    d = np.sqrt(np.diag(H))
+    A = H / np.outer(d, d)
+    ref = np.tril(A.copy())
+    assert W.cholesky_factor(ref, ref, k, 0.0)
+    got, x = A.copy(), rng.standard_normal(k)
+    assert W.cholesky_holding(got, k, x) == 0
+    np.testing.assert_array_equal(np.tril(got), np.tril(ref))
+    bad = int(rng.integers(1, k))
+    A[bad, bad] = -1.0
+    A[bad, :bad] *= 1e-3                             # (its other entries near zero: the column is rounding)
+    A[:bad, bad] = A[bad, :bad]
+    A[bad + 1:, bad] *= 1e-3
+    A[bad, bad + 1:] = A[bad + 1:, bad]
+    rhs = rng.standard_normal(k)
+    factor, x = A.copy(), rhs.copy()
+    assert W.cholesky_holding(factor, k, x) == 1 and x[bad] == 0.0
+    W._cholesky_solve_in_place(factor, x, k)
+    keep = np.arange(k) != bad
+    np.testing.assert_allclose(x[keep], np.linalg.solve(A[np.ix_(keep, keep)], rhs[keep]), rtol=1e-9)
+    assert x[bad] == 0.0
+
+
 def test_a_free_column_that_died_out_is_held_not_divided_by():
     """A stream in operation fits free responses up to 30 /s: after a replay from ~40 s into the stream their
     columns are exp(-1200) = 0 over the whole window, their diagonal of J^T J exactly 0. The score test's gain
