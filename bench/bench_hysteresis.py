@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import tempfile
@@ -52,6 +53,7 @@ from creep_online.diagnostics.extended import Design, fit_base, fit_extended, pr
 from creep_online.effects import hysteresis_input, invert_hysteresis  # noqa: E402
 from creep_online.effects.forward import transformed_input  # noqa: E402
 from creep_online.effects.hysteresis import Hysteresis, flattest_branch  # noqa: E402
+from creep_online.identification import POORLY_DETERMINED  # noqa: E402
 from creep_online.metrics import fit_percent, rms  # noqa: E402
 from hil_sim.hysteresis_plants import INPUT_FAMILIES, hysteresis_record  # noqa: E402
 from bench.harness import dist, results_path, write_report  # noqa: E402
@@ -60,6 +62,10 @@ from bench.harness import dist, results_path, write_report  # noqa: E402
 REPRODUCES = 1e-6
 #: Relative error tolerances of the creep and resonance parameters (those of ``bench_online_scenarios``).
 TOL = {"alpha": 0.02, "b": 0.03, "a1": 0.05, "a2": 0.05}
+#: The parameters whose 1-sigma the extended fit reports (``ExtendedFit.uncertainty``): per record their relative
+#: 1-sigma, the error over it, and ``within_or_flagged``: inside ``TOL`` or reported poorly determined (1-sigma over
+#: identify's POORLY_DETERMINED), the honest outcomes.
+UNCERTAIN = ("alpha", "a1", "a2")
 #: b is judged as the data determine it: with the loop's gain on the record's input (``loop_gain``); the raw
 #: ratio is reported too (``errors["b"]``).
 GAIN_JUDGED = {"b": "b_with_loop"}
@@ -174,6 +180,11 @@ def run_one(family: str, seed: int, n: int, worker=None) -> dict:
     row["loop_gain"] = loop_gain(rec, hp)
     row["errors"]["b_with_loop"] = abs(fit.model.b / (rec.model.b * row["loop_gain"]) - 1.0)
     row["within"] = all(row["errors"][GAIN_JUDGED.get(p, p)] <= TOL[p] for p in TOL)
+    row["uncertainty_rel"] = {p: fit.uncertainty.get(p, math.nan) / abs(getattr(fit.model, p)) for p in UNCERTAIN}
+    row["error_over_sigma"] = {p: row["errors"][p] / row["uncertainty_rel"][p] if row["uncertainty_rel"][p] > 0
+                               else math.nan for p in UNCERTAIN}
+    row["within_or_flagged"] = {p: bool(row["errors"][p] <= TOL[p] or not row["uncertainty_rel"][p] <= POORLY_DETERMINED)
+                                for p in UNCERTAIN}
     if worker is not None:
         with tempfile.NamedTemporaryFile(suffix=".npz", delete=False) as fh:
             np.savez(fh, t=rec.t, u=rec.u, y=rec.y, u_pre=np.nan if rec.u_pre is None else rec.u_pre)
@@ -199,6 +210,10 @@ def summary(rows: list[dict]) -> dict:
            "within_per_parameter": {p: sum(r["errors"][GAIN_JUDGED.get(p, p)] <= TOL[p] for r in rows) / len(rows)
                                     for p in TOL},
            "b_raw_within": sum(r["errors"]["b"] <= TOL["b"] for r in rows) / len(rows),
+           "within_or_flagged": {p: sum(r["within_or_flagged"][p] for r in rows) / len(rows) for p in UNCERTAIN},
+           "flagged": {p: sum(not r["uncertainty_rel"][p] <= POORLY_DETERMINED for r in rows) / len(rows)
+                       for p in UNCERTAIN},
+           "error_over_sigma": {p: dist_finite([r["error_over_sigma"][p] for r in rows]) for p in UNCERTAIN},
            "relative_errors": {p: dist_finite([r["errors"][p] for r in rows]) for p in (*TOL, "b_with_loop")},
            "w_max": dist_finite(col("w_max")), "w_min": dist_finite(col("w_min")),
            "loop_error": dist_finite(col("loop_error")), "flattest_branch": dist_finite(col("flattest_branch")),

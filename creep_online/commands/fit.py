@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 
 from ..effects import effect_names
 from ._common import (add_column_options, add_model_output, check_model_output, nonempty, print_json, save_fitted,
@@ -57,7 +58,8 @@ def run(args: argparse.Namespace) -> int:
     saved = save_fitted(fit, out_path, rec) if out_path else None
     noise = noise_std_estimate(fit.residual)
     out = {**fit.to_dict(), "fit_percent_before": base.fit_percent, "residual_rms_before": base.residual_rms,
-           "noise_rms": noise, "samples": data.n, "file": rec.source, "notes": inp.notes + notes}
+           "noise_rms": noise, "samples": data.n, "file": rec.source,
+           "notes": inp.notes + notes + fit.poorly_determined()}
     live = None
     if args.online:
         from ..diagnostics.online import live_error
@@ -78,6 +80,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"{rec.source}: {data.n} samples; effects: {', '.join(effects)}")
     print(f"  alpha = {m.alpha:.6g}, a1 = {m.a1:.6g}, a2 = {m.a2:.6g}, b = {m.b:.6g} "
           f"(fn {m.fn:.5g} Hz, zeta {m.zeta:.4g}), offset {fit.offset:.6g}")
+    if fit.uncertainty:
+        print("  1-sigma " + ", ".join(f"{k} {_relative(sd, getattr(m, k))}" for k, sd in fit.uncertainty.items()))
     for name, params in fit.effect_params.items():
         shown = ", ".join(f"{k} = {_fmt(v)}" for k, v in params.items() if k not in ("r", "w"))
         print(f"  {name}: {shown}")
@@ -92,6 +96,11 @@ def run(args: argparse.Namespace) -> int:
         print("  live prediction error of the online estimator (RMS per window):")
         print(format_live_error(live, noise if noise > 0 else None))
     return 0
+
+
+def _relative(sd: float, value: float) -> str:
+    """A 1-sigma as a share of its value: ``0.12 %``, or ``not determined`` where it is unbounded."""
+    return f"{100 * sd / abs(value):.3g} %" if math.isfinite(sd) and value else "not determined"
 
 
 def _fmt(v) -> str:

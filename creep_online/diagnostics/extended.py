@@ -35,7 +35,8 @@ from ..effects import FitView, InputEffect, ParallelEffect, ParamSpec, Stage, ch
 from ..discretize import step_response_sensitivity
 from ..effects.forward import SNAP_RTOL, snapped_time  # noqa: F401 - SNAP_RTOL: the snapping rule, re-exported
 from ..errors import DataError, ModelError
-from ..metrics import fit_percent, noise_std_estimate, rms
+from ..identification import POORLY_DETERMINED
+from ..metrics import fit_percent, long_run_variance_factor, noise_std_estimate, rms
 from ..model import EXTENDED_FIT_ALPHA_BOUNDS as ALPHA_BOUNDS
 from ..model import CreepModel, ExtendedModel, FittedModel, with_effects
 from ..record import check_amplitudes, check_time_and_output
@@ -49,6 +50,9 @@ RCOND = 1e-10
 _GELSY, _GELSY_LWORK = get_lapack_funcs(("gelsy", "gelsy_lwork"), (np.zeros((1, 1)),))
 #: Bounds of the base model's damping (alpha's are ``model.EXTENDED_FIT_ALPHA_BOUNDS``).
 ZETA_BOUNDS = (1e-3, 20.0)
+#: An eigenvalue of the column-normalised J^T J at or below this share of the largest is a direction the record
+#: does not determine (``base_uncertainty``): ~1e-6 of the columns' norm, beyond what a 1e-8 polish resolves.
+UNDETERMINED_CONDITION = 1e-12
 #: Evaluations allowed per least-squares fit.
 MAX_NFEV = 40
 #: Extended fits: this many grid starts get a short polish of SHORT_NFEV evaluations first.
@@ -825,6 +829,7 @@ class ExtendedFit:
     t_pre: float | None = None
     alternatives: list = field(default_factory=list, repr=False)  # other polished base starts
     names: list = field(default_factory=list, repr=False)         # names of theta's entries
+    uncertainty: dict = field(default_factory=dict)  # 1-sigma of alpha, a1, a2 (``base_uncertainty``; fit_extended's)
 
     def simulate(self, t: np.ndarray, u: np.ndarray) -> np.ndarray:
         """This model's output for input u at times t, in the fitted record's conventions (``y_hat`` again on it).
@@ -843,7 +848,19 @@ class ExtendedFit:
     def to_dict(self) -> dict:
         return {"effects": list(self.effects), **self.model.describe(), "offset": self.offset,
                 "effect_params": self.effect_params, "fit_percent": self.fit_percent,
-                "residual_rms": self.residual_rms, "n_params": self.n_params}
+                "residual_rms": self.residual_rms, "n_params": self.n_params, "uncertainty": self.uncertainty}
+
+    def poorly_determined(self) -> list[str]:
+        """Warnings for the base parameters whose 1-sigma exceeds POORLY_DETERMINED of their value (identify's
+        rule and words): a slow sine or triangle does not excite the resonance, and its a1, a2 are then
+        whatever the fit stopped at."""
+        out = []
+        for k, sd in self.uncertainty.items():
+            value = abs(getattr(self.model, k))
+            if not sd <= POORLY_DETERMINED * value:
+                shown = f"{sd / value:.0%}" if math.isfinite(sd) and value > 0.0 else "unbounded"
+                out.append(f"{k} is poorly determined by these data (1-sigma {shown})")
+        return out
 
 
 def _differentiable(effect: ParallelEffect) -> bool:
@@ -1284,7 +1301,43 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
             fit = _result(design, th)
     if above and fit.residual_rms < RESTART_EXPLAINED * base.residual_rms:
         fit, design, best = _other_variants(design, fit, best, best_cost, max_nfev, workers)
-    return _reported_variant(design, fit, best, max_nfev)
+    fit, design, best = _reported_variant(design, fit, best, max_nfev)
+    fit.uncertainty = base_uncertainty(design, best, fit.residual)
+    return fit
+
+
+def base_uncertainty(design: Design, theta: np.ndarray, residual: np.ndarray) -> dict[str, float]:
+    """1-sigma of alpha, a1 and a2 at the fit's parameters ``theta``: sigma^2 (J^T J)^-1 of the weighted,
+    projected residual's Jacobian (variable projection: the linear coefficients profiled out, so this is the
+    nonlinear parameters' marginal covariance), sigma^2 the weighted residual's variance over n - parameters,
+    inflated for a coloured residual as identify's (``long_run_variance_factor``); a1 and a2 from log10 fn and
+    log10 zeta by the delta method (a1 = zeta / (pi fn), a2 = 1 / (2 pi fn)^2). inf for a parameter that leans
+    on a direction J^T J is singular in (``UNDETERMINED_CONDITION``: the record does not determine it); empty
+    where the design has no exact Jacobian (non-uniform time)."""
+    if not design.analytic:
+        return {}
+    try:
+        jac = design.jacobian(theta)
+        wres = design.residual(theta)
+    except (ValueError, np.linalg.LinAlgError, ModelError):
+        return {}
+    dof = max(wres.size - len(theta) - len(design.project(theta)[0]), 1)
+    sigma2 = float(wres @ wres) / dof * long_run_variance_factor(residual)
+    scale = np.sqrt(np.einsum("ij,ij->j", jac, jac))
+    scale[scale == 0.0] = 1.0
+    jn = jac / scale
+    eig, vec = np.linalg.eigh(jn.T @ jn)
+    kept = eig > UNDETERMINED_CONDITION * max(eig[-1], 1e-300)
+    cov = (vec[:, kept] / eig[kept]) @ vec[:, kept].T * sigma2 / np.outer(scale, scale)
+    lost = np.sum(vec[:, ~kept] ** 2, axis=1) > 1e-3      # a parameter with a share of a singular direction
+    ia, ifn, iz = design.index("alpha"), design.index("log10_fn"), design.index("log10_zeta")
+    ln10 = math.log(10.0)
+    m = CreepModel.from_resonance(theta[ia], 10 ** theta[ifn], 10 ** theta[iz], 1.0)
+    var_ln_a1 = ln10 ** 2 * (cov[iz, iz] + cov[ifn, ifn] - 2.0 * cov[iz, ifn])    # ln a1 = ln10 (log zeta - log fn)
+    var_ln_a2 = 4.0 * ln10 ** 2 * cov[ifn, ifn]                                   # ln a2 = -2 ln10 log fn + const
+    return {"alpha": math.inf if lost[ia] else math.sqrt(max(cov[ia, ia], 0.0)),
+            "a1": math.inf if lost[ifn] or lost[iz] else m.a1 * math.sqrt(max(var_ln_a1, 0.0)),
+            "a2": math.inf if lost[ifn] else m.a2 * math.sqrt(max(var_ln_a2, 0.0))}
 
 
 def _other_variants(design: Design, fit: ExtendedFit, best: np.ndarray, best_cost: float,
@@ -1316,8 +1369,9 @@ def _other_variants(design: Design, fit: ExtendedFit, best: np.ndarray, best_cos
     return fit, chosen, theta
 
 
-def _reported_variant(design: Design, fit: ExtendedFit, theta: np.ndarray, max_nfev: int) -> ExtendedFit:
-    """``fit``, or the fit with another variant of an effect that has a reported solution (hysteresis' initial
+def _reported_variant(design: Design, fit: ExtendedFit, theta: np.ndarray,
+                      max_nfev: int) -> tuple[ExtendedFit, Design, np.ndarray]:
+    """(fit, its design, its parameters): ``fit``, or the fit with another variant of an effect that has a reported solution (hysteresis' initial
     state) when that variant's reported solution reaches a lower objective (residual plus the prior's penalty,
     ``InputEffect.reported_solution``) at the same parameters, polished from there.
 
@@ -1332,7 +1386,7 @@ def _reported_variant(design: Design, fit: ExtendedFit, theta: np.ndarray, max_n
 
     own = _reported(design, theta)
     if own is None:
-        return fit
+        return fit, design, theta
     best, best_theta, best_obj = design, theta, objective(own)
     for e, _ in design.inputs:
         if e.name not in own[4]:
@@ -1344,9 +1398,10 @@ def _reported_variant(design: Design, fit: ExtendedFit, theta: np.ndarray, max_n
                 if obj < best_obj:
                     best, best_obj = other, obj
     if best is design:
-        return fit
+        return fit, design, theta
     th = _polish(best.explored(), best, theta, max_nfev)
-    return _result(best, th if objective(_reported(best, th)) < best_obj else best_theta)
+    th = th if objective(_reported(best, th)) < best_obj else best_theta
+    return _result(best, th), best, th
 
 
 def _short_polishes(explore: Design, design: Design, chosen: list[np.ndarray], workers: int) -> list[np.ndarray]:
