@@ -246,7 +246,8 @@ def diagnose(record_or_t_u_y, *, candidates: tuple[str, ...] | None = None, use_
         else:
             skipped[name] = why
     # the candidate fits are independent: on several cores at once (pool.py), results in the serial order
-    fits = ordered_map(lambda job: ext.fit_extended(data, (job[1],), base, max_nfev=max_nfev), todo, n_workers,
+    fits = ordered_map(lambda job: ext.fit_extended(data, (job[1],), base, max_nfev=max_nfev, uncertainty=False),
+                       todo, n_workers,
                        before=lambda _k, job: report(f"[{job[0]}/{len(candidates)}] fitting the base model + {job[1]}"))
     for (_, name), fit in zip(todo, fits):
         ev, lr, pv, dk = evidence(base, fit, data.n)
@@ -322,7 +323,7 @@ def _single_from_pair(data: ext.Prepared, base: ext.ExtendedFit, single: Candida
     """
     report(f"fitting {single.effect} alone from the pair's plant")
     refit = ext.fit_extended(data, (single.effect,), base, max_nfev=max_nfev, warm=pair, workers=workers,
-                             restart=True)
+                             restart=True, uncertainty=False)
     if refit.rss >= single.fit.rss:
         return ev1, how
     ev = evidence(refit, pair, data.n)[0]

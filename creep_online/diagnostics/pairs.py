@@ -134,7 +134,8 @@ def choose_pair(data: ext.Prepared, base: ext.ExtendedFit, singles: list[tuple[s
         if len(significant) >= 2:
             pair = (first[0], significant[1][0])
             report(f"fitting the two best together: {pair[0]} + {pair[1]}")
-            fit = ext.fit_extended(data, pair, base, max_nfev=max_nfev, warm=first[1], workers=workers)
+            fit = ext.fit_extended(data, pair, base, max_nfev=max_nfev, warm=first[1], workers=workers,
+                                   uncertainty=False)
             if not data.uniform:
                 return PairChoice(pair, fit, False, {pair: _weigh(base, fit, data.n)})
         if fit is not None and evidence(first[1], fit, data.n)[0] > EVIDENCE_THRESHOLD:
@@ -176,7 +177,7 @@ def choose_pair(data: ext.Prepared, base: ext.ExtendedFit, singles: list[tuple[s
     if small is not data:
         small.release()                   # the window's remembered responses: the whole record's fit asks for none
         report(f"fitting the chosen pair to the whole record: {best[0]} + {best[1]}")
-        fit = ext.fit_extended(data, best, base, max_nfev=max_nfev, warm=fit, workers=workers)
+        fit = ext.fit_extended(data, best, base, max_nfev=max_nfev, warm=fit, workers=workers, uncertainty=False)
     order = [s[0] for s in singles]
     return PairChoice(_ordered(best, order), fit, True, scores,
                       [_ordered(k, order) for k in rival_pairs(best, sound, scores)])
@@ -218,7 +219,8 @@ def _fitted_evidence(data: ext.Prepared, base: ext.ExtendedFit, singles: list, s
     """The BIC drop of partner ``s`` fitted beside its effect (warm from that effect's single fit) over the single
     fit it must beat (``s.against``), on the whole record."""
     fits = {name: fit for name, fit, _ in singles}
-    pair = ext.fit_extended(data, (s.beside, s.effect), base, max_nfev=max_nfev, warm=fits[s.beside], workers=workers)
+    pair = ext.fit_extended(data, (s.beside, s.effect), base, max_nfev=max_nfev, warm=fits[s.beside], workers=workers,
+                            uncertainty=False)
     return evidence(fits[s.against], pair, data.n)[0]
 
 
@@ -269,7 +271,7 @@ def _round(data: ext.Prepared, base: ext.ExtendedFit, kept: tuple, singles: list
         if key not in fits or fits[key].residual_rms > SEARCH_ABOVE * noise:
             others.append((e, key))
     done = ordered_map(lambda ek: ext.fit_extended(data, (kept[0], ek[0]), base, max_nfev=max_nfev, warm=kept[1],
-                                                   screen=screen),
+                                                   screen=screen, uncertainty=False),
                        others, workers, before=lambda _i, ek: report(f"pair search: {kept[0]} + {ek[0]}"))
     for (e, key), fit in zip(others, done):
         if key not in fits or fit.rss < fits[key].rss:
