@@ -7,6 +7,7 @@ Usage (from the repository root)::
     python -m bench.bench_online_hysteresis plants [--records 20] [--families sine,triangle,random_staircase]
     python -m bench.bench_online_hysteresis scatter [--records 3] [--realisations 6]
     python -m bench.bench_online_hysteresis attribution [--records 20] [--block 200]
+    python -m bench.bench_online_hysteresis resting [--records 16] [--first-seed 20]
 
 ``latency``: per-sample work of ``update()`` (thread CPU and wall, p50/p99/max in us) at 10 kHz with the default 8
 play operators, against the plain estimator on the same stream in the same run (a triangle record of
@@ -37,6 +38,11 @@ only to worse than 5 % of the largest (1-sigma); ``determined_weights_ok``: the 
 
 ``scatter``: ``--records`` random plants per family (seeds 2000+), each with ``--realisations`` noise draws: each
 weight's spread over the draws against the mean reported ``w_std``, and the paths (events, re-searches) they took.
+
+``resting``: plants at rest on a branch of their loop for 2 s, then a 1 Hz triangle
+(``hil_sim.hysteresis_plants.resting_record``), ``--records`` seeds x three rests (ascending, descending, centred), fed
+in one block and sample by sample: the window error over the noise floor and the quality at the end, a pass at most
+``RESTING_FLOORS`` and not degraded (the tests' rule), fractions per feeding and per rest.
 
 ``attribution``: where the online and batch weights part, on the ``plants`` records (seeds 1000+), with the batch
 fit's thresholds set to the online estimate's (``same_thresholds``). The batch fit's reported solution re-solved at
@@ -511,6 +517,44 @@ def scatter(args) -> dict:
             "records": rows}
 
 
+#: ``resting``'s verdict: the window error at the end at most this many noise floors, and quality not "degraded"
+#: (``tests/test_online_hysteresis.py``'s resting-on-a-branch test).
+RESTING_FLOORS = 1.5
+
+
+def resting(args) -> dict:
+    """Plants at rest on a branch, then swept (``hil_sim.hysteresis_plants.resting_record``: seeds from
+    ``--first-seed``, each at rest ascending, descending and centred), fed in one block and sample by sample
+    (``update()``): quality and window error over the noise floor at the end, pass fractions per feeding and rest."""
+    from creep_online.online import OnlineEstimator
+    from hil_sim.hysteresis_plants import resting_record
+
+    rows = []
+    for seed in range(args.first_seed, args.first_seed + args.records):
+        for initial in ("ascending", "descending", "centred"):
+            rec = resting_record(seed, initial)
+            for feed in ("block", "sample"):
+                est = OnlineEstimator(rec.h, effects=("hysteresis",))
+                start = time.perf_counter()
+                if feed == "block":
+                    est.update_block(rec.u, rec.y)
+                else:
+                    for a, b in zip(rec.u.tolist(), rec.y.tolist()):
+                        est.update(a, b)
+                e = est.estimate
+                ratio = e.residual_rms / e.noise_rms if e.residual_rms is not None and e.noise_rms else math.nan
+                rows.append({"seed": seed, "initial": initial, "feed": feed, "quality": e.quality,
+                             "window_over_floor": ratio, "events": len(e.events or []),
+                             "ok": bool(e.quality != "degraded" and ratio <= RESTING_FLOORS),
+                             "seconds": time.perf_counter() - start})
+    groups = {f"{key}={value}": [r for r in rows if r[key] == value]
+              for key in ("feed", "initial") for value in sorted({r[key] for r in rows})}
+    summary = {name: {"runs": len(sel), "pass": sum(r["ok"] for r in sel) / len(sel),
+                      "window_over_floor": dist([r["window_over_floor"] for r in sel])} for name, sel in groups.items()}
+    return {"mode": "resting", "first_seed": args.first_seed, "records": args.records, "floors": RESTING_FLOORS,
+            "pass": sum(r["ok"] for r in rows) / len(rows), "summary": summary, "rows": rows}
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="mode", required=True)
@@ -528,6 +572,9 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--samples", type=int, default=60000)
     p.add_argument("--block", type=int, default=200)
     p.add_argument("--families", default="sine,triangle,random_staircase")
+    p = sub.add_parser("resting")
+    p.add_argument("--records", type=int, default=16)
+    p.add_argument("--first-seed", type=int, default=20)
     p = sub.add_parser("scatter")
     p.add_argument("--records", type=int, default=3)
     p.add_argument("--realisations", type=int, default=6)
@@ -537,7 +584,7 @@ def main(argv: list[str] | None = None) -> dict:
         q.add_argument("--out", default=None)
     args = ap.parse_args(argv)
     doc = {"latency": latency, "real": real, "plants": plants, "scatter": scatter,
-           "attribution": attribution}[args.mode](args)
+           "attribution": attribution, "resting": resting}[args.mode](args)
     suffix = "" if args.mode != "real" or args.window == 10.0 else f"_window{args.window:g}s"
     write_report(doc, args.out or results_path(f"online_hysteresis_{args.mode}{suffix}"), argv=argv)
     return doc

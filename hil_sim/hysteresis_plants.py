@@ -14,7 +14,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from creep_online.effects import INITIAL_STATES, loop_width, simulate_with_effects
+from creep_online.effects.hysteresis import hysteresis_input, threshold_fractions
 from creep_online.model import CreepModel
+from creep_online.simulate import simulate
 
 from .hidden_effects import staircase
 
@@ -142,3 +144,48 @@ def hysteresis_record(family: str, seed: int, n: int = 20_000, h: float = 1e-4) 
     y = y_clean + noise * rng.standard_normal(n)
     width = loop_width(params["r"], params["w"], stroke) / stroke
     return HysteresisRecord(family, t, u, y, y_clean, noise, model, params, u_pre, seed, {"loop_width_rel": width})
+
+
+def online_creep_plant(rng: np.random.Generator) -> CreepModel:
+    """A plant for the online estimator's hysteresis records: fn 200-500 Hz, zeta 0.2-0.5, alpha 0.03-0.2, b 0.5-3."""
+    wn = 2 * math.pi * rng.uniform(200, 500)
+    zeta = rng.uniform(0.2, 0.5)
+    return CreepModel(rng.uniform(0.03, 0.2), 2 * zeta / wn, 1 / wn ** 2, rng.uniform(0.5, 3.0))
+
+
+def online_loop_weights(rng: np.random.Generator) -> np.ndarray:
+    """Eight play weights decaying from 0.02-0.1 (the loop a few percent of the stroke), at the online estimator's
+    thresholds (``threshold_fractions(8)`` of the stroke)."""
+    return rng.uniform(0.02, 0.1) * np.exp(-np.arange(8) / rng.uniform(1.0, 3.0))
+
+
+@dataclass
+class RestingRecord:
+    """A plant at rest on a branch of its loop, then swept (``resting_record``): sample period h, input u, output y,
+    the creep plant and the true weights w."""
+    h: float
+    u: np.ndarray
+    y: np.ndarray
+    model: CreepModel
+    w: np.ndarray
+
+
+def resting_record(seed: int, initial: str, rest_s: float = 2.0, seconds: float = 10.0,
+                   fs: float = 5000.0) -> RestingRecord:
+    """A creep + resonance plant (``online_creep_plant``) behind a loop of 8 operators (``online_loop_weights``) resting
+    on the branch ``initial`` (its plays at u - r, u + r or centred since long before the record) for ``rest_s``,
+    then a 1 Hz triangle from the rest level up to 4; the record is the output's deviation from that rest, with
+    white noise at 1e-4 of its range. What a device at rest on a branch when the stream starts gives the
+    estimator: the start in equilibrium that the window's start columns model."""
+    rng = np.random.default_rng(seed)
+    h = 1.0 / fs
+    t = np.arange(int(seconds * fs)) * h
+    model = online_creep_plant(rng)
+    phase = np.maximum(t - rest_s, 0.0)
+    u = np.round(4.0 * (1.0 - np.abs(2.0 * (phase % 1.0) - 1.0)) * 250) / 250
+    r = threshold_fractions(8) * np.ptp(u)
+    w = online_loop_weights(rng)
+    v = hysteresis_input(u, r, w, initial)
+    y = simulate(model, t, v - v[0])
+    noise = 1e-4 * np.ptp(y)
+    return RestingRecord(h, u, y + noise * rng.standard_normal(t.size), model, w)

@@ -21,6 +21,7 @@ from creep_online.online._kernels import hysteresis as HK
 from creep_online.online._kernels import window as W
 from creep_online.online.soe import SoeBasis
 from creep_online.simulate import simulate
+from hil_sim.hysteresis_plants import online_creep_plant, online_loop_weights, resting_record
 
 H = 1e-4
 
@@ -160,27 +161,15 @@ def test_a_replay_of_the_ring_reproduces_the_live_statistics(equilibrium):
     assert np.allclose(rep[lay["sy"]:lay["sy"] + p], st[lay["sy"]:lay["sy"] + p], rtol=1e-10)
 
 
-def _random_creep_plant(rng: np.random.Generator) -> CreepModel:
-    """fn 200-500 Hz, zeta 0.2-0.5, alpha 0.03-0.2, b 0.5-3."""
-    wn = 2 * math.pi * rng.uniform(200, 500)
-    zeta = rng.uniform(0.2, 0.5)
-    return CreepModel(rng.uniform(0.03, 0.2), 2 * zeta / wn, 1 / wn ** 2, rng.uniform(0.5, 3.0))
-
-
-def _random_weights(rng: np.random.Generator) -> np.ndarray:
-    """Eight play weights decaying from 0.02-0.1 (the loop a few percent of the stroke)."""
-    return rng.uniform(0.02, 0.1) * np.exp(-np.arange(8) / rng.uniform(1.0, 3.0))
-
-
 def _hammerstein(seed: int, seconds: float = 12.0, fs: float = 5000.0):
     """A creep + resonance plant behind a PI loop of 8 operators at the online thresholds, a 1 Hz triangle."""
     rng = np.random.default_rng(seed)
     h = 1.0 / fs
     t = np.arange(int(seconds * fs)) * h
-    model = _random_creep_plant(rng)
+    model = online_creep_plant(rng)
     u = np.round(4.0 * (2 * np.abs(t % 1.0 - 0.5)) * 250) / 250
     r = threshold_fractions(8) * np.ptp(u)
-    w = _random_weights(rng)
+    w = online_loop_weights(rng)
     y = simulate(model, t, hysteresis_input(u, r, w))
     noise = 1e-4 * np.ptp(y)
     return h, t, u, y + noise * rng.standard_normal(t.size), model, r, w, noise
@@ -246,22 +235,11 @@ def test_the_online_weights_1_sigma_is_their_spread_over_noise_realisations(seed
     assert np.all((ratio >= 0.4) & (ratio <= 2.5)), ratio
 
 
-def _resting_on_a_branch(seed: int, initial: str, rest_s: float = 2.0, seconds: float = 10.0, fs: float = 5000.0):
-    """The plant of ``_hammerstein`` resting on the branch ``initial`` (its plays at u - r or u + r since long
-    before the record) for ``rest_s``, then a 1 Hz triangle from the rest level up: the record is the deviation
-    from that rest."""
-    rng = np.random.default_rng(seed)
-    h = 1.0 / fs
-    t = np.arange(int(seconds * fs)) * h
-    model = _random_creep_plant(rng)
-    phase = np.maximum(t - rest_s, 0.0)
-    u = np.round(4.0 * (1.0 - np.abs(2.0 * (phase % 1.0) - 1.0)) * 250) / 250
-    r = threshold_fractions(8) * np.ptp(u)
-    w = _random_weights(rng)
-    v = hysteresis_input(u, r, w, initial)
-    y = simulate(model, t, v - v[0])
-    noise = 1e-4 * np.ptp(y)
-    return h, u, y + noise * rng.standard_normal(t.size), model, w
+def _resting_on_a_branch(seed: int, initial: str):
+    """``hil_sim.hysteresis_plants.resting_record``: a plant at rest on the branch ``initial`` for 2 s, then a 1 Hz
+    triangle (``bench_online_hysteresis resting`` runs the same on more seeds)."""
+    rec = resting_record(seed, initial)
+    return rec.h, rec.u, rec.y, rec.model, rec.w
 
 
 @pytest.mark.parametrize("seed, initial, feed", [
