@@ -1669,20 +1669,7 @@ def cholesky_factor(A: np.ndarray, L: np.ndarray, n: int, pivot_floor: float) ->
     so L may be A itself (in place, no scratch: the drift score test inside the per-sample kernel). Returns
     False at the first pivot not above ``pivot_floor`` (0: not numerically positive definite).
     """
-    for j in range(n):
-        s = A[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if not s > pivot_floor:
-            return False
-        djj = math.sqrt(s)
-        L[j, j] = djj
-        for i in range(j + 1, n):
-            t = A[i, j]
-            for k in range(j):
-                t -= L[i, k] * L[j, k]
-            L[i, j] = t / djj
-    return True
+    return _factor(A, L, n, pivot_floor, L[0, :0]) >= 0     # (an empty view: fail, not hold; no allocation)
 
 
 @njit(cache=CACHE)
@@ -1698,27 +1685,36 @@ def cholesky_holding(A: np.ndarray, n: int, x: np.ndarray) -> int:
     ln a1, ln a2 entries then keep ~1e-17 of their terms: a negative diagonal, which Levenberg-Marquardt's damping
     (a multiple of the diagonal) keeps negative, and the whole step failed at every damping: a re-fit then never
     moved anything again (a plant resting on a branch, fed sample by sample, stayed at 520x the noise floor)."""
+    return _factor(A, A, n, 0.0, x)
+
+
+@njit(cache=CACHE)
+def _factor(A: np.ndarray, L: np.ndarray, n: int, pivot_floor: float, x: np.ndarray) -> int:
+    """The factor of ``cholesky_factor`` (``x`` empty: -1 at the first pivot not above ``pivot_floor``) and of
+    ``cholesky_holding`` (such a pivot's parameter held, x[j] = 0); returns how many were held."""
     held = 0
     for j in range(n):
         s = A[j, j]
         for k in range(j):
-            s -= A[j, k] * A[j, k]
-        if not s > 0.0:
+            s -= L[j, k] * L[j, k]
+        if not s > pivot_floor:
+            if x.shape[0] == 0:
+                return -1
             for k in range(j):
-                A[j, k] = 0.0
-            A[j, j] = 1.0
+                L[j, k] = 0.0
+            L[j, j] = 1.0
             for i in range(j + 1, n):
-                A[i, j] = 0.0
+                L[i, j] = 0.0
             x[j] = 0.0
             held += 1
             continue
         djj = math.sqrt(s)
-        A[j, j] = djj
+        L[j, j] = djj
         for i in range(j + 1, n):
             t = A[i, j]
             for k in range(j):
-                t -= A[i, k] * A[j, k]
-            A[i, j] = t / djj
+                t -= L[i, k] * L[j, k]
+            L[i, j] = t / djj
     return held
 
 
