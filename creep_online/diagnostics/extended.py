@@ -1324,10 +1324,10 @@ def base_uncertainty(design: Design, theta: np.ndarray, residual: np.ndarray) ->
         return {}
     try:
         jac = design.jacobian(theta)
-        wres = design.residual(theta)
+        coef, _, wres = design.project(theta)
     except (ValueError, np.linalg.LinAlgError, ModelError):
         return {}
-    dof = max(wres.size - len(theta) - len(design.project(theta)[0]), 1)
+    dof = max(wres.size - len(theta) - len(coef), 1)
     sigma2 = float(wres @ wres) / dof * long_run_variance_factor(residual)
     scale = np.sqrt(np.einsum("ij,ij->j", jac, jac))
     scale[scale == 0.0] = 1.0
@@ -1402,9 +1402,9 @@ def _other_variants(design: Design, fit: ExtendedFit, best: np.ndarray, best_cos
 
 def _reported_variant(design: Design, fit: ExtendedFit, theta: np.ndarray,
                       max_nfev: int) -> tuple[ExtendedFit, Design, np.ndarray]:
-    """(fit, its design, its parameters): ``fit``, or the fit with another variant of an effect that has a reported solution (hysteresis' initial
-    state) when that variant's reported solution reaches a lower objective (residual plus the prior's penalty,
-    ``InputEffect.reported_solution``) at the same parameters, polished from there.
+    """(fit, its design, its parameters): ``fit``, or the fit with another variant of an effect that has a reported
+    solution (hysteresis' initial state) when that variant's reported solution reaches a lower objective (residual
+    plus the prior's penalty, ``InputEffect.reported_solution``) at the same parameters, polished from there.
 
     The search ranks the variants with its reduced basis unconstrained, where an operator the record never
     opens still fits the first move of the input (the jump of a centred operator) and stands in for the state
