@@ -267,7 +267,7 @@ def test_fit_json_says_which_thresholds_the_data_determine(tmp_path, capsys):
 def test_the_fit_reports_its_resonance_undetermined_on_a_slow_triangle(tmp_path, capsys):
     """A slow triangle does not excite a resonance at hundreds of Hz: the fit's a2 is whatever it stopped at, and
     it says so (1-sigma over identify's 20 %, a note naming it), in JSON and in text; a1, which the turns touch,
-    is loosely determined; alpha, which the creep after each turn determines, is reported determined."""
+    is at best loosely determined; alpha, which the creep after each turn determines, is reported determined."""
     rec = hysteresis_record("triangle", 0, n=N)
     path = tmp_path / "tri.csv"
     save_csv(path, rec.t, rec.u, rec.y)
@@ -276,7 +276,7 @@ def test_the_fit_reports_its_resonance_undetermined_on_a_slow_triangle(tmp_path,
     sd = out["uncertainty"]
     assert sd["alpha"] is not None and sd["alpha"] < 0.05 * out["alpha"]
     assert sd["a2"] is None or sd["a2"] > POORLY_DETERMINED * out["a2"]
-    assert sd["a1"] is None or sd["a1"] > 0.1 * out["a1"]          # (18 % here: loosely, through the corners)
+    assert sd["a1"] is None or sd["a1"] > 0.1 * out["a1"]          # (the curvature alone: 18 %; the profile: open)
     assert any(n.startswith("a2 is poorly determined") for n in out["notes"])
     assert main(["fit", str(path), "--effects", "hysteresis"]) == 0
     text = capsys.readouterr().out
