@@ -15,7 +15,6 @@ import pytest
 from creep_online.effects.hysteresis import (hysteresis_input, initial_plays, play_operators, solve_pi_weights,
                                              threshold_fractions)
 from creep_online.errors import DataError
-from creep_online.model import CreepModel
 from creep_online.online import OnlineEstimator
 from creep_online.online._kernels import hysteresis as HK
 from creep_online.online._kernels import window as W
