@@ -54,7 +54,7 @@ ZETA_BOUNDS = (1e-3, 20.0)
 #: does not determine (``base_uncertainty``): ~1e-6 of the columns' norm, beyond what a 1e-8 polish resolves.
 UNDETERMINED_CONDITION = 1e-12
 #: The factors fn and zeta are moved by, up and down, to probe the cost's profile (``_profile_open``).
-FLAT_FACTORS = (2.0, 4.0, 8.0)
+PROFILE_FACTORS = (2.0, 4.0, 8.0)
 #: Evaluations allowed per least-squares fit.
 MAX_NFEV = 40
 #: Extended fits: this many grid starts get a short polish of SHORT_NFEV evaluations first.
@@ -1348,7 +1348,7 @@ def base_uncertainty(design: Design, theta: np.ndarray, residual: np.ndarray) ->
 
 
 def _profile_open(design: Design, theta: np.ndarray, ifn: int, iz: int, cost: float, sigma2: float) -> set[str]:
-    """Which of a1, a2 the cost's profile leaves open: fn or zeta moved by one of FLAT_FACTORS, up or down (the
+    """Which of a1, a2 the cost's profile leaves open: fn or zeta moved by one of PROFILE_FACTORS, up or down (the
     other parameters as fitted, the linear ones projected afresh), and a1 or a2 called poorly determined when the
     cost rises by less than a Gaussian of 1-sigma POORLY_DETERMINED (relative) would for that move of it:
     ``rise <= (|d ln a| / POORLY_DETERMINED)^2`` noise variances (fn x f moves ln a2 by 2 ln f and ln a1 by ln f;
@@ -1357,7 +1357,7 @@ def _profile_open(design: Design, theta: np.ndarray, ifn: int, iz: int, cost: fl
     re-optimising the others can only raise the probes' costs, so an open verdict holds."""
     found: set[str] = set()
     for i, moves in ((ifn, {"a1": 1.0, "a2": 2.0}), (iz, {"a1": 1.0})):
-        for step in (sign * math.log10(f) for f in FLAT_FACTORS for sign in (-1.0, 1.0)):
+        for step in (sign * math.log10(f) for f in PROFILE_FACTORS for sign in (-1.0, 1.0)):
             other = theta.copy()
             other[i] = min(max(theta[i] + step, design.lo[i]), design.hi[i])
             if other[i] == theta[i]:
