@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import inspect
 import math
 import time
 
@@ -171,12 +172,14 @@ def one_scan(rec, both, gain: float, shape_u: np.ndarray, h: float) -> dict:
 #: frozen, ``oracle`` the true current loop at every block: the limit of adaptation).
 DRIFT_REFERENCES = ("stairs", "scan")
 DRIFT_MODES = ("adaptive", "frozen", "known", "oracle")
+#: The estimator's own default window (s): what a user who sets nothing gets.
+ESTIMATOR_WINDOW_S = inspect.signature(OnlineEstimator).parameters["window_s"].default
 
 
 def drift_plant(seed: int, reference: str, duration: float = 60.0, growth: float = 0.3, h: float = 1e-4,
-                modes: tuple = DRIFT_MODES) -> dict:
+                modes: tuple = DRIFT_MODES, window_s: float | None = ESTIMATOR_WINDOW_S) -> dict:
     """Adaptive vs frozen on a plant whose loop width grows by ``growth`` over ``duration`` (module docstring);
-    ``modes``: the closed loops run (the ratios of those present)."""
+    ``modes``: the closed loops run (the ratios of those present); ``window_s``: the estimator's."""
     from creep_online.effects import loop_width
     rng = np.random.default_rng([seed, 41])
     plant = random_plant(rng)
@@ -194,11 +197,12 @@ def drift_plant(seed: int, reference: str, duration: float = 60.0, growth: float
     f = CreepCompensator(h, plant, bandwidth_hz=bandwidth)
     shaped = np.array([(f.command(x), f.shaped_reference)[1] for x in r])
     late = t >= duration - 20.0
-    out = {"seed": seed, "reference": reference, "plant": plant.params(),
+    out = {"seed": seed, "reference": reference, "window_s": window_s, "plant": plant.params(),
            "loop_width_rel": loop_width(loop["r"], loop["w"], stroke) / stroke, "growth": growth, "modes": {}}
     for mode in modes:
         t0 = time.thread_time()
-        est = OnlineEstimator(h, input_gate=0.0, effects=("hysteresis",)) if mode in ("adaptive", "frozen") else None
+        est = (OnlineEstimator(h, window_s=window_s, input_gate=0.0, effects=("hysteresis",))
+               if mode in ("adaptive", "frozen") else None)
         rec = run_closed_loop(t, r, plant, mode, estimator=est, compensator=CreepCompensator(h, bandwidth_hz=bandwidth),
                               hysteresis=loop, loop_scale=scale, noise=2.5e-3 * amp, block=100, seed=seed)
         err = rec.y_clean - shaped
@@ -268,6 +272,9 @@ def main(argv: list[str] | None = None) -> dict:
                     help="closed loops of the drift comparison (comma-separated; adaptive,frozen for the ratio)")
     ap.add_argument("--drift-references", default=",".join(DRIFT_REFERENCES),
                     help="references of the drift comparison: stairs, scan or both (comma-separated)")
+    ap.add_argument("--drift-window-s", type=float, default=ESTIMATOR_WINDOW_S,
+                    help=f"the estimator's window_s in the drift comparison (default {ESTIMATOR_WINDOW_S:g}: "
+                         "OnlineEstimator's)")
     ap.add_argument("--attribute", action="store_true", help="also the mixed models (live creep with the batch loop "
                     "and the reverse; needs both sources)")
     ap.add_argument("--out", default=None)
@@ -287,7 +294,8 @@ def main(argv: list[str] | None = None) -> dict:
     drift = []
     for seed in range(args.first_seed, args.first_seed + args.drift_plants):
         for reference in [x for x in args.drift_references.split(",") if x]:
-            drift.append(drift_plant(seed, reference, modes=tuple(x for x in args.drift_modes.split(",") if x)))
+            drift.append(drift_plant(seed, reference, modes=tuple(x for x in args.drift_modes.split(",") if x),
+                                     window_s=args.drift_window_s))
             m = drift[-1]["modes"]
             print(f"drift seed {seed} {reference}: loop {100 * drift[-1]['loop_width_rel']:.1f} % "
                   + " ".join(f"{k} {v['rms_late_rel']:.2e}" for k, v in m.items()), flush=True)

@@ -39,6 +39,9 @@ DETERMINED = dict(QualitySettings().determined.items())
 DWELL_S = 0.2
 #: The creep part: a model is taken only when the estimate determines these.
 CREEP = ("alpha", "b")
+#: What a window that lags a drifting plant needs (the window's lag costs about drift rate x window_s of the moving
+#: part of the output; docs/online.md, "A plant that drifts faster than the window").
+SHORTER = "a shorter window_s follows faster"
 #: The resonance's coefficients.
 RESONANCE = ("a1", "a2")
 #: An undetermined resonance is used (when no determined one was seen) if each coefficient's relative 1-sigma is
@@ -217,7 +220,8 @@ def checks(view: QualityView) -> tuple[str, str, float]:
         return "provisional", (f"input constant for {held:.3g} s: the window no longer holds an input change "
                                "(the estimate is the last one the data determined)"), ratio
     if ratio > s.floor_ratio:
-        return "degraded", f"window error {ratio:.1f}x the noise floor: the model misses part of the data", ratio
+        return "degraded", (f"window error {ratio:.1f}x the noise floor: the model misses part of the data (an "
+                            f"effect it lacks, or a plant drifting faster than the window follows: {SHORTER})"), ratio
     return "", "", ratio
 
 
@@ -271,7 +275,7 @@ def assess(view: QualityView) -> Verdict:
         return Verdict("provisional", why, determined, cleared)
     if ratio > view.settings.good_ratio:
         return Verdict("provisional", (f"window error {ratio:.2f}x the noise floor: the model misses a little of the "
-                                       "data (unmodeled dynamics, or parameters moving within the window)"),
+                                       f"data (unmodeled dynamics, or parameters moving within the window: {SHORTER})"),
                        determined, cleared)
     return Verdict("good", "", determined, cleared)
 
