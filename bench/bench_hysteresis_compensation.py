@@ -25,14 +25,15 @@ output's stroke; ``ratio`` = uncompensated error / compensated error (the issue'
 closed loop (``hil_sim.closed_loop.run_closed_loop``, the estimator fed the commands, sensor noise 0.25 % of the
 output's stroke): a staircase over the stroke for 6 s (0.3 s holds), then a 2 Hz triangle scan. ``adaptive`` takes
 the gate's model at every block of 100 samples; ``frozen`` keeps the model it holds at 10 s. The error is the rms of
-the output minus the shaped reference over the last 20 s; goal: adaptive at least 3x smaller than frozen.
+the output minus the shaped reference over the last 20 s; goal: adaptive at least 3x smaller than frozen. Both use
+the estimator's default window unless ``--drift-window-s`` sets another.
 
 ``--attribute`` (with both sources): two mixed models on the same scans, ``live_creep+batch_loop`` (the live
 estimate's creep and resonance with the batch fit's loop) and ``batch_creep+live_loop``: which half of the live
 model the compensation error comes from.
 
 Usage: ``python -m bench.bench_hysteresis_compensation [--plants 20] [--first-seed 0] [--drift-plants 4]
-[--drift-modes adaptive,frozen] [--drift-references stairs] [--attribute]``; JSON in ``bench/results/hysteresis_compensation.json``.
+[--drift-modes adaptive,frozen] [--drift-references stairs] [--drift-window-s 4] [--attribute]``; JSON in ``bench/results/hysteresis_compensation.json``.
 """
 from __future__ import annotations
 
