@@ -26,7 +26,8 @@ closed loop (``hil_sim.closed_loop.run_closed_loop``, the estimator fed the comm
 output's stroke): a staircase over the stroke for 6 s (0.3 s holds), then a 2 Hz triangle scan. ``adaptive`` takes
 the gate's model at every block of 100 samples; ``frozen`` keeps the model it holds at 10 s. The error is the rms of
 the output minus the shaped reference over the last 20 s; goal: adaptive at least 3x smaller than frozen. Both use
-the estimator's default window unless ``--drift-window-s`` sets another.
+the estimator's default window unless ``--drift-window-s`` sets another. Per mode fed the estimator,
+``update_block_ms``: p50/p99/max of each ``update_block`` call's own CPU time (ms), what the loop waits for each block.
 
 ``--attribute`` (with both sources): two mixed models on the same scans, ``live_creep+batch_loop`` (the live
 estimate's creep and resonance with the batch fit's loop) and ``batch_creep+live_loop``: which half of the live
@@ -177,6 +178,24 @@ DRIFT_MODES = ("adaptive", "frozen", "known", "oracle")
 ESTIMATOR_WINDOW_S = inspect.signature(OnlineEstimator).parameters["window_s"].default
 
 
+class TimedBlocks:
+    """An estimator whose ``update_block`` calls' own CPU times (s) are kept in ``seconds``: what a control loop
+    that feeds it a block at a time waits for (the loop's blocks are 10 ms of samples)."""
+
+    def __init__(self, estimator: OnlineEstimator) -> None:
+        self._estimator = estimator
+        self.seconds: list[float] = []
+
+    def update_block(self, u: np.ndarray, y: np.ndarray):
+        t0 = time.thread_time()
+        out = self._estimator.update_block(u, y)
+        self.seconds.append(time.thread_time() - t0)
+        return out
+
+    def __getattr__(self, name: str):
+        return getattr(self._estimator, name)
+
+
 def drift_plant(seed: int, reference: str, duration: float = 60.0, growth: float = 0.3, h: float = 1e-4,
                 modes: tuple = DRIFT_MODES, window_s: float | None = ESTIMATOR_WINDOW_S) -> dict:
     """Adaptive vs frozen on a plant whose loop width grows by ``growth`` over ``duration`` (module docstring);
@@ -202,14 +221,15 @@ def drift_plant(seed: int, reference: str, duration: float = 60.0, growth: float
            "loop_width_rel": loop_width(loop["r"], loop["w"], stroke) / stroke, "growth": growth, "modes": {}}
     for mode in modes:
         t0 = time.thread_time()
-        est = (OnlineEstimator(h, window_s=window_s, input_gate=0.0, effects=("hysteresis",))
+        est = (TimedBlocks(OnlineEstimator(h, window_s=window_s, input_gate=0.0, effects=("hysteresis",)))
                if mode in ("adaptive", "frozen") else None)
         rec = run_closed_loop(t, r, plant, mode, estimator=est, compensator=CreepCompensator(h, bandwidth_hz=bandwidth),
                               hysteresis=loop, loop_scale=scale, noise=2.5e-3 * amp, block=100, seed=seed)
         err = rec.y_clean - shaped
         out["modes"][mode] = {"rms_late_rel": float(np.sqrt(np.mean(err[late] ** 2))) / amp,
                               "model_updates": len(rec.models), "cpu_s": time.thread_time() - t0,
-                              "last_model_t": rec.model_t[-1] if rec.model_t else None}
+                              "last_model_t": rec.model_t[-1] if rec.model_t else None,
+                              **({"update_block_ms": dist(est.seconds, 1e-3)} if est is not None else {})}
     m = out["modes"]
     for name, (over, under) in (("ratio_frozen_over_adaptive", ("frozen", "adaptive")),
                                 ("ratio_known_over_oracle", ("known", "oracle"))):
@@ -299,7 +319,9 @@ def main(argv: list[str] | None = None) -> dict:
                                      window_s=args.drift_window_s))
             m = drift[-1]["modes"]
             print(f"drift seed {seed} {reference}: loop {100 * drift[-1]['loop_width_rel']:.1f} % "
-                  + " ".join(f"{k} {v['rms_late_rel']:.2e}" for k, v in m.items()), flush=True)
+                  + " ".join(f"{k} {v['rms_late_rel']:.2e}" for k, v in m.items())
+                  + "".join(f" ({k}: update_block max {v['update_block_ms']['max']:.3g} ms)" for k, v in m.items()
+                            if "update_block_ms" in v), flush=True)
     doc = {"plants": args.plants, "first_seed": args.first_seed, "calibration_samples": args.calibration_samples,
            "frequencies_hz": FREQUENCIES, "shapes": SHAPES, "goal_ratio": GOAL_RATIO,
            "summary": {src: summary(rows, src) for src in summarised}, "rows": rows,
