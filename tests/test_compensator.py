@@ -460,14 +460,25 @@ def test_model_gate_rules():
     assert g.model(est(0.5 + DWELL_S, [])) is None and g.model(est(0.6 + DWELL_S, ["alpha", "b"])) is None
 
 
-def test_a_drift_before_the_drift_columns_is_not_a_change():
+@pytest.mark.parametrize("feed", ["block", pytest.param("sample", marks=pytest.mark.xfail(
+    strict=True, raises=AssertionError, reason="fed sample by sample (update()'s schedule of the background work) "
+    "the event comes back: creep error 4.06 against the oracle's 0.040"))])
+def test_a_drift_before_the_drift_columns_is_not_a_change(feed, monkeypatch):
     """Random drifting plant 1010 (alpha 0.075, 498 Hz, zeta 0.64, b -4.98), compensated with the policy that
     takes only 'good' estimates: the change test of the flat hold [0.5, 1.5] s read the drift (~4 noise
     levels per second, before the window fits drift at 5 s) as a1 +35 %, a2 -26 % and restarted the window;
     the re-searches on compensated holds never recovered (creep error 1.2e4 against the oracle's 0.039).
     The change test now fits the drift itself while the window does not (its own test:
-    test_online_kernels.test_the_change_test_fits_a_drift_the_window_does_not); on this tree the event
-    also stays away by timing (the window misfits from its first re-fit), so this guards the outcome."""
+    test_online_kernels.test_the_change_test_fits_a_drift_the_window_does_not); in blocks of 100 the event
+    also stays away by timing (the window misfits from its first re-fit), so this guards the outcome. Fed
+    sample by sample (``update()``; the loop's blocks passed on one sample at a time) it does not."""
+    import creep_online.online as online
     from hil_sim.closed_loop import drifting_comparison
+    if feed == "sample":
+        class PerSample(online.OnlineEstimator):
+            def update_block(self, u, y):
+                for uk, yk in zip(u, y):
+                    self.update(float(uk), float(yk))
+        monkeypatch.setattr(online, "OnlineEstimator", PerSample)
     res = drifting_comparison(1010, 12.0, {"input_gate": 20.0}, modes=("oracle", "adaptive"), gate=False)
     assert res["adaptive"] < 1.25 * res["oracle"], res
