@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import inspect
 import math
 import time
 
@@ -55,6 +54,7 @@ from creep_online.online.compensator import CreepCompensator
 from hil_sim.closed_loop import run_closed_loop
 from hil_sim.hysteresis_plants import random_loop, random_plant, hysteresis_record
 from hil_sim.play_stage import width_scale
+from bench.bench_online_scenarios import estimator_window_s
 from bench.harness import dist, results_path, write_report
 
 #: Model sources compared on the same plants.
@@ -175,7 +175,7 @@ def one_scan(rec, both, gain: float, shape_u: np.ndarray, h: float) -> dict:
 DRIFT_REFERENCES = ("stairs", "scan")
 DRIFT_MODES = ("adaptive", "frozen", "known", "oracle")
 #: The estimator's own default window (s): what a user who sets nothing gets.
-ESTIMATOR_WINDOW_S = inspect.signature(OnlineEstimator).parameters["window_s"].default
+ESTIMATOR_WINDOW_S = estimator_window_s()
 
 
 class TimedBlocks:
