@@ -96,7 +96,7 @@ class TrackerSettings:
     drift_on: float = 25.0
     drift_off: float = 9.0
     #: The score test waits until the window is converged and spans this long (s).
-    drift_min_s: float = 2.5
+    drift_min_s: float = 1.0
     #: While the rates are off, the score test runs at every this-many-th re-fit (it costs two units).
     drift_test_every: int = 5
     #: Largest plausible drift relative to the parameter (1/s): faster "drift" is misfit (the rates go off).
