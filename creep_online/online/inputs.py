@@ -162,7 +162,7 @@ class InputStage:
             done[0] = i + 1
             self.buffer_sample(float(u[i]), float(y[i]))
             i += 1
-            est._startup.advance(1 << 30)
+            est._startup.advance(est._units)   # (update()'s budget: the start-up lands at the same sample)
         return i
 
     def buffer_quiet(self, u: np.ndarray, y: np.ndarray) -> int:

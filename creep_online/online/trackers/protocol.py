@@ -39,6 +39,7 @@ class Tracker(Protocol):
     disagreement: dict | None           #: the last change test, if the last second disagreed with the window
     feed_chunk: int                     #: samples per unit of work when a buffer is replayed
     busy: bool                          #: background jobs are queued
+    pending: bool                       #: background work is under way (jobs queued, or a fit in the kernel)
     first_fit_pending: bool             #: the first fit after the start-up's replay has not finished yet
 
     # ---------------------------------------------------------------- monitors

@@ -235,6 +235,7 @@ class RecursiveTracker(ParameterView, LiveMonitors, Checkpointable):
         """Nothing queued (block mode)."""
 
     busy = False
+    pending = False                      #: no background work: block mode feeds whole runs (``feed_block``)
 
     # ------------------------------------------------------------------ publication and events
     def _schedule(self) -> None:

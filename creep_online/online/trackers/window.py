@@ -409,6 +409,12 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
     def busy(self) -> bool:
         return bool(self._jobs)
 
+    @property
+    def pending(self) -> bool:
+        """Is background work under way (a queued job, or a re-fit or change test in the per-sample kernel)? Block
+        mode then feeds sample by sample, as update() does, so that the work lands at the same sample."""
+        return self.machine is not None or bool(self._jobs)
+
     def work(self, units: int = 1) -> bool:
         """Run up to ``units`` units of the queued jobs (``Scheduler.work``)."""
         return self.scheduler.work(self, units)
