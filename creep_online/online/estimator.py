@@ -441,9 +441,9 @@ class OnlineEstimator(StoredParams, Checkpointable):
         self._recovery.block_progress = (tr, n0, s0, i, done, None if exact else (du, yy, n))
         units = self._units
         while j < du.size:
-            if tr.pending:                   # background work under way: sample by sample, as update() runs it
-                finite = tr.advance(float(du[j]), float(yy[j]), units)
-                j += 1
+            if tr.pending:                   # background work under way: update()'s course (``feed_pending``)
+                used, finite = tr.feed_pending(du[j:], yy[j:], status[j:], units)
+                j += used
             else:                            # none: the block kernel up to the next scheduled job
                 j += tr.feed_block(du[j:], yy[j:], status[j:])
                 finite = tr.state_finite()

@@ -56,6 +56,9 @@ class Tracker(Protocol):
     def advance(self, u: float, y: float, units: int, work: bool = True) -> bool:
         """One live sample and its share of the background work; False: the state was found non-finite."""
 
+    def feed_pending(self, u: np.ndarray, y: np.ndarray, status: np.ndarray, units: int) -> tuple[int, bool]:
+        """Block mode while work is under way: ``advance``'s course on the leading samples; (consumed, finite)."""
+
     def feed(self, u: float, y: float) -> int:
         """One sample without background work; the kernel's status."""
 

@@ -400,6 +400,27 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
             self.scheduler.schedule(self)
         return used
 
+    def feed_pending(self, u: np.ndarray, y: np.ndarray, status: np.ndarray, units: int) -> tuple[int, bool]:
+        """Block mode while background work is under way (``pending``): update()'s course on the leading samples of
+        u, y, the machine's run in one kernel call (``feed_machine``), else one sample through ``advance``. Returns
+        (samples consumed, whether the state is finite)."""
+        if self.machine is not None:
+            return self.feed_machine(u, y, status, units), self.state_finite()
+        return 1, self.advance(float(u[0]), float(y[0]), units)
+
+    def feed_machine(self, u: np.ndarray, y: np.ndarray, status: np.ndarray, units: int) -> int:
+        """Block mode while a re-fit or change test runs in the per-sample kernel: what ``advance`` does sample by
+        sample with ``units`` slices each (``fit_machine.block_work``), up to the sample where the machine finishes or
+        work is due; returns how many samples were consumed."""
+        used = RF.block_work(u, y, self.st, self.S, self.ring, self._ctx, self.machine, units, status, 0)
+        last = status[used - 1]
+        if last >= RF.MACHINE_DONE:
+            self.machine = None
+            last -= RF.MACHINE_DONE
+        if last >= 8:
+            self.scheduler.schedule(self)
+        return used
+
     @property
     def prediction(self) -> float:
         return float(self.sc[W.SC_PRED])
