@@ -152,7 +152,7 @@ class InputStage:
         est = self.est
         i, n = done[0], u.size
         while i < n and est._live is None:
-            run = self.buffer_quiet(u[i:], y[i:])
+            run = self.buffer_quiet(u[i:], y[i:]) or self.search_quiet(u[i:], y[i:])
             if run:
                 est.samples += run
                 i += run
@@ -180,6 +180,22 @@ class InputStage:
         if run:
             self.accept_run(u[:run])
             est._startup.buffer_run(u[:run] - est._u_ref, y[:run])
+        return run
+
+    def search_quiet(self, u: np.ndarray, y: np.ndarray) -> int:
+        """Block mode while the start-up search runs: the leading samples of u, y that the gate passes, with the
+        search's steps of each (``Startup.search_run``), into the start-up buffer at once; returns how many (0: the
+        next goes through ``buffer_sample``). The same values as ``buffer_sample`` and ``advance`` one by one."""
+        est = self.est
+        if est._held or est._backlog or est._deferred or est._u_ref is None:
+            return 0
+        run = self.passing_run(u[:min(u.size, PASS_SCAN)])
+        run = est._startup.search_run(run) if run else 0
+        if run:
+            self.accept_run(u[:run])
+            est._startup.buffer_run(u[:run] - est._u_ref, y[:run])
+            if est._startup.search.result is not None:     # (finished in the run's last sample)
+                est._startup.search_landed()
         return run
 
     def update_deferred(self, tr: "Tracker", u: float, y: float) -> None:
