@@ -145,10 +145,11 @@ class InputStage:
         est._deferred = bool(est._held)
 
     def buffer_until_live(self, u: np.ndarray, y: np.ndarray, done: list[int]) -> int:
-        """Block mode before the tracker is live: u[done[0]:], y[...] into the start-up (its steps run to completion
-        after each sample, ``Startup.advance``) until the tracker goes live or the block ends; returns where it
-        stopped. ``done[0]`` (and ``est.samples``) count the samples taken, each before it goes in (a fault inside
-        counts it taken). The samples between the start-up's steps go in at once (``buffer_quiet``)."""
+        """Block mode before the tracker is live: u[done[0]:], y[...] into the start-up (its steps with update()'s
+        budget after each sample, ``Startup.advance``, so it lands at update()'s sample) until the tracker goes live or
+        the block ends; returns where it stopped. ``done[0]`` (and ``est.samples``) count the samples taken, each
+        before it goes in (a fault inside counts it taken). The samples between the start-up's steps go in at once
+        (``buffer_quiet``), and so do those of the search's run with its steps (``search_quiet``)."""
         est = self.est
         i, n = done[0], u.size
         while i < n and est._live is None:

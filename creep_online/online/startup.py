@@ -12,8 +12,9 @@ live (phases ``buffering``, ``searching``, then ``tracking`` while the buffer is
 4. the tracker starts at the search's result and the buffer is replayed into it, after the rest a stream read from
    rest implies (``lead_in``); it goes live after its first fit of the replayed window (``handover.Handover``).
 
-Sample by sample each of these takes calls of its own (no update() pays two of them); in block mode (``units`` >=
-2^29) everything runs at once. Thresholds: ``OnlineSettings.startup``; the reading of the start: ``online/rest.py``.
+Sample by sample each of these takes calls of its own (no update() pays two of them); block mode takes the same
+steps at the same samples (``search_run``); with ``units`` >= 2^29 (a full buffer, a checkpoint) everything runs
+at once. Thresholds: ``OnlineSettings.startup``; the reading of the start: ``online/rest.py``.
 """
 from __future__ import annotations
 
@@ -86,7 +87,7 @@ class Startup:
         self.restarted = False             # restarted in operation after a fault: the plant was not at rest
         self.hint: tuple | None = None     # (alpha, a1, a2) before a fault's restart: a candidate of the search
         self.handover = Handover(self)     # the tracker's start, the buffer's replay, going live
-        self.eager = False                 # the current call runs everything at once (``advance``: block mode)
+        self.eager = False                 # the current call runs everything at once (``advance``: a checkpoint)
 
     # ------------------------------------------------------------------ the buffer
     def buffer(self, du: float, y: float) -> None:
@@ -165,7 +166,7 @@ class Startup:
         Sample by sample the search's end, the tracker's start steps and the replay's first unit each take
         a call of their own (``start_steps``): together they were one update() of ~80-120 us. The estimate
         reads "searching" until the tracker has started, a few samples later. With ``units`` >= ``EAGER``
-        (block mode, a full buffer) everything runs in this call."""
+        (a full buffer, a checkpoint) everything runs in this call."""
         est = self.est
         eager = self.eager = units >= EAGER
         while self.reframing is not None:      # (the step's reading's buffer moving to its frame, a chunk per call)

@@ -156,7 +156,7 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         self.converged = False           # a refit has barely moved since the start: the change test may judge
         self._jobs: list[Generator] = []
         self._draining = False             # a checkpoint runs the jobs to their end: no job waits (``drain``)
-        self.eager = False                 # the jobs run to their end now (``Scheduler.finish``: block mode)
+        self.eager = False                 # the jobs run to their end now (``Scheduler.finish``: a checkpoint)
         #: the re-fit or change test under way (``fit_machine.sample_work`` advances it): its index among the
         #: context's work arrays (``MACHINE_REFIT``, ``MACHINE_TEST``), or None
         self.machine: int | None = None
