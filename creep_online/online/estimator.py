@@ -389,9 +389,8 @@ class OnlineEstimator(StoredParams, Checkpointable):
             self._recovery.fault(exc, "update")
 
     def update_block(self, u: np.ndarray, y: np.ndarray) -> None:
-        """Feed many samples: the same estimates as repeated update() (``==``, whatever the chunking: the background
-        work runs sample by sample with update()'s budget, so it lands at the same sample; the block kernel takes
-        the runs of samples with no work under way).
+        """Feed many samples: the estimates of repeated update() (``==``, any chunking: the background work lands at
+        update()'s sample, ``_feed_block``).
 
         Raises only ``DataError`` (arrays that cannot be used). An internal fault is caught, counted and recovered
         from, and the block goes on from the sample after the one it came in (``_block_from``)."""
@@ -425,9 +424,8 @@ class OnlineEstimator(StoredParams, Checkpointable):
     def _feed_block(self, u: np.ndarray, y: np.ndarray, done: list[int]) -> None:
         """update_block()'s work from ``done[0]`` on. ``done[0]``: samples taken (counted in ``samples``); in the
         tracker's loop it is advanced by the tracker's own sample count, which its kernel moves per sample, so a
-        fault inside ``feed_block`` or ``advance`` leaves it exact. While background work is under way
-        (``Tracker.pending``) the samples go one by one through ``advance`` with update()'s work budget, else the
-        block kernel runs up to the next scheduled job: update()'s course exactly, in fewer calls."""
+        fault inside leaves it exact. While work is under way (``Tracker.pending``) it runs update()'s course
+        (``feed_pending``), else the block kernel up to the next scheduled job: update()'s course in fewer calls."""
         n = u.size
         i = self._inputs.buffer_until_live(u, y, done)
         if i == n:
@@ -439,10 +437,9 @@ class OnlineEstimator(StoredParams, Checkpointable):
         # the arrays are the samples as they came unless the input gate kept some back or had some waiting: then
         # all of u[i:] is taken (decided or held), and a fault leaves the rest of du, yy waiting (``block_resync``)
         self._recovery.block_progress = (tr, n0, s0, i, done, None if exact else (du, yy, n))
-        units = self._units
         while j < du.size:
             if tr.pending:                   # background work under way: update()'s course (``feed_pending``)
-                used, finite = tr.feed_pending(du[j:], yy[j:], status[j:], units)
+                used, finite = tr.feed_pending(du[j:], yy[j:], status[j:], self._units)
                 j += used
             else:                            # none: the block kernel up to the next scheduled job
                 j += tr.feed_block(du[j:], yy[j:], status[j:])
