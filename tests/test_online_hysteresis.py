@@ -264,7 +264,6 @@ def test_a_plant_resting_on_a_branch_is_fitted_at_the_floor(seed, initial, feed)
         assert np.max(np.abs(np.asarray(e.hysteresis["w"]) - w)) <= 0.05 * np.max(w)
 
 
-
 @pytest.mark.parametrize("epoch", [0, 500])
 def test_an_operator_the_input_leaves_is_opened_only_within_the_windows_memory(epoch):
     """An operator counts as opened while the input moved it up and down within this epoch of the window's memory

@@ -389,7 +389,8 @@ class OnlineEstimator(StoredParams, Checkpointable):
             self._recovery.fault(exc, "update")
 
     def update_block(self, u: np.ndarray, y: np.ndarray) -> None:
-        """Feed many samples (same semantics as repeated update(); background work runs to completion).
+        """Feed many samples: the estimates of repeated update() (``==``, any chunking: the background work lands at
+        update()'s sample, ``_feed_block``).
 
         Raises only ``DataError`` (arrays that cannot be used). An internal fault is caught, counted and recovered
         from, and the block goes on from the sample after the one it came in (``_block_from``)."""
@@ -423,7 +424,8 @@ class OnlineEstimator(StoredParams, Checkpointable):
     def _feed_block(self, u: np.ndarray, y: np.ndarray, done: list[int]) -> None:
         """update_block()'s work from ``done[0]`` on. ``done[0]``: samples taken (counted in ``samples``); in the
         tracker's loop it is advanced by the tracker's own sample count, which its kernel moves per sample, so a
-        fault inside ``feed_block`` or ``finish`` leaves it exact."""
+        fault inside leaves it exact. While work is under way (``Tracker.pending``) it runs update()'s course
+        (``feed_pending``), else the block kernel up to the next scheduled job: update()'s course in fewer calls."""
         n = u.size
         i = self._inputs.buffer_until_live(u, y, done)
         if i == n:
@@ -436,11 +438,15 @@ class OnlineEstimator(StoredParams, Checkpointable):
         # all of u[i:] is taken (decided or held), and a fault leaves the rest of du, yy waiting (``block_resync``)
         self._recovery.block_progress = (tr, n0, s0, i, done, None if exact else (du, yy, n))
         while j < du.size:
-            j += tr.feed_block(du[j:], yy[j:], status[j:])
+            if tr.pending:                   # background work under way: update()'s course (``feed_pending``)
+                used, finite = tr.feed_pending(du[j:], yy[j:], status[j:], self._units)
+                j += used
+            else:                            # none: the block kernel up to the next scheduled job
+                j += tr.feed_block(du[j:], yy[j:], status[j:])
+                finite = tr.state_finite()
             self.samples = s0 + (j if exact else n - i)
             done[0] = i + j if exact else n
-            tr.finish()
-            if not tr.state_finite():
+            if not finite:
                 self._recovery.fault(None, "update_block")
                 tr = self._live
                 if tr is None or not exact:  # restarted: the rest of the block goes through the start-up (what

@@ -1,8 +1,8 @@
 """The tracker's start after the start-up search (``startup.Startup``): its state at the search's result, the
 start-up buffer replayed into it, and going live once its first fit of the replayed window has finished.
 
-Sample by sample each step takes calls of its own (no update() pays two of them); with ``units`` >= ``EAGER``
-(block mode) everything runs at once.
+Sample by sample each step takes calls of its own (no update() pays two of them), in block mode too; with
+``units`` >= ``EAGER`` (a full buffer, a checkpoint) everything runs at once.
 """
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ from .trackers.window import WindowTracker
 if TYPE_CHECKING:
     from .startup import Startup
 
-#: Block mode: a unit budget this large runs every step in one call.
+#: A unit budget this large runs every step in one call (a full start-up buffer, a checkpoint).
 EAGER = 1 << 29
 
 
@@ -137,8 +137,8 @@ class Handover:
         start-up search's estimate comes from its grid on the search window, which a plant the model class does not
         hold (close unmodelled modes) can leave a fifth off in gain; the live predictions start from the window's
         own fit. Meanwhile the new samples are fed as live ones (the fit's slices run in the per-sample kernel),
-        only their predictions are not reported. In block mode (``EAGER``) it goes live at once: no prediction is
-        reported before the block's end, and the fit runs with the block's next samples."""
+        only their predictions are not reported. With ``EAGER`` (a full buffer, a checkpoint) it goes live at once,
+        and the fit runs with the next samples."""
         est = self.est
         tr = est._tracker
         lead = self.startup.lead or 0

@@ -145,14 +145,15 @@ class InputStage:
         est._deferred = bool(est._held)
 
     def buffer_until_live(self, u: np.ndarray, y: np.ndarray, done: list[int]) -> int:
-        """Block mode before the tracker is live: u[done[0]:], y[...] into the start-up (its steps run to completion
-        after each sample, ``Startup.advance``) until the tracker goes live or the block ends; returns where it
-        stopped. ``done[0]`` (and ``est.samples``) count the samples taken, each before it goes in (a fault inside
-        counts it taken). The samples between the start-up's steps go in at once (``buffer_quiet``)."""
+        """Block mode before the tracker is live: u[done[0]:], y[...] into the start-up (its steps with update()'s
+        budget after each sample, ``Startup.advance``, so it lands at update()'s sample) until the tracker goes live or
+        the block ends; returns where it stopped. ``done[0]`` (and ``est.samples``) count the samples taken, each
+        before it goes in (a fault inside counts it taken). The samples between the start-up's steps go in at once
+        (``buffer_quiet``), and so do those of the search's run with its steps (``search_quiet``)."""
         est = self.est
         i, n = done[0], u.size
         while i < n and est._live is None:
-            run = self.buffer_quiet(u[i:], y[i:])
+            run = self.buffer_quiet(u[i:], y[i:]) or self.search_quiet(u[i:], y[i:])
             if run:
                 est.samples += run
                 i += run
@@ -162,7 +163,7 @@ class InputStage:
             done[0] = i + 1
             self.buffer_sample(float(u[i]), float(y[i]))
             i += 1
-            est._startup.advance(1 << 30)
+            est._startup.advance(est._units)   # (update()'s budget: the start-up lands at the same sample)
         return i
 
     def buffer_quiet(self, u: np.ndarray, y: np.ndarray) -> int:
@@ -180,6 +181,22 @@ class InputStage:
         if run:
             self.accept_run(u[:run])
             est._startup.buffer_run(u[:run] - est._u_ref, y[:run])
+        return run
+
+    def search_quiet(self, u: np.ndarray, y: np.ndarray) -> int:
+        """Block mode while the start-up search runs: the leading samples of u, y that the gate passes, with the
+        search's steps of each (``Startup.search_run``), into the start-up buffer at once; returns how many (0: the
+        next goes through ``buffer_sample``). The same values as ``buffer_sample`` and ``advance`` one by one."""
+        est = self.est
+        if est._held or est._backlog or est._deferred or est._u_ref is None:
+            return 0
+        run = self.passing_run(u[:min(u.size, PASS_SCAN)])
+        run = est._startup.search_run(run) if run else 0
+        if run:
+            self.accept_run(u[:run])
+            est._startup.buffer_run(u[:run] - est._u_ref, y[:run])
+            if est._startup.search.result is not None:     # (finished in the run's last sample)
+                est._startup.search_landed()
         return run
 
     def update_deferred(self, tr: "Tracker", u: float, y: float) -> None:

@@ -12,8 +12,9 @@ live (phases ``buffering``, ``searching``, then ``tracking`` while the buffer is
 4. the tracker starts at the search's result and the buffer is replayed into it, after the rest a stream read from
    rest implies (``lead_in``); it goes live after its first fit of the replayed window (``handover.Handover``).
 
-Sample by sample each of these takes calls of its own (no update() pays two of them); in block mode (``units`` >=
-2^29) everything runs at once. Thresholds: ``OnlineSettings.startup``; the reading of the start: ``online/rest.py``.
+Sample by sample each of these takes calls of its own (no update() pays two of them); block mode takes the same
+steps at the same samples (``search_run``); with ``units`` >= 2^29 (a full buffer, a checkpoint) everything runs
+at once. Thresholds: ``OnlineSettings.startup``; the reading of the start: ``online/rest.py``.
 """
 from __future__ import annotations
 
@@ -86,7 +87,7 @@ class Startup:
         self.restarted = False             # restarted in operation after a fault: the plant was not at rest
         self.hint: tuple | None = None     # (alpha, a1, a2) before a fault's restart: a candidate of the search
         self.handover = Handover(self)     # the tracker's start, the buffer's replay, going live
-        self.eager = False                 # the current call runs everything at once (``advance``: block mode)
+        self.eager = False                 # the current call runs everything at once (``advance``: a checkpoint)
 
     # ------------------------------------------------------------------ the buffer
     def buffer(self, du: float, y: float) -> None:
@@ -165,7 +166,7 @@ class Startup:
         Sample by sample the search's end, the tracker's start steps and the replay's first unit each take
         a call of their own (``start_steps``): together they were one update() of ~80-120 us. The estimate
         reads "searching" until the tracker has started, a few samples later. With ``units`` >= ``EAGER``
-        (block mode, a full buffer) everything runs in this call."""
+        (a full buffer, a checkpoint) everything runs in this call."""
         est = self.est
         eager = self.eager = units >= EAGER
         while self.reframing is not None:      # (the step's reading's buffer moving to its frame, a chunk per call)
@@ -187,14 +188,8 @@ class Startup:
             units -= 1
         if est._phase == "searching":
             if self.starting is None:
-                s = self.search
-                s.eager = eager            # (block mode: each candidate's rows in one kernel call)
-                while units > 0 and not s.step():
-                    units -= 1
-                if s.result is None or self.longer_window_needed(s.result):
-                    return
-                self.starting = self.handover.start_steps(s.result, compete=self.competing)
-                if not eager:
+                self.search_units(units)
+                if not self.search_landed() or not eager:
                     return
             for _ in self.starting:
                 if not eager:
@@ -203,6 +198,40 @@ class Startup:
                 return
         if est._catchup:
             self.handover.catch_up(max(units, 1))
+
+    def search_units(self, units: int) -> bool:
+        """Up to ``units`` steps of the search under way (``eager``: each candidate's rows in one kernel call); returns
+        whether one of them finished it (the steps left then go unused, as in ``advance``)."""
+        s = self.search
+        s.eager = self.eager
+        while units > 0 and not s.step():
+            units -= 1
+        return units > 0
+
+    def search_landed(self) -> bool:
+        """After the search's steps of a call: has it ended with a result to start the tracker at (the tracker's
+        start, ``Handover.start_steps``, is then under way), rather than still running or wanting a longer window?"""
+        res = self.search.result
+        if res is None or self.longer_window_needed(res):
+            return False
+        self.starting = self.handover.start_steps(res, compete=self.competing)
+        return True
+
+    def search_run(self, limit: int) -> int:
+        """Block mode while the start-up search runs and nothing else of the start-up is under way: the search's
+        steps of up to ``limit`` samples, ``units`` a sample as update()'s ``advance`` gives them, up to the sample
+        whose steps finish it; returns how many samples (0: the next goes through ``advance``). The caller buffers
+        them at once (the search reads only rows already buffered) and, if the search finished, calls
+        ``search_landed`` as ``advance`` does after that sample's steps."""
+        est = self.est
+        if (est._phase != "searching" or self.starting is not None or self.reframing is not None
+                or self.lead is None and not self.in_operation):
+            return 0
+        units, self.eager = est._units, False      # (``advance`` with update()'s budget)
+        for j in range(min(limit, self.bu.size - self.nbuf)):
+            if self.search_units(units):
+                return j + 1
+        return min(limit, self.bu.size - self.nbuf)
 
     def read_start(self) -> bool:
         """A stream whose input is at a non-zero level from its first sample: a step from rest there, or taken in

@@ -641,6 +641,20 @@ def sample_work(u: float, y: float, st: np.ndarray, S: np.ndarray, ring: np.ndar
 
 
 @njit(cache=CACHE)
+def block_work(u: np.ndarray, y: np.ndarray, st: np.ndarray, S: np.ndarray, ring: np.ndarray, ctx: np.ndarray,
+               which: int, slices: int, status: np.ndarray, start: int) -> int:
+    """``sample_work`` for samples ``start`` on, until the re-fit or change test under way finishes or the caller's
+    work is due (flag 8); their statuses in ``status``; returns how many were consumed. The per-sample calls of
+    update() while the machine runs, in one loop (block mode lands the machine's result at the same sample)."""
+    for k in range(start, u.size):
+        s = sample_work(u[k], y[k], st, S, ring, ctx, which, slices)
+        status[k] = s
+        if s >= 8:                         # (MACHINE_DONE is 16: a finished machine stops the loop too)
+            return k + 1 - start
+    return u.size - start
+
+
+@njit(cache=CACHE)
 def start_test(st: np.ndarray, S: np.ndarray, S0: np.ndarray, sy0: np.ndarray, syy0: float, shift: np.ndarray,
                shift0: np.ndarray, live: np.ndarray, wk: np.ndarray, free_rates: bool) -> None:
     """Start the change test in its own work array: the statistics since a snapshot (S0, sy0, syy0,

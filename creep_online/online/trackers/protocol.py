@@ -39,6 +39,7 @@ class Tracker(Protocol):
     disagreement: dict | None           #: the last change test, if the last second disagreed with the window
     feed_chunk: int                     #: samples per unit of work when a buffer is replayed
     busy: bool                          #: background jobs are queued
+    pending: bool                       #: background work is under way (jobs queued, or a fit in the kernel)
     first_fit_pending: bool             #: the first fit after the start-up's replay has not finished yet
 
     # ---------------------------------------------------------------- monitors
@@ -54,6 +55,9 @@ class Tracker(Protocol):
     # ---------------------------------------------------------------- feeding
     def advance(self, u: float, y: float, units: int, work: bool = True) -> bool:
         """One live sample and its share of the background work; False: the state was found non-finite."""
+
+    def feed_pending(self, u: np.ndarray, y: np.ndarray, status: np.ndarray, units: int) -> tuple[int, bool]:
+        """Block mode while work is under way: ``advance``'s course on the leading samples; (consumed, finite)."""
 
     def feed(self, u: float, y: float) -> int:
         """One sample without background work; the kernel's status."""

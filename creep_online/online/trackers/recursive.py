@@ -227,6 +227,10 @@ class RecursiveTracker(ParameterView, LiveMonitors, Checkpointable):
             self._schedule()
         return used
 
+    def feed_pending(self, u: np.ndarray, y: np.ndarray, status: np.ndarray, units: int) -> tuple[int, bool]:
+        """One sample through ``advance`` (the protocol's block step while work is under way; never pending here)."""
+        return 1, self.advance(float(u[0]), float(y[0]), units)
+
     def work(self, units: int = 1) -> bool:
         """No background work: everything is done per sample (the estimator's polling interface)."""
         return True
@@ -235,6 +239,7 @@ class RecursiveTracker(ParameterView, LiveMonitors, Checkpointable):
         """Nothing queued (block mode)."""
 
     busy = False
+    pending = False                      #: no background work: block mode feeds whole runs (``feed_block``)
 
     # ------------------------------------------------------------------ publication and events
     def _schedule(self) -> None:

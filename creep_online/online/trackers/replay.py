@@ -77,7 +77,7 @@ class Replayer:
         deferred = False
         while i < tr.n:                  # the live stream keeps appending: catch up
             stop = tr.scheduler.test_after(tr, i) if tr.detect else tr.n   # (stop at the test's snapshot instants)
-            units = 1 << 30 if tr.eager else 1     # (block mode: every unit up to that stop in one call)
+            units = 1 << 30 if tr.eager else 1     # (a checkpoint: every unit up to that stop in one call)
             i, n = W.replay_units(tr.ring, slot, origin, i, min(stop, tr.n), skip, chunk, tr.settings.cold_replay_rows,
                                   units, st, S, *tr._replay_work)
             if tr.detect and i % tr.test_every == 0 and i - origin > skip:

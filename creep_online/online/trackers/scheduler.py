@@ -98,8 +98,8 @@ class Scheduler:
         return tr._jobs[0]
 
     def finish(self, tr: WindowTracker) -> None:
-        """Run the queued jobs to completion, or until the one at the head waits for samples (block mode: the jobs'
-        searches run each candidate's rows in one kernel call, ``WindowTracker.eager``)."""
+        """Run the queued jobs to completion, or until the one at the head waits for samples (a checkpoint's
+        ``drain``: the jobs' searches run each candidate's rows in one kernel call, ``WindowTracker.eager``)."""
         tr.eager = True
         try:
             while tr._jobs:

@@ -156,7 +156,7 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         self.converged = False           # a refit has barely moved since the start: the change test may judge
         self._jobs: list[Generator] = []
         self._draining = False             # a checkpoint runs the jobs to their end: no job waits (``drain``)
-        self.eager = False                 # the jobs run to their end now (``Scheduler.finish``: block mode)
+        self.eager = False                 # the jobs run to their end now (``Scheduler.finish``: a checkpoint)
         #: the re-fit or change test under way (``fit_machine.sample_work`` advances it): its index among the
         #: context's work arrays (``MACHINE_REFIT``, ``MACHINE_TEST``), or None
         self.machine: int | None = None
@@ -400,6 +400,27 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
             self.scheduler.schedule(self)
         return used
 
+    def feed_pending(self, u: np.ndarray, y: np.ndarray, status: np.ndarray, units: int) -> tuple[int, bool]:
+        """Block mode while background work is under way (``pending``): update()'s course on the leading samples of
+        u, y, the machine's run in one kernel call (``feed_machine``), else one sample through ``advance``. Returns
+        (samples consumed, whether the state is finite)."""
+        if self.machine is not None:
+            return self.feed_machine(u, y, status, units), self.state_finite()
+        return 1, self.advance(float(u[0]), float(y[0]), units)
+
+    def feed_machine(self, u: np.ndarray, y: np.ndarray, status: np.ndarray, units: int) -> int:
+        """Block mode while a re-fit or change test runs in the per-sample kernel: what ``advance`` does sample by
+        sample with ``units`` slices each (``fit_machine.block_work``), up to the sample where the machine finishes or
+        work is due; returns how many samples were consumed."""
+        used = RF.block_work(u, y, self.st, self.S, self.ring, self._ctx, self.machine, units, status, 0)
+        last = status[used - 1]
+        if last >= RF.MACHINE_DONE:
+            self.machine = None
+            last -= RF.MACHINE_DONE
+        if last >= 8:
+            self.scheduler.schedule(self)
+        return used
+
     @property
     def prediction(self) -> float:
         return float(self.sc[W.SC_PRED])
@@ -408,6 +429,12 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
     @property
     def busy(self) -> bool:
         return bool(self._jobs)
+
+    @property
+    def pending(self) -> bool:
+        """Is background work under way (a queued job, or a re-fit or change test in the per-sample kernel)? Block
+        mode then feeds sample by sample, as update() does, so that the work lands at the same sample."""
+        return self.machine is not None or bool(self._jobs)
 
     def work(self, units: int = 1) -> bool:
         """Run up to ``units`` units of the queued jobs (``Scheduler.work``)."""
