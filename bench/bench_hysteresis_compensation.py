@@ -201,6 +201,8 @@ def drift_plant(seed: int, reference: str, duration: float = 60.0, growth: float
     """Adaptive vs frozen on a plant whose loop width grows by ``growth`` over ``duration`` (module docstring);
     ``modes``: the closed loops run (the ratios of those present); ``window_s``: the estimator's."""
     from creep_online.effects import loop_width
+    from creep_online.online import warm_kernels
+    warm_kernels()          # (as a control loop does before it starts: no block pays for loading a kernel)
     rng = np.random.default_rng([seed, 41])
     plant = random_plant(rng)
     stroke = 1.0
