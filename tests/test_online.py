@@ -306,8 +306,8 @@ def test_a_stream_taken_in_operation_triggers_no_collector_pass():
     assert passes == []
 
 
-_PER_SAMPLE = ("update_block() now runs update()'s schedule of the background work (the same estimates, ==); "
-               "update() sample by sample already ended this way before, the run-to-completion block mode did not")
+_PER_SAMPLE = ("update() sample by sample ends this way, and update_block() follows update()'s schedule of the "
+               "background work (the same estimates, ==)")
 
 
 @pytest.mark.parametrize("family, seed", [("payload", 8), pytest.param("stiffness", 0, marks=pytest.mark.xfail(
