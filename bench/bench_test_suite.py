@@ -17,6 +17,7 @@ CPU sums are the figures to compare; wall times grow with the load.
 Usage: python -m bench.bench_test_suite [--runs 2] [--keep DIR] [--out FILE]
        python -m bench.bench_test_suite --here [--out FILE]
        python -m bench.bench_test_suite --from-run LOG XML [--out FILE]   (a run made by hand, see below)
+       python -m bench.bench_test_suite --durations SUITE_XML LONG_XML   (writes tests/durations.json)
 A run made by hand: ``CI_REPORTS=DIR bash .ci/run > LOG 2>&1`` in a fresh clone (XML: DIR/suite.xml).
 (prints one JSON document; --out writes it too, e.g. bench/results/test_suite.json)
 """
@@ -69,6 +70,37 @@ def parse_junit(path: str, top: int = 20) -> dict:
             "slowest": [{"test": n, "s": round(t, 2)} for t, n in cases[:top]]}
 
 
+def junit_times(paths: list[str]) -> dict[str, float]:
+    """Each test's time (setup + call + teardown) by pytest node id, from junit XML files: the least of its times
+    in them (a fresh clone's first tests also compile numba kernels; a loaded machine slows any test)."""
+    times: dict[str, float] = {}
+    for path in paths:
+        for case in ET.parse(path).getroot().iter("testcase"):
+            key = _nodeid(case.get("classname", ""), case.get("name", ""))
+            times[key] = min(times.get(key, float("inf")), round(float(case.get("time", 0.0)), 2))
+    return times
+
+
+def _nodeid(classname: str, name: str) -> str:
+    """pytest's node id of a junit test case: its class name is the module's dotted path, then any classes (the
+    longest prefix that is a file here is the module; all of it if none is)."""
+    parts = classname.split(".")
+    k = next((k for k in range(len(parts), 0, -1) if (ROOT / ("/".join(parts[:k]) + ".py")).is_file()), len(parts))
+    return "::".join(["/".join(parts[:k]) + ".py", *parts[k:], name])
+
+
+def write_durations(paths: list[str], out: str) -> dict:
+    """The durations file the suite is split by (tests/conftest.py: ``LONG_S``): every test's time in the runs
+    ``paths`` (junit XML of ``.ci/run``'s two test steps), with where it was measured."""
+    doc = {"measured": {"from": [os.path.basename(p) for p in paths], "cores": os.cpu_count(),
+                        "utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
+           "seconds": dict(sorted(junit_times(paths).items()))}
+    with open(out, "w") as f:
+        json.dump(doc, f, indent=0)
+        f.write("\n")
+    return {"tests": len(doc["seconds"]), "written": out}
+
+
 def fresh_clone_run(workdir: str) -> dict:
     """Clone this repository's committed tree into ``workdir`` and run ``.ci/run`` there; its log, XML and CPU."""
     clone = os.path.join(workdir, "creep_online")
@@ -113,10 +145,11 @@ def cpu_profile(paths: list[str], top: int = 20) -> dict:
                            "wall_s": round(r["wall"], 1)} for r in ranked[:top]]}
 
 
-def here_run() -> dict:
-    """The README's test command in this checkout (numba's cache as it is): wall, loads, CPU, junit summary."""
+def here_run(keep: str | None = None) -> dict:
+    """The README's test command in this checkout (numba's cache as it is): wall, loads, CPU, junit summary
+    (its junit XML kept in ``keep``, if given: a ``--durations`` source)."""
     with tempfile.TemporaryDirectory(prefix="creep_suite_") as workdir:
-        xml = os.path.join(workdir, "suite.xml")
+        xml = os.path.join(keep or workdir, "suite.xml")
         env = dict(os.environ, SUITE_CPU_DIR=workdir, PYTHONPATH=os.pathsep.join(
             p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p))
         before, load_before, t0 = resource.getrusage(resource.RUSAGE_CHILDREN), list(os.getloadavg()), time.time()
@@ -146,17 +179,23 @@ def summary(runs: list[dict]) -> dict:
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=2, help="fresh-clone CI runs (default 2)")
-    ap.add_argument("--keep", help="run in this directory and keep the clones (default: a temporary one)")
+    ap.add_argument("--keep", help="run in this directory and keep the clones (default: a temporary one); with "
+                    "--here: keep the junit XML there")
     ap.add_argument("--here", action="store_true", help="time the README's test command in this checkout instead")
     ap.add_argument("--from-run", nargs=2, metavar=("LOG", "XML"), help="report a finished run instead")
+    ap.add_argument("--durations", nargs="+", metavar="XML",
+                    help="write tests/durations.json (the suite's split) from these junit XML files, and stop")
     ap.add_argument("--out", help="write the JSON here too")
     args = ap.parse_args(argv)
+    if args.durations:
+        print(json.dumps(write_durations(args.durations, str(ROOT / "tests" / "durations.json"))))
+        return
     if args.from_run:
         log, xml = args.from_run
         with open(log) as f:
             runs = [{**parse_log(f.read()), **parse_junit(xml)}]
     elif args.here:
-        runs = [here_run()]
+        runs = [here_run(args.keep)]
     else:
         runs = []
         for k in range(args.runs):

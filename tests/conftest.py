@@ -4,6 +4,8 @@
 * Run in parallel (``pytest -n auto``, pytest-xdist), the numba kernels are compiled once, in the
   controller, so that two workers never compile the same kernel at once (on a fresh clone that is
   about a minute of CPU); the workers load them from numba's cache.
+* The suite's split: a test measured over ``LONG_S`` (tests/durations.json) is marked ``long``, which
+  the README's test command leaves to CI (``.ci/run`` runs the long tests after the suite).
 * Units of work (``FileOrTestScheduling``): a test file goes to one worker whole, so that its
   module fixtures are computed once; in the files of long tests (``SPLIT``) each test (or
   test class: tests that read one fixture are a class) is a unit of its own, so both workers
@@ -13,6 +15,7 @@
 """
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -43,6 +46,30 @@ SPLIT = ("test_real_data.py", "test_diagnose_pairs.py", "test_diagnostics.py", "
 RUN_FIRST = (*SPLIT, "test_online.py", "test_hil_faults.py", "test_bench_scenarios.py", "test_hold_physics.py",
              "test_scenarios.py", "test_diagnose_parallel.py", "test_readonly_install.py", "test_transport_pi.py",
              "test_identify_convergence.py", "test_online_kernels.py", "test_transport_can.py", "test_capancdt.py")
+
+#: Each test's measured time (tests/durations.json: the least over CI runs on 2 cores, both busy; written by
+#: ``python -m bench.bench_test_suite --durations`` from ``.ci/run``'s junit XML). A test over ``LONG_S`` is
+#: marked ``long``: the rest, the README's test command, take about 5 minutes of a 2-core machine
+#: (bench/bench_test_coverage.py says which lines of the package only the long tests run). A test not in the
+#: file (a new one) runs in the default suite until the file is written again.
+DURATIONS = Path(__file__).resolve().parent / "durations.json"
+LONG_S = 2.0
+#: Kept in the default suite whatever they take: the README's own examples (a newcomer's first page), the demo
+#: and its compensation run (the first command's), and the tests that alone run the most lines of the package
+#: per second among those over ``LONG_S`` (``bench_test_coverage --by-test --cover``: at least 3 lines a second).
+ALWAYS_DEFAULT = frozenset({
+    "tests/test_docs.py::test_examples_run[README.md]",
+    "tests/test_demo.py::test_demo_runs_without_a_tty_and_writes_a_report",
+    "tests/test_compensator_loop.py::test_demo_compensate_writes_the_compensation_report",
+    "tests/test_adversarial.py::test_compare_report_keeps_the_users_folders",
+    "tests/test_transport_pi.py::test_a_tcp_controller_that_comes_back_is_reconnected",
+    "tests/test_adversarial.py::test_every_source_option_refuses_hostile_values_in_one_line[csv-realtime]",
+    "tests/test_identify_convergence.py::test_asynchronous_input_changes_are_warned_and_synchronous_ones_not",
+    "tests/test_batch.py::test_an_earlier_table_is_not_a_record_and_no_record_is_overwritten",
+    "tests/test_fuzz_frames.py::test_fuzz_binary_fast",
+    "tests/test_online.py::test_a_start_up_correction_is_reported_as_such",
+    "tests/test_hold_physics.py::test_the_holds_name_the_hidden_effect_at_every_strength[30.0-drift]",
+})
 
 _warming: list[subprocess.Popen] = []
 
@@ -80,7 +107,18 @@ def pytest_sessionfinish(session: pytest.Session) -> None:
         _reap(_warming.pop())
 
 
+def measured_long(path: Path = DURATIONS, threshold: float = LONG_S) -> frozenset[str]:
+    """The node ids of the tests measured over ``threshold`` seconds (``ALWAYS_DEFAULT`` excepted)."""
+    seconds = json.loads(path.read_text())["seconds"] if path.exists() else {}
+    return frozenset(k for k, s in seconds.items() if s > threshold and k not in ALWAYS_DEFAULT)
+
+
+@pytest.hookimpl(tryfirst=True)      # before pytest's -m selection
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    long_ids = measured_long()
+    for item in items:
+        if item.nodeid in long_ids:
+            item.add_marker(pytest.mark.long)
     if hasattr(config, "workerinput"):      # an xdist worker: every worker sorts alike
         items.sort(key=lambda item: RUN_FIRST.index(item.path.name) if item.path.name in RUN_FIRST
                    else len(RUN_FIRST))

@@ -80,3 +80,26 @@ def test_the_plugin_writes_one_row_per_test_with_its_cpu(tmp_path):
     rows = {r["id"].split("::")[1]: r for r in map(json.loads, (out / "main.jsonl").read_text().splitlines())}
     assert set(rows) == {"test_spin", "test_child"}
     assert rows["test_spin"]["self"] >= 0.19 and rows["test_child"]["children"] > 0.0
+
+
+def test_the_durations_file_keeps_each_tests_least_time_and_splits_the_suite_at_its_threshold(tmp_path):
+    """``--durations``: a test's least time over the runs given (a fresh clone's first tests also compile
+    kernels); conftest marks ``long`` the tests over the threshold, the ones kept in the default suite excepted."""
+    from conftest import ALWAYS_DEFAULT, measured_long
+
+    first, second = tmp_path / "suite.xml", tmp_path / "long.xml"
+    first.write_text(XML)
+    second.write_text(XML.replace('time="12.5"', 'time="1.5"').replace(
+        'classname="tests.test_b"', 'classname="tests.test_bench_test_suite.TestLike"'))
+    out = tmp_path / "durations.json"
+    bench.write_durations([str(first), str(second)], str(out))
+    seconds = json.loads(out.read_text())["seconds"]
+    assert seconds == {"tests/test_a.py::test_one": 1.5, "tests/test_a.py::test_two[x]": 0.5,
+                       "tests/test_b.py::test_three": 3.0,
+                       "tests/test_bench_test_suite.py::TestLike::test_three": 3.0}
+    assert measured_long(out, 2.0) == {"tests/test_b.py::test_three",
+                                       "tests/test_bench_test_suite.py::TestLike::test_three"}
+    assert measured_long(out, 1.0) == set(seconds) - {"tests/test_a.py::test_two[x]"}
+    seconds[next(iter(ALWAYS_DEFAULT))] = 99.0
+    out.write_text(json.dumps({"seconds": seconds}))
+    assert not measured_long(out, 2.0) & ALWAYS_DEFAULT
