@@ -16,6 +16,8 @@ from pathlib import Path
 
 import pytest
 
+from bench.suite_cpu import worker_id
+
 DIR_ENV = "SUITE_COVERAGE_DIR"
 _numbers = itertools.count()
 
@@ -26,7 +28,7 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
     if not folder:
         yield
         return
-    worker = getattr(item.config, "workerinput", {}).get("workerid", "main")
+    worker = worker_id(item)
     number = f"{worker}-{next(_numbers)}"
     before = os.environ.get("COVERAGE_FILE")
     os.environ["COVERAGE_FILE"] = str(Path(folder) / f"child.{number}")

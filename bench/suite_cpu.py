@@ -24,6 +24,12 @@ def _cpu(who: int) -> float:
     return use.ru_utime + use.ru_stime
 
 
+def worker_id(item: pytest.Item) -> str:
+    """The pytest-xdist worker running ``item`` ("main" without xdist), from xdist's own config: the
+    environment's worker id is inherited by a pytest a test starts."""
+    return getattr(item.config, "workerinput", {}).get("workerid", "main")
+
+
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
     folder = os.environ.get(DIR_ENV)
@@ -34,8 +40,6 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
     yield
     row = {"id": item.nodeid, "wall": time.perf_counter() - wall, "self": _cpu(resource.RUSAGE_SELF) - own,
            "children": _cpu(resource.RUSAGE_CHILDREN) - children}
-    # (the worker id from pytest-xdist's own config: the environment's is inherited by a pytest a test starts)
-    worker = getattr(item.config, "workerinput", {}).get("workerid", "main")
-    path = Path(folder) / f"{worker}.jsonl"
+    path = Path(folder) / f"{worker_id(item)}.jsonl"
     with path.open("a") as out:
         out.write(json.dumps(row) + "\n")
