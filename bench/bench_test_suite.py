@@ -59,7 +59,7 @@ def parse_junit(path: str, top: int = 20) -> dict:
     cases = []
     counts = {"passed": 0, "failed": 0, "error": 0, "skipped": 0}
     for case in ET.parse(path).getroot().iter("testcase"):
-        nodeid = f"{case.get('classname', '').replace('.', '/')}.py::{case.get('name')}"
+        nodeid = _nodeid(case.get("classname", ""), case.get("name", ""))
         cases.append((float(case.get("time", 0.0)), nodeid))
         kinds = {child.tag for child in case}
         kind = next((k for k in ("failure", "error", "skipped") if k in kinds), "passed")
