@@ -130,6 +130,24 @@ def test_two_hidden_effects_need_both():
     assert both.effect_params["delay"]["delay_s"] == pytest.approx(3.4e-3, abs=3e-4)
 
 
+def test_the_pair_search_names_two_hidden_effects():
+    """Delay and drift hidden together, diagnosed: neither explains the record alone, so the search fits the pairs
+    round by round and names both, down to the noise (the search's rounds in the default suite: the real records
+    that reach them take a minute)."""
+    rng = np.random.default_rng(7)
+    t, u = staircase(4000, 1e-3, rng)
+    model = CreepModel.from_resonance(0.4, 45.0, 0.12, 1.3)
+    y = simulate_with_effects(model, t, u, {"delay": {"delay_s": 3.4e-3}, "drift": {"rate": 0.08}})
+    noise = 0.004
+    y = y + noise * rng.standard_normal(t.size)
+    stages: list[str] = []
+    d = diagnose((t, u, y), candidates=("delay", "drift"), progress=stages.append, workers=1)
+    assert any(s.startswith("pair search:") for s in stages), stages
+    assert d.combination is not None and d.combination.significant
+    assert set(d.combination.fit.effects) == {"delay", "drift"}
+    assert d.combination.fit.residual_rms < 1.3 * noise
+
+
 def test_with_effects_api_matches_catalogue():
     model = CreepModel.from_resonance(0.3, 50.0, 0.1)
     t = np.arange(1000) * 1e-3
