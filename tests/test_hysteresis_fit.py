@@ -344,3 +344,15 @@ def test_a_saved_hysteresis_model_is_the_fit(family, tmp_path, capsys):
     assert main(["compare", str(model), str(csv), "--json"]) == 0
     compared = json.loads(capsys.readouterr().out)
     assert abs(compared["fit_percent"] - fitted["fit_percent"]) <= SAVED_TOL
+
+
+def test_a_fit_whose_resonance_ends_above_nyquist_is_searched_again():
+    """A random staircase that determines the resonance (481 Hz at 10 kHz): the base fit and the hysteresis fit
+    first settle at 9.9 kHz, above the Nyquist frequency, where the samples cannot show a resonance, at 1.05x the
+    noise (under the misfit that restarts a fit). The restart from the grid finds the plant's resonance."""
+    rec = hysteresis_record("random_staircase", 2, n=10000)
+    _, fit = _fit(rec)
+    for p in ("a1", "a2"):
+        assert getattr(fit.model, p) == pytest.approx(getattr(rec.model, p), rel=0.05), p
+    assert fit.model.alpha == pytest.approx(rec.model.alpha, rel=0.02)
+    assert fit.residual_rms <= 1.02 * rec.noise_std

@@ -110,6 +110,7 @@ FULL_FTOL = 1e-5
 #: effect pulls the base fit (and so the warm start) into a wrong resonance. (A wrong candidate
 #: explains little and is not restarted: the diagnosis pays for the restart only where it can help.)
 #: A base fit with a parameter on its bound restarts every extended fit above the floor (``_on_a_bound``).
+#: A fit whose resonance lies above the record's Nyquist frequency is restarted whatever its misfit (``_beyond_nyquist``).
 #: (1.2 until a fit in a wrong basin at 1.18x its own estimate, 1.20x the true noise, was left: hysteresis + second
 #: creep 3-10x seed 47. The single-effect bands' fits end at 0.98-1.06x the noise. 1.1 until hysteresis' basis
 #: grew to 24 thresholds: the same pair's wrong basin then ended at 1.075x its own estimate, 1.09x the noise;
@@ -1223,7 +1224,8 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     runs the short polishes of a long record on that many threads (the
     result does not depend on it, ``_short_polishes``). ``restart``: search the base
     parameters again from a grid (``_restart_base``) whatever the fit's misfit (by default
-    only a fit above the floor that explains most of the base's misfit is restarted). ``screen``: the fit
+    only a fit above the floor that explains most of the base's misfit, or one whose resonance lies above the
+    Nyquist frequency, is restarted). ``screen``: the fit
     only ranks effects for a fit on a longer record (the pair search on a long record's window, where only the
     chosen pair is fitted to the record, warm from this fit and restarted by the rule there): no restart here.
     ``uncertainty``: the 1-sigma of alpha, a1 and a2 (``base_uncertainty``: a Jacobian and the profile's probes,
@@ -1296,8 +1298,9 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
             best, best_cost = th, c
     fit = _result(design, best)
     above = RESTART_ABOVE_FLOOR * noise_std_estimate(fit.residual) < fit.residual_rms
-    if restart or (not screen and above and (fit.residual_rms < RESTART_EXPLAINED * base.residual_rms
-                                             or _on_a_bound(design, base.theta[:3]))):
+    if restart or (not screen and ((above and (fit.residual_rms < RESTART_EXPLAINED * base.residual_rms
+                                               or _on_a_bound(design, base.theta[:3])))
+                                   or _beyond_nyquist(data, best))):
         th = _restart_base(design, explore, best, max_nfev, workers)
         cost = design.cost(th)
         if cost < best_cost:
@@ -1481,6 +1484,15 @@ def _on_a_bound(design: Design, base: np.ndarray) -> bool:
     """
     span = design.hi[:3] - design.lo[:3]
     return bool(np.any(np.minimum(base - design.lo[:3], design.hi[:3] - base) < 1e-6 * span))
+
+
+def _beyond_nyquist(data: Prepared, theta: np.ndarray) -> bool:
+    """True when the fitted resonance lies above the record's Nyquist frequency, where the samples cannot show
+    it: the fit either lost the plant's resonance or the plant has none in band, and a restart (kept only if it
+    lowers the cost) tells which. (Hysteresis, random staircase seed 2: the base fit and the hysteresis fit ended
+    at 9.9 kHz for a plant at 481 Hz sampled at 10 kHz, at 1.048x their own noise estimate, under
+    ``RESTART_ABOVE_FLOOR``; restarted, 474 Hz and 1.001x the noise.)"""
+    return bool(10 ** theta[1] > 0.5 / data.h)
 
 
 def _restart_base(design: Design, explore: Design, best: np.ndarray, max_nfev: int, workers: int = 1) -> np.ndarray:
