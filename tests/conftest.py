@@ -57,7 +57,8 @@ LONG_S = 2.0
 #: Kept in the default suite whatever they take: the README's own examples (a newcomer's first page), the demo
 #: and its compensation run (the first command's), and the tests that alone run the most lines of the package
 #: per second among those over ``LONG_S`` (``bench_test_coverage --by-test --cover``: at least 3 lines a second),
-#: and one diagnosis that runs the pair search's rounds (otherwise only the long real-record tests reach them).
+#: one diagnosis that runs the pair search's rounds (otherwise only the long real-record tests reach them), and
+#: the capaNCDT emulator's every fault at once (its fault paths: the other fault tests are long).
 ALWAYS_DEFAULT = frozenset({
     "tests/test_docs.py::test_examples_run[README.md]",
     "tests/test_demo.py::test_demo_runs_without_a_tty_and_writes_a_report",
@@ -71,6 +72,7 @@ ALWAYS_DEFAULT = frozenset({
     "tests/test_online.py::test_a_start_up_correction_is_reported_as_such",
     "tests/test_hold_physics.py::test_the_holds_name_the_hidden_effect_at_every_strength[30.0-drift]",
     "tests/test_diagnostics.py::test_the_pair_search_names_two_hidden_effects",
+    "tests/test_capancdt.py::test_faults_are_counted_exactly_and_every_sample_is_the_plants",
 })
 
 _warming: list[subprocess.Popen] = []

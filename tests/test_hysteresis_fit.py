@@ -346,6 +346,7 @@ def test_a_saved_hysteresis_model_is_the_fit(family, tmp_path, capsys):
     assert abs(compared["fit_percent"] - fitted["fit_percent"]) <= SAVED_TOL
 
 
+@pytest.mark.long
 def test_a_fit_whose_resonance_ends_above_nyquist_is_searched_again():
     """A random staircase that determines the resonance (481 Hz at 10 kHz): the base fit and the hysteresis fit
     first settle at 9.9 kHz, above the Nyquist frequency, where the samples cannot show a resonance, at 1.05x the
