@@ -57,6 +57,9 @@ INITIAL_STATES = {"centred": 0.0, "ascending": -1.0, "descending": 1.0}
 #: branch of the inverse within 1 / SLOPE_FLOOR of its mean. (Relative to S_0 alone, a fit could make the first
 #: branch flat instead: b -> 0, its weights ~1e300, on a loop whose large-signal branch falls.)
 SLOPE_FLOOR = 0.05
+#: An operator's output counts as an affine function of the input (``opened_operators``: its weight only trades
+#: with the gain) within this fraction of the input's range: rounding in the plays' sums, with a wide margin.
+AFFINE_RTOL = 1e-9
 #: ``solve_pi_weights`` works on the design's triangular factor when it has more than this many rows per column.
 COMPRESS_ROWS = 4
 #: Prior scale of each weight (a Gaussian of this standard deviation around 0): a weight the data determine
@@ -110,16 +113,33 @@ def hysteresis_input(u: np.ndarray, r, w, initial: str = "centred") -> np.ndarra
     return u + w @ play_operators(u, r, initial=initial_plays(u[0], r, initial))
 
 
-def opened_operators(plays: np.ndarray, before: np.ndarray) -> np.ndarray:
-    """Which operators the record opens (bool per row of ``plays``): pushed both up and down.
+def opened_operators(plays: np.ndarray, before: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Which operators' weights the record can tell from the input's own (bool per row of ``plays``).
 
-    An operator that only ever moves one way (the input never travels 2 r back
-    from where it last pushed it) follows u - r or u + r on the record, an
-    affine copy of the input: the record says nothing about its weight.
-    ``before``: the states before the record (``initial_plays``).
+    An operator whose output is an affine function of the input on the record
+    (it never moved, or it followed u - r or u + r at every sample: the input
+    only ever pushed it, never within its band) adds nothing a gain and an
+    offset do not: its weight would only trade with b. Every other one is
+    told apart: one pushed both up and down, and one pushed one way only that
+    held still while the input moved (a ratchet: a staircase that turns back
+    less than 2 r holds it for a while). ``before``: the states before the
+    record (``initial_plays``); ``u``: the record's input.
     """
     steps = np.diff(plays, axis=1, prepend=np.asarray(before, dtype=float)[:, None])
-    return np.any(steps > 0.0, axis=1) & np.any(steps < 0.0, axis=1)
+    both_ways = np.any(steps > 0.0, axis=1) & np.any(steps < 0.0, axis=1)
+    moved = np.any(steps != 0.0, axis=1)
+    return both_ways | (moved & ~_affine_in(plays, u))
+
+
+def _affine_in(rows: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Per row: whether it is c0 + c1 u on the record, to ``AFFINE_RTOL`` of the input's range (a least squares
+    on [1, u]; a constant input: whether the row is constant)."""
+    u = np.asarray(u, dtype=float)
+    span = max(float(np.ptp(u)), float(np.max(np.abs(u), initial=0.0)), 1e-300)
+    basis = np.vstack([np.ones_like(u), u - float(np.mean(u))]) if np.ptp(u) > 0 else np.ones((1, u.size))
+    q, _ = np.linalg.qr(basis.T)
+    misfit = rows - (rows @ q) @ q.T
+    return np.max(np.abs(misfit), axis=1, initial=0.0) <= AFFINE_RTOL * span
 
 
 def partial_slopes(r, w) -> np.ndarray:
@@ -391,7 +411,7 @@ class PlayWeights:
         self.before = initial_plays(data.u[0], self.r, self.initial)
         self.u = data.u
         self.plays = play_operators(data.u, self.r, initial=self.before)
-        self.opened = opened_operators(self.plays, self.before)
+        self.opened = opened_operators(self.plays, self.before, data.u)
         self.names = weight_names(self.r.size)
 
     def rows(self, u: np.ndarray, before: bool = False) -> np.ndarray:

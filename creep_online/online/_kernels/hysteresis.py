@@ -547,10 +547,12 @@ def weight_prior(F: np.ndarray, c0: int, nh: int, noise: float, neff: float, fyy
 def pin_unopened(st: np.ndarray, o: int, nh: int, theta: np.ndarray, t0: int, masks: np.ndarray, rows: np.ndarray,
                  free: float) -> None:
     """A re-fit's weights (theta from t0): an operator the input has not opened (pushed both up and down) within the
-    window's memory (``set_memory``) since the start or the oldest remembered sample follows u - r or u + r, an affine copy of the input, and its weight is not
-    the data's: pinned at 0 (fixed in the masks ``rows``); an opened one is free (mask value ``free``), as the batch
-    fit's rule (``effects.hysteresis.opened_operators``). The start columns are free (their prior holds them); a
-    start in equilibrium's are pinned at 0, the centred start, until ``free_start`` and after ``drop_start``."""
+    window's memory (``set_memory``) since the start or the oldest remembered sample is pinned at 0 (fixed in the
+    masks ``rows``); an opened one is free (mask value ``free``). Stricter than the batch fit's rule
+    (``effects.hysteresis.opened_operators``, which also frees an operator pushed one way that held still while
+    the input moved): a weight the window cannot yet tell from the gain stays out of the tracked state. The start
+    columns are free (their prior holds them); a start in equilibrium's are pinned at 0, the centred start, until
+    ``free_start`` and after ``drop_start``."""
     k = nh - START
     pinned = st[o + EQUILIBRIUM] != 0.0 and (st[o + FREED] == 0.0 or st[o + DROPPED] != 0.0)
     for i in range(nh):
