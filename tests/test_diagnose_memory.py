@@ -1,5 +1,6 @@
 """What keeps a long diagnosis' memory down must not change a number: the PI weights solved on the design's
-triangular factor, LAPACK's gelsy called directly, a superposer without its rows' spectra, released caches."""
+triangular factor, LAPACK's gelsy called directly, a superposer without its rows' spectra, superposers shared by
+the designs that hold them, released caches."""
 from __future__ import annotations
 
 import numpy as np
@@ -67,7 +68,7 @@ def test_released_caches_are_built_again_with_the_same_values():
     before = design.cost(theta)
     window = data.explore_data()
     data.release()
-    assert set(data._cache) <= {"explore"} and data.explore_data() is window
+    assert set(data._cache) <= {"explore", "superposer"} and data.explore_data() is window
     assert ext.Design(data, ("second_creep",)).cost(theta) == before
 
 
@@ -88,23 +89,31 @@ def test_release_forgets_the_exploration_windows_responses_too():
     before = (design.cost(theta), design.explored().cost(theta))
     assert window._cache                                          # the window's fit remembered its responses
     data.release()
-    assert set(data._cache) <= {"explore"} and not window._cache and data.explore_data() is window
+    assert set(data._cache) <= {"explore", "superposer"} and data.explore_data() is window
+    assert set(window._cache) <= {"superposer"}
     again = ext.Design(data, ("second_creep",))
     assert (again.cost(theta), again.explored().cost(theta)) == before
 
 
-def test_large_superposers_are_remembered_two_at_a_time_with_the_same_columns(monkeypatch):
-    """Beyond CACHE_BYTES only the two most recent superposers stay (the plain input's and a variant's); one
-    asked for again is built again, giving the same columns."""
+def test_designs_on_the_same_rows_share_one_superposer_freed_with_the_last_of_them():
+    """A superposer lives as long as a design holds it: two designs (a design and its copy, as on two threads)
+    on the same input rows share one, another variant gets its own, and none stays once no design holds it;
+    one built again gives the same columns."""
+    import gc
+    import weakref
     data = _long_record()
-    monkeypatch.setattr(ext, "CACHE_BYTES", 1)                    # every superposer counts as large
-    hyst = ext.get_effect("hysteresis")
-    keys = [(), ((hyst, "centred"),), ((hyst, "ascending"),)]
-    step = 1.0 - np.exp(-np.arange(data.n) * data.h / 0.05)
-    first = [data.superposer(k).apply(step) for k in keys]
-    assert len(data._cache["superposer"]) == 2 and "u" not in data._cache["superposer"]
-    again = [data.superposer(k).apply(step) for k in keys]
-    assert all(np.array_equal(a, b) for a, b in zip(first, again))
+    theta_of = (lambda d: np.concatenate([[0.3, 1.0, -0.5], 0.5 * (d.lo[3:] + d.hi[3:])]))
+    first = ext.Design(data, ("hysteresis",))
+    twin = first.copy()
+    other = ext.Design(data, ("hysteresis",), variants={"hysteresis": "ascending"})
+    costs = [d.cost(theta_of(d)) for d in (first, twin, other)]
+    assert twin.superposer() is first.superposer() and other.superposer() is not first.superposer()
+    held = weakref.ref(first.superposer())
+    del first, twin
+    gc.collect()
+    assert held() is None and len(data._cache["superposer"]) == 1       # the ascending variant's: other holds it
+    again = ext.Design(data, ("hysteresis",))
+    assert again.cost(theta_of(again)) == costs[0]
 
 
 def test_row_spectra_a_few_rows_at_a_time_are_all_rows_at_once(monkeypatch):

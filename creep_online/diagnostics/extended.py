@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import threading
+import weakref
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -82,13 +83,10 @@ SOLVED_CACHE = 8
 BASE_PATH_CACHE = 8
 #: Parallel-effect paths remembered per record (``Prepared.parallel_path``) ...
 PARALLEL_PATH_CACHE = 16
-#: Superposers remembered per record (``Prepared.superposer``: the plain input and each input effect's variant; the
-#: two most recent always kept: a fit alternates between the plain input's and its variant's) ...
-SUPERPOSER_CACHE = 8
 #: Reported-solution rows remembered per record (``_reported_rows``: one per set of variants) ...
 REPORTED_CACHE = 4
 #: ... and at most this many bytes in each of those memories (the most recent response or solution always kept).
-#: The counts suit the explore window; on a long record one entry of a hysteresis fit (13 input rows, or a coupled
+#: The counts suit the explore window; on a long record one entry of a hysteresis fit (13 rows' responses, or a coupled
 #: design's tangent of 27 columns) is 5-11 MB at 50,000 samples, and eight to sixteen of each, per record and per
 #: design, held a diagnosis near 1 GB. There a fit's evaluations reuse the last one or two entries (the Jacobian
 #: at the point just evaluated); on the 150 V piezo record 24 MB held ~25 MB more at the peak for no evaluation
@@ -189,32 +187,41 @@ class Prepared:
         return 1.0 / self.h
 
     def superposer(self, inputs: tuple[tuple[InputEffect, str | None], ...] = ()) -> fx.Superposer:
-        """Cached superposer of the input rows: u, then each input effect's rows (built on first use).
+        """The superposer of the input rows: u, then each input effect's rows (built when no live one has them).
 
         ``inputs``: (input-stage effect, its variant) pairs in registry order;
-        () is the plain input. Remembered like the responses (``SUPERPOSER_CACHE``, ``CACHE_BYTES``): on a
-        long record one input effect's variant holds its rows and their spectra (15 MB for hysteresis' 13 rows
-        at 50,000 samples), and a fit tries its variants one after the other.
+        () is the plain input. Held weakly: a superposer lives as long as a
+        design holds it (``Design.superposer``), so the designs of one fit and
+        their copies on other threads share one, and none outlives the last
+        design that uses it. On a long record one input effect's variant holds
+        its rows and their spectra (15 MB for hysteresis' 13 rows at 50,000
+        samples); a fit's designs each use one variant, and a variant no
+        design uses any more is freed at once instead of staying in a memory of
+        recent ones beside the next variant's.
         """
         key = "+".join(f"{e.name}[{variant}]" for e, variant in inputs) or "u"
-
-        def make() -> fx.Superposer:
-            x = self.input_rows(inputs, self.u)
-            pre = None
-            if self.u_pre is not None:
-                pre = self.input_rows(inputs, np.array([self.u_pre]), before=True)[:, 0]
-            return fx.Superposer(self.t, x, x_pre=pre, t_pre=self.t_pre)
-        return _remembered(self._cache.setdefault("superposer", {}), key, SUPERPOSER_CACHE, make, _superposer_bytes,
-                           keep=2)
+        with _CACHE_LOCK:
+            live = self._cache.setdefault("superposer", weakref.WeakValueDictionary())
+            sup = live.get(key)
+        if sup is not None:
+            return sup
+        x = self.input_rows(inputs, self.u)
+        pre = None
+        if self.u_pre is not None:
+            pre = self.input_rows(inputs, np.array([self.u_pre]), before=True)[:, 0]
+        sup = fx.Superposer(self.t, x, x_pre=pre, t_pre=self.t_pre)
+        with _CACHE_LOCK:                        # another thread built the same meanwhile: both use the first one
+            return live.setdefault(key, sup)
 
     def release(self) -> None:
-        """Forget the remembered responses and superposers (not the exploration window): the next fit builds
-        what it asks for again. Exact reuse only, so no result changes; on a long record they are most of a
-        diagnosis' memory between its stages (a hysteresis variant's superposer alone is 16 MB at 50,000
-        samples), and the next stage (the pair search, on a window) does not ask for them. The exploration
-        window's own remembered responses go too (the next stage's designs explore other parameters)."""
+        """Forget the remembered responses (not the exploration window, nor the superposers the live designs
+        hold, ``superposer``): the next fit builds what it asks for again. Exact reuse only, so no result changes;
+        on a long record they are most of a diagnosis' memory between its stages (a hysteresis fit's responses
+        and reported rows, 5-10 MB each at 50,000 samples), and the next stage (the pair search, on a window) does
+        not ask for them. The exploration window's own remembered responses go too (the next stage's designs
+        explore other parameters)."""
         with _CACHE_LOCK:
-            for key in [k for k in self._cache if k != "explore"]:
+            for key in [k for k in self._cache if k not in ("explore", "superposer")]:
                 del self._cache[key]
         window = self._cache.get("explore")
         if window is not None and window is not self:
@@ -322,13 +329,6 @@ def _remembered(cache: dict, key: tuple, size: int, make: Callable[[], np.ndarra
     return value
 
 
-def _superposer_bytes(sup: fx.Superposer) -> int:
-    """Memory a remembered superposer holds: its input rows' differences and (uniform records, when kept) their
-    spectra, or (other records) its times since each input change."""
-    held = sup.tau.nbytes if not sup.uniform else 0 if sup.spectra is None else sup.spectra.nbytes
-    return sup.dx.nbytes + held
-
-
 def _evict(cache: dict, size: int, nbytes: Callable[[object], int], keep: int = 1) -> None:
     """Drop the least recently used entries (first in ``cache``) beyond ``size`` entries or ``CACHE_BYTES``
     bytes (``nbytes`` of an entry), keeping the ``keep`` most recent ones."""
@@ -424,10 +424,19 @@ class Design:
         self._solved: dict[bytes, tuple] = {}    # theta -> (coefficients, output, weighted residual), recent ones
         self._weighted: tuple[bytes, np.ndarray] | None = None   # (theta, weighted design) of the last evaluation
         self._reported: tuple[bytes, tuple | None] | None = None  # (theta, ``_reported``) of the last one asked
+        self._superposer: fx.Superposer | None = None              # held while this design lives (``superposer``)
 
     def copy(self) -> "Design":
         """The same design with its own (empty) solution cache and evaluation counter (for another thread)."""
         return Design(self.data, self.effects, self.harmonics, self.variants)
+
+    def superposer(self) -> fx.Superposer:
+        """The superposer of this design's input rows (``Prepared.superposer``), held for the design's lifetime:
+        its evaluations, its Jacobians and the remembered paths built from it all use these rows, and a record
+        keeps a superposer only while a design holds it."""
+        if self._superposer is None:
+            self._superposer = self.data.superposer(self.inputs)
+        return self._superposer
 
     def explored(self) -> "Design":
         """The same design on the record's exploration window (``Prepared.explore_data``); itself if that window
@@ -463,11 +472,12 @@ class Design:
         """
         data = self.data
         p, alpha, a1, a2, d = self._base(theta)
+        sup = self.superposer()                  # held first: the remembered paths below are built from it
         if data.uniform:
             base = data.base_path(self.inputs, alpha, a1, a2, d)
-            tau = data.superposer(self.inputs).grid_tau - d
+            tau = sup.grid_tau - d
         else:
-            base = data.superposer(self.inputs).apply(lambda tt: fx.base_step_at(alpha, a1, a2, tt - d))
+            base = sup.apply(lambda tt: fx.base_step_at(alpha, a1, a2, tt - d))
             tau = None
         inputs = self.inputs if self.coupled else ()
         par = [data.parallel_path(e, p, tuple(p[n] for n in self.own[e.name]), d, tau, inputs)
@@ -688,7 +698,7 @@ class Design:
         if len(self.exact) > 3 and not self.stages[Stage.PARALLEL]:
             slope = data.base_path_slope(alpha, a1, a2, d)
             steps = np.vstack([steps] + [self._delay_rate(theta, k) * slope for k in self.exact[3:]])
-        sup = data.superposer(self.inputs)
+        sup = self.superposer()
         rows = sup.rows
         w = data.weights
         v = wres if w is None else wres * w
@@ -707,7 +717,8 @@ class Design:
                 pulled[k:k + len(dsteps), :rows] = kappa * q
                 pulled[k:k + len(dsteps), col] = q @ coef[:rows]
             else:
-                m, q = self._superposed(data.superposer(), dsteps, coef[col:col + 1], v, p)
+                # the plain input's rows: uncoupled parallel paths come only in designs without input effects
+                m, q = self._superposed(sup, dsteps, coef[col:col + 1], v, p)
                 pulled[k:k + len(dsteps), col] = q[:, 0]
             parts.append(m)
             k += len(dsteps)
