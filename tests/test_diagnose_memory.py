@@ -1,6 +1,6 @@
 """What keeps a long diagnosis' memory down must not change a number: the PI weights solved on the design's
 triangular factor, LAPACK's gelsy called directly, a superposer without its rows' spectra, superposers shared by
-the designs that hold them, released caches."""
+the designs that hold them, released caches, rows differenced in place."""
 from __future__ import annotations
 
 import numpy as np
@@ -114,6 +114,24 @@ def test_designs_on_the_same_rows_share_one_superposer_freed_with_the_last_of_th
     assert held() is None and len(data._cache["superposer"]) == 1       # the ascending variant's: other holds it
     again = ext.Design(data, ("hysteresis",))
     assert again.cost(theta_of(again)) == costs[0]
+
+
+def test_rows_overwritten_in_place_and_written_into_a_given_array_are_the_same_numbers():
+    """``Superposer(overwrite_x=True)`` computes the steps in the rows themselves, and ``apply(out=...)`` writes
+    the superposition into the caller's array: both the numbers of the plain superposer, uniform or not."""
+    rng = np.random.default_rng(8)
+    n = 3000
+    x = np.cumsum(rng.normal(size=(4, n)), axis=1)
+    for t in (np.arange(n) * 1e-3, np.cumsum(rng.uniform(0.5, 1.5, size=n)) * 1e-3):
+        for pre in (None, np.zeros(4)):
+            plain = Superposer(t, x, x_pre=pre)
+            rows = x.copy()
+            inplace = Superposer(t, rows, x_pre=pre, overwrite_x=True)
+            assert inplace.dx is rows and np.array_equal(inplace.dx, plain.dx)
+            step = (lambda tt: 1.0 - np.exp(-tt / 0.05))
+            expected = plain.apply(step)
+            out = np.full((6, n), np.nan)
+            assert inplace.apply(step, out=out[1:5]) is not None and np.array_equal(out[1:5], expected)
 
 
 def test_row_spectra_a_few_rows_at_a_time_are_all_rows_at_once(monkeypatch):

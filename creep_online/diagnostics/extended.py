@@ -209,7 +209,7 @@ class Prepared:
         pre = None
         if self.u_pre is not None:
             pre = self.input_rows(inputs, np.array([self.u_pre]), before=True)[:, 0]
-        sup = fx.Superposer(self.t, x, x_pre=pre, t_pre=self.t_pre)
+        sup = fx.Superposer(self.t, x, x_pre=pre, t_pre=self.t_pre, overwrite_x=True)   # x: built for it
         with _CACHE_LOCK:                        # another thread built the same meanwhile: both use the first one
             return live.setdefault(key, sup)
 
@@ -494,6 +494,8 @@ class Design:
         """Design matrix (n, p) of an uncoupled design: dynamic paths (delayed, filtered) then offset and
         additive columns."""
         p, base, par, static = self._paths(theta)
+        if not self.stages[Stage.OUTPUT_FILTER]:
+            return np.vstack([base, *par, static]).T          # one copy of the rows, not a stack of a stack
         cols = np.vstack([base, *par])
         for e in self.stages[Stage.OUTPUT_FILTER]:
             cols = e.filter_columns(self.data.t, cols, p)
@@ -792,18 +794,19 @@ def _solve(wphi: np.ndarray, wy: np.ndarray) -> np.ndarray:
     """Least-squares coefficients of the weighted design (columns scaled to unit norm; gelsy, as identify)."""
     scale = np.linalg.norm(wphi, axis=0)
     scale[scale == 0] = 1.0
-    return _gelsy(wphi / scale, wy) / scale
+    return _gelsy(wphi / scale, wy, overwrite=True) / scale      # the scaled copy is LAPACK's to overwrite
 
 
 #: (rows, columns) -> LAPACK's optimal work size for gelsy (``_gelsy``).
 _GELSY_WORK: dict[tuple[int, int], int] = {}
 
 
-def _gelsy(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def _gelsy(a: np.ndarray, b: np.ndarray, overwrite: bool = False) -> np.ndarray:
     """``scipy.linalg.lstsq(a, b, cond=RCOND, lapack_driver="gelsy", check_finite=False)[0]`` for real 2-d ``a``
     and 1-d ``b``: the same LAPACK call with the same arguments (so the same numbers), without the wrapper's
     per-call checks and work-size query (~60 us, a tenth of an evaluation on a 6,000-sample window, where
-    a coupled design solves ten small problems per evaluation)."""
+    a coupled design solves ten small problems per evaluation). ``overwrite``: ``a`` (Fortran-ordered) is the
+    caller's scratch, factorised in place rather than copied (a design's size: 5 MB at 50,000 samples)."""
     m, n = a.shape
     if m == 0 or n == 0 or a.dtype != np.float64 or b.ndim != 1:
         return scipy_lstsq(a, b, cond=RCOND, lapack_driver="gelsy", check_finite=False)[0]
@@ -815,7 +818,7 @@ def _gelsy(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         work = _GELSY_WORK[(m, n)] = int(size)
     if m < n:
         b = np.concatenate([b, np.zeros(n - m)])
-    x, info = _GELSY(a, b, np.zeros((n, 1), dtype=np.int32), RCOND, work, False, False)[1::3]
+    x, info = _GELSY(a, b, np.zeros((n, 1), dtype=np.int32), RCOND, work, overwrite, False)[1::3]
     if info < 0:
         raise ValueError(f"illegal value in {-info}-th argument of internal gelsy")
     return x[:n]
@@ -958,18 +961,16 @@ def _reported_solution(design: Design, theta: np.ndarray) -> tuple | None:
         else:
             def step(tt: np.ndarray) -> np.ndarray:
                 return fx.base_step_at(alpha, a1, a2, tt - d) + sum(k * s(tt - d) for k, s in zip(kappa, steps))
-        dynamic = [sup.apply(step)]
+        more = []
     else:
         if data.uniform:
-            dynamic = [sup.apply(fx.delayed_grid(data.step_grid(alpha, a1, a2), data.h, d))]
+            step = fx.delayed_grid(data.step_grid(alpha, a1, a2), data.h, d)
         else:
-            dynamic = [sup.apply(lambda tt: fx.base_step_at(alpha, a1, a2, tt - d))]
-        dynamic += [data.parallel_path(e, p, tuple(p[k] for k in design.own[e.name]), d, tau) for e in parallel]
+            def step(tt: np.ndarray) -> np.ndarray:
+                return fx.base_step_at(alpha, a1, a2, tt - d)
+        more = [data.parallel_path(e, p, tuple(p[k] for k in design.own[e.name]), d, tau) for e in parallel]
         names = names + [e.gain_column for e in parallel]
-    for e in design.stages[Stage.OUTPUT_FILTER]:
-        dynamic = [e.filter_columns(data.t, q, p) for q in dynamic]
-    phi = np.vstack(dynamic + [static]).T
-    del dynamic
+    phi = _stacked(design, sup, step, more, static, p)
     names = names + static_names
     wphi = phi if data.weights is None else phi * data.weights[:, None]
     effect, sol = own[0]
@@ -982,11 +983,30 @@ def _reported_solution(design: Design, theta: np.ndarray) -> tuple | None:
     return x, names, y_hat, wres, {effect.name: found}
 
 
+def _stacked(design: Design, sup: fx.Superposer, step: np.ndarray | Callable, more: list[np.ndarray],
+             static: np.ndarray, p: dict[str, float]) -> np.ndarray:
+    """The reported solution's design (n, columns): the superposition of ``step`` on sup's rows, the ``more``
+    rows (parallel paths), filtered by the output-filter effects, then the ``static`` rows. Without a filter the
+    superposition is written straight into the design's rows: stacked, it was a second copy of the 25 rows
+    beside the design (10 MB for hysteresis at 50,000 samples)."""
+    filters = design.stages[Stage.OUTPUT_FILTER]
+    if filters:
+        dynamic = [sup.apply(step)] + more
+        for e in filters:
+            dynamic = [e.filter_columns(design.data.t, q, p) for q in dynamic]
+        return np.vstack(dynamic + [static]).T
+    rows = np.empty((sup.rows + sum(q.shape[0] for q in more) + static.shape[0], sup.n))
+    sup.apply(step, out=rows[:sup.rows])
+    rows[sup.rows:] = np.vstack(more + [static])
+    return rows.T
+
+
 def _reported_rows(design: Design) -> tuple[list[tuple], fx.Superposer | None]:
     """(each input effect, its variant and its reported solution; the superposer of the reported rows, None when
     no effect has a reported solution): what ``_reported_solution`` needs of a record and the variants, remembered
-    per record (``Prepared``) within ``CACHE_BYTES`` (an exploration window's; a long record's, 40 MB for
-    hysteresis at 50,000 samples, is built again when asked again, without its rows' spectra)."""
+    per record (``Prepared``) within ``CACHE_BYTES`` (an exploration window's; a long record's, 10 MB of steps
+    for hysteresis' 25 rows at 50,000 samples and 30 MB with their spectra, is built again when asked again,
+    without the spectra)."""
     data = design.data
     solutions = [(e, variant, e.reported_solution(data, variant)) for e, variant in design.inputs]
     if all(sol is None for _, _, sol in solutions):
@@ -998,20 +1018,20 @@ def _reported_rows(design: Design) -> tuple[list[tuple], fx.Superposer | None]:
 
     pre = None if data.u_pre is None else rows(np.array([data.u_pre]), before=True)[:, 0]
     x = rows(data.u)
-    # rows' steps, their spectra and the solutions' copy of the rows: 32 bytes per row and sample; beyond
-    # CACHE_BYTES the entry is not remembered, and spectra kept for its one ``apply`` would only add to the peak
-    keep = 32 * x.size <= CACHE_BYTES
-    return solutions, fx.Superposer(data.t, x, x_pre=pre, t_pre=data.t_pre, keep_spectra=keep)
+    # rows' steps and their spectra: 24 bytes per row and sample; beyond CACHE_BYTES the entry is not
+    # remembered, and spectra kept for its one ``apply`` would only add to the peak
+    keep = 24 * x.size <= CACHE_BYTES
+    return solutions, fx.Superposer(data.t, x, x_pre=pre, t_pre=data.t_pre, keep_spectra=keep, overwrite_x=True)
 
 
 def _reported_bytes(entry: tuple) -> int:
-    """Bytes of a remembered ``_reported_rows``: its superposer's input steps and their spectra (the reported
-    solutions hold the same rows once more)."""
+    """Bytes of a remembered ``_reported_rows``: its superposer's input steps and their spectra (uniform records)
+    or times since each input change (the reported solutions run their rows again when asked)."""
     sup = entry[1]
     if sup is None:
         return 0
     held = sup.tau.nbytes if not sup.uniform else 0 if sup.spectra is None else sup.spectra.nbytes
-    return 2 * sup.dx.nbytes + held
+    return sup.dx.nbytes + held
 
 
 def base_theta(model: CreepModel) -> np.ndarray:

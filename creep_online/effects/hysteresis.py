@@ -15,6 +15,8 @@ on the direction of the last input change.
 """
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 
 from ..errors import ModelError
@@ -123,23 +125,27 @@ def opened_operators(plays: np.ndarray, before: np.ndarray, u: np.ndarray) -> np
     told apart: one pushed both up and down, and one pushed one way only that
     held still while the input moved (a ratchet: a staircase that turns back
     less than 2 r holds it for a while). ``before``: the states before the
-    record (``initial_plays``); ``u``: the record's input.
+    record (``initial_plays``); ``u``: the record's input. A row at a time:
+    every row's steps at once were two more copies of the plays.
     """
-    steps = np.diff(plays, axis=1, prepend=np.asarray(before, dtype=float)[:, None])
-    both_ways = np.any(steps > 0.0, axis=1) & np.any(steps < 0.0, axis=1)
-    moved = np.any(steps != 0.0, axis=1)
-    return both_ways | (moved & ~_affine_in(plays, u))
+    before = np.broadcast_to(np.asarray(before, dtype=float), (plays.shape[0],))
+    affine = _affine_test(u)
+    out = np.empty(plays.shape[0], dtype=bool)
+    for i, row in enumerate(plays):
+        steps = np.diff(row, prepend=before[i])
+        up, down = bool(np.any(steps > 0.0)), bool(np.any(steps < 0.0))
+        out[i] = (up and down) or ((up or down) and not affine(row))
+    return out
 
 
-def _affine_in(rows: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Per row: whether it is c0 + c1 u on the record, to ``AFFINE_RTOL`` of the input's range (a least squares
-    on [1, u]; a constant input: whether the row is constant)."""
+def _affine_test(u: np.ndarray) -> Callable[[np.ndarray], bool]:
+    """Whether a row is c0 + c1 u on the record, to ``AFFINE_RTOL`` of the input's range (a least squares on
+    [1, u]; a constant input: whether the row is constant)."""
     u = np.asarray(u, dtype=float)
     span = max(float(np.ptp(u)), float(np.max(np.abs(u), initial=0.0)), 1e-300)
     basis = np.vstack([np.ones_like(u), u - float(np.mean(u))]) if np.ptp(u) > 0 else np.ones((1, u.size))
     q, _ = np.linalg.qr(basis.T)
-    misfit = rows - (rows @ q) @ q.T
-    return np.max(np.abs(misfit), axis=1, initial=0.0) <= AFFINE_RTOL * span
+    return lambda row: float(np.max(np.abs(row - q @ (q.T @ row)), initial=0.0)) <= AFFINE_RTOL * span
 
 
 def partial_slopes(r, w) -> np.ndarray:
@@ -402,23 +408,22 @@ class PlayWeights:
 
     ``rows``: the plays themselves (the search fits their leading directions);
     ``solve``: ``solve_pi_weights`` with the operators the record never opens
-    pinned at 0. Built per record and initial state.
+    pinned at 0. Built per record and initial state. The plays are run again
+    when asked for rather than kept: the caller copies them into its own rows
+    once, and kept they were 10 MB beside those at 50,000 samples.
     """
 
     def __init__(self, data, variant: str | None) -> None:
         self.initial = variant or "centred"
         self.r = Hysteresis.thresholds(data)
-        self.before = initial_plays(data.u[0], self.r, self.initial)
-        self.u = data.u
-        self.plays = play_operators(data.u, self.r, initial=self.before)
-        self.opened = opened_operators(self.plays, self.before, data.u)
+        self.opened = opened_operators(self.rows(data.u), initial_plays(data.u[0], self.r, self.initial), data.u)
         self.names = weight_names(self.r.size)
 
     def rows(self, u: np.ndarray, before: bool = False) -> np.ndarray:
         """The plays for input u (the record's own, or ``before``: all resting on the input before the record)."""
         if before:
             return np.repeat(np.asarray(u, dtype=float)[None, :], self.r.size, axis=0)
-        return self.plays if u is self.u else play_operators(u, self.r, initial=initial_plays(u[0], self.r, self.initial))
+        return play_operators(u, self.r, initial=initial_plays(u[0], self.r, self.initial))
 
     def solve(self, a: np.ndarray, wy: np.ndarray, gain: int, cols: np.ndarray, gain_estimate: float,
               noise_var: float) -> tuple[np.ndarray, dict]:

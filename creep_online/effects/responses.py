@@ -26,9 +26,10 @@ from ..errors import DataError
 MULTIGRID_POINTS = 2048
 #: Ratio between successive grids of the multi-resolution step response.
 MULTIGRID_RATIO = 8.0
-#: Scratch memory of one batch of rows in ``Superposer.apply`` (their spectra and padded transforms) and
-#: ``Superposer.row_spectra`` (their padded copies).
-SCRATCH_BYTES = 8 * 2**20
+#: Scratch memory of one batch of rows in ``Superposer.apply`` (their spectra and padded transforms, about three
+#: times this in all) and ``Superposer.row_spectra`` (their padded copies): two rows of a 50,000-sample record,
+#: as fast per row as eight (the transforms are per row) for a third of the scratch beside the output.
+SCRATCH_BYTES = 4 * 2**20
 #: Non-uniform records: at most this many (samples x input changes) pairs are summed explicitly.
 MAX_PAIRS = 20_000_000
 
@@ -209,6 +210,22 @@ def delayed_grid_slope(s: np.ndarray, h: float, delay: float) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- superposition
+def _steps(x: np.ndarray, pre: np.ndarray, in_place: bool) -> np.ndarray:
+    """``np.diff(x, axis=1, prepend=pre[:, None])``: the same subtractions, without its concatenated copy of the
+    rows; ``in_place``, in x itself, a row at a time (each row's previous samples copied first: one row of
+    scratch instead of a second set of rows, 5-10 MB for hysteresis' rows of a 50,000-sample record)."""
+    if not in_place:
+        dx = np.empty_like(x)
+        np.subtract(x[:, :1], pre[:, None], out=dx[:, :1])
+        np.subtract(x[:, 1:], x[:, :-1], out=dx[:, 1:])
+        return dx
+    for i in range(x.shape[0]):
+        previous = x[i, :-1].copy()
+        np.subtract(x[i, 1:], previous, out=x[i, 1:])
+        x[i, 0] -= pre[i]
+    return x
+
+
 class Superposer:
     """Zero-order-hold superposition y = sum_k dx_k S(t - t_k) for fixed input rows.
 
@@ -217,21 +234,20 @@ class Superposer:
     (the input spectra are cached), or an explicit sum over the input changes
     on non-uniform ones. ``x_pre`` is the input before the record (default:
     the first sample, i.e. deviation variables; 0 = from rest) and ``t_pre``
-    the time of that first jump (default t[0]).
+    the time of that first jump (default t[0]). ``overwrite_x``: the rows are
+    the caller's to overwrite (a float array built for this superposer), and
+    their steps are computed in their place instead of beside them.
     """
 
     def __init__(self, t: np.ndarray, x: np.ndarray, x_pre=None, t_pre: float | None = None,
-                 keep_spectra: bool = True) -> None:
+                 keep_spectra: bool = True, overwrite_x: bool = False) -> None:
         self.t = np.asarray(t, dtype=float)
         x = np.atleast_2d(np.asarray(x, dtype=float))
         n = self.t.size
         if x.shape[1] != n:
             raise DataError(f"input rows have {x.shape[1]} samples, time has {n}")
         pre = x[:, 0] if x_pre is None else np.broadcast_to(np.asarray(x_pre, dtype=float), (x.shape[0],))
-        # np.diff(x, axis=1, prepend=pre): the same subtractions, without its concatenated copy of the rows
-        self.dx = np.empty_like(x)
-        np.subtract(x[:, :1], pre[:, None], out=self.dx[:, :1])
-        np.subtract(x[:, 1:], x[:, :-1], out=self.dx[:, 1:])
+        self.dx = _steps(x, pre.copy(), overwrite_x and x.flags.writeable and x.flags.c_contiguous)
         self.rows = x.shape[0]
         self.n = n
         self.t_pre = float(self.t[0] if t_pre is None else t_pre)
@@ -270,16 +286,19 @@ class Superposer:
         """Times k h (uniform records) at which apply() wants the step response."""
         return np.arange(self.n) * self.h
 
-    def apply(self, step: np.ndarray | StepFn) -> np.ndarray:
+    def apply(self, step: np.ndarray | StepFn, out: np.ndarray | None = None) -> np.ndarray:
         """Rows of outputs for a step response given on the grid (uniform) or as a function of tau.
 
         Uniform records also take several step responses on the grid at once
         (shape (k, n)) and give (k, rows, n): one superposition per response.
+        ``out``: an array of that shape to write them in (e.g. the first rows of
+        a design the caller assembles), returned.
         """
         if self.uniform:
             s = step(self.grid_tau) if callable(step) else np.asarray(step, dtype=float)
             fs = rfft(s, self.nfft, axis=-1)
-            out = np.empty(fs.shape[:-1] + (self.rows, self.n))
+            if out is None:
+                out = np.empty(fs.shape[:-1] + (self.rows, self.n))
             # a few rows at a time (each row's transform is its own): the padded transforms of every row at once
             # were 4x the output, 50 MB beside it for hysteresis' 25 rows of a 50,000-sample record
             batch = max(1, SCRATCH_BYTES // (16 * self.nfft * max(1, s.size // self.n)))
@@ -291,12 +310,17 @@ class Superposer:
         if not callable(step):
             raise ValueError("non-uniform records need the step response as a function of time")
         if self.change.size == 0:
-            return np.zeros((self.rows, self.n))
-        tau = self.tau
-        s = np.zeros(tau.shape)
-        pos = tau > 0
-        s[pos] = step(tau[pos])
-        return self.dx[:, self.change] @ s
+            value = np.zeros((self.rows, self.n))
+        else:
+            tau = self.tau
+            s = np.zeros(tau.shape)
+            pos = tau > 0
+            s[pos] = step(tau[pos])
+            value = self.dx[:, self.change] @ s
+        if out is None:
+            return value
+        out[...] = value
+        return out
 
     def products(self, steps: np.ndarray, weights: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For step responses S_k on the grid (uniform): (sum_i w_i apply(S_k)_i, apply(S_k) @ v) per k.
