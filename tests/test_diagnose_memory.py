@@ -1,6 +1,6 @@
 """What keeps a long diagnosis' memory down must not change a number: the PI weights solved on the design's
 triangular factor, LAPACK's gelsy called directly, a superposer without its rows' spectra, superposers shared by
-the designs that hold them, released caches, rows differenced in place."""
+the designs that hold them, released caches and designs, rows differenced in place."""
 from __future__ import annotations
 
 import numpy as np
@@ -114,6 +114,23 @@ def test_designs_on_the_same_rows_share_one_superposer_freed_with_the_last_of_th
     assert held() is None and len(data._cache["superposer"]) == 1       # the ascending variant's: other holds it
     again = ext.Design(data, ("hysteresis",))
     assert again.cost(theta_of(again)) == costs[0]
+
+
+def test_a_released_design_answers_its_points_and_evaluates_new_ones_the_same():
+    """``Design.release`` lets go of the superposer, the weighted design and a coupled design's tangents: the
+    points evaluated are answered from the remembered solutions without an evaluation, and the Jacobian (the
+    tangent computed again) and a new point give the same numbers as a design that kept everything."""
+    data = _long_record(6000)
+    for effects in (("hysteresis",), ("hysteresis", "second_creep")):
+        kept, freed = ext.Design(data, effects), ext.Design(data, effects)
+        theta = np.concatenate([[0.3, 1.0, -0.5], 0.5 * (kept.lo[3:] + kept.hi[3:])])
+        moved = theta + 1e-3
+        assert kept.cost(theta) == freed.cost(theta)
+        freed.release()
+        count = freed.nfev
+        assert freed.cost(theta) == kept.cost(theta) and freed.nfev == count
+        assert np.array_equal(freed.jacobian(theta), kept.jacobian(theta))
+        assert freed.cost(moved) == kept.cost(moved)
 
 
 def test_rows_overwritten_in_place_and_written_into_a_given_array_are_the_same_numbers():

@@ -438,6 +438,21 @@ class Design:
             self._superposer = self.data.superposer(self.inputs)
         return self._superposer
 
+    def release(self) -> None:
+        """Let go of the superposer and the weighted designs (the last evaluation's, a coupled design's tangents);
+        the remembered solutions stay.
+
+        A point the design has evaluated is then answered as before (its
+        solution, its reported solution), and a new point gets the superposer
+        again (built anew if no other design holds it). A fit's last stages ask
+        its designs only for evaluated points, and on a long record these are
+        20-26 MB per design beside the next variant's rows (hysteresis, 50,000
+        samples).
+        """
+        self._superposer = None
+        self._weighted = None
+        self._solved = {key: entry[:3] + (None,) for key, entry in self._solved.items()}
+
     def explored(self) -> "Design":
         """The same design on the record's exploration window (``Prepared.explore_data``); itself if that window
         is the record."""
@@ -668,10 +683,7 @@ class Design:
         """The weighted design at theta: the last evaluation's (scipy asks for jac(x) after fun(x)) or anew
         (the coupled model's tangent design, remembered with its solution)."""
         if self.coupled:
-            key = theta.tobytes()
-            if key not in self._solved:
-                self.project(theta)
-            return self._solved[key][3][0]
+            return self._tangent(theta)[0]
         if self._weighted is None or self._weighted[0] != theta.tobytes():
             phi = self.columns(theta)
             self._weighted = (theta.tobytes(), phi if self.data.weights is None else phi * self.data.weights[:, None])
@@ -679,10 +691,19 @@ class Design:
 
     def _curvature(self, theta: np.ndarray) -> np.ndarray:
         """A coupled design's inner curvature at theta (``varpro.projected_jacobian``), remembered with its solution."""
+        return self._tangent(theta)[1]
+
+    def _tangent(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A coupled design's (weighted tangent design, curvature) at theta, remembered with its solution; computed
+        again where ``release`` let it go (the same numbers: not an evaluation of the fit, as the uncoupled design's
+        columns in ``_weighted_columns``)."""
         key = theta.tobytes()
         if key not in self._solved:
             self.project(theta)
-        return self._solved[key][3][1]
+        entry = self._solved[key]
+        if entry[3] is None:
+            entry = self._solved[key] = entry[:3] + (self._coupled_project(theta)[3],)
+        return entry[3]
 
     def _exact_products(self, theta: np.ndarray, coef: np.ndarray, wres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(D_k c, D_k^T r) for D_k = d(weighted design)/d(theta_k), k in ``exact``: shapes (m, n), (m, p).
@@ -1329,14 +1350,17 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
             best, best_cost = th, c
     fit = _result(design, best)
     above = RESTART_ABOVE_FLOOR * noise_std_estimate(fit.residual) < fit.residual_rms
-    if restart or (not screen and ((above and (fit.residual_rms < RESTART_EXPLAINED * base.residual_rms
-                                               or _on_a_bound(design, base.theta[:3])))
-                                   or _beyond_nyquist(data, best))):
+    restarted = restart or (not screen and ((above and (fit.residual_rms < RESTART_EXPLAINED * base.residual_rms
+                                                        or _on_a_bound(design, base.theta[:3])))
+                                            or _beyond_nyquist(data, best)))
+    if restarted:
         th = _restart_base(design, explore, best, max_nfev, workers)
         cost = design.cost(th)
-        if cost < best_cost:
-            best, best_cost = th, cost
-            fit = _result(design, th)
+    if not uncertainty:
+        design.release()         # from here asked only for points it has evaluated (its Jacobian aside)
+    if restarted and cost < best_cost:
+        best, best_cost = th, cost
+        fit = _result(design, th)
     if above and fit.residual_rms < RESTART_EXPLAINED * base.residual_rms:
         fit, design, best = _other_variants(design, fit, best, best_cost, max_nfev, workers)
     fit, design, best = _reported_variant(design, fit, best, max_nfev)
@@ -1423,12 +1447,14 @@ def _other_variants(design: Design, fit: ExtendedFit, best: np.ndarray, best_cos
         small = [other.explored() for other in others]
         done = list(ordered_map(lambda d: _optimise(d, best, max_nfev), small, workers))
         k = int(np.argmin([d.cost(th) for d, th in zip(small, done)]))
+        del small                # the window designs' rows and solutions, not needed on the record
         others, done = [others[k]], [_optimise(others[k], done[k], FULL_NFEV, FULL_TOL, FULL_FTOL)]
     else:
         # each variant's own designs: on the fit's workers, the same polishes and counts as one after the other
         done = list(ordered_map(lambda other: _polish(other, other, best, max_nfev), others, workers))
     for other, th in zip(others, done):
         cost = other.cost(th)
+        other.release()          # its result at th is remembered; the reported rows are built next
         if cost < best_cost:
             fit, best_cost, chosen, theta = _result(other, th), cost, other, th
     return fit, chosen, theta
@@ -1459,6 +1485,8 @@ def _reported_variant(design: Design, fit: ExtendedFit, theta: np.ndarray,
         for variant in e.variants:
             if variant != design.variants[e.name]:
                 other = Design(design.data, design.effects, design.harmonics, {**design.variants, e.name: variant})
+                other.project(theta)
+                other.release()  # its solution remembered, its rows let go before the reported ones are built
                 obj = objective(_reported(other, theta))
                 if obj < best_obj:
                     best, best_obj = other, obj
