@@ -113,14 +113,20 @@ def test_extended_fit_forward_consistency():
         assert np.max(np.abs(fit.simulate(ds.t, ds.u) - fit.y_hat)) < 1e-6 * np.ptp(ds.y)
 
 
-def test_two_hidden_effects_need_both():
-    """Delay and drift hidden together: each alone leaves a misfit, both bring the residual to the noise."""
+def _delay_and_drift(noise: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A staircase record (4,000 samples at 1 kHz) with a 3.4 ms delay and a drift hidden together, and white
+    noise of std ``noise``."""
     rng = np.random.default_rng(7)
     t, u = staircase(4000, 1e-3, rng)
     model = CreepModel.from_resonance(0.4, 45.0, 0.12, 1.3)
     y = simulate_with_effects(model, t, u, {"delay": {"delay_s": 3.4e-3}, "drift": {"rate": 0.08}})
+    return t, u, y + noise * rng.standard_normal(t.size)
+
+
+def test_two_hidden_effects_need_both():
+    """Delay and drift hidden together: each alone leaves a misfit, both bring the residual to the noise."""
     noise = 0.004
-    y = y + noise * rng.standard_normal(t.size)
+    t, u, y = _delay_and_drift(noise)
     data = prepare(t, u, y)
     base = fit_base(data)
     both = fit_extended(data, "delay,drift", base)
@@ -134,12 +140,8 @@ def test_the_pair_search_names_two_hidden_effects():
     """Delay and drift hidden together, diagnosed: neither explains the record alone, so the search fits the pairs
     round by round and names both, down to the noise (the search's rounds in the default suite: the real records
     that reach them take a minute)."""
-    rng = np.random.default_rng(7)
-    t, u = staircase(4000, 1e-3, rng)
-    model = CreepModel.from_resonance(0.4, 45.0, 0.12, 1.3)
-    y = simulate_with_effects(model, t, u, {"delay": {"delay_s": 3.4e-3}, "drift": {"rate": 0.08}})
     noise = 0.004
-    y = y + noise * rng.standard_normal(t.size)
+    t, u, y = _delay_and_drift(noise)
     stages: list[str] = []
     d = diagnose((t, u, y), candidates=("delay", "drift"), progress=stages.append, workers=1)
     assert any(s.startswith("pair search:") for s in stages), stages
