@@ -147,8 +147,8 @@ def test_operators_pushed_one_way_that_held_are_free():
     hp = fit.effect_params["hysteresis"]
     assert hp["opened"] == len(hp["w"]) and hp["r_opened"] == pytest.approx(max(hp["r"]))
     assert hp["determined"] <= hp["opened"]
-    assert fit.residual_rms <= 1.05 * noise                # pinned: 1.10x
-    assert fit.model.b == pytest.approx(1.0, rel=0.02)     # pinned: 1.099, the loop's weight taken into the gain
+    assert fit.residual_rms <= 1.05 * noise                # those operators pinned at 0 would leave 1.10x
+    assert fit.model.b == pytest.approx(1.0, rel=0.02)     # and b 1.099: the loop's weight taken into the gain
 
 
 def test_the_record_says_which_operators_are_copies_of_the_input():

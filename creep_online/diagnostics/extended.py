@@ -1008,7 +1008,7 @@ def _stacked(design: Design, sup: fx.Superposer, step: np.ndarray | Callable, mo
              static: np.ndarray, p: dict[str, float]) -> np.ndarray:
     """The reported solution's design (n, columns): the superposition of ``step`` on sup's rows, the ``more``
     rows (parallel paths), filtered by the output-filter effects, then the ``static`` rows. Without a filter the
-    superposition is written straight into the design's rows: stacked, it was a second copy of the 25 rows
+    superposition is written straight into the design's rows: stacked, it would be a second copy of the 25 rows
     beside the design (10 MB for hysteresis at 50,000 samples)."""
     filters = design.stages[Stage.OUTPUT_FILTER]
     if filters:

@@ -126,7 +126,7 @@ def opened_operators(plays: np.ndarray, before: np.ndarray, u: np.ndarray) -> np
     held still while the input moved (a ratchet: a staircase that turns back
     less than 2 r holds it for a while). ``before``: the states before the
     record (``initial_plays``); ``u``: the record's input. A row at a time:
-    every row's steps at once were two more copies of the plays.
+    every row's steps at once would be two more copies of the plays.
     """
     before = np.broadcast_to(np.asarray(before, dtype=float), (plays.shape[0],))
     affine = _affine_test(u)
@@ -410,7 +410,7 @@ class PlayWeights:
     ``solve``: ``solve_pi_weights`` with the operators the record never opens
     pinned at 0. Built per record and initial state. The plays are run again
     when asked for rather than kept: the caller copies them into its own rows
-    once, and kept they were 10 MB beside those at 50,000 samples.
+    once, and kept they would be 10 MB beside those at 50,000 samples.
     """
 
     def __init__(self, data, variant: str | None) -> None:
