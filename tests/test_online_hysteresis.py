@@ -295,6 +295,59 @@ def test_an_operator_the_input_leaves_is_opened_only_within_the_windows_memory(e
     HK.replay_origin(replay, st, o, nh, basis.size)
     assert replay[o + HK.EPOCH] == epoch and replay[o + HK.AGE] == 0.0
 
+
+@pytest.mark.parametrize("epoch", [0, 500])
+def test_the_recent_input_range_forgets_a_range_the_input_left(epoch):
+    """``recent_span``: the input's range over this epoch and the one before (since the start without an epoch).
+    A sweep over 0 .. 1, then 0.25 .. 0.75 for more than two epochs: the range is 0.5 with an epoch and stays 1
+    without. A replay starts with the live range and its swap keeps the live one (the stream's, not the ring's)."""
+    basis = SoeBasis.build(H, horizon_s=10.0, dx=1.2)
+    r = np.array([0.05, 0.15, 0.3, 0.45])
+    st = _state(basis, r, 1e-4, 1e-8)
+    nh = HK.columns_for(r.size)
+    lay = W.layout(basis.size, 0, 0, nh)
+    o = lay["hyst"]
+    HK.set_memory(st, o, float(epoch))
+    ring, S = np.zeros((2, 4096)), np.zeros((lay["p"], lay["p"]))
+    n = np.arange(1600)
+    for x in 0.5 * (1.0 - np.cos(2 * math.pi * n[:400] / 200)):
+        W.sample(float(x), math.nan, st, S, ring)
+    assert HK.recent_span(st, o) == pytest.approx(1.0)
+    for x in 0.5 + 0.25 * np.sin(2 * math.pi * n / 200):
+        W.sample(float(x), math.nan, st, S, ring)
+    assert HK.recent_span(st, o) == pytest.approx(1.0 if epoch == 0 else 0.5, abs=1e-3)
+    replay = np.zeros_like(st)
+    HK.replay_origin(replay, st, o, nh, basis.size)
+    assert HK.recent_span(replay, o) == HK.recent_span(st, o)
+    replay[o + HK.RECENT:o + HK.RECENT + 4] = [-5.0, 5.0, -5.0, 5.0]     # (what a replay of older samples saw)
+    HK.swap_block(st, replay, o, nh, basis.size)
+    assert HK.recent_span(replay, o) == HK.recent_span(st, o)
+
+def test_the_thresholds_follow_a_controller_that_leaves_a_range():
+    """A controller's commands over four times the stroke for 3 s (the reference passed through before its first
+    model, say), then a 1 Hz triangle over the stroke: the thresholds follow the range the input now moves in (two
+    epochs of the 2-s window later) and the window fits the loop at the noise floor with the plant's weights. Held
+    at the first range, 8 thresholds over 0 .. 2 left two operators inside the plant's loop: 1.49x the floor, b 3.6 %
+    off (on 20 random plants, seeds 100-119: 1 of 20 within 1.1x the floor, 20 of 20 with the thresholds following)."""
+    rng = np.random.default_rng(11)
+    h = 1.0 / 5000.0
+    t = np.arange(int(20.0 / h)) * h
+    model = online_creep_plant(rng)
+    triangle = 2.0 * np.abs(t % 1.0 - 0.5)
+    u = np.where(t < 3.0, 4.0 * triangle, triangle)
+    r, w = threshold_fractions(8), online_loop_weights(rng)
+    y = simulate(model, t, hysteresis_input(u, r, w))
+    y = y + 1e-4 * np.ptp(y[t > 3.0]) * rng.standard_normal(t.size)
+    est = OnlineEstimator(h, window_s=2.0, effects=("hysteresis",))
+    est.update_block(u, y)
+    e = est.estimate
+    assert np.allclose(e.hysteresis["r"], r, rtol=1e-3)
+    assert e.residual_rms <= 1.1 * e.noise_rms and e.quality != "degraded"
+    err = np.abs(np.asarray(e.hysteresis["w"]) - w) / np.max(w)
+    assert np.all(err[:-1] <= 0.05) and err[-1] <= 0.1      # (the largest play turns only in the top 6 % of a sweep)
+    assert abs(e.b / model.b - 1.0) < 0.01
+
+
 def test_a_start_in_equilibrium_outlives_the_rests_drop_and_is_freed_by_a_window_that_fits():
     """A start in equilibrium's columns: pinned at 0 while the window misfits; kept (still pinned) when the rest's
     samples are dropped at the sweep (the window from the sweep on holds the creep they set off);

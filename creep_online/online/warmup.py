@@ -76,9 +76,9 @@ def warm_kernels() -> None:
 
 
 def _warm_hysteresis(u: np.ndarray) -> None:
-    """The hysteresis columns' kernels that the tracker's Python calls (a widening, a replay's start and swap, a
+    """The hysteresis columns' kernels that the tracker's Python calls (new thresholds, a replay's start and swap, a
     re-search's corrected input), and a tracker with the columns through its per-sample, replay and re-fit kernels:
-    loaded at a stream's first widening otherwise (6 ms in one update())."""
+    loaded at a stream's first new thresholds otherwise (6 ms in one update())."""
     from .estimator import OnlineEstimator
     est = OnlineEstimator(1e-3, horizon_s=10.0, t_c=0.05, effects=("hysteresis",))
     t = np.arange(3000) * 1e-3
@@ -100,4 +100,4 @@ def _warm_hysteresis(u: np.ndarray) -> None:
     S, shift = tr.S.copy(), tr._shift.copy()
     RF.begin(st, S, shift, wk, 1, False, True, 0, True)
     RF.run(st, S, shift, tr.theta.copy(), wk, tr.basis.lam, tr.basis.dx)
-    tr.widen_loop()
+    tr.follow_input_range()

@@ -28,7 +28,7 @@ The block at the end of the state array (``block_at``; ``size`` entries; K plays
 
 ==================  ====================================================================================
 ``[0]``             1 once the operators have been started (at the first input, centred on it)
-``[1]``, ``[2]``    the lowest and the highest input fed (the tracker widens the thresholds with them)
+``[1]``, ``[2]``    the lowest and the highest input fed (``sweep``, the rest at the start)
 ``[GAIN]``          b of the coefficients m (``set_gain``): the columns are unit-gain responses
 ``[RISE]``          the input's largest rise above its lowest value before it (``sweep``) ...
 ``[FALL]``          ... and its largest fall below its highest value before it
@@ -39,6 +39,8 @@ The block at the end of the state array (``block_at``; ``size`` entries; K plays
 ``[FREED]``         1: the re-fits fit the coefficients of a start in equilibrium's columns (``free_start``)
 ``[AGE]``           samples since the ``opened`` flags last aged (``set_memory``) ...
 ``[EPOCH]``         ... and the samples between two agings (0: never)
+``[RANGE_AGE]``     samples since the recent input range last aged (every ``EPOCH`` samples, as the flags)
+``[RECENT]``...     the input's lowest and highest value in this epoch, then in the epoch before (``recent_span``)
 ``r`` (K)           the thresholds
 ``plays`` (K)       the operators' states after the last sample
 ``ptail`` (K)       their states before the oldest remembered sample
@@ -69,9 +71,9 @@ START_SCALE = 1.0
 #: The prior's noise level is at least this times the window's output RMS (a noise-free record still pins them).
 PRIOR_FLOOR = 1e-6
 #: Entries before the thresholds: the started flag, the input's lowest and highest value, b of the coefficients,
-#: the input's largest rise and fall (``sweep``), the samples before its first move, the start's form and the
-#: ``opened`` flags' epoch.
-HEAD = 13
+#: the input's largest rise and fall (``sweep``), the samples before its first move, the start's form, the
+#: ``opened`` flags' epoch and the recent input range's.
+HEAD = 18
 GAIN = 3
 RISE = 4
 FALL = 5
@@ -87,6 +89,11 @@ FREED = 10
 #: Samples since the ``opened`` flags last aged, and the samples between two agings (``set_memory``; 0: never).
 AGE = 11
 EPOCH = 12
+#: Samples since the recent input range last aged (``recent_span``; every ``EPOCH`` samples, on a clock of its own: a
+#: replay rebuilds the ``opened`` flags over the remembered samples, the range stays the live stream's).
+RANGE_AGE = 13
+#: The input's lowest and highest value in this epoch (RECENT, RECENT + 1) and in the one before (RECENT + 2, + 3).
+RECENT = 14
 #: Start columns after the K play columns: the ascending start's, then the descending start's.
 START = 2
 
@@ -155,6 +162,7 @@ def set_memory(st: np.ndarray, o: int, epoch: float) -> None:
     constant, then off by b w_i times that difference)."""
     st[o + AGE] = 0.0
     st[o + EPOCH] = epoch
+    st[o + RANGE_AGE] = 0.0
 
 
 @njit(cache=CACHE, inline="always")
@@ -169,6 +177,26 @@ def _age(st: np.ndarray, o: int, k: int) -> None:
     st[o + AGE] = 0.0
     for i in range(k):
         st[o + HEAD + 3 * k + i] = float((int(st[o + HEAD + 3 * k + i]) & 3) << 2)
+
+
+@njit(cache=CACHE, inline="always")
+def _track_range(st: np.ndarray, o: int, u: float) -> None:
+    """The input u into this epoch's range; every ``EPOCH`` samples this epoch's range becomes the one before and a
+    new one starts at u (``recent_span``)."""
+    if u < st[o + RECENT]:
+        st[o + RECENT] = u
+    if u > st[o + RECENT + 1]:
+        st[o + RECENT + 1] = u
+    if st[o + EPOCH] <= 0.0:
+        return
+    st[o + RANGE_AGE] += 1.0
+    if st[o + RANGE_AGE] < st[o + EPOCH]:
+        return
+    st[o + RANGE_AGE] = 0.0
+    st[o + RECENT + 2] = st[o + RECENT]
+    st[o + RECENT + 3] = st[o + RECENT + 1]
+    st[o + RECENT] = u
+    st[o + RECENT + 1] = u
 
 
 @njit(cache=CACHE, inline="always")
@@ -238,6 +266,9 @@ def _start(st: np.ndarray, o: int, k: int, u: float) -> None:
     st[o + RISE] = 0.0
     st[o + FALL] = 0.0
     st[o + REST] = 0.0
+    st[o + RANGE_AGE] = 0.0
+    for j in range(4):
+        st[o + RECENT + j] = u
 
 
 @njit(cache=CACHE, inline="always")
@@ -289,6 +320,7 @@ def step(st: np.ndarray, o: int, nh: int, q: int, co: np.ndarray, u: float) -> N
         st[o + RISE] = u - st[o + 1]
     if st[o + 2] - u > st[o + FALL]:
         st[o + FALL] = st[o + 2] - u
+    _track_range(st, o, u)
     _age(st, o, k)
     r = resonance_in_co(q)
     ch = channels_at(o, nh)
@@ -387,6 +419,15 @@ def drop_start(st: np.ndarray, o: int) -> None:
         st[o + DROPPED] = 1.0
 
 
+def recent_span(st: np.ndarray, o: int) -> float:
+    """The input's range over this epoch and the one before (``set_memory``; since the start without forgetting):
+    what the window's data can set play thresholds on. A command's brief excursion or a range the controller has
+    left (the reference passed through before its first model) ages out of it."""
+    lo = min(st[o + RECENT], st[o + RECENT + 2])
+    hi = max(st[o + RECENT + 1], st[o + RECENT + 3])
+    return float(hi - lo)
+
+
 def in_equilibrium(st: np.ndarray, o: int) -> bool:
     """Do the start columns describe a start in equilibrium (``set_start_form``)?"""
     return bool(st[o + EQUILIBRIUM] != 0.0)
@@ -418,6 +459,8 @@ def replay_origin(st: np.ndarray, live: np.ndarray, o: int, nh: int, q: int) -> 
     st[o + FREED] = live[o + FREED]
     st[o + AGE] = 0.0
     st[o + EPOCH] = live[o + EPOCH]
+    for j in range(RANGE_AGE, HEAD):
+        st[o + j] = live[o + j]
     for i in range(k):
         st[o + HEAD + i] = live[o + HEAD + i]
         st[o + HEAD + k + i] = live[o + HEAD + 2 * k + i]
@@ -495,6 +538,8 @@ def swap_block(live: np.ndarray, replayed: np.ndarray, o: int, nh: int, q: int) 
     replayed[o + REST] = live[o + REST]
     replayed[o + DROPPED] = live[o + DROPPED]
     replayed[o + FREED] = live[o + FREED]
+    for j in range(RANGE_AGE, HEAD):
+        replayed[o + j] = live[o + j]
     for i in range(k):
         replayed[o + HEAD + 2 * k + i] = live[o + HEAD + 2 * k + i]
     for i in range(2 * k):

@@ -192,8 +192,8 @@ class Scheduler:
         update()): a replay when the resonance left the linearization point or the loop's plays need new thresholds,
         else the settling of a change event."""
         move, noise = raw[7], raw[-2]      # (the fit's largest relative move, the noise level: ``after_accept``)
-        if not self.queued(tr, "relinearize_job") and (tr.widen_loop() | tr.settle_loop(_fit_rms(raw), noise)):
-            replay_due = True              # (the plays' thresholds follow a wider input range: a replay rebuilds them)
+        if not self.queued(tr, "relinearize_job") and (tr.follow_input_range() | tr.settle_loop(_fit_rms(raw), noise)):
+            replay_due = True              # (the plays' thresholds follow the input's range: a replay rebuilds them)
         if replay_due:
             if not self.queued(tr, "relinearize_job"):
                 # a settled window whose resonance runs off is what a change looks like: the test due next

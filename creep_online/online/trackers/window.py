@@ -64,9 +64,13 @@ from .settings import DEFAULT, TrackerSettings
 #: The defaults' free-response rates and "determined" limits (the estimator's start-up search and quality).
 FREE_RATES = DEFAULT.free_rates
 DETERMINED = DEFAULT.determined
-#: The play operators' thresholds follow the input's range once it is this much wider than the one they were set for
-#: (``widen_loop``; each widening is a replay of the remembered samples).
+#: The play operators' thresholds follow the input's recent range (``follow_input_range``) once it is this much
+#: wider than the one they were set for ...
 HYSTERESIS_WIDEN = 1.05
+#: ... or this many times narrower: a controller's commands can leave a range for good (the reference passed through
+#: before the first model, a brief excursion at a model's handover), and thresholds set on it leave the range the
+#: input now moves in to one or two operators. Each move of the thresholds is a replay of the remembered samples.
+HYSTERESIS_NARROW = 2.0
 #: A stream that held its first input this long (s) before moving started at rest (``settle_loop``).
 HYSTERESIS_REST_S = 0.1
 
@@ -212,15 +216,17 @@ class WindowTracker(ParameterView, LiveMonitors, Checkpointable):
         coefficient over b (``_kernels/hysteresis.py``)."""
         return self.theta[5 + self.n_free:self.r0] / self.theta[3]
 
-    def widen_loop(self) -> bool:
-        """The thresholds for the input's range, if it has grown HYSTERESIS_WIDEN beyond the one they were set for
-        (the batch fit's rule on the range seen so far): the new thresholds and tails in the live block
-        (``hysteresis.rethreshold``); the caller then replays the remembered samples. True if they moved."""
+    def follow_input_range(self) -> bool:
+        """The thresholds for the input's recent range (``hysteresis.recent_span``: this epoch of the ``opened`` flags
+        and the one before), if it is HYSTERESIS_WIDEN wider or HYSTERESIS_NARROW times narrower than the one they were
+        set for (the batch fit's rule on that range): the new thresholds and tails in the live block
+        (``hysteresis.rethreshold``); the caller then replays the remembered samples. An input at rest (no range)
+        keeps them. True if they moved."""
         if not self.n_hyst:
             return False
         o = self.lay["hyst"]
-        span = float(self.st[o + 2] - self.st[o + 1])
-        if not span > HYSTERESIS_WIDEN * self._hyst_span:
+        span = HK.recent_span(self.st, o)
+        if not span > 0.0 or self._hyst_span / HYSTERESIS_NARROW <= span <= HYSTERESIS_WIDEN * self._hyst_span:
             return False
         self._hyst_span = span
         self.hyst_r[:] = threshold_fractions(self.n_plays) * span
