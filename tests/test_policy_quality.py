@@ -53,7 +53,20 @@ CASES = [
                                                             "settled": True, "estimate_settled": False})),
      "provisional", "estimate corrected", []),
     ("an old unsettled change, window at the floor", _view(_tracker(last_event={
+        "t": NOW - 9.0, "detected_t": NOW - 8.0, "moved": ["b"], "settled": False})),
+     "changing", "change detected", []),
+    ("... of the resonance alone (never pinned by a scan)", _view(_tracker(last_event={
         "t": NOW - 9.0, "detected_t": NOW - 8.0, "moved": ["a1"], "settled": False})),
+     "changing", "change detected", ["alpha", "b"]),
+    ("... an estimate's correction", _view(_tracker(last_event={
+        "t": NOW - 9.0, "detected_t": NOW - 8.0, "moved": ["a1", "a2"], "settled": False, "estimate_settled": False})),
+     "provisional", "estimate corrected", ["alpha", "b"]),
+    ("... just found", _view(_tracker(last_event={
+        "t": NOW - 1.0, "detected_t": NOW - 0.5, "moved": ["a1"], "settled": False})),
+     "changing", "change detected", []),
+    ("... the last second disagreeing on b", _view(_tracker(
+        last_event={"t": NOW - 9.0, "detected_t": NOW - 8.0, "moved": ["a1"], "settled": False},
+        disagreement={"t": NOW - 1.0, "moves": {"b": 0.1}, "lr": 30.0})),
      "changing", "change detected", []),
     ("an old unsettled change, window missing the data", _view(_tracker(ratio=50.0, last_event={
         "t": NOW - 9.0, "detected_t": NOW - 8.0, "moved": ["a1"], "settled": False})),

@@ -15,8 +15,9 @@ One pure function, ``assess``, on a read-only view of the estimator (``QualityVi
 ``determined`` lists the parameters within their limits once steps 1-5 pass (empty before): a ``provisional``
 estimate with alpha and b in it has a trustworthy creep part. One check contests only the resonance: a last second
 that disagrees with the window on a1 or a2 alone (``resonance_only``; on a scan far below the resonance its fit of
-the last second does not determine them). The estimate then reads ``changing`` and ``determined`` keeps alpha and b
-where they are within their limits (the model gate takes them with the last determined resonance). The thresholds are ``OnlineSettings.quality``
+the last second does not determine them), or a change event that moved a1 or a2 alone and has not settled past its
+first seconds. The estimate then reads ``changing`` (or ``provisional``, an estimate's correction) and ``determined``
+keeps alpha and b where they are within their limits (the model gate takes them with the last determined resonance). The thresholds are ``OnlineSettings.quality``
 (``online/settings.py``).
 
 What a compensator may take from an estimate follows from the same verdict (``model_source``; the model gate,
@@ -226,19 +227,28 @@ def checks(view: QualityView) -> tuple[str, str, float]:
 
 
 def resonance_only(view: QualityView, ratio: float) -> bool:
-    """Is the only failing check a disagreement of the last second on the resonance (a1, a2) alone, the window at
-    most ``floor_ratio`` x the noise floor, no change event held?"""
+    """Does every failing check contest the resonance (a1, a2) alone, the window at most ``floor_ratio`` x the noise
+    floor? The last second disagreeing on a1 or a2 only, or a change event past its first ``change_hold_s`` that
+    moved a1 or a2 only and has not settled (on a scan far below the resonance the fit never pins them, so such an
+    event never settles, and alpha and b stay what the data determine)."""
     tr = view.tracker
-    dis = tr.disagreement if tr is not None else None
-    if dis is None or not dis["moves"] or not set(dis["moves"]) <= set(RESONANCE) or tr.replaying:
+    if tr is None or tr.replaying:
         return False
     held = tr.input_held_samples * view.dt
     if not ratio <= view.settings.floor_ratio or tr.output_stuck or tr.fit_sample == 0 or (
             view.window_s is not None and held > view.settings.held_windows * view.window_s):
         return False
-    ev = tr.last_event
+    hold = view.settings.change_hold_s
     now = view.samples * view.dt - view.n_shift * view.dt
-    return ev is None or (now - ev["detected_t"] >= view.settings.change_hold_s and ev["settled"])
+    ev, dis = tr.last_event, tr.disagreement
+    event_open = ev is not None and (now - ev["detected_t"] < hold or not ev["settled"])
+    event_resonance = ev is not None and now - ev["detected_t"] >= hold and bool(ev["moved"]) and \
+        set(ev["moved"]) <= set(RESONANCE)
+    disagrees = dis is not None and now - dis["t"] < hold
+    disagrees_resonance = dis is not None and bool(dis["moves"]) and set(dis["moves"]) <= set(RESONANCE)
+    if not (event_open or disagrees):
+        return False
+    return (not event_open or event_resonance) and (not disagrees or disagrees_resonance)
 
 
 def determination(view: QualityView) -> tuple[list, str]:
