@@ -166,15 +166,24 @@ def set_memory(st: np.ndarray, o: int, epoch: float) -> None:
 
 
 @njit(cache=CACHE, inline="always")
+def _epoch_turns(st: np.ndarray, o: int, clock: int) -> bool:
+    """One sample on the clock at ``clock`` (``AGE``, ``RANGE_AGE``): True, and the clock back at 0, when it reaches
+    ``EPOCH`` (never without an epoch)."""
+    if st[o + EPOCH] <= 0.0:
+        return False
+    st[o + clock] += 1.0
+    if st[o + clock] < st[o + EPOCH]:
+        return False
+    st[o + clock] = 0.0
+    return True
+
+
+@njit(cache=CACHE, inline="always")
 def _age(st: np.ndarray, o: int, k: int) -> None:
     """One sample towards the ``opened`` flags' next aging (``set_memory``): at it, this epoch's flags become the
     epoch before's."""
-    if st[o + EPOCH] <= 0.0:
+    if not _epoch_turns(st, o, AGE):
         return
-    st[o + AGE] += 1.0
-    if st[o + AGE] < st[o + EPOCH]:
-        return
-    st[o + AGE] = 0.0
     for i in range(k):
         st[o + HEAD + 3 * k + i] = float((int(st[o + HEAD + 3 * k + i]) & 3) << 2)
 
@@ -187,12 +196,8 @@ def _track_range(st: np.ndarray, o: int, u: float) -> None:
         st[o + RECENT] = u
     if u > st[o + RECENT + 1]:
         st[o + RECENT + 1] = u
-    if st[o + EPOCH] <= 0.0:
+    if not _epoch_turns(st, o, RANGE_AGE):
         return
-    st[o + RANGE_AGE] += 1.0
-    if st[o + RANGE_AGE] < st[o + EPOCH]:
-        return
-    st[o + RANGE_AGE] = 0.0
     st[o + RECENT + 2] = st[o + RECENT]
     st[o + RECENT + 3] = st[o + RECENT + 1]
     st[o + RECENT] = u
