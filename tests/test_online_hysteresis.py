@@ -321,6 +321,7 @@ def test_the_recent_input_range_forgets_a_range_the_input_left(epoch):
     HK.swap_block(st, replay, o, nh, basis.size)
     assert HK.recent_span(replay, o) == HK.recent_span(st, o)
 
+
 def test_the_thresholds_follow_a_controller_that_leaves_a_range():
     """A controller's commands over four times the stroke for 3 s (the reference passed through before its first
     model, say), then a 1 Hz triangle over the stroke: the thresholds follow the range the input now moves in (two

@@ -17,8 +17,8 @@ estimate with alpha and b in it has a trustworthy creep part. One check contests
 that disagrees with the window on a1 or a2 alone (``resonance_only``; on a scan far below the resonance its fit of
 the last second does not determine them), or a change event that moved a1 or a2 alone and has not settled past its
 first seconds. The estimate then reads ``changing`` (or ``provisional``, an estimate's correction) and ``determined``
-keeps alpha and b where they are within their limits (the model gate takes them with the last determined resonance). The thresholds are ``OnlineSettings.quality``
-(``online/settings.py``).
+keeps alpha and b where they are within their limits (the model gate takes them with the last determined
+resonance). The thresholds are ``OnlineSettings.quality`` (``online/settings.py``).
 
 What a compensator may take from an estimate follows from the same verdict (``model_source``; the model gate,
 ``online/gate.py``, keeps the dwell and the remembered resonance): creep compensation needs alpha and b, which
