@@ -121,6 +121,32 @@ def test_same_file_names_in_two_folders_get_distinct_ids(tmp_path):
     assert ids == [str(tmp_path / "a" / "x"), str(tmp_path / "b" / "x")]
 
 
+def test_a_job_that_carries_its_samples_loads_as_its_file_did(tmp_path):
+    """``batch --send-records``: the file is read where the batch runs, and the job carries its samples, its
+    file's warnings and, for an unreadable file, the one-line error a worker would have given."""
+    t = np.arange(200) * 1e-3
+    lines = "\n".join(f"{a:.3f},{1.0 if a > 0 else 0.0},{0.5 * a:.6f}" for a in t)
+    (tmp_path / "good.csv").write_text("t,u,y\n" + lines)                # no end-of-line: a warning
+    (tmp_path / "bad.csv").write_text("t,u,y\n0,0,0\n0.001,1,nan\n")
+    jobs = {job.id: job for job in find_records(str(tmp_path))}
+    with pytest.warns(UserWarning, match="has no end-of-line"):
+        direct = load_csv(str(tmp_path / "good.csv"))
+    carried = {name: job.carrying_samples() for name, job in jobs.items()}
+    for path in tmp_path.iterdir():                                           # the workers cannot see the files
+        path.unlink()
+    good, bad = carried["good"], carried["bad"]
+    assert good.path is None and bad.path is None and bad.samples is None
+    assert any("has no end-of-line" in note for note in good.notes)
+    record = good.load()
+    for name in ("t", "u", "y"):
+        assert np.array_equal(getattr(record, name), getattr(direct, name))
+    assert record.t.size == t.size and record.u[0] == 0.0 and record.u[1] == 1.0
+    assert "line 3, column y" in bad.error
+    with pytest.raises(DataError, match="line 3, column y"):
+        bad.load()
+    assert good.carrying_samples() is good                                    # carried once: nothing to read
+
+
 def test_a_bad_record_is_a_row_with_the_identify_error(fleet):
     root, _ = fleet
     job = next(j for j in find_records(str(root / "records")) if j.id == "broken")

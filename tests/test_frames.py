@@ -156,6 +156,17 @@ def test_sequence_late_after_give_up():
     assert st.missing == 1 and st.late == 1
 
 
+def test_sequence_remembers_only_the_last_history_of_lost_numbers():
+    """The lost numbers kept to tell a late sample from a duplicate are bounded by ``history``: a number lost
+    longer ago than that arrives as a duplicate, a recent one as late; neither is delivered."""
+    tr = SequenceTracker(window=2, history=4)
+    out = [k for s in (0, 4, 5, 6, 10, 11, 12) for k, _ in tr.push(s, s)]
+    assert out == [0, 4, 5, 6, 10, 11, 12]
+    assert (tr.stats.gaps, tr.stats.missing) == (2, 6)
+    assert tr.push(1, 1) == [] and tr.push(8, 8) == []
+    assert (tr.stats.duplicates, tr.stats.late, tr.stats.delivered) == (1, 1, 7)
+
+
 def test_sequence_wraps_and_resets():
     seqs = [65533, 65534, 65535, 0, 1, 2]
     out, st = _run(seqs, modulus=65536)
