@@ -26,7 +26,8 @@ closed loop (``hil_sim.closed_loop.run_closed_loop``, the estimator fed the comm
 output's stroke): a staircase over the stroke for 6 s (0.3 s holds), then a 2 Hz triangle scan. ``adaptive`` takes
 the gate's model at every block of 100 samples; ``frozen`` keeps the model it holds at 10 s. The error is the rms of
 the output minus the shaped reference over the last 20 s; goal: adaptive at least 3x smaller than frozen. Both use
-the estimator's default window unless ``--drift-window-s`` sets another. Per mode fed the estimator,
+the estimator's default window unless ``--drift-window-s`` sets another (``rule``: per plant, the window
+docs/online.md's rule gives for its loop width and drift, ``rule_window_s``). Per mode fed the estimator,
 ``update_block_ms``: p50/p99/max of each ``update_block`` call's own CPU time (ms), what the loop waits for each block.
 
 ``--attribute`` (with both sources): two mixed models on the same scans, ``live_creep+batch_loop`` (the live
@@ -34,7 +35,7 @@ estimate's creep and resonance with the batch fit's loop) and ``batch_creep+live
 model the compensation error comes from.
 
 Usage: ``python -m bench.bench_hysteresis_compensation [--plants 20] [--first-seed 0] [--drift-plants 4]
-[--drift-modes adaptive,frozen] [--drift-references stairs] [--drift-window-s 4] [--attribute]``; JSON in ``bench/results/hysteresis_compensation.json``.
+[--drift-modes adaptive,frozen] [--drift-references stairs] [--drift-window-s 4|rule] [--attribute]``; JSON in ``bench/results/hysteresis_compensation.json``.
 """
 from __future__ import annotations
 
@@ -196,10 +197,25 @@ class TimedBlocks:
         return getattr(self._estimator, name)
 
 
+#: The drift comparison's sensor noise, over the output's stroke.
+DRIFT_NOISE_REL = 2.5e-3
+
+
+def rule_window_s(loop_width_rel: float, growth: float, duration: float) -> float:
+    """The window docs/online.md tells a user to choose for a loop that drifts ("A plant that drifts faster than
+    the window"): window_s < noise / (A r), A the loop's width and r its relative drift rate per second; at most
+    the estimator's default window (a slow drift needs no shorter one)."""
+    rate = abs(growth) / duration
+    if loop_width_rel <= 0.0 or rate == 0.0:
+        return ESTIMATOR_WINDOW_S
+    return min(ESTIMATOR_WINDOW_S, DRIFT_NOISE_REL / (loop_width_rel * rate))
+
+
 def drift_plant(seed: int, reference: str, duration: float = 60.0, growth: float = 0.3, h: float = 1e-4,
-                modes: tuple = DRIFT_MODES, window_s: float | None = ESTIMATOR_WINDOW_S) -> dict:
+                modes: tuple = DRIFT_MODES, window_s: float | str | None = ESTIMATOR_WINDOW_S) -> dict:
     """Adaptive vs frozen on a plant whose loop width grows by ``growth`` over ``duration`` (module docstring);
-    ``modes``: the closed loops run (the ratios of those present); ``window_s``: the estimator's."""
+    ``modes``: the closed loops run (the ratios of those present); ``window_s``: the estimator's, or ``"rule"``:
+    the window the docs' rule gives for this plant's loop and drift (``rule_window_s``)."""
     from creep_online.effects import loop_width
     from creep_online.online import warm_kernels
     warm_kernels()          # (as a control loop does before it starts: no block pays for loading a kernel)
@@ -215,6 +231,8 @@ def drift_plant(seed: int, reference: str, duration: float = 60.0, growth: float
     shape = stairs if reference == "stairs" else np.where(t < 6.0, stairs, 1.0 - np.abs(2.0 * ((2.0 * t) % 1.0) - 1.0))
     r = shape * amp * np.sign(plant.b)
     scale = width_scale(loop, stroke, growth, n)
+    if window_s == "rule":
+        window_s = rule_window_s(loop_width(loop["r"], loop["w"], stroke) / stroke, growth, duration)
     bandwidth = plant.fn / 2
     f = CreepCompensator(h, plant, bandwidth_hz=bandwidth)
     shaped = np.array([(f.command(x), f.shaped_reference)[1] for x in r])
@@ -226,7 +244,7 @@ def drift_plant(seed: int, reference: str, duration: float = 60.0, growth: float
         est = (TimedBlocks(OnlineEstimator(h, window_s=window_s, input_gate=0.0, effects=("hysteresis",)))
                if mode in ("adaptive", "frozen") else None)
         rec = run_closed_loop(t, r, plant, mode, estimator=est, compensator=CreepCompensator(h, bandwidth_hz=bandwidth),
-                              hysteresis=loop, loop_scale=scale, noise=2.5e-3 * amp, block=100, seed=seed)
+                              hysteresis=loop, loop_scale=scale, noise=DRIFT_NOISE_REL * amp, block=100, seed=seed)
         err = rec.y_clean - shaped
         out["modes"][mode] = {"rms_late_rel": float(np.sqrt(np.mean(err[late] ** 2))) / amp,
                               "model_updates": len(rec.models), "cpu_s": time.thread_time() - t0,
@@ -284,6 +302,10 @@ def drift_summary(rows: list[dict]) -> dict:
 DRIFT_GOAL = 3.0
 
 
+def _window_arg(text: str) -> float | str:
+    return text if text == "rule" else float(text)
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--plants", type=int, default=20)
@@ -295,9 +317,10 @@ def main(argv: list[str] | None = None) -> dict:
                     help="closed loops of the drift comparison (comma-separated; adaptive,frozen for the ratio)")
     ap.add_argument("--drift-references", default=",".join(DRIFT_REFERENCES),
                     help="references of the drift comparison: stairs, scan or both (comma-separated)")
-    ap.add_argument("--drift-window-s", type=float, default=ESTIMATOR_WINDOW_S,
+    ap.add_argument("--drift-window-s", type=_window_arg, default=ESTIMATOR_WINDOW_S,
                     help=f"the estimator's window_s in the drift comparison (default {ESTIMATOR_WINDOW_S:g}: "
-                         "OnlineEstimator's)")
+                         "OnlineEstimator's), or 'rule': per plant, the window the docs' rule gives for its loop "
+                         "and drift")
     ap.add_argument("--attribute", action="store_true", help="also the mixed models (live creep with the batch loop "
                     "and the reverse; needs both sources)")
     ap.add_argument("--out", default=None)
