@@ -231,14 +231,15 @@ def drift_plant(seed: int, reference: str, duration: float = 60.0, growth: float
     shape = stairs if reference == "stairs" else np.where(t < 6.0, stairs, 1.0 - np.abs(2.0 * ((2.0 * t) % 1.0) - 1.0))
     r = shape * amp * np.sign(plant.b)
     scale = width_scale(loop, stroke, growth, n)
+    width_rel = loop_width(loop["r"], loop["w"], stroke) / stroke
     if window_s == "rule":
-        window_s = rule_window_s(loop_width(loop["r"], loop["w"], stroke) / stroke, growth, duration)
+        window_s = rule_window_s(width_rel, growth, duration)
     bandwidth = plant.fn / 2
     f = CreepCompensator(h, plant, bandwidth_hz=bandwidth)
     shaped = np.array([(f.command(x), f.shaped_reference)[1] for x in r])
     late = t >= duration - 20.0
     out = {"seed": seed, "reference": reference, "window_s": window_s, "plant": plant.params(),
-           "loop_width_rel": loop_width(loop["r"], loop["w"], stroke) / stroke, "growth": growth, "modes": {}}
+           "loop_width_rel": width_rel, "growth": growth, "modes": {}}
     for mode in modes:
         t0 = time.thread_time()
         est = (TimedBlocks(OnlineEstimator(h, window_s=window_s, input_gate=0.0, effects=("hysteresis",)))
