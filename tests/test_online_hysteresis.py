@@ -264,6 +264,20 @@ def test_a_plant_resting_on_a_branch_is_fitted_at_the_floor(seed, initial, feed)
         assert np.max(np.abs(np.asarray(e.hysteresis["w"]) - w)) <= 0.05 * np.max(w)
 
 
+@pytest.mark.parametrize("seed, initial", [(107, "ascending"), (139, "descending")])
+def test_a_change_that_corrects_the_start_up_estimate_searches_alpha_again(seed, initial):
+    """A change declared before the start-up estimate settled (``estimate_settled`` False) corrects that estimate: its
+    alpha is no plant's, and the post-change search frees it (alpha held there, these plants resting on a branch
+    ended at 6.8x and 2.7x the floor, degraded)."""
+    h, u, y, model, w = _resting_on_a_branch(seed, initial)
+    est = OnlineEstimator(h, effects=("hysteresis",))
+    est.update_block(u, y)
+    e = est.estimate
+    assert any(not event["estimate_settled"] for event in e.events)     # (the path this test is about)
+    assert e.quality != "degraded" and e.residual_rms <= 1.5 * e.noise_rms
+    assert abs(e.alpha / model.alpha - 1) < 0.05
+
+
 def _epoch_stream(epoch: int) -> tuple:
     """Four plays (0.05 .. 0.45) in a state with statistics off, their ``opened`` flags and recent range aging every
     ``epoch`` samples (0: never), and a ring and statistics to feed it with ``W.sample``: (basis, st, o, nh, ring,

@@ -62,8 +62,9 @@ def warm_kernels() -> None:
     search = ResonanceSearch(tr.basis, u[:300] - u[0], u[:300] * 0.5, fixed_alpha=0.1, free=T.FREE_RATES,
                              starts=[(0.1, 20.0, 0.5)], work=None)
     search.run()
-    for _ in search._free_gram(0.1, 2e-3, 1e-6, search.free, 2):     # (the strided rows: ``_rows_free_sparse``)
-        pass
+    for a1 in (2e-3, 3e-3):            # (the strided rows, ``_rows_free_sparse``: the first candidate at a stride fills
+        for _ in search._free_gram(0.1, a1, 1e-6, search.free, 2):   # the shared rows' cache, the next reads it)
+            pass
     T.WindowTracker  # noqa: B018 - imported for its kernels
     R.warm()
     _warm_hysteresis(u)

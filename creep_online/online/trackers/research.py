@@ -21,7 +21,10 @@ class Researcher:
     """The window tracker's re-search watch and jobs (no state of its own: it works on the tracker it is given)."""
 
     def research_job(self, tr: WindowTracker, n_from: int) -> Generator:
-        """Wait for post-change samples, search the resonance on them (alpha held), rebuild the window there.
+        """Wait for post-change samples, search the resonance on them, rebuild the window there. Alpha is held (creep
+        does not jump) unless the change corrected a start-up estimate that had not settled (``_alpha_known``
+        False): that alpha is no plant's, and held it kept two plants resting on a branch at 2.7x and 6.8x the
+        noise floor; freed, the live alpha joins the grid's exponents.
 
         Samples from ``n_from`` on are all post-change (``ChangeDetection.post_change_start``): the search gets
         ``settings.research_s`` seconds of them (longer if the input has not moved), starting from the exact node
@@ -56,7 +59,8 @@ class Researcher:
             lead = n_from - n0 if n_from < n_detect else min(settle, u.size // 4)
             # the live estimate competes with the grid: the window re-fits often follow a change
             # before the test confirms it, and the grid's best basin can be a wrong one
-            search = ResonanceSearch(tr.basis, u, y, zeta0=zeta0, lead=lead, fixed_alpha=tr.alpha,
+            search = ResonanceSearch(tr.basis, u, y, zeta0=zeta0, lead=lead,
+                                     fixed_alpha=tr.alpha if tr._alpha_known else None, alphas=(tr.alpha,),
                                      work=tr.work_memory, extra=((tr.alpha, tr.a1, tr.a2),),
                                      starts=starts, scratch=tr._search_scratch)
             yield
