@@ -41,9 +41,10 @@ weight's spread over the draws against the mean reported ``w_std``, and the path
 
 ``resting``: plants at rest on a branch of their loop for 2 s, then a 1 Hz triangle
 (``hil_sim.hysteresis_plants.resting_record``; seeds 100+, not the tests' 22 and 23), ``--records`` seeds x three
-rests (ascending, descending, centred), fed in one block and sample by sample: the window error over the noise floor
-and the quality at the end, a pass at most ``RESTING_FLOORS`` and not degraded (the tests' rule), fractions per
-feeding and per rest.
+rests (ascending, descending, centred), ``--seconds`` long, fed in one block and sample by sample: the window error
+over the noise floor and the quality at the end, a pass at most ``RESTING_FLOORS`` and not degraded (the tests'
+rule), fractions per feeding and per rest; fed sample by sample, also the time from which the estimate read every
+0.1 s passes to the end (``settled_s``, None if it does not pass at the end).
 
 ``attribution``: where the online and batch weights part, on the ``plants`` records (seeds 1000+), with the batch
 fit's thresholds set to the online estimate's (``same_thresholds``). The batch fit's reported solution re-solved at
@@ -523,6 +524,12 @@ def scatter(args) -> dict:
 RESTING_FLOORS = 1.5
 
 
+def _resting_pass(e) -> tuple[bool, float]:
+    """(pass, window error over the noise floor) of an estimate: at most ``RESTING_FLOORS`` and not degraded."""
+    ratio = e.residual_rms / e.noise_rms if e.residual_rms is not None and e.noise_rms else math.nan
+    return bool(e.quality != "degraded" and ratio <= RESTING_FLOORS), ratio
+
+
 def resting(args) -> dict:
     """Plants at rest on a branch, then swept (``hil_sim.hysteresis_plants.resting_record``: seeds from
     ``--first-seed``, each at rest ascending, descending and centred), fed in one block and sample by sample
@@ -533,26 +540,35 @@ def resting(args) -> dict:
     rows = []
     for seed in range(args.first_seed, args.first_seed + args.records):
         for initial in ("ascending", "descending", "centred"):
-            rec = resting_record(seed, initial)
+            rec = resting_record(seed, initial, seconds=args.seconds)
             for feed in ("block", "sample"):
                 est = OnlineEstimator(rec.h, effects=("hysteresis",))
                 start = time.perf_counter()
+                settled_at = None
                 if feed == "block":
                     est.update_block(rec.u, rec.y)
                 else:
-                    for a, b in zip(rec.u.tolist(), rec.y.tolist()):
+                    every = int(round(0.1 / rec.h))
+                    for k, (a, b) in enumerate(zip(rec.u.tolist(), rec.y.tolist()), 1):
                         est.update(a, b)
+                        if k % every == 0:
+                            passes = _resting_pass(est.estimate)[0]
+                            settled_at = (settled_at or k) if passes else None
                 e = est.estimate
-                ratio = e.residual_rms / e.noise_rms if e.residual_rms is not None and e.noise_rms else math.nan
+                ok, ratio = _resting_pass(e)
                 rows.append({"seed": seed, "initial": initial, "feed": feed, "quality": e.quality,
-                             "window_over_floor": ratio, "events": len(e.events or []),
-                             "ok": bool(e.quality != "degraded" and ratio <= RESTING_FLOORS),
+                             "window_over_floor": ratio, "events": len(e.events or []), "ok": ok,
+                             "settled_s": settled_at * rec.h if feed == "sample" and ok and settled_at else None,
                              "seconds": time.perf_counter() - start})
     groups = {f"{key}={value}": [r for r in rows if r[key] == value]
               for key in ("feed", "initial") for value in sorted({r[key] for r in rows})}
     summary = {name: {"runs": len(sel), "pass": sum(r["ok"] for r in sel) / len(sel),
                       "window_over_floor": dist([r["window_over_floor"] for r in sel])} for name, sel in groups.items()}
-    return {"mode": "resting", "first_seed": args.first_seed, "records": args.records, "floors": RESTING_FLOORS,
+    settled = [r["settled_s"] for r in rows if r["feed"] == "sample"]
+    summary["settled_s"] = {"runs": len(settled), "settled": sum(s is not None for s in settled),
+                            **dist([s for s in settled if s is not None])}
+    return {"mode": "resting", "first_seed": args.first_seed, "records": args.records, "seconds": args.seconds,
+            "floors": RESTING_FLOORS,
             "pass": sum(r["ok"] for r in rows) / len(rows), "summary": summary, "rows": rows}
 
 
@@ -575,6 +591,7 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--families", default="sine,triangle,random_staircase")
     p = sub.add_parser("resting")
     p.add_argument("--records", type=int, default=16)
+    p.add_argument("--seconds", type=float, default=10.0, help="record length (the rest's 2 s included)")
     p.add_argument("--first-seed", type=int, default=100)
     p = sub.add_parser("scatter")
     p.add_argument("--records", type=int, default=3)
