@@ -117,7 +117,7 @@ RESTART_ABOVE_FLOOR = 1.05
 #: A fit that reports its uncertainty and determines a1 or a2 only to a relative 1-sigma above this (finite: an
 #: undetermined one is reported so) is restarted too, whatever its misfit (``_weakly_determined``): a flat cost there
 #: lets another basin lie close. A hysteresis triangle (seed 3) stopped at 1.016x the noise with a1 80 % and a2 40 %
-#: off, reported at 7 % and 9 %; restarted, the plant's basin, 161 noise variances lower, a1 and a2 within 5 %.
+#: off, reported at 7 % and 9 %; restarted, the plant's basin, 161 noise variances lower (a1 5.2 %, a2 2.5 % off).
 RESTART_UNCERTAIN = 0.05
 RESTART_EXPLAINED = 0.5
 #: The restart grid: alpha values and damping values (fn: the record's frequency-response peaks and two defaults).
