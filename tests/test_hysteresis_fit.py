@@ -399,12 +399,14 @@ def test_a_fit_that_determines_its_resonance_weakly_is_searched_again():
         assert abs(getattr(fit.model, p) - getattr(rec.model, p)) <= 3.0 * sigma, p
 
 
-def test_a_fit_reported_above_the_floor_tries_the_other_start_states():
-    """A staircase with few levels whose search stopped at 0.52 of a 0.88 base misfit (under the half that lets a
-    fit try the other start states) was reported on the ascending start at 2.8x the noise, alpha 3.5 % off. The
-    plant rests centred: a fit for the user still above the floor tries the other start states, and is there."""
-    rec = hysteresis_record("few_levels", 8, n=10000)
+@pytest.mark.parametrize("family, seed, n", [("few_levels", 8, 10000), ("random_staircase", 6, 40000)])
+def test_a_fit_for_the_user_tries_every_start_state_of_its_loop(family, seed, n):
+    """The start state is chosen by short polishes before the fit, and the fit tried the others only above the
+    floor when its search explained most of the base misfit. A staircase with few levels was reported ascending
+    at 2.8x the noise (alpha 3.5 % off), a random staircase centred at 1.026x (b 5 % off, 2,300 noise variances
+    above the plant's start): a fit that reports its uncertainty tries every start state, and finds the plant's."""
+    rec = hysteresis_record(family, seed, n=n)
     _, fit = _fit(rec)
-    assert fit.effect_params["hysteresis"]["initial"] == rec.params["initial"] == "centred"
-    assert fit.residual_rms <= 1.02 * rec.noise_std
+    assert fit.effect_params["hysteresis"]["initial"] == rec.params["initial"]
+    assert fit.residual_rms <= 1.01 * rec.noise_std
     assert fit.model.alpha == pytest.approx(rec.model.alpha, rel=0.02)
