@@ -1386,8 +1386,8 @@ def _searched_further(design: Design, fit: ExtendedFit, best: np.ndarray, restar
     plant 6, 40,000 samples) was reported centred at 1.026x the noise, 2,300 noise variances above the plant's
     descending start, b 5 % off and its compensation 9x instead of 20x; a staircase with few levels (bench seed
     8) ascending at 2.8x, alpha 3.5 % off, where the plant rests centred (1.006x). About a third more CPU over
-    ``bench_hysteresis``' 120 fits. The base parameters again (``_restart_base``), when the fit determines the resonance only weakly
-    (``RESTART_UNCERTAIN``). Each is kept only when the cost falls."""
+    ``bench_hysteresis``' 120 fits. The base parameters again (``_restart_base``), when the fit determines the
+    resonance only weakly (``RESTART_UNCERTAIN``). Each is kept only when the cost falls."""
     if not varied:
         fit, design, best = _other_variants(design, fit, best, design.cost(best), max_nfev, workers)
         fit, design, best = _reported_variant(design, fit, best, max_nfev)
