@@ -32,7 +32,9 @@ Prandtl-Ishlinskii loop (loop width 2-20 % of the stroke, alpha 0.01-0.3,
   decaying minor loops and a random walk), once its memory is wiped: RMS of
   ``v_true - (c v_fit + d)`` (c, d by least squares: gain and offset belong
   to the linear path) over the true loop's opening (sum w_i 2 r_i); the same for
-  the previous code's weights (``previous.loop_error``).
+  the previous code's weights (``previous.loop_error``);
+* ``cpu_seconds``: the fit's CPU time (its process'), this code's and the previous code's (``previous.cpu_seconds``,
+  its worker fitting the same record while this process waits).
 
 The summary gives each fraction per input family, over all records, and per band of the true loop width
 (``WIDTH_BANDS``). Prints one JSON document and writes it to ``bench/results/`` (``--out``).
@@ -78,7 +80,7 @@ WIDTH_BANDS = ((0.02, 0.05), (0.05, 0.1), (0.1, 0.2001))
 
 #: The previous code's worker: fits the record in each .npz named on stdin, prints its weights and simulate's miss.
 PREVIOUS_WORKER = """
-import json, sys
+import json, sys, time
 import numpy as np
 from creep_online.diagnostics.extended import fit_base, fit_extended, prepare
 print("ready", flush=True)
@@ -86,11 +88,13 @@ for line in sys.stdin:
     z = np.load(line.strip())
     u_pre = None if np.isnan(z["u_pre"]) else float(z["u_pre"])
     data = prepare(z["t"], z["u"], z["y"], u_pre=u_pre)
+    c0 = time.process_time()
     fit = fit_extended(data, ("hysteresis",), fit_base(data))
+    cpu = time.process_time() - c0
     w = np.asarray(fit.effect_params["hysteresis"]["w"])
     sim = fit.simulate(z["t"], z["u"])
     hp = fit.effect_params["hysteresis"]
-    print(json.dumps({"r": list(hp["r"]), "w": w.tolist(), "initial": hp.get("initial", "centred"),
+    print(json.dumps({"cpu_seconds": cpu, "r": list(hp["r"]), "w": w.tolist(), "initial": hp.get("initial", "centred"),
                       "fit_percent": fit.fit_percent, "residual_rms": fit.residual_rms,
                       "w_max": float(np.max(np.abs(w))), "simulate_rms": float(np.sqrt(np.mean((sim - fit.y_hat) ** 2))),
                       "flattest_branch": float(np.min(s := np.concatenate(([1.0], 1 + np.cumsum(w)))) / np.mean(s))}),
@@ -201,7 +205,8 @@ def run_one(family: str, seed: int, n: int, worker=None) -> dict:
         row["previous"] = {"fit_percent": prev["fit_percent"], "residual_over_noise": prev["residual_rms"] / rec.noise_std,
                            "w_max": prev["w_max"], "simulate_over_noise": prev["simulate_rms"] / rec.noise_std,
                            "flattest_branch": prev["flattest_branch"], "w_min": float(np.min(prev["w"])),
-                           "loop_error": loop_error(rec.params, prev, 2 * max(rec.params["r"]))}
+                           "loop_error": loop_error(rec.params, prev, 2 * max(rec.params["r"])),
+                           "cpu_seconds": prev.get("cpu_seconds", math.nan)}
     return row
 
 
@@ -237,7 +242,8 @@ def summary(rows: list[dict]) -> dict:
                            "residual_over_noise": dist_finite(col("residual_over_noise", "previous")),
                            "fit_percent_minus_previous": dist_finite([r["fit_percent"] - r["previous"]["fit_percent"]
                                                                for r in prev]),
-                           "flattest_branch": dist_finite(col("flattest_branch", "previous"))}
+                           "flattest_branch": dist_finite(col("flattest_branch", "previous")),
+                           "cpu_seconds": dist_finite(col("cpu_seconds", "previous"))}
     return out
 
 

@@ -1366,31 +1366,26 @@ def fit_extended(data: Prepared, effects: tuple[str, ...] | list[str] | str, bas
     if restarted and cost < best_cost:
         best, best_cost = th, cost
         fit = _result(design, th)
-    varied = above and fit.residual_rms < RESTART_EXPLAINED * base.residual_rms
-    if varied:
+    # the other variants (hysteresis' start states): for a fit above the floor that explains most of the base
+    # misfit, and for every fit for the user (``uncertainty``), since the short polishes that chose the variant
+    # rank the start states wrongly at the floor too. A random staircase (compensation bench plant 6, 40,000
+    # samples) was reported centred at 1.026x the noise, 2,300 noise variances above the plant's descending start,
+    # b 5 % off and its compensation 9x instead of 20x; a staircase with few levels (bench seed 8) ascending at
+    # 2.8x, alpha 3.5 % off, where the plant rests centred (1.006x).
+    if uncertainty or (above and fit.residual_rms < RESTART_EXPLAINED * base.residual_rms):
         fit, design, best = _other_variants(design, fit, best, best_cost, max_nfev, workers)
     fit, design, best = _reported_variant(design, fit, best, max_nfev)
     if uncertainty:
-        fit, design, best = _searched_further(design, fit, best, restarted, varied, max_nfev, workers)
+        fit, design, best = _searched_further(design, fit, best, restarted, max_nfev, workers)
     return fit
 
 
-def _searched_further(design: Design, fit: ExtendedFit, best: np.ndarray, restarted: bool, varied: bool,
+def _searched_further(design: Design, fit: ExtendedFit, best: np.ndarray, restarted: bool,
                       max_nfev: int, workers: int) -> tuple[ExtendedFit, Design, np.ndarray]:
-    """A fit that reports its uncertainty (one for the user, not one of diagnose's ranking fits) searched where
-    the cheaper gates before let it pass; returns (the fit with its uncertainty, its design, its parameters).
-
-    The other variants (``_other_variants``, hysteresis' start states), wherever the gate before did not try
-    them: it asks for a fit above the floor that explains most of the base misfit, and the short polishes that
-    chose the variant rank the start states wrongly at the floor too. A random staircase (compensation bench
-    plant 6, 40,000 samples) was reported centred at 1.026x the noise, 2,300 noise variances above the plant's
-    descending start, b 5 % off and its compensation 9x instead of 20x; a staircase with few levels (bench seed
-    8) ascending at 2.8x, alpha 3.5 % off, where the plant rests centred (1.006x). About a third more CPU over
-    ``bench_hysteresis``' 120 fits. The base parameters again (``_restart_base``), when the fit determines the
-    resonance only weakly (``RESTART_UNCERTAIN``). Each is kept only when the cost falls."""
-    if not varied:
-        fit, design, best = _other_variants(design, fit, best, design.cost(best), max_nfev, workers)
-        fit, design, best = _reported_variant(design, fit, best, max_nfev)
+    """A fit that reports its uncertainty (one for the user, not one of diagnose's ranking fits) with its
+    uncertainty, and searched again from the base parameters (``_restart_base``) when it determines the resonance
+    only weakly (``RESTART_UNCERTAIN``), kept only when the cost falls; returns (the fit, its design, its
+    parameters)."""
     fit.uncertainty = base_uncertainty(design, best, fit.residual)
     if not restarted and _weakly_determined(fit):
         th = _restart_base(design, design.explored(), best, max_nfev, workers)
@@ -1474,7 +1469,8 @@ def _other_variants(design: Design, fit: ExtendedFit, best: np.ndarray, best_cos
     parameters if that goes lower: the variant is chosen by short polishes before the fit, which can rank the
     states wrongly (hysteresis + second creep 10-100x seed 1: the descending state stopped at 1.73x the noise,
     the centred one from the same parameters reaches 0.99x). Only for fits above the floor that explain most
-    of the base's misfit, as the base's restart. Returns (fit, its design, its parameters)."""
+    of the base's misfit, as the base's restart, and for every fit for the user (``fit_extended``). Returns
+    (fit, its design, its parameters)."""
     chosen, theta = design, best
     others = [Design(design.data, design.effects, design.harmonics, {**design.variants, name: variant})
               for name in design.effects for variant in get_effect(name).variants
