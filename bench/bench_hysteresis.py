@@ -206,7 +206,7 @@ def run_one(family: str, seed: int, n: int, worker=None) -> dict:
                            "w_max": prev["w_max"], "simulate_over_noise": prev["simulate_rms"] / rec.noise_std,
                            "flattest_branch": prev["flattest_branch"], "w_min": float(np.min(prev["w"])),
                            "loop_error": loop_error(rec.params, prev, 2 * max(rec.params["r"])),
-                           "cpu_seconds": prev.get("cpu_seconds", math.nan)}
+                           "cpu_seconds": prev["cpu_seconds"]}
     return row
 
 
